@@ -1,0 +1,2 @@
+//! `cargo xtask <task>`: project tasks written as plain Rust (the cargo-xtask pattern).
+fn main() {}
