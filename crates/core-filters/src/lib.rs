@@ -10,15 +10,21 @@
 //! Layers (kept apart on purpose):
 //! - [`model`]: capability traits a model implements (what laws it states);
 //! - [`kalman`]: Gaussian filter steps (KF, EKF, EKF2, UKF) on fixed-size storage;
-//! - [`particle`]: particle filters (bootstrap, MLN-RBPF, Storvik, MPF-EKF2) sharing one weight
-//!   routine and one resampling kernel;
+//! - [`weights`] and [`resampling`]: the one log-domain weight routine and the resampling
+//!   schemes over one inverse-CDF kernel, shared by every particle filter;
+//! - [`particle`]: particle filters (bootstrap, MLN-RBPF, Storvik, MPF-EKF2), the
+//!   [`particle::ParticleFilter`] trait, the generic runner and its observers;
 //! - [`rng`]: reproducible random streams derived from (master seed, run, purpose);
 //! - [`health`] and [`error`]: counted repairs and typed failures.
 
 pub mod error;
 pub mod health;
+pub mod kalman;
 pub mod model;
+pub mod particle;
+pub mod resampling;
 pub mod rng;
+pub mod weights;
 
 pub use error::FilterError;
 pub use health::Health;

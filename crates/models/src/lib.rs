@@ -2,3 +2,21 @@
 //!
 //! Structures, excitation, integrators, data generation and the filter partitions of the
 //! N-storey Bouc–Wen shear chain (SPEC §1–3, §5–6).
+//!
+//! - [`structure`]: the N-storey shear chain with Bouc–Wen elements, its continuous right-hand
+//!   side, forward-Euler map, accelerations and restoring forces; presets in [`preset`];
+//! - [`integrate`]: classical RK4 (truth) and adaptive Dormand–Prince 5(4) (validation);
+//! - [`excitation`] and [`readers`]: ground motions (El Centro, Kanai–Tajimi, harmonic, user
+//!   records in CSV and PEER `.AT2`);
+//! - [`dataset`]: truth and noisy measurements from named random streams;
+//! - [`priors`] and [`partition`]: the priors of SPEC §3 and the three filter partitions
+//!   (augmented state, MLN-RBPF/Storvik, MPF-EKF2) implementing the `core-filters` traits.
+
+pub mod dataset;
+pub mod excitation;
+pub mod integrate;
+pub mod partition;
+pub mod preset;
+pub mod priors;
+pub mod readers;
+pub mod structure;

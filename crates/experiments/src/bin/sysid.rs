@@ -1,6 +1,7 @@
 //! `sysid`: online Bayesian identification of hysteretic structures from the command line.
 
 use clap::{Parser, Subcommand};
+use experiments::cli;
 
 #[derive(Parser)]
 #[command(name = "sysid", version, about = "Online Bayesian identification of hysteretic structures")]
@@ -10,9 +11,20 @@ struct Cli {
 }
 
 #[derive(Subcommand)]
-enum Command {}
+enum Command {
+    /// Simulate a structure under an excitation and write a noisy data set.
+    Simulate(cli::simulate::Args),
+    /// Run one identification filter on a data set and write a run record.
+    Filter(cli::filter::Args),
+    /// Compute Table I (moments of z = xᵀx by linearisation, EKF2 and the unscented transform).
+    Table1(cli::table1::Args),
+}
 
 fn main() -> anyhow::Result<()> {
     let cli = Cli::parse();
-    match cli.command {}
+    match cli.command {
+        Command::Simulate(args) => cli::simulate::run(args),
+        Command::Filter(args) => cli::filter::run(args),
+        Command::Table1(args) => cli::table1::run(args),
+    }
 }

@@ -1,1 +1,5 @@
 //! Subcommands of `sysid`, one module each. Each module exposes `Args` (clap) and `run`.
+
+pub mod filter;
+pub mod simulate;
+pub mod table1;

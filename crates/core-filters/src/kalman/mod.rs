@@ -1,0 +1,1 @@
+//! Gaussian filter steps (SPEC §4).

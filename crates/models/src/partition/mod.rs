@@ -1,0 +1,1 @@
+//! Filter partitions of the Bouc–Wen chain (SPEC §5).
