@@ -1,10 +1,10 @@
 //! Counters of numerical repairs. A repair keeps a run going; it is never silent: every filter
 //! owns a [`Health`] the caller can read, and run records report it.
 
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 /// Counts of numerical repairs made during a run (all start at zero).
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
 pub struct Health {
     /// A covariance was symmetrised where its asymmetry exceeded round-off.
     pub symmetrised: u64,
