@@ -1,1 +1,177 @@
-//! (in progress)
+//! Named structures with their default excitation (SPEC §1–2).
+//!
+//! - `paper-3dof`: three unit-mass storeys, k = 8, c = 0.25, a Bouc–Wen element between the
+//!   ground and storey 1 (β = 2, γ = 1, n = 2); El Centro × 3.0 at dt = 0.005 s.
+//! - `paper-3dof-harmonic`: the same structure under `3·sin(4t)` m/s² for 31.18 s.
+//! - `shear-chain` with a storey count N: the same per-storey values for N storeys, Bouc–Wen
+//!   element at storey 1, El Centro × 3.0 ([`Preset::with_storeys`]).
+
+use crate::excitation::{self, GroundMotion, DEFAULT_DT, EL_CENTRO_SCALE};
+use crate::structure::{BoucWen, ShearChain};
+use thiserror::Error;
+
+/// Amplitude (m/s²), frequency (rad/s) and duration (s) of the harmonic preset (SPEC §2).
+pub const HARMONIC_AMPLITUDE: f64 = 3.0;
+pub const HARMONIC_OMEGA: f64 = 4.0;
+pub const HARMONIC_DURATION: f64 = 31.18;
+
+/// The default excitation of a preset.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum DefaultExcitation {
+    /// El Centro 1940 N-S at this amplitude scale.
+    ElCentro { scale: f64 },
+    /// `amplitude·sin(omega·t)` for `duration` seconds.
+    Harmonic {
+        amplitude: f64,
+        omega: f64,
+        duration: f64,
+    },
+}
+
+impl DefaultExcitation {
+    /// The excitation sampled at `dt`.
+    pub fn ground_motion(&self, dt: f64) -> GroundMotion {
+        match *self {
+            DefaultExcitation::ElCentro { scale } => {
+                excitation::el_centro().scaled(scale).resample_linear(dt)
+            }
+            DefaultExcitation::Harmonic {
+                amplitude,
+                omega,
+                duration,
+            } => excitation::harmonic(amplitude, omega, duration, dt),
+        }
+    }
+}
+
+/// A named structure with its default excitation and time step.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Preset {
+    pub name: String,
+    pub chain: ShearChain,
+    pub excitation: DefaultExcitation,
+    pub dt: f64,
+}
+
+/// Unknown preset name or impossible storey count.
+#[derive(Debug, Clone, PartialEq, Eq, Error)]
+pub enum PresetError {
+    #[error("unknown preset `{name}`; valid presets: {}", Preset::NAMES.join(", "))]
+    Unknown { name: String },
+    #[error("a shear chain needs at least one storey, got {storeys}")]
+    NoStorey { storeys: usize },
+}
+
+impl Preset {
+    /// Names accepted by [`Preset::from_name`].
+    pub const NAMES: [&'static str; 3] = ["paper-3dof", "paper-3dof-harmonic", "shear-chain"];
+
+    /// The paper's structure (SPEC §1) generalised to `storeys` storeys: unit masses, k = 8,
+    /// c = 0.25, Bouc–Wen element (β = 2, γ = 1, n = 2) between the ground and storey 1.
+    pub fn chain(storeys: usize) -> Result<ShearChain, PresetError> {
+        if storeys == 0 {
+            return Err(PresetError::NoStorey { storeys });
+        }
+        Ok(ShearChain::new(
+            vec![1.0; storeys],
+            vec![8.0; storeys],
+            vec![0.25; storeys],
+            vec![BoucWen {
+                storey: 0,
+                beta: 2.0,
+                gamma: 1.0,
+                n: 2.0,
+            }],
+        )
+        .expect("the preset values are valid"))
+    }
+
+    /// `paper-3dof` (SPEC §1–2).
+    pub fn paper_3dof() -> Self {
+        Self::with_storeys(3)
+            .expect("3 storeys")
+            .renamed("paper-3dof")
+    }
+
+    /// `paper-3dof-harmonic` (SPEC §2).
+    pub fn paper_3dof_harmonic() -> Self {
+        Self {
+            excitation: DefaultExcitation::Harmonic {
+                amplitude: HARMONIC_AMPLITUDE,
+                omega: HARMONIC_OMEGA,
+                duration: HARMONIC_DURATION,
+            },
+            ..Self::paper_3dof()
+        }
+        .renamed("paper-3dof-harmonic")
+    }
+
+    /// `shear-chain`: the paper's per-storey values for `storeys` storeys, El Centro × 3.0.
+    pub fn with_storeys(storeys: usize) -> Result<Self, PresetError> {
+        Ok(Self {
+            name: "shear-chain".to_string(),
+            chain: Self::chain(storeys)?,
+            excitation: DefaultExcitation::ElCentro {
+                scale: EL_CENTRO_SCALE,
+            },
+            dt: DEFAULT_DT,
+        })
+    }
+
+    fn renamed(mut self, name: &str) -> Self {
+        self.name = name.to_string();
+        self
+    }
+
+    /// A preset by name. `storeys` overrides the number of storeys (same per-storey values);
+    /// `None` keeps the preset's own (3, or 3 for `shear-chain` as well).
+    pub fn from_name(name: &str, storeys: Option<usize>) -> Result<Self, PresetError> {
+        let mut p = match name {
+            "paper-3dof" => Self::paper_3dof(),
+            "paper-3dof-harmonic" => Self::paper_3dof_harmonic(),
+            "shear-chain" => Self::with_storeys(3)?,
+            _ => {
+                return Err(PresetError::Unknown {
+                    name: name.to_string(),
+                })
+            }
+        };
+        if let Some(n) = storeys {
+            p.chain = Self::chain(n)?;
+        }
+        Ok(p)
+    }
+
+    /// The preset's default excitation sampled at its `dt`.
+    pub fn ground_motion(&self) -> GroundMotion {
+        self.excitation.ground_motion(self.dt)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn presets_by_name() {
+        let p = Preset::from_name("paper-3dof", None).unwrap();
+        assert_eq!(
+            p.chain.theta(),
+            vec![8., 8., 8., 0.25, 0.25, 0.25, 2., 1., 2.]
+        );
+        assert_eq!(p.ground_motion().len(), 6237);
+        let h = Preset::from_name("paper-3dof-harmonic", None).unwrap();
+        assert_eq!(h.chain, p.chain);
+        let g = h.ground_motion();
+        assert_eq!(g.len(), 6237);
+        assert!((g.pga() - 3.0).abs() < 1e-3);
+        let five = Preset::from_name("paper-3dof", Some(5)).unwrap();
+        assert_eq!(five.chain.storeys(), 5);
+        assert_eq!(five.chain.dim(), 11);
+        let err = Preset::from_name("nope", None).unwrap_err().to_string();
+        for n in Preset::NAMES {
+            assert!(err.contains(n), "{err}");
+        }
+        assert!(Preset::from_name("shear-chain", Some(0)).is_err());
+    }
+}

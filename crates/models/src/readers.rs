@@ -1,1 +1,343 @@
-//! (in progress)
+//! Readers of user ground-motion records (SPEC §2): CSV `t,acc` and PEER NGA `.AT2`.
+//!
+//! Every error names the file, the 1-based line number and the field, and no input makes a
+//! reader panic. Records are returned as a [`GroundMotion`] in m/s² whose time origin is the
+//! first sample.
+
+use crate::excitation::{GroundMotion, G};
+use std::path::{Path, PathBuf};
+use thiserror::Error;
+
+/// Units of the acceleration column of a CSV record (declared by the caller).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub enum Units {
+    /// Multiples of g = 9.81 m/s².
+    #[serde(rename = "g")]
+    G,
+    /// m/s².
+    #[serde(rename = "m/s2")]
+    MetersPerSecond2,
+}
+
+impl Units {
+    /// Factor converting to m/s².
+    pub fn to_si(self) -> f64 {
+        match self {
+            Units::G => G,
+            Units::MetersPerSecond2 => 1.0,
+        }
+    }
+}
+
+/// Why a record could not be read. `line` is 1-based.
+#[derive(Debug, Error)]
+pub enum ReadError {
+    #[error("{file}: cannot read: {source}")]
+    Io {
+        file: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error("{file}:{line}: expected {expected} columns, found {found}")]
+    ColumnCount {
+        file: PathBuf,
+        line: usize,
+        expected: usize,
+        found: usize,
+    },
+    #[error("{file}:{line}: field `{field}`: `{value}` is not a number")]
+    NotNumeric {
+        file: PathBuf,
+        line: usize,
+        field: String,
+        value: String,
+    },
+    #[error("{file}:{line}: field `{field}`: non-finite value `{value}`")]
+    NonFinite {
+        file: PathBuf,
+        line: usize,
+        field: String,
+        value: String,
+    },
+    #[error("{file}:{line}: field `t`: time {t} does not increase (previous {previous})")]
+    NonMonotonicTime {
+        file: PathBuf,
+        line: usize,
+        previous: f64,
+        t: f64,
+    },
+    #[error("{file}:{line}: field `t`: time {t} is off the uniform grid (expected {expected}, dt = {dt})")]
+    NonUniformTime {
+        file: PathBuf,
+        line: usize,
+        t: f64,
+        expected: f64,
+        dt: f64,
+    },
+    #[error(
+        "{file}:{line}: field `NPTS`: header declares {declared} points, the file holds {found}"
+    )]
+    NptsMismatch {
+        file: PathBuf,
+        line: usize,
+        declared: usize,
+        found: usize,
+    },
+    #[error("{file}:{line}: field `{field}`: {message}")]
+    Header {
+        file: PathBuf,
+        line: usize,
+        field: String,
+        message: String,
+    },
+    #[error("{file}: empty record ({found} samples, at least {needed} needed)")]
+    Empty {
+        file: PathBuf,
+        found: usize,
+        needed: usize,
+    },
+}
+
+/// Parses one numeric field (Fortran `D` exponents accepted), rejecting NaN and infinities.
+pub(crate) fn parse_field(
+    file: &Path,
+    line: usize,
+    field: &str,
+    raw: &str,
+) -> Result<f64, ReadError> {
+    let s = raw.trim();
+    let v: f64 = s
+        .parse()
+        .or_else(|_| s.replace(['D', 'd'], "E").parse())
+        .map_err(|_| ReadError::NotNumeric {
+            file: file.to_path_buf(),
+            line,
+            field: field.to_string(),
+            value: s.to_string(),
+        })?;
+    if !v.is_finite() {
+        return Err(ReadError::NonFinite {
+            file: file.to_path_buf(),
+            line,
+            field: field.to_string(),
+            value: s.to_string(),
+        });
+    }
+    Ok(v)
+}
+
+/// Checks that `times` (with their 1-based line numbers) increase strictly and lie on a uniform
+/// grid; returns the step. Rounding of printed times is tolerated up to 1% of a step, far
+/// below any real gap or jitter.
+pub(crate) fn uniform_step(file: &Path, times: &[(usize, f64)]) -> Result<f64, ReadError> {
+    for w in times.windows(2) {
+        if w[1].1 <= w[0].1 {
+            return Err(ReadError::NonMonotonicTime {
+                file: file.to_path_buf(),
+                line: w[1].0,
+                previous: w[0].1,
+                t: w[1].1,
+            });
+        }
+    }
+    let n = times.len();
+    let t0 = times[0].1;
+    let dt = (times[n - 1].1 - t0) / (n - 1) as f64;
+    for (k, &(line, t)) in times.iter().enumerate() {
+        let expected = t0 + k as f64 * dt;
+        if (t - expected).abs() > 0.01 * dt {
+            return Err(ReadError::NonUniformTime {
+                file: file.to_path_buf(),
+                line,
+                t,
+                expected,
+                dt,
+            });
+        }
+    }
+    Ok(dt)
+}
+
+fn read_text(path: &Path) -> Result<String, ReadError> {
+    std::fs::read_to_string(path).map_err(|source| ReadError::Io {
+        file: path.to_path_buf(),
+        source,
+    })
+}
+
+/// Reads a CSV record `t,acc` (one header line optional; blank lines and lines starting with
+/// `#` are skipped) with the acceleration in `units`.
+pub fn read_csv(path: &Path, units: Units) -> Result<GroundMotion, ReadError> {
+    let text = read_text(path)?;
+    parse_csv(path, &text, units)
+}
+
+/// Parses CSV text as [`read_csv`] does; `file` is used in error messages only.
+pub fn parse_csv(file: &Path, text: &str, units: Units) -> Result<GroundMotion, ReadError> {
+    let mut times = Vec::new();
+    let mut acc = Vec::new();
+    let mut seen_first = false;
+    for (i, raw) in text.lines().enumerate() {
+        let line = i + 1;
+        let l = raw.trim();
+        if l.is_empty() || l.starts_with('#') {
+            continue;
+        }
+        let fields: Vec<&str> = l.split(',').collect();
+        // The first non-blank line is a header when none of its fields is a number.
+        if !seen_first {
+            seen_first = true;
+            if fields.iter().all(|f| f.trim().parse::<f64>().is_err()) {
+                continue;
+            }
+        }
+        if fields.len() != 2 {
+            return Err(ReadError::ColumnCount {
+                file: file.to_path_buf(),
+                line,
+                expected: 2,
+                found: fields.len(),
+            });
+        }
+        let t = parse_field(file, line, "t", fields[0])?;
+        let a = parse_field(file, line, "acc", fields[1])?;
+        times.push((line, t));
+        acc.push(a * units.to_si());
+    }
+    if acc.len() < 2 {
+        return Err(ReadError::Empty {
+            file: file.to_path_buf(),
+            found: acc.len(),
+            needed: 2,
+        });
+    }
+    let dt = uniform_step(file, &times)?;
+    Ok(GroundMotion { dt, acc })
+}
+
+/// Reads a PEER NGA `.AT2` record (values in g, converted to m/s²).
+pub fn read_at2(path: &Path) -> Result<GroundMotion, ReadError> {
+    let text = read_text(path)?;
+    parse_at2(path, &text)
+}
+
+/// `(NPTS, DT)` from line 4 of an AT2 file, in either the NGA-West2 form
+/// `NPTS=  4000, DT= .0050 SEC` or the older `4000   .0050   NPTS, DT`.
+fn parse_at2_header(file: &Path, line: &str) -> Result<(usize, f64), ReadError> {
+    let up = line.to_ascii_uppercase();
+    let header_err = |field: &str, message: String| ReadError::Header {
+        file: file.to_path_buf(),
+        line: 4,
+        field: field.to_string(),
+        message,
+    };
+    // Value following `key` and `=`, up to the next comma or whitespace-separated token.
+    let keyed = |key: &str| -> Option<String> {
+        let pos = up.find(key)?;
+        let rest = up[pos + key.len()..].trim_start();
+        let rest = rest.strip_prefix('=')?.trim_start();
+        let end = rest
+            .find(|c: char| c == ',' || c.is_whitespace())
+            .unwrap_or(rest.len());
+        Some(rest[..end].to_string())
+    };
+    let (npts_raw, dt_raw) = match (keyed("NPTS"), keyed("DT")) {
+        (Some(n), Some(d)) => (n, d),
+        _ => {
+            let toks: Vec<&str> = up
+                .split([' ', '\t', ','])
+                .filter(|t| !t.is_empty())
+                .collect();
+            if toks.len() < 2 {
+                return Err(header_err(
+                    "NPTS",
+                    format!("cannot find NPTS and DT in `{}`", line.trim()),
+                ));
+            }
+            (toks[0].to_string(), toks[1].to_string())
+        }
+    };
+    let npts_f = parse_field(file, 4, "NPTS", &npts_raw)?;
+    if npts_f < 1.0 || npts_f.fract() != 0.0 {
+        return Err(header_err(
+            "NPTS",
+            format!("`{npts_raw}` is not a positive integer"),
+        ));
+    }
+    let dt = parse_field(file, 4, "DT", &dt_raw)?;
+    if dt <= 0.0 {
+        return Err(header_err("DT", format!("`{dt_raw}` is not positive")));
+    }
+    Ok((npts_f as usize, dt))
+}
+
+/// Parses AT2 text as [`read_at2`] does; `file` is used in error messages only.
+pub fn parse_at2(file: &Path, text: &str) -> Result<GroundMotion, ReadError> {
+    let lines: Vec<&str> = text.lines().collect();
+    if lines.len() < 4 {
+        return Err(ReadError::Header {
+            file: file.to_path_buf(),
+            line: lines.len() + 1,
+            field: "header".to_string(),
+            message: format!(
+                "an AT2 file has 4 header lines, found {} lines in all",
+                lines.len()
+            ),
+        });
+    }
+    let (npts, dt) = parse_at2_header(file, lines[3])?;
+    let mut acc = Vec::with_capacity(npts);
+    for (i, l) in lines.iter().enumerate().skip(4) {
+        for tok in l.split_whitespace() {
+            let field = format!("value {}", acc.len() + 1);
+            acc.push(parse_field(file, i + 1, &field, tok)? * G);
+        }
+    }
+    if acc.len() != npts {
+        return Err(ReadError::NptsMismatch {
+            file: file.to_path_buf(),
+            line: 4,
+            declared: npts,
+            found: acc.len(),
+        });
+    }
+    if acc.len() < 2 {
+        return Err(ReadError::Empty {
+            file: file.to_path_buf(),
+            found: acc.len(),
+            needed: 2,
+        });
+    }
+    Ok(GroundMotion { dt, acc })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn csv_with_and_without_header() {
+        let f = Path::new("mem.csv");
+        let a = parse_csv(f, "t,acc\n0,0.1\n0.01,-0.2\n0.02,0.3\n", Units::G).unwrap();
+        let b = parse_csv(f, "0,0.1\n0.01,-0.2\n\n0.02,0.3\n", Units::G).unwrap();
+        assert_eq!(a, b);
+        assert_eq!(a.acc.len(), 3);
+        assert!((a.dt - 0.01).abs() < 1e-15);
+        assert!((a.acc[1] + 0.2 * G).abs() < 1e-12);
+        let c = parse_csv(f, "0,0.1\n0.01,-0.2\n", Units::MetersPerSecond2).unwrap();
+        assert_eq!(c.acc, vec![0.1, -0.2]);
+    }
+
+    #[test]
+    fn at2_header_formats() {
+        let f = Path::new("mem.AT2");
+        let new = "PEER\nEVENT\nACCELERATION TIME SERIES IN UNITS OF G\nNPTS=    5, DT=   .0050 SEC\n  .1E-02  -.2E-02  .3E-02\n  .4E-02  .5E-02\n";
+        let old = "PEER\nEVENT\nACCELERATION TIME SERIES IN UNITS OF G\n     5   .0050   NPTS, DT\n  .1E-02  -.2E-02  .3E-02\n  .4E-02  .5E-02\n";
+        let a = parse_at2(f, new).unwrap();
+        let b = parse_at2(f, old).unwrap();
+        assert_eq!(a, b);
+        assert_eq!(a.dt, 0.005);
+        assert_eq!(a.acc.len(), 5);
+        assert!((a.acc[1] + 0.002 * G).abs() < 1e-15);
+    }
+}

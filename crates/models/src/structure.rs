@@ -1,1 +1,515 @@
-//! (in progress)
+//! The N-storey shear chain with Bouc–Wen hysteretic elements (SPEC §1).
+//!
+//! Storeys are numbered `0..N` in code (1-based `1..=N` in names and files). Element `j` links
+//! storey `j−1` to storey `j`, storey `−1` being the ground, so element 0 is the ground element.
+//! Coordinates are relative to the ground. With `d_j = x_j − x_{j−1}` and `δv_j = v_j − v_{j−1}`
+//! (`x_{−1} = v_{−1} = 0`), the force carried by element `j` is
+//!
+//! - linear element:    `f_j = k_j d_j + c_j δv_j`,
+//! - Bouc–Wen element:  `f_j = k_j r_j + c_j δv_j`, `ṙ_j = δv_j − β|δv_j||r_j|^(n−1) r_j − γ δv_j |r_j|^n`
+//!   (SPEC eq. 22; the dashpot stays linear),
+//!
+//! and storey `j` obeys `m_j ẍ_j = −m_j ü_g − f_j + f_{j+1}` (`f_N = 0`). For the paper's
+//! three-storey chain with unit masses this is exactly SPEC §1.
+//!
+//! State layout: `[x_1..x_N, v_1..v_N, r_e for each Bouc–Wen element in order]`.
+//! Parameter vector θ: `[k_1..k_N, c_1..c_N, then (β, γ, n) per Bouc–Wen element]`, which for the
+//! paper is `[k1 k2 k3 c1 c2 c3 β γ n]`.
+
+use thiserror::Error;
+
+/// A Bouc–Wen hysteretic element replacing the linear spring of one element of the chain.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct BoucWen {
+    /// 0-based element index (element 0 links the ground to storey 1).
+    pub storey: usize,
+    pub beta: f64,
+    pub gamma: f64,
+    /// Exponent; `n ≥ 1` is required (see [`StructureError::ExponentBelowOne`]).
+    pub n: f64,
+}
+
+/// Impossible structure definitions.
+#[derive(Debug, Clone, PartialEq, Error)]
+pub enum StructureError {
+    #[error("a shear chain needs at least one storey")]
+    NoStorey,
+    #[error("{what} has {found} entries, expected {expected}")]
+    WrongLength {
+        what: &'static str,
+        expected: usize,
+        found: usize,
+    },
+    #[error("mass of storey {storey} must be positive and finite, got {value}")]
+    NonPositiveMass { storey: usize, value: f64 },
+    #[error("{what} of storey {storey} must be non-negative and finite, got {value}")]
+    NegativeCoefficient {
+        what: &'static str,
+        storey: usize,
+        value: f64,
+    },
+    #[error("Bouc–Wen element at storey {storey}: the chain has only {storeys} storeys")]
+    ElementOutOfRange { storey: usize, storeys: usize },
+    #[error("two Bouc–Wen elements at storey {storey}")]
+    DuplicateElement { storey: usize },
+    #[error("Bouc–Wen element at storey {storey}: {what} must be finite, got {value}")]
+    NonFiniteBoucWen {
+        storey: usize,
+        what: &'static str,
+        value: f64,
+    },
+    /// For `n < 1`, `|r|^(n−1)` is unbounded at `r = 0`: the right-hand side is then not
+    /// Lipschitz at the origin (the start of every simulation), uniqueness of the solution is
+    /// lost and the filters' Jacobians blow up. The priors (SPEC §3, `n ~ U(1, 5)`) never go
+    /// below 1, so the chain requires `n ≥ 1`.
+    #[error("Bouc–Wen element at storey {storey}: exponent n = {n} must be ≥ 1")]
+    ExponentBelowOne { storey: usize, n: f64 },
+}
+
+/// An N-storey shear chain (SPEC §1), validated at construction.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ShearChain {
+    masses: Vec<f64>,
+    k: Vec<f64>,
+    c: Vec<f64>,
+    bouc_wen: Vec<BoucWen>,
+    /// `bw_slot[j] = Some(e)` when element `j` is Bouc–Wen element `e`.
+    bw_slot: Vec<Option<usize>>,
+}
+
+/// `|r|^(n−1) r` and `|r|^n`, the two nonlinear terms of SPEC eq. 22 (`n ≥ 1`, so both are
+/// finite and zero at `r = 0`, including `n = 1` where `0^0 = 1` multiplies `r = 0`).
+#[inline]
+fn bw_terms(r: f64, n: f64) -> (f64, f64) {
+    let a = r.abs();
+    let pow_nm1 = a.powf(n - 1.0);
+    (pow_nm1 * r, pow_nm1 * a)
+}
+
+/// Bouc–Wen rate `ṙ = δv − β|δv||r|^(n−1) r − γ δv |r|^n` (SPEC eq. 22).
+#[inline]
+pub fn bouc_wen_rate(dv: f64, r: f64, beta: f64, gamma: f64, n: f64) -> f64 {
+    let (t1, t2) = bw_terms(r, n);
+    dv - beta * dv.abs() * t1 - gamma * dv * t2
+}
+
+impl ShearChain {
+    /// A validated chain. `masses`, `k`, `c` have one entry per storey; `bouc_wen` lists the
+    /// hysteretic elements in the order their `r` appears in the state.
+    pub fn new(
+        masses: Vec<f64>,
+        k: Vec<f64>,
+        c: Vec<f64>,
+        bouc_wen: Vec<BoucWen>,
+    ) -> Result<Self, StructureError> {
+        let n = masses.len();
+        if n == 0 {
+            return Err(StructureError::NoStorey);
+        }
+        for (what, v) in [("k", &k), ("c", &c)] {
+            if v.len() != n {
+                return Err(StructureError::WrongLength {
+                    what,
+                    expected: n,
+                    found: v.len(),
+                });
+            }
+        }
+        for (j, &m) in masses.iter().enumerate() {
+            if !(m > 0.0 && m.is_finite()) {
+                return Err(StructureError::NonPositiveMass {
+                    storey: j,
+                    value: m,
+                });
+            }
+        }
+        for (what, v) in [("stiffness k", &k), ("damping c", &c)] {
+            for (j, &x) in v.iter().enumerate() {
+                if !(x >= 0.0 && x.is_finite()) {
+                    return Err(StructureError::NegativeCoefficient {
+                        what,
+                        storey: j,
+                        value: x,
+                    });
+                }
+            }
+        }
+        let mut bw_slot = vec![None; n];
+        for (e, bw) in bouc_wen.iter().enumerate() {
+            if bw.storey >= n {
+                return Err(StructureError::ElementOutOfRange {
+                    storey: bw.storey,
+                    storeys: n,
+                });
+            }
+            if bw_slot[bw.storey].is_some() {
+                return Err(StructureError::DuplicateElement { storey: bw.storey });
+            }
+            for (what, v) in [("beta", bw.beta), ("gamma", bw.gamma), ("n", bw.n)] {
+                if !v.is_finite() {
+                    return Err(StructureError::NonFiniteBoucWen {
+                        storey: bw.storey,
+                        what,
+                        value: v,
+                    });
+                }
+            }
+            if bw.n < 1.0 {
+                return Err(StructureError::ExponentBelowOne {
+                    storey: bw.storey,
+                    n: bw.n,
+                });
+            }
+            bw_slot[bw.storey] = Some(e);
+        }
+        Ok(Self {
+            masses,
+            k,
+            c,
+            bouc_wen,
+            bw_slot,
+        })
+    }
+
+    /// Number of storeys N.
+    pub fn storeys(&self) -> usize {
+        self.masses.len()
+    }
+
+    /// State dimension `2N + (number of Bouc–Wen elements)`.
+    pub fn dim(&self) -> usize {
+        2 * self.masses.len() + self.bouc_wen.len()
+    }
+
+    pub fn masses(&self) -> &[f64] {
+        &self.masses
+    }
+
+    pub fn stiffness(&self) -> &[f64] {
+        &self.k
+    }
+
+    pub fn damping(&self) -> &[f64] {
+        &self.c
+    }
+
+    pub fn bouc_wen(&self) -> &[BoucWen] {
+        &self.bouc_wen
+    }
+
+    /// Index of `r_e` (Bouc–Wen element `e`) in the state vector.
+    pub fn r_index(&self, element: usize) -> usize {
+        assert!(
+            element < self.bouc_wen.len(),
+            "no Bouc–Wen element {element}"
+        );
+        2 * self.masses.len() + element
+    }
+
+    /// Force carried by element `j` (spring or hysteretic part plus dashpot).
+    #[inline]
+    fn element_force(&self, state: &[f64], j: usize) -> f64 {
+        let n = self.masses.len();
+        let (xm, vm) = if j == 0 {
+            (0.0, 0.0)
+        } else {
+            (state[j - 1], state[n + j - 1])
+        };
+        let dv = state[n + j] - vm;
+        let spring = match self.bw_slot[j] {
+            Some(e) => self.k[j] * state[2 * n + e],
+            None => self.k[j] * (state[j] - xm),
+        };
+        spring + self.c[j] * dv
+    }
+
+    #[track_caller]
+    fn check_state(&self, state: &[f64]) {
+        assert_eq!(state.len(), self.dim(), "state has the wrong length");
+    }
+
+    /// Relative accelerations `ẍ_j = −ü_g + (−f_j + f_{j+1}) / m_j` (SPEC §1), written to `out`
+    /// (length N). No allocation.
+    #[track_caller]
+    pub fn relative_accelerations(&self, state: &[f64], ug: f64, out: &mut [f64]) {
+        self.check_state(state);
+        let n = self.masses.len();
+        assert_eq!(out.len(), n, "output has the wrong length");
+        let mut f_cur = self.element_force(state, 0);
+        for j in 0..n {
+            let f_next = if j + 1 < n {
+                self.element_force(state, j + 1)
+            } else {
+                0.0
+            };
+            out[j] = -ug + (f_next - f_cur) / self.masses[j];
+            f_cur = f_next;
+        }
+    }
+
+    /// Continuous right-hand side `dstate = g(state, ü_g)` (SPEC §1). No allocation.
+    #[track_caller]
+    pub fn rhs(&self, state: &[f64], ug: f64, dstate: &mut [f64]) {
+        self.check_state(state);
+        assert_eq!(dstate.len(), state.len(), "derivative has the wrong length");
+        let n = self.masses.len();
+        dstate[..n].copy_from_slice(&state[n..2 * n]);
+        self.relative_accelerations(state, ug, &mut dstate[n..2 * n]);
+        for (e, bw) in self.bouc_wen.iter().enumerate() {
+            let j = bw.storey;
+            let vm = if j == 0 { 0.0 } else { state[n + j - 1] };
+            let dv = state[n + j] - vm;
+            dstate[2 * n + e] = bouc_wen_rate(dv, state[2 * n + e], bw.beta, bw.gamma, bw.n);
+        }
+    }
+
+    /// Forward-Euler map of SPEC §3: `out = state + dt · g(state, ü_g(k−1))`. No allocation.
+    #[track_caller]
+    pub fn euler_step(&self, state: &[f64], ug_prev: f64, dt: f64, out: &mut [f64]) {
+        self.rhs(state, ug_prev, out);
+        for (o, s) in out.iter_mut().zip(state) {
+            *o = s + dt * *o;
+        }
+    }
+
+    /// Restoring force `k_j r_j` of Bouc–Wen element `element` (the hysteresis loop plots it
+    /// against the element's relative displacement).
+    #[track_caller]
+    pub fn restoring_force(&self, state: &[f64], element: usize) -> f64 {
+        self.check_state(state);
+        let bw = &self.bouc_wen[element];
+        self.k[bw.storey] * state[self.r_index(element)]
+    }
+
+    /// Relative displacement `x_j − x_{j−1}` across Bouc–Wen element `element`.
+    #[track_caller]
+    pub fn element_drift(&self, state: &[f64], element: usize) -> f64 {
+        self.check_state(state);
+        let j = self.bouc_wen[element].storey;
+        state[j] - if j == 0 { 0.0 } else { state[j - 1] }
+    }
+
+    /// Saturation bound `(1/(β+γ))^(1/n)` of `|r|` for element `element`, when `β + γ > 0`
+    /// (otherwise `r` is unbounded and `None` is returned).
+    pub fn saturation(&self, element: usize) -> Option<f64> {
+        let bw = &self.bouc_wen[element];
+        let s = bw.beta + bw.gamma;
+        (s > 0.0).then(|| (1.0 / s).powf(1.0 / bw.n))
+    }
+
+    /// Parameter vector θ: `[k_1..k_N, c_1..c_N, then (β, γ, n) per Bouc–Wen element]`.
+    pub fn theta(&self) -> Vec<f64> {
+        let mut t = Vec::with_capacity(2 * self.storeys() + 3 * self.bouc_wen.len());
+        t.extend_from_slice(&self.k);
+        t.extend_from_slice(&self.c);
+        for bw in &self.bouc_wen {
+            t.extend_from_slice(&[bw.beta, bw.gamma, bw.n]);
+        }
+        t
+    }
+
+    /// Names of θ, in the order of [`ShearChain::theta`]: `k1..kN`, `c1..cN`, then `beta`,
+    /// `gamma`, `n` when the chain has a single Bouc–Wen element (the paper's notation), or
+    /// `beta<s>`, `gamma<s>`, `n<s>` (1-based storey `s`) when it has several.
+    pub fn theta_names(&self) -> Vec<String> {
+        let n = self.storeys();
+        let mut names: Vec<String> = (1..=n).map(|j| format!("k{j}")).collect();
+        names.extend((1..=n).map(|j| format!("c{j}")));
+        let single = self.bouc_wen.len() == 1;
+        for bw in &self.bouc_wen {
+            let s = if single {
+                String::new()
+            } else {
+                (bw.storey + 1).to_string()
+            };
+            names.extend([format!("beta{s}"), format!("gamma{s}"), format!("n{s}")]);
+        }
+        names
+    }
+
+    /// Names of the state entries: `x1..xN`, `v1..vN`, `r<s>` per Bouc–Wen element (1-based
+    /// storey `s`).
+    pub fn state_names(&self) -> Vec<String> {
+        let n = self.storeys();
+        let mut names: Vec<String> = (1..=n).map(|j| format!("x{j}")).collect();
+        names.extend((1..=n).map(|j| format!("v{j}")));
+        names.extend(self.bouc_wen.iter().map(|bw| format!("r{}", bw.storey + 1)));
+        names
+    }
+
+    /// The same chain (masses and Bouc–Wen storeys) with parameters θ in the order of
+    /// [`ShearChain::theta`], validated (e.g. for the validation run with θ_val, SPEC §7).
+    pub fn with_theta(&self, theta: &[f64]) -> Result<Self, StructureError> {
+        let n = self.storeys();
+        let expected = 2 * n + 3 * self.bouc_wen.len();
+        if theta.len() != expected {
+            return Err(StructureError::WrongLength {
+                what: "theta",
+                expected,
+                found: theta.len(),
+            });
+        }
+        let bouc_wen = self
+            .bouc_wen
+            .iter()
+            .enumerate()
+            .map(|(e, bw)| BoucWen {
+                storey: bw.storey,
+                beta: theta[2 * n + 3 * e],
+                gamma: theta[2 * n + 3 * e + 1],
+                n: theta[2 * n + 3 * e + 2],
+            })
+            .collect();
+        Self::new(
+            self.masses.clone(),
+            theta[..n].to_vec(),
+            theta[n..2 * n].to_vec(),
+            bouc_wen,
+        )
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn paper() -> ShearChain {
+        ShearChain::new(
+            vec![1.0; 3],
+            vec![8.0; 3],
+            vec![0.25; 3],
+            vec![BoucWen {
+                storey: 0,
+                beta: 2.0,
+                gamma: 1.0,
+                n: 2.0,
+            }],
+        )
+        .unwrap()
+    }
+
+    #[test]
+    fn rhs_matches_spec_equations() {
+        // SPEC §1 written out by hand for the paper's chain, at an arbitrary state.
+        let ch = paper();
+        let s = [0.1, -0.2, 0.35, 0.7, -0.4, 0.25, 0.3];
+        let ug = 1.3;
+        let (k, c, b, g, n): (f64, f64, f64, f64, f64) = (8.0, 0.25, 2.0, 1.0, 2.0);
+        let (x1, x2, x3, v1, v2, v3, r1) = (s[0], s[1], s[2], s[3], s[4], s[5], s[6]);
+        let a1 = -ug - k * r1 + k * (x2 - x1) - c * v1 + c * (v2 - v1);
+        let a2 = -ug + k * (x1 - x2) + k * (x3 - x2) + c * (v1 - v2) + c * (v3 - v2);
+        let a3 = -ug + k * (x2 - x3) + c * (v2 - v3);
+        let rd = v1 - b * v1.abs() * f64::abs(r1).powf(n - 1.0) * r1 - g * v1 * r1.abs().powf(n);
+        let mut d = [0.0; 7];
+        ch.rhs(&s, ug, &mut d);
+        let want = [v1, v2, v3, a1, a2, a3, rd];
+        for i in 0..7 {
+            assert!(
+                (d[i] - want[i]).abs() < 1e-14,
+                "entry {i}: {} vs {}",
+                d[i],
+                want[i]
+            );
+        }
+        let mut e = [0.0; 7];
+        ch.euler_step(&s, ug, 0.005, &mut e);
+        for i in 0..7 {
+            assert!((e[i] - (s[i] + 0.005 * want[i])).abs() < 1e-15);
+        }
+        assert!((ch.restoring_force(&s, 0) - 8.0 * r1).abs() < 1e-15);
+    }
+
+    #[test]
+    fn names_theta_and_saturation() {
+        let ch = paper();
+        assert_eq!(ch.theta(), vec![8., 8., 8., 0.25, 0.25, 0.25, 2., 1., 2.]);
+        assert_eq!(
+            ch.theta_names(),
+            ["k1", "k2", "k3", "c1", "c2", "c3", "beta", "gamma", "n"]
+        );
+        assert_eq!(ch.state_names(), ["x1", "x2", "x3", "v1", "v2", "v3", "r1"]);
+        assert!((ch.saturation(0).unwrap() - (1.0f64 / 3.0).sqrt()).abs() < 1e-15);
+        let again = ch.with_theta(&ch.theta()).unwrap();
+        assert_eq!(again, ch);
+    }
+
+    #[test]
+    fn validation_rejects_impossible_values() {
+        let bw = |storey, n| BoucWen {
+            storey,
+            beta: 1.0,
+            gamma: 0.5,
+            n,
+        };
+        let ok = |m: Vec<f64>, k: Vec<f64>, c: Vec<f64>, b| ShearChain::new(m, k, c, b);
+        assert_eq!(
+            ok(vec![], vec![], vec![], vec![]),
+            Err(StructureError::NoStorey)
+        );
+        assert!(matches!(
+            ok(vec![1.0; 2], vec![1.0], vec![0.0; 2], vec![]),
+            Err(StructureError::WrongLength { what: "k", .. })
+        ));
+        assert!(matches!(
+            ok(vec![1.0, 0.0], vec![1.0; 2], vec![0.0; 2], vec![]),
+            Err(StructureError::NonPositiveMass { storey: 1, .. })
+        ));
+        assert!(matches!(
+            ok(vec![1.0; 2], vec![1.0, -1.0], vec![0.0; 2], vec![]),
+            Err(StructureError::NegativeCoefficient { storey: 1, .. })
+        ));
+        assert!(matches!(
+            ok(vec![1.0; 2], vec![1.0; 2], vec![f64::NAN, 0.0], vec![]),
+            Err(StructureError::NegativeCoefficient { storey: 0, .. })
+        ));
+        assert!(matches!(
+            ok(vec![1.0; 2], vec![1.0; 2], vec![0.0; 2], vec![bw(2, 2.0)]),
+            Err(StructureError::ElementOutOfRange { .. })
+        ));
+        assert!(matches!(
+            ok(
+                vec![1.0; 2],
+                vec![1.0; 2],
+                vec![0.0; 2],
+                vec![bw(1, 2.0), bw(1, 2.0)]
+            ),
+            Err(StructureError::DuplicateElement { storey: 1 })
+        ));
+        assert!(matches!(
+            ok(vec![1.0; 2], vec![1.0; 2], vec![0.0; 2], vec![bw(0, 0.5)]),
+            Err(StructureError::ExponentBelowOne { .. })
+        ));
+        assert!(paper().with_theta(&[1.0; 4]).is_err());
+    }
+
+    #[test]
+    fn bouc_wen_at_zero_is_finite_for_n_equal_one() {
+        assert_eq!(bouc_wen_rate(0.7, 0.0, 2.0, 1.0, 1.0), 0.7);
+        assert_eq!(bouc_wen_rate(0.7, 0.0, 2.0, 1.0, 2.0), 0.7);
+    }
+
+    #[test]
+    fn bouc_wen_at_upper_storey_uses_relative_velocity() {
+        let ch = ShearChain::new(
+            vec![2.0; 2],
+            vec![3.0, 5.0],
+            vec![0.1, 0.2],
+            vec![BoucWen {
+                storey: 1,
+                beta: 0.5,
+                gamma: 0.5,
+                n: 1.5,
+            }],
+        )
+        .unwrap();
+        let s = [0.1, 0.4, 0.2, -0.3, 0.15];
+        let mut d = [0.0; 5];
+        ch.rhs(&s, 0.5, &mut d);
+        let f0 = 3.0 * 0.1 + 0.1 * 0.2;
+        let f1 = 5.0 * 0.15 + 0.2 * (-0.3 - 0.2);
+        assert!((d[2] - (-0.5 + (f1 - f0) / 2.0)).abs() < 1e-15);
+        assert!((d[3] - (-0.5 - f1 / 2.0)).abs() < 1e-15);
+        assert!((d[4] - bouc_wen_rate(-0.5, 0.15, 0.5, 0.5, 1.5)).abs() < 1e-15);
+        assert!((ch.element_drift(&s, 0) - 0.3).abs() < 1e-15);
+    }
+}
