@@ -1,0 +1,131 @@
+//! Second-order extended Kalman filter steps (EKF2, SPEC §4); EKF1 is the special case of empty
+//! Hessians. The caller evaluates the map and its Jacobian at the current mean (the model knows
+//! how); the constant Hessians come as sparse entry lists ([`SparseHessians`]).
+//!
+//! For a map that is at most quadratic in the state (the MPF-EKF2 partition of SPEC §5.4, §6),
+//! these moments are exact.
+
+use nalgebra::{SMatrix, SVector};
+
+use super::kf::{gaussian_update, symmetrise, Innovation};
+use super::second_order::second_order_terms;
+use crate::error::FilterError;
+use crate::health::Health;
+use crate::model::SparseHessians;
+
+/// EKF2 propagate, SPEC §4 (EKF1 when `hess` is empty):
+/// `m ← φ(m) + ½ Σ_i e_i tr(𝓗ⁱ P)`, `P ← J P Jᵀ + ½ Σ_{i,i'} e_i e_{i'}ᵀ tr(𝓗ⁱ P 𝓗^{i'} P) + Q`.
+///
+/// `value` = φ(m) and `jac` = ∂φ/∂x at the current `m`; the Hessian terms use the current `P`.
+pub fn ekf2_propagate<const N: usize>(
+    m: &mut SVector<f64, N>,
+    p: &mut SMatrix<f64, N, N>,
+    value: &SVector<f64, N>,
+    jac: &SMatrix<f64, N, N>,
+    hess: &SparseHessians,
+    q: &SMatrix<f64, N, N>,
+) {
+    let mut new_p = jac * *p * jac.transpose() + q;
+    if hess.is_empty() {
+        *m = *value;
+    } else {
+        let mut mean2 = SVector::<f64, N>::zeros();
+        let mut cov2 = SMatrix::<f64, N, N>::zeros();
+        second_order_terms(hess, p, &mut mean2, &mut cov2);
+        *m = value + mean2;
+        new_p += cov2;
+    }
+    symmetrise(&mut new_p);
+    *p = new_p;
+}
+
+/// EKF2 predicted moments of a measurement (or of any map ψ of the Gaussian `N(m, P)`) without
+/// updating, SPEC §4 and §5.4 (a), (d):
+/// `ŷ = ψ(m) + ½ Σ_i e_i tr(𝓗ⁱ P)` and `L = J P Jᵀ + ½ Σ_{i,i'} e_i e_{i'}ᵀ tr(𝓗ⁱ P 𝓗^{i'} P) + S`.
+///
+/// `value` = ψ(m), `jac` = ∂ψ/∂x at `m`, `s_add` the additive noise covariance.
+pub fn ekf2_moments<const N: usize, const NY: usize>(
+    p: &SMatrix<f64, N, N>,
+    value: &SVector<f64, NY>,
+    jac: &SMatrix<f64, NY, N>,
+    hess: &SparseHessians,
+    s_add: &SMatrix<f64, NY, NY>,
+) -> (SVector<f64, NY>, SMatrix<f64, NY, NY>) {
+    let mut cov = jac * p * jac.transpose() + s_add;
+    let mut mean = *value;
+    if !hess.is_empty() {
+        let mut mean2 = SVector::<f64, NY>::zeros();
+        let mut cov2 = SMatrix::<f64, NY, NY>::zeros();
+        second_order_terms(hess, p, &mut mean2, &mut cov2);
+        mean += mean2;
+        cov += cov2;
+    }
+    symmetrise(&mut cov);
+    (mean, cov)
+}
+
+/// EKF2 update, SPEC §4: `ŷ = ψ(m) + ½ tr(𝓗ⁱ P)`,
+/// `L = J P Jᵀ + ½ tr(𝓗ⁱ P 𝓗^{i'} P) + R`, then as [`gaussian_update`] (whose additive covariance
+/// is `R` plus the Hessian term). `value` = ψ(m), `jac` = ∂ψ/∂x at the current `m`.
+#[allow(clippy::too_many_arguments)]
+pub fn ekf2_update<const N: usize, const NY: usize>(
+    m: &mut SVector<f64, N>,
+    p: &mut SMatrix<f64, N, N>,
+    y: &SVector<f64, NY>,
+    value: &SVector<f64, NY>,
+    jac: &SMatrix<f64, NY, N>,
+    hess: &SparseHessians,
+    r: &SMatrix<f64, NY, NY>,
+    step: usize,
+    health: &mut Health,
+) -> Result<Innovation<NY>, FilterError> {
+    if hess.is_empty() {
+        return gaussian_update(m, p, y, value, jac, r, step, health);
+    }
+    let mut mean2 = SVector::<f64, NY>::zeros();
+    let mut cov2 = SMatrix::<f64, NY, NY>::zeros();
+    second_order_terms(hess, p, &mut mean2, &mut cov2);
+    let y_hat = value + mean2;
+    let s_add = cov2 + r;
+    gaussian_update(m, p, y, &y_hat, jac, &s_add, step, health)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::{Matrix1, Matrix1x2, Matrix2, Vector1, Vector2};
+
+    /// z = x0 x1 with x ~ N(μ, P): exact mean μ0 μ1 + P01 and exact variance
+    /// μ1² P00 + μ0² P11 + 2 μ0 μ1 P01 + P00 P11 + P01² (Isserlis).
+    #[test]
+    fn bilinear_moments_are_exact() {
+        let mu = Vector2::new(0.7, -1.3);
+        let p = Matrix2::new(0.5, 0.2, 0.2, 0.8);
+        let mut h = SparseHessians::new();
+        h.push(0, 0, 1, 1.0);
+        let value = Vector1::new(mu[0] * mu[1]);
+        let jac = Matrix1x2::new(mu[1], mu[0]);
+        let (mean, cov) = ekf2_moments(&p, &value, &jac, &h, &Matrix1::zeros());
+        let exact_mean = mu[0] * mu[1] + p[(0, 1)];
+        let exact_var = mu[1].powi(2) * p[(0, 0)]
+            + mu[0].powi(2) * p[(1, 1)]
+            + 2.0 * mu[0] * mu[1] * p[(0, 1)]
+            + p[(0, 0)] * p[(1, 1)]
+            + p[(0, 1)].powi(2);
+        assert!((mean[0] - exact_mean).abs() < 1e-14);
+        assert!((cov[(0, 0)] - exact_var).abs() < 1e-14);
+    }
+
+    #[test]
+    fn propagate_without_hessians_is_linearisation() {
+        let mut m = Vector2::new(1.0, 2.0);
+        let mut p = Matrix2::new(1.0, 0.1, 0.1, 2.0);
+        let jac = Matrix2::new(1.0, 0.5, 0.0, 1.0);
+        let value = Vector2::new(3.0, 4.0);
+        let q = Matrix2::identity() * 0.01;
+        let expected_p = jac * p * jac.transpose() + q;
+        ekf2_propagate(&mut m, &mut p, &value, &jac, &SparseHessians::new(), &q);
+        assert_eq!(m, value);
+        assert!((p - expected_p).abs().max() < 1e-15);
+    }
+}
