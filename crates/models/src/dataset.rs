@@ -1,1 +1,814 @@
-//! (in progress)
+//! Data generation and data-set directories (SPEC §2).
+//!
+//! [`generate`] integrates the truth with RK4 under the clean excitation, then adds Gaussian
+//! noise of s.d. `noise_fraction × RMS` to every clean acceleration channel and to the
+//! excitation. Each noise comes from its own named stream
+//! (`core_filters::rng::stream(seed, run, purpose)`): measurement noise from
+//! `purpose::MEASUREMENT_NOISE`, excitation noise from `purpose::EXCITATION_NOISE`, a synthetic
+//! excitation from `purpose::EXCITATION`. All samples are kept, including row 0 at `t = 0`
+//! (the filters use `k = 1..K`).
+//!
+//! A data-set directory holds
+//! - `measured.csv`: header `t,ug,a1,...,aN` (measured excitation and accelerations);
+//! - `truth.csv` (optional): header `t,ug,x1..xN,v1..vN,r<s>...` with the clean excitation and
+//!   the true states, one `r` column per Bouc–Wen element (1-based storey `s`);
+//! - `dataset.json` (optional): [`DatasetMeta`] (config, true parameters, noise levels, RMS).
+//!
+//! Numbers are written with Rust's `{}` formatting of `f64`, the shortest decimal that parses
+//! back to the same bits, so a directory round-trips bit for bit.
+
+use crate::excitation::{self, rms, GroundMotion, KanaiTajimi};
+use crate::integrate::{simulate_rk4, Trajectory};
+use crate::preset::{Preset, PresetError, HARMONIC_DURATION};
+use crate::readers::{self, parse_field, uniform_step, ReadError, Units};
+use crate::structure::ShearChain;
+use core_filters::rng::{purpose, stream};
+use rand_distr::{Distribution, StandardNormal};
+use serde::{Deserialize, Serialize};
+use std::fmt::Write as _;
+use std::io::Write as _;
+use std::path::{Path, PathBuf};
+use thiserror::Error;
+
+/// Where the ground acceleration comes from.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "kebab-case")]
+pub enum ExcitationSource {
+    /// The vendored El Centro 1940 N-S record.
+    ElCentro,
+    /// Kanai–Tajimi / Clough–Penzien filtered white noise from the `excitation` stream.
+    KanaiTajimi { params: KanaiTajimi },
+    /// `amplitude·sin(omega·t)` (m/s², rad/s).
+    Harmonic { amplitude: f64, omega: f64 },
+    /// A user CSV record `t,acc`.
+    Csv { path: PathBuf, units: Units },
+    /// A PEER NGA `.AT2` record.
+    At2 { path: PathBuf },
+}
+
+impl ExcitationSource {
+    /// Default amplitude scale of the source: 3.0 for El Centro and the Kanai–Tajimi record
+    /// (whose default PGA is El Centro's), 1.0 otherwise (SPEC §2).
+    pub fn default_scale(&self) -> f64 {
+        match self {
+            ExcitationSource::ElCentro | ExcitationSource::KanaiTajimi { .. } => {
+                excitation::EL_CENTRO_SCALE
+            }
+            _ => 1.0,
+        }
+    }
+}
+
+/// What the accelerometers measure (SPEC §2).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum MeasurementKind {
+    /// Relative accelerations ẍ (paper eq. 29b, `h = −ü_g`).
+    Relative,
+    /// Absolute accelerations ẍ + ü_g.
+    Absolute,
+}
+
+/// Everything that defines a data set.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct DatasetConfig {
+    /// Preset name ([`Preset::NAMES`]).
+    pub preset: String,
+    /// Storey count override (same per-storey values).
+    pub storeys: Option<usize>,
+    pub excitation: ExcitationSource,
+    /// Amplitude scale applied to the excitation.
+    pub scale: f64,
+    /// Duration (s); `None` keeps the whole record (31.18 s for synthetic inputs).
+    pub duration: Option<f64>,
+    /// Time step of the data (s).
+    pub dt: f64,
+    /// Noise s.d. as a fraction of the RMS of each clean signal (0.1 in SPEC §2).
+    pub noise_fraction: f64,
+    pub measurement: MeasurementKind,
+    pub seed: u64,
+    pub run: u64,
+}
+
+impl DatasetConfig {
+    /// The preset's default data set (SPEC §2) for `seed`, run 0.
+    pub fn from_preset(preset: &str, seed: u64) -> Result<Self, PresetError> {
+        let p = Preset::from_name(preset, None)?;
+        let (excitation, scale, duration) = match p.excitation {
+            crate::preset::DefaultExcitation::ElCentro { scale } => {
+                (ExcitationSource::ElCentro, scale, None)
+            }
+            crate::preset::DefaultExcitation::Harmonic {
+                amplitude,
+                omega,
+                duration,
+            } => (
+                ExcitationSource::Harmonic { amplitude, omega },
+                1.0,
+                Some(duration),
+            ),
+        };
+        Ok(Self {
+            preset: preset.to_string(),
+            storeys: None,
+            excitation,
+            scale,
+            duration,
+            dt: p.dt,
+            noise_fraction: 0.1,
+            measurement: MeasurementKind::Relative,
+            seed,
+            run: 0,
+        })
+    }
+}
+
+/// RMS values of the clean signals over the whole record (SPEC §3 uses them for R and Q).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RmsValues {
+    /// Per measured acceleration channel (relative or absolute as measured).
+    pub acc: Vec<f64>,
+    /// Clean ground acceleration.
+    pub ug: f64,
+    /// Per-storey relative velocity.
+    pub vel: Vec<f64>,
+    /// Per-storey relative displacement.
+    pub disp: Vec<f64>,
+    /// Per Bouc–Wen element hysteretic variable r.
+    pub r: Vec<f64>,
+}
+
+/// Standard deviations of the added noises.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct NoiseLevels {
+    pub fraction: f64,
+    /// Per acceleration channel.
+    pub acc_sd: Vec<f64>,
+    /// Excitation.
+    pub ug_sd: f64,
+}
+
+/// The content of `dataset.json`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct DatasetMeta {
+    pub config: DatasetConfig,
+    pub dt: f64,
+    pub samples: usize,
+    pub storeys: usize,
+    /// 0-based element indices of the Bouc–Wen elements.
+    pub bouc_wen_storeys: Vec<usize>,
+    pub theta_names: Vec<String>,
+    pub theta_true: Vec<f64>,
+    pub state_names: Vec<String>,
+    pub noise: NoiseLevels,
+    pub rms: RmsValues,
+    /// Per Bouc–Wen element: `max |r|` and its saturation bound (when β+γ > 0).
+    pub max_abs_r: Vec<f64>,
+    pub saturation: Vec<Option<f64>>,
+    pub seed: u64,
+    pub run: u64,
+}
+
+/// A generated data set.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Dataset {
+    pub config: DatasetConfig,
+    pub chain: ShearChain,
+    pub dt: f64,
+    pub t: Vec<f64>,
+    pub ug_clean: Vec<f64>,
+    pub ug_meas: Vec<f64>,
+    /// Clean accelerations, row-major `K × N`.
+    pub y_clean: Vec<f64>,
+    /// Measured accelerations, row-major `K × N`.
+    pub y_meas: Vec<f64>,
+    /// True states at every sample (RK4, clean excitation).
+    pub truth: Trajectory,
+    pub theta_true: Vec<f64>,
+    pub theta_names: Vec<String>,
+    pub state_names: Vec<String>,
+    pub rms: RmsValues,
+    pub noise: NoiseLevels,
+}
+
+/// Failures of generation, writing or loading. File-level errors name the file, the line and
+/// the field.
+#[derive(Debug, Error)]
+pub enum DatasetError {
+    #[error(transparent)]
+    Preset(#[from] PresetError),
+    #[error(transparent)]
+    Read(#[from] ReadError),
+    #[error("invalid dataset config: field `{field}`: {message}")]
+    InvalidConfig {
+        field: &'static str,
+        message: String,
+    },
+    #[error("the simulated response is not finite at t = {t} (unstable structure or input?)")]
+    NonFinite { t: f64 },
+    #[error("{file}: {source}")]
+    Io {
+        file: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error("{file}:{line}:{column}: {message}")]
+    Json {
+        file: PathBuf,
+        line: usize,
+        column: usize,
+        message: String,
+    },
+    #[error("{file}:{line}: field `{field}`: {message}")]
+    Mismatch {
+        file: PathBuf,
+        line: usize,
+        field: String,
+        message: String,
+    },
+}
+
+fn invalid(field: &'static str, message: impl Into<String>) -> DatasetError {
+    DatasetError::InvalidConfig {
+        field,
+        message: message.into(),
+    }
+}
+
+/// The excitation of `config`, scaled, at `config.dt`, truncated to `config.duration`.
+pub fn ground_motion(config: &DatasetConfig) -> Result<GroundMotion, DatasetError> {
+    let full = config.duration.unwrap_or(HARMONIC_DURATION);
+    let raw = match &config.excitation {
+        ExcitationSource::ElCentro => excitation::el_centro(),
+        ExcitationSource::KanaiTajimi { params } => {
+            let mut rng = stream(config.seed, config.run, purpose::EXCITATION);
+            excitation::kanai_tajimi(params, full, config.dt, &mut rng)
+        }
+        ExcitationSource::Harmonic { amplitude, omega } => {
+            excitation::harmonic(*amplitude, *omega, full, config.dt)
+        }
+        ExcitationSource::Csv { path, units } => readers::read_csv(path, *units)?,
+        ExcitationSource::At2 { path } => readers::read_at2(path)?,
+    };
+    let mut gm = raw.scaled(config.scale);
+    if (gm.dt - config.dt).abs() > 1e-9 * config.dt {
+        gm = gm.resample_linear(config.dt);
+    } else {
+        gm.dt = config.dt;
+    }
+    if let Some(d) = config.duration {
+        gm = gm.truncated(d);
+    }
+    if gm.len() < 2 {
+        return Err(invalid("duration", "the record has fewer than 2 samples"));
+    }
+    Ok(gm)
+}
+
+/// Generates the data set of `config` (SPEC §2).
+pub fn generate(config: &DatasetConfig) -> Result<Dataset, DatasetError> {
+    if !(config.dt > 0.0 && config.dt.is_finite()) {
+        return Err(invalid(
+            "dt",
+            format!("{} is not a positive time step", config.dt),
+        ));
+    }
+    if !(config.noise_fraction >= 0.0 && config.noise_fraction.is_finite()) {
+        return Err(invalid(
+            "noise_fraction",
+            format!("{} is not a non-negative number", config.noise_fraction),
+        ));
+    }
+    if !config.scale.is_finite() {
+        return Err(invalid("scale", format!("{} is not finite", config.scale)));
+    }
+    if let Some(d) = config.duration {
+        if !(d > 0.0 && d.is_finite()) {
+            return Err(invalid(
+                "duration",
+                format!("{d} is not a positive duration"),
+            ));
+        }
+    }
+    let preset = Preset::from_name(&config.preset, config.storeys)?;
+    let chain = preset.chain;
+    let gm = ground_motion(config)?;
+    let dt = config.dt;
+    let ug_clean = gm.acc;
+    let kk = ug_clean.len();
+    let n = chain.storeys();
+    let truth = simulate_rk4(&chain, &ug_clean, dt);
+    if let Some(k) = truth
+        .rows()
+        .position(|row| row.iter().any(|v| !v.is_finite()))
+    {
+        return Err(DatasetError::NonFinite { t: k as f64 * dt });
+    }
+    let mut y_clean = vec![0.0; kk * n];
+    for (k, row) in y_clean.chunks_exact_mut(n).enumerate() {
+        chain.relative_accelerations(truth.state(k), ug_clean[k], row);
+        if config.measurement == MeasurementKind::Absolute {
+            row.iter_mut().for_each(|a| *a += ug_clean[k]);
+        }
+    }
+    let column_rms = |buf: &[f64], cols: usize, j: usize| -> f64 {
+        rms(&buf
+            .iter()
+            .skip(j)
+            .step_by(cols)
+            .copied()
+            .collect::<Vec<_>>())
+    };
+    let d = chain.dim();
+    let rms_values = RmsValues {
+        acc: (0..n).map(|j| column_rms(&y_clean, n, j)).collect(),
+        ug: rms(&ug_clean),
+        vel: (0..n)
+            .map(|j| column_rms(truth.as_flat(), d, n + j))
+            .collect(),
+        disp: (0..n).map(|j| column_rms(truth.as_flat(), d, j)).collect(),
+        r: (2 * n..d)
+            .map(|j| column_rms(truth.as_flat(), d, j))
+            .collect(),
+    };
+    let f = config.noise_fraction;
+    let noise = NoiseLevels {
+        fraction: f,
+        acc_sd: rms_values.acc.iter().map(|r| f * r).collect(),
+        ug_sd: f * rms_values.ug,
+    };
+    let mut rng = stream(config.seed, config.run, purpose::MEASUREMENT_NOISE);
+    let mut y_meas = y_clean.clone();
+    for row in y_meas.chunks_exact_mut(n) {
+        for (y, sd) in row.iter_mut().zip(&noise.acc_sd) {
+            let z: f64 = StandardNormal.sample(&mut rng);
+            *y += sd * z;
+        }
+    }
+    let mut rng = stream(config.seed, config.run, purpose::EXCITATION_NOISE);
+    let ug_meas = ug_clean
+        .iter()
+        .map(|u| {
+            let z: f64 = StandardNormal.sample(&mut rng);
+            u + noise.ug_sd * z
+        })
+        .collect();
+    Ok(Dataset {
+        config: config.clone(),
+        dt,
+        t: (0..kk).map(|k| k as f64 * dt).collect(),
+        ug_clean,
+        ug_meas,
+        y_clean,
+        y_meas,
+        theta_true: chain.theta(),
+        theta_names: chain.theta_names(),
+        state_names: chain.state_names(),
+        truth,
+        chain,
+        rms: rms_values,
+        noise,
+    })
+}
+
+impl Dataset {
+    /// Number of samples K (row 0 at t = 0 included).
+    pub fn len(&self) -> usize {
+        self.t.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.t.is_empty()
+    }
+
+    /// Number of acceleration channels (storeys).
+    pub fn channels(&self) -> usize {
+        self.chain.storeys()
+    }
+
+    /// Measured accelerations at sample `k`.
+    pub fn y(&self, k: usize) -> &[f64] {
+        let n = self.channels();
+        &self.y_meas[k * n..(k + 1) * n]
+    }
+
+    /// `max |r|` per Bouc–Wen element over the record.
+    pub fn max_abs_r(&self) -> Vec<f64> {
+        (0..self.chain.bouc_wen().len())
+            .map(|e| {
+                let i = self.chain.r_index(e);
+                self.truth.rows().fold(0.0_f64, |m, s| m.max(s[i].abs()))
+            })
+            .collect()
+    }
+
+    /// The content of `dataset.json`.
+    pub fn meta(&self) -> DatasetMeta {
+        DatasetMeta {
+            config: self.config.clone(),
+            dt: self.dt,
+            samples: self.len(),
+            storeys: self.channels(),
+            bouc_wen_storeys: self.chain.bouc_wen().iter().map(|b| b.storey).collect(),
+            theta_names: self.theta_names.clone(),
+            theta_true: self.theta_true.clone(),
+            state_names: self.state_names.clone(),
+            noise: self.noise.clone(),
+            rms: self.rms.clone(),
+            max_abs_r: self.max_abs_r(),
+            saturation: (0..self.chain.bouc_wen().len())
+                .map(|e| self.chain.saturation(e))
+                .collect(),
+            seed: self.config.seed,
+            run: self.config.run,
+        }
+    }
+
+    /// What [`load_dir`] returns for a directory written by [`Dataset::write_dir`].
+    pub fn to_loaded(&self) -> LoadedDataset {
+        LoadedDataset {
+            dt: self.dt,
+            t: self.t.clone(),
+            ug_meas: self.ug_meas.clone(),
+            y_meas: self.y_meas.clone(),
+            channels: self.channels(),
+            truth: Some(LoadedTruth {
+                ug_clean: self.ug_clean.clone(),
+                states: self.truth.clone(),
+                state_names: self.state_names.clone(),
+            }),
+            meta: Some(self.meta()),
+        }
+    }
+
+    /// Writes `measured.csv`, `truth.csv` and `dataset.json` into `dir` (created if needed).
+    pub fn write_dir(&self, dir: &Path) -> Result<(), DatasetError> {
+        std::fs::create_dir_all(dir).map_err(|source| DatasetError::Io {
+            file: dir.to_path_buf(),
+            source,
+        })?;
+        let n = self.channels();
+        let mut s = String::from("t,ug");
+        for j in 1..=n {
+            write!(s, ",a{j}").unwrap();
+        }
+        s.push('\n');
+        for k in 0..self.len() {
+            write!(s, "{},{}", self.t[k], self.ug_meas[k]).unwrap();
+            for a in self.y(k) {
+                write!(s, ",{a}").unwrap();
+            }
+            s.push('\n');
+        }
+        write_file(&dir.join(MEASURED), s.as_bytes())?;
+
+        let mut s = String::from("t,ug");
+        for name in &self.state_names {
+            write!(s, ",{name}").unwrap();
+        }
+        s.push('\n');
+        for k in 0..self.len() {
+            write!(s, "{},{}", self.t[k], self.ug_clean[k]).unwrap();
+            for v in self.truth.state(k) {
+                write!(s, ",{v}").unwrap();
+            }
+            s.push('\n');
+        }
+        write_file(&dir.join(TRUTH), s.as_bytes())?;
+
+        let json = serde_json::to_string_pretty(&self.meta()).expect("meta is serialisable");
+        write_file(&dir.join(META), json.as_bytes())
+    }
+}
+
+/// File names inside a data-set directory.
+pub const MEASURED: &str = "measured.csv";
+pub const TRUTH: &str = "truth.csv";
+pub const META: &str = "dataset.json";
+
+fn write_file(path: &Path, bytes: &[u8]) -> Result<(), DatasetError> {
+    let io = |source| DatasetError::Io {
+        file: path.to_path_buf(),
+        source,
+    };
+    let mut f = std::fs::File::create(path).map_err(io)?;
+    f.write_all(bytes).map_err(io)
+}
+
+/// The true states of a loaded directory (`truth.csv`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct LoadedTruth {
+    /// Clean excitation.
+    pub ug_clean: Vec<f64>,
+    pub states: Trajectory,
+    pub state_names: Vec<String>,
+}
+
+/// A data-set directory as loaded: measured data always, truth and metadata when present
+/// (field data has only `measured.csv`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct LoadedDataset {
+    pub dt: f64,
+    pub t: Vec<f64>,
+    pub ug_meas: Vec<f64>,
+    /// Row-major `K × channels`.
+    pub y_meas: Vec<f64>,
+    pub channels: usize,
+    pub truth: Option<LoadedTruth>,
+    pub meta: Option<DatasetMeta>,
+}
+
+impl LoadedDataset {
+    pub fn len(&self) -> usize {
+        self.t.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.t.is_empty()
+    }
+
+    /// Measured accelerations at sample `k`.
+    pub fn y(&self, k: usize) -> &[f64] {
+        &self.y_meas[k * self.channels..(k + 1) * self.channels]
+    }
+}
+
+/// A parsed numeric table: column names from the header and row-major values, with the line
+/// number of every row.
+struct Table {
+    names: Vec<String>,
+    values: Vec<f64>,
+    lines: Vec<usize>,
+}
+
+fn read_table(path: &Path) -> Result<Table, DatasetError> {
+    let text = std::fs::read_to_string(path).map_err(|source| ReadError::Io {
+        file: path.to_path_buf(),
+        source,
+    })?;
+    let mut lines = text.lines().enumerate();
+    let names: Vec<String> = match lines.next() {
+        Some((_, h)) => h.split(',').map(|s| s.trim().to_string()).collect(),
+        None => {
+            return Err(ReadError::Empty {
+                file: path.to_path_buf(),
+                found: 0,
+                needed: 2,
+            }
+            .into())
+        }
+    };
+    let mut values = Vec::new();
+    let mut rows = Vec::new();
+    for (i, l) in lines {
+        let line = i + 1;
+        if l.trim().is_empty() {
+            continue;
+        }
+        let fields: Vec<&str> = l.split(',').collect();
+        if fields.len() != names.len() {
+            return Err(ReadError::ColumnCount {
+                file: path.to_path_buf(),
+                line,
+                expected: names.len(),
+                found: fields.len(),
+            }
+            .into());
+        }
+        for (name, f) in names.iter().zip(&fields) {
+            values.push(parse_field(path, line, name, f)?);
+        }
+        rows.push(line);
+    }
+    if rows.len() < 2 {
+        return Err(ReadError::Empty {
+            file: path.to_path_buf(),
+            found: rows.len(),
+            needed: 2,
+        }
+        .into());
+    }
+    Ok(Table {
+        names,
+        values,
+        lines: rows,
+    })
+}
+
+impl Table {
+    fn column(&self, j: usize) -> Vec<f64> {
+        self.values
+            .iter()
+            .skip(j)
+            .step_by(self.names.len())
+            .copied()
+            .collect()
+    }
+}
+
+fn header_error(file: &Path, field: &str, message: String) -> DatasetError {
+    ReadError::Header {
+        file: file.to_path_buf(),
+        line: 1,
+        field: field.to_string(),
+        message,
+    }
+    .into()
+}
+
+/// Loads a data-set directory written by [`Dataset::write_dir`] (or by hand: only
+/// `measured.csv` is required).
+pub fn load_dir(dir: &Path) -> Result<LoadedDataset, DatasetError> {
+    let mpath = dir.join(MEASURED);
+    let m = read_table(&mpath)?;
+    let channels = m.names.len().saturating_sub(2);
+    let expected: Vec<String> = ["t".to_string(), "ug".to_string()]
+        .into_iter()
+        .chain((1..=channels).map(|j| format!("a{j}")))
+        .collect();
+    if channels == 0 || m.names != expected {
+        return Err(header_error(
+            &mpath,
+            "header",
+            format!(
+                "expected `t,ug,a1,...,aN` (N ≥ 1), found `{}`",
+                m.names.join(",")
+            ),
+        ));
+    }
+    let t = m.column(0);
+    let times: Vec<(usize, f64)> = m.lines.iter().copied().zip(t.iter().copied()).collect();
+    let dt_grid = uniform_step(&mpath, &times)?;
+    let ug_meas = m.column(1);
+    let w = m.names.len();
+    let y_meas: Vec<f64> = m
+        .values
+        .chunks_exact(w)
+        .flat_map(|row| row[2..].iter().copied())
+        .collect();
+
+    let jpath = dir.join(META);
+    let meta: Option<DatasetMeta> = match std::fs::read_to_string(&jpath) {
+        Ok(text) => Some(serde_json::from_str(&text).map_err(|e| DatasetError::Json {
+            file: jpath.clone(),
+            line: e.line(),
+            column: e.column(),
+            message: e.to_string(),
+        })?),
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => None,
+        Err(source) => {
+            return Err(DatasetError::Io {
+                file: jpath,
+                source,
+            })
+        }
+    };
+    // The metadata carries dt exactly; the grid estimate (t_last − t_0)/(K − 1) may differ in
+    // the last bit.
+    let dt = match &meta {
+        Some(meta) => {
+            if (meta.dt - dt_grid).abs() > 1e-6 * meta.dt {
+                return Err(DatasetError::Mismatch {
+                    file: jpath,
+                    line: 1,
+                    field: "dt".to_string(),
+                    message: format!("dt = {} but {MEASURED} has dt = {dt_grid}", meta.dt),
+                });
+            }
+            if meta.samples != t.len() || meta.storeys != channels {
+                return Err(DatasetError::Mismatch {
+                    file: jpath,
+                    line: 1,
+                    field: "samples".to_string(),
+                    message: format!(
+                        "{} samples × {} channels, but {MEASURED} has {} × {channels}",
+                        meta.samples,
+                        meta.storeys,
+                        t.len()
+                    ),
+                });
+            }
+            meta.dt
+        }
+        None => dt_grid,
+    };
+
+    let tpath = dir.join(TRUTH);
+    let truth = if tpath.exists() {
+        let tr = read_table(&tpath)?;
+        let w = tr.names.len();
+        if w < 2 + 2 * channels || tr.names[0] != "t" || tr.names[1] != "ug" {
+            return Err(header_error(
+                &tpath,
+                "header",
+                format!(
+                    "expected `t,ug,x1..x{channels},v1..v{channels},r...`, found `{}`",
+                    tr.names.join(",")
+                ),
+            ));
+        }
+        for j in 0..channels {
+            for (off, p) in [(2, "x"), (2 + channels, "v")] {
+                let want = format!("{p}{}", j + 1);
+                if tr.names[off + j] != want {
+                    return Err(header_error(
+                        &tpath,
+                        &tr.names[off + j],
+                        format!("expected column `{want}`"),
+                    ));
+                }
+            }
+        }
+        if let Some(bad) = tr.names[2 + 2 * channels..]
+            .iter()
+            .find(|n| !n.starts_with('r'))
+        {
+            return Err(header_error(
+                &tpath,
+                bad,
+                "expected a Bouc–Wen column `r<storey>`".to_string(),
+            ));
+        }
+        let tt = tr.column(0);
+        if tt.len() != t.len() {
+            return Err(DatasetError::Mismatch {
+                file: tpath,
+                line: *tr.lines.last().unwrap_or(&1),
+                field: "t".to_string(),
+                message: format!("{} rows, {MEASURED} has {}", tt.len(), t.len()),
+            });
+        }
+        if let Some(k) = (0..t.len()).find(|&k| (tt[k] - t[k]).abs() > 1e-9 * dt) {
+            return Err(DatasetError::Mismatch {
+                file: tpath,
+                line: tr.lines[k],
+                field: "t".to_string(),
+                message: format!("t = {} but {MEASURED} has t = {}", tt[k], t[k]),
+            });
+        }
+        let states: Vec<f64> = tr
+            .values
+            .chunks_exact(w)
+            .flat_map(|row| row[2..].iter().copied())
+            .collect();
+        Some(LoadedTruth {
+            ug_clean: tr.column(1),
+            states: Trajectory::from_flat(w - 2, dt, states),
+            state_names: tr.names[2..].to_vec(),
+        })
+    } else {
+        None
+    };
+    Ok(LoadedDataset {
+        dt,
+        t,
+        ug_meas,
+        y_meas,
+        channels,
+        truth,
+        meta,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn default_config_and_short_generation() {
+        let mut c = DatasetConfig::from_preset("paper-3dof", 1).unwrap();
+        assert_eq!(c.scale, 3.0);
+        assert_eq!(c.excitation, ExcitationSource::ElCentro);
+        c.duration = Some(2.0);
+        let d = generate(&c).unwrap();
+        assert_eq!(d.len(), 401);
+        assert_eq!(d.truth.dim(), 7);
+        assert_eq!(d.y_meas.len(), 401 * 3);
+        assert_eq!(d.theta_true, vec![8., 8., 8., 0.25, 0.25, 0.25, 2., 1., 2.]);
+        let h = DatasetConfig::from_preset("paper-3dof-harmonic", 1).unwrap();
+        assert_eq!(h.duration, Some(31.18));
+        c.noise_fraction = -1.0;
+        assert!(matches!(
+            generate(&c),
+            Err(DatasetError::InvalidConfig {
+                field: "noise_fraction",
+                ..
+            })
+        ));
+    }
+
+    #[test]
+    fn absolute_measurement_adds_the_excitation() {
+        let mut c = DatasetConfig::from_preset("paper-3dof", 1).unwrap();
+        c.duration = Some(1.0);
+        let rel = generate(&c).unwrap();
+        c.measurement = MeasurementKind::Absolute;
+        let abs = generate(&c).unwrap();
+        for k in 0..rel.len() {
+            for j in 0..3 {
+                let want = rel.y_clean[3 * k + j] + rel.ug_clean[k];
+                assert!((abs.y_clean[3 * k + j] - want).abs() < 1e-12);
+            }
+        }
+    }
+}
