@@ -585,3 +585,72 @@ fn masses_scale_the_accelerations() {
         assert!(y1[i].abs() > 1e-3, "the check needs a non-zero force");
     }
 }
+
+// ----------------------------------------------------------------------------------------------
+// The maps are called per particle per step: they must not allocate.
+
+struct CountingAllocator;
+
+thread_local! {
+    static ALLOCATIONS: std::cell::Cell<usize> = const { std::cell::Cell::new(0) };
+}
+
+// SAFETY: every call is forwarded unchanged to the system allocator; the counter is a
+// thread-local `Cell` with a const initialiser, so counting itself never allocates.
+unsafe impl std::alloc::GlobalAlloc for CountingAllocator {
+    unsafe fn alloc(&self, layout: std::alloc::Layout) -> *mut u8 {
+        let _ = ALLOCATIONS.try_with(|c| c.set(c.get() + 1));
+        unsafe { std::alloc::System.alloc(layout) }
+    }
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: std::alloc::Layout) {
+        unsafe { std::alloc::System.dealloc(ptr, layout) }
+    }
+}
+
+#[global_allocator]
+static GLOBAL: CountingAllocator = CountingAllocator;
+
+fn allocations() -> usize {
+    ALLOCATIONS.with(|c| c.get())
+}
+
+#[test]
+fn map_evaluations_do_not_allocate() {
+    let mut rng = stream(15, 0, "partition-allocations");
+    let s = spec(3, false, MeasurementKind::Relative, &mut rng);
+    let aug = AugmentedChain::<16, 3>::new(s.clone()).unwrap();
+    let mln = MlnChain::<8, 8, 4, 3>::new(s.clone()).unwrap();
+    let mpf = PaperMpf::new(s).unwrap();
+    let p = random_point(3, &mut rng);
+    let xa = aug_state::<16>(&p);
+    let (u, z) = mln_state::<8, 8>(&p);
+    let (xn, m) = mpf_state::<13>(&p);
+    let before = allocations();
+    let mut sink = 0.0;
+    for k in 1..=K {
+        sink += aug.propagate(k, &xa).sum() + aug.measure(k, &xa).sum();
+        sink += aug.process_noise_sd().sum() + aug.measurement_cov().sum();
+        let (f, fl) = mln.transition(k, &u);
+        let (h, hm) = mln.observation(k, &u);
+        sink += f.sum() + fl.sum() + h.sum() + hm.sum();
+        sink += mln.observation_jacobian_u(k, &u, &z).sum() + mln.process_noise_sd().sum();
+        sink += mln.linked_rows().iter().sum::<usize>() as f64;
+        let (a, ja) = mpf.sampled_dynamics(k, &xn, &m);
+        let (b, jb) = mpf.marginal_dynamics(k, &xn, &m);
+        let (c, jc) = mpf.observation(k, &xn, &m);
+        sink += a.sum() + ja.sum() + b.sum() + jb.sum() + c.sum() + jc.sum();
+        sink += mpf.sampled_hessians().entries().len() as f64;
+        sink += mpf.sampled_noise_sd().sum() + mpf.marginal_noise_sd().sum();
+    }
+    let after = allocations();
+    assert!(sink.is_finite());
+    assert_eq!(
+        after - before,
+        0,
+        "map evaluations allocated {} times",
+        after - before
+    );
+    // The counter works: a Vec allocates.
+    let v = std::hint::black_box(vec![1.0_f64; 4]);
+    assert!(allocations() > after && v.len() == 4);
+}
