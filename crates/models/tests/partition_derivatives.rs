@@ -411,7 +411,7 @@ fn mpf_hessians_equal_spec_section_6_for_three_unit_storeys() {
             .iter()
             .map(|e| (e.output, e.a.min(e.b), e.a.max(e.b), e.value))
             .collect();
-        v.sort_by(|p, q| (p.0, p.1, p.2).cmp(&(q.0, q.1, q.2)));
+        v.sort_by_key(|p| (p.0, p.1, p.2));
         v
     };
     let expected = |list: &[(usize, usize, usize, f64)]| {
