@@ -22,6 +22,22 @@
 //! transition from k−1 to k uses `ug[k−1]`, the measurement at k uses `ug[k]`. Every partition
 //! evaluates the element forces through the one kernel of this module, so the three agree to
 //! round-off (tested in `tests/partition_derivatives.rs`).
+//!
+//! ```
+//! use core_filters::model::ConditionallyQuadratic;
+//! use models::partition::{FilterSpec, PaperMpf, PartitionError};
+//! use nalgebra::{SVector, Vector3};
+//!
+//! // SPEC §3 settings from RMS values of the clean signals (3 storeys, unit masses).
+//! let ug = vec![0.0; 101];
+//! let spec = FilterSpec::from_rms(0.005, vec![1.0; 3], ug, &[2.0, 3.0, 4.0], 3.0, 0.5, 0.1)?;
+//! let mpf = PaperMpf::new(spec)?;
+//! // y_2 has 7 constant second derivatives (SPEC §6), y_1 and y_3 have 3 and 4.
+//! assert_eq!(mpf.observation_hessians().entries().len(), 14);
+//! let (y, jac) = mpf.observation(1, &Vector3::new(0.1, 0.2, 2.0), &SVector::<f64, 13>::zeros());
+//! assert_eq!((y.len(), jac.ncols()), (3, 13));
+//! # Ok::<(), PartitionError>(())
+//! ```
 
 pub mod augmented;
 pub mod mln;
