@@ -1,1 +1,381 @@
-//! (in progress)
+//! Storvik's algorithm with Gaussian sufficient statistics (SPEC §5.3; Storvik 2002, with the
+//! paper's update, §3.3.2).
+//!
+//! Same partition as the MLN-RBPF: each particle carries `u` and the sufficient statistics
+//! `s = (μ, C)` of the static block `z`. Per particle and step, with
+//! `(f, F_L) = transition(k, u_{k−1})`:
+//! - (i) draw a realisation `z0 ~ N(μ, C)`;
+//! - (ii) `u_k ~ N(f + F z0, Q_u)` (only the linked rows depend on `z`), weight
+//!   `N(y_k; H(u_k) z0 + h(u_k), R)`;
+//! - (iii) update `(μ, C)` with the stacked measurement `[u_{k,L}; y_k]`, noise
+//!   `blockdiag(Q_L, R)`. The linked rows are linear in `z` (Jacobian `F_L`). For `y_k`:
+//!   - [`StorvikUpdate::Linearised`] (the paper's update, default): `y_k` written through
+//!     `u_{k−1}`, `g(z) = H(u_k(z)) z + h(u_k(z))`, linearised at `z0`:
+//!     `G_z = H(u_k) + J_u F`, `ŷ = g(z0) + G_z (μ − z0)`;
+//!   - [`StorvikUpdate::Exact`]: given `u_k`, `y_k` is linear in `z`: a KF update with
+//!     `(H(u_k), h(u_k))`, exactly as MLN-RBPF (d).
+//!
+//!   The stacked update is done as two sequential updates (linked rows, then `y_k`) at the same
+//!   linearisation point `z0`: with block-diagonal noise, sequential updates with linear (or
+//!   fixed-point linearised) measurements equal the stacked one.
+//!
+//! Then normalise, summarise the weighted mixture, resample `(u, μ, C)` jointly (at the start of
+//! the next step).
+//!
+//! Sampling from a singular `C`: static parameters held fixed (zero prior variance) or directions
+//! the data pin down make `C` positive *semi*-definite. Step (i) uses a semidefinite Cholesky
+//! factor (see [`psd_cholesky`]): a pivot that is zero up to round-off gives a zero column, so the
+//! draw has exactly zero spread in that direction, as the Gaussian does. This is not a repair and
+//! is not counted; a clearly negative pivot (an indefinite `C`) is a failure of that particle.
+//!
+//! Failure policy (as MLN-RBPF): a particle whose factorisation or Kalman update fails gets a NaN
+//! log-weight, mapped to −∞ and counted by the weight routine (Cholesky failures are counted in
+//! `health.cholesky_failures`); the step fails with [`FilterError::AllWeightsZero`] only if no
+//! particle survives. `R` is factorised once in [`Storvik::new`]; if it is not positive definite
+//! every step returns that error.
+
+use nalgebra::{SMatrix, SVector};
+use rand::Rng;
+use serde::{Deserialize, Serialize};
+
+use super::mlnrbpf::{standard_normal, LinkedRows};
+use super::{
+    distinct_sampled, fill_posterior, gather, ParticleConfig, ParticleFilter, Posterior, StepInfo,
+};
+use crate::error::FilterError;
+use crate::health::Health;
+use crate::kalman::{cholesky_repaired, gaussian_update, kf_update, log_normal_density_chol};
+use crate::model::{ConditionallyLinear, Layout};
+use crate::resampling::Resampler;
+use crate::weights::{normalise_log_weights, reset_uniform};
+
+/// How Storvik's step (iii) treats the measurement `y_k` (SPEC §5.3).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum StorvikUpdate {
+    /// The paper's update: `y_k` through `u_{k−1}`, linearised at the realisation `z0`.
+    #[default]
+    Linearised,
+    /// Given `u_k`, `y_k` is linear in `z`: an exact KF update (no linearisation).
+    Exact,
+}
+
+impl StorvikUpdate {
+    pub fn name(self) -> &'static str {
+        match self {
+            StorvikUpdate::Linearised => "linearised",
+            StorvikUpdate::Exact => "exact",
+        }
+    }
+}
+
+/// A pivot below this fraction of the largest diagonal entry of `C` is round-off (a direction of
+/// zero variance); below minus this fraction, `C` is indefinite.
+const PSD_PIVOT_REL_TOL: f64 = 1e-12;
+
+/// Lower factor `L` with `L Lᵀ = A` for a symmetric positive *semi*-definite `A`: Cholesky in
+/// which a pivot within `±1e-12 · max_j a_jj` of zero yields a zero column (that direction has
+/// no variance). `None` for a non-finite entry or a clearly negative pivot (indefinite `A`).
+pub fn psd_cholesky<const N: usize>(a: &SMatrix<f64, N, N>) -> Option<SMatrix<f64, N, N>> {
+    if a.iter().any(|v| !v.is_finite()) {
+        return None;
+    }
+    let max_diag = (0..N).map(|j| a[(j, j)]).fold(0.0_f64, f64::max);
+    let tol = PSD_PIVOT_REL_TOL * max_diag;
+    let mut l = SMatrix::<f64, N, N>::zeros();
+    for j in 0..N {
+        let mut d = a[(j, j)];
+        for k in 0..j {
+            d -= l[(j, k)] * l[(j, k)];
+        }
+        if d < -tol {
+            return None;
+        }
+        if d <= tol {
+            // Zero column: the remaining entries of this column stay 0.
+            continue;
+        }
+        let ljj = d.sqrt();
+        l[(j, j)] = ljj;
+        for i in (j + 1)..N {
+            let mut s = a[(i, j)];
+            for k in 0..j {
+                s -= l[(i, k)] * l[(j, k)];
+            }
+            l[(i, j)] = s / ljj;
+        }
+    }
+    Some(l)
+}
+
+/// Storvik's filter (SPEC §5.3) for `u ∈ R^NU`, `z ∈ R^NZ`, `NL` linked rows and `NY`
+/// measurements. All buffers are allocated in [`Storvik::new`]; `step` allocates nothing.
+pub struct Storvik<M, const NU: usize, const NZ: usize, const NL: usize, const NY: usize>
+where
+    M: ConditionallyLinear<NU, NZ, NL, NY>,
+{
+    model: M,
+    config: ParticleConfig,
+    update: StorvikUpdate,
+    layout: Layout,
+    u: Vec<SVector<f64, NU>>,
+    u_next: Vec<SVector<f64, NU>>,
+    mu: Vec<SVector<f64, NZ>>,
+    mu_next: Vec<SVector<f64, NZ>>,
+    cov: Vec<SMatrix<f64, NZ, NZ>>,
+    cov_next: Vec<SMatrix<f64, NZ, NZ>>,
+    log_w: Vec<f64>,
+    w: Vec<f64>,
+    ancestors: Vec<usize>,
+    resampler: Resampler,
+    pending_resample: bool,
+    noise_sd: SVector<f64, NU>,
+    linked: LinkedRows<NU, NL>,
+    r: SMatrix<f64, NY, NY>,
+    /// Lower Cholesky factor of the constant `R` (weights of step (ii)), or why it failed.
+    r_chol: Result<SMatrix<f64, NY, NY>, FilterError>,
+    setup_health: Health,
+    health: Health,
+}
+
+impl<M, const NU: usize, const NZ: usize, const NL: usize, const NY: usize>
+    Storvik<M, NU, NZ, NL, NY>
+where
+    M: ConditionallyLinear<NU, NZ, NL, NY>,
+{
+    /// Storvik's filter with the paper's linearised update ([`StorvikUpdate::Linearised`]).
+    #[track_caller]
+    pub fn new(model: M, config: ParticleConfig) -> Self {
+        Self::with_update(model, config, StorvikUpdate::default())
+    }
+
+    /// Storvik's filter with the chosen treatment of `y_k` in step (iii).
+    ///
+    /// # Panics
+    /// If `config.particles == 0` or the model's linked rows are out of range or repeated.
+    #[track_caller]
+    pub fn with_update(model: M, config: ParticleConfig, update: StorvikUpdate) -> Self {
+        let np = config.particles;
+        assert!(np > 0, "a particle filter needs at least one particle");
+        let noise_sd = model.process_noise_sd();
+        let r = model.measurement_cov();
+        let mut health = Health::default();
+        let r_chol = cholesky_repaired(&r, 0, "measurement covariance R", &mut health);
+        Self {
+            layout: model.layout(),
+            linked: LinkedRows::new(model.linked_rows(), &noise_sd),
+            r,
+            r_chol,
+            noise_sd,
+            update,
+            u: vec![SVector::zeros(); np],
+            u_next: vec![SVector::zeros(); np],
+            mu: vec![SVector::zeros(); np],
+            mu_next: vec![SVector::zeros(); np],
+            cov: vec![SMatrix::zeros(); np],
+            cov_next: vec![SMatrix::zeros(); np],
+            log_w: vec![0.0; np],
+            w: vec![0.0; np],
+            ancestors: vec![0; np],
+            resampler: Resampler::new(config.resampling.scheme, np),
+            pending_resample: false,
+            setup_health: health,
+            health,
+            config,
+            model,
+        }
+    }
+
+    pub fn model(&self) -> &M {
+        &self.model
+    }
+
+    pub fn update(&self) -> StorvikUpdate {
+        self.update
+    }
+
+    /// The sampled blocks of the current step.
+    pub fn sampled(&self) -> &[SVector<f64, NU>] {
+        &self.u
+    }
+
+    /// The per-particle means `μ^i` of `z`.
+    pub fn means(&self) -> &[SVector<f64, NZ>] {
+        &self.mu
+    }
+
+    /// The per-particle covariances `C^i` of `z`.
+    pub fn covariances(&self) -> &[SMatrix<f64, NZ, NZ>] {
+        &self.cov
+    }
+
+    /// The normalised weights of the current step.
+    pub fn weights(&self) -> &[f64] {
+        &self.w
+    }
+
+    fn resample_pending<G: Rng + ?Sized>(&mut self, rng: &mut G) {
+        if !self.pending_resample {
+            return;
+        }
+        self.resampler.resample(&self.w, &mut self.ancestors, rng);
+        gather(&self.u, &self.ancestors, &mut self.u_next);
+        gather(&self.mu, &self.ancestors, &mut self.mu_next);
+        gather(&self.cov, &self.ancestors, &mut self.cov_next);
+        std::mem::swap(&mut self.u, &mut self.u_next);
+        std::mem::swap(&mut self.mu, &mut self.mu_next);
+        std::mem::swap(&mut self.cov, &mut self.cov_next);
+        reset_uniform(&mut self.log_w, &mut self.w);
+        self.health.resamples += 1;
+        self.pending_resample = false;
+    }
+}
+
+impl<M, const NU: usize, const NZ: usize, const NL: usize, const NY: usize> ParticleFilter<NY>
+    for Storvik<M, NU, NZ, NL, NY>
+where
+    M: ConditionallyLinear<NU, NZ, NL, NY>,
+{
+    fn name(&self) -> &'static str {
+        "storvik"
+    }
+
+    fn particles(&self) -> usize {
+        self.config.particles
+    }
+
+    /// Draws `u_0^i` and `(μ_0^i, C_0^i)` from the model's priors, uniform weights, counters
+    /// reset to the repairs made in `new` (factorising `R`).
+    fn initialise<G: Rng + ?Sized>(&mut self, rng: &mut G) {
+        for ((u, mu), cov) in self.u.iter_mut().zip(&mut self.mu).zip(&mut self.cov) {
+            *u = self.model.sample_initial(rng);
+            (*mu, *cov) = self.model.sample_marginal_prior(rng);
+        }
+        reset_uniform(&mut self.log_w, &mut self.w);
+        self.pending_resample = false;
+        self.health = self.setup_health;
+    }
+
+    /// SPEC §5.3 (i)–(iii) for every particle; see the module documentation.
+    #[allow(non_snake_case)]
+    fn step<G: Rng + ?Sized>(
+        &mut self,
+        k: usize,
+        y: &SVector<f64, NY>,
+        rng: &mut G,
+    ) -> Result<StepInfo, FilterError> {
+        let r_chol = match &self.r_chol {
+            Ok(l) => *l,
+            Err(e) => return Err(e.clone()),
+        };
+        self.resample_pending(rng);
+        let linked = &self.linked;
+        for i in 0..self.config.particles {
+            let (mu, cov, health) = (&mut self.mu[i], &mut self.cov[i], &mut self.health);
+            // (i) z0 ~ N(μ, C) with a semidefinite factor of C.
+            let Some(c_chol) = psd_cholesky(cov) else {
+                health.cholesky_failures += 1;
+                self.log_w[i] = f64::NAN;
+                continue;
+            };
+            let z0 = *mu + c_chol * standard_normal::<NZ, G>(rng);
+            // (ii) u_k ~ N(f + F z0, Q_u): linked rows f_L + F_L z0 + noise, others f + noise.
+            let (f, F_L) = self.model.transition(k, &self.u[i]);
+            let f_l = linked.pick(&f);
+            let mut u_new = f;
+            linked.add_unlinked_noise(&mut u_new, &self.noise_sd, rng);
+            let mut u_l = f_l + F_L * z0;
+            for l in 0..NL {
+                let sd = self.noise_sd[linked.rows[l]];
+                if sd != 0.0 {
+                    u_l[l] += sd * standard_normal::<1, G>(rng)[0];
+                }
+            }
+            linked.scatter(&mut u_new, &u_l);
+            self.u[i] = u_new;
+            let (h, H) = self.model.observation(k, &u_new);
+            let y_z0 = H * z0 + h;
+            self.log_w[i] += log_normal_density_chol(&(y - y_z0), &r_chol);
+            // (iii) the linked rows: linear in z with Jacobian F_L and noise Q_L.
+            let mean_l = f_l + F_L * *mu;
+            if gaussian_update(mu, cov, &u_l, &mean_l, &F_L, &linked.q_l, k, health).is_err() {
+                self.log_w[i] = f64::NAN;
+                continue;
+            }
+            // (iii) y_k, sequentially after the linked rows (block-diagonal noise).
+            let updated = match self.update {
+                StorvikUpdate::Exact => kf_update(mu, cov, y, &H, &h, &self.r, k, health),
+                StorvikUpdate::Linearised => {
+                    // G_z = H(u_k) + J_u F, F zero outside the linked rows.
+                    let J_u = self.model.observation_jacobian_u(k, &u_new, &z0);
+                    let mut G_z = H;
+                    for (l, &r) in linked.rows.iter().enumerate() {
+                        G_z += J_u.column(r) * F_L.row(l);
+                    }
+                    let y_hat = y_z0 + G_z * (*mu - z0);
+                    gaussian_update(mu, cov, y, &y_hat, &G_z, &self.r, k, health)
+                }
+            };
+            if updated.is_err() {
+                self.log_w[i] = f64::NAN;
+            }
+        }
+        let s = normalise_log_weights(&mut self.log_w, &mut self.w, k, &mut self.health)?;
+        let resample = self
+            .config
+            .resampling
+            .should_resample(s.ess, self.config.particles);
+        self.pending_resample = resample;
+        Ok(StepInfo {
+            k,
+            loglik_increment: s.loglik_increment,
+            ess: s.ess,
+            resampled: resample,
+        })
+    }
+
+    fn posterior(&self, out: &mut Posterior) {
+        fill_posterior(&self.layout, &self.w, &self.u, &self.mu, &self.cov, out);
+    }
+
+    fn layout(&self) -> &Layout {
+        &self.layout
+    }
+
+    fn health(&self) -> Health {
+        self.health
+    }
+
+    fn distinct_sampled_params(&self) -> Vec<(String, usize)> {
+        distinct_sampled(&self.layout, &self.u)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::Matrix3;
+
+    #[test]
+    fn psd_cholesky_handles_zero_variance_directions() {
+        // Entry 1 fixed (zero variance), entries 0 and 2 correlated.
+        let a = Matrix3::new(4.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 2.0);
+        let l = psd_cholesky(&a).unwrap();
+        assert!((l * l.transpose() - a).abs().max() < 1e-15);
+        assert_eq!(l.column(1).abs().max(), 0.0);
+        // A rank-one matrix in a non-coordinate direction.
+        let v = nalgebra::Vector3::new(1.0, -2.0, 0.5);
+        let b = v * v.transpose();
+        let l = psd_cholesky(&b).unwrap();
+        assert!((l * l.transpose() - b).abs().max() < 1e-12);
+    }
+
+    #[test]
+    fn psd_cholesky_rejects_indefinite_and_nan() {
+        let a = Matrix3::new(1.0, 2.0, 0.0, 2.0, 1.0, 0.0, 0.0, 0.0, 1.0);
+        assert!(psd_cholesky(&a).is_none());
+        let mut b = Matrix3::identity();
+        b[(2, 2)] = f64::NAN;
+        assert!(psd_cholesky(&b).is_none());
+    }
+}
