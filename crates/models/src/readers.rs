@@ -140,6 +140,21 @@ pub(crate) fn uniform_step(file: &Path, times: &[(usize, f64)]) -> Result<f64, R
             });
         }
     }
+    // Local check first, so that a gap is reported where it occurs: every step within 5 % of
+    // the first one (printed times rounded to a few digits stay well inside).
+    let dt1 = times[1].1 - times[0].1;
+    for w in times.windows(2) {
+        if ((w[1].1 - w[0].1) - dt1).abs() > 0.05 * dt1 {
+            return Err(ReadError::NonUniformTime {
+                file: file.to_path_buf(),
+                line: w[1].0,
+                t: w[1].1,
+                expected: w[0].1 + dt1,
+                dt: dt1,
+            });
+        }
+    }
+    // Global check: no drift away from the uniform grid.
     let n = times.len();
     let t0 = times[0].1;
     let dt = (times[n - 1].1 - t0) / (n - 1) as f64;

@@ -219,7 +219,7 @@ fn hysteretic_variable_stays_below_saturation() {
     let ratio = max_r(3.0) / sat;
     let strong = max_r(10.0) / sat;
     println!(
-        "max|r1|/saturation: {ratio:.4} at scale 3, 1 − {:.3e} at scale 20",
+        "max|r1|/saturation: {ratio:.4} at scale 3, 1 − {:.3e} at scale 10",
         1.0 - strong
     );
     // SPEC §2: ≈ 0.38 / 0.577 ≈ 65 % at scale 3.
