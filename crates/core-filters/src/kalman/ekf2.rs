@@ -7,7 +7,7 @@
 
 use nalgebra::{SMatrix, SVector};
 
-use super::kf::{gaussian_update, symmetrise, Innovation};
+use super::kf::{gaussian_update, sandwich, symmetrise, Innovation};
 use super::second_order::second_order_terms;
 use crate::error::FilterError;
 use crate::health::Health;
@@ -25,7 +25,7 @@ pub fn ekf2_propagate<const N: usize>(
     hess: &SparseHessians,
     q: &SMatrix<f64, N, N>,
 ) {
-    let mut new_p = jac * *p * jac.transpose() + q;
+    let mut new_p = sandwich(jac, p) + q;
     if hess.is_empty() {
         *m = *value;
     } else {
@@ -51,7 +51,7 @@ pub fn ekf2_moments<const N: usize, const NY: usize>(
     hess: &SparseHessians,
     s_add: &SMatrix<f64, NY, NY>,
 ) -> (SVector<f64, NY>, SMatrix<f64, NY, NY>) {
-    let mut cov = jac * p * jac.transpose() + s_add;
+    let mut cov = sandwich(jac, p) + s_add;
     let mut mean = *value;
     if !hess.is_empty() {
         let mut mean2 = SVector::<f64, NY>::zeros();

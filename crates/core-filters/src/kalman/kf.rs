@@ -167,6 +167,27 @@ pub(crate) fn symmetrise<const N: usize>(p: &mut SMatrix<f64, N, N>) {
     }
 }
 
+/// `J P Jᵀ` for symmetric `P`, computing the lower triangle only and mirroring it (the result is
+/// exactly symmetric and costs 1.5 instead of 2 matrix products). Columns of `Jᵀ` and of `P Jᵀ`
+/// are contiguous, so every dot product runs over contiguous memory.
+pub(crate) fn sandwich<const N: usize, const M: usize>(
+    jac: &SMatrix<f64, M, N>,
+    p: &SMatrix<f64, N, N>,
+) -> SMatrix<f64, M, M> {
+    let jt = jac.transpose();
+    let pjt = p * jt;
+    let mut out = SMatrix::<f64, M, M>::zeros();
+    for j in 0..M {
+        let col = pjt.column(j);
+        for i in j..M {
+            let v = jt.column(i).dot(&col);
+            out[(i, j)] = v;
+            out[(j, i)] = v;
+        }
+    }
+    out
+}
+
 /// KF propagate, SPEC §4: `m ← G m + g`, `P ← G P Gᵀ + Q` (symmetrised).
 pub fn kf_propagate<const N: usize>(
     m: &mut SVector<f64, N>,
@@ -176,7 +197,7 @@ pub fn kf_propagate<const N: usize>(
     q: &SMatrix<f64, N, N>,
 ) {
     *m = g * *m + offset;
-    *p = g * *p * g.transpose() + q;
+    *p = sandwich(g, p) + q;
     symmetrise(p);
 }
 
