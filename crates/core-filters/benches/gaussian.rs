@@ -146,6 +146,29 @@ fn ekf2_mpf_step(c: &mut Criterion) {
         },
     );
 
+    c.bench_function("ekf2_propagate 13 states", |b| {
+        b.iter_batched(
+            || (m, p),
+            |(mut m, mut p)| {
+                ekf2_propagate(&mut m, &mut p, &phi, &jac_phi, &marginal, &q_bl);
+                black_box((m, p))
+            },
+            BatchSize::SmallInput,
+        )
+    });
+
+    c.bench_function("ekf2_update 13 states 3 measurements", |b| {
+        b.iter_batched(
+            || (m, p, Health::default()),
+            |(mut m, mut p, mut health)| {
+                let e = ekf2_update(&mut m, &mut p, &y, &psi_y, &jac_y, &obs, &r, 1, &mut health)
+                    .unwrap();
+                black_box((m, p, e.loglik))
+            },
+            BatchSize::SmallInput,
+        )
+    });
+
     c.bench_function("second_order_terms 13 states, 5 outputs of phi_bl", |b| {
         b.iter_batched(
             || (SVector::<f64, 13>::zeros(), SMatrix::<f64, 13, 13>::zeros()),

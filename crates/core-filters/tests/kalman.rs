@@ -403,6 +403,18 @@ fn second_order_terms_equal_dense_traces() {
         let mut mean = SVector::<f64, NO>::zeros();
         let mut cov = SMatrix::<f64, NO, NO>::zeros();
         second_order_terms(&hess, &p, &mut mean, &mut cov);
+        // The same entries grouped by output (the order models use) give the same terms.
+        let mut by_output = hess.entries().to_vec();
+        by_output.sort_by_key(|e| e.output);
+        let mut sorted = SparseHessians::new();
+        for e in &by_output {
+            sorted.push(e.output, e.a, e.b, e.value);
+        }
+        let mut mean_s = SVector::<f64, NO>::zeros();
+        let mut cov_s = SMatrix::<f64, NO, NO>::zeros();
+        second_order_terms(&sorted, &p, &mut mean_s, &mut cov_s);
+        assert!((mean_s - mean).abs().max() < 1e-12 * (1.0 + mean.abs().max()));
+        assert!((cov_s - cov).abs().max() < 1e-12 * (1.0 + cov.abs().max()));
         let pd = DMatrix::from_fn(N, N, |i, j| p[(i, j)]);
         let dense: Vec<DMatrix<f64>> = (0..NO).map(|i| hess.dense(i, N)).collect();
         for i in 0..NO {

@@ -7,7 +7,7 @@
 
 use nalgebra::{SMatrix, SVector};
 
-use crate::model::SparseHessians;
+use crate::model::{HessianEntry, SparseHessians};
 
 /// Second-order terms from sparse constant Hessians, SPEC §4:
 /// `mean[i] = ½ tr(𝓗ⁱ P)`, `cov[i][i'] = ½ tr(𝓗ⁱ P 𝓗^{i'} P)` for outputs `i, i' < NO`.
@@ -33,31 +33,60 @@ pub fn second_order_terms<const N: usize, const NO: usize>(
     mean.fill(0.0);
     cov.fill(0.0);
     let entries = hess.entries();
-    for (n1, e1) in entries.iter().enumerate() {
+    for e in entries {
         assert!(
-            e1.output < NO && e1.a < N && e1.b < N,
-            "Hessian entry {e1:?} out of range for {NO} outputs and {N} inputs"
+            e.output < NO && e.a < N && e.b < N,
+            "Hessian entry {e:?} out of range for {NO} outputs and {N} inputs"
         );
-        let v1 = if e1.a == e1.b {
-            0.5 * e1.value
-        } else {
-            e1.value
-        };
-        mean[e1.output] += v1 * p[(e1.a, e1.b)];
-        // Diagonal pair (the entry with itself).
-        let self_term = p[(e1.a, e1.a)] * p[(e1.b, e1.b)] + p[(e1.a, e1.b)] * p[(e1.b, e1.a)];
-        cov[(e1.output, e1.output)] += v1 * v1 * self_term;
-        for e2 in &entries[(n1 + 1)..] {
-            let v2 = if e2.a == e2.b {
-                0.5 * e2.value
-            } else {
-                e2.value
-            };
-            let s = p[(e1.a, e2.a)] * p[(e1.b, e2.b)] + p[(e1.a, e2.b)] * p[(e1.b, e2.a)];
-            let c = v1 * v2 * s;
-            cov[(e1.output, e2.output)] += c;
-            cov[(e2.output, e1.output)] += c;
+    }
+    let weight = |e: &HessianEntry| if e.a == e.b { 0.5 * e.value } else { e.value };
+    let pair = |e1: &HessianEntry, e2: &HessianEntry| {
+        weight(e1)
+            * weight(e2)
+            * (p[(e1.a, e2.a)] * p[(e1.b, e2.b)] + p[(e1.a, e2.b)] * p[(e1.b, e2.a)])
+    };
+    // Entries are visited in runs of equal output (models push them output by output), so that
+    // each (run, run) block accumulates in a register and touches `cov` once. Any order is
+    // correct: runs are then merely shorter.
+    let run_end = |start: usize| {
+        let o = entries[start].output;
+        start
+            + entries[start..]
+                .iter()
+                .take_while(|e| e.output == o)
+                .count()
+    };
+    let mut s1 = 0;
+    while s1 < entries.len() {
+        let e1_end = run_end(s1);
+        let g1 = &entries[s1..e1_end];
+        let o1 = g1[0].output;
+        let (mut acc_mean, mut acc_cov) = (0.0, 0.0);
+        for (n1, e1) in g1.iter().enumerate() {
+            acc_mean += weight(e1) * p[(e1.a, e1.b)];
+            acc_cov += pair(e1, e1);
+            for e2 in &g1[(n1 + 1)..] {
+                acc_cov += 2.0 * pair(e1, e2);
+            }
         }
+        mean[o1] += acc_mean;
+        cov[(o1, o1)] += acc_cov;
+        let mut s2 = e1_end;
+        while s2 < entries.len() {
+            let e2_end = run_end(s2);
+            let g2 = &entries[s2..e2_end];
+            let o2 = g2[0].output;
+            let mut acc = 0.0;
+            for e1 in g1 {
+                for e2 in g2 {
+                    acc += pair(e1, e2);
+                }
+            }
+            cov[(o1, o2)] += acc;
+            cov[(o2, o1)] += acc;
+            s2 = e2_end;
+        }
+        s1 = e1_end;
     }
 }
 
