@@ -361,7 +361,7 @@ fn coupled_linear_model_gives_unbiased_likelihood() {
     let lg = model.joint();
     let ys = simulate(&lg, 25, 3);
     let exact = kalman_filter(&lg, &ys).expect("KF runs").loglik;
-    let runs = 400;
+    let runs = 1000;
     let mut f = MpfEkf2::new(Coupled::new(), config(40));
     let z: Vec<f64> = (0..runs)
         .map(|r| {

@@ -41,7 +41,7 @@ use super::{distinct_sampled, fill_posterior, gather, ParticleConfig, ParticleFi
 use super::{Posterior, StepInfo};
 use crate::error::FilterError;
 use crate::health::Health;
-use crate::kalman::kf::symmetrise;
+use crate::kalman::kf::{solve_lower_in_place, symmetrise};
 use crate::kalman::second_order_terms;
 use crate::kalman::{cholesky_repaired, ekf2_propagate, ekf2_update, gaussian_update};
 use crate::model::{ConditionallyQuadratic, Layout, SparseHessians};
@@ -302,6 +302,88 @@ pub fn ekf2_propagate_near_identity<const N: usize>(
     *p = b;
 }
 
+/// `ND` independent standard normal draws.
+fn standard_normal<G: Rng + ?Sized, const ND: usize>(rng: &mut G) -> SVector<f64, ND> {
+    let mut xi = SVector::<f64, ND>::zeros();
+    for v in xi.iter_mut() {
+        *v = StandardNormal.sample(rng);
+    }
+    xi
+}
+
+/// SPEC §5.4 (a) and (b) fused, for the [`MpfKernel::Sparse`] path: with `S = Jₙ P Jₙᵀ + cov_add
+/// = C Cᵀ` (the proposal covariance, which is also the innovation covariance of the
+/// pseudo-measurement), the draw is `xⁿ = mean + C ξ`, so the whitened innovation
+/// `C⁻¹ (xⁿ − mean)` is `ξ` itself and the update of [`gaussian_update`] becomes
+/// `m ← m + Wᵀ ξ`, `P ← P − Wᵀ W` with `W = C⁻¹ Jₙ P`. `Jₙ P` and `S` are computed once and the
+/// product `Jₙ P` visits only the non-zero entries of `Jₙ`. Same result as the dense path
+/// (sample, then [`gaussian_update`]) up to round-off, with the same random draws; same repair
+/// and failure policy (`m`, `P` untouched on error).
+fn sample_and_update_fused<G: Rng + ?Sized, const ND: usize, const NBL: usize>(
+    prop: &Proposal<ND, NBL>,
+    m: &mut SVector<f64, NBL>,
+    p: &mut SMatrix<f64, NBL, NBL>,
+    k: usize,
+    rng: &mut G,
+    health: &mut Health,
+) -> Result<SVector<f64, ND>, FilterError> {
+    // Jₙ P, row r = Σ_j Jₙ[r, j] P[j, :]; P is symmetric, so P[j, c] is read as P[c, j]
+    // (contiguous column).
+    let mut jp = SMatrix::<f64, ND, NBL>::zeros();
+    for j in 0..NBL {
+        for r in 0..ND {
+            let d = prop.jac[(r, j)];
+            if d != 0.0 {
+                for c in 0..NBL {
+                    jp[(r, c)] += d * p[(c, j)];
+                }
+            }
+        }
+    }
+    let s = jp * prop.jac.transpose() + prop.cov_add;
+    let chol = cholesky_repaired(&s, k, "proposal covariance", health)?;
+    let xi = standard_normal::<G, ND>(rng);
+    let x_dyn = prop.mean + chol * xi;
+    // The innovation x_dyn − mean must be finite, as in `gaussian_update`.
+    if x_dyn.iter().any(|v| !v.is_finite()) {
+        return Err(FilterError::NonFinite {
+            step: k,
+            which: "innovation",
+        });
+    }
+    let mut w = jp;
+    solve_lower_in_place(&chol, &mut w);
+    let new_m = *m + w.tr_mul(&xi);
+    if new_m.iter().any(|v| !v.is_finite()) {
+        return Err(FilterError::NonFinite {
+            step: k,
+            which: "filtered mean",
+        });
+    }
+    let mut new_p = *p;
+    for c in 0..NBL {
+        for r in 0..=c {
+            let mut acc = 0.0;
+            for d in 0..ND {
+                acc += w[(d, r)] * w[(d, c)];
+            }
+            // Written symmetrically: P − WᵀW is symmetric by construction.
+            let v = 0.5 * (p[(r, c)] + p[(c, r)]) - acc;
+            new_p[(r, c)] = v;
+            new_p[(c, r)] = v;
+        }
+    }
+    if new_p.iter().any(|v| !v.is_finite()) {
+        return Err(FilterError::NonFinite {
+            step: k,
+            which: "filtered covariance",
+        });
+    }
+    *m = new_m;
+    *p = new_p;
+    Ok(x_dyn)
+}
+
 /// Advances one particle through SPEC §5.4 (a)–(e) and returns `log N(y_k; ŷ, L)`.
 /// `x_n` is overwritten with `xⁿ_k`; `m`, `p` with the filtered moments of `x^bl_k`.
 #[allow(clippy::too_many_arguments)]
@@ -328,31 +410,32 @@ where
     let x_prev = *x_n;
 
     // (a) Proposal: sample the dynamic entries from the EKF2 moments; static entries copied.
+    // (b) Pseudo-measurement update of x^bl_{k−1} with xⁿ_k[0..ND]: the predicted moments are
+    // those of (a), so ŷ = prop.mean and the additive covariance is the Hessian term plus Qₙ.
     let prop = proposal(model, q_n, k, &x_prev, m, p);
-    let s = prop.jac * *p * prop.jac.transpose() + prop.cov_add;
-    let chol = cholesky_repaired(&s, k, "proposal covariance", health)?;
-    let mut xi = SVector::<f64, ND>::zeros();
-    for v in xi.iter_mut() {
-        *v = StandardNormal.sample(rng);
-    }
-    let x_dyn = prop.mean + chol * xi;
+    let x_dyn = match kernel {
+        MpfKernel::Sparse => sample_and_update_fused(&prop, m, p, k, rng, health)?,
+        MpfKernel::Dense => {
+            let s = prop.jac * *p * prop.jac.transpose() + prop.cov_add;
+            let chol = cholesky_repaired(&s, k, "proposal covariance", health)?;
+            let x_dyn = prop.mean + chol * standard_normal::<G, ND>(rng);
+            gaussian_update(
+                m,
+                p,
+                &x_dyn,
+                &prop.mean,
+                &prop.jac,
+                &prop.cov_add,
+                k,
+                health,
+            )?;
+            x_dyn
+        }
+    };
     let mut x_new = x_prev;
     for d in 0..ND {
         x_new[d] = x_dyn[d];
     }
-
-    // (b) Pseudo-measurement update of x^bl_{k−1} with xⁿ_k[0..ND]: the predicted moments are
-    // those of (a), so ŷ = prop.mean and the additive covariance is the Hessian term plus Qₙ.
-    gaussian_update(
-        m,
-        p,
-        &x_dyn,
-        &prop.mean,
-        &prop.jac,
-        &prop.cov_add,
-        k,
-        health,
-    )?;
 
     // (c) Propagate x^bl through φ_bl(xⁿ_{k−1}, ·) at the updated mean.
     let (phi, jac_bl) = model.marginal_dynamics(k, &x_prev, m);
