@@ -50,7 +50,9 @@ fn try_cholesky<const N: usize>(a: &SMatrix<f64, N, N>) -> Option<SMatrix<f64, N
         for k in 0..j {
             d -= l[(j, k)] * l[(j, k)];
         }
-        if !(d > PIVOT_REL_TOL * a[(j, j)]) || !(d > 0.0) {
+        // Written so that a NaN pivot also fails.
+        let clearly_positive = d > 0.0 && d > PIVOT_REL_TOL * a[(j, j)];
+        if !clearly_positive {
             return None;
         }
         let ljj = d.sqrt();
