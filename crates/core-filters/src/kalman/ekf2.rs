@@ -17,6 +17,7 @@ use crate::model::SparseHessians;
 /// `m ← φ(m) + ½ Σ_i e_i tr(𝓗ⁱ P)`, `P ← J P Jᵀ + ½ Σ_{i,i'} e_i e_{i'}ᵀ tr(𝓗ⁱ P 𝓗^{i'} P) + Q`.
 ///
 /// `value` = φ(m) and `jac` = ∂φ/∂x at the current `m`; the Hessian terms use the current `P`.
+/// Like [`super::kf_propagate`] it does not check for non-finite input: the next update does.
 pub fn ekf2_propagate<const N: usize>(
     m: &mut SVector<f64, N>,
     p: &mut SMatrix<f64, N, N>,

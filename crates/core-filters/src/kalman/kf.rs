@@ -191,6 +191,9 @@ pub(crate) fn sandwich<const N: usize, const M: usize>(
 }
 
 /// KF propagate, SPEC §4: `m ← G m + g`, `P ← G P Gᵀ + Q` (symmetrised).
+///
+/// Allocation-free and infallible: a non-finite input is not checked here, it is reported as a
+/// typed error by the next update (which checks its innovation covariance and residual).
 pub fn kf_propagate<const N: usize>(
     m: &mut SVector<f64, N>,
     p: &mut SMatrix<f64, N, N>,
