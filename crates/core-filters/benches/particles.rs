@@ -37,21 +37,27 @@ struct Chain {
     q_sd: [f64; 7],
 }
 
-/// Accelerations [ẍ1 ẍ2 ẍ3] and ṙ1 at state `s = [x1 x2 x3 ẋ1 ẋ2 ẋ3 r1]`, θ = [k c β γ n].
-fn rates(s: &[f64; 7], th: &[f64; 9], ug: f64) -> ([f64; 3], f64) {
+/// Accelerations [ẍ1 ẍ2 ẍ3] at state `s = [x1 x2 x3 ẋ1 ẋ2 ẋ3 r1]`, θ = [k c β γ n].
+fn accelerations(s: &[f64; 7], th: &[f64; 9], ug: f64) -> [f64; 3] {
     let [x1, x2, x3, v1, v2, v3, r1] = *s;
-    let [k1, k2, k3, c1, c2, c3, beta, gamma, n] = *th;
+    let [k1, k2, k3, c1, c2, c3, ..] = *th;
     let a1 = -ug - k1 * r1 + k2 * (x2 - x1) - c1 * v1 + c2 * (v2 - v1);
     let a2 = -ug + k2 * (x1 - x2) + k3 * (x3 - x2) + c2 * (v1 - v2) + c3 * (v3 - v2);
     let a3 = -ug + k3 * (x2 - x3) + c3 * (v2 - v3);
+    [a1, a2, a3]
+}
+
+/// Bouc–Wen rate ṙ1 (SPEC eq. 22).
+fn bouc_wen_rate(v1: f64, r1: f64, th: &[f64; 9]) -> f64 {
+    let [.., beta, gamma, n] = *th;
     let ar = r1.abs().powf(n - 1.0);
-    let rdot = v1 - beta * v1.abs() * ar * r1 - gamma * v1 * ar * r1.abs();
-    ([a1, a2, a3], rdot)
+    v1 - beta * v1.abs() * ar * r1 - gamma * v1 * ar * r1.abs()
 }
 
 /// One forward-Euler step of the chain.
 fn euler(s: &[f64; 7], th: &[f64; 9], ug: f64) -> [f64; 7] {
-    let (a, rdot) = rates(s, th, ug);
+    let a = accelerations(s, th, ug);
+    let rdot = bouc_wen_rate(s[3], s[6], th);
     [
         s[0] + DT * s[3],
         s[1] + DT * s[4],
@@ -77,7 +83,7 @@ fn chain_and_data() -> (Chain, Vec<SVector<f64, 3>>) {
     for k in 1..=STEPS {
         s = euler(&s, &THETA_TRUE, ug[k - 1]);
         v1_sq += s[3] * s[3];
-        clean.push(rates(&s, &THETA_TRUE, ug[k]).0);
+        clean.push(accelerations(&s, &THETA_TRUE, ug[k]));
     }
     let rms = |f: &dyn Fn(usize) -> f64| {
         ((0..STEPS).map(|k| f(k).powi(2)).sum::<f64>() / STEPS as f64).sqrt()
@@ -146,7 +152,7 @@ impl StateSpace<16, 3> for Augmented {
     fn measure(&self, k: usize, x: &SVector<f64, 16>) -> SVector<f64, 3> {
         let s: [f64; 7] = std::array::from_fn(|i| x[i]);
         let th: [f64; 9] = std::array::from_fn(|i| x[7 + i]);
-        SVector::from(rates(&s, &th, self.0.ug[k]).0)
+        SVector::from(accelerations(&s, &th, self.0.ug[k]))
     }
     fn measurement_cov(&self) -> SMatrix<f64, 3, 3> {
         SMatrix::from_diagonal(&SVector::from(self.0.r_diag))
