@@ -28,10 +28,16 @@
 //! [`FilterError::AllWeightsZero`]. A particle whose weight is already zero (possible with an ESS
 //! threshold) is not advanced: its weight stays zero whatever it would compute.
 //!
-//! Performance: the Jacobian of `φ_bl` is the identity plus a few entries for the Bouc–Wen
-//! chain, so the default [`MpfKernel::Sparse`] propagates `P` with `J P Jᵀ = (I + D) P (I + D)ᵀ`
-//! visiting only the non-zero entries of `D = J − I`; [`MpfKernel::Dense`] uses the generic
-//! [`ekf2_propagate`] and is the reference the sparse kernel is tested against.
+//! Performance (SPEC §4, §6): the Jacobian of `φ_bl` is the identity plus a few entries for the
+//! Bouc–Wen chain and the other Jacobians are sparse. The default [`MpfKernel::Sparse`] therefore
+//! (i) propagates `P` with `J P Jᵀ = (I + D) P (I + D)ᵀ` visiting only the non-zero entries of
+//! `D = J − I` ([`ekf2_propagate_near_identity`]); (ii) fuses the proposal draw (a) with the
+//! pseudo-measurement update (b), whose innovation covariance is the proposal covariance, so
+//! `Jₙ P`, its Cholesky factor and the whitened innovation (the standard normal draw itself) are
+//! computed once; (iii) forms `J P` over the non-zeros of `J` and downdates `P` symmetrically in
+//! the measurement update. [`MpfKernel::Dense`] uses the generic [`gaussian_update`],
+//! [`ekf2_propagate`] and [`ekf2_update`] throughout and is the reference the sparse kernel is
+//! tested against (same random draws, results equal to round-off).
 
 use nalgebra::{SMatrix, SVector};
 use rand::Rng;
@@ -48,13 +54,13 @@ use crate::model::{ConditionallyQuadratic, Layout, SparseHessians};
 use crate::resampling::Resampler;
 use crate::weights::{normalise_log_weights, reset_uniform};
 
-/// Which implementation propagates the marginalised covariance in step (c).
+/// Which implementation of the Gaussian steps the filter uses (module documentation).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum MpfKernel {
-    /// [`ekf2_propagate_near_identity`]: cost proportional to the non-zeros of `J − I`.
+    /// Sparse, fused steps: cost proportional to the non-zeros of the Jacobians.
     #[default]
     Sparse,
-    /// The generic dense [`ekf2_propagate`] (reference implementation).
+    /// The generic dense Kalman steps of [`crate::kalman`] (reference implementation).
     Dense,
 }
 
@@ -151,7 +157,7 @@ where
         }
     }
 
-    /// Chooses the propagation kernel of step (c) (default [`MpfKernel::Sparse`]).
+    /// Chooses the implementation of the Gaussian steps (default [`MpfKernel::Sparse`]).
     pub fn with_kernel(mut self, kernel: MpfKernel) -> Self {
         self.kernel = kernel;
         self
@@ -327,19 +333,7 @@ fn sample_and_update_fused<G: Rng + ?Sized, const ND: usize, const NBL: usize>(
     rng: &mut G,
     health: &mut Health,
 ) -> Result<SVector<f64, ND>, FilterError> {
-    // Jₙ P, row r = Σ_j Jₙ[r, j] P[j, :]; P is symmetric, so P[j, c] is read as P[c, j]
-    // (contiguous column).
-    let mut jp = SMatrix::<f64, ND, NBL>::zeros();
-    for j in 0..NBL {
-        for r in 0..ND {
-            let d = prop.jac[(r, j)];
-            if d != 0.0 {
-                for c in 0..NBL {
-                    jp[(r, c)] += d * p[(c, j)];
-                }
-            }
-        }
-    }
+    let jp = sparse_jp(&prop.jac, p);
     let s = jp * prop.jac.transpose() + prop.cov_add;
     let chol = cholesky_repaired(&s, k, "proposal covariance", health)?;
     let xi = standard_normal::<G, ND>(rng);
@@ -361,19 +355,7 @@ fn sample_and_update_fused<G: Rng + ?Sized, const ND: usize, const NBL: usize>(
         });
     }
     let mut new_p = *p;
-    for c in 0..NBL {
-        for r in 0..=c {
-            let mut acc = 0.0;
-            for d in 0..ND {
-                acc += w[(d, r)] * w[(d, c)];
-            }
-            // Written symmetrically: P − WᵀW is symmetric by construction.
-            let v = 0.5 * (p[(r, c)] + p[(c, r)]) - acc;
-            new_p[(r, c)] = v;
-            new_p[(c, r)] = v;
-        }
-    }
-    if new_p.iter().any(|v| !v.is_finite()) {
+    if !downdate_symmetric(&mut new_p, &w) {
         return Err(FilterError::NonFinite {
             step: k,
             which: "filtered covariance",
@@ -382,6 +364,109 @@ fn sample_and_update_fused<G: Rng + ?Sized, const ND: usize, const NBL: usize>(
     *m = new_m;
     *p = new_p;
     Ok(x_dyn)
+}
+
+/// `ln(2π)`.
+const LN_2PI: f64 = 1.837_877_066_409_345_5;
+
+/// `J P` for symmetric `P`, visiting only the non-zero entries of `J` (row `r` of the product is
+/// `Σ_j J[r, j] P[j, :]`, and `P[j, c]` is read as `P[c, j]`, a contiguous column).
+fn sparse_jp<const NO: usize, const N: usize>(
+    jac: &SMatrix<f64, NO, N>,
+    p: &SMatrix<f64, N, N>,
+) -> SMatrix<f64, NO, N> {
+    let mut jp = SMatrix::<f64, NO, N>::zeros();
+    for j in 0..N {
+        for r in 0..NO {
+            let d = jac[(r, j)];
+            if d != 0.0 {
+                for c in 0..N {
+                    jp[(r, c)] += d * p[(c, j)];
+                }
+            }
+        }
+    }
+    jp
+}
+
+/// `P ← P − Wᵀ W`, computing the upper triangle once and mirroring it (the result is symmetric
+/// by construction). Returns whether every entry is finite.
+fn downdate_symmetric<const NO: usize, const N: usize>(
+    p: &mut SMatrix<f64, N, N>,
+    w: &SMatrix<f64, NO, N>,
+) -> bool {
+    let mut finite = true;
+    for c in 0..N {
+        for r in 0..=c {
+            let mut acc = 0.0;
+            for d in 0..NO {
+                acc += w[(d, r)] * w[(d, c)];
+            }
+            let v = 0.5 * (p[(r, c)] + p[(c, r)]) - acc;
+            finite &= v.is_finite();
+            p[(r, c)] = v;
+            p[(c, r)] = v;
+        }
+    }
+    finite
+}
+
+/// SPEC §5.4 (d)+(e) on the [`MpfKernel::Sparse`] path: the EKF2 update with `y_k` of
+/// [`ekf2_update`] (Hessian terms by [`second_order_terms`], then `L = J P Jᵀ + ½tr(𝓗ⁱP𝓗^{i'}P)
+/// + R = C Cᵀ`, `W = C⁻¹ J P`, `e = C⁻¹ (y − ŷ)`, `m ← m + Wᵀ e`, `P ← P − Wᵀ W`) with `J P`
+/// over the non-zeros of `J` and a symmetric downdate. Returns `log N(y; ŷ, L)`. Same repair
+/// and error policy as [`gaussian_update`], except that on a non-finite result `m`, `P` may be
+/// left partly updated (the particle then has weight zero and is never used again).
+#[allow(clippy::too_many_arguments)]
+fn ekf2_update_sparse<const N: usize, const NY: usize>(
+    m: &mut SVector<f64, N>,
+    p: &mut SMatrix<f64, N, N>,
+    y: &SVector<f64, NY>,
+    value: &SVector<f64, NY>,
+    jac: &SMatrix<f64, NY, N>,
+    hess: &SparseHessians,
+    r: &SMatrix<f64, NY, NY>,
+    step: usize,
+    health: &mut Health,
+) -> Result<f64, FilterError> {
+    let mut y_hat = *value;
+    let mut l_cov = *r;
+    if !hess.is_empty() {
+        let mut mean2 = SVector::<f64, NY>::zeros();
+        let mut cov2 = SMatrix::<f64, NY, NY>::zeros();
+        second_order_terms(hess, p, &mut mean2, &mut cov2);
+        y_hat += mean2;
+        l_cov += cov2;
+    }
+    let residual = y - y_hat;
+    if residual.iter().any(|v| !v.is_finite()) {
+        return Err(FilterError::NonFinite {
+            step,
+            which: "innovation",
+        });
+    }
+    let jp = sparse_jp(jac, p);
+    l_cov += jp * jac.transpose();
+    let chol = cholesky_repaired(&l_cov, step, "innovation covariance", health)?;
+    let mut w = jp;
+    solve_lower_in_place(&chol, &mut w);
+    let mut e = residual;
+    solve_lower_in_place(&chol, &mut e);
+    *m += w.tr_mul(&e);
+    if m.iter().any(|v| !v.is_finite()) {
+        return Err(FilterError::NonFinite {
+            step,
+            which: "filtered mean",
+        });
+    }
+    if !downdate_symmetric(p, &w) {
+        return Err(FilterError::NonFinite {
+            step,
+            which: "filtered covariance",
+        });
+    }
+    let log_det_half: f64 = (0..NY).map(|j| chol[(j, j)].ln()).sum();
+    Ok(-0.5 * e.norm_squared() - log_det_half - 0.5 * (NY as f64) * LN_2PI)
 }
 
 /// Advances one particle through SPEC §5.4 (a)–(e) and returns `log N(y_k; ŷ, L)`.
@@ -449,18 +534,11 @@ where
 
     // (d)+(e) EKF2 update with y_k at xⁿ_k; its innovation log-density is the weight factor.
     let (h, jac_y) = model.observation(k, x_n, m);
-    let inn = ekf2_update(
-        m,
-        p,
-        y,
-        &h,
-        &jac_y,
-        model.observation_hessians(),
-        r,
-        k,
-        health,
-    )?;
-    Ok(inn.loglik)
+    let hess_y = model.observation_hessians();
+    match kernel {
+        MpfKernel::Sparse => ekf2_update_sparse(m, p, y, &h, &jac_y, hess_y, r, k, health),
+        MpfKernel::Dense => Ok(ekf2_update(m, p, y, &h, &jac_y, hess_y, r, k, health)?.loglik),
+    }
 }
 
 impl<M, const NN: usize, const ND: usize, const NBL: usize, const NY: usize> ParticleFilter<NY>
