@@ -396,6 +396,9 @@ fn coupled_linear_model_gives_unbiased_likelihood() {
 // NBL = 3, NY = 1.
 //   ψ₀ = xⁿ₀ + 0.1 x₀ + x₀ x₁,   ψ₁ = 0.5 xⁿ₁ + x₁ x₂ − 0.3 x₂² + xⁿ₂ x₀.
 
+/// One output as `(constant, linear coefficients, bilinear terms (a, b, q))`.
+type QuadraticTerms = (f64, Vector3<f64>, Vec<(usize, usize, f64)>);
+
 struct Bilinear {
     sampled_hess: SparseHessians,
     empty: SparseHessians,
@@ -422,7 +425,7 @@ impl Bilinear {
     }
 
     /// Each output as `const + lᵀx + Σ q x_a x_b` for the exact-moment reference.
-    fn terms(&self, xn: &Vector3<f64>) -> [(f64, Vector3<f64>, Vec<(usize, usize, f64)>); 2] {
+    fn terms(&self, xn: &Vector3<f64>) -> [QuadraticTerms; 2] {
         [
             (xn[0], Vector3::new(0.1, 0.0, 0.0), vec![(0, 1, 1.0)]),
             (
@@ -507,7 +510,7 @@ impl ConditionallyQuadratic<3, 2, 3, 1> for Bilinear {
 /// `Cov(x_a x_b, x_c x_d) = μ_a μ_c P_bd + μ_a μ_d P_bc + μ_b μ_c P_ad + μ_b μ_d P_ac
 ///  + P_ac P_bd + P_ad P_bc`.
 fn exact_quadratic_moments(
-    terms: &[(f64, Vector3<f64>, Vec<(usize, usize, f64)>); 2],
+    terms: &[QuadraticTerms; 2],
     mu: &Vector3<f64>,
     p: &Matrix3<f64>,
     noise_var: &Vector2<f64>,

@@ -412,11 +412,12 @@ fn downdate_symmetric<const NO: usize, const N: usize>(
 }
 
 /// SPEC §5.4 (d)+(e) on the [`MpfKernel::Sparse`] path: the EKF2 update with `y_k` of
-/// [`ekf2_update`] (Hessian terms by [`second_order_terms`], then `L = J P Jᵀ + ½tr(𝓗ⁱP𝓗^{i'}P)
-/// + R = C Cᵀ`, `W = C⁻¹ J P`, `e = C⁻¹ (y − ŷ)`, `m ← m + Wᵀ e`, `P ← P − Wᵀ W`) with `J P`
-/// over the non-zeros of `J` and a symmetric downdate. Returns `log N(y; ŷ, L)`. Same repair
-/// and error policy as [`gaussian_update`], except that on a non-finite result `m`, `P` may be
-/// left partly updated (the particle then has weight zero and is never used again).
+/// [`ekf2_update`]. The Hessian terms come from [`second_order_terms`]; then, with
+/// `L = J P Jᵀ + ½tr(𝓗ⁱP𝓗^{i'}P) + R = C Cᵀ`, `W = C⁻¹ J P` and `e = C⁻¹ (y − ŷ)`:
+/// `m ← m + Wᵀ e`, `P ← P − Wᵀ W`, with `J P` over the non-zeros of `J` and a symmetric
+/// downdate. Returns `log N(y; ŷ, L)`. Same repair and error policy as [`gaussian_update`],
+/// except that on a non-finite result `m`, `P` may be left partly updated (the particle then has
+/// weight zero and is never used again).
 #[allow(clippy::too_many_arguments)]
 fn ekf2_update_sparse<const N: usize, const NY: usize>(
     m: &mut SVector<f64, N>,
