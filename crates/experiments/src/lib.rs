@@ -2,5 +2,14 @@
 //!
 //! Everything with I/O: experiment configs, sweeps over runs, metrics, run records, figures,
 //! reports, and the subcommands of the `sysid` command-line tool (module [`cli`]).
+//!
+//! - [`metrics`]: θ_val, relative errors, CV(RMSE) and NRMSE (SPEC §7);
+//! - [`observe`]: the observer that records traces and online errors during a run;
+//! - [`record`]: the run record written for every run;
+//! - [`sweep`]: parallel, resumable, shardable sweeps over runs.
 
 pub mod cli;
+pub mod metrics;
+pub mod observe;
+pub mod record;
+pub mod sweep;
