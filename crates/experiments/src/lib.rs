@@ -9,7 +9,9 @@
 //! - [`sweep`]: parallel, resumable, shardable sweeps over runs.
 
 pub mod cli;
+pub mod figures;
 pub mod metrics;
 pub mod observe;
+pub mod pipeline;
 pub mod record;
 pub mod sweep;

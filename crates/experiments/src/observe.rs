@@ -39,6 +39,8 @@ pub struct Recorder<'a> {
     pub last: Posterior,
     truth: Option<TruthStates<'a>>,
     pub state_sums: Vec<ErrorSums>,
+    /// Optional progress bar advanced every 64 steps (terminal runs of `sysid filter`).
+    pub progress: Option<indicatif::ProgressBar>,
 }
 
 impl<'a> Recorder<'a> {
@@ -66,6 +68,7 @@ impl<'a> Recorder<'a> {
             last: Posterior::default(),
             truth,
             state_sums: vec![ErrorSums::default(); n_states],
+            progress: None,
         }
     }
 
@@ -100,6 +103,11 @@ impl Observer for Recorder<'_> {
             self.trace.param_mean.push(post.param_mean.clone());
             self.trace.param_sd.push(post.param_sd.clone());
             self.trace.ess.push(info.ess);
+        }
+        if let Some(bar) = &self.progress {
+            if k % 64 == 0 || k == self.total_steps {
+                bar.set_position(k as u64);
+            }
         }
         // The last completed step's posterior (θ_sd_final; also kept when a run fails early).
         self.last.clone_from(post);

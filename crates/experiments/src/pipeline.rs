@@ -1,0 +1,479 @@
+//! One identification run, end to end: data set + algorithm + settings + seed → [`RunRecord`].
+//!
+//! Configuration errors (an unknown parameter to fix, a storey count that is not compiled in, an
+//! invalid prior) are returned as errors before anything runs. Numerical failures *inside* the
+//! run are not errors here: they end the run early and are written into the record, so a sweep
+//! of 50 runs never aborts because of one.
+
+use std::collections::BTreeMap;
+use std::time::Instant;
+
+use anyhow::{anyhow, bail, Context, Result};
+use core_filters::particle::bootstrap::BootstrapPf;
+use core_filters::particle::mlnrbpf::MlnRbpf;
+use core_filters::particle::mpf::MpfEkf2;
+use core_filters::particle::storvik::{Storvik, StorvikUpdate};
+use core_filters::particle::{run, ParticleConfig, ParticleFilter};
+use core_filters::resampling::{ResamplePolicy, Scheme};
+use core_filters::rng::{purpose, stream};
+use models::dataset::LoadedDataset;
+use models::integrate::{simulate_adaptive, Tolerance};
+use models::partition::{
+    AugmentedChain, FilterSpec, MarginalPrior, MeasurementKind, MlnChain, MpfChain,
+};
+use models::priors::ParameterPrior;
+use models::structure::ShearChain;
+use nalgebra::SVector;
+use serde::{Deserialize, Serialize};
+
+use crate::metrics::{relative_errors, ErrorSums, StateErrors};
+use crate::observe::{Recorder, TruthStates};
+use crate::record::{Loop, RunRecord, Timing, Validation, Versions};
+
+/// The identification algorithms (SPEC §5).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Algorithm {
+    Bootstrap,
+    MlnRbpf,
+    Storvik,
+    MpfEkf2,
+}
+
+impl Algorithm {
+    pub const ALL: [Algorithm; 4] = [
+        Algorithm::Bootstrap,
+        Algorithm::MlnRbpf,
+        Algorithm::Storvik,
+        Algorithm::MpfEkf2,
+    ];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Algorithm::Bootstrap => "bootstrap",
+            Algorithm::MlnRbpf => "mln-rbpf",
+            Algorithm::Storvik => "storvik",
+            Algorithm::MpfEkf2 => "mpf-ekf2",
+        }
+    }
+
+    /// Name used in figures and reports.
+    pub fn label(self) -> &'static str {
+        match self {
+            Algorithm::Bootstrap => "Bootstrap PF",
+            Algorithm::MlnRbpf => "MLN-RBPF",
+            Algorithm::Storvik => "Storvik",
+            Algorithm::MpfEkf2 => "MPF-EKF2",
+        }
+    }
+}
+
+impl std::str::FromStr for Algorithm {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        Algorithm::ALL
+            .into_iter()
+            .find(|a| a.name() == s)
+            .ok_or_else(|| {
+                format!(
+                    "unknown algorithm `{s}` (expected bootstrap, mln-rbpf, storvik or mpf-ekf2)"
+                )
+            })
+    }
+}
+
+/// Filter settings of a run; every field has the SPEC default and is written into the record.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct FilterSettings {
+    /// Number of particles `Np` (SPEC §3: 500).
+    pub particles: usize,
+    /// Resampling scheme (SPEC §3: systematic).
+    pub resampling: Scheme,
+    /// Resample only when ESS < threshold·Np; absent: every step (SPEC §3).
+    pub ess_threshold: Option<f64>,
+    /// Storvik's step (iii): `linearised` (the paper's) or `exact`.
+    pub storvik_update: StorvikUpdate,
+    /// Point-mass priors: parameter name → value (e.g. `k1 = 8.0`).
+    pub fix: BTreeMap<String, f64>,
+    /// Prior of θ; absent: SPEC §3's priors for the data set's storey count.
+    pub prior: Option<ParameterPrior>,
+    /// Gaussian prior of the marginalised block.
+    pub marginal_prior: MarginalPrior,
+    /// Noise fraction used to set R and Q from RMS values (SPEC §3: 0.1).
+    pub noise_fraction: f64,
+    /// Which accelerations the data hold (relative, SPEC §2, or absolute).
+    pub measurement: MeasurementKind,
+    /// Storey masses; absent: the data set's structure, or unit masses for field data.
+    pub masses: Option<Vec<f64>>,
+    /// θ_val averages the posterior mean over the last `window` steps (SPEC eq. 26: 80).
+    pub window: usize,
+    /// Keep one trace step in `trace_every` (0: no trace).
+    pub trace_every: usize,
+    /// Run the validation integration with θ_val (needs the truth).
+    pub validate: bool,
+    /// Keep the validation and true hysteresis loops in the record, one point in `loop_every`
+    /// (0: no loops).
+    pub loop_every: usize,
+}
+
+impl Default for FilterSettings {
+    fn default() -> Self {
+        Self {
+            particles: 500,
+            resampling: Scheme::Systematic,
+            ess_threshold: None,
+            storvik_update: StorvikUpdate::Linearised,
+            fix: BTreeMap::new(),
+            prior: None,
+            marginal_prior: MarginalPrior::MomentMatched,
+            noise_fraction: 0.1,
+            measurement: MeasurementKind::Relative,
+            masses: None,
+            window: 80,
+            trace_every: 10,
+            validate: true,
+            loop_every: 4,
+        }
+    }
+}
+
+/// What a run is given: the data, and when known the true structure (for the validation run).
+pub struct RunInput<'a> {
+    pub data: &'a LoadedDataset,
+    /// The true structure, with θ_true (for validation); `None` for field data.
+    pub chain: Option<&'a ShearChain>,
+    pub experiment: &'a str,
+    pub seed: u64,
+    pub run: u64,
+    /// Show a progress bar on stderr (when it is a terminal).
+    pub progress: bool,
+}
+
+/// RMS values that set Q and R (SPEC §3): from the data set's metadata (clean signals) when
+/// present, otherwise estimated from the measured signals.
+fn rms_values(data: &LoadedDataset, nf: f64) -> (Vec<f64>, f64, f64) {
+    if let Some(meta) = &data.meta {
+        return (meta.rms.acc.clone(), meta.rms.ug, meta.rms.vel[0]);
+    }
+    // Field data: a measured channel holds the clean signal plus noise of s.d. nf·RMS(clean),
+    // so RMS(measured) = RMS(clean)·√(1 + nf²).
+    let rms = |v: &mut dyn Iterator<Item = f64>| {
+        let (s, n) = v.fold((0.0, 0usize), |(s, n), x| (s + x * x, n + 1));
+        (s / n.max(1) as f64).sqrt() / (1.0 + nf * nf).sqrt()
+    };
+    let k = data.len();
+    let acc: Vec<f64> = (0..data.channels)
+        .map(|j| rms(&mut (0..k).map(|i| data.y(i)[j])))
+        .collect();
+    let ug = rms(&mut data.ug_meas.iter().copied());
+    // RMS of ẋ1: trapezoidal integral of the measured relative acceleration of storey 1 with
+    // its linear trend removed (the drift of integrated noise).
+    let mut v = vec![0.0; k];
+    for i in 1..k {
+        v[i] = v[i - 1] + 0.5 * data.dt * (data.y(i - 1)[0] + data.y(i)[0]);
+    }
+    let slope = v[k - 1] / (k.max(2) - 1) as f64;
+    let v1 =
+        rms(&mut v.iter().enumerate().map(|(i, x)| x - slope * i as f64)) * (1.0 + nf * nf).sqrt();
+    (acc, ug, v1)
+}
+
+/// Builds the filter specification of a run.
+pub fn filter_spec(
+    data: &LoadedDataset,
+    chain: Option<&ShearChain>,
+    s: &FilterSettings,
+) -> Result<FilterSpec> {
+    let n = data.channels;
+    let masses = match (&s.masses, chain) {
+        (Some(m), _) => m.clone(),
+        (None, Some(c)) => c.masses().to_vec(),
+        (None, None) => vec![1.0; n],
+    };
+    if masses.len() != n {
+        bail!("{} masses given for {n} measured storeys", masses.len());
+    }
+    let (acc, ug, v1) = rms_values(data, s.noise_fraction);
+    let mut spec = FilterSpec::from_rms(
+        data.dt,
+        masses,
+        data.ug_meas.clone(),
+        &acc,
+        ug,
+        v1,
+        s.noise_fraction,
+    )?;
+    spec.measurement = s.measurement;
+    spec.marginal_prior = s.marginal_prior;
+    let mut prior = s.prior.clone().unwrap_or_else(|| ParameterPrior::paper(n));
+    for (name, value) in &s.fix {
+        prior
+            .fix(name, *value)
+            .with_context(|| format!("fixing {name} = {value}"))?;
+    }
+    spec.prior = prior;
+    spec.validate()?;
+    Ok(spec)
+}
+
+/// What the generic driver returns.
+struct Driven {
+    summary: core_filters::particle::RunSummary,
+    distinct: Vec<(String, usize)>,
+    param_names: Vec<String>,
+    theta_val: Vec<f64>,
+    theta_sd_final: Vec<f64>,
+    trace: crate::observe::Trace,
+    online: Option<StateErrors>,
+    wall_s: f64,
+}
+
+fn drive<const NY: usize, F: ParticleFilter<NY>>(
+    mut filter: F,
+    input: &RunInput,
+    s: &FilterSettings,
+    algorithm: Algorithm,
+) -> Driven {
+    let data = input.data;
+    let layout = filter.layout().clone();
+    // Truth rows in the filter's state order, when the truth is known.
+    let truth_rows: Option<Vec<Vec<f64>>> = data.truth.as_ref().and_then(|t| {
+        let cols: Option<Vec<usize>> = layout
+            .state_names
+            .iter()
+            .map(|n| t.state_names.iter().position(|m| m == n))
+            .collect();
+        cols.map(|cols| {
+            (0..t.states.len())
+                .map(|k| cols.iter().map(|&c| t.states.state(k)[c]).collect())
+                .collect()
+        })
+    });
+    let steps = data.len() - 1;
+    let ys: Vec<SVector<f64, NY>> = (1..=steps)
+        .map(|k| SVector::<f64, NY>::from_column_slice(data.y(k)))
+        .collect();
+    let mut recorder = Recorder::new(
+        steps,
+        s.window,
+        s.trace_every,
+        data.dt,
+        layout.params.len(),
+        layout.states.len(),
+        truth_rows.as_ref().map(|rows| TruthStates { rows }),
+    );
+    if input.progress && std::io::IsTerminal::is_terminal(&std::io::stderr()) {
+        let bar = indicatif::ProgressBar::new(steps as u64);
+        bar.set_style(
+            indicatif::ProgressStyle::with_template(
+                "{prefix:>10} [{bar:30}] {pos}/{len} steps, ETA {eta}",
+            )
+            .expect("valid template")
+            .progress_chars("=> "),
+        );
+        bar.set_prefix(algorithm.name());
+        recorder.progress = Some(bar);
+    }
+    let mut rng = stream(
+        input.seed,
+        input.run,
+        &format!("{}/{}", purpose::FILTER, algorithm.name()),
+    );
+    let start = Instant::now();
+    let summary = run(&mut filter, &ys, &mut rng, &mut recorder);
+    let wall_s = start.elapsed().as_secs_f64();
+    if let Some(bar) = &recorder.progress {
+        bar.finish_and_clear();
+    }
+    Driven {
+        distinct: filter.distinct_sampled_params(),
+        param_names: layout.param_names.clone(),
+        theta_val: recorder.theta_val(),
+        theta_sd_final: recorder.last.param_sd.clone(),
+        online: truth_rows
+            .as_ref()
+            .map(|_| StateErrors::from_sums(&layout.state_names, &recorder.state_sums)),
+        trace: recorder.trace,
+        summary,
+        wall_s,
+    }
+}
+
+/// Builds and runs the filter for a storey count compiled in (const dimensions).
+macro_rules! dispatch {
+    ($alg:expr, $spec:expr, $pc:expr, $input:expr, $s:expr, $n:expr; $( $ns:literal => ($nx:literal, $nu:literal, $nl:literal, $nbl:literal) ),* ) => {
+        match $n {
+            $( $ns => match $alg {
+                Algorithm::Bootstrap => drive::<$ns, _>(
+                    BootstrapPf::new(AugmentedChain::<$nx, $ns>::new($spec)?, $pc), $input, $s, $alg),
+                Algorithm::MlnRbpf => drive::<$ns, _>(
+                    MlnRbpf::new(MlnChain::<$nu, $nu, $nl, $ns>::new($spec)?, $pc), $input, $s, $alg),
+                Algorithm::Storvik => drive::<$ns, _>(
+                    Storvik::with_update(MlnChain::<$nu, $nu, $nl, $ns>::new($spec)?, $pc, $s.storvik_update),
+                    $input, $s, $alg),
+                Algorithm::MpfEkf2 => drive::<$ns, _>(
+                    MpfEkf2::new(MpfChain::<$nbl, $ns>::new($spec)?, $pc), $input, $s, $alg),
+            }, )*
+            other => bail!(
+                "{other} storeys: the filters are compiled for {} storeys (add the size to `pipeline::dispatch!`)",
+                [$($ns.to_string()),*].join(", ")
+            ),
+        }
+    };
+}
+
+/// Storey counts the filters are compiled for.
+pub const SUPPORTED_STOREYS: [usize; 3] = [2, 3, 5];
+
+/// Runs one algorithm on one data set and returns its record.
+pub fn identify(input: &RunInput, algorithm: Algorithm, s: &FilterSettings) -> Result<RunRecord> {
+    let data = input.data;
+    if data.len() < 2 {
+        bail!(
+            "the data set has {} samples; at least 2 are needed",
+            data.len()
+        );
+    }
+    if s.particles == 0 {
+        bail!("particles must be at least 1");
+    }
+    if let Some(t) = s.ess_threshold {
+        if !(t > 0.0 && t <= 1.0) {
+            bail!("ess_threshold {t} must be in (0, 1]");
+        }
+    }
+    let spec = filter_spec(data, input.chain, s)?;
+    let pc = ParticleConfig {
+        particles: s.particles,
+        resampling: ResamplePolicy {
+            scheme: s.resampling,
+            ess_threshold: s.ess_threshold,
+        },
+    };
+    let n = data.channels;
+    let spec_ref = &spec;
+    let d: Driven = dispatch!(algorithm, spec_ref.clone(), pc, input, s, n;
+        2 => (12, 6, 3, 9),
+        3 => (16, 8, 4, 13),
+        5 => (24, 12, 6, 21));
+
+    let steps = data.len() - 1;
+    let theta_true = data.meta.as_ref().map(|m| m.theta_true.clone());
+    if let Some(t) = &theta_true {
+        if t.len() != d.param_names.len() {
+            return Err(anyhow!(
+                "the data set's true θ has {} entries, the filter's θ {}",
+                t.len(),
+                d.param_names.len()
+            ));
+        }
+    }
+    let validation_start = Instant::now();
+    let validation = match (s.validate, input.chain, &data.truth) {
+        (true, Some(chain), Some(truth)) if d.summary.failure.is_none() => {
+            Some(validate(chain, &d.theta_val, truth, data.dt, s.loop_every))
+        }
+        _ => None,
+    };
+    let validation_s = validation_start.elapsed().as_secs_f64();
+    let mut failures = BTreeMap::new();
+    if let Some(f) = &d.summary.failure {
+        failures.insert(f.kind().to_string(), 1);
+    }
+    let config = serde_json::json!({
+        "algorithm": algorithm.name(),
+        "filter": s,
+        "data": data.meta.as_ref().map(|m| serde_json::to_value(&m.config).ok()),
+        "spec": {
+            "dt": spec.dt, "masses": spec.masses, "q_disp_sd": spec.q_disp_sd,
+            "q_vel_sd": spec.q_vel_sd, "q_r_sd": spec.q_r_sd, "r_diag": spec.r_diag,
+            "prior": spec.prior,
+        },
+    });
+    Ok(RunRecord {
+        experiment: input.experiment.to_string(),
+        algorithm: algorithm.name().to_string(),
+        seed: input.seed,
+        run: input.run,
+        particles: s.particles,
+        rel_error: theta_true
+            .as_ref()
+            .map(|t| relative_errors(&d.theta_val, t)),
+        theta_true,
+        param_names: d.param_names,
+        theta_val: d.theta_val,
+        window: s.window,
+        theta_sd_final: d.theta_sd_final,
+        loglik: d.summary.loglik,
+        steps_total: steps,
+        steps_completed: d.summary.steps_completed,
+        ess_min: d.summary.ess_min,
+        ess_mean: d.summary.ess_mean,
+        distinct_sampled: d.distinct.into_iter().collect(),
+        failures,
+        failure: d.summary.failure.as_ref().map(|f| f.to_string()),
+        health: d.summary.health,
+        online_states: d.online,
+        validation,
+        config,
+        versions: Versions::current(),
+        trace: d.trace,
+        timing: Timing {
+            wall_s: d.wall_s,
+            particle_steps_per_s: (s.particles * d.summary.steps_completed) as f64
+                / d.wall_s.max(1e-12),
+            validation_s,
+        },
+    })
+}
+
+/// The validation run (SPEC §7): θ_val, zero initial conditions, clean excitation, adaptive
+/// Dormand–Prince 5(4); errors against the true states and the hysteresis loops.
+fn validate(
+    chain: &ShearChain,
+    theta_val: &[f64],
+    truth: &models::dataset::LoadedTruth,
+    dt: f64,
+    loop_every: usize,
+) -> Validation {
+    let names = truth.state_names.clone();
+    let fail = |e: String| Validation {
+        states: StateErrors {
+            names: names.clone(),
+            errors: vec![],
+        },
+        loop_validation: None,
+        loop_true: None,
+        error: Some(e),
+    };
+    let model = match chain.with_theta(theta_val) {
+        Ok(m) => m,
+        Err(e) => return fail(format!("θ_val is not a valid structure: {e}")),
+    };
+    let traj = match simulate_adaptive(&model, &truth.ug_clean, dt, Tolerance::default()) {
+        Ok(t) => t,
+        Err(e) => return fail(format!("validation integration failed: {e}")),
+    };
+    let mut sums = vec![ErrorSums::default(); names.len()];
+    for k in 0..traj.len().min(truth.states.len()) {
+        for (j, s) in sums.iter_mut().enumerate() {
+            s.add(traj.state(k)[j], truth.states.state(k)[j]);
+        }
+    }
+    let loops = |c: &ShearChain, t: &models::integrate::Trajectory| -> Loop {
+        let mut l = Loop::default();
+        for k in (0..t.len()).step_by(loop_every.max(1)) {
+            l.x.push(c.element_drift(t.state(k), 0));
+            l.force.push(c.restoring_force(t.state(k), 0));
+        }
+        l
+    };
+    let keep = loop_every > 0 && !chain.bouc_wen().is_empty();
+    Validation {
+        states: StateErrors::from_sums(&names, &sums),
+        loop_validation: keep.then(|| loops(&model, &traj)),
+        loop_true: keep.then(|| loops(chain, &truth.states)),
+        error: None,
+    }
+}
