@@ -14,4 +14,7 @@ pub mod metrics;
 pub mod observe;
 pub mod pipeline;
 pub mod record;
+pub mod report;
+pub mod reproduce;
+pub mod study;
 pub mod sweep;

@@ -204,7 +204,12 @@ pub fn filter_spec(
         v1,
         s.noise_fraction,
     )?;
-    spec.measurement = s.measurement;
+    // The data set says what its accelerometers measure; the settings apply to field data.
+    spec.measurement = match data.meta.as_ref().map(|m| m.config.measurement) {
+        Some(models::dataset::MeasurementKind::Absolute) => MeasurementKind::Absolute,
+        Some(models::dataset::MeasurementKind::Relative) => MeasurementKind::Relative,
+        None => s.measurement,
+    };
     spec.marginal_prior = s.marginal_prior;
     let mut prior = s.prior.clone().unwrap_or_else(|| ParameterPrior::paper(n));
     for (name, value) in &s.fix {

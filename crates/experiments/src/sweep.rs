@@ -87,14 +87,16 @@ impl Default for SweepOptions {
 }
 
 /// Runs `run` on every job of this shard whose record is not yet in `dir`, writing each record to
-/// `dir/<id(job)>.json` as soon as it is done. Returns the records of this shard, in job order
+/// `dir/<id(job)>.json` as soon as it is done. An `Err` from `run` is a configuration error and
+/// stops the sweep (records already written stay); numerical failures belong inside records.
+/// Returns the records of this shard, in job order
 /// (finished earlier or now).
 pub fn run_sweep<J, R>(
     jobs: &[J],
     id: impl Fn(&J) -> String + Sync,
     dir: &Path,
     opts: &SweepOptions,
-    run: impl Fn(&J) -> R + Sync,
+    run: impl Fn(&J) -> Result<R> + Sync,
 ) -> Result<Vec<R>>
 where
     J: Sync,
@@ -119,7 +121,7 @@ where
                 let record = if path.exists() {
                     read_record(&path)?
                 } else {
-                    let r = run(job);
+                    let r = run(job)?;
                     write_atomic(&path, &r)?;
                     bar.inc(1);
                     r

@@ -4,7 +4,11 @@ use clap::{Parser, Subcommand};
 use experiments::cli;
 
 #[derive(Parser)]
-#[command(name = "sysid", version, about = "Online Bayesian identification of hysteretic structures")]
+#[command(
+    name = "sysid",
+    version,
+    about = "Online Bayesian identification of hysteretic structures"
+)]
 struct Cli {
     #[command(subcommand)]
     command: Command,
@@ -16,6 +20,10 @@ enum Command {
     Simulate(cli::simulate::Args),
     /// Run one identification filter on a data set and write a run record.
     Filter(cli::filter::Args),
+    /// Reproduce the paper: every study, figure and the report.
+    Reproduce(cli::reproduce::Args),
+    /// Merge the records of sharded sweeps.
+    Merge(cli::merge::Args),
     /// Compute Table I (moments of z = xᵀx by linearisation, EKF2 and the unscented transform).
     Table1(cli::table1::Args),
 }
@@ -26,5 +34,7 @@ fn main() -> anyhow::Result<()> {
         Command::Simulate(args) => cli::simulate::run(args),
         Command::Filter(args) => cli::filter::run(args),
         Command::Table1(args) => cli::table1::run(args),
+        Command::Reproduce(args) => cli::reproduce::run(args),
+        Command::Merge(args) => cli::merge::run(args),
     }
 }

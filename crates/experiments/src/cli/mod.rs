@@ -1,5 +1,7 @@
 //! Subcommands of `sysid`, one module each. Each module exposes `Args` (clap) and `run`.
 
 pub mod filter;
+pub mod merge;
+pub mod reproduce;
 pub mod simulate;
 pub mod table1;

@@ -1,0 +1,316 @@
+//! The paper reproduction (SPEC §8): runs every study of `experiments/`, draws every figure from
+//! the records, and writes `summary.json` and `REPORT.md` with the paper's statements beside our
+//! measurements.
+
+use std::collections::BTreeMap;
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::{Context, Result};
+use serde::Serialize;
+
+use crate::figures;
+use crate::metrics::mean_sd;
+use crate::pipeline::Algorithm;
+use crate::record::RunRecord;
+use crate::study::Study;
+use crate::sweep::{run_sweep, Shard, SweepOptions};
+
+/// The studies of the reproduction, in the order they run.
+pub const STUDIES: [&str; 5] = ["fig4", "fig5", "fig6", "fig8", "fig7"];
+
+/// The paper's θ_val for its Fig. 8 run (eq. 31).
+pub const PAPER_EQ31: [f64; 9] = [
+    7.973, 7.912, 7.943, 0.277, 0.342, 0.278, 3.418, 0.960, 2.488,
+];
+
+/// Options of a reproduction.
+#[derive(Debug, Clone)]
+pub struct Options {
+    pub experiments: PathBuf,
+    pub out: PathBuf,
+    pub quick: bool,
+    pub threads: usize,
+    pub shard: Shard,
+    pub progress: bool,
+}
+
+/// Per algorithm and parameter: statistics of θ_val over the runs of a study.
+#[derive(Debug, Clone, Serialize)]
+pub struct ParamStats {
+    pub name: String,
+    pub truth: f64,
+    /// Mean and s.d. over runs of θ_val / θ_true.
+    pub ratio_mean: f64,
+    pub ratio_sd: f64,
+    /// Mean over runs of the relative error |θ_val − θ_true| / θ_true.
+    pub rel_error_mean: f64,
+}
+
+/// Per algorithm: statistics over the runs of a study.
+#[derive(Debug, Clone, Serialize)]
+pub struct AlgorithmStats {
+    pub algorithm: String,
+    pub runs: usize,
+    pub failed: usize,
+    pub params: Vec<ParamStats>,
+    pub online_nrmse_mean: f64,
+    pub validation_nrmse_mean: f64,
+    pub distinct_sampled_mean: BTreeMap<String, f64>,
+    pub ess_mean: f64,
+    pub loglik_mean: f64,
+    pub wall_s_mean: f64,
+    pub particle_steps_per_s_mean: f64,
+}
+
+/// Statistics of one algorithm's records.
+pub fn algorithm_stats(algorithm: &str, records: &[&RunRecord]) -> AlgorithmStats {
+    let ok: Vec<&&RunRecord> = records.iter().filter(|r| !r.is_failure()).collect();
+    let names = records
+        .first()
+        .map(|r| r.param_names.clone())
+        .unwrap_or_default();
+    let params = names
+        .iter()
+        .enumerate()
+        .map(|(j, name)| {
+            let truth = ok
+                .first()
+                .and_then(|r| r.theta_true.as_ref())
+                .map_or(f64::NAN, |t| t[j]);
+            let ratios: Vec<f64> = ok.iter().map(|r| r.theta_val[j] / truth).collect();
+            let errs: Vec<f64> = ok
+                .iter()
+                .filter_map(|r| r.rel_error.as_ref().map(|e| e[j]))
+                .collect();
+            let (ratio_mean, ratio_sd, _) = mean_sd(&ratios);
+            ParamStats {
+                name: name.clone(),
+                truth,
+                ratio_mean,
+                ratio_sd,
+                rel_error_mean: mean_sd(&errs).0,
+            }
+        })
+        .collect();
+    let avg = |f: &dyn Fn(&RunRecord) -> Option<f64>| {
+        mean_sd(&ok.iter().filter_map(|r| f(r)).collect::<Vec<_>>()).0
+    };
+    let mut distinct: BTreeMap<String, Vec<f64>> = BTreeMap::new();
+    for r in &ok {
+        for (k, v) in &r.distinct_sampled {
+            distinct.entry(k.clone()).or_default().push(*v as f64);
+        }
+    }
+    AlgorithmStats {
+        algorithm: algorithm.to_string(),
+        runs: records.len(),
+        failed: records.len() - ok.len(),
+        params,
+        online_nrmse_mean: avg(&|r| r.online_states.as_ref().map(|s| s.mean_nrmse())),
+        validation_nrmse_mean: avg(&|r| {
+            r.validation
+                .as_ref()
+                .filter(|v| v.error.is_none())
+                .map(|v| v.states.mean_nrmse())
+        }),
+        distinct_sampled_mean: distinct
+            .into_iter()
+            .map(|(k, v)| (k, mean_sd(&v).0))
+            .collect(),
+        ess_mean: avg(&|r| Some(r.ess_mean)),
+        loglik_mean: avg(&|r| Some(r.loglik)),
+        wall_s_mean: avg(&|r| Some(r.timing.wall_s)),
+        particle_steps_per_s_mean: avg(&|r| Some(r.timing.particle_steps_per_s)),
+    }
+}
+
+/// Records of a study grouped by algorithm, in the study's algorithm order.
+fn by_algorithm<'a>(
+    study: &Study,
+    records: &'a [RunRecord],
+) -> Vec<(Algorithm, Vec<&'a RunRecord>)> {
+    study
+        .sweep
+        .algorithms
+        .iter()
+        .map(|a| {
+            (
+                *a,
+                records.iter().filter(|r| r.algorithm == a.name()).collect(),
+            )
+        })
+        .collect()
+}
+
+/// Runs the reproduction. With a shard other than `0/1`, only runs this shard's records (no
+/// figures, no report): merge the shards' `records/` and run again without `--shard` to draw.
+pub fn reproduce(opts: &Options) -> Result<()> {
+    let start = Instant::now();
+    let mut studies = BTreeMap::new();
+    let mut records = BTreeMap::new();
+    for name in STUDIES {
+        let path = opts.experiments.join(format!("{name}.toml"));
+        let mut study = Study::load(&path)?;
+        if opts.quick {
+            study = study.quick();
+        }
+        let dir = opts.out.join("records").join(name);
+        let jobs = study.jobs();
+        let sweep = SweepOptions {
+            threads: opts.threads,
+            shard: opts.shard,
+            progress: opts.progress,
+            label: name.to_string(),
+        };
+        let recs = run_sweep(&jobs, Study::job_id, &dir, &sweep, |job| {
+            study
+                .run_job(job)
+                .with_context(|| format!("{name}: {}", Study::job_id(job)))
+        })?;
+        eprintln!("{name}: {} runs", recs.len());
+        records.insert(name, recs);
+        studies.insert(name, study);
+    }
+    if opts.shard != Shard::default() {
+        eprintln!(
+            "shard {}/{} done; merge the shards' records and run again to draw",
+            opts.shard.index, opts.shard.count
+        );
+        return Ok(());
+    }
+    let sweep_s = start.elapsed().as_secs_f64();
+
+    crate::cli::table1::run(crate::cli::table1::Args {
+        out: opts.out.join("table1"),
+    })?;
+    draw(opts, &studies, &records)?;
+    let summary: BTreeMap<&str, Vec<AlgorithmStats>> = STUDIES
+        .iter()
+        .map(|name| {
+            let groups = by_algorithm(&studies[name], &records[name]);
+            (
+                *name,
+                groups
+                    .iter()
+                    .map(|(a, r)| algorithm_stats(a.name(), r))
+                    .collect(),
+            )
+        })
+        .collect();
+    let total_s = start.elapsed().as_secs_f64();
+    let summary_path = opts.out.join("summary.json");
+    std::fs::write(
+        &summary_path,
+        serde_json::to_string_pretty(&serde_json::json!({
+            "quick": opts.quick,
+            "wall_s": { "sweeps": sweep_s, "total": total_s },
+            "studies": summary,
+        }))? + "\n",
+    )
+    .with_context(|| format!("writing {}", summary_path.display()))?;
+    let report = crate::report::write_report(opts, &studies, &records, &summary, sweep_s, total_s)?;
+    let path = opts.out.join("REPORT.md");
+    std::fs::write(&path, report).with_context(|| format!("writing {}", path.display()))?;
+    eprintln!("wrote {} ({total_s:.1} s)", path.display());
+    Ok(())
+}
+
+fn draw(
+    opts: &Options,
+    studies: &BTreeMap<&str, Study>,
+    records: &BTreeMap<&str, Vec<RunRecord>>,
+) -> Result<()> {
+    let fig = |name: &str| opts.out.join(format!("{name}.svg"));
+    let first = |study: &str, alg: Algorithm| -> Option<&RunRecord> {
+        records[study]
+            .iter()
+            .find(|r| r.algorithm == alg.name() && r.run == 0)
+    };
+    if let Some(r) = first("fig4", Algorithm::Bootstrap) {
+        figures::convergence(
+            &[("Bootstrap PF", r)],
+            &fig("fig4a_bootstrap_convergence"),
+            "Fig. 4(a) — bootstrap PF, 500 particles: parameter estimates",
+        )?;
+        figures::hysteresis(
+            r,
+            &fig("fig4b_bootstrap_loop"),
+            "Fig. 4(b) — bootstrap PF: validation hysteresis loop",
+        )?;
+    }
+    let pair = |study: &str, a: Algorithm, b: Algorithm, file: &str, title: &str| -> Result<()> {
+        if let (Some(ra), Some(rb)) = (first(study, a), first(study, b)) {
+            figures::convergence(&[(a.label(), ra), (b.label(), rb)], &fig(file), title)?;
+        }
+        Ok(())
+    };
+    pair(
+        "fig5",
+        Algorithm::MlnRbpf,
+        Algorithm::Storvik,
+        "fig5_mlnrbpf_vs_storvik",
+        "Fig. 5 — MLN-RBPF vs Storvik, 500 particles",
+    )?;
+    pair(
+        "fig6",
+        Algorithm::MlnRbpf,
+        Algorithm::MpfEkf2,
+        "fig6a_mlnrbpf_vs_mpfekf2",
+        "Fig. 6(a) — MLN-RBPF vs MPF-EKF2, 500 particles",
+    )?;
+    let groups6: Vec<(&str, Vec<&RunRecord>)> = by_algorithm(&studies["fig6"], &records["fig6"])
+        .into_iter()
+        .map(|(a, r)| (a.label(), r))
+        .collect();
+    figures::state_errors(
+        &groups6,
+        &fig("fig6b_state_nrmse"),
+        "Fig. 6(b) — online state estimates: NRMSE",
+    )?;
+    let groups7: Vec<(&str, Vec<&RunRecord>)> = by_algorithm(&studies["fig7"], &records["fig7"])
+        .into_iter()
+        .map(|(a, r)| (a.label(), r))
+        .collect();
+    figures::crosses(
+        &groups7,
+        &fig("fig7_theta_val_crosses"),
+        "Fig. 7 — θ_val / θ_true: mean ± s.d. over runs",
+    )?;
+    if let Some(r) = first("fig8", Algorithm::MpfEkf2) {
+        figures::convergence(
+            &[("MPF-EKF2", r)],
+            &fig("fig8a_mpfekf2_convergence"),
+            "Fig. 8(a) — MPF-EKF2, 500 particles: parameter estimates",
+        )?;
+        figures::hysteresis(
+            r,
+            &fig("fig8b_mpfekf2_loop"),
+            "Fig. 8(b) — MPF-EKF2: validation hysteresis loop",
+        )?;
+    }
+    Ok(())
+}
+
+/// Writes a Markdown table row.
+pub(crate) fn row(out: &mut String, cells: &[String]) {
+    let _ = writeln!(out, "| {} |", cells.join(" | "));
+}
+
+/// The figure files a full reproduction draws.
+pub fn figure_files(out: &Path) -> Vec<PathBuf> {
+    [
+        "fig4a_bootstrap_convergence",
+        "fig4b_bootstrap_loop",
+        "fig5_mlnrbpf_vs_storvik",
+        "fig6a_mlnrbpf_vs_mpfekf2",
+        "fig6b_state_nrmse",
+        "fig7_theta_val_crosses",
+        "fig8a_mpfekf2_convergence",
+        "fig8b_mpfekf2_loop",
+    ]
+    .iter()
+    .map(|n| out.join(format!("{n}.svg")))
+    .collect()
+}

@@ -1,0 +1,180 @@
+//! Experiment configs (one TOML per figure or study in `experiments/`) and their expansion into
+//! jobs: algorithm × particles × resampling × run. Every job regenerates its data set from
+//! `(master_seed, run)`, so all algorithms of one run see the identical data set.
+
+use std::path::Path;
+
+use anyhow::{bail, Context, Result};
+use core_filters::resampling::Scheme;
+use models::dataset::{generate, DatasetConfig};
+use serde::{Deserialize, Serialize};
+
+use crate::pipeline::{identify, Algorithm, FilterSettings, RunInput};
+use crate::record::RunRecord;
+
+/// The data of a study.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DataSection {
+    /// Preset name (`paper-3dof`, `paper-3dof-harmonic`, `shear-chain`).
+    pub preset: String,
+    pub storeys: Option<usize>,
+    /// Amplitude scale (default: the preset's).
+    pub scale: Option<f64>,
+    /// Duration (s) (default: the whole record).
+    pub duration: Option<f64>,
+}
+
+/// The sweep axes.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SweepSection {
+    pub algorithms: Vec<Algorithm>,
+    /// Runs 0..runs (each its own data set and filter streams).
+    pub runs: u64,
+    pub master_seed: u64,
+    #[serde(default = "default_particles")]
+    pub particles: Vec<usize>,
+    #[serde(default = "default_resampling")]
+    pub resampling: Vec<Scheme>,
+}
+
+fn default_particles() -> Vec<usize> {
+    vec![500]
+}
+fn default_resampling() -> Vec<Scheme> {
+    vec![Scheme::Systematic]
+}
+
+/// A reduced form for a fast look (`--quick`).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct QuickSection {
+    pub runs: u64,
+    pub particles: usize,
+    /// Duration of the data (s) in quick mode.
+    pub duration: Option<f64>,
+}
+
+/// One study (`experiments/<name>.toml`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Study {
+    pub name: String,
+    pub description: String,
+    pub data: DataSection,
+    pub sweep: SweepSection,
+    #[serde(default)]
+    pub filter: FilterSettings,
+    pub quick: Option<QuickSection>,
+}
+
+/// One run of a study.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Job {
+    pub algorithm: Algorithm,
+    pub particles: usize,
+    pub resampling: Scheme,
+    pub run: u64,
+}
+
+impl Study {
+    /// Reads and checks a study file; errors name the file.
+    pub fn load(path: &Path) -> Result<Self> {
+        let text = std::fs::read_to_string(path)
+            .with_context(|| format!("reading study {}", path.display()))?;
+        let s: Study =
+            toml::from_str(&text).with_context(|| format!("parsing study {}", path.display()))?;
+        s.check()
+            .with_context(|| format!("study {}", path.display()))?;
+        Ok(s)
+    }
+
+    fn check(&self) -> Result<()> {
+        if self.sweep.algorithms.is_empty() || self.sweep.runs == 0 {
+            bail!("the sweep needs at least one algorithm and one run");
+        }
+        if self.sweep.particles.iter().any(|&p| p == 0) {
+            bail!("particles must be at least 1");
+        }
+        Ok(())
+    }
+
+    /// The study in `--quick` form (fewer runs and particles, shorter data if configured).
+    pub fn quick(&self) -> Self {
+        let mut s = self.clone();
+        if let Some(q) = self.quick {
+            s.sweep.runs = s.sweep.runs.min(q.runs);
+            s.sweep.particles = vec![q.particles];
+            if q.duration.is_some() {
+                s.data.duration = q.duration;
+            }
+        }
+        s
+    }
+
+    /// The jobs, in a fixed order (algorithm-major within each run, so that a partial sweep
+    /// has complete runs first).
+    pub fn jobs(&self) -> Vec<Job> {
+        let mut out = Vec::new();
+        for run in 0..self.sweep.runs {
+            for &particles in &self.sweep.particles {
+                for &resampling in &self.sweep.resampling {
+                    for &algorithm in &self.sweep.algorithms {
+                        out.push(Job {
+                            algorithm,
+                            particles,
+                            resampling,
+                            run,
+                        });
+                    }
+                }
+            }
+        }
+        out
+    }
+
+    /// File stem of a job's record.
+    pub fn job_id(job: &Job) -> String {
+        format!(
+            "{}-np{}-{}-run{:03}",
+            job.algorithm.name(),
+            job.particles,
+            job.resampling.name(),
+            job.run
+        )
+    }
+
+    /// The data-set configuration of run `run`.
+    pub fn dataset_config(&self, run: u64) -> Result<DatasetConfig> {
+        let mut c = DatasetConfig::from_preset(&self.data.preset, self.sweep.master_seed)?;
+        c.storeys = self.data.storeys;
+        if let Some(s) = self.data.scale {
+            c.scale = s;
+        }
+        if self.data.duration.is_some() {
+            c.duration = self.data.duration;
+        }
+        c.run = run;
+        Ok(c)
+    }
+
+    /// Runs one job: generate the run's data set, identify, return the record. Errors are
+    /// configuration errors; numerical failures are inside the record.
+    pub fn run_job(&self, job: &Job) -> Result<RunRecord> {
+        let data = generate(&self.dataset_config(job.run)?)?;
+        let loaded = data.to_loaded();
+        let mut settings = self.filter.clone();
+        settings.particles = job.particles;
+        settings.resampling = job.resampling;
+        let input = RunInput {
+            data: &loaded,
+            chain: Some(&data.chain),
+            experiment: &self.name,
+            seed: self.sweep.master_seed,
+            run: job.run,
+            progress: false,
+        };
+        identify(&input, job.algorithm, &settings)
+    }
+}
