@@ -63,11 +63,24 @@ fn main() -> Result<()> {
             threads,
             shard,
         } => {
-            run(Command::new(cargo())
-                .current_dir(&root)
-                .args(["build", "--release", "--quiet", "-p", "experiments", "--bin", "sysid"]))?;
-            let out = if quick { "results/paper-quick" } else { "results/paper" };
-            let mut cmd = Command::new(root.join("target/release/sysid"));
+            run(Command::new(cargo()).current_dir(&root).args([
+                "build",
+                "--release",
+                "--quiet",
+                "-p",
+                "experiments",
+                "--bin",
+                "sysid",
+            ]))?;
+            let out = if quick {
+                "results/paper-quick"
+            } else {
+                "results/paper"
+            };
+            let target = std::env::var_os("CARGO_TARGET_DIR")
+                .map(PathBuf::from)
+                .unwrap_or_else(|| root.join("target"));
+            let mut cmd = Command::new(target.join("release/sysid"));
             cmd.current_dir(&root).args([
                 "reproduce",
                 "--experiments",
@@ -85,8 +98,10 @@ fn main() -> Result<()> {
             }
             run(&mut cmd)
         }
-        Task::Bench => run(Command::new(cargo())
-            .current_dir(&root)
-            .args(["bench", "-p", "core-filters"])),
+        Task::Bench => {
+            run(Command::new(cargo())
+                .current_dir(&root)
+                .args(["bench", "-p", "core-filters"]))
+        }
     }
 }
