@@ -1,0 +1,928 @@
+//! SVG figures of the paper reproduction (SPEC §8), drawn from run records only (STYLE lesson 10).
+//!
+//! - [`convergence`]: posterior mean of each parameter against time with a ±2 s.d. band, one
+//!   colour per run, the true value dashed (Figs. 4, 5, 6, 8);
+//! - [`hysteresis`]: restoring force k1·r1 against x1, true loop and validation loop
+//!   (Figs. 4 (b), 8);
+//! - [`crosses`]: θ_val / θ_true over many runs, a cross at the mean with arms of ± one s.d.
+//!   per algorithm (Fig. 7);
+//! - [`state_errors`]: mean online-state NRMSE per state and algorithm (Fig. 6 companion);
+//! - [`validate_svg`]: a cheap well-formedness check of a written figure.
+//!
+//! Every function writes one SVG file, creating its parent directories. Non-finite values in a
+//! record (a diverged run, a failure mid-trace) leave gaps in the curves instead of corrupting
+//! the axes; values outside a panel's clamped range are drawn on its edge.
+
+use std::path::Path;
+
+use anyhow::{bail, Context, Result};
+use plotters::coord::types::RangedCoordf64;
+use plotters::coord::Shift;
+use plotters::prelude::*;
+use plotters::style::text_anchor::{HPos, Pos, VPos};
+
+use crate::metrics::mean_sd;
+use crate::record::RunRecord;
+
+/// Font family of all text (the SVG backend writes `<text>` elements; the viewer lays them out).
+const FONT: &str = "sans-serif";
+/// Font sizes in plotters units; the SVG backend writes `size / 1.24` px, so these give ≥ 16 px
+/// tick labels, ≥ 17 px axis descriptions and ≥ 20 px titles.
+const TITLE_SIZE: f64 = 32.0;
+const CAPTION_SIZE: f64 = 26.0;
+const DESC_SIZE: f64 = 21.0;
+const LABEL_SIZE: f64 = 20.0;
+const WIDTH: u32 = 1200;
+
+/// Colour-blind-safe palette (Okabe–Ito), one colour per run or algorithm, cycled.
+const PALETTE: [RGBColor; 7] = [
+    RGBColor(0, 114, 178),
+    RGBColor(213, 94, 0),
+    RGBColor(0, 158, 115),
+    RGBColor(204, 121, 167),
+    RGBColor(230, 159, 0),
+    RGBColor(86, 180, 233),
+    RGBColor(120, 120, 120),
+];
+
+fn colour(i: usize) -> RGBColor {
+    PALETTE[i % PALETTE.len()]
+}
+
+/// Units of a parameter of the Bouc–Wen chain with unit masses (SPEC §2): stiffnesses k [1/s²],
+/// dampings c [1/s], β and γ [1/mⁿ] (β|r|ⁿ has units of 1/m), the exponent n dimensionless.
+pub fn param_unit(name: &str) -> &'static str {
+    let digits_after = |prefix: &str| {
+        name.strip_prefix(prefix)
+            .is_some_and(|rest| rest.chars().all(|c| c.is_ascii_digit()))
+    };
+    if name.starts_with("beta") || name.starts_with("gamma") {
+        "[1/m^n]"
+    } else if digits_after("k") {
+        "[1/s²]"
+    } else if digits_after("c") {
+        "[1/s]"
+    } else {
+        "[-]"
+    }
+}
+
+/// Grid of panels for `n` panels: as square as possible, columns first (9 → 3×3, 4 → 2×2,
+/// 2 → 1×2, 5 → 2×3).
+fn grid_dims(n: usize) -> (usize, usize) {
+    let n = n.max(1);
+    let mut cols = 1;
+    while cols * cols < n {
+        cols += 1;
+    }
+    let rows = n.div_ceil(cols);
+    (rows, cols)
+}
+
+fn create_parent(path: &Path) -> Result<()> {
+    if let Some(dir) = path.parent() {
+        if !dir.as_os_str().is_empty() {
+            std::fs::create_dir_all(dir)
+                .with_context(|| format!("creating directory {}", dir.display()))?;
+        }
+    }
+    Ok(())
+}
+
+/// Smallest and largest finite values, if any.
+fn finite_range(values: impl IntoIterator<Item = f64>) -> Option<(f64, f64)> {
+    values
+        .into_iter()
+        .filter(|v| v.is_finite())
+        .fold(None, |acc, v| match acc {
+            None => Some((v, v)),
+            Some((lo, hi)) => Some((lo.min(v), hi.max(v))),
+        })
+}
+
+/// A non-degenerate range with 5 % padding on both sides (plotters needs lo < hi).
+fn padded((lo, hi): (f64, f64)) -> (f64, f64) {
+    if hi > lo {
+        let pad = 0.05 * (hi - lo);
+        (lo - pad, hi + pad)
+    } else {
+        let half = if lo.abs() > 0.0 { 0.1 * lo.abs() } else { 1.0 };
+        (lo - half, lo + half)
+    }
+}
+
+/// Tick label with as many decimals as the tick spacing of a range of width `span` needs.
+fn tick(v: f64, span: f64) -> String {
+    // Plotters picks at most ~10 ticks at 1, 2 or 5 × 10^k, so span/10 bounds the spacing.
+    let step = span / 10.0;
+    let decimals = if step > 0.0 && step.is_finite() {
+        (-step.log10().floor()).clamp(0.0, 6.0) as usize
+    } else {
+        2
+    };
+    let s = format!("{v:.decimals$}");
+    // "-0.00" reads badly on an axis.
+    if s.starts_with('-') && s[1..].chars().all(|c| c == '0' || c == '.') {
+        s[1..].to_string()
+    } else {
+        s
+    }
+}
+
+/// Maximal runs of consecutive indices where `ok` holds (gaps at non-finite data).
+fn segments(n: usize, ok: impl Fn(usize) -> bool) -> Vec<std::ops::Range<usize>> {
+    let mut out = Vec::new();
+    let mut start = None;
+    for k in 0..n {
+        match (ok(k), start) {
+            (true, None) => start = Some(k),
+            (false, Some(s)) => {
+                out.push(s..k);
+                start = None;
+            }
+            _ => {}
+        }
+    }
+    if let Some(s) = start {
+        out.push(s..n);
+    }
+    out
+}
+
+/// Opens the SVG root, white background, with the figure title drawn; returns the area below it.
+fn titled_root<'b>(
+    root: &DrawingArea<SVGBackend<'b>, Shift>,
+    title: &str,
+) -> Result<DrawingArea<SVGBackend<'b>, Shift>> {
+    root.fill(&WHITE)?;
+    Ok(root.titled(title, (FONT, TITLE_SIZE))?)
+}
+
+/// One legend entry of a manually drawn legend strip.
+enum Swatch {
+    Line(RGBColor),
+    Dashed(RGBColor),
+    Band(RGBColor),
+}
+
+/// Draws legend entries side by side, centred vertically in `area`.
+fn legend_strip(
+    area: &DrawingArea<SVGBackend<'_>, Shift>,
+    entries: &[(Swatch, String)],
+) -> Result<()> {
+    if entries.is_empty() {
+        return Ok(());
+    }
+    let (w, h) = area.dim_in_pixel();
+    let y = h as i32 / 2;
+    let slot = (w as i32 - 40) / entries.len() as i32;
+    let text =
+        TextStyle::from((FONT, DESC_SIZE).into_font()).pos(Pos::new(HPos::Left, VPos::Center));
+    for (i, (swatch, label)) in entries.iter().enumerate() {
+        let x = 20 + i as i32 * slot;
+        match swatch {
+            Swatch::Line(c) => area.draw(&PathElement::new(
+                vec![(x, y), (x + 40, y)],
+                c.stroke_width(3),
+            ))?,
+            Swatch::Dashed(c) => {
+                for dx in [0, 16, 32] {
+                    area.draw(&PathElement::new(
+                        vec![(x + dx, y), (x + dx + 9, y)],
+                        c.stroke_width(2),
+                    ))?;
+                }
+            }
+            Swatch::Band(c) => area.draw(&Rectangle::new(
+                [(x, y - 8), (x + 40, y + 8)],
+                c.mix(0.25).filled(),
+            ))?,
+        }
+        area.draw(&Text::new(label.clone(), (x + 48, y), text.clone()))?;
+    }
+    Ok(())
+}
+
+/// Value of parameter `j` in trace row `k` (NaN when the row is short).
+fn at(rows: &[Vec<f64>], k: usize, j: usize) -> f64 {
+    rows.get(k)
+        .and_then(|r| r.get(j))
+        .copied()
+        .unwrap_or(f64::NAN)
+}
+
+/// Y range of one convergence panel: the posterior means ± 2 s.d. and the true value, clamped so
+/// that one diverging band does not flatten the panel: for a positive parameter never wider than
+/// [0, 4 × reference], the reference being the true value or, without one, the largest final
+/// posterior mean.
+fn convergence_y_range(runs: &[(&str, &RunRecord)], j: usize, truth: Option<f64>) -> (f64, f64) {
+    let mut values = Vec::new();
+    let mut all_positive = true;
+    let mut last_mean = f64::NEG_INFINITY;
+    for (_, r) in runs {
+        let tr = &r.trace;
+        let mut last = f64::NAN;
+        for k in 0..tr.t.len() {
+            let m = at(&tr.param_mean, k, j);
+            if !m.is_finite() {
+                continue;
+            }
+            all_positive &= m > 0.0;
+            last = m;
+            values.push(m);
+            let sd = at(&tr.param_sd, k, j);
+            if sd.is_finite() {
+                values.push(m - 2.0 * sd);
+                values.push(m + 2.0 * sd);
+            }
+        }
+        if last.is_finite() {
+            last_mean = last_mean.max(last);
+        }
+    }
+    if let Some(t) = truth {
+        values.push(t);
+    }
+    let Some((mut lo, mut hi)) = finite_range(values) else {
+        return (0.0, 1.0);
+    };
+    let positive = match truth {
+        Some(t) => t > 0.0,
+        None => all_positive && last_mean > 0.0,
+    };
+    if positive {
+        let reference = truth.unwrap_or(last_mean);
+        lo = lo.max(0.0);
+        hi = hi.min(4.0 * reference);
+        if hi <= lo {
+            (lo, hi) = (0.0, 4.0 * reference);
+        }
+    }
+    padded((lo, hi))
+}
+
+/// Convergence figure (SPEC §8, Figs. 4, 5, 6, 8): one panel per parameter (3×3 for the nine
+/// parameters of SPEC §2), posterior mean against time with a shaded ±2 s.d. band per run, in
+/// distinct colours, and the true value as a black dashed line when the records know it.
+///
+/// All runs must share the parameter names of the first. Failed runs are drawn up to where
+/// their trace stops.
+pub fn convergence(runs: &[(&str, &RunRecord)], path: &Path, title: &str) -> Result<()> {
+    let Some((_, first)) = runs.first() else {
+        bail!("convergence figure {}: no runs to draw", path.display());
+    };
+    let names = &first.param_names;
+    if names.is_empty() {
+        bail!(
+            "convergence figure {}: the record has no parameters",
+            path.display()
+        );
+    }
+    if let Some((label, _)) = runs.iter().find(|(_, r)| &r.param_names != names) {
+        bail!(
+            "convergence figure {}: run '{label}' has parameters different from the first run",
+            path.display()
+        );
+    }
+    // A true value is drawn when some record knows it (they come from the same data).
+    let truth = |j: usize| {
+        runs.iter()
+            .find_map(|(_, r)| r.theta_true.as_ref().and_then(|t| t.get(j).copied()))
+            .filter(|t| t.is_finite())
+    };
+    let (t0, t1) = padded(
+        finite_range(runs.iter().flat_map(|(_, r)| r.trace.t.iter().copied()))
+            .unwrap_or((0.0, 1.0)),
+    );
+    let t0 = if t0 < 0.0 && t1 > 0.0 { 0.0 } else { t0 };
+
+    let (rows, cols) = grid_dims(names.len());
+    let height = 110 + 265 * rows as u32;
+    create_parent(path)?;
+    let root = SVGBackend::new(path, (WIDTH, height)).into_drawing_area();
+    let body = titled_root(&root, title)?;
+    let (h_body, _) = (body.dim_in_pixel().1, ());
+    let (grid, legend) = body.split_vertically(h_body as i32 - 50);
+    let panels = grid.split_evenly((rows, cols));
+
+    for (j, (name, area)) in names.iter().zip(&panels).enumerate() {
+        let truth_j = truth(j);
+        let (lo, hi) = convergence_y_range(runs, j, truth_j);
+        let mut chart = ChartBuilder::on(area)
+            .caption(format!("{name} {}", param_unit(name)), (FONT, CAPTION_SIZE))
+            .margin(8)
+            .x_label_area_size(48)
+            .y_label_area_size(70)
+            .build_cartesian_2d(t0..t1, lo..hi)?;
+        let (tspan, yspan) = (t1 - t0, hi - lo);
+        chart
+            .configure_mesh()
+            .x_desc("t [s]")
+            .x_labels(6)
+            .y_labels(5)
+            .x_label_formatter(&|v| tick(*v, tspan))
+            .y_label_formatter(&|v| tick(*v, yspan))
+            .label_style((FONT, LABEL_SIZE))
+            .axis_desc_style((FONT, DESC_SIZE))
+            .light_line_style(WHITE)
+            .draw()?;
+        let clamp = |v: f64| v.clamp(lo, hi);
+        // Bands first so that no mean line is hidden under another run's band.
+        for (i, (_, r)) in runs.iter().enumerate() {
+            let tr = &r.trace;
+            let ok = |k: usize| {
+                tr.t[k].is_finite()
+                    && at(&tr.param_mean, k, j).is_finite()
+                    && at(&tr.param_sd, k, j).is_finite()
+            };
+            for seg in segments(tr.t.len(), ok) {
+                let upper = seg.clone().map(|k| {
+                    (
+                        tr.t[k],
+                        clamp(at(&tr.param_mean, k, j) + 2.0 * at(&tr.param_sd, k, j)),
+                    )
+                });
+                let lower = seg.clone().rev().map(|k| {
+                    (
+                        tr.t[k],
+                        clamp(at(&tr.param_mean, k, j) - 2.0 * at(&tr.param_sd, k, j)),
+                    )
+                });
+                let outline: Vec<(f64, f64)> = upper.chain(lower).collect();
+                chart.draw_series(std::iter::once(Polygon::new(
+                    outline,
+                    colour(i).mix(0.18).filled(),
+                )))?;
+            }
+        }
+        for (i, (_, r)) in runs.iter().enumerate() {
+            let tr = &r.trace;
+            let ok = |k: usize| tr.t[k].is_finite() && at(&tr.param_mean, k, j).is_finite();
+            for seg in segments(tr.t.len(), ok) {
+                let points: Vec<(f64, f64)> = seg
+                    .map(|k| (tr.t[k], clamp(at(&tr.param_mean, k, j))))
+                    .collect();
+                chart.draw_series(LineSeries::new(points, colour(i).stroke_width(2)))?;
+            }
+        }
+        if let Some(t) = truth_j.filter(|t| *t >= lo && *t <= hi) {
+            chart.draw_series(DashedLineSeries::new(
+                vec![(t0, t), (t1, t)],
+                10,
+                6,
+                BLACK.stroke_width(2),
+            ))?;
+        }
+    }
+
+    let mut entries: Vec<(Swatch, String)> = runs
+        .iter()
+        .enumerate()
+        .map(|(i, (label, _))| (Swatch::Line(colour(i)), label.to_string()))
+        .collect();
+    entries.push((Swatch::Band(colour(6)), "mean ± 2 s.d.".to_string()));
+    if (0..names.len()).any(|j| truth(j).is_some()) {
+        entries.push((Swatch::Dashed(BLACK), "true value".to_string()));
+    }
+    legend_strip(&legend, &entries)?;
+    root.present()
+        .with_context(|| format!("writing {}", path.display()))?;
+    Ok(())
+}
+
+/// Hysteresis figure (SPEC §7 validation, Figs. 4 (b) and 8): restoring force k1·r1 against the
+/// drift x1, the true loop in black and the loop of the validation run (integrated with θ_val)
+/// in colour. A record without loops gives a figure that says why.
+pub fn hysteresis(run: &RunRecord, path: &Path, title: &str) -> Result<()> {
+    let validation = run.validation.as_ref();
+    let loop_val = validation.and_then(|v| v.loop_validation.as_ref());
+    let loop_true = validation.and_then(|v| v.loop_true.as_ref());
+    let loops: Vec<(&crate::record::Loop, RGBColor, String)> = [
+        loop_true.map(|l| (l, BLACK, "true loop".to_string())),
+        loop_val.map(|l| {
+            (
+                l,
+                colour(0),
+                format!("validation loop ({}, θ_val)", run.algorithm),
+            )
+        }),
+    ]
+    .into_iter()
+    .flatten()
+    .collect();
+
+    let pairs = |l: &crate::record::Loop| -> Vec<(f64, f64)> {
+        l.x.iter().copied().zip(l.force.iter().copied()).collect()
+    };
+    let (x0, x1) = padded(
+        finite_range(
+            loops
+                .iter()
+                .flat_map(|(l, ..)| pairs(l))
+                .filter(|p| p.1.is_finite())
+                .map(|p| p.0),
+        )
+        .unwrap_or((-1.0, 1.0)),
+    );
+    let (f0, f1) = padded(
+        finite_range(
+            loops
+                .iter()
+                .flat_map(|(l, ..)| pairs(l))
+                .filter(|p| p.0.is_finite())
+                .map(|p| p.1),
+        )
+        .unwrap_or((-1.0, 1.0)),
+    );
+
+    create_parent(path)?;
+    let root = SVGBackend::new(path, (WIDTH, 900)).into_drawing_area();
+    let body = titled_root(&root, title)?;
+    let mut chart = ChartBuilder::on(&body)
+        .margin(20)
+        .x_label_area_size(60)
+        .y_label_area_size(100)
+        .build_cartesian_2d(x0..x1, f0..f1)?;
+    let (xspan, fspan) = (x1 - x0, f1 - f0);
+    chart
+        .configure_mesh()
+        .x_desc("x1 [m]")
+        .y_desc("k1·r1 [m/s²]")
+        .x_label_formatter(&|v| tick(*v, xspan))
+        .y_label_formatter(&|v| tick(*v, fspan))
+        .label_style((FONT, LABEL_SIZE))
+        .axis_desc_style((FONT, DESC_SIZE))
+        .light_line_style(WHITE)
+        .draw()?;
+
+    for (l, c, label) in &loops {
+        let xy = pairs(l);
+        let ok = |k: usize| xy[k].0.is_finite() && xy[k].1.is_finite();
+        let mut first = true;
+        for seg in segments(xy.len(), ok) {
+            let series = chart.draw_series(LineSeries::new(xy[seg].to_vec(), c.stroke_width(2)))?;
+            // One legend entry per loop, not per segment.
+            if first {
+                let c = *c;
+                series.label(label.as_str()).legend(move |(x, y)| {
+                    PathElement::new(vec![(x, y), (x + 30, y)], c.stroke_width(3))
+                });
+                first = false;
+            }
+        }
+    }
+    if loops.is_empty() {
+        let why = match validation {
+            None => "no validation run in this record".to_string(),
+            Some(v) => match &v.error {
+                Some(e) => format!("validation failed: {e}"),
+                None => "the record keeps no hysteresis loops".to_string(),
+            },
+        };
+        let (w, h) = body.dim_in_pixel();
+        let style = TextStyle::from((FONT, CAPTION_SIZE).into_font())
+            .pos(Pos::new(HPos::Center, VPos::Center));
+        body.draw(&Text::new(why, (w as i32 / 2, h as i32 / 2), style))?;
+    } else {
+        chart
+            .configure_series_labels()
+            .position(SeriesLabelPosition::UpperLeft)
+            .label_font((FONT, DESC_SIZE))
+            .background_style(WHITE.mix(0.85))
+            .border_style(BLACK)
+            .draw()?;
+    }
+    root.present()
+        .with_context(|| format!("writing {}", path.display()))?;
+    Ok(())
+}
+
+/// Marker of algorithm `i` at chart coordinates (circle, triangle, square, diamond).
+fn draw_marker<DB: DrawingBackend>(
+    chart: &mut ChartContext<
+        '_,
+        DB,
+        Cartesian2d<plotters::coord::types::RangedCoordf64, plotters::coord::types::RangedCoordf64>,
+    >,
+    i: usize,
+    at: (f64, f64),
+    c: RGBColor,
+) -> Result<()>
+where
+    DB::ErrorType: 'static,
+{
+    let style = c.filled();
+    match i % 4 {
+        0 => chart.draw_series(std::iter::once(Circle::new(at, 7, style)))?,
+        1 => chart.draw_series(std::iter::once(TriangleMarker::new(at, 9, style)))?,
+        2 => chart.draw_series(std::iter::once(
+            EmptyElement::at(at) + Rectangle::new([(-6, -6), (6, 6)], style),
+        ))?,
+        _ => chart.draw_series(std::iter::once(
+            EmptyElement::at(at) + Polygon::new(vec![(0, -8), (8, 0), (0, 8), (-8, 0)], style),
+        ))?,
+    };
+    Ok(())
+}
+
+/// Legend swatch (marker) of algorithm `i` at pixel coordinates.
+fn legend_marker<DB: DrawingBackend>(
+    i: usize,
+    (x, y): (i32, i32),
+    c: RGBColor,
+) -> DynElement<'static, DB, (i32, i32)> {
+    let style = c.filled();
+    let x = x + 15;
+    match i % 4 {
+        0 => Circle::new((x, y), 7, style).into_dyn(),
+        1 => TriangleMarker::new((x, y), 9, style).into_dyn(),
+        2 => Rectangle::new([(x - 6, y - 6), (x + 6, y + 6)], style).into_dyn(),
+        _ => Polygon::new(vec![(x, y - 8), (x + 8, y), (x, y + 8), (x - 8, y)], style).into_dyn(),
+    }
+}
+
+/// Category labels under the x axis: name `j` centred at x = j (plotters' automatic ticks of
+/// a float axis need not fall on the integers).
+fn category_labels(
+    root: &DrawingArea<SVGBackend<'_>, Shift>,
+    chart: &ChartContext<'_, SVGBackend<'_>, Cartesian2d<RangedCoordf64, RangedCoordf64>>,
+    names: &[String],
+    y_axis: f64,
+) -> Result<()> {
+    let style =
+        TextStyle::from((FONT, LABEL_SIZE).into_font()).pos(Pos::new(HPos::Center, VPos::Top));
+    for (j, name) in names.iter().enumerate() {
+        let (x, y) = chart.backend_coord(&(j as f64, y_axis));
+        root.draw(&PathElement::new(vec![(x, y), (x, y + 5)], BLACK))?;
+        root.draw(&Text::new(name.clone(), (x, y + 8), style.clone()))?;
+    }
+    Ok(())
+}
+
+/// Cross figure (SPEC §8, Fig. 7): for each parameter and algorithm, a cross at the mean over
+/// runs of θ_val / θ_true with a vertical arm of ± one s.d. over runs and a short horizontal arm,
+/// algorithms side by side; the truth is the line at 1. Failed runs and runs without a true θ
+/// are skipped and counted in the legend.
+pub fn crosses(groups: &[(&str, Vec<&RunRecord>)], path: &Path, title: &str) -> Result<()> {
+    let Some(names) = groups
+        .iter()
+        .flat_map(|(_, runs)| runs.iter())
+        .map(|r| &r.param_names)
+        .next()
+    else {
+        bail!("cross figure {}: no runs to draw", path.display());
+    };
+    if names.is_empty() {
+        bail!(
+            "cross figure {}: the records have no parameters",
+            path.display()
+        );
+    }
+    struct Summary {
+        mean: Vec<f64>,
+        sd: Vec<f64>,
+        used: usize,
+        failed: usize,
+        no_truth: usize,
+    }
+    let mut summaries = Vec::with_capacity(groups.len());
+    for (label, runs) in groups {
+        if let Some(r) = runs.iter().find(|r| &r.param_names != names) {
+            bail!(
+                "cross figure {}: a run of '{label}' (seed {}, run {}) has different parameters",
+                path.display(),
+                r.seed,
+                r.run
+            );
+        }
+        let failed = runs.iter().filter(|r| r.is_failure()).count();
+        let ratios: Vec<Vec<f64>> = runs
+            .iter()
+            .filter(|r| !r.is_failure())
+            .filter_map(|r| r.normalised_theta_val())
+            .collect();
+        let no_truth = runs.len() - failed - ratios.len();
+        let (mut mean, mut sd) = (Vec::new(), Vec::new());
+        for j in 0..names.len() {
+            let column: Vec<f64> = ratios
+                .iter()
+                .map(|r| r.get(j).copied().unwrap_or(f64::NAN))
+                .collect();
+            let (m, s, _) = mean_sd(&column);
+            mean.push(m);
+            sd.push(s);
+        }
+        summaries.push(Summary {
+            mean,
+            sd,
+            used: ratios.len(),
+            failed,
+            no_truth,
+        });
+    }
+
+    // Ratios to the truth: the axis always shows 1 and is clamped to [−1, 4] so that one
+    // wild estimate (β is poorly identified, SPEC §8) does not flatten the others.
+    let values = summaries.iter().flat_map(|s| {
+        s.mean
+            .iter()
+            .zip(&s.sd)
+            .flat_map(|(m, sd)| {
+                let sd = if sd.is_finite() { *sd } else { 0.0 };
+                [m - sd, m + sd]
+            })
+            .collect::<Vec<_>>()
+    });
+    let (lo, hi) = finite_range(values.chain([1.0])).unwrap_or((0.0, 2.0));
+    let (lo, hi) = padded((lo.clamp(-1.0, 0.9), hi.clamp(1.1, 4.0)));
+
+    let n = names.len();
+    let g = groups.len().max(1);
+    let width = 0.7 / g as f64;
+    let offset = |i: usize| (i as f64 - (g as f64 - 1.0) / 2.0) * width;
+
+    create_parent(path)?;
+    let root = SVGBackend::new(path, (WIDTH, 800)).into_drawing_area();
+    let body = titled_root(&root, title)?;
+    let mut chart = ChartBuilder::on(&body)
+        .margin(20)
+        .x_label_area_size(60)
+        .y_label_area_size(90)
+        .build_cartesian_2d(-0.5..(n as f64 - 0.5), lo..hi)?;
+    let yspan = hi - lo;
+    chart
+        .configure_mesh()
+        .disable_x_mesh()
+        .x_labels(0)
+        .y_label_formatter(&|v| tick(*v, yspan))
+        .x_desc("parameter")
+        .y_desc("θ_val / θ_true [-]")
+        .label_style((FONT, LABEL_SIZE))
+        .axis_desc_style((FONT, DESC_SIZE))
+        .light_line_style(WHITE)
+        .draw()?;
+    category_labels(&root, &chart, names, lo)?;
+    chart.draw_series(DashedLineSeries::new(
+        vec![(-0.5, 1.0), (n as f64 - 0.5, 1.0)],
+        10,
+        6,
+        BLACK.stroke_width(2),
+    ))?;
+
+    let clamp = |v: f64| v.clamp(lo, hi);
+    for (i, ((label, _), s)) in groups.iter().zip(&summaries).enumerate() {
+        let c = colour(i);
+        let arm = 0.35 * width;
+        for j in 0..n {
+            let (m, sd) = (s.mean[j], s.sd[j]);
+            if !m.is_finite() {
+                continue;
+            }
+            let x = j as f64 + offset(i);
+            let sd = if sd.is_finite() { sd } else { 0.0 };
+            chart.draw_series(std::iter::once(PathElement::new(
+                vec![(x, clamp(m - sd)), (x, clamp(m + sd))],
+                c.stroke_width(3),
+            )))?;
+            chart.draw_series(std::iter::once(PathElement::new(
+                vec![(x - arm, clamp(m)), (x + arm, clamp(m))],
+                c.stroke_width(3),
+            )))?;
+            draw_marker(&mut chart, i, (x, clamp(m)), c)?;
+        }
+        let mut text = format!("{label} (n = {}", s.used);
+        if s.failed > 0 {
+            text.push_str(&format!(", {} failed skipped", s.failed));
+        }
+        if s.no_truth > 0 {
+            text.push_str(&format!(", {} without truth skipped", s.no_truth));
+        }
+        text.push(')');
+        // An invisible anchor series carries the legend entry.
+        chart
+            .draw_series(std::iter::empty::<Circle<(f64, f64), i32>>())?
+            .label(text)
+            .legend(move |p| legend_marker(i, p, c));
+    }
+    chart
+        .configure_series_labels()
+        .position(SeriesLabelPosition::UpperRight)
+        .label_font((FONT, DESC_SIZE))
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK)
+        .draw()?;
+    root.present()
+        .with_context(|| format!("writing {}", path.display()))?;
+    Ok(())
+}
+
+/// State-error figure (companion of Fig. 6, SPEC §7): grouped bars of the online-state NRMSE per
+/// state (x axis) and algorithm (colour), the mean over the given runs with a ± one s.d.
+/// whisker. Failed runs and runs without online errors are skipped and counted in the legend.
+pub fn state_errors(groups: &[(&str, Vec<&RunRecord>)], path: &Path, title: &str) -> Result<()> {
+    // State names in order of first appearance over all records.
+    let mut names: Vec<String> = Vec::new();
+    for (_, runs) in groups {
+        for r in runs.iter().filter(|r| !r.is_failure()) {
+            for name in r.online_states.iter().flat_map(|s| &s.names) {
+                if !names.contains(name) {
+                    names.push(name.clone());
+                }
+            }
+        }
+    }
+    if names.is_empty() {
+        bail!(
+            "state-error figure {}: no run has online state errors",
+            path.display()
+        );
+    }
+    struct Summary {
+        mean: Vec<f64>,
+        sd: Vec<f64>,
+        used: usize,
+        skipped: usize,
+    }
+    let summaries: Vec<Summary> = groups
+        .iter()
+        .map(|(_, runs)| {
+            let usable: Vec<_> = runs
+                .iter()
+                .filter(|r| !r.is_failure())
+                .filter_map(|r| r.online_states.as_ref())
+                .collect();
+            let (mut mean, mut sd) = (Vec::new(), Vec::new());
+            for name in &names {
+                let column: Vec<f64> = usable
+                    .iter()
+                    .map(|s| {
+                        s.names
+                            .iter()
+                            .position(|n| n == name)
+                            .and_then(|p| s.errors.get(p))
+                            .map_or(f64::NAN, |e| e.nrmse)
+                    })
+                    .collect();
+                let (m, s, _) = mean_sd(&column);
+                mean.push(m);
+                sd.push(s);
+            }
+            Summary {
+                mean,
+                sd,
+                used: usable.len(),
+                skipped: runs.len() - usable.len(),
+            }
+        })
+        .collect();
+
+    let top = finite_range(summaries.iter().flat_map(|s| {
+        s.mean
+            .iter()
+            .zip(&s.sd)
+            .map(|(m, sd)| m + if sd.is_finite() { *sd } else { 0.0 })
+            .collect::<Vec<_>>()
+    }))
+    .map_or(1.0, |(_, hi)| hi);
+    let top = if top > 0.0 { 1.1 * top } else { 1.0 };
+
+    let n = names.len();
+    let g = groups.len().max(1);
+    let width = 0.8 / g as f64;
+    let offset = |i: usize| (i as f64 - (g as f64 - 1.0) / 2.0) * width;
+
+    create_parent(path)?;
+    let root = SVGBackend::new(path, (WIDTH, 800)).into_drawing_area();
+    let body = titled_root(&root, title)?;
+    let mut chart = ChartBuilder::on(&body)
+        .margin(20)
+        .x_label_area_size(60)
+        .y_label_area_size(90)
+        .build_cartesian_2d(-0.5..(n as f64 - 0.5), 0.0..top)?;
+    chart
+        .configure_mesh()
+        .disable_x_mesh()
+        .x_labels(0)
+        .y_label_formatter(&|v| tick(*v, top))
+        .x_desc("state")
+        .y_desc("NRMSE [-]")
+        .label_style((FONT, LABEL_SIZE))
+        .axis_desc_style((FONT, DESC_SIZE))
+        .light_line_style(WHITE)
+        .draw()?;
+    category_labels(&root, &chart, &names, 0.0)?;
+
+    for (i, ((label, _), s)) in groups.iter().zip(&summaries).enumerate() {
+        let c = colour(i);
+        for j in 0..n {
+            let m = s.mean[j];
+            if !m.is_finite() {
+                continue;
+            }
+            let x = j as f64 + offset(i);
+            let m = m.clamp(0.0, top);
+            chart.draw_series(std::iter::once(Rectangle::new(
+                [(x - 0.45 * width, 0.0), (x + 0.45 * width, m)],
+                c.mix(0.85).filled(),
+            )))?;
+            if s.sd[j].is_finite() && s.sd[j] > 0.0 {
+                let (a, b) = ((m - s.sd[j]).max(0.0), (m + s.sd[j]).min(top));
+                chart.draw_series(std::iter::once(PathElement::new(
+                    vec![(x, a), (x, b)],
+                    BLACK.stroke_width(2),
+                )))?;
+            }
+        }
+        let mut text = format!("{label} (n = {}", s.used);
+        if s.skipped > 0 {
+            text.push_str(&format!(", {} skipped", s.skipped));
+        }
+        text.push(')');
+        chart
+            .draw_series(std::iter::empty::<Circle<(f64, f64), i32>>())?
+            .label(text)
+            .legend(move |(x, y)| Rectangle::new([(x, y - 8), (x + 30, y + 8)], c.filled()));
+    }
+    chart
+        .configure_series_labels()
+        .position(SeriesLabelPosition::UpperRight)
+        .label_font((FONT, DESC_SIZE))
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK)
+        .draw()?;
+    root.present()
+        .with_context(|| format!("writing {}", path.display()))?;
+    Ok(())
+}
+
+/// Checks that `path` is a non-empty SVG document: it opens with `<svg` or `<?xml` and closes
+/// with `</svg>`.
+pub fn validate_svg(path: &Path) -> Result<()> {
+    let text = std::fs::read_to_string(path)
+        .with_context(|| format!("reading figure {}", path.display()))?;
+    let body = text.trim();
+    if body.is_empty() {
+        bail!("figure {} is empty", path.display());
+    }
+    if !(body.starts_with("<svg") || body.starts_with("<?xml")) {
+        bail!(
+            "figure {} does not start with an SVG or XML header",
+            path.display()
+        );
+    }
+    if !body.contains("<svg") || !body.ends_with("</svg>") {
+        bail!("figure {} is not closed by </svg>", path.display());
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn units_of_the_paper_parameters() {
+        assert_eq!(param_unit("k1"), "[1/s²]");
+        assert_eq!(param_unit("c3"), "[1/s]");
+        assert_eq!(param_unit("beta"), "[1/m^n]");
+        assert_eq!(param_unit("gamma2"), "[1/m^n]");
+        assert_eq!(param_unit("n"), "[-]");
+        assert_eq!(param_unit("cx"), "[-]");
+    }
+
+    #[test]
+    fn grids_are_near_square() {
+        assert_eq!(grid_dims(9), (3, 3));
+        assert_eq!(grid_dims(1), (1, 1));
+        assert_eq!(grid_dims(2), (1, 2));
+        assert_eq!(grid_dims(5), (2, 3));
+        assert_eq!(grid_dims(12), (3, 4));
+    }
+
+    #[test]
+    fn segments_split_at_gaps() {
+        let v = [1.0, f64::NAN, 2.0, 3.0, f64::INFINITY, 4.0];
+        assert_eq!(
+            segments(v.len(), |k| v[k].is_finite()),
+            vec![0..1, 2..4, 5..6]
+        );
+        assert!(segments(0, |_| true).is_empty());
+    }
+
+    #[test]
+    fn ranges_are_never_degenerate() {
+        assert_eq!(finite_range([f64::NAN, f64::INFINITY]), None);
+        let (lo, hi) = padded((2.0, 2.0));
+        assert!(lo < 2.0 && hi > 2.0);
+        let (lo, hi) = padded((0.0, 0.0));
+        assert!(lo < 0.0 && hi > 0.0);
+        assert_eq!(padded((0.0, 10.0)), (-0.5, 10.5));
+    }
+
+    #[test]
+    fn ticks_follow_the_span() {
+        assert_eq!(tick(8.0, 10.0), "8");
+        assert_eq!(tick(0.25, 0.5), "0.25");
+        assert_eq!(tick(-0.0001, 1.0), "0.0");
+    }
+}
