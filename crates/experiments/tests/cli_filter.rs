@@ -1,0 +1,164 @@
+//! `sysid simulate` + `sysid filter` end to end: records, determinism, failures.
+
+use std::path::PathBuf;
+use std::process::Command;
+
+fn sysid() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_sysid"))
+}
+
+fn temp_dir(tag: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("sysid-cli-{tag}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+fn simulate(dir: &std::path::Path) {
+    let st = sysid()
+        .args([
+            "simulate",
+            "--preset",
+            "paper-3dof",
+            "--seed",
+            "1",
+            "--duration",
+            "3",
+            "--out",
+        ])
+        .arg(dir)
+        .status()
+        .unwrap();
+    assert!(st.success());
+}
+
+fn record_without_timing(path: &std::path::Path) -> serde_json::Value {
+    let mut v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap();
+    v.as_object_mut().unwrap().remove("timing");
+    v
+}
+
+#[test]
+fn filter_writes_a_complete_deterministic_record() {
+    let dir = temp_dir("ok");
+    let data = dir.join("d");
+    simulate(&data);
+    for alg in ["bootstrap", "mln-rbpf", "storvik", "mpf-ekf2"] {
+        let mut outs = vec![];
+        for threads in ["1", "2"] {
+            let out = dir.join(format!("{alg}-{threads}.json"));
+            let st = sysid()
+                .env("RAYON_NUM_THREADS", threads)
+                .args([
+                    "filter",
+                    "--algorithm",
+                    alg,
+                    "--particles",
+                    "50",
+                    "--seed",
+                    "3",
+                    "--data",
+                ])
+                .arg(&data)
+                .arg("--out")
+                .arg(&out)
+                .status()
+                .unwrap();
+            assert!(st.success(), "{alg} failed");
+            outs.push(record_without_timing(&out));
+        }
+        assert_eq!(outs[0], outs[1], "{alg}: records differ between runs");
+        let r = &outs[0];
+        for key in [
+            "algorithm",
+            "seed",
+            "particles",
+            "param_names",
+            "theta_val",
+            "theta_sd_final",
+            "theta_true",
+            "loglik",
+            "failures",
+            "config",
+            "trace",
+        ] {
+            assert!(r.get(key).is_some(), "{alg}: record lacks {key}");
+        }
+        assert_eq!(r["param_names"].as_array().unwrap().len(), 9);
+        assert!(r["failure"].is_null());
+    }
+}
+
+#[test]
+fn a_hopeless_measurement_is_a_recorded_failure_and_a_nonzero_exit() {
+    let dir = temp_dir("fail");
+    let data = dir.join("d");
+    simulate(&data);
+    // Replace one measured acceleration by 1e300: every particle's likelihood underflows to 0.
+    let path = data.join("measured.csv");
+    let text = std::fs::read_to_string(&path).unwrap();
+    let mut lines: Vec<String> = text.lines().map(String::from).collect();
+    let mut cells: Vec<String> = lines[50].split(',').map(String::from).collect();
+    cells[2] = "1e300".into();
+    lines[50] = cells.join(",");
+    std::fs::write(&path, lines.join("\n") + "\n").unwrap();
+    let out = dir.join("r.json");
+    let o = sysid()
+        .args([
+            "filter",
+            "--algorithm",
+            "mpf-ekf2",
+            "--particles",
+            "30",
+            "--data",
+        ])
+        .arg(&data)
+        .arg("--out")
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(!o.status.success(), "the run should fail");
+    let msg = String::from_utf8_lossy(&o.stderr);
+    assert!(msg.contains("failed at step"), "{msg}");
+    let r = record_without_timing(&out);
+    assert!(r["failure"].is_string(), "{r}");
+    assert!(r["failures"].as_object().unwrap().values().any(|v| v == 1));
+}
+
+#[test]
+fn bad_input_is_a_clear_error_not_a_panic() {
+    let dir = temp_dir("bad");
+    let o = sysid()
+        .args(["filter", "--algorithm", "mpf-ekf2", "--data"])
+        .arg(dir.join("missing"))
+        .arg("--out")
+        .arg(dir.join("r.json"))
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(1));
+    let msg = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        msg.contains("missing") && !msg.contains("panicked"),
+        "{msg}"
+    );
+    let data = dir.join("d");
+    simulate(&data);
+    let o = sysid()
+        .args([
+            "filter",
+            "--algorithm",
+            "mln-rbpf",
+            "--fix",
+            "k9=1",
+            "--data",
+        ])
+        .arg(&data)
+        .arg("--out")
+        .arg(dir.join("r.json"))
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(1));
+    let msg = String::from_utf8_lossy(&o.stderr);
+    assert!(msg.contains("k9") && !msg.contains("panicked"), "{msg}");
+}
