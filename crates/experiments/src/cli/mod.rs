@@ -2,6 +2,7 @@
 
 pub mod filter;
 pub mod merge;
+pub mod regression;
 pub mod reproduce;
 pub mod simulate;
 pub mod table1;
