@@ -163,9 +163,49 @@ enum Swatch {
     Line(RGBColor),
     Dashed(RGBColor),
     Band(RGBColor),
+    Bar(RGBColor),
+    /// The marker of algorithm `i` (see [`marker`]).
+    Marker(usize, RGBColor),
 }
 
-/// Draws legend entries side by side, centred vertically in `area`.
+/// Height of one legend row (px).
+const LEGEND_ROW: u32 = 34;
+
+/// Columns and height (px) of the legend strip of `entries` on a figure `WIDTH` px wide: as
+/// many columns as the longest label allows, so that labels never overlap.
+fn legend_layout(entries: &[(Swatch, String)]) -> (usize, u32) {
+    if entries.is_empty() {
+        return (1, 0);
+    }
+    // Swatch, gap and the label at ≈ 0.6 em per character (the SVG viewer lays text out).
+    let em = DESC_SIZE / 1.24;
+    let longest = entries
+        .iter()
+        .map(|(_, l)| l.chars().count())
+        .max()
+        .unwrap_or(0);
+    let slot = 70.0 + 0.6 * em * longest as f64;
+    let cols = (((WIDTH - 40) as f64 / slot).floor() as usize).clamp(1, entries.len());
+    let rows = entries.len().div_ceil(cols) as u32;
+    (cols, rows * LEGEND_ROW + 16)
+}
+
+/// A marker of algorithm `i` centred at pixel `(x, y)`: circle, triangle, square, diamond.
+fn marker<DB: DrawingBackend>(
+    i: usize,
+    (x, y): (i32, i32),
+    c: RGBColor,
+) -> DynElement<'static, DB, (i32, i32)> {
+    let style = c.filled();
+    match i % 4 {
+        0 => Circle::new((x, y), 7, style).into_dyn(),
+        1 => TriangleMarker::new((x, y), 9, style).into_dyn(),
+        2 => Rectangle::new([(x - 6, y - 6), (x + 6, y + 6)], style).into_dyn(),
+        _ => Polygon::new(vec![(x, y - 8), (x + 8, y), (x, y + 8), (x - 8, y)], style).into_dyn(),
+    }
+}
+
+/// Draws legend entries in the grid given by [`legend_layout`].
 fn legend_strip(
     area: &DrawingArea<SVGBackend<'_>, Shift>,
     entries: &[(Swatch, String)],
@@ -173,13 +213,14 @@ fn legend_strip(
     if entries.is_empty() {
         return Ok(());
     }
-    let (w, h) = area.dim_in_pixel();
-    let y = h as i32 / 2;
-    let slot = (w as i32 - 40) / entries.len() as i32;
+    let (cols, _) = legend_layout(entries);
+    let (w, _) = area.dim_in_pixel();
+    let slot = (w as i32 - 40) / cols as i32;
     let text =
         TextStyle::from((FONT, DESC_SIZE).into_font()).pos(Pos::new(HPos::Left, VPos::Center));
     for (i, (swatch, label)) in entries.iter().enumerate() {
-        let x = 20 + i as i32 * slot;
+        let x = 20 + (i % cols) as i32 * slot;
+        let y = 8 + (i / cols) as i32 * LEGEND_ROW as i32 + LEGEND_ROW as i32 / 2;
         match swatch {
             Swatch::Line(c) => area.draw(&PathElement::new(
                 vec![(x, y), (x + 40, y)],
@@ -197,6 +238,21 @@ fn legend_strip(
                 [(x, y - 8), (x + 40, y + 8)],
                 c.mix(0.25).filled(),
             ))?,
+            Swatch::Bar(c) => area.draw(&Rectangle::new(
+                [(x + 8, y - 9), (x + 32, y + 9)],
+                c.mix(0.85).filled(),
+            ))?,
+            Swatch::Marker(k, c) => {
+                area.draw(&PathElement::new(
+                    vec![(x + 20, y - 12), (x + 20, y + 12)],
+                    c.stroke_width(3),
+                ))?;
+                area.draw(&PathElement::new(
+                    vec![(x + 10, y), (x + 30, y)],
+                    c.stroke_width(3),
+                ))?;
+                area.draw(&marker(*k, (x + 20, y), *c))?;
+            }
         }
         area.draw(&Text::new(label.clone(), (x + 48, y), text.clone()))?;
     }
@@ -213,22 +269,24 @@ fn at(rows: &[Vec<f64>], k: usize, j: usize) -> f64 {
 
 /// Y range of one convergence panel: the posterior means ± 2 s.d. and the true value, clamped so
 /// that one diverging band does not flatten the panel: for a positive parameter never wider than
-/// [0, 4 × reference], the reference being the true value or, without one, the largest final
-/// posterior mean.
+/// [0, 4 × reference], the reference being the true value or, without one, the largest first
+/// posterior mean (the prior mean, which does not diverge with the filter).
 fn convergence_y_range(runs: &[(&str, &RunRecord)], j: usize, truth: Option<f64>) -> (f64, f64) {
     let mut values = Vec::new();
     let mut all_positive = true;
-    let mut last_mean = f64::NEG_INFINITY;
+    let mut first_mean = f64::NEG_INFINITY;
     for (_, r) in runs {
         let tr = &r.trace;
-        let mut last = f64::NAN;
+        let mut first = f64::NAN;
         for k in 0..tr.t.len() {
             let m = at(&tr.param_mean, k, j);
             if !m.is_finite() {
                 continue;
             }
             all_positive &= m > 0.0;
-            last = m;
+            if first.is_nan() {
+                first = m;
+            }
             values.push(m);
             let sd = at(&tr.param_sd, k, j);
             if sd.is_finite() {
@@ -236,8 +294,8 @@ fn convergence_y_range(runs: &[(&str, &RunRecord)], j: usize, truth: Option<f64>
                 values.push(m + 2.0 * sd);
             }
         }
-        if last.is_finite() {
-            last_mean = last_mean.max(last);
+        if first.is_finite() {
+            first_mean = first_mean.max(first);
         }
     }
     if let Some(t) = truth {
@@ -248,10 +306,10 @@ fn convergence_y_range(runs: &[(&str, &RunRecord)], j: usize, truth: Option<f64>
     };
     let positive = match truth {
         Some(t) => t > 0.0,
-        None => all_positive && last_mean > 0.0,
+        None => all_positive && first_mean > 0.0,
     };
     if positive {
-        let reference = truth.unwrap_or(last_mean);
+        let reference = truth.unwrap_or(first_mean);
         lo = lo.max(0.0);
         hi = hi.min(4.0 * reference);
         if hi <= lo {
@@ -296,13 +354,23 @@ pub fn convergence(runs: &[(&str, &RunRecord)], path: &Path, title: &str) -> Res
     );
     let t0 = if t0 < 0.0 && t1 > 0.0 { 0.0 } else { t0 };
 
+    let mut entries: Vec<(Swatch, String)> = runs
+        .iter()
+        .enumerate()
+        .map(|(i, (label, _))| (Swatch::Line(colour(i)), label.to_string()))
+        .collect();
+    entries.push((Swatch::Band(colour(6)), "mean ± 2 s.d.".to_string()));
+    if (0..names.len()).any(|j| truth(j).is_some()) {
+        entries.push((Swatch::Dashed(BLACK), "true value".to_string()));
+    }
+    let (_, legend_h) = legend_layout(&entries);
+
     let (rows, cols) = grid_dims(names.len());
-    let height = 110 + 265 * rows as u32;
+    let height = 60 + legend_h + 265 * rows as u32;
     create_parent(path)?;
     let root = SVGBackend::new(path, (WIDTH, height)).into_drawing_area();
     let body = titled_root(&root, title)?;
-    let (h_body, _) = (body.dim_in_pixel().1, ());
-    let (grid, legend) = body.split_vertically(h_body as i32 - 50);
+    let (grid, legend) = body.split_vertically(body.dim_in_pixel().1 - legend_h);
     let panels = grid.split_evenly((rows, cols));
 
     for (j, (name, area)) in names.iter().zip(&panels).enumerate() {
@@ -375,15 +443,6 @@ pub fn convergence(runs: &[(&str, &RunRecord)], path: &Path, title: &str) -> Res
         }
     }
 
-    let mut entries: Vec<(Swatch, String)> = runs
-        .iter()
-        .enumerate()
-        .map(|(i, (label, _))| (Swatch::Line(colour(i)), label.to_string()))
-        .collect();
-    entries.push((Swatch::Band(colour(6)), "mean ± 2 s.d.".to_string()));
-    if (0..names.len()).any(|j| truth(j).is_some()) {
-        entries.push((Swatch::Dashed(BLACK), "true value".to_string()));
-    }
     legend_strip(&legend, &entries)?;
     root.present()
         .with_context(|| format!("writing {}", path.display()))?;
@@ -436,8 +495,14 @@ pub fn hysteresis(run: &RunRecord, path: &Path, title: &str) -> Result<()> {
     );
 
     create_parent(path)?;
+    let entries: Vec<(Swatch, String)> = loops
+        .iter()
+        .map(|(_, c, label)| (Swatch::Line(*c), label.clone()))
+        .collect();
+    let (_, legend_h) = legend_layout(&entries);
     let root = SVGBackend::new(path, (WIDTH, 900)).into_drawing_area();
     let body = titled_root(&root, title)?;
+    let (body, legend) = body.split_vertically(body.dim_in_pixel().1 - legend_h);
     let mut chart = ChartBuilder::on(&body)
         .margin(20)
         .x_label_area_size(60)
@@ -455,20 +520,11 @@ pub fn hysteresis(run: &RunRecord, path: &Path, title: &str) -> Result<()> {
         .light_line_style(WHITE)
         .draw()?;
 
-    for (l, c, label) in &loops {
+    for (l, c, _) in &loops {
         let xy = pairs(l);
         let ok = |k: usize| xy[k].0.is_finite() && xy[k].1.is_finite();
-        let mut first = true;
         for seg in segments(xy.len(), ok) {
-            let series = chart.draw_series(LineSeries::new(xy[seg].to_vec(), c.stroke_width(2)))?;
-            // One legend entry per loop, not per segment.
-            if first {
-                let c = *c;
-                series.label(label.as_str()).legend(move |(x, y)| {
-                    PathElement::new(vec![(x, y), (x + 30, y)], c.stroke_width(3))
-                });
-                first = false;
-            }
+            chart.draw_series(LineSeries::new(xy[seg].to_vec(), c.stroke_width(2)))?;
         }
     }
     if loops.is_empty() {
@@ -483,62 +539,11 @@ pub fn hysteresis(run: &RunRecord, path: &Path, title: &str) -> Result<()> {
         let style = TextStyle::from((FONT, CAPTION_SIZE).into_font())
             .pos(Pos::new(HPos::Center, VPos::Center));
         body.draw(&Text::new(why, (w as i32 / 2, h as i32 / 2), style))?;
-    } else {
-        chart
-            .configure_series_labels()
-            .position(SeriesLabelPosition::UpperLeft)
-            .label_font((FONT, DESC_SIZE))
-            .background_style(WHITE.mix(0.85))
-            .border_style(BLACK)
-            .draw()?;
     }
+    legend_strip(&legend, &entries)?;
     root.present()
         .with_context(|| format!("writing {}", path.display()))?;
     Ok(())
-}
-
-/// Marker of algorithm `i` at chart coordinates (circle, triangle, square, diamond).
-fn draw_marker<DB: DrawingBackend>(
-    chart: &mut ChartContext<
-        '_,
-        DB,
-        Cartesian2d<plotters::coord::types::RangedCoordf64, plotters::coord::types::RangedCoordf64>,
-    >,
-    i: usize,
-    at: (f64, f64),
-    c: RGBColor,
-) -> Result<()>
-where
-    DB::ErrorType: 'static,
-{
-    let style = c.filled();
-    match i % 4 {
-        0 => chart.draw_series(std::iter::once(Circle::new(at, 7, style)))?,
-        1 => chart.draw_series(std::iter::once(TriangleMarker::new(at, 9, style)))?,
-        2 => chart.draw_series(std::iter::once(
-            EmptyElement::at(at) + Rectangle::new([(-6, -6), (6, 6)], style),
-        ))?,
-        _ => chart.draw_series(std::iter::once(
-            EmptyElement::at(at) + Polygon::new(vec![(0, -8), (8, 0), (0, 8), (-8, 0)], style),
-        ))?,
-    };
-    Ok(())
-}
-
-/// Legend swatch (marker) of algorithm `i` at pixel coordinates.
-fn legend_marker<DB: DrawingBackend>(
-    i: usize,
-    (x, y): (i32, i32),
-    c: RGBColor,
-) -> DynElement<'static, DB, (i32, i32)> {
-    let style = c.filled();
-    let x = x + 15;
-    match i % 4 {
-        0 => Circle::new((x, y), 7, style).into_dyn(),
-        1 => TriangleMarker::new((x, y), 9, style).into_dyn(),
-        2 => Rectangle::new([(x - 6, y - 6), (x + 6, y + 6)], style).into_dyn(),
-        _ => Polygon::new(vec![(x, y - 8), (x + 8, y), (x, y + 8), (x - 8, y)], style).into_dyn(),
-    }
 }
 
 /// Category labels under the x axis: name `j` centred at x = j (plotters' automatic ticks of
@@ -641,9 +646,29 @@ pub fn crosses(groups: &[(&str, Vec<&RunRecord>)], path: &Path, title: &str) -> 
     let width = 0.7 / g as f64;
     let offset = |i: usize| (i as f64 - (g as f64 - 1.0) / 2.0) * width;
 
+    let mut entries: Vec<(Swatch, String)> = groups
+        .iter()
+        .zip(&summaries)
+        .enumerate()
+        .map(|(i, ((label, _), s))| {
+            let mut text = format!("{label} (n = {}", s.used);
+            if s.failed > 0 {
+                text.push_str(&format!(", {} failed run(s) skipped", s.failed));
+            }
+            if s.no_truth > 0 {
+                text.push_str(&format!(", {} without truth skipped", s.no_truth));
+            }
+            text.push_str("): mean ± 1 s.d. over runs");
+            (Swatch::Marker(i, colour(i)), text)
+        })
+        .collect();
+    entries.push((Swatch::Dashed(BLACK), "truth".to_string()));
+    let (_, legend_h) = legend_layout(&entries);
+
     create_parent(path)?;
-    let root = SVGBackend::new(path, (WIDTH, 800)).into_drawing_area();
+    let root = SVGBackend::new(path, (WIDTH, 760 + legend_h)).into_drawing_area();
     let body = titled_root(&root, title)?;
+    let (body, legend) = body.split_vertically(body.dim_in_pixel().1 - legend_h);
     let mut chart = ChartBuilder::on(&body)
         .margin(20)
         .x_label_area_size(60)
@@ -670,7 +695,7 @@ pub fn crosses(groups: &[(&str, Vec<&RunRecord>)], path: &Path, title: &str) -> 
     ))?;
 
     let clamp = |v: f64| v.clamp(lo, hi);
-    for (i, ((label, _), s)) in groups.iter().zip(&summaries).enumerate() {
+    for (i, s) in summaries.iter().enumerate() {
         let c = colour(i);
         let arm = 0.35 * width;
         for j in 0..n {
@@ -688,29 +713,11 @@ pub fn crosses(groups: &[(&str, Vec<&RunRecord>)], path: &Path, title: &str) -> 
                 vec![(x - arm, clamp(m)), (x + arm, clamp(m))],
                 c.stroke_width(3),
             )))?;
-            draw_marker(&mut chart, i, (x, clamp(m)), c)?;
+            let (px, py) = chart.backend_coord(&(x, clamp(m)));
+            root.draw(&marker(i, (px, py), c))?;
         }
-        let mut text = format!("{label} (n = {}", s.used);
-        if s.failed > 0 {
-            text.push_str(&format!(", {} failed skipped", s.failed));
-        }
-        if s.no_truth > 0 {
-            text.push_str(&format!(", {} without truth skipped", s.no_truth));
-        }
-        text.push(')');
-        // An invisible anchor series carries the legend entry.
-        chart
-            .draw_series(std::iter::empty::<Circle<(f64, f64), i32>>())?
-            .label(text)
-            .legend(move |p| legend_marker(i, p, c));
     }
-    chart
-        .configure_series_labels()
-        .position(SeriesLabelPosition::UpperRight)
-        .label_font((FONT, DESC_SIZE))
-        .background_style(WHITE.mix(0.85))
-        .border_style(BLACK)
-        .draw()?;
+    legend_strip(&legend, &entries)?;
     root.present()
         .with_context(|| format!("writing {}", path.display()))?;
     Ok(())
@@ -791,9 +798,25 @@ pub fn state_errors(groups: &[(&str, Vec<&RunRecord>)], path: &Path, title: &str
     let width = 0.8 / g as f64;
     let offset = |i: usize| (i as f64 - (g as f64 - 1.0) / 2.0) * width;
 
+    let entries: Vec<(Swatch, String)> = groups
+        .iter()
+        .zip(&summaries)
+        .enumerate()
+        .map(|(i, ((label, _), s))| {
+            let mut text = format!("{label} (n = {}", s.used);
+            if s.skipped > 0 {
+                text.push_str(&format!(", {} skipped", s.skipped));
+            }
+            text.push(')');
+            (Swatch::Bar(colour(i)), text)
+        })
+        .collect();
+    let (_, legend_h) = legend_layout(&entries);
+
     create_parent(path)?;
-    let root = SVGBackend::new(path, (WIDTH, 800)).into_drawing_area();
+    let root = SVGBackend::new(path, (WIDTH, 760 + legend_h)).into_drawing_area();
     let body = titled_root(&root, title)?;
+    let (body, legend) = body.split_vertically(body.dim_in_pixel().1 - legend_h);
     let mut chart = ChartBuilder::on(&body)
         .margin(20)
         .x_label_area_size(60)
@@ -812,7 +835,7 @@ pub fn state_errors(groups: &[(&str, Vec<&RunRecord>)], path: &Path, title: &str
         .draw()?;
     category_labels(&root, &chart, &names, 0.0)?;
 
-    for (i, ((label, _), s)) in groups.iter().zip(&summaries).enumerate() {
+    for (i, s) in summaries.iter().enumerate() {
         let c = colour(i);
         for j in 0..n {
             let m = s.mean[j];
@@ -833,23 +856,8 @@ pub fn state_errors(groups: &[(&str, Vec<&RunRecord>)], path: &Path, title: &str
                 )))?;
             }
         }
-        let mut text = format!("{label} (n = {}", s.used);
-        if s.skipped > 0 {
-            text.push_str(&format!(", {} skipped", s.skipped));
-        }
-        text.push(')');
-        chart
-            .draw_series(std::iter::empty::<Circle<(f64, f64), i32>>())?
-            .label(text)
-            .legend(move |(x, y)| Rectangle::new([(x, y - 8), (x + 30, y + 8)], c.filled()));
     }
-    chart
-        .configure_series_labels()
-        .position(SeriesLabelPosition::UpperRight)
-        .label_font((FONT, DESC_SIZE))
-        .background_style(WHITE.mix(0.85))
-        .border_style(BLACK)
-        .draw()?;
+    legend_strip(&legend, &entries)?;
     root.present()
         .with_context(|| format!("writing {}", path.display()))?;
     Ok(())

@@ -219,7 +219,10 @@ fn convergence_grid_adapts_to_parameter_count() {
     assert!(svg.contains("k1 [") && svg.contains("k2 ["));
     assert!(!svg.contains("k3 ["));
     // One row of panels: a shorter figure than the 3×3 one.
-    assert!(svg.contains("height=\"375\""), "1 row: 110 + 265 px");
+    assert!(
+        svg.contains("height=\"375\""),
+        "1 row: 60 + 50 (legend) + 265 px"
+    );
 }
 
 #[test]
@@ -283,7 +286,7 @@ fn crosses_figure_counts_runs_and_skips_failures() {
     }
     for text in [
         "MLN-RBPF (n = 5)",
-        "Storvik (n = 2, 1 failed skipped, 1 without truth skipped)",
+        "Storvik (n = 2, 1 failed run(s) skipped, 1 without truth skipped)",
         "MPF-EKF2 (n = 3)",
         "θ_val / θ_true",
     ] {
@@ -297,7 +300,7 @@ fn crosses_figure_counts_runs_and_skips_failures() {
     failed.failure = Some("diverged".into());
     let path = dir.join("allfailed.svg");
     crosses(&[("Storvik", vec![&failed])], &path, "all failed").unwrap();
-    assert!(read(&path).contains("Storvik (n = 0, 1 failed skipped)"));
+    assert!(read(&path).contains("Storvik (n = 0, 1 failed run(s) skipped)"));
 }
 
 #[test]
