@@ -73,15 +73,29 @@ fn theta_table(out: &mut String, runs: &[(&str, &RunRecord)]) {
     }
 }
 
+/// Wall times of the invocation that wrote the report.
+pub struct Timings {
+    pub sweep_s: f64,
+    pub total_s: f64,
+    /// Runs executed by this invocation (the others were loaded from existing records).
+    pub executed: usize,
+    pub total_jobs: usize,
+}
+
 /// Builds the report text.
 pub fn write_report(
     opts: &Options,
     studies: &BTreeMap<&str, Study>,
     records: &BTreeMap<&str, Vec<RunRecord>>,
     summary: &BTreeMap<&str, Vec<AlgorithmStats>>,
-    sweep_s: f64,
-    total_s: f64,
+    timings: Timings,
 ) -> Result<String> {
+    let Timings {
+        sweep_s,
+        total_s,
+        executed,
+        total_jobs,
+    } = timings;
     let mut o = String::new();
     let first = |study: &str, alg: Algorithm| {
         records[study]

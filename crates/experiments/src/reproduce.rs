@@ -150,6 +150,8 @@ pub fn reproduce(opts: &Options) -> Result<()> {
     let start = Instant::now();
     let mut studies = BTreeMap::new();
     let mut records = BTreeMap::new();
+    let mut executed = 0usize;
+    let mut total_jobs = 0usize;
     for name in STUDIES {
         let path = opts.experiments.join(format!("{name}.toml"));
         let mut study = Study::load(&path)?;
@@ -158,6 +160,19 @@ pub fn reproduce(opts: &Options) -> Result<()> {
         }
         let dir = opts.out.join("records").join(name);
         let jobs = study.jobs();
+        total_jobs += jobs
+            .iter()
+            .enumerate()
+            .filter(|(i, _)| opts.shard.contains(*i))
+            .count();
+        executed += jobs
+            .iter()
+            .enumerate()
+            .filter(|(i, j)| {
+                opts.shard.contains(*i)
+                    && !crate::sweep::record_path(&dir, &Study::job_id(j)).exists()
+            })
+            .count();
         let sweep = SweepOptions {
             threads: opts.threads,
             shard: opts.shard,
@@ -206,11 +221,23 @@ pub fn reproduce(opts: &Options) -> Result<()> {
         serde_json::to_string_pretty(&serde_json::json!({
             "quick": opts.quick,
             "wall_s": { "sweeps": sweep_s, "total": total_s },
+            "runs": { "executed": executed, "total": total_jobs },
             "studies": summary,
         }))? + "\n",
     )
     .with_context(|| format!("writing {}", summary_path.display()))?;
-    let report = crate::report::write_report(opts, &studies, &records, &summary, sweep_s, total_s)?;
+    let report = crate::report::write_report(
+        opts,
+        &studies,
+        &records,
+        &summary,
+        crate::report::Timings {
+            sweep_s,
+            total_s,
+            executed,
+            total_jobs,
+        },
+    )?;
     let path = opts.out.join("REPORT.md");
     std::fs::write(&path, report).with_context(|| format!("writing {}", path.display()))?;
     eprintln!("wrote {} ({total_s:.1} s)", path.display());
