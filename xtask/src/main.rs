@@ -2,10 +2,16 @@
 //!
 //! - `reproduce-paper [--quick] [--threads N] [--shard i/n]`: builds `sysid` in release and runs
 //!   `sysid reproduce` from the workspace root into `results/paper/` (or `results/paper-quick/`).
-//! - `bench`: runs the criterion benchmarks of `core-filters` in release.
+//! - `regression [--threads N] [--resume]`: builds `sysid` in release and runs `sysid regression`
+//!   (`experiments/regression.toml` into `results/regression/`); fails when a bound is breached.
+//! - `bench [--full]`: runs the criterion benchmarks of `core-filters` (short measurement times
+//!   unless `--full`), then appends one dated line per benchmark to `results/perf/history.csv`
+//!   and prints the change against the previous line of the same benchmark.
 
-use std::path::PathBuf;
+use std::fs;
+use std::path::{Path, PathBuf};
 use std::process::Command;
+use std::time::{SystemTime, UNIX_EPOCH};
 
 use anyhow::{bail, Context, Result};
 use clap::{Parser, Subcommand};
@@ -31,8 +37,21 @@ enum Task {
         #[arg(long)]
         shard: Option<String>,
     },
-    /// Run the criterion benchmarks (release).
-    Bench,
+    /// Identification-accuracy regression check (experiments/regression.toml).
+    Regression {
+        /// Worker threads (0: one per core).
+        #[arg(long, default_value_t = 0)]
+        threads: usize,
+        /// Reuse the records of an interrupted check instead of recomputing every run.
+        #[arg(long)]
+        resume: bool,
+    },
+    /// Run the criterion benchmarks (release) and append the medians to results/perf/history.csv.
+    Bench {
+        /// Criterion's own measurement times instead of the short ones.
+        #[arg(long)]
+        full: bool,
+    },
 }
 
 /// The workspace root (the parent of this crate's directory).
@@ -41,6 +60,13 @@ fn root() -> PathBuf {
         .parent()
         .expect("xtask lives inside the workspace")
         .to_path_buf()
+}
+
+fn target_dir(root: &Path) -> PathBuf {
+    std::env::var_os("CARGO_TARGET_DIR")
+        .map(PathBuf::from)
+        .map(|t| if t.is_relative() { root.join(t) } else { t })
+        .unwrap_or_else(|| root.join("target"))
 }
 
 fn cargo() -> String {
@@ -55,6 +81,20 @@ fn run(cmd: &mut Command) -> Result<()> {
     Ok(())
 }
 
+/// Builds the release `sysid` and returns its path.
+fn build_sysid(root: &Path) -> Result<PathBuf> {
+    run(Command::new(cargo()).current_dir(root).args([
+        "build",
+        "--release",
+        "--quiet",
+        "-p",
+        "experiments",
+        "--bin",
+        "sysid",
+    ]))?;
+    Ok(target_dir(root).join("release/sysid"))
+}
+
 fn main() -> Result<()> {
     let root = root();
     match Cli::parse().task {
@@ -63,24 +103,13 @@ fn main() -> Result<()> {
             threads,
             shard,
         } => {
-            run(Command::new(cargo()).current_dir(&root).args([
-                "build",
-                "--release",
-                "--quiet",
-                "-p",
-                "experiments",
-                "--bin",
-                "sysid",
-            ]))?;
+            let sysid = build_sysid(&root)?;
             let out = if quick {
                 "results/paper-quick"
             } else {
                 "results/paper"
             };
-            let target = std::env::var_os("CARGO_TARGET_DIR")
-                .map(PathBuf::from)
-                .unwrap_or_else(|| root.join("target"));
-            let mut cmd = Command::new(target.join("release/sysid"));
+            let mut cmd = Command::new(sysid);
             cmd.current_dir(&root).args([
                 "reproduce",
                 "--experiments",
@@ -98,10 +127,315 @@ fn main() -> Result<()> {
             }
             run(&mut cmd)
         }
-        Task::Bench => {
-            run(Command::new(cargo())
-                .current_dir(&root)
-                .args(["bench", "-p", "core-filters"]))
+        Task::Regression { threads, resume } => {
+            let sysid = build_sysid(&root)?;
+            let mut cmd = Command::new(sysid);
+            cmd.current_dir(&root).args([
+                "regression",
+                "--config",
+                "experiments/regression.toml",
+                "--out",
+                "results/regression",
+                "--threads",
+                &threads.to_string(),
+            ]);
+            // Records of an earlier check may come from other code: recompute unless asked.
+            if !resume {
+                cmd.arg("--fresh");
+            }
+            run(&mut cmd)
         }
+        Task::Bench { full } => bench(&root, full),
+    }
+}
+
+/// Runs the benchmarks, then records the medians of those this run measured.
+fn bench(root: &Path, full: bool) -> Result<()> {
+    let started = SystemTime::now();
+    let mut cmd = Command::new(cargo());
+    cmd.current_dir(root)
+        .args(["bench", "-p", "core-filters", "--benches"]);
+    if !full {
+        // Enough for a few-percent median on steps of 10 µs to 10 ms; trends, not proofs.
+        cmd.args([
+            "--",
+            "--warm-up-time",
+            "1",
+            "--measurement-time",
+            "3",
+            "--sample-size",
+            "20",
+        ]);
+    }
+    run(&mut cmd)?;
+    let mut measured = Vec::new();
+    collect_estimates(&target_dir(root).join("criterion"), started, &mut measured)?;
+    if measured.is_empty() {
+        bail!("no criterion estimates written by this run");
+    }
+    measured.sort_by(|a, b| a.name.cmp(&b.name));
+    let history = root.join("results/perf/history.csv");
+    append_history(&history, &date_today(), &git_rev(root), &measured)
+}
+
+/// One benchmark measured by this run.
+#[derive(Debug, Clone, PartialEq)]
+struct Measured {
+    name: String,
+    median_ns: f64,
+    /// Elements (particles) per iteration, when the benchmark declares a throughput.
+    elements: Option<f64>,
+}
+
+/// Walks `dir` for `new/estimates.json` written after `since`, with the name and throughput
+/// from the `new/benchmark.json` beside it.
+fn collect_estimates(dir: &Path, since: SystemTime, out: &mut Vec<Measured>) -> Result<()> {
+    let Ok(entries) = fs::read_dir(dir) else {
+        return Ok(());
+    };
+    for entry in entries {
+        let path = entry?.path();
+        if !path.is_dir() {
+            continue;
+        }
+        let est = path.join("new/estimates.json");
+        let fresh = fs::metadata(&est)
+            .and_then(|m| m.modified())
+            .is_ok_and(|t| t >= since);
+        if fresh {
+            let e = fs::read_to_string(&est)?;
+            let b = fs::read_to_string(path.join("new/benchmark.json"))?;
+            let median_ns = json_number_after(&e, "\"median\"", "\"point_estimate\":")
+                .with_context(|| format!("no median in {}", est.display()))?;
+            let name = json_string(&b, "\"full_id\":")
+                .with_context(|| format!("no full_id beside {}", est.display()))?;
+            let elements = json_number_after(&b, "\"throughput\"", "\"Elements\":");
+            out.push(Measured {
+                name,
+                median_ns,
+                elements,
+            });
+        } else if path.file_name().is_some_and(|n| n != "report") {
+            collect_estimates(&path, since, out)?;
+        }
+    }
+    Ok(())
+}
+
+/// The number following `key` after the first `anchor` of a compact JSON text (criterion's own
+/// files: a fixed shape, no need for a JSON dependency in this crate).
+fn json_number_after(text: &str, anchor: &str, key: &str) -> Option<f64> {
+    let rest = &text[text.find(anchor)? + anchor.len()..];
+    let rest = &rest[rest.find(key)? + key.len()..];
+    let end = rest.find([',', '}']).unwrap_or(rest.len());
+    rest[..end].trim().parse().ok()
+}
+
+/// The string value of `key` (no escapes expected in criterion ids).
+fn json_string(text: &str, key: &str) -> Option<String> {
+    let rest = text[text.find(key)? + key.len()..].trim_start();
+    let rest = rest.strip_prefix('"')?;
+    Some(rest[..rest.find('"')?].to_string())
+}
+
+const HISTORY_HEADER: &str = "date,git_rev,benchmark,median_ns,particle_steps_per_s";
+
+/// A CSV field, quoted when it holds a comma or a quote.
+fn csv_field(s: &str) -> String {
+    if s.contains([',', '"']) {
+        format!("\"{}\"", s.replace('"', "\"\""))
+    } else {
+        s.to_string()
+    }
+}
+
+/// Splits one CSV line (quoted fields with doubled quotes).
+fn csv_split(line: &str) -> Vec<String> {
+    let mut out = Vec::new();
+    let mut cur = String::new();
+    let mut quoted = false;
+    let mut chars = line.chars().peekable();
+    while let Some(c) = chars.next() {
+        match (c, quoted) {
+            ('"', true) if chars.peek() == Some(&'"') => {
+                cur.push('"');
+                chars.next();
+            }
+            ('"', _) => quoted = !quoted,
+            (',', false) => out.push(std::mem::take(&mut cur)),
+            _ => cur.push(c),
+        }
+    }
+    out.push(cur);
+    out
+}
+
+/// Appends this run's lines to the history and prints each median against the last line of the
+/// same benchmark.
+fn append_history(path: &Path, date: &str, rev: &str, measured: &[Measured]) -> Result<()> {
+    let old = fs::read_to_string(path).unwrap_or_default();
+    let mut previous = std::collections::BTreeMap::new();
+    for line in old.lines().skip(1).filter(|l| !l.trim().is_empty()) {
+        let f = csv_split(line);
+        if let (Some(name), Some(Ok(median))) = (f.get(2), f.get(3).map(|m| m.parse::<f64>())) {
+            previous.insert(name.clone(), (f[0].clone(), f[1].clone(), median));
+        }
+    }
+    let mut text = if old.is_empty() {
+        format!("{HISTORY_HEADER}\n")
+    } else if old.ends_with('\n') {
+        old
+    } else {
+        old + "\n"
+    };
+    println!(
+        "{:<58} {:>13} {:>14} {:>9}  previous",
+        "benchmark", "median", "particle-st/s", "change"
+    );
+    for m in measured {
+        let rate = m.elements.map(|n| n / (m.median_ns * 1e-9));
+        text.push_str(&format!(
+            "{date},{rev},{},{:.1},{}\n",
+            csv_field(&m.name),
+            m.median_ns,
+            rate.map_or(String::new(), |r| format!("{r:.0}"))
+        ));
+        let (change, prev) = match previous.get(&m.name) {
+            Some((d, r, p)) => (
+                format!("{:+.1}%", 100.0 * (m.median_ns / p - 1.0)),
+                format!("{} ({d}, {r})", human_ns(*p)),
+            ),
+            None => ("new".into(), String::new()),
+        };
+        println!(
+            "{:<58} {:>13} {:>14} {:>9}  {prev}",
+            m.name,
+            human_ns(m.median_ns),
+            rate.map_or(String::new(), |r| format!("{r:.3e}")),
+            change
+        );
+    }
+    if let Some(dir) = path.parent() {
+        fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    }
+    fs::write(path, text).with_context(|| format!("writing {}", path.display()))?;
+    println!("appended {} lines to {}", measured.len(), path.display());
+    Ok(())
+}
+
+fn human_ns(ns: f64) -> String {
+    match ns {
+        n if n >= 1e6 => format!("{:.3} ms", n / 1e6),
+        n if n >= 1e3 => format!("{:.2} µs", n / 1e3),
+        n => format!("{n:.0} ns"),
+    }
+}
+
+/// The short git revision, with `-dirty` when the benchmarked crate has uncommitted changes.
+fn git_rev(root: &Path) -> String {
+    let out = Command::new("git")
+        .current_dir(root)
+        .args(["rev-parse", "--short", "HEAD"])
+        .output();
+    let Some(out) = out.ok().filter(|o| o.status.success()) else {
+        return "unknown".into();
+    };
+    let rev = String::from_utf8_lossy(&out.stdout).trim().to_string();
+    let clean = Command::new("git")
+        .current_dir(root)
+        .args(["diff", "--quiet", "HEAD", "--", "crates/core-filters"])
+        .status()
+        .is_ok_and(|s| s.success());
+    if clean {
+        rev
+    } else {
+        format!("{rev}-dirty")
+    }
+}
+
+/// Today's UTC date, YYYY-MM-DD.
+fn date_today() -> String {
+    let days = SystemTime::now()
+        .duration_since(UNIX_EPOCH)
+        .map_or(0, |d| d.as_secs() / 86_400) as i64;
+    let (y, m, d) = civil_from_days(days);
+    format!("{y:04}-{m:02}-{d:02}")
+}
+
+/// Proleptic Gregorian date of a day count since 1970-01-01 (H. Hinnant's algorithm).
+fn civil_from_days(z: i64) -> (i64, u32, u32) {
+    let z = z + 719_468;
+    let era = z.div_euclid(146_097);
+    let doe = z.rem_euclid(146_097);
+    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
+    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
+    let mp = (5 * doy + 2) / 153;
+    let d = (doy - (153 * mp + 2) / 5 + 1) as u32;
+    let m = if mp < 10 { mp + 3 } else { mp - 9 } as u32;
+    (yoe + era * 400 + i64::from(m <= 2), m, d)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn dates() {
+        assert_eq!(civil_from_days(0), (1970, 1, 1));
+        assert_eq!(civil_from_days(11_016), (2000, 2, 29));
+        assert_eq!(civil_from_days(19_782), (2024, 2, 29));
+    }
+
+    #[test]
+    fn criterion_json() {
+        let e = r#"{"mean":{"point_estimate":2.0,"x":1},"median":{"confidence_interval":{"lower_bound":1.0},"point_estimate":38037.5,"standard_error":4.0}}"#;
+        assert_eq!(
+            json_number_after(e, "\"median\"", "\"point_estimate\":"),
+            Some(38037.5)
+        );
+        let b = r#"{"group_id":"g","throughput":{"Elements":500},"full_id":"particle-step/bootstrap/nx16"}"#;
+        assert_eq!(
+            json_string(b, "\"full_id\":").as_deref(),
+            Some("particle-step/bootstrap/nx16")
+        );
+        assert_eq!(
+            json_number_after(b, "\"throughput\"", "\"Elements\":"),
+            Some(500.0)
+        );
+        let none = r#"{"throughput":null,"full_id":"kf"}"#;
+        assert_eq!(
+            json_number_after(none, "\"throughput\"", "\"Elements\":"),
+            None
+        );
+    }
+
+    #[test]
+    fn csv_round_trip() {
+        let name = "second_order_terms 13 states, 5 \"outputs\"";
+        let line = format!("2024-01-01,abc,{},1.0,", csv_field(name));
+        let f = csv_split(&line);
+        assert_eq!(f.len(), 5);
+        assert_eq!(f[2], name);
+        assert_eq!(f[4], "");
+    }
+
+    #[test]
+    fn history_appends_and_compares() {
+        let dir = std::env::temp_dir().join(format!("xtask-history-{}", std::process::id()));
+        let path = dir.join("history.csv");
+        let _ = fs::remove_file(&path);
+        let m = |ns| Measured {
+            name: "a, b".into(),
+            median_ns: ns,
+            elements: Some(500.0),
+        };
+        append_history(&path, "2024-01-01", "r1", &[m(1000.0)]).unwrap();
+        append_history(&path, "2024-01-02", "r2", &[m(2000.0)]).unwrap();
+        let text = fs::read_to_string(&path).unwrap();
+        let lines: Vec<&str> = text.lines().collect();
+        assert_eq!(lines[0], HISTORY_HEADER);
+        assert_eq!(lines[1], "2024-01-01,r1,\"a, b\",1000.0,500000000");
+        assert_eq!(lines[2], "2024-01-02,r2,\"a, b\",2000.0,250000000");
+        fs::remove_dir_all(&dir).unwrap();
     }
 }

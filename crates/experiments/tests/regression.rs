@@ -1,0 +1,144 @@
+//! The regression file parses, covers every algorithm and parameter of its sweep, and its bounds
+//! flag a statistic that moved past them.
+
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+
+use experiments::cli::regression::{evaluate, format_table, RegressionFile, PAPER_PARAMS};
+use experiments::reproduce::{AlgorithmStats, ParamStats};
+
+fn file() -> RegressionFile {
+    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../experiments/regression.toml");
+    RegressionFile::load(&path).expect("experiments/regression.toml")
+}
+
+/// Statistics of one algorithm that sit exactly on the bounds of `file` (pass), with θ_val of
+/// every parameter moved from the truth by its bound.
+fn at_bounds(file: &RegressionFile, alg: &str) -> AlgorithmStats {
+    let t = &file.thresholds[alg];
+    AlgorithmStats {
+        algorithm: alg.into(),
+        runs: file.study.sweep.runs as usize,
+        failed: t.max_failed,
+        params: PAPER_PARAMS
+            .iter()
+            .map(|p| ParamStats {
+                name: p.to_string(),
+                truth: 1.0,
+                ratio_mean: 1.0 + t.rel_error_mean[*p],
+                ratio_sd: t.ratio_sd[*p],
+                rel_error_mean: t.rel_error_mean[*p],
+            })
+            .collect(),
+        online_nrmse_mean: 0.1,
+        validation_nrmse_mean: f64::NAN,
+        distinct_sampled_mean: t
+            .max_distinct_sampled_mean
+            .map(|d| PAPER_PARAMS.iter().map(|p| (p.to_string(), d)).collect())
+            .unwrap_or_default(),
+        ess_mean: 100.0,
+        loglik_mean: 0.0,
+        wall_s_mean: 1.0,
+        particle_steps_per_s_mean: 1e6,
+    }
+}
+
+#[test]
+fn regression_file_covers_every_algorithm_and_parameter() {
+    let f = file();
+    assert_eq!(f.study.data.preset, "paper-3dof");
+    assert_ne!(f.study.sweep.master_seed, 2016, "not fig7's data sets");
+    assert!(!f.study.filter.validate && f.study.filter.trace_every == 0);
+    assert_eq!(f.study.sweep.algorithms.len(), 4);
+    for a in &f.study.sweep.algorithms {
+        let t = &f.thresholds[a.name()];
+        for p in PAPER_PARAMS {
+            assert!(t.rel_error_mean[p] > 0.0, "{} {p}", a.name());
+            assert!(t.ratio_sd[p] > 0.0, "{} {p}", a.name());
+        }
+        if a.name() != "bootstrap" {
+            assert_eq!(
+                t.max_failed,
+                0,
+                "{}: marginalized filters never fail",
+                a.name()
+            );
+        }
+    }
+    let boot = &f.thresholds["bootstrap"];
+    assert!(boot.max_distinct_sampled_mean.is_some_and(|d| d < 10.0));
+}
+
+#[test]
+fn a_missing_bound_is_rejected() {
+    let text = std::fs::read_to_string(
+        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../experiments/regression.toml"),
+    )
+    .unwrap();
+    assert!(RegressionFile::parse(&text, &PAPER_PARAMS).is_ok());
+    // A parameter the file has no bound for.
+    let err = RegressionFile::parse(&text, &["k1", "k4"]).unwrap_err();
+    assert!(format!("{err:#}").contains("`k4`"), "{err:#}");
+    // The bounds of one algorithm of the sweep removed.
+    let cut = text.replace("[thresholds.storvik", "[unused.storvik");
+    assert!(RegressionFile::parse(&cut, &PAPER_PARAMS).is_err());
+}
+
+#[test]
+fn statistics_at_the_bounds_pass_and_each_synthetic_breach_is_flagged() {
+    let f = file();
+    let algs: Vec<&str> = f.study.sweep.algorithms.iter().map(|a| a.name()).collect();
+    let base: Vec<AlgorithmStats> = algs.iter().map(|a| at_bounds(&f, a)).collect();
+    let none = BTreeMap::new();
+    let checks = evaluate(&f.thresholds, &base, &none);
+    // failed + 9 + 9 per algorithm, + 9 degeneracy checks for the bootstrap PF.
+    assert_eq!(checks.len(), 4 * 19 + 9);
+    assert!(checks.iter().all(|c| c.ok()), "{}", format_table(&checks));
+
+    // One statistic a hair above its bound: exactly one breach, on that statistic.
+    let mut s = base.clone();
+    s[2].params[4].rel_error_mean *= 1.0 + 1e-9;
+    let c = evaluate(&f.thresholds, &s, &none);
+    let breaches: Vec<_> = c.iter().filter(|c| !c.ok()).collect();
+    assert_eq!(breaches.len(), 1);
+    assert_eq!(
+        (
+            breaches[0].algorithm.as_str(),
+            breaches[0].quantity.as_str(),
+            breaches[0].parameter.as_str()
+        ),
+        (algs[2], "rel_error_mean", "c2")
+    );
+
+    let mut s = base.clone();
+    s[0].params[0].ratio_sd += 0.01;
+    s[1].failed += 1;
+    let b = s.iter().position(|a| a.algorithm == "bootstrap").unwrap();
+    s[b].distinct_sampled_mean.insert("k1".into(), 150.0);
+    let c = evaluate(&f.thresholds, &s, &none);
+    let mut flagged: Vec<(String, String)> = c
+        .iter()
+        .filter(|c| !c.ok())
+        .map(|c| (c.quantity.clone(), c.parameter.clone()))
+        .collect();
+    flagged.sort();
+    assert_eq!(
+        flagged,
+        [
+            ("distinct_sampled_mean".to_string(), "k1".to_string()),
+            ("failed".into(), "".into()),
+            ("ratio_sd".into(), "k1".into()),
+        ]
+    );
+    assert_eq!(format_table(&c).matches("BREACH").count(), 3);
+
+    // A NaN statistic (e.g. every run failed) and a missing algorithm are breaches.
+    let mut s = base.clone();
+    s[0].params[8].ratio_sd = f64::NAN;
+    s.pop();
+    let c = evaluate(&f.thresholds, &s, &none);
+    assert!(c
+        .iter()
+        .any(|c| !c.ok() && c.parameter == "n" && c.quantity == "ratio_sd"));
+    assert!(c.iter().filter(|c| c.algorithm == algs[3]).all(|c| !c.ok()));
+}
