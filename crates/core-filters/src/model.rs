@@ -129,13 +129,19 @@ pub trait ConditionallyLinear<const NU: usize, const NZ: usize, const NL: usize,
     fn linked_rows(&self) -> [usize; NL];
     /// `(f(u_{k-1}), F_L(u_{k-1}))`: the affine-in-`z` transition to step `k`; `F_L` holds the
     /// linked rows of `F` only.
-    fn transition(&self, k: usize, u: &SVector<f64, NU>)
-        -> (SVector<f64, NU>, SMatrix<f64, NL, NZ>);
+    fn transition(
+        &self,
+        k: usize,
+        u: &SVector<f64, NU>,
+    ) -> (SVector<f64, NU>, SMatrix<f64, NL, NZ>);
     /// Standard deviations of `v_u` (zero for copied entries such as `n`).
     fn process_noise_sd(&self) -> SVector<f64, NU>;
     /// `(h(u_k), H(u_k))`: the affine-in-`z` measurement at step `k`.
-    fn observation(&self, k: usize, u: &SVector<f64, NU>)
-        -> (SVector<f64, NY>, SMatrix<f64, NY, NZ>);
+    fn observation(
+        &self,
+        k: usize,
+        u: &SVector<f64, NU>,
+    ) -> (SVector<f64, NY>, SMatrix<f64, NY, NZ>);
     /// `J_u = ∂/∂u [H(u) z + h(u)]` at `(u_k, z)` (Storvik's linearisation, SPEC §5.3 (iii)).
     fn observation_jacobian_u(
         &self,

@@ -6,8 +6,8 @@
 //! portable algorithm; seeds are expanded with SplitMix64 and purposes are hashed with FNV-1a,
 //! both fixed algorithms, so a stream is the same on every platform and every version.
 
-pub use rand_xoshiro::Xoshiro256PlusPlus as StreamRng;
 use rand_core::SeedableRng;
+pub use rand_xoshiro::Xoshiro256PlusPlus as StreamRng;
 
 /// Well-known purposes. Any other `&str` is allowed; these names keep call sites consistent.
 pub mod purpose {
@@ -74,7 +74,11 @@ mod tests {
         let xa: Vec<u64> = (0..8).map(|_| a.random()).collect();
         let xb: Vec<u64> = (0..8).map(|_| b.random()).collect();
         assert_eq!(xa, xb);
-        for (s, r, p) in [(8, 3, purpose::MEASUREMENT_NOISE), (7, 4, purpose::MEASUREMENT_NOISE), (7, 3, purpose::EXCITATION_NOISE)] {
+        for (s, r, p) in [
+            (8, 3, purpose::MEASUREMENT_NOISE),
+            (7, 4, purpose::MEASUREMENT_NOISE),
+            (7, 3, purpose::EXCITATION_NOISE),
+        ] {
             let mut c = stream(s, r, p);
             let xc: Vec<u64> = (0..8).map(|_| c.random()).collect();
             assert_ne!(xa, xc, "key ({s},{r},{p}) collides");
