@@ -18,13 +18,12 @@ use rand_distr::{Distribution, StandardNormal};
 
 use super::{
     distinct_sampled, fill_posterior, gather, ParticleConfig, ParticleFilter, Posterior, StepInfo,
+    WeightedSet,
 };
 use crate::error::FilterError;
 use crate::health::Health;
 use crate::kalman::{cholesky_repaired, log_normal_density_chol};
 use crate::model::{Layout, StateSpace};
-use crate::resampling::Resampler;
-use crate::weights::{normalise_log_weights, reset_uniform};
 
 /// Bootstrap PF (SPEC §5.1) for a model with an `NX`-dimensional augmented state and `NY`
 /// measurements. All buffers are allocated in [`BootstrapPf::new`]; `step` allocates nothing.
@@ -38,13 +37,8 @@ where
     /// Particles `x_k^i` (current buffer) and the gather target of resampling.
     x: Vec<SVector<f64, NX>>,
     x_next: Vec<SVector<f64, NX>>,
-    /// Normalised log-weights and linear weights.
-    log_w: Vec<f64>,
-    w: Vec<f64>,
-    ancestors: Vec<usize>,
-    resampler: Resampler,
-    /// The resampling decided at the previous step, carried out at the start of the next one.
-    pending_resample: bool,
+    /// Weights and the resampling bookkeeping.
+    set: WeightedSet,
     /// Process-noise standard deviations (diagonal `Q`), read once from the model.
     noise_sd: SVector<f64, NX>,
     /// Lower Cholesky factor of the constant `R`, or the error that prevented it.
@@ -65,7 +59,7 @@ where
     #[track_caller]
     pub fn new(model: M, config: ParticleConfig) -> Self {
         let np = config.particles;
-        assert!(np > 0, "a particle filter needs at least one particle");
+        let set = WeightedSet::new(&config);
         let mut health = Health::default();
         let r_chol = cholesky_repaired(
             &model.measurement_cov(),
@@ -79,11 +73,7 @@ where
             r_chol,
             x: vec![SVector::zeros(); np],
             x_next: vec![SVector::zeros(); np],
-            log_w: vec![0.0; np],
-            w: vec![0.0; np],
-            ancestors: vec![0; np],
-            resampler: Resampler::new(config.resampling.scheme, np),
-            pending_resample: false,
+            set,
             setup_health: health,
             health,
             config,
@@ -102,7 +92,7 @@ where
 
     /// The normalised weights of the current step.
     pub fn weights(&self) -> &[f64] {
-        &self.w
+        &self.set.w
     }
 }
 
@@ -124,8 +114,7 @@ where
         for xi in self.x.iter_mut() {
             *xi = self.model.sample_initial(rng);
         }
-        reset_uniform(&mut self.log_w, &mut self.w);
-        self.pending_resample = false;
+        self.set.reset();
         self.health = self.setup_health;
     }
 
@@ -140,15 +129,11 @@ where
             Ok(l) => *l,
             Err(e) => return Err(e.clone()),
         };
-        if self.pending_resample {
-            self.resampler.resample(&self.w, &mut self.ancestors, rng);
-            gather(&self.x, &self.ancestors, &mut self.x_next);
+        if let Some(ancestors) = self.set.take_pending(rng, &mut self.health) {
+            gather(&self.x, ancestors, &mut self.x_next);
             std::mem::swap(&mut self.x, &mut self.x_next);
-            reset_uniform(&mut self.log_w, &mut self.w);
-            self.health.resamples += 1;
-            self.pending_resample = false;
         }
-        for (xi, lw) in self.x.iter_mut().zip(self.log_w.iter_mut()) {
+        for (xi, lw) in self.x.iter_mut().zip(self.set.log_w.iter_mut()) {
             let mut xn = self.model.propagate(k, xi);
             for j in 0..NX {
                 let sd = self.noise_sd[j];
@@ -162,24 +147,13 @@ where
             let residual = y - self.model.measure(k, xi);
             *lw += log_normal_density_chol(&residual, &r_chol);
         }
-        let s = normalise_log_weights(&mut self.log_w, &mut self.w, k, &mut self.health)?;
-        let resample = self
-            .config
-            .resampling
-            .should_resample(s.ess, self.config.particles);
-        self.pending_resample = resample;
-        Ok(StepInfo {
-            k,
-            loglik_increment: s.loglik_increment,
-            ess: s.ess,
-            resampled: resample,
-        })
+        self.set.conclude(k, &mut self.health)
     }
 
     fn posterior(&self, out: &mut Posterior) {
         let none_mu: &[SVector<f64, 0>] = &[];
         let none_cov: &[SMatrix<f64, 0, 0>] = &[];
-        fill_posterior(&self.layout, &self.w, &self.x, none_mu, none_cov, out);
+        fill_posterior(&self.layout, &self.set.w, &self.x, none_mu, none_cov, out);
     }
 
     fn layout(&self) -> &Layout {

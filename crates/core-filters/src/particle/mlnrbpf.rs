@@ -24,13 +24,12 @@ use rand_distr::{Distribution, StandardNormal};
 
 use super::{
     distinct_sampled, fill_posterior, gather, ParticleConfig, ParticleFilter, Posterior, StepInfo,
+    WeightedSet,
 };
 use crate::error::FilterError;
 use crate::health::Health;
 use crate::kalman::{cholesky_repaired, gaussian_update, kf_update};
 use crate::model::{ConditionallyLinear, Layout};
-use crate::resampling::Resampler;
-use crate::weights::{normalise_log_weights, reset_uniform};
 
 /// A vector of `N` independent standard normal draws.
 pub(crate) fn standard_normal<const N: usize, G: Rng + ?Sized>(rng: &mut G) -> SVector<f64, N> {
@@ -113,11 +112,8 @@ where
     mu_next: Vec<SVector<f64, NZ>>,
     cov: Vec<SMatrix<f64, NZ, NZ>>,
     cov_next: Vec<SMatrix<f64, NZ, NZ>>,
-    log_w: Vec<f64>,
-    w: Vec<f64>,
-    ancestors: Vec<usize>,
-    resampler: Resampler,
-    pending_resample: bool,
+    /// Weights and the resampling bookkeeping.
+    set: WeightedSet,
     noise_sd: SVector<f64, NU>,
     linked: LinkedRows<NU, NL>,
     r: SMatrix<f64, NY, NY>,
@@ -150,11 +146,7 @@ where
             mu_next: vec![SVector::zeros(); np],
             cov: vec![SMatrix::zeros(); np],
             cov_next: vec![SMatrix::zeros(); np],
-            log_w: vec![0.0; np],
-            w: vec![0.0; np],
-            ancestors: vec![0; np],
-            resampler: Resampler::new(config.resampling.scheme, np),
-            pending_resample: false,
+            set: WeightedSet::new(&config),
             health: Health::default(),
             config,
             model,
@@ -182,24 +174,20 @@ where
 
     /// The normalised weights of the current step.
     pub fn weights(&self) -> &[f64] {
-        &self.w
+        &self.set.w
     }
 
     /// Carries out the resampling decided at the previous step: `(u, μ, C)` jointly.
     fn resample_pending<G: Rng + ?Sized>(&mut self, rng: &mut G) {
-        if !self.pending_resample {
+        let Some(ancestors) = self.set.take_pending(rng, &mut self.health) else {
             return;
-        }
-        self.resampler.resample(&self.w, &mut self.ancestors, rng);
-        gather(&self.u, &self.ancestors, &mut self.u_next);
-        gather(&self.mu, &self.ancestors, &mut self.mu_next);
-        gather(&self.cov, &self.ancestors, &mut self.cov_next);
+        };
+        gather(&self.u, ancestors, &mut self.u_next);
+        gather(&self.mu, ancestors, &mut self.mu_next);
+        gather(&self.cov, ancestors, &mut self.cov_next);
         std::mem::swap(&mut self.u, &mut self.u_next);
         std::mem::swap(&mut self.mu, &mut self.mu_next);
         std::mem::swap(&mut self.cov, &mut self.cov_next);
-        reset_uniform(&mut self.log_w, &mut self.w);
-        self.health.resamples += 1;
-        self.pending_resample = false;
     }
 }
 
@@ -223,8 +211,7 @@ where
             *u = self.model.sample_initial(rng);
             (*mu, *cov) = self.model.sample_marginal_prior(rng);
         }
-        reset_uniform(&mut self.log_w, &mut self.w);
-        self.pending_resample = false;
+        self.set.reset();
         self.health = Health::default();
     }
 
@@ -257,33 +244,22 @@ where
             };
             self.u[i] = u_new;
             if !proposed {
-                self.log_w[i] = f64::NAN;
+                self.set.log_w[i] = f64::NAN;
                 continue;
             }
             // (c) + (d): the KF update's log-likelihood is log N(y; H μ + h, H C Hᵀ + R).
             let (h, H) = self.model.observation(k, &u_new);
             match kf_update(mu, cov, y, &H, &h, &self.r, k, health) {
-                Ok(inn) => self.log_w[i] += inn.loglik,
-                Err(_) => self.log_w[i] = f64::NAN,
+                Ok(inn) => self.set.log_w[i] += inn.loglik,
+                Err(_) => self.set.log_w[i] = f64::NAN,
             }
         }
         // (e)
-        let s = normalise_log_weights(&mut self.log_w, &mut self.w, k, &mut self.health)?;
-        let resample = self
-            .config
-            .resampling
-            .should_resample(s.ess, self.config.particles);
-        self.pending_resample = resample;
-        Ok(StepInfo {
-            k,
-            loglik_increment: s.loglik_increment,
-            ess: s.ess,
-            resampled: resample,
-        })
+        self.set.conclude(k, &mut self.health)
     }
 
     fn posterior(&self, out: &mut Posterior) {
-        fill_posterior(&self.layout, &self.w, &self.u, &self.mu, &self.cov, out);
+        fill_posterior(&self.layout, &self.set.w, &self.u, &self.mu, &self.cov, out);
     }
 
     fn layout(&self) -> &Layout {

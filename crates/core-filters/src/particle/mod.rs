@@ -20,7 +20,8 @@ use serde::{Deserialize, Serialize};
 use crate::error::FilterError;
 use crate::health::Health;
 use crate::model::{Layout, Slot};
-use crate::resampling::ResamplePolicy;
+use crate::resampling::{ResamplePolicy, Resampler};
+use crate::weights::{normalise_log_weights, reset_uniform};
 
 /// Settings shared by every particle filter.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -37,6 +38,77 @@ impl Default for ParticleConfig {
             particles: 500,
             resampling: ResamplePolicy::default(),
         }
+    }
+}
+
+/// The weights of a particle system and its resampling bookkeeping, shared by every particle
+/// filter: log-weights and weights, the ancestor buffer, the resampler and the resampling decided
+/// at the previous step (carried out at the start of the next one, see
+/// [`ParticleFilter::posterior`]). Allocated once; nothing here allocates afterwards.
+#[derive(Debug, Clone)]
+pub struct WeightedSet {
+    /// Normalised log-weights; filters add each particle's log-likelihood increment in `step`.
+    pub log_w: Vec<f64>,
+    /// Normalised weights.
+    pub w: Vec<f64>,
+    ancestors: Vec<usize>,
+    resampler: Resampler,
+    policy: ResamplePolicy,
+    pending: bool,
+}
+
+impl WeightedSet {
+    /// Uniform weights for `config.particles` particles.
+    pub fn new(config: &ParticleConfig) -> Self {
+        let np = config.particles;
+        assert!(np > 0, "a particle filter needs at least one particle");
+        let mut set = Self {
+            log_w: vec![0.0; np],
+            w: vec![0.0; np],
+            ancestors: vec![0; np],
+            resampler: Resampler::new(config.resampling.scheme, np),
+            policy: config.resampling,
+            pending: false,
+        };
+        set.reset();
+        set
+    }
+
+    /// Uniform weights, nothing pending (initialisation).
+    pub fn reset(&mut self) {
+        reset_uniform(&mut self.log_w, &mut self.w);
+        self.pending = false;
+    }
+
+    /// If the previous step decided to resample, draws the ancestors, resets the weights to
+    /// uniform, counts the resampling and returns the ancestors; the caller then moves its
+    /// particle buffers with [`gather`].
+    pub fn take_pending<G: Rng + ?Sized>(
+        &mut self,
+        rng: &mut G,
+        health: &mut Health,
+    ) -> Option<&[usize]> {
+        if !self.pending {
+            return None;
+        }
+        self.resampler.resample(&self.w, &mut self.ancestors, rng);
+        reset_uniform(&mut self.log_w, &mut self.w);
+        health.resamples += 1;
+        self.pending = false;
+        Some(&self.ancestors)
+    }
+
+    /// Ends step `k`: normalises the log-weights (SPEC §3, the one weight routine), decides
+    /// whether to resample, and reports the step.
+    pub fn conclude(&mut self, k: usize, health: &mut Health) -> Result<StepInfo, FilterError> {
+        let s = normalise_log_weights(&mut self.log_w, &mut self.w, k, health)?;
+        self.pending = self.policy.should_resample(s.ess, self.w.len());
+        Ok(StepInfo {
+            k,
+            loglik_increment: s.loglik_increment,
+            ess: s.ess,
+            resampled: self.pending,
+        })
     }
 }
 

@@ -44,15 +44,13 @@ use rand::Rng;
 use rand_distr::{Distribution, StandardNormal};
 
 use super::{distinct_sampled, fill_posterior, gather, ParticleConfig, ParticleFilter};
-use super::{Posterior, StepInfo};
+use super::{Posterior, StepInfo, WeightedSet};
 use crate::error::FilterError;
 use crate::health::Health;
 use crate::kalman::kf::{solve_lower_in_place, symmetrise};
 use crate::kalman::second_order_terms;
 use crate::kalman::{cholesky_repaired, ekf2_propagate, ekf2_update, gaussian_update};
 use crate::model::{ConditionallyQuadratic, Layout, SparseHessians};
-use crate::resampling::Resampler;
-use crate::weights::{normalise_log_weights, reset_uniform};
 
 /// Which implementation of the Gaussian steps the filter uses (module documentation).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -83,7 +81,8 @@ pub struct MpfEkf2<M, const NN: usize, const ND: usize, const NBL: usize, const 
     config: ParticleConfig,
     kernel: MpfKernel,
     layout: Layout,
-    resampler: Resampler,
+    /// Weights and the resampling bookkeeping.
+    set: WeightedSet,
     /// Sampled block `xⁿ` per particle (front buffer) and the resampling target (back buffer).
     x_n: Vec<SVector<f64, NN>>,
     x_n_back: Vec<SVector<f64, NN>>,
@@ -93,10 +92,6 @@ pub struct MpfEkf2<M, const NN: usize, const ND: usize, const NBL: usize, const 
     /// Covariance `P` of `x^bl` per particle, double-buffered.
     cov: Vec<SMatrix<f64, NBL, NBL>>,
     cov_back: Vec<SMatrix<f64, NBL, NBL>>,
-    /// Normalised log-weights and weights of the current step.
-    log_w: Vec<f64>,
-    w: Vec<f64>,
-    ancestors: Vec<usize>,
     /// `Qₙ` (ND×ND, diagonal).
     q_n: SMatrix<f64, ND, ND>,
     /// Diagonal of `Q_bl`.
@@ -105,8 +100,6 @@ pub struct MpfEkf2<M, const NN: usize, const ND: usize, const NBL: usize, const 
     q_bl: SMatrix<f64, NBL, NBL>,
     /// `R`.
     r: SMatrix<f64, NY, NY>,
-    /// Resampling decided at the previous step, carried out at the start of the next.
-    pending_resample: bool,
     health: Health,
 }
 
@@ -130,25 +123,18 @@ where
         let q_bl = SMatrix::<f64, NBL, NBL>::from_diagonal(&q_bl_diag);
         let r = model.measurement_cov();
         let layout = model.layout();
-        let mut log_w = vec![0.0; np];
-        let mut w = vec![0.0; np];
-        reset_uniform(&mut log_w, &mut w);
         Self {
-            resampler: Resampler::new(config.resampling.scheme, np),
+            set: WeightedSet::new(&config),
             x_n: vec![SVector::zeros(); np],
             x_n_back: vec![SVector::zeros(); np],
             mu: vec![SVector::zeros(); np],
             mu_back: vec![SVector::zeros(); np],
             cov: vec![SMatrix::zeros(); np],
             cov_back: vec![SMatrix::zeros(); np],
-            log_w,
-            w,
-            ancestors: vec![0; np],
             q_n,
             q_bl_diag,
             q_bl,
             r,
-            pending_resample: false,
             health: Health::default(),
             kernel: MpfKernel::default(),
             layout,
@@ -169,7 +155,7 @@ where
 
     /// Normalised weights of the current step.
     pub fn weights(&self) -> &[f64] {
-        &self.w
+        &self.set.w
     }
 
     /// Sampled block `xⁿ` of every particle.
@@ -203,19 +189,18 @@ where
         (prop.mean, cov)
     }
 
-    /// Carries out the resampling decided at the previous step: ancestors from the weights,
-    /// gather `(xⁿ, m, P)` jointly into the back buffers, swap, reset the weights.
+    /// Carries out the resampling decided at the previous step: gather `(xⁿ, m, P)` jointly
+    /// into the back buffers and swap.
     fn resample_pending<G: Rng + ?Sized>(&mut self, rng: &mut G) {
-        self.resampler.resample(&self.w, &mut self.ancestors, rng);
-        gather(&self.x_n, &self.ancestors, &mut self.x_n_back);
-        gather(&self.mu, &self.ancestors, &mut self.mu_back);
-        gather(&self.cov, &self.ancestors, &mut self.cov_back);
+        let Some(ancestors) = self.set.take_pending(rng, &mut self.health) else {
+            return;
+        };
+        gather(&self.x_n, ancestors, &mut self.x_n_back);
+        gather(&self.mu, ancestors, &mut self.mu_back);
+        gather(&self.cov, ancestors, &mut self.cov_back);
         std::mem::swap(&mut self.x_n, &mut self.x_n_back);
         std::mem::swap(&mut self.mu, &mut self.mu_back);
         std::mem::swap(&mut self.cov, &mut self.cov_back);
-        reset_uniform(&mut self.log_w, &mut self.w);
-        self.health.resamples += 1;
-        self.pending_resample = false;
     }
 }
 
@@ -562,8 +547,7 @@ where
             self.mu[i] = m0;
             self.cov[i] = p0;
         }
-        reset_uniform(&mut self.log_w, &mut self.w);
-        self.pending_resample = false;
+        self.set.reset();
         self.health = Health::default();
     }
 
@@ -581,11 +565,9 @@ where
                 which: "measurement",
             });
         }
-        if self.pending_resample {
-            self.resample_pending(rng);
-        }
+        self.resample_pending(rng);
         for i in 0..self.config.particles {
-            if self.log_w[i] == f64::NEG_INFINITY {
+            if self.set.log_w[i] == f64::NEG_INFINITY {
                 continue;
             }
             let res = advance_particle(
@@ -604,27 +586,23 @@ where
                 &mut self.health,
             );
             match res {
-                Ok(loglik) => self.log_w[i] += loglik,
+                Ok(loglik) => self.set.log_w[i] += loglik,
                 // Counted as a NaN weight by the weight routine (module docs).
-                Err(_) => self.log_w[i] = f64::NAN,
+                Err(_) => self.set.log_w[i] = f64::NAN,
             }
         }
-        let summary = normalise_log_weights(&mut self.log_w, &mut self.w, k, &mut self.health)?;
-        let resample = self
-            .config
-            .resampling
-            .should_resample(summary.ess, self.config.particles);
-        self.pending_resample = resample;
-        Ok(StepInfo {
-            k,
-            loglik_increment: summary.loglik_increment,
-            ess: summary.ess,
-            resampled: resample,
-        })
+        self.set.conclude(k, &mut self.health)
     }
 
     fn posterior(&self, out: &mut Posterior) {
-        fill_posterior(&self.layout, &self.w, &self.x_n, &self.mu, &self.cov, out);
+        fill_posterior(
+            &self.layout,
+            &self.set.w,
+            &self.x_n,
+            &self.mu,
+            &self.cov,
+            out,
+        );
     }
 
     fn layout(&self) -> &Layout {

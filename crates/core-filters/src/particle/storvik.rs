@@ -41,13 +41,12 @@ use serde::{Deserialize, Serialize};
 use super::mlnrbpf::{standard_normal, LinkedRows};
 use super::{
     distinct_sampled, fill_posterior, gather, ParticleConfig, ParticleFilter, Posterior, StepInfo,
+    WeightedSet,
 };
 use crate::error::FilterError;
 use crate::health::Health;
 use crate::kalman::{cholesky_repaired, gaussian_update, kf_update, log_normal_density_chol};
 use crate::model::{ConditionallyLinear, Layout};
-use crate::resampling::Resampler;
-use crate::weights::{normalise_log_weights, reset_uniform};
 
 /// How Storvik's step (iii) treats the measurement `y_k` (SPEC §5.3).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
@@ -124,11 +123,8 @@ where
     mu_next: Vec<SVector<f64, NZ>>,
     cov: Vec<SMatrix<f64, NZ, NZ>>,
     cov_next: Vec<SMatrix<f64, NZ, NZ>>,
-    log_w: Vec<f64>,
-    w: Vec<f64>,
-    ancestors: Vec<usize>,
-    resampler: Resampler,
-    pending_resample: bool,
+    /// Weights and the resampling bookkeeping.
+    set: WeightedSet,
     noise_sd: SVector<f64, NU>,
     linked: LinkedRows<NU, NL>,
     r: SMatrix<f64, NY, NY>,
@@ -174,11 +170,7 @@ where
             mu_next: vec![SVector::zeros(); np],
             cov: vec![SMatrix::zeros(); np],
             cov_next: vec![SMatrix::zeros(); np],
-            log_w: vec![0.0; np],
-            w: vec![0.0; np],
-            ancestors: vec![0; np],
-            resampler: Resampler::new(config.resampling.scheme, np),
-            pending_resample: false,
+            set: WeightedSet::new(&config),
             setup_health: health,
             health,
             config,
@@ -211,23 +203,19 @@ where
 
     /// The normalised weights of the current step.
     pub fn weights(&self) -> &[f64] {
-        &self.w
+        &self.set.w
     }
 
     fn resample_pending<G: Rng + ?Sized>(&mut self, rng: &mut G) {
-        if !self.pending_resample {
+        let Some(ancestors) = self.set.take_pending(rng, &mut self.health) else {
             return;
-        }
-        self.resampler.resample(&self.w, &mut self.ancestors, rng);
-        gather(&self.u, &self.ancestors, &mut self.u_next);
-        gather(&self.mu, &self.ancestors, &mut self.mu_next);
-        gather(&self.cov, &self.ancestors, &mut self.cov_next);
+        };
+        gather(&self.u, ancestors, &mut self.u_next);
+        gather(&self.mu, ancestors, &mut self.mu_next);
+        gather(&self.cov, ancestors, &mut self.cov_next);
         std::mem::swap(&mut self.u, &mut self.u_next);
         std::mem::swap(&mut self.mu, &mut self.mu_next);
         std::mem::swap(&mut self.cov, &mut self.cov_next);
-        reset_uniform(&mut self.log_w, &mut self.w);
-        self.health.resamples += 1;
-        self.pending_resample = false;
     }
 }
 
@@ -251,8 +239,7 @@ where
             *u = self.model.sample_initial(rng);
             (*mu, *cov) = self.model.sample_marginal_prior(rng);
         }
-        reset_uniform(&mut self.log_w, &mut self.w);
-        self.pending_resample = false;
+        self.set.reset();
         self.health = self.setup_health;
     }
 
@@ -275,7 +262,7 @@ where
             // (i) z0 ~ N(μ, C) with a semidefinite factor of C.
             let Some(c_chol) = psd_cholesky(cov) else {
                 health.cholesky_failures += 1;
-                self.log_w[i] = f64::NAN;
+                self.set.log_w[i] = f64::NAN;
                 continue;
             };
             let z0 = *mu + c_chol * standard_normal::<NZ, G>(rng);
@@ -295,11 +282,11 @@ where
             self.u[i] = u_new;
             let (h, H) = self.model.observation(k, &u_new);
             let y_z0 = H * z0 + h;
-            self.log_w[i] += log_normal_density_chol(&(y - y_z0), &r_chol);
+            self.set.log_w[i] += log_normal_density_chol(&(y - y_z0), &r_chol);
             // (iii) the linked rows: linear in z with Jacobian F_L and noise Q_L.
             let mean_l = f_l + F_L * *mu;
             if gaussian_update(mu, cov, &u_l, &mean_l, &F_L, &linked.q_l, k, health).is_err() {
-                self.log_w[i] = f64::NAN;
+                self.set.log_w[i] = f64::NAN;
                 continue;
             }
             // (iii) y_k, sequentially after the linked rows (block-diagonal noise).
@@ -317,25 +304,14 @@ where
                 }
             };
             if updated.is_err() {
-                self.log_w[i] = f64::NAN;
+                self.set.log_w[i] = f64::NAN;
             }
         }
-        let s = normalise_log_weights(&mut self.log_w, &mut self.w, k, &mut self.health)?;
-        let resample = self
-            .config
-            .resampling
-            .should_resample(s.ess, self.config.particles);
-        self.pending_resample = resample;
-        Ok(StepInfo {
-            k,
-            loglik_increment: s.loglik_increment,
-            ess: s.ess,
-            resampled: resample,
-        })
+        self.set.conclude(k, &mut self.health)
     }
 
     fn posterior(&self, out: &mut Posterior) {
-        fill_posterior(&self.layout, &self.w, &self.u, &self.mu, &self.cov, out);
+        fill_posterior(&self.layout, &self.set.w, &self.u, &self.mu, &self.cov, out);
     }
 
     fn layout(&self) -> &Layout {
