@@ -22,6 +22,8 @@ enum Command {
     Filter(cli::filter::Args),
     /// Reproduce the paper: every study, figure and the report.
     Reproduce(cli::reproduce::Args),
+    /// Identification-accuracy regression check against reviewed thresholds.
+    Regression(cli::regression::Args),
     /// Merge the records of sharded sweeps.
     Merge(cli::merge::Args),
     /// Compute Table I (moments of z = xᵀx by linearisation, EKF2 and the unscented transform).
@@ -36,5 +38,6 @@ fn main() -> anyhow::Result<()> {
         Command::Table1(args) => cli::table1::run(args),
         Command::Reproduce(args) => cli::reproduce::run(args),
         Command::Merge(args) => cli::merge::run(args),
+        Command::Regression(args) => cli::regression::run(args),
     }
 }
