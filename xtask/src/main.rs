@@ -154,7 +154,9 @@ fn bench(root: &Path, full: bool) -> Result<()> {
     let started = SystemTime::now();
     let mut cmd = Command::new(cargo());
     cmd.current_dir(root)
-        .args(["bench", "-p", "core-filters", "--benches"]);
+        // The bench targets only (`--benches` would also run the library's unit tests, whose
+        // harness rejects criterion's options).
+        .args(["bench", "-p", "core-filters", "--bench", "*"]);
     if !full {
         // Enough for a few-percent median on steps of 10 µs to 10 ms; trends, not proofs.
         cmd.args([
