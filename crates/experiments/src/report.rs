@@ -145,6 +145,13 @@ pub fn write_report(
     );
     row(
         &mut o,
+        &[
+            "runs executed by this invocation".into(),
+            format!("{executed} of {total_jobs} (the others were loaded from existing records)"),
+        ],
+    );
+    row(
+        &mut o,
         &["wall time, sweeps (s)".into(), format!("{sweep_s:.1}")],
     );
     row(
