@@ -23,8 +23,8 @@ use rand::Rng;
 use rand_distr::{Distribution, StandardNormal};
 
 use super::{
-    distinct_sampled, fill_posterior, gather, ParticleConfig, ParticleFilter, Posterior, StepInfo,
-    WeightedSet,
+    distinct_sampled, fill_posterior, MarginalParticles, ParticleConfig, ParticleFilter, Posterior,
+    StepInfo, WeightedSet,
 };
 use crate::error::FilterError;
 use crate::health::Health;
@@ -105,13 +105,8 @@ where
     model: M,
     config: ParticleConfig,
     layout: Layout,
-    /// Sampled block `u^i`, Gaussian `(μ^i, C^i)` of `z`, each double-buffered for resampling.
-    u: Vec<SVector<f64, NU>>,
-    u_next: Vec<SVector<f64, NU>>,
-    mu: Vec<SVector<f64, NZ>>,
-    mu_next: Vec<SVector<f64, NZ>>,
-    cov: Vec<SMatrix<f64, NZ, NZ>>,
-    cov_next: Vec<SMatrix<f64, NZ, NZ>>,
+    /// Sampled blocks and Gaussians of the marginalised block, double-buffered.
+    p: MarginalParticles<NU, NZ>,
     /// Weights and the resampling bookkeeping.
     set: WeightedSet,
     noise_sd: SVector<f64, NU>,
@@ -140,12 +135,7 @@ where
             linked: LinkedRows::new(model.linked_rows(), &noise_sd),
             r: model.measurement_cov(),
             noise_sd,
-            u: vec![SVector::zeros(); np],
-            u_next: vec![SVector::zeros(); np],
-            mu: vec![SVector::zeros(); np],
-            mu_next: vec![SVector::zeros(); np],
-            cov: vec![SMatrix::zeros(); np],
-            cov_next: vec![SMatrix::zeros(); np],
+            p: MarginalParticles::new(np),
             set: WeightedSet::new(&config),
             health: Health::default(),
             config,
@@ -159,17 +149,17 @@ where
 
     /// The sampled blocks of the current step.
     pub fn sampled(&self) -> &[SVector<f64, NU>] {
-        &self.u
+        &self.p.sampled
     }
 
     /// The per-particle means `μ^i` of `z`.
     pub fn means(&self) -> &[SVector<f64, NZ>] {
-        &self.mu
+        &self.p.mu
     }
 
     /// The per-particle covariances `C^i` of `z`.
     pub fn covariances(&self) -> &[SMatrix<f64, NZ, NZ>] {
-        &self.cov
+        &self.p.cov
     }
 
     /// The normalised weights of the current step.
@@ -182,12 +172,7 @@ where
         let Some(ancestors) = self.set.take_pending(rng, &mut self.health) else {
             return;
         };
-        gather(&self.u, ancestors, &mut self.u_next);
-        gather(&self.mu, ancestors, &mut self.mu_next);
-        gather(&self.cov, ancestors, &mut self.cov_next);
-        std::mem::swap(&mut self.u, &mut self.u_next);
-        std::mem::swap(&mut self.mu, &mut self.mu_next);
-        std::mem::swap(&mut self.cov, &mut self.cov_next);
+        self.p.resample(ancestors);
     }
 }
 
@@ -207,7 +192,13 @@ where
     /// Draws `u_0^i` and `(μ_0^i, C_0^i)` from the model's priors, uniform weights, counters
     /// reset.
     fn initialise<G: Rng + ?Sized>(&mut self, rng: &mut G) {
-        for ((u, mu), cov) in self.u.iter_mut().zip(&mut self.mu).zip(&mut self.cov) {
+        for ((u, mu), cov) in self
+            .p
+            .sampled
+            .iter_mut()
+            .zip(&mut self.p.mu)
+            .zip(&mut self.p.cov)
+        {
             *u = self.model.sample_initial(rng);
             (*mu, *cov) = self.model.sample_marginal_prior(rng);
         }
@@ -226,8 +217,8 @@ where
         self.resample_pending(rng);
         let linked = &self.linked;
         for i in 0..self.config.particles {
-            let (mu, cov, health) = (&mut self.mu[i], &mut self.cov[i], &mut self.health);
-            let (f, F_L) = self.model.transition(k, &self.u[i]);
+            let (mu, cov, health) = (&mut self.p.mu[i], &mut self.p.cov[i], &mut self.health);
+            let (f, F_L) = self.model.transition(k, &self.p.sampled[i]);
             let mut u_new = f;
             linked.add_unlinked_noise(&mut u_new, &self.noise_sd, rng);
             // (a) the linked rows with z marginalised: N(f_L + F_L μ, F_L C F_Lᵀ + Q_L).
@@ -242,7 +233,7 @@ where
                 }
                 Err(_) => false,
             };
-            self.u[i] = u_new;
+            self.p.sampled[i] = u_new;
             if !proposed {
                 self.set.log_w[i] = f64::NAN;
                 continue;
@@ -259,7 +250,14 @@ where
     }
 
     fn posterior(&self, out: &mut Posterior) {
-        fill_posterior(&self.layout, &self.set.w, &self.u, &self.mu, &self.cov, out);
+        fill_posterior(
+            &self.layout,
+            &self.set.w,
+            &self.p.sampled,
+            &self.p.mu,
+            &self.p.cov,
+            out,
+        );
     }
 
     fn layout(&self) -> &Layout {
@@ -271,6 +269,6 @@ where
     }
 
     fn distinct_sampled_params(&self) -> Vec<(String, usize)> {
-        distinct_sampled(&self.layout, &self.u)
+        distinct_sampled(&self.layout, &self.p.sampled)
     }
 }

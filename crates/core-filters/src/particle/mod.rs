@@ -112,6 +112,43 @@ impl WeightedSet {
     }
 }
 
+/// The particles of a marginalized filter: per particle the sampled block and the Gaussian
+/// `N(μ, C)` of the marginalised block, double-buffered so that resampling moves `(sampled, μ, C)`
+/// jointly without allocating (MLN-RBPF, Storvik, MPF-EKF2).
+#[derive(Debug, Clone)]
+pub struct MarginalParticles<const NS: usize, const NM: usize> {
+    pub sampled: Vec<SVector<f64, NS>>,
+    pub mu: Vec<SVector<f64, NM>>,
+    pub cov: Vec<SMatrix<f64, NM, NM>>,
+    sampled_back: Vec<SVector<f64, NS>>,
+    mu_back: Vec<SVector<f64, NM>>,
+    cov_back: Vec<SMatrix<f64, NM, NM>>,
+}
+
+impl<const NS: usize, const NM: usize> MarginalParticles<NS, NM> {
+    /// Zeroed storage for `np` particles.
+    pub fn new(np: usize) -> Self {
+        Self {
+            sampled: vec![SVector::zeros(); np],
+            mu: vec![SVector::zeros(); np],
+            cov: vec![SMatrix::zeros(); np],
+            sampled_back: vec![SVector::zeros(); np],
+            mu_back: vec![SVector::zeros(); np],
+            cov_back: vec![SMatrix::zeros(); np],
+        }
+    }
+
+    /// Replaces particle `i` by particle `ancestors[i]`, all three blocks jointly.
+    pub fn resample(&mut self, ancestors: &[usize]) {
+        gather(&self.sampled, ancestors, &mut self.sampled_back);
+        gather(&self.mu, ancestors, &mut self.mu_back);
+        gather(&self.cov, ancestors, &mut self.cov_back);
+        std::mem::swap(&mut self.sampled, &mut self.sampled_back);
+        std::mem::swap(&mut self.mu, &mut self.mu_back);
+        std::mem::swap(&mut self.cov, &mut self.cov_back);
+    }
+}
+
 /// What one filter step reports.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct StepInfo {

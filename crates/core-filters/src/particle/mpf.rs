@@ -43,8 +43,8 @@ use nalgebra::{SMatrix, SVector};
 use rand::Rng;
 use rand_distr::{Distribution, StandardNormal};
 
-use super::{distinct_sampled, fill_posterior, gather, ParticleConfig, ParticleFilter};
-use super::{Posterior, StepInfo, WeightedSet};
+use super::{distinct_sampled, fill_posterior, ParticleConfig, ParticleFilter};
+use super::{MarginalParticles, Posterior, StepInfo, WeightedSet};
 use crate::error::FilterError;
 use crate::health::Health;
 use crate::kalman::kf::{solve_lower_in_place, symmetrise};
@@ -83,15 +83,8 @@ pub struct MpfEkf2<M, const NN: usize, const ND: usize, const NBL: usize, const 
     layout: Layout,
     /// Weights and the resampling bookkeeping.
     set: WeightedSet,
-    /// Sampled block `xⁿ` per particle (front buffer) and the resampling target (back buffer).
-    x_n: Vec<SVector<f64, NN>>,
-    x_n_back: Vec<SVector<f64, NN>>,
-    /// Mean `m` of `x^bl` per particle, double-buffered.
-    mu: Vec<SVector<f64, NBL>>,
-    mu_back: Vec<SVector<f64, NBL>>,
-    /// Covariance `P` of `x^bl` per particle, double-buffered.
-    cov: Vec<SMatrix<f64, NBL, NBL>>,
-    cov_back: Vec<SMatrix<f64, NBL, NBL>>,
+    /// Sampled blocks and Gaussians of the marginalised block, double-buffered.
+    p: MarginalParticles<NN, NBL>,
     /// `Qₙ` (ND×ND, diagonal).
     q_n: SMatrix<f64, ND, ND>,
     /// Diagonal of `Q_bl`.
@@ -125,12 +118,7 @@ where
         let layout = model.layout();
         Self {
             set: WeightedSet::new(&config),
-            x_n: vec![SVector::zeros(); np],
-            x_n_back: vec![SVector::zeros(); np],
-            mu: vec![SVector::zeros(); np],
-            mu_back: vec![SVector::zeros(); np],
-            cov: vec![SMatrix::zeros(); np],
-            cov_back: vec![SMatrix::zeros(); np],
+            p: MarginalParticles::new(np),
             q_n,
             q_bl_diag,
             q_bl,
@@ -160,17 +148,17 @@ where
 
     /// Sampled block `xⁿ` of every particle.
     pub fn sampled(&self) -> &[SVector<f64, NN>] {
-        &self.x_n
+        &self.p.sampled
     }
 
     /// Means `m` of the marginalised block of every particle.
     pub fn marginal_means(&self) -> &[SVector<f64, NBL>] {
-        &self.mu
+        &self.p.mu
     }
 
     /// Covariances `P` of the marginalised block of every particle.
     pub fn marginal_covs(&self) -> &[SMatrix<f64, NBL, NBL>] {
-        &self.cov
+        &self.p.cov
     }
 
     /// SPEC §5.4 (a): mean and covariance of the proposal of the dynamic sampled entries
@@ -195,12 +183,7 @@ where
         let Some(ancestors) = self.set.take_pending(rng, &mut self.health) else {
             return;
         };
-        gather(&self.x_n, ancestors, &mut self.x_n_back);
-        gather(&self.mu, ancestors, &mut self.mu_back);
-        gather(&self.cov, ancestors, &mut self.cov_back);
-        std::mem::swap(&mut self.x_n, &mut self.x_n_back);
-        std::mem::swap(&mut self.mu, &mut self.mu_back);
-        std::mem::swap(&mut self.cov, &mut self.cov_back);
+        self.p.resample(ancestors);
     }
 }
 
@@ -542,10 +525,10 @@ where
 
     fn initialise<G: Rng + ?Sized>(&mut self, rng: &mut G) {
         for i in 0..self.config.particles {
-            self.x_n[i] = self.model.sample_initial(rng);
+            self.p.sampled[i] = self.model.sample_initial(rng);
             let (m0, p0) = self.model.sample_marginal_prior(rng);
-            self.mu[i] = m0;
-            self.cov[i] = p0;
+            self.p.mu[i] = m0;
+            self.p.cov[i] = p0;
         }
         self.set.reset();
         self.health = Health::default();
@@ -579,9 +562,9 @@ where
                 &self.r,
                 k,
                 y,
-                &mut self.x_n[i],
-                &mut self.mu[i],
-                &mut self.cov[i],
+                &mut self.p.sampled[i],
+                &mut self.p.mu[i],
+                &mut self.p.cov[i],
                 rng,
                 &mut self.health,
             );
@@ -598,9 +581,9 @@ where
         fill_posterior(
             &self.layout,
             &self.set.w,
-            &self.x_n,
-            &self.mu,
-            &self.cov,
+            &self.p.sampled,
+            &self.p.mu,
+            &self.p.cov,
             out,
         );
     }
@@ -614,7 +597,7 @@ where
     }
 
     fn distinct_sampled_params(&self) -> Vec<(String, usize)> {
-        distinct_sampled(&self.layout, &self.x_n)
+        distinct_sampled(&self.layout, &self.p.sampled)
     }
 }
 

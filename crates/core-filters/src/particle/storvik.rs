@@ -40,8 +40,8 @@ use serde::{Deserialize, Serialize};
 
 use super::mlnrbpf::{standard_normal, LinkedRows};
 use super::{
-    distinct_sampled, fill_posterior, gather, ParticleConfig, ParticleFilter, Posterior, StepInfo,
-    WeightedSet,
+    distinct_sampled, fill_posterior, MarginalParticles, ParticleConfig, ParticleFilter, Posterior,
+    StepInfo, WeightedSet,
 };
 use crate::error::FilterError;
 use crate::health::Health;
@@ -117,12 +117,8 @@ where
     config: ParticleConfig,
     update: StorvikUpdate,
     layout: Layout,
-    u: Vec<SVector<f64, NU>>,
-    u_next: Vec<SVector<f64, NU>>,
-    mu: Vec<SVector<f64, NZ>>,
-    mu_next: Vec<SVector<f64, NZ>>,
-    cov: Vec<SMatrix<f64, NZ, NZ>>,
-    cov_next: Vec<SMatrix<f64, NZ, NZ>>,
+    /// Sampled blocks and Gaussians of the marginalised block, double-buffered.
+    p: MarginalParticles<NU, NZ>,
     /// Weights and the resampling bookkeeping.
     set: WeightedSet,
     noise_sd: SVector<f64, NU>,
@@ -164,12 +160,7 @@ where
             r_chol,
             noise_sd,
             update,
-            u: vec![SVector::zeros(); np],
-            u_next: vec![SVector::zeros(); np],
-            mu: vec![SVector::zeros(); np],
-            mu_next: vec![SVector::zeros(); np],
-            cov: vec![SMatrix::zeros(); np],
-            cov_next: vec![SMatrix::zeros(); np],
+            p: MarginalParticles::new(np),
             set: WeightedSet::new(&config),
             setup_health: health,
             health,
@@ -188,17 +179,17 @@ where
 
     /// The sampled blocks of the current step.
     pub fn sampled(&self) -> &[SVector<f64, NU>] {
-        &self.u
+        &self.p.sampled
     }
 
     /// The per-particle means `μ^i` of `z`.
     pub fn means(&self) -> &[SVector<f64, NZ>] {
-        &self.mu
+        &self.p.mu
     }
 
     /// The per-particle covariances `C^i` of `z`.
     pub fn covariances(&self) -> &[SMatrix<f64, NZ, NZ>] {
-        &self.cov
+        &self.p.cov
     }
 
     /// The normalised weights of the current step.
@@ -210,12 +201,7 @@ where
         let Some(ancestors) = self.set.take_pending(rng, &mut self.health) else {
             return;
         };
-        gather(&self.u, ancestors, &mut self.u_next);
-        gather(&self.mu, ancestors, &mut self.mu_next);
-        gather(&self.cov, ancestors, &mut self.cov_next);
-        std::mem::swap(&mut self.u, &mut self.u_next);
-        std::mem::swap(&mut self.mu, &mut self.mu_next);
-        std::mem::swap(&mut self.cov, &mut self.cov_next);
+        self.p.resample(ancestors);
     }
 }
 
@@ -235,7 +221,13 @@ where
     /// Draws `u_0^i` and `(μ_0^i, C_0^i)` from the model's priors, uniform weights, counters
     /// reset to the repairs made in `new` (factorising `R`).
     fn initialise<G: Rng + ?Sized>(&mut self, rng: &mut G) {
-        for ((u, mu), cov) in self.u.iter_mut().zip(&mut self.mu).zip(&mut self.cov) {
+        for ((u, mu), cov) in self
+            .p
+            .sampled
+            .iter_mut()
+            .zip(&mut self.p.mu)
+            .zip(&mut self.p.cov)
+        {
             *u = self.model.sample_initial(rng);
             (*mu, *cov) = self.model.sample_marginal_prior(rng);
         }
@@ -258,7 +250,7 @@ where
         self.resample_pending(rng);
         let linked = &self.linked;
         for i in 0..self.config.particles {
-            let (mu, cov, health) = (&mut self.mu[i], &mut self.cov[i], &mut self.health);
+            let (mu, cov, health) = (&mut self.p.mu[i], &mut self.p.cov[i], &mut self.health);
             // (i) z0 ~ N(μ, C) with a semidefinite factor of C.
             let Some(c_chol) = psd_cholesky(cov) else {
                 health.cholesky_failures += 1;
@@ -267,7 +259,7 @@ where
             };
             let z0 = *mu + c_chol * standard_normal::<NZ, G>(rng);
             // (ii) u_k ~ N(f + F z0, Q_u): linked rows f_L + F_L z0 + noise, others f + noise.
-            let (f, F_L) = self.model.transition(k, &self.u[i]);
+            let (f, F_L) = self.model.transition(k, &self.p.sampled[i]);
             let f_l = linked.pick(&f);
             let mut u_new = f;
             linked.add_unlinked_noise(&mut u_new, &self.noise_sd, rng);
@@ -279,7 +271,7 @@ where
                 }
             }
             linked.scatter(&mut u_new, &u_l);
-            self.u[i] = u_new;
+            self.p.sampled[i] = u_new;
             let (h, H) = self.model.observation(k, &u_new);
             let y_z0 = H * z0 + h;
             self.set.log_w[i] += log_normal_density_chol(&(y - y_z0), &r_chol);
@@ -311,7 +303,14 @@ where
     }
 
     fn posterior(&self, out: &mut Posterior) {
-        fill_posterior(&self.layout, &self.set.w, &self.u, &self.mu, &self.cov, out);
+        fill_posterior(
+            &self.layout,
+            &self.set.w,
+            &self.p.sampled,
+            &self.p.mu,
+            &self.p.cov,
+            out,
+        );
     }
 
     fn layout(&self) -> &Layout {
@@ -323,7 +322,7 @@ where
     }
 
     fn distinct_sampled_params(&self) -> Vec<(String, usize)> {
-        distinct_sampled(&self.layout, &self.u)
+        distinct_sampled(&self.layout, &self.p.sampled)
     }
 }
 
