@@ -22,10 +22,7 @@ use nalgebra::{SMatrix, SVector};
 use rand::Rng;
 use rand_distr::{Distribution, StandardNormal};
 
-use super::{
-    distinct_sampled, fill_posterior, MarginalParticles, ParticleConfig, ParticleFilter, Posterior,
-    StepInfo, WeightedSet,
-};
+use super::{MarginalParticles, ParticleConfig, ParticleFilter, Posterior, StepInfo, WeightedSet};
 use crate::error::FilterError;
 use crate::health::Health;
 use crate::kalman::{cholesky_repaired, gaussian_update, kf_update};
@@ -166,14 +163,6 @@ where
     pub fn weights(&self) -> &[f64] {
         &self.set.w
     }
-
-    /// Carries out the resampling decided at the previous step: `(u, μ, C)` jointly.
-    fn resample_pending<G: Rng + ?Sized>(&mut self, rng: &mut G) {
-        let Some(ancestors) = self.set.take_pending(rng, &mut self.health) else {
-            return;
-        };
-        self.p.resample(ancestors);
-    }
 }
 
 impl<M, const NU: usize, const NZ: usize, const NL: usize, const NY: usize> ParticleFilter<NY>
@@ -192,16 +181,12 @@ where
     /// Draws `u_0^i` and `(μ_0^i, C_0^i)` from the model's priors, uniform weights, counters
     /// reset.
     fn initialise<G: Rng + ?Sized>(&mut self, rng: &mut G) {
-        for ((u, mu), cov) in self
-            .p
-            .sampled
-            .iter_mut()
-            .zip(&mut self.p.mu)
-            .zip(&mut self.p.cov)
-        {
-            *u = self.model.sample_initial(rng);
-            (*mu, *cov) = self.model.sample_marginal_prior(rng);
-        }
+        let model = &self.model;
+        self.p.initialise(rng, |rng| {
+            let u = model.sample_initial(rng);
+            let (mu, cov) = model.sample_marginal_prior(rng);
+            (u, mu, cov)
+        });
         self.set.reset();
         self.health = Health::default();
     }
@@ -214,7 +199,8 @@ where
         y: &SVector<f64, NY>,
         rng: &mut G,
     ) -> Result<StepInfo, FilterError> {
-        self.resample_pending(rng);
+        self.p
+            .resample_pending(&mut self.set, rng, &mut self.health);
         let linked = &self.linked;
         for i in 0..self.config.particles {
             let (mu, cov, health) = (&mut self.p.mu[i], &mut self.p.cov[i], &mut self.health);
@@ -250,14 +236,7 @@ where
     }
 
     fn posterior(&self, out: &mut Posterior) {
-        fill_posterior(
-            &self.layout,
-            &self.set.w,
-            &self.p.sampled,
-            &self.p.mu,
-            &self.p.cov,
-            out,
-        );
+        self.p.posterior(&self.layout, &self.set.w, out);
     }
 
     fn layout(&self) -> &Layout {
@@ -269,6 +248,6 @@ where
     }
 
     fn distinct_sampled_params(&self) -> Vec<(String, usize)> {
-        distinct_sampled(&self.layout, &self.p.sampled)
+        self.p.distinct_sampled(&self.layout)
     }
 }

@@ -138,6 +138,39 @@ impl<const NS: usize, const NM: usize> MarginalParticles<NS, NM> {
         }
     }
 
+    /// Draws every particle: `draw` returns the sampled block and the Gaussian `(μ, C)`.
+    pub fn initialise<G: Rng + ?Sized>(
+        &mut self,
+        rng: &mut G,
+        mut draw: impl FnMut(&mut G) -> (SVector<f64, NS>, SVector<f64, NM>, SMatrix<f64, NM, NM>),
+    ) {
+        for ((s, m), c) in self.sampled.iter_mut().zip(&mut self.mu).zip(&mut self.cov) {
+            (*s, *m, *c) = draw(rng);
+        }
+    }
+
+    /// Carries out the resampling `set` decided at the previous step, if any.
+    pub fn resample_pending<G: Rng + ?Sized>(
+        &mut self,
+        set: &mut WeightedSet,
+        rng: &mut G,
+        health: &mut Health,
+    ) {
+        if let Some(ancestors) = set.take_pending(rng, health) {
+            self.resample(ancestors);
+        }
+    }
+
+    /// Posterior moments: sampled entries averaged, marginalised ones as a Gaussian mixture.
+    pub fn posterior(&self, layout: &Layout, w: &[f64], out: &mut Posterior) {
+        fill_posterior(layout, w, &self.sampled, &self.mu, &self.cov, out);
+    }
+
+    /// Distinct-value counts of the parameters in the sampled block.
+    pub fn distinct_sampled(&self, layout: &Layout) -> Vec<(String, usize)> {
+        distinct_sampled(layout, &self.sampled)
+    }
+
     /// Replaces particle `i` by particle `ancestors[i]`, all three blocks jointly.
     pub fn resample(&mut self, ancestors: &[usize]) {
         gather(&self.sampled, ancestors, &mut self.sampled_back);

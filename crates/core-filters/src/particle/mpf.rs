@@ -43,8 +43,8 @@ use nalgebra::{SMatrix, SVector};
 use rand::Rng;
 use rand_distr::{Distribution, StandardNormal};
 
-use super::{distinct_sampled, fill_posterior, ParticleConfig, ParticleFilter};
 use super::{MarginalParticles, Posterior, StepInfo, WeightedSet};
+use super::{ParticleConfig, ParticleFilter};
 use crate::error::FilterError;
 use crate::health::Health;
 use crate::kalman::kf::{solve_lower_in_place, symmetrise};
@@ -175,15 +175,6 @@ where
         let mut cov = prop.jac * p * prop.jac.transpose() + prop.cov_add;
         symmetrise(&mut cov);
         (prop.mean, cov)
-    }
-
-    /// Carries out the resampling decided at the previous step: gather `(xⁿ, m, P)` jointly
-    /// into the back buffers and swap.
-    fn resample_pending<G: Rng + ?Sized>(&mut self, rng: &mut G) {
-        let Some(ancestors) = self.set.take_pending(rng, &mut self.health) else {
-            return;
-        };
-        self.p.resample(ancestors);
     }
 }
 
@@ -524,12 +515,12 @@ where
     }
 
     fn initialise<G: Rng + ?Sized>(&mut self, rng: &mut G) {
-        for i in 0..self.config.particles {
-            self.p.sampled[i] = self.model.sample_initial(rng);
-            let (m0, p0) = self.model.sample_marginal_prior(rng);
-            self.p.mu[i] = m0;
-            self.p.cov[i] = p0;
-        }
+        let model = &self.model;
+        self.p.initialise(rng, |rng| {
+            let x_n = model.sample_initial(rng);
+            let (m0, p0) = model.sample_marginal_prior(rng);
+            (x_n, m0, p0)
+        });
         self.set.reset();
         self.health = Health::default();
     }
@@ -548,7 +539,8 @@ where
                 which: "measurement",
             });
         }
-        self.resample_pending(rng);
+        self.p
+            .resample_pending(&mut self.set, rng, &mut self.health);
         for i in 0..self.config.particles {
             if self.set.log_w[i] == f64::NEG_INFINITY {
                 continue;
@@ -578,14 +570,7 @@ where
     }
 
     fn posterior(&self, out: &mut Posterior) {
-        fill_posterior(
-            &self.layout,
-            &self.set.w,
-            &self.p.sampled,
-            &self.p.mu,
-            &self.p.cov,
-            out,
-        );
+        self.p.posterior(&self.layout, &self.set.w, out);
     }
 
     fn layout(&self) -> &Layout {
@@ -597,7 +582,7 @@ where
     }
 
     fn distinct_sampled_params(&self) -> Vec<(String, usize)> {
-        distinct_sampled(&self.layout, &self.p.sampled)
+        self.p.distinct_sampled(&self.layout)
     }
 }
 
