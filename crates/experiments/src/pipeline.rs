@@ -357,8 +357,8 @@ pub fn identify(input: &RunInput, algorithm: Algorithm, s: &FilterSettings) -> R
         },
     };
     let n = data.channels;
-    let spec_ref = &spec;
-    let d: Driven = dispatch!(algorithm, spec_ref.clone(), pc, input, s, n;
+    // The partition takes the spec by value; the record still needs it afterwards.
+    let d: Driven = dispatch!(algorithm, spec.clone(), pc, input, s, n;
         2 => (12, 6, 3, 9),
         3 => (16, 8, 4, 13),
         5 => (24, 12, 6, 21));
