@@ -3,7 +3,6 @@
 //! sparse Hessians of SPEC §6. Inputs are seeded; set-up is outside the timed closure.
 
 use core_filters::kalman::{ekf2_propagate, ekf2_update, kf_update, second_order_terms};
-use core_filters::model::SparseHessians;
 use core_filters::rng::stream;
 use core_filters::Health;
 use criterion::{black_box, criterion_group, criterion_main, BatchSize, Criterion};
@@ -40,58 +39,11 @@ fn kf_update_8x3(c: &mut Criterion) {
     });
 }
 
-/// x^bl index (SPEC §6): 0 x1, 1 x2, 2 x3, 3 ẋ2, 4 ẋ3, 5 k1, 6 k2, 7 k3, 8 c1, 9 c2, 10 c3, 11 β, 12 γ.
-const X1: usize = 0;
-const X2: usize = 1;
-const X3: usize = 2;
-const V2: usize = 3;
-const V3: usize = 4;
-const K2: usize = 6;
-const K3: usize = 7;
-const C2: usize = 9;
-const C3: usize = 10;
-
-/// The three sparse Hessian sets of SPEC §6 (sampled ψₙ, marginal φ_bl, observation).
-fn spec6_hessians(dt: f64) -> (SparseHessians, SparseHessians, SparseHessians) {
-    let mut sampled = SparseHessians::new();
-    for (a, b, v) in [(K2, X2, dt), (K2, X1, -dt), (C2, V2, dt)] {
-        sampled.push(0, a, b, v);
-    }
-    let mut marginal = SparseHessians::new();
-    for (a, b, v) in [
-        (K2, X1, dt),
-        (K2, X2, -dt),
-        (K3, X3, dt),
-        (K3, X2, -dt),
-        (C2, V2, -dt),
-        (C3, V3, dt),
-        (C3, V2, -dt),
-    ] {
-        marginal.push(3, a, b, v);
-    }
-    for (a, b, v) in [(K3, X2, dt), (K3, X3, -dt), (C3, V2, dt), (C3, V3, -dt)] {
-        marginal.push(4, a, b, v);
-    }
-    let mut obs = SparseHessians::new();
-    for (a, b, v) in [(K2, X2, 1.0), (K2, X1, -1.0), (C2, V2, 1.0)] {
-        obs.push(0, a, b, v);
-    }
-    for (a, b, v) in [
-        (K2, X1, 1.0),
-        (K2, X2, -1.0),
-        (K3, X3, 1.0),
-        (K3, X2, -1.0),
-        (C2, V2, -1.0),
-        (C3, V3, 1.0),
-        (C3, V2, -1.0),
-    ] {
-        obs.push(1, a, b, v);
-    }
-    for (a, b, v) in [(K3, X2, 1.0), (K3, X3, -1.0), (C3, V2, 1.0), (C3, V3, -1.0)] {
-        obs.push(2, a, b, v);
-    }
-    (sampled, marginal, obs)
-}
+/// The paper-size MPF-EKF2 bench model, for its SPEC §6 Hessians.
+#[allow(dead_code)]
+#[path = "mpf.rs"]
+mod mpf_bench;
+use mpf_bench::chain::spec6_hessians;
 
 fn ekf2_mpf_step(c: &mut Criterion) {
     let dt = 0.005;

@@ -59,45 +59,52 @@ pub mod chain {
         (-v1.abs() * ar.powf(n - 1.0) * r1, -v1 * ar.powf(n))
     }
 
+    /// The three sparse Hessian sets of SPEC §6 (sampled ψₙ, marginal φ_bl, observation) for the
+    /// three-storey chain with unit masses and time step `dt`.
+    pub fn spec6_hessians(dt: f64) -> (SparseHessians, SparseHessians, SparseHessians) {
+        let mut sampled = SparseHessians::new();
+        for (a, b, v) in [(K2, X2, dt), (K2, X1, -dt), (C2, V2, dt)] {
+            sampled.push(0, a, b, v);
+        }
+        let mut marginal = SparseHessians::new();
+        for (a, b, v) in [
+            (K2, X1, dt),
+            (K2, X2, -dt),
+            (K3, X3, dt),
+            (K3, X2, -dt),
+            (C2, V2, -dt),
+            (C3, V3, dt),
+            (C3, V2, -dt),
+        ] {
+            marginal.push(3, a, b, v);
+        }
+        for (a, b, v) in [(K3, X2, dt), (K3, X3, -dt), (C3, V2, dt), (C3, V3, -dt)] {
+            marginal.push(4, a, b, v);
+        }
+        let mut obs = SparseHessians::new();
+        for (a, b, v) in [(K2, X2, 1.0), (K2, X1, -1.0), (C2, V2, 1.0)] {
+            obs.push(0, a, b, v);
+        }
+        for (a, b, v) in [
+            (K2, X1, 1.0),
+            (K2, X2, -1.0),
+            (K3, X3, 1.0),
+            (K3, X2, -1.0),
+            (C2, V2, -1.0),
+            (C3, V3, 1.0),
+            (C3, V2, -1.0),
+        ] {
+            obs.push(1, a, b, v);
+        }
+        for (a, b, v) in [(K3, X2, 1.0), (K3, X3, -1.0), (C3, V2, 1.0), (C3, V3, -1.0)] {
+            obs.push(2, a, b, v);
+        }
+        (sampled, marginal, obs)
+    }
+
     impl ChainModel {
         pub fn new(dt: f64, ug: Vec<f64>) -> Self {
-            let mut sampled_hess = SparseHessians::new();
-            sampled_hess.push(0, K2, X2, dt);
-            sampled_hess.push(0, K2, X1, -dt);
-            sampled_hess.push(0, C2, V2, dt);
-            let mut marginal_hess = SparseHessians::new();
-            for (a, b, v) in [
-                (K2, X1, dt),
-                (K2, X2, -dt),
-                (K3, X3, dt),
-                (K3, X2, -dt),
-                (C2, V2, -dt),
-                (C3, V3, dt),
-                (C3, V2, -dt),
-            ] {
-                marginal_hess.push(3, a, b, v);
-            }
-            for (a, b, v) in [(K3, X2, dt), (K3, X3, -dt), (C3, V2, dt), (C3, V3, -dt)] {
-                marginal_hess.push(4, a, b, v);
-            }
-            let mut observation_hess = SparseHessians::new();
-            for (a, b, v) in [(K2, X2, 1.0), (K2, X1, -1.0), (C2, V2, 1.0)] {
-                observation_hess.push(0, a, b, v);
-            }
-            for (a, b, v) in [
-                (K2, X1, 1.0),
-                (K2, X2, -1.0),
-                (K3, X3, 1.0),
-                (K3, X2, -1.0),
-                (C2, V2, -1.0),
-                (C3, V3, 1.0),
-                (C3, V2, -1.0),
-            ] {
-                observation_hess.push(1, a, b, v);
-            }
-            for (a, b, v) in [(K3, X2, 1.0), (K3, X3, -1.0), (C3, V2, 1.0), (C3, V3, -1.0)] {
-                observation_hess.push(2, a, b, v);
-            }
+            let (sampled_hess, marginal_hess, observation_hess) = spec6_hessians(dt);
             // Noise levels of SPEC §3 for RMS(ü_g) ≈ 2.1 and RMS(ẋ1) ≈ 0.5 (the harmonic input).
             let vel = dt * 0.1 * 2.1;
             let sampled_sd = SVector::<f64, 2>::new(vel, dt * 0.05 * 0.5);
