@@ -15,7 +15,7 @@ use crate::error::FilterError;
 use crate::health::Health;
 
 /// `ln(2π)`.
-const LN_2PI: f64 = 1.837_877_066_409_345_5;
+pub(crate) const LN_2PI: f64 = 1.837_877_066_409_345_5;
 
 /// A Cholesky pivot is accepted only if it exceeds this fraction of its own diagonal entry: a
 /// smaller pivot is round-off, not information (the matrix is numerically singular).
@@ -146,6 +146,18 @@ pub(crate) fn solve_lower_in_place<const N: usize, const C: usize>(
     }
 }
 
+/// `Σ_j ln L_jj` for a lower Cholesky factor, i.e. `½ ln det(L Lᵀ)`. One logarithm of the product
+/// of the pivots; the sum of logarithms is the fallback when that product under- or overflows.
+#[inline]
+pub(crate) fn log_det_half<const N: usize>(chol: &SMatrix<f64, N, N>) -> f64 {
+    let product: f64 = (0..N).map(|j| chol[(j, j)]).product();
+    if product.is_normal() {
+        product.ln()
+    } else {
+        (0..N).map(|j| chol[(j, j)].ln()).sum()
+    }
+}
+
 /// `log N(r; 0, L Lᵀ)` from the residual `r` and the lower factor `L`:
 /// `−½ |L⁻¹ r|² − Σ ln L_jj − (N/2) ln 2π`.
 pub fn log_normal_density_chol<const N: usize>(
@@ -154,8 +166,43 @@ pub fn log_normal_density_chol<const N: usize>(
 ) -> f64 {
     let mut e = *residual;
     solve_lower_in_place(chol, &mut e);
-    let log_det_half: f64 = (0..N).map(|j| chol[(j, j)].ln()).sum();
-    -0.5 * e.norm_squared() - log_det_half - 0.5 * (N as f64) * LN_2PI
+    -0.5 * e.norm_squared() - log_det_half(chol) - 0.5 * (N as f64) * LN_2PI
+}
+
+/// A constant Gaussian noise `N(0, R)` factorised once (the measurement noise of the particle
+/// filters): every density then costs one triangular solve and no logarithm.
+#[derive(Debug, Clone, Copy)]
+pub struct FactoredCov<const N: usize> {
+    chol: SMatrix<f64, N, N>,
+    /// `−½ ln det R − (N/2) ln 2π`.
+    log_norm: f64,
+}
+
+impl<const N: usize> FactoredCov<N> {
+    /// Factorises `cov` with the documented repair of [`cholesky_repaired`] (counted in
+    /// `health`, reported as step 0).
+    pub fn new(
+        cov: &SMatrix<f64, N, N>,
+        which: &'static str,
+        health: &mut Health,
+    ) -> Result<Self, FilterError> {
+        let chol = cholesky_repaired(cov, 0, which, health)?;
+        let log_norm = -log_det_half(&chol) - 0.5 * (N as f64) * LN_2PI;
+        Ok(Self { chol, log_norm })
+    }
+
+    /// The lower Cholesky factor actually used.
+    pub fn chol(&self) -> &SMatrix<f64, N, N> {
+        &self.chol
+    }
+
+    /// `log N(r; 0, R)`; equal to [`log_normal_density_chol`] with this factor.
+    #[inline]
+    pub fn log_density(&self, residual: &SVector<f64, N>) -> f64 {
+        let mut e = *residual;
+        solve_lower_in_place(&self.chol, &mut e);
+        -0.5 * e.norm_squared() + self.log_norm
+    }
 }
 
 /// Replaces `p` by `(p + pᵀ)/2` (round-off only; not counted).
@@ -190,6 +237,76 @@ pub(crate) fn sandwich<const N: usize, const M: usize>(
     out
 }
 
+/// `J P` for symmetric `P`, visiting only the non-zero entries of `J` (row `r` of the product is
+/// `Σ_j J[r, j] P[j, :]`, and `P[j, c]` is read as `P[c, j]`, a contiguous column). The
+/// Jacobians of the partitioned chain have a handful of non-zeros per row.
+pub(crate) fn sparse_jp<const NO: usize, const N: usize>(
+    jac: &SMatrix<f64, NO, N>,
+    p: &SMatrix<f64, N, N>,
+) -> SMatrix<f64, NO, N> {
+    let mut jp = SMatrix::<f64, NO, N>::zeros();
+    for j in 0..N {
+        for r in 0..NO {
+            let d = jac[(r, j)];
+            if d != 0.0 {
+                for c in 0..N {
+                    jp[(r, c)] += d * p[(c, j)];
+                }
+            }
+        }
+    }
+    jp
+}
+
+/// `(J P) Jᵀ + S` with the lower triangle of `(J P) Jᵀ` computed over the non-zeros of `J` and
+/// mirrored: for symmetric `S` the result is exactly symmetric.
+pub(crate) fn innovation_cov<const NY: usize, const N: usize>(
+    jp: &SMatrix<f64, NY, N>,
+    jac: &SMatrix<f64, NY, N>,
+    s_add: &SMatrix<f64, NY, NY>,
+) -> SMatrix<f64, NY, NY> {
+    let mut l = SMatrix::<f64, NY, NY>::zeros();
+    for c in 0..N {
+        for j in 0..NY {
+            let d = jac[(j, c)];
+            if d != 0.0 {
+                for i in j..NY {
+                    l[(i, j)] += jp[(i, c)] * d;
+                }
+            }
+        }
+    }
+    for j in 0..NY {
+        for i in (j + 1)..NY {
+            l[(j, i)] = l[(i, j)];
+        }
+    }
+    l + s_add
+}
+
+/// `P ← P − Wᵀ W`, computing the upper triangle once and mirroring it (the result is symmetric
+/// by construction; the input is read through `(P + Pᵀ)/2`). Returns whether every entry is
+/// finite.
+pub(crate) fn downdate_symmetric<const NO: usize, const N: usize>(
+    p: &mut SMatrix<f64, N, N>,
+    w: &SMatrix<f64, NO, N>,
+) -> bool {
+    let mut finite = true;
+    for c in 0..N {
+        for r in 0..=c {
+            let mut acc = 0.0;
+            for d in 0..NO {
+                acc += w[(d, r)] * w[(d, c)];
+            }
+            let v = 0.5 * (p[(r, c)] + p[(c, r)]) - acc;
+            finite &= v.is_finite();
+            p[(r, c)] = v;
+            p[(c, r)] = v;
+        }
+    }
+    finite
+}
+
 /// KF propagate, SPEC §4: `m ← G m + g`, `P ← G P Gᵀ + Q` (symmetrised).
 ///
 /// Allocation-free and infallible: a non-finite input is not checked here, it is reported as a
@@ -206,13 +323,75 @@ pub fn kf_propagate<const N: usize>(
     symmetrise(p);
 }
 
+/// The gain side of a Gaussian measurement update, computed once per update: `J P` and the lower
+/// Cholesky factor `C` of the innovation covariance `L = J P Jᵀ + S`. The marginalised particle
+/// filters factorise `L` first because it is also their proposal covariance
+/// ([`UpdateFactor::apply_whitened`]).
+#[derive(Debug, Clone, Copy)]
+pub struct UpdateFactor<const N: usize, const NY: usize> {
+    jp: SMatrix<f64, NY, N>,
+    /// Lower Cholesky factor of `L` (after any repair).
+    pub chol: SMatrix<f64, NY, NY>,
+}
+
+impl<const N: usize, const NY: usize> UpdateFactor<N, NY> {
+    /// `J P` over the non-zeros of `J`, `L = J P Jᵀ + S` (exactly symmetric for symmetric `S`)
+    /// and its factor by [`cholesky_repaired`] (same repair, counting and errors).
+    pub fn new(
+        p: &SMatrix<f64, N, N>,
+        jac: &SMatrix<f64, NY, N>,
+        s_add: &SMatrix<f64, NY, NY>,
+        step: usize,
+        which: &'static str,
+        health: &mut Health,
+    ) -> Result<Self, FilterError> {
+        let jp = sparse_jp(jac, p);
+        let l_cov = innovation_cov(&jp, jac, s_add);
+        let chol = cholesky_repaired(&l_cov, step, which, health)?;
+        Ok(Self { jp, chol })
+    }
+
+    /// The update given the whitened innovation `e = C⁻¹ (y − ŷ)`: with `W = C⁻¹ J P`,
+    /// `m ← m + Wᵀ e`, `P ← P − Wᵀ W` (symmetric by construction). A sampled pseudo-measurement
+    /// `ŷ + C ξ` has whitened innovation `ξ`, so no solve is needed for it. On a non-finite
+    /// result `m` and `p` are left unchanged.
+    pub fn apply_whitened(
+        &self,
+        m: &mut SVector<f64, N>,
+        p: &mut SMatrix<f64, N, N>,
+        e: &SVector<f64, NY>,
+        step: usize,
+    ) -> Result<(), FilterError> {
+        let mut w = self.jp;
+        solve_lower_in_place(&self.chol, &mut w);
+        let new_m = *m + w.tr_mul(e);
+        if new_m.iter().any(|v| !v.is_finite()) {
+            return Err(FilterError::NonFinite {
+                step,
+                which: "filtered mean",
+            });
+        }
+        let mut new_p = *p;
+        if !downdate_symmetric(&mut new_p, &w) {
+            return Err(FilterError::NonFinite {
+                step,
+                which: "filtered covariance",
+            });
+        }
+        *m = new_m;
+        *p = new_p;
+        Ok(())
+    }
+}
+
 /// The one Gaussian measurement update, SPEC §4. Given the predicted measurement `ŷ`, the
 /// Jacobian `J` (NY×N) and the additive covariance `S` (`R`, plus for EKF2 the Hessian term):
 ///
 /// `L = J P Jᵀ + S`, `K = P Jᵀ L⁻¹`, `m ← m + K (y − ŷ)`, `P ← P − K L Kᵀ` (symmetrised).
 ///
 /// With `L = C Cᵀ` (lower Cholesky, [`cholesky_repaired`]) and `W = C⁻¹ J P`, the update is
-/// `m ← m + Wᵀ C⁻¹ (y − ŷ)` and `P ← P − Wᵀ W`: two triangular solves, no inverse.
+/// `m ← m + Wᵀ C⁻¹ (y − ŷ)` and `P ← P − Wᵀ W`: two triangular solves, no inverse
+/// ([`UpdateFactor`]).
 ///
 /// On error (`NonFinite` for a non-finite residual, innovation covariance or result,
 /// `NotPositiveDefinite` if `L` cannot be factorised even after repair) `m` and `p` are left
@@ -235,36 +414,14 @@ pub fn gaussian_update<const N: usize, const NY: usize>(
             which: "innovation",
         });
     }
-    // J P (NY×N); P is symmetric so (J P)ᵀ = P Jᵀ.
-    let jp = jac * *p;
-    let l_cov = jp * jac.transpose() + s_add;
-    let chol = cholesky_repaired(&l_cov, step, "innovation covariance", health)?;
-    let mut w = jp;
-    solve_lower_in_place(&chol, &mut w);
+    let factor = UpdateFactor::new(p, jac, s_add, step, "innovation covariance", health)?;
     let mut e = residual;
-    solve_lower_in_place(&chol, &mut e);
-    let new_m = *m + w.tr_mul(&e);
-    let mut new_p = *p - w.tr_mul(&w);
-    symmetrise(&mut new_p);
-    if new_m.iter().any(|v| !v.is_finite()) {
-        return Err(FilterError::NonFinite {
-            step,
-            which: "filtered mean",
-        });
-    }
-    if new_p.iter().any(|v| !v.is_finite()) {
-        return Err(FilterError::NonFinite {
-            step,
-            which: "filtered covariance",
-        });
-    }
-    *m = new_m;
-    *p = new_p;
-    let log_det_half: f64 = (0..NY).map(|j| chol[(j, j)].ln()).sum();
-    let loglik = -0.5 * e.norm_squared() - log_det_half - 0.5 * (NY as f64) * LN_2PI;
+    solve_lower_in_place(&factor.chol, &mut e);
+    factor.apply_whitened(m, p, &e, step)?;
+    let loglik = -0.5 * e.norm_squared() - log_det_half(&factor.chol) - 0.5 * (NY as f64) * LN_2PI;
     Ok(Innovation {
         residual,
-        chol,
+        chol: factor.chol,
         loglik,
     })
 }
@@ -386,5 +543,71 @@ mod tests {
         assert_eq!(err.kind(), "non_finite");
         assert_eq!(m, Vector2::new(1.0, 2.0));
         assert_eq!(p, Matrix2::identity());
+    }
+
+    #[test]
+    fn log_det_half_survives_underflow_of_the_pivot_product() {
+        let mut l = Matrix3::identity() * 1e-120;
+        l[(2, 2)] = 3.0;
+        let expected = 2.0 * (1e-120_f64).ln() + 3.0_f64.ln();
+        assert!((log_det_half(&l) - expected).abs() < 1e-12 * expected.abs());
+        let l = Matrix3::new(2.0, 0.0, 0.0, 0.3, 0.5, 0.0, -0.1, 0.2, 4.0);
+        assert!((log_det_half(&l) - (4.0_f64).ln()).abs() < 1e-15);
+    }
+
+    #[test]
+    fn factored_noise_density_equals_the_direct_one() {
+        let r = Matrix3::new(4.0, 2.0, 0.6, 2.0, 5.0, 1.5, 0.6, 1.5, 3.0);
+        let mut h = Health::default();
+        let noise = FactoredCov::new(&r, "R", &mut h).unwrap();
+        let chol = cholesky_repaired(&r, 0, "R", &mut h).unwrap();
+        let res = nalgebra::Vector3::new(0.3, -1.2, 2.5);
+        let direct = log_normal_density_chol(&res, &chol);
+        assert!((noise.log_density(&res) - direct).abs() < 1e-14);
+        // Against the textbook formula with an explicit inverse and determinant.
+        let textbook = -0.5 * (res.transpose() * r.try_inverse().unwrap() * res)[0]
+            - 0.5 * r.determinant().ln()
+            - 1.5 * LN_2PI;
+        assert!((direct - textbook).abs() < 1e-12);
+    }
+
+    #[test]
+    fn innovation_covariance_is_exactly_symmetric_and_matches_the_dense_product() {
+        let p = Matrix3::new(4.0, 2.0, 0.6, 2.0, 5.0, 1.5, 0.6, 1.5, 3.0);
+        let jac = nalgebra::Matrix2x3::new(0.3, 0.0, -1.7, 0.0, 2.1, 0.4);
+        let s = Matrix2::new(0.5, 0.1, 0.1, 0.7);
+        let jp = sparse_jp(&jac, &p);
+        assert!((jp - jac * p).abs().max() < 1e-14);
+        let l = innovation_cov(&jp, &jac, &s);
+        assert_eq!(l[(0, 1)], l[(1, 0)]);
+        assert!((l - (jac * p * jac.transpose() + s)).abs().max() < 1e-13);
+    }
+
+    /// A pseudo-measurement drawn as `ŷ + C ξ` updated through its whitened innovation `ξ` gives
+    /// the same moments as the ordinary update with that measurement.
+    #[test]
+    fn whitened_update_of_a_drawn_measurement_equals_the_ordinary_update() {
+        let p0 = Matrix3::new(4.0, 2.0, 0.6, 2.0, 5.0, 1.5, 0.6, 1.5, 3.0);
+        let m0 = nalgebra::Vector3::new(1.0, -2.0, 0.5);
+        let jac = nalgebra::Matrix2x3::new(0.3, 0.0, -1.7, 0.0, 2.1, 0.4);
+        let s = Matrix2::new(0.5, 0.1, 0.1, 0.7);
+        let y_hat = jac * m0;
+        let xi = Vector2::new(0.8, -1.3);
+        let mut h = Health::default();
+        let factor = UpdateFactor::new(&p0, &jac, &s, 0, "L", &mut h).unwrap();
+        let y = y_hat + factor.chol * xi;
+        let (mut m1, mut p1) = (m0, p0);
+        factor.apply_whitened(&mut m1, &mut p1, &xi, 0).unwrap();
+        let (mut m2, mut p2) = (m0, p0);
+        gaussian_update(&mut m2, &mut p2, &y, &y_hat, &jac, &s, 0, &mut h).unwrap();
+        assert!((m1 - m2).abs().max() < 1e-13);
+        assert!((p1 - p2).abs().max() < 1e-13);
+        assert_eq!(p1, p1.transpose());
+        // Against the textbook gain K = P Jᵀ L⁻¹.
+        let l = jac * p0 * jac.transpose() + s;
+        let k = p0 * jac.transpose() * l.try_inverse().unwrap();
+        assert!((m1 - (m0 + k * (y - y_hat))).abs().max() < 1e-12);
+        assert!((p1 - (p0 - k * l * k.transpose())).abs().max() < 1e-12);
+        assert_eq!(h, Health::default());
     }
 }

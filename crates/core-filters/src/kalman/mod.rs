@@ -2,7 +2,9 @@
 //! small whole-data-set driver (STYLE: "the Kalman module is pure step functions").
 //!
 //! - [`kf`]: [`kf_propagate`], [`kf_update`] and the one [`gaussian_update`] every filter uses,
-//!   with [`cholesky_repaired`] (documented, counted repair) and [`log_normal_density_chol`];
+//!   with [`cholesky_repaired`] (documented, counted repair), [`UpdateFactor`] (the gain side of
+//!   an update, shared with the marginalised particle filters), [`log_normal_density_chol`] and
+//!   [`FactoredCov`] (a constant noise factorised once);
 //! - [`second_order`]: EKF2 Hessian terms from sparse constant Hessians;
 //! - [`ekf2`]: [`ekf2_propagate`], [`ekf2_update`], [`ekf2_moments`] (EKF1 = empty Hessians);
 //! - [`ukf`]: the scaled unscented transform and a UKF propagate/update pair (baseline);
@@ -19,7 +21,7 @@ pub mod ukf;
 pub use ekf2::{ekf2_moments, ekf2_propagate, ekf2_update};
 pub use kf::{
     cholesky_repaired, gaussian_update, kf_propagate, kf_update, log_normal_density_chol,
-    Innovation,
+    FactoredCov, Innovation, UpdateFactor,
 };
 pub use linear::{kalman_filter, KalmanRun, LinearGaussian};
 pub use second_order::second_order_terms;

@@ -22,7 +22,7 @@ use super::{
 };
 use crate::error::FilterError;
 use crate::health::Health;
-use crate::kalman::{cholesky_repaired, log_normal_density_chol};
+use crate::kalman::FactoredCov;
 use crate::model::{Layout, StateSpace};
 
 /// Bootstrap PF (SPEC §5.1) for a model with an `NX`-dimensional augmented state and `NY`
@@ -41,8 +41,8 @@ where
     set: WeightedSet,
     /// Process-noise standard deviations (diagonal `Q`), read once from the model.
     noise_sd: SVector<f64, NX>,
-    /// Lower Cholesky factor of the constant `R`, or the error that prevented it.
-    r_chol: Result<SMatrix<f64, NY, NY>, FilterError>,
+    /// The constant `R` factorised once, or the error that prevented it.
+    r_noise: Result<FactoredCov<NY>, FilterError>,
     /// Repairs made while factorising `R` in `new`; a re-initialisation starts from these.
     setup_health: Health,
     health: Health,
@@ -61,16 +61,15 @@ where
         let np = config.particles;
         let set = WeightedSet::new(&config);
         let mut health = Health::default();
-        let r_chol = cholesky_repaired(
+        let r_noise = FactoredCov::new(
             &model.measurement_cov(),
-            0,
             "measurement covariance R",
             &mut health,
         );
         Self {
             layout: model.layout(),
             noise_sd: model.process_noise_sd(),
-            r_chol,
+            r_noise,
             x: vec![SVector::zeros(); np],
             x_next: vec![SVector::zeros(); np],
             set,
@@ -125,8 +124,8 @@ where
         y: &SVector<f64, NY>,
         rng: &mut G,
     ) -> Result<StepInfo, FilterError> {
-        let r_chol = match &self.r_chol {
-            Ok(l) => *l,
+        let r_noise = match &self.r_noise {
+            Ok(r) => *r,
             Err(e) => return Err(e.clone()),
         };
         if let Some(ancestors) = self.set.take_pending(rng, &mut self.health) {
@@ -145,7 +144,7 @@ where
             }
             *xi = xn;
             let residual = y - self.model.measure(k, xi);
-            *lw += log_normal_density_chol(&residual, &r_chol);
+            *lw += r_noise.log_density(&residual);
         }
         self.set.conclude(k, &mut self.health)
     }

@@ -5,7 +5,9 @@
 //! `z`. Per particle and step, with `(f, F_L) = transition(k, u_{k−1})` and `L` the linked rows:
 //! - (a) proposal with `z` marginalised: linked rows `u_L ~ N(f_L + F_L μ, F_L C F_Lᵀ + Q_L)`,
 //!   the other rows `f + noise` (they do not depend on `z`);
-//! - (b) pseudo-measurement update of `(μ, C)` with `u_L` (Jacobian `F_L`, noise `Q_L`);
+//! - (b) pseudo-measurement update of `(μ, C)` with `u_L` (Jacobian `F_L`, noise `Q_L`). Its
+//!   innovation covariance is the proposal covariance of (a), factorised once
+//!   ([`UpdateFactor`]); with `u_L = mean + C ξ` the whitened innovation is the draw `ξ` itself;
 //! - (c) weight `N(y_k; H μ + h, H C Hᵀ + R)` with `(h, H) = observation(k, u_k)`, which is the
 //!   log-likelihood returned by (d), so (c) and (d) are one [`kf_update`] call;
 //! - (d) measurement update of `(μ, C)` with `y_k`;
@@ -25,7 +27,7 @@ use rand_distr::{Distribution, StandardNormal};
 use super::{MarginalParticles, ParticleConfig, ParticleFilter, Posterior, StepInfo, WeightedSet};
 use crate::error::FilterError;
 use crate::health::Health;
-use crate::kalman::{cholesky_repaired, gaussian_update, kf_update};
+use crate::kalman::{kf_update, UpdateFactor};
 use crate::model::{ConditionallyLinear, Layout};
 
 /// A vector of `N` independent standard normal draws.
@@ -207,15 +209,24 @@ where
             let (f, F_L) = self.model.transition(k, &self.p.sampled[i]);
             let mut u_new = f;
             linked.add_unlinked_noise(&mut u_new, &self.noise_sd, rng);
-            // (a) the linked rows with z marginalised: N(f_L + F_L μ, F_L C F_Lᵀ + Q_L).
+            // (a) the linked rows with z marginalised: N(f_L + F_L μ, S), S = F_L C F_Lᵀ + Q_L.
+            // S is also the innovation covariance of (b), so it is factorised once.
             let mean_l = linked.pick(&f) + F_L * *mu;
-            let s = F_L * *cov * F_L.transpose() + linked.q_l;
-            let proposed = match cholesky_repaired(&s, k, "MLN proposal covariance", health) {
-                Ok(l) => {
-                    let u_l = mean_l + l * standard_normal::<NL, G>(rng);
+            let proposed = match UpdateFactor::new(
+                cov,
+                &F_L,
+                &linked.q_l,
+                k,
+                "MLN proposal covariance",
+                health,
+            ) {
+                Ok(factor) => {
+                    let xi = standard_normal::<NL, G>(rng);
+                    let u_l = mean_l + factor.chol * xi;
                     linked.scatter(&mut u_new, &u_l);
-                    // (b) u_L observes z through F_L.
-                    gaussian_update(mu, cov, &u_l, &mean_l, &F_L, &linked.q_l, k, health).is_ok()
+                    // (b) u_L observes z through F_L; its whitened innovation is ξ itself.
+                    u_l.iter().all(|v| v.is_finite())
+                        && factor.apply_whitened(mu, cov, &xi, k).is_ok()
                 }
                 Err(_) => false,
             };

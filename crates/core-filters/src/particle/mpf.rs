@@ -47,7 +47,10 @@ use super::{MarginalParticles, Posterior, StepInfo, WeightedSet};
 use super::{ParticleConfig, ParticleFilter};
 use crate::error::FilterError;
 use crate::health::Health;
-use crate::kalman::kf::{solve_lower_in_place, symmetrise};
+use crate::kalman::kf::{
+    downdate_symmetric, innovation_cov, log_det_half, solve_lower_in_place, sparse_jp, symmetrise,
+    LN_2PI,
+};
 use crate::kalman::second_order_terms;
 use crate::kalman::{cholesky_repaired, ekf2_propagate, ekf2_update, gaussian_update};
 use crate::model::{ConditionallyQuadratic, Layout, SparseHessians};
@@ -293,7 +296,7 @@ fn sample_and_update_fused<G: Rng + ?Sized, const ND: usize, const NBL: usize>(
     health: &mut Health,
 ) -> Result<SVector<f64, ND>, FilterError> {
     let jp = sparse_jp(&prop.jac, p);
-    let s = jp * prop.jac.transpose() + prop.cov_add;
+    let s = innovation_cov(&jp, &prop.jac, &prop.cov_add);
     let chol = cholesky_repaired(&s, k, "proposal covariance", health)?;
     let xi = standard_normal::<G, ND>(rng);
     let x_dyn = prop.mean + chol * xi;
@@ -323,51 +326,6 @@ fn sample_and_update_fused<G: Rng + ?Sized, const ND: usize, const NBL: usize>(
     *m = new_m;
     *p = new_p;
     Ok(x_dyn)
-}
-
-/// `ln(2π)`.
-const LN_2PI: f64 = 1.837_877_066_409_345_5;
-
-/// `J P` for symmetric `P`, visiting only the non-zero entries of `J` (row `r` of the product is
-/// `Σ_j J[r, j] P[j, :]`, and `P[j, c]` is read as `P[c, j]`, a contiguous column).
-fn sparse_jp<const NO: usize, const N: usize>(
-    jac: &SMatrix<f64, NO, N>,
-    p: &SMatrix<f64, N, N>,
-) -> SMatrix<f64, NO, N> {
-    let mut jp = SMatrix::<f64, NO, N>::zeros();
-    for j in 0..N {
-        for r in 0..NO {
-            let d = jac[(r, j)];
-            if d != 0.0 {
-                for c in 0..N {
-                    jp[(r, c)] += d * p[(c, j)];
-                }
-            }
-        }
-    }
-    jp
-}
-
-/// `P ← P − Wᵀ W`, computing the upper triangle once and mirroring it (the result is symmetric
-/// by construction). Returns whether every entry is finite.
-fn downdate_symmetric<const NO: usize, const N: usize>(
-    p: &mut SMatrix<f64, N, N>,
-    w: &SMatrix<f64, NO, N>,
-) -> bool {
-    let mut finite = true;
-    for c in 0..N {
-        for r in 0..=c {
-            let mut acc = 0.0;
-            for d in 0..NO {
-                acc += w[(d, r)] * w[(d, c)];
-            }
-            let v = 0.5 * (p[(r, c)] + p[(c, r)]) - acc;
-            finite &= v.is_finite();
-            p[(r, c)] = v;
-            p[(c, r)] = v;
-        }
-    }
-    finite
 }
 
 /// SPEC §5.4 (d)+(e) on the [`MpfKernel::Sparse`] path: the EKF2 update with `y_k` of
@@ -406,7 +364,7 @@ fn ekf2_update_sparse<const N: usize, const NY: usize>(
         });
     }
     let jp = sparse_jp(jac, p);
-    l_cov += jp * jac.transpose();
+    let l_cov = innovation_cov(&jp, jac, &l_cov);
     let chol = cholesky_repaired(&l_cov, step, "innovation covariance", health)?;
     let mut w = jp;
     solve_lower_in_place(&chol, &mut w);
@@ -425,8 +383,7 @@ fn ekf2_update_sparse<const N: usize, const NY: usize>(
             which: "filtered covariance",
         });
     }
-    let log_det_half: f64 = (0..NY).map(|j| chol[(j, j)].ln()).sum();
-    Ok(-0.5 * e.norm_squared() - log_det_half - 0.5 * (NY as f64) * LN_2PI)
+    Ok(-0.5 * e.norm_squared() - log_det_half(&chol) - 0.5 * (NY as f64) * LN_2PI)
 }
 
 /// Advances one particle through SPEC §5.4 (a)–(e) and returns `log N(y_k; ŷ, L)`.

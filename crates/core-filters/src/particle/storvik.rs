@@ -42,7 +42,7 @@ use super::mlnrbpf::{standard_normal, LinkedRows};
 use super::{MarginalParticles, ParticleConfig, ParticleFilter, Posterior, StepInfo, WeightedSet};
 use crate::error::FilterError;
 use crate::health::Health;
-use crate::kalman::{cholesky_repaired, gaussian_update, kf_update, log_normal_density_chol};
+use crate::kalman::{gaussian_update, kf_update, FactoredCov};
 use crate::model::{ConditionallyLinear, Layout};
 
 /// How Storvik's step (iii) treats the measurement `y_k` (SPEC §5.3).
@@ -121,8 +121,8 @@ where
     noise_sd: SVector<f64, NU>,
     linked: LinkedRows<NU, NL>,
     r: SMatrix<f64, NY, NY>,
-    /// Lower Cholesky factor of the constant `R` (weights of step (ii)), or why it failed.
-    r_chol: Result<SMatrix<f64, NY, NY>, FilterError>,
+    /// The constant `R` factorised once (weights of step (ii)), or why it failed.
+    r_noise: Result<FactoredCov<NY>, FilterError>,
     setup_health: Health,
     health: Health,
 }
@@ -149,12 +149,12 @@ where
         let noise_sd = model.process_noise_sd();
         let r = model.measurement_cov();
         let mut health = Health::default();
-        let r_chol = cholesky_repaired(&r, 0, "measurement covariance R", &mut health);
+        let r_noise = FactoredCov::new(&r, "measurement covariance R", &mut health);
         Self {
             layout: model.layout(),
             linked: LinkedRows::new(model.linked_rows(), &noise_sd),
             r,
-            r_chol,
+            r_noise,
             noise_sd,
             update,
             p: MarginalParticles::new(np),
@@ -229,8 +229,8 @@ where
         y: &SVector<f64, NY>,
         rng: &mut G,
     ) -> Result<StepInfo, FilterError> {
-        let r_chol = match &self.r_chol {
-            Ok(l) => *l,
+        let r_noise = match &self.r_noise {
+            Ok(r) => *r,
             Err(e) => return Err(e.clone()),
         };
         self.p
@@ -261,7 +261,7 @@ where
             self.p.sampled[i] = u_new;
             let (h, H) = self.model.observation(k, &u_new);
             let y_z0 = H * z0 + h;
-            self.set.log_w[i] += log_normal_density_chol(&(y - y_z0), &r_chol);
+            self.set.log_w[i] += r_noise.log_density(&(y - y_z0));
             // (iii) the linked rows: linear in z with Jacobian F_L and noise Q_L.
             let mean_l = f_l + F_L * *mu;
             if gaussian_update(mu, cov, &u_l, &mean_l, &F_L, &linked.q_l, k, health).is_err() {
