@@ -41,6 +41,13 @@ pub struct Innovation<const NY: usize> {
     pub loglik: f64,
 }
 
+/// Whether every entry is finite. Reads the contiguous storage without early exit (a
+/// vectorisable reduction): nalgebra's element iterator is markedly slower in the hot loops.
+#[inline]
+pub(crate) fn all_finite<const R: usize, const C: usize>(a: &SMatrix<f64, R, C>) -> bool {
+    a.as_slice().iter().fold(true, |ok, v| ok & v.is_finite())
+}
+
 /// Plain Cholesky factorisation with a relative pivot test; `None` if a pivot is not clearly
 /// positive (this also rejects NaN).
 fn try_cholesky<const N: usize>(a: &SMatrix<f64, N, N>) -> Option<SMatrix<f64, N, N>> {
@@ -57,12 +64,15 @@ fn try_cholesky<const N: usize>(a: &SMatrix<f64, N, N>) -> Option<SMatrix<f64, N
         }
         let ljj = d.sqrt();
         l[(j, j)] = ljj;
+        // 1/ljj as ljj/d: the square root and the division run side by side instead of one
+        // after the other (this chain of pivots is the latency of the whole factorisation).
+        let inv = ljj * (1.0 / d);
         for i in (j + 1)..N {
             let mut s = a[(i, j)];
             for k in 0..j {
                 s -= l[(i, k)] * l[(j, k)];
             }
-            l[(i, j)] = s / ljj;
+            l[(i, j)] = s * inv;
         }
     }
     Some(l)
@@ -85,7 +95,7 @@ pub fn cholesky_repaired<const N: usize>(
     which: &'static str,
     health: &mut Health,
 ) -> Result<SMatrix<f64, N, N>, FilterError> {
-    if a.iter().any(|v| !v.is_finite()) {
+    if !all_finite(a) {
         return Err(FilterError::NonFinite { step, which });
     }
     let mut s = *a;
@@ -131,17 +141,20 @@ pub fn cholesky_repaired<const N: usize>(
 }
 
 /// Solves `L X = B` in place for lower-triangular `L` (forward substitution, column by column).
+/// The pivots are inverted once: a division costs several multiplications, and a solve against
+/// a `J P` block has one per entry.
 pub(crate) fn solve_lower_in_place<const N: usize, const C: usize>(
     l: &SMatrix<f64, N, N>,
     b: &mut SMatrix<f64, N, C>,
 ) {
+    let inv_diag: [f64; N] = std::array::from_fn(|i| 1.0 / l[(i, i)]);
     for c in 0..C {
         for i in 0..N {
             let mut s = b[(i, c)];
             for k in 0..i {
                 s -= l[(i, k)] * b[(k, c)];
             }
-            b[(i, c)] = s / l[(i, i)];
+            b[(i, c)] = s * inv_diag[i];
         }
     }
 }
@@ -237,41 +250,43 @@ pub(crate) fn sandwich<const N: usize, const M: usize>(
     out
 }
 
-/// `J P` for symmetric `P`, visiting only the non-zero entries of `J` (row `r` of the product is
-/// `Σ_j J[r, j] P[j, :]`, and `P[j, c]` is read as `P[c, j]`, a contiguous column). The
-/// Jacobians of the partitioned chain have a handful of non-zeros per row.
-pub(crate) fn sparse_jp<const NO: usize, const N: usize>(
+/// `P Jᵀ` (N×NO) visiting only the non-zero entries of `J`: column `r` of the product is
+/// `Σ_j J[r, j] P[:, j]`, an accumulation of contiguous columns. The Jacobians of the
+/// partitioned chain have a handful of non-zeros per row.
+pub(crate) fn sparse_pjt<const NO: usize, const N: usize>(
     jac: &SMatrix<f64, NO, N>,
     p: &SMatrix<f64, N, N>,
-) -> SMatrix<f64, NO, N> {
-    let mut jp = SMatrix::<f64, NO, N>::zeros();
-    for j in 0..N {
-        for r in 0..NO {
+) -> SMatrix<f64, N, NO> {
+    let mut pjt = SMatrix::<f64, N, NO>::zeros();
+    for r in 0..NO {
+        for j in 0..N {
             let d = jac[(r, j)];
             if d != 0.0 {
-                for c in 0..N {
-                    jp[(r, c)] += d * p[(c, j)];
+                let src = p.fixed_columns::<1>(j);
+                let mut dst = pjt.fixed_columns_mut::<1>(r);
+                for (o, s) in dst.iter_mut().zip(src.iter()) {
+                    *o += d * s;
                 }
             }
         }
     }
-    jp
+    pjt
 }
 
-/// `(J P) Jᵀ + S` with the lower triangle of `(J P) Jᵀ` computed over the non-zeros of `J` and
+/// `J (P Jᵀ) + S` with the lower triangle of `J P Jᵀ` computed over the non-zeros of `J` and
 /// mirrored: for symmetric `S` the result is exactly symmetric.
 pub(crate) fn innovation_cov<const NY: usize, const N: usize>(
-    jp: &SMatrix<f64, NY, N>,
+    pjt: &SMatrix<f64, N, NY>,
     jac: &SMatrix<f64, NY, N>,
     s_add: &SMatrix<f64, NY, NY>,
 ) -> SMatrix<f64, NY, NY> {
     let mut l = SMatrix::<f64, NY, NY>::zeros();
     for c in 0..N {
-        for j in 0..NY {
-            let d = jac[(j, c)];
+        for i in 0..NY {
+            let d = jac[(i, c)];
             if d != 0.0 {
-                for i in j..NY {
-                    l[(i, j)] += jp[(i, c)] * d;
+                for j in 0..=i {
+                    l[(i, j)] += d * pjt[(c, j)];
                 }
             }
         }
@@ -282,29 +297,6 @@ pub(crate) fn innovation_cov<const NY: usize, const N: usize>(
         }
     }
     l + s_add
-}
-
-/// `P ← P − Wᵀ W`, computing the upper triangle once and mirroring it (the result is symmetric
-/// by construction; the input is read through `(P + Pᵀ)/2`). Returns whether every entry is
-/// finite.
-pub(crate) fn downdate_symmetric<const NO: usize, const N: usize>(
-    p: &mut SMatrix<f64, N, N>,
-    w: &SMatrix<f64, NO, N>,
-) -> bool {
-    let mut finite = true;
-    for c in 0..N {
-        for r in 0..=c {
-            let mut acc = 0.0;
-            for d in 0..NO {
-                acc += w[(d, r)] * w[(d, c)];
-            }
-            let v = 0.5 * (p[(r, c)] + p[(c, r)]) - acc;
-            finite &= v.is_finite();
-            p[(r, c)] = v;
-            p[(c, r)] = v;
-        }
-    }
-    finite
 }
 
 /// KF propagate, SPEC §4: `m ← G m + g`, `P ← G P Gᵀ + Q` (symmetrised).
@@ -323,19 +315,22 @@ pub fn kf_propagate<const N: usize>(
     symmetrise(p);
 }
 
-/// The gain side of a Gaussian measurement update, computed once per update: `J P` and the lower
-/// Cholesky factor `C` of the innovation covariance `L = J P Jᵀ + S`. The marginalised particle
-/// filters factorise `L` first because it is also their proposal covariance
+/// The gain side of a Gaussian measurement update, computed once per update: `P Jᵀ` and the
+/// lower Cholesky factor `C` of the innovation covariance `L = J P Jᵀ + S`. The marginalised
+/// particle filters factorise `L` first because it is also their proposal covariance
 /// ([`UpdateFactor::apply_whitened`]).
+///
+/// Layout: everything is held transposed (`P Jᵀ`, `Wᵀ`) so that each inner loop runs down a
+/// contiguous column of length `N`.
 #[derive(Debug, Clone, Copy)]
 pub struct UpdateFactor<const N: usize, const NY: usize> {
-    jp: SMatrix<f64, NY, N>,
+    pjt: SMatrix<f64, N, NY>,
     /// Lower Cholesky factor of `L` (after any repair).
     pub chol: SMatrix<f64, NY, NY>,
 }
 
 impl<const N: usize, const NY: usize> UpdateFactor<N, NY> {
-    /// `J P` over the non-zeros of `J`, `L = J P Jᵀ + S` (exactly symmetric for symmetric `S`)
+    /// `P Jᵀ` over the non-zeros of `J`, `L = J P Jᵀ + S` (exactly symmetric for symmetric `S`)
     /// and its factor by [`cholesky_repaired`] (same repair, counting and errors).
     pub fn new(
         p: &SMatrix<f64, N, N>,
@@ -345,16 +340,21 @@ impl<const N: usize, const NY: usize> UpdateFactor<N, NY> {
         which: &'static str,
         health: &mut Health,
     ) -> Result<Self, FilterError> {
-        let jp = sparse_jp(jac, p);
-        let l_cov = innovation_cov(&jp, jac, s_add);
+        let pjt = sparse_pjt(jac, p);
+        let l_cov = innovation_cov(&pjt, jac, s_add);
         let chol = cholesky_repaired(&l_cov, step, which, health)?;
-        Ok(Self { jp, chol })
+        Ok(Self { pjt, chol })
     }
 
     /// The update given the whitened innovation `e = C⁻¹ (y − ŷ)`: with `W = C⁻¹ J P`,
-    /// `m ← m + Wᵀ e`, `P ← P − Wᵀ W` (symmetric by construction). A sampled pseudo-measurement
-    /// `ŷ + C ξ` has whitened innovation `ξ`, so no solve is needed for it. On a non-finite
-    /// result `m` and `p` are left unchanged.
+    /// `m ← m + Wᵀ e`, `P ← P − Wᵀ W` (lower triangle mirrored, so `P` stays exactly
+    /// symmetric). A sampled pseudo-measurement `ŷ + C ξ` has whitened innovation `ξ`, so no
+    /// solve is needed for it.
+    ///
+    /// On a non-finite gain or mean `m` and `p` are left unchanged. `P` is downdated in place (a
+    /// copy of it would cost as much as the downdate), so if only the downdated covariance
+    /// overflows, `p` is left non-finite and the error says so; every filter of the crate then
+    /// stops using those moments.
     pub fn apply_whitened(
         &self,
         m: &mut SVector<f64, N>,
@@ -362,26 +362,94 @@ impl<const N: usize, const NY: usize> UpdateFactor<N, NY> {
         e: &SVector<f64, NY>,
         step: usize,
     ) -> Result<(), FilterError> {
-        let mut w = self.jp;
-        solve_lower_in_place(&self.chol, &mut w);
-        let new_m = *m + w.tr_mul(e);
-        if new_m.iter().any(|v| !v.is_finite()) {
+        // Wᵀ = (P Jᵀ) C⁻ᵀ, column by column: Wᵀ_i = (P Jᵀ_i − Σ_{k<i} C_ik Wᵀ_k) / C_ii.
+        let mut wt = self.pjt;
+        for i in 0..NY {
+            for k in 0..i {
+                let c = self.chol[(i, k)];
+                if c != 0.0 {
+                    for r in 0..N {
+                        wt[(r, i)] -= c * wt[(r, k)];
+                    }
+                }
+            }
+            let inv = 1.0 / self.chol[(i, i)];
+            for r in 0..N {
+                wt[(r, i)] *= inv;
+            }
+        }
+        let new_m = *m + wt * e;
+        if !all_finite(&new_m) || !all_finite(&wt) {
             return Err(FilterError::NonFinite {
                 step,
                 which: "filtered mean",
             });
         }
-        let mut new_p = *p;
-        if !downdate_symmetric(&mut new_p, &w) {
+        // P − Wᵀ W by whole columns (fixed length, so the loop vectorises): column c loses
+        // Σ_d Wᵀ[c, d] · Wᵀ[:, d]. Then the lower triangle is mirrored, so P is exactly
+        // symmetric whatever the rounding.
+        for c in 0..N {
+            for d in 0..NY {
+                let a = wt[(c, d)];
+                for r in 0..N {
+                    p[(r, c)] -= a * wt[(r, d)];
+                }
+            }
+        }
+        for c in 0..N {
+            for r in (c + 1)..N {
+                p[(c, r)] = p[(r, c)];
+            }
+        }
+        if !all_finite(p) {
             return Err(FilterError::NonFinite {
                 step,
                 which: "filtered covariance",
             });
         }
         *m = new_m;
-        *p = new_p;
         Ok(())
     }
+}
+
+/// The update of [`gaussian_update`] from the residual `y − ŷ`; returns the factor and the
+/// whitened residual `e = C⁻¹ (y − ŷ)`, from which the caller may score the measurement.
+fn update_from_residual<const N: usize, const NY: usize>(
+    m: &mut SVector<f64, N>,
+    p: &mut SMatrix<f64, N, N>,
+    residual: &SVector<f64, NY>,
+    jac: &SMatrix<f64, NY, N>,
+    s_add: &SMatrix<f64, NY, NY>,
+    step: usize,
+    health: &mut Health,
+) -> Result<(SMatrix<f64, NY, NY>, SVector<f64, NY>), FilterError> {
+    if !all_finite(residual) {
+        return Err(FilterError::NonFinite {
+            step,
+            which: "innovation",
+        });
+    }
+    let factor = UpdateFactor::new(p, jac, s_add, step, "innovation covariance", health)?;
+    let mut e = *residual;
+    solve_lower_in_place(&factor.chol, &mut e);
+    factor.apply_whitened(m, p, &e, step)?;
+    Ok((factor.chol, e))
+}
+
+/// [`gaussian_update`] for a caller that does not use the log-likelihood (Storvik's update of the
+/// sufficient statistics): the same moments, without the logarithm.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn gaussian_update_unscored<const N: usize, const NY: usize>(
+    m: &mut SVector<f64, N>,
+    p: &mut SMatrix<f64, N, N>,
+    y: &SVector<f64, NY>,
+    y_hat: &SVector<f64, NY>,
+    jac: &SMatrix<f64, NY, N>,
+    s_add: &SMatrix<f64, NY, NY>,
+    step: usize,
+    health: &mut Health,
+) -> Result<(), FilterError> {
+    update_from_residual(m, p, &(y - y_hat), jac, s_add, step, health).map(|_| ())
 }
 
 /// The one Gaussian measurement update, SPEC §4. Given the predicted measurement `ŷ`, the
@@ -395,7 +463,8 @@ impl<const N: usize, const NY: usize> UpdateFactor<N, NY> {
 ///
 /// On error (`NonFinite` for a non-finite residual, innovation covariance or result,
 /// `NotPositiveDefinite` if `L` cannot be factorised even after repair) `m` and `p` are left
-/// unchanged.
+/// unchanged, except in the one case [`UpdateFactor::apply_whitened`] documents (a finite gain
+/// whose downdated covariance overflows).
 #[allow(clippy::too_many_arguments)]
 pub fn gaussian_update<const N: usize, const NY: usize>(
     m: &mut SVector<f64, N>,
@@ -408,20 +477,11 @@ pub fn gaussian_update<const N: usize, const NY: usize>(
     health: &mut Health,
 ) -> Result<Innovation<NY>, FilterError> {
     let residual = y - y_hat;
-    if residual.iter().any(|v| !v.is_finite()) {
-        return Err(FilterError::NonFinite {
-            step,
-            which: "innovation",
-        });
-    }
-    let factor = UpdateFactor::new(p, jac, s_add, step, "innovation covariance", health)?;
-    let mut e = residual;
-    solve_lower_in_place(&factor.chol, &mut e);
-    factor.apply_whitened(m, p, &e, step)?;
-    let loglik = -0.5 * e.norm_squared() - log_det_half(&factor.chol) - 0.5 * (NY as f64) * LN_2PI;
+    let (chol, e) = update_from_residual(m, p, &residual, jac, s_add, step, health)?;
+    let loglik = -0.5 * e.norm_squared() - log_det_half(&chol) - 0.5 * (NY as f64) * LN_2PI;
     Ok(Innovation {
         residual,
-        chol: factor.chol,
+        chol,
         loglik,
     })
 }
@@ -576,9 +636,9 @@ mod tests {
         let p = Matrix3::new(4.0, 2.0, 0.6, 2.0, 5.0, 1.5, 0.6, 1.5, 3.0);
         let jac = nalgebra::Matrix2x3::new(0.3, 0.0, -1.7, 0.0, 2.1, 0.4);
         let s = Matrix2::new(0.5, 0.1, 0.1, 0.7);
-        let jp = sparse_jp(&jac, &p);
-        assert!((jp - jac * p).abs().max() < 1e-14);
-        let l = innovation_cov(&jp, &jac, &s);
+        let pjt = sparse_pjt(&jac, &p);
+        assert!((pjt - p * jac.transpose()).abs().max() < 1e-14);
+        let l = innovation_cov(&pjt, &jac, &s);
         assert_eq!(l[(0, 1)], l[(1, 0)]);
         assert!((l - (jac * p * jac.transpose() + s)).abs().max() < 1e-13);
     }

@@ -27,6 +27,7 @@ use rand_distr::{Distribution, StandardNormal};
 use super::{MarginalParticles, ParticleConfig, ParticleFilter, Posterior, StepInfo, WeightedSet};
 use crate::error::FilterError;
 use crate::health::Health;
+use crate::kalman::kf::all_finite;
 use crate::kalman::{kf_update, UpdateFactor};
 use crate::model::{ConditionallyLinear, Layout};
 
@@ -225,8 +226,7 @@ where
                     let u_l = mean_l + factor.chol * xi;
                     linked.scatter(&mut u_new, &u_l);
                     // (b) u_L observes z through F_L; its whitened innovation is ξ itself.
-                    u_l.iter().all(|v| v.is_finite())
-                        && factor.apply_whitened(mu, cov, &xi, k).is_ok()
+                    all_finite(&u_l) && factor.apply_whitened(mu, cov, &xi, k).is_ok()
                 }
                 Err(_) => false,
             };

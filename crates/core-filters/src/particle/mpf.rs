@@ -34,9 +34,10 @@
 //! `D = J − I` ([`ekf2_propagate_near_identity`]); (ii) fuses the proposal draw (a) with the
 //! pseudo-measurement update (b), whose innovation covariance is the proposal covariance, so
 //! `Jₙ P`, its Cholesky factor and the whitened innovation (the standard normal draw itself) are
-//! computed once; (iii) forms `J P` over the non-zeros of `J` and downdates `P` symmetrically in
-//! the measurement update. [`MpfKernel::Dense`] uses the generic [`gaussian_update`],
-//! [`ekf2_propagate`] and [`ekf2_update`] throughout and is the reference the sparse kernel is
+//! computed once ([`UpdateFactor`]). The measurement update (d) is [`ekf2_update`] on both paths
+//! (the shared Gaussian update already visits only the non-zeros of `J`). [`MpfKernel::Dense`]
+//! forms the proposal covariance with dense products, samples, then calls [`gaussian_update`],
+//! and propagates with the dense [`ekf2_propagate`]; it is the reference the sparse kernel is
 //! tested against (same random draws, results equal to round-off).
 
 use nalgebra::{SMatrix, SVector};
@@ -47,12 +48,11 @@ use super::{MarginalParticles, Posterior, StepInfo, WeightedSet};
 use super::{ParticleConfig, ParticleFilter};
 use crate::error::FilterError;
 use crate::health::Health;
-use crate::kalman::kf::{
-    downdate_symmetric, innovation_cov, log_det_half, solve_lower_in_place, sparse_jp, symmetrise,
-    LN_2PI,
-};
+use crate::kalman::kf::{all_finite, symmetrise};
 use crate::kalman::second_order_terms;
-use crate::kalman::{cholesky_repaired, ekf2_propagate, ekf2_update, gaussian_update};
+use crate::kalman::{
+    cholesky_repaired, ekf2_propagate, ekf2_update, gaussian_update, UpdateFactor,
+};
 use crate::model::{ConditionallyQuadratic, Layout, SparseHessians};
 
 /// Which implementation of the Gaussian steps the filter uses (module documentation).
@@ -282,11 +282,9 @@ fn standard_normal<G: Rng + ?Sized, const ND: usize>(rng: &mut G) -> SVector<f64
 /// SPEC §5.4 (a) and (b) fused, for the [`MpfKernel::Sparse`] path: with `S = Jₙ P Jₙᵀ + cov_add
 /// = C Cᵀ` (the proposal covariance, which is also the innovation covariance of the
 /// pseudo-measurement), the draw is `xⁿ = mean + C ξ`, so the whitened innovation
-/// `C⁻¹ (xⁿ − mean)` is `ξ` itself and the update of [`gaussian_update`] becomes
-/// `m ← m + Wᵀ ξ`, `P ← P − Wᵀ W` with `W = C⁻¹ Jₙ P`. `Jₙ P` and `S` are computed once and the
-/// product `Jₙ P` visits only the non-zero entries of `Jₙ`. Same result as the dense path
-/// (sample, then [`gaussian_update`]) up to round-off, with the same random draws; same repair
-/// and failure policy (`m`, `P` untouched on error).
+/// `C⁻¹ (xⁿ − mean)` is `ξ` itself: [`UpdateFactor`] is formed once and applied with `ξ`. Same
+/// result as the dense path (sample, then [`gaussian_update`]) up to round-off, with the same
+/// random draws; same repair and failure policy (`m`, `P` untouched on error).
 fn sample_and_update_fused<G: Rng + ?Sized, const ND: usize, const NBL: usize>(
     prop: &Proposal<ND, NBL>,
     m: &mut SVector<f64, NBL>,
@@ -295,95 +293,25 @@ fn sample_and_update_fused<G: Rng + ?Sized, const ND: usize, const NBL: usize>(
     rng: &mut G,
     health: &mut Health,
 ) -> Result<SVector<f64, ND>, FilterError> {
-    let jp = sparse_jp(&prop.jac, p);
-    let s = innovation_cov(&jp, &prop.jac, &prop.cov_add);
-    let chol = cholesky_repaired(&s, k, "proposal covariance", health)?;
+    let factor = UpdateFactor::new(
+        p,
+        &prop.jac,
+        &prop.cov_add,
+        k,
+        "proposal covariance",
+        health,
+    )?;
     let xi = standard_normal::<G, ND>(rng);
-    let x_dyn = prop.mean + chol * xi;
+    let x_dyn = prop.mean + factor.chol * xi;
     // The innovation x_dyn − mean must be finite, as in `gaussian_update`.
-    if x_dyn.iter().any(|v| !v.is_finite()) {
+    if !all_finite(&x_dyn) {
         return Err(FilterError::NonFinite {
             step: k,
             which: "innovation",
         });
     }
-    let mut w = jp;
-    solve_lower_in_place(&chol, &mut w);
-    let new_m = *m + w.tr_mul(&xi);
-    if new_m.iter().any(|v| !v.is_finite()) {
-        return Err(FilterError::NonFinite {
-            step: k,
-            which: "filtered mean",
-        });
-    }
-    let mut new_p = *p;
-    if !downdate_symmetric(&mut new_p, &w) {
-        return Err(FilterError::NonFinite {
-            step: k,
-            which: "filtered covariance",
-        });
-    }
-    *m = new_m;
-    *p = new_p;
+    factor.apply_whitened(m, p, &xi, k)?;
     Ok(x_dyn)
-}
-
-/// SPEC §5.4 (d)+(e) on the [`MpfKernel::Sparse`] path: the EKF2 update with `y_k` of
-/// [`ekf2_update`]. The Hessian terms come from [`second_order_terms`]; then, with
-/// `L = J P Jᵀ + ½tr(𝓗ⁱP𝓗^{i'}P) + R = C Cᵀ`, `W = C⁻¹ J P` and `e = C⁻¹ (y − ŷ)`:
-/// `m ← m + Wᵀ e`, `P ← P − Wᵀ W`, with `J P` over the non-zeros of `J` and a symmetric
-/// downdate. Returns `log N(y; ŷ, L)`. Same repair and error policy as [`gaussian_update`],
-/// except that on a non-finite result `m`, `P` may be left partly updated (the particle then has
-/// weight zero and is never used again).
-#[allow(clippy::too_many_arguments)]
-fn ekf2_update_sparse<const N: usize, const NY: usize>(
-    m: &mut SVector<f64, N>,
-    p: &mut SMatrix<f64, N, N>,
-    y: &SVector<f64, NY>,
-    value: &SVector<f64, NY>,
-    jac: &SMatrix<f64, NY, N>,
-    hess: &SparseHessians,
-    r: &SMatrix<f64, NY, NY>,
-    step: usize,
-    health: &mut Health,
-) -> Result<f64, FilterError> {
-    let mut y_hat = *value;
-    let mut l_cov = *r;
-    if !hess.is_empty() {
-        let mut mean2 = SVector::<f64, NY>::zeros();
-        let mut cov2 = SMatrix::<f64, NY, NY>::zeros();
-        second_order_terms(hess, p, &mut mean2, &mut cov2);
-        y_hat += mean2;
-        l_cov += cov2;
-    }
-    let residual = y - y_hat;
-    if residual.iter().any(|v| !v.is_finite()) {
-        return Err(FilterError::NonFinite {
-            step,
-            which: "innovation",
-        });
-    }
-    let jp = sparse_jp(jac, p);
-    let l_cov = innovation_cov(&jp, jac, &l_cov);
-    let chol = cholesky_repaired(&l_cov, step, "innovation covariance", health)?;
-    let mut w = jp;
-    solve_lower_in_place(&chol, &mut w);
-    let mut e = residual;
-    solve_lower_in_place(&chol, &mut e);
-    *m += w.tr_mul(&e);
-    if m.iter().any(|v| !v.is_finite()) {
-        return Err(FilterError::NonFinite {
-            step,
-            which: "filtered mean",
-        });
-    }
-    if !downdate_symmetric(p, &w) {
-        return Err(FilterError::NonFinite {
-            step,
-            which: "filtered covariance",
-        });
-    }
-    Ok(-0.5 * e.norm_squared() - log_det_half(&chol) - 0.5 * (NY as f64) * LN_2PI)
 }
 
 /// Advances one particle through SPEC §5.4 (a)–(e) and returns `log N(y_k; ŷ, L)`.
@@ -452,10 +380,7 @@ where
     // (d)+(e) EKF2 update with y_k at xⁿ_k; its innovation log-density is the weight factor.
     let (h, jac_y) = model.observation(k, x_n, m);
     let hess_y = model.observation_hessians();
-    match kernel {
-        MpfKernel::Sparse => ekf2_update_sparse(m, p, y, &h, &jac_y, hess_y, r, k, health),
-        MpfKernel::Dense => Ok(ekf2_update(m, p, y, &h, &jac_y, hess_y, r, k, health)?.loglik),
-    }
+    Ok(ekf2_update(m, p, y, &h, &jac_y, hess_y, r, k, health)?.loglik)
 }
 
 impl<M, const NN: usize, const ND: usize, const NBL: usize, const NY: usize> ParticleFilter<NY>

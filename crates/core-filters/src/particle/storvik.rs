@@ -42,7 +42,8 @@ use super::mlnrbpf::{standard_normal, LinkedRows};
 use super::{MarginalParticles, ParticleConfig, ParticleFilter, Posterior, StepInfo, WeightedSet};
 use crate::error::FilterError;
 use crate::health::Health;
-use crate::kalman::{gaussian_update, kf_update, FactoredCov};
+use crate::kalman::kf::{all_finite, gaussian_update_unscored};
+use crate::kalman::FactoredCov;
 use crate::model::{ConditionallyLinear, Layout};
 
 /// How Storvik's step (iii) treats the measurement `y_k` (SPEC §5.3).
@@ -73,10 +74,15 @@ const PSD_PIVOT_REL_TOL: f64 = 1e-12;
 /// which a pivot within `±1e-12 · max_j a_jj` of zero yields a zero column (that direction has
 /// no variance). `None` for a non-finite entry or a clearly negative pivot (indefinite `A`).
 pub fn psd_cholesky<const N: usize>(a: &SMatrix<f64, N, N>) -> Option<SMatrix<f64, N, N>> {
-    if a.iter().any(|v| !v.is_finite()) {
+    if !all_finite(a) {
         return None;
     }
-    let max_diag = (0..N).map(|j| a[(j, j)]).fold(0.0_f64, f64::max);
+    let mut max_diag = 0.0_f64;
+    for j in 0..N {
+        if a[(j, j)] > max_diag {
+            max_diag = a[(j, j)];
+        }
+    }
     let tol = PSD_PIVOT_REL_TOL * max_diag;
     let mut l = SMatrix::<f64, N, N>::zeros();
     for j in 0..N {
@@ -93,12 +99,14 @@ pub fn psd_cholesky<const N: usize>(a: &SMatrix<f64, N, N>) -> Option<SMatrix<f6
         }
         let ljj = d.sqrt();
         l[(j, j)] = ljj;
+        // 1/ljj as ljj/d: the square root and the division run side by side.
+        let inv = ljj * (1.0 / d);
         for i in (j + 1)..N {
             let mut s = a[(i, j)];
             for k in 0..j {
                 s -= l[(i, k)] * l[(j, k)];
             }
-            l[(i, j)] = s / ljj;
+            l[(i, j)] = s * inv;
         }
     }
     Some(l)
@@ -264,13 +272,17 @@ where
             self.set.log_w[i] += r_noise.log_density(&(y - y_z0));
             // (iii) the linked rows: linear in z with Jacobian F_L and noise Q_L.
             let mean_l = f_l + F_L * *mu;
-            if gaussian_update(mu, cov, &u_l, &mean_l, &F_L, &linked.q_l, k, health).is_err() {
+            if gaussian_update_unscored(mu, cov, &u_l, &mean_l, &F_L, &linked.q_l, k, health)
+                .is_err()
+            {
                 self.set.log_w[i] = f64::NAN;
                 continue;
             }
             // (iii) y_k, sequentially after the linked rows (block-diagonal noise).
             let updated = match self.update {
-                StorvikUpdate::Exact => kf_update(mu, cov, y, &H, &h, &self.r, k, health),
+                StorvikUpdate::Exact => {
+                    gaussian_update_unscored(mu, cov, y, &(H * *mu + h), &H, &self.r, k, health)
+                }
                 StorvikUpdate::Linearised => {
                     // G_z = H(u_k) + J_u F, F zero outside the linked rows.
                     let J_u = self.model.observation_jacobian_u(k, &u_new, &z0);
@@ -279,7 +291,7 @@ where
                         G_z += J_u.column(r) * F_L.row(l);
                     }
                     let y_hat = y_z0 + G_z * (*mu - z0);
-                    gaussian_update(mu, cov, y, &y_hat, &G_z, &self.r, k, health)
+                    gaussian_update_unscored(mu, cov, y, &y_hat, &G_z, &self.r, k, health)
                 }
             };
             if updated.is_err() {
