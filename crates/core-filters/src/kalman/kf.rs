@@ -41,11 +41,16 @@ pub struct Innovation<const NY: usize> {
     pub loglik: f64,
 }
 
-/// Whether every entry is finite. Reads the contiguous storage without early exit (a
-/// vectorisable reduction): nalgebra's element iterator is markedly slower in the hot loops.
+/// Whether every entry is finite. Reads the contiguous storage without early exit and tests
+/// the exponent bits (all ones for ±∞ and NaN) with integer operations, which vectorise;
+/// nalgebra's element iterator is markedly slower in the hot loops.
 #[inline]
 pub(crate) fn all_finite<const R: usize, const C: usize>(a: &SMatrix<f64, R, C>) -> bool {
-    a.as_slice().iter().fold(true, |ok, v| ok & v.is_finite())
+    const EXPONENT: u64 = 0x7ff0_0000_0000_0000;
+    let non_finite = a.as_slice().iter().fold(0u64, |acc, v| {
+        acc | u64::from(v.to_bits() & EXPONENT == EXPONENT)
+    });
+    non_finite == 0
 }
 
 /// Plain Cholesky factorisation with a relative pivot test; `None` if a pivot is not clearly
@@ -669,5 +674,15 @@ mod tests {
         assert!((m1 - (m0 + k * (y - y_hat))).abs().max() < 1e-12);
         assert!((p1 - (p0 - k * l * k.transpose())).abs().max() < 1e-12);
         assert_eq!(h, Health::default());
+    }
+
+    #[test]
+    fn all_finite_detects_every_kind_of_non_finite_entry() {
+        let mut a = Matrix3::new(1.0, -2.0, 0.0, f64::MAX, -f64::MAX, 1e-310, 3.0, 4.0, 5.0);
+        assert!(all_finite(&a));
+        for bad in [f64::NAN, f64::INFINITY, f64::NEG_INFINITY, -f64::NAN] {
+            a[(2, 1)] = bad;
+            assert!(!all_finite(&a), "{bad} not detected");
+        }
     }
 }
