@@ -19,8 +19,7 @@
 //!   linearisation point `z0`: with block-diagonal noise, sequential updates with linear (or
 //!   fixed-point linearised) measurements equal the stacked one.
 //!
-//! Step (i) is done for every particle before (ii)–(iii) (the draws of (i) come first in the
-//! random stream). Then normalise, summarise the weighted mixture, resample `(u, μ, C)` jointly (at the start of
+//! Then normalise, summarise the weighted mixture, resample `(u, μ, C)` jointly (at the start of
 //! the next step).
 //!
 //! Sampling from a singular `C`: static parameters held fixed (zero prior variance) or directions
@@ -125,8 +124,6 @@ where
     layout: Layout,
     /// Sampled blocks and Gaussians of the marginalised block, double-buffered.
     p: MarginalParticles<NU, NZ>,
-    /// The realisations `z0 ~ N(μ, C)` of step (i), one per particle.
-    z0: Vec<SVector<f64, NZ>>,
     /// Weights and the resampling bookkeeping.
     set: WeightedSet,
     noise_sd: SVector<f64, NU>,
@@ -169,7 +166,6 @@ where
             noise_sd,
             update,
             p: MarginalParticles::new(np),
-            z0: vec![SVector::zeros(); np],
             set: WeightedSet::new(&config),
             setup_health: health,
             health,
@@ -247,30 +243,16 @@ where
         };
         self.p
             .resample_pending(&mut self.set, rng, &mut self.health);
-        // (i) z0 ~ N(μ, C) with a semidefinite factor of C, for every particle first: the
-        // factorisations are independent of each other, and a loop doing only them lets the
-        // processor overlap one particle's chain of pivots (square roots and divisions) with
-        // the next one's.
-        for i in 0..self.config.particles {
-            match psd_cholesky(&self.p.cov[i]) {
-                Some(c_chol) => {
-                    self.z0[i] = self.p.mu[i] + c_chol * standard_normal::<NZ, G>(rng);
-                }
-                None => {
-                    self.health.cholesky_failures += 1;
-                    self.set.log_w[i] = f64::NAN;
-                }
-            }
-        }
         let linked = &self.linked;
         for i in 0..self.config.particles {
-            // NaN marks a failure of (i): the weight routine maps NaN to −∞ in place, so no NaN
-            // survives from an earlier step.
-            if self.set.log_w[i].is_nan() {
-                continue;
-            }
             let (mu, cov, health) = (&mut self.p.mu[i], &mut self.p.cov[i], &mut self.health);
-            let z0 = self.z0[i];
+            // (i) z0 ~ N(μ, C) with a semidefinite factor of C.
+            let Some(c_chol) = psd_cholesky(cov) else {
+                health.cholesky_failures += 1;
+                self.set.log_w[i] = f64::NAN;
+                continue;
+            };
+            let z0 = *mu + c_chol * standard_normal::<NZ, G>(rng);
             // (ii) u_k ~ N(f + F z0, Q_u): linked rows f_L + F_L z0 + noise, others f + noise.
             let (f, F_L) = self.model.transition(k, &self.p.sampled[i]);
             let f_l = linked.pick(&f);
