@@ -244,10 +244,19 @@ where
         self.p
             .resample_pending(&mut self.set, rng, &mut self.health);
         let linked = &self.linked;
-        for i in 0..self.config.particles {
+        let np = self.config.particles;
+        // The factor of particle i + 1 is computed while particle i is processed: the
+        // factorisation is a chain of dependent square roots and divisions, and interleaving it
+        // with independent work hides that latency. Random draws keep their order.
+        let mut next_chol = psd_cholesky(&self.p.cov[0]);
+        for i in 0..np {
+            let this_chol = next_chol;
+            if i + 1 < np {
+                next_chol = psd_cholesky(&self.p.cov[i + 1]);
+            }
             let (mu, cov, health) = (&mut self.p.mu[i], &mut self.p.cov[i], &mut self.health);
             // (i) z0 ~ N(μ, C) with a semidefinite factor of C.
-            let Some(c_chol) = psd_cholesky(cov) else {
+            let Some(c_chol) = this_chol else {
                 health.cholesky_failures += 1;
                 self.set.log_w[i] = f64::NAN;
                 continue;
