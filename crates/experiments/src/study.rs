@@ -94,7 +94,7 @@ impl Study {
         if self.sweep.algorithms.is_empty() || self.sweep.runs == 0 {
             bail!("the sweep needs at least one algorithm and one run");
         }
-        if self.sweep.particles.iter().any(|&p| p == 0) {
+        if self.sweep.particles.contains(&0) {
             bail!("particles must be at least 1");
         }
         Ok(())

@@ -47,6 +47,7 @@ pub struct Innovation<const NY: usize> {
 /// instruction set (a per-entry `is_finite` with early exit, or nalgebra's element iterator, runs
 /// one entry at a time in the hot loops).
 #[inline]
+#[allow(clippy::eq_op)] // `v − v` is the test itself, not a mistake.
 pub(crate) fn all_finite<const R: usize, const C: usize>(a: &SMatrix<f64, R, C>) -> bool {
     let s = a.as_slice();
     let mut lanes = [0.0_f64; 8];

@@ -28,7 +28,10 @@ pub fn run(args: Args) -> Result<()> {
             let dir = entry?.path();
             if dir.is_dir() {
                 let name = dir.file_name().expect("directory name").to_owned();
-                total += merge(&[dir.clone()], &args.into.join("records").join(name))?;
+                total += merge(
+                    std::slice::from_ref(&dir),
+                    &args.into.join("records").join(name),
+                )?;
             }
         }
     }
