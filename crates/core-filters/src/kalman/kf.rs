@@ -61,19 +61,35 @@ pub(crate) fn all_finite<const R: usize, const C: usize>(a: &SMatrix<f64, R, C>)
     lanes.iter().sum::<f64>() + rest == 0.0
 }
 
-/// Plain Cholesky factorisation with a relative pivot test; `None` if a pivot is not clearly
-/// positive (this also rejects NaN).
-fn try_cholesky<const N: usize>(a: &SMatrix<f64, N, N>) -> Option<SMatrix<f64, N, N>> {
+/// What a Cholesky factorisation does with a pivot `d` (the diagonal entry after elimination).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Pivot {
+    /// `l_jj = √d`.
+    Accept,
+    /// A direction of zero variance: column `j` stays zero.
+    ZeroColumn,
+    /// The matrix is not (semi)definite: give up.
+    Fail,
+}
+
+/// Lower Cholesky factor of `a` (dot-product form) with the pivot rule `decide(j, d)`; `None` as
+/// soon as a pivot fails. The callers differ only in that rule: [`try_cholesky`] (definite) and
+/// Storvik's semidefinite factor.
+#[inline]
+pub(crate) fn cholesky_with<const N: usize>(
+    a: &SMatrix<f64, N, N>,
+    decide: impl Fn(usize, f64) -> Pivot,
+) -> Option<SMatrix<f64, N, N>> {
     let mut l = SMatrix::<f64, N, N>::zeros();
     for j in 0..N {
         let mut d = a[(j, j)];
         for k in 0..j {
             d -= l[(j, k)] * l[(j, k)];
         }
-        // Written so that a NaN pivot also fails.
-        let clearly_positive = d > 0.0 && d > PIVOT_REL_TOL * a[(j, j)];
-        if !clearly_positive {
-            return None;
+        match decide(j, d) {
+            Pivot::Fail => return None,
+            Pivot::ZeroColumn => continue,
+            Pivot::Accept => {}
         }
         let ljj = d.sqrt();
         l[(j, j)] = ljj;
@@ -89,6 +105,19 @@ fn try_cholesky<const N: usize>(a: &SMatrix<f64, N, N>) -> Option<SMatrix<f64, N
         }
     }
     Some(l)
+}
+
+/// Plain Cholesky factorisation with a relative pivot test; `None` if a pivot is not clearly
+/// positive (this also rejects NaN).
+fn try_cholesky<const N: usize>(a: &SMatrix<f64, N, N>) -> Option<SMatrix<f64, N, N>> {
+    cholesky_with(a, |j, d| {
+        // Written so that a NaN pivot also fails.
+        if d > 0.0 && d > PIVOT_REL_TOL * a[(j, j)] {
+            Pivot::Accept
+        } else {
+            Pivot::Fail
+        }
+    })
 }
 
 /// Lower Cholesky factor of a covariance with the documented repair (SPEC §4):
@@ -217,11 +246,6 @@ impl<const N: usize> FactoredCov<N> {
         Ok(Self { chol, log_norm })
     }
 
-    /// The lower Cholesky factor actually used.
-    pub fn chol(&self) -> &SMatrix<f64, N, N> {
-        &self.chol
-    }
-
     /// `log N(r; 0, R)`; equal to [`log_normal_density_chol`] with this factor.
     #[inline]
     pub fn log_density(&self, residual: &SVector<f64, N>) -> f64 {
@@ -263,26 +287,36 @@ pub(crate) fn sandwich<const N: usize, const M: usize>(
     out
 }
 
-/// `P Jᵀ` (N×NO) visiting only the non-zero entries of `J`: column `r` of the product is
-/// `Σ_j J[r, j] P[:, j]`, an accumulation of contiguous columns. The Jacobians of the
-/// partitioned chain have a handful of non-zeros per row.
+/// Calls `f(r, c, J[r, c])` for every non-zero entry of `J`, column by column (so sums built
+/// from it run over `c` in increasing order). The Jacobians of the partitioned chain have a
+/// handful of non-zeros per row.
+#[inline(always)]
+fn for_each_nonzero<const R: usize, const C: usize>(
+    jac: &SMatrix<f64, R, C>,
+    mut f: impl FnMut(usize, usize, f64),
+) {
+    for c in 0..C {
+        for r in 0..R {
+            let d = jac[(r, c)];
+            if d != 0.0 {
+                f(r, c, d);
+            }
+        }
+    }
+}
+
+/// `P Jᵀ` (N×NO) over the non-zeros of `J`: column `r` of the product accumulates
+/// `J[r, j] · P[:, j]`, a contiguous column.
 pub(crate) fn sparse_pjt<const NO: usize, const N: usize>(
     jac: &SMatrix<f64, NO, N>,
     p: &SMatrix<f64, N, N>,
 ) -> SMatrix<f64, N, NO> {
     let mut pjt = SMatrix::<f64, N, NO>::zeros();
-    for r in 0..NO {
-        for j in 0..N {
-            let d = jac[(r, j)];
-            if d != 0.0 {
-                let src = p.fixed_columns::<1>(j);
-                let mut dst = pjt.fixed_columns_mut::<1>(r);
-                for (o, s) in dst.iter_mut().zip(src.iter()) {
-                    *o += d * s;
-                }
-            }
+    for_each_nonzero(jac, |r, j, d| {
+        for i in 0..N {
+            pjt[(i, r)] += d * p[(i, j)];
         }
-    }
+    });
     pjt
 }
 
@@ -294,16 +328,11 @@ pub(crate) fn innovation_cov<const NY: usize, const N: usize>(
     s_add: &SMatrix<f64, NY, NY>,
 ) -> SMatrix<f64, NY, NY> {
     let mut l = SMatrix::<f64, NY, NY>::zeros();
-    for c in 0..N {
-        for i in 0..NY {
-            let d = jac[(i, c)];
-            if d != 0.0 {
-                for j in 0..=i {
-                    l[(i, j)] += d * pjt[(c, j)];
-                }
-            }
+    for_each_nonzero(jac, |i, c, d| {
+        for j in 0..=i {
+            l[(i, j)] += d * pjt[(c, j)];
         }
-    }
+    });
     for j in 0..NY {
         for i in (j + 1)..NY {
             l[(j, i)] = l[(i, j)];
@@ -331,7 +360,7 @@ pub fn kf_propagate<const N: usize>(
 /// The gain side of a Gaussian measurement update, computed once per update: `P Jᵀ` and the
 /// lower Cholesky factor `C` of the innovation covariance `L = J P Jᵀ + S`. The marginalised
 /// particle filters factorise `L` first because it is also their proposal covariance
-/// ([`UpdateFactor::apply_whitened`]).
+/// ([`UpdateFactor::condition_on_draw`]).
 ///
 /// Layout: everything is held transposed (`P Jᵀ`, `Wᵀ`) so that each inner loop runs down a
 /// contiguous column of length `N`.
@@ -339,7 +368,7 @@ pub fn kf_propagate<const N: usize>(
 pub struct UpdateFactor<const N: usize, const NY: usize> {
     pjt: SMatrix<f64, N, NY>,
     /// Lower Cholesky factor of `L` (after any repair).
-    pub chol: SMatrix<f64, NY, NY>,
+    chol: SMatrix<f64, NY, NY>,
 }
 
 impl<const N: usize, const NY: usize> UpdateFactor<N, NY> {
@@ -357,6 +386,31 @@ impl<const N: usize, const NY: usize> UpdateFactor<N, NY> {
         let l_cov = innovation_cov(&pjt, jac, s_add);
         let chol = cholesky_repaired(&l_cov, step, which, health)?;
         Ok(Self { pjt, chol })
+    }
+
+    /// Draws `mean + C ξ` from `N(mean, L)` and conditions `(m, P)` on it; returns the draw.
+    /// This is the proposal and pseudo-measurement update of the marginalised particle filters
+    /// (MLN-RBPF (a)+(b), MPF-EKF2 (a)+(b)): the proposal covariance is the innovation
+    /// covariance, so the whitened innovation `C⁻¹ (draw − mean)` is `ξ` itself and the update
+    /// needs no solve. A non-finite draw is `NonFinite("innovation")`, as in [`gaussian_update`];
+    /// on error `m` and `p` are as [`UpdateFactor::apply_whitened`] leaves them.
+    pub fn condition_on_draw(
+        &self,
+        m: &mut SVector<f64, N>,
+        p: &mut SMatrix<f64, N, N>,
+        mean: &SVector<f64, NY>,
+        xi: &SVector<f64, NY>,
+        step: usize,
+    ) -> Result<SVector<f64, NY>, FilterError> {
+        let drawn = mean + self.chol * xi;
+        if !all_finite(&drawn) {
+            return Err(FilterError::NonFinite {
+                step,
+                which: "innovation",
+            });
+        }
+        self.apply_whitened(m, p, xi, step)?;
+        Ok(drawn)
     }
 
     /// The update given the whitened innovation `e = C⁻¹ (y − ŷ)`: with `W = C⁻¹ J P`,
@@ -659,7 +713,7 @@ mod tests {
     /// A pseudo-measurement drawn as `ŷ + C ξ` updated through its whitened innovation `ξ` gives
     /// the same moments as the ordinary update with that measurement.
     #[test]
-    fn whitened_update_of_a_drawn_measurement_equals_the_ordinary_update() {
+    fn conditioning_on_a_draw_equals_the_ordinary_update_with_that_measurement() {
         let p0 = Matrix3::new(4.0, 2.0, 0.6, 2.0, 5.0, 1.5, 0.6, 1.5, 3.0);
         let m0 = nalgebra::Vector3::new(1.0, -2.0, 0.5);
         let jac = nalgebra::Matrix2x3::new(0.3, 0.0, -1.7, 0.0, 2.1, 0.4);
@@ -668,9 +722,13 @@ mod tests {
         let xi = Vector2::new(0.8, -1.3);
         let mut h = Health::default();
         let factor = UpdateFactor::new(&p0, &jac, &s, 0, "L", &mut h).unwrap();
-        let y = y_hat + factor.chol * xi;
         let (mut m1, mut p1) = (m0, p0);
-        factor.apply_whitened(&mut m1, &mut p1, &xi, 0).unwrap();
+        let y = factor
+            .condition_on_draw(&mut m1, &mut p1, &y_hat, &xi, 0)
+            .unwrap();
+        // The draw is ŷ + C ξ with C the factor of L.
+        let chol = cholesky_repaired(&(jac * p0 * jac.transpose() + s), 0, "L", &mut h).unwrap();
+        assert!((y - (y_hat + chol * xi)).abs().max() < 1e-13);
         let (mut m2, mut p2) = (m0, p0);
         gaussian_update(&mut m2, &mut p2, &y, &y_hat, &jac, &s, 0, &mut h).unwrap();
         assert!((m1 - m2).abs().max() < 1e-13);

@@ -6,8 +6,9 @@
 //! - (a) proposal with `z` marginalised: linked rows `u_L ~ N(f_L + F_L μ, F_L C F_Lᵀ + Q_L)`,
 //!   the other rows `f + noise` (they do not depend on `z`);
 //! - (b) pseudo-measurement update of `(μ, C)` with `u_L` (Jacobian `F_L`, noise `Q_L`). Its
-//!   innovation covariance is the proposal covariance of (a), factorised once
-//!   ([`UpdateFactor`]); with `u_L = mean + C ξ` the whitened innovation is the draw `ξ` itself;
+//!   innovation covariance is the proposal covariance of (a), factorised once; with
+//!   `u_L = mean + C ξ` the whitened innovation is the draw `ξ` itself
+//!   ([`UpdateFactor::condition_on_draw`]);
 //! - (c) weight `N(y_k; H μ + h, H C Hᵀ + R)` with `(h, H) = observation(k, u_k)`, which is the
 //!   log-likelihood returned by (d), so (c) and (d) are one [`kf_update`] call;
 //! - (d) measurement update of `(μ, C)` with `y_k`;
@@ -27,7 +28,6 @@ use rand_distr::{Distribution, StandardNormal};
 use super::{MarginalParticles, ParticleConfig, ParticleFilter, Posterior, StepInfo, WeightedSet};
 use crate::error::FilterError;
 use crate::health::Health;
-use crate::kalman::kf::all_finite;
 use crate::kalman::{kf_update, UpdateFactor};
 use crate::model::{ConditionallyLinear, Layout};
 
@@ -211,27 +211,19 @@ where
             let mut u_new = f;
             linked.add_unlinked_noise(&mut u_new, &self.noise_sd, rng);
             // (a) the linked rows with z marginalised: N(f_L + F_L μ, S), S = F_L C F_Lᵀ + Q_L.
-            // S is also the innovation covariance of (b), so it is factorised once.
+            // S is also the innovation covariance of (b): (b) u_L observes z through F_L.
             let mean_l = linked.pick(&f) + F_L * *mu;
-            let proposed = match UpdateFactor::new(
-                cov,
-                &F_L,
-                &linked.q_l,
-                k,
-                "MLN proposal covariance",
-                health,
-            ) {
-                Ok(factor) => {
-                    let xi = standard_normal::<NL, G>(rng);
-                    let u_l = mean_l + factor.chol * xi;
-                    linked.scatter(&mut u_new, &u_l);
-                    // (b) u_L observes z through F_L; its whitened innovation is ξ itself.
-                    all_finite(&u_l) && factor.apply_whitened(mu, cov, &xi, k).is_ok()
-                }
-                Err(_) => false,
-            };
+            let drawn =
+                UpdateFactor::new(cov, &F_L, &linked.q_l, k, "MLN proposal covariance", health)
+                    .and_then(|factor| {
+                        let xi = standard_normal::<NL, G>(rng);
+                        factor.condition_on_draw(mu, cov, &mean_l, &xi, k)
+                    });
+            if let Ok(u_l) = &drawn {
+                linked.scatter(&mut u_new, u_l);
+            }
             self.p.sampled[i] = u_new;
-            if !proposed {
+            if drawn.is_err() {
                 self.set.log_w[i] = f64::NAN;
                 continue;
             }

@@ -42,13 +42,13 @@
 
 use nalgebra::{SMatrix, SVector};
 use rand::Rng;
-use rand_distr::{Distribution, StandardNormal};
 
+use super::mlnrbpf::standard_normal;
 use super::{MarginalParticles, Posterior, StepInfo, WeightedSet};
 use super::{ParticleConfig, ParticleFilter};
 use crate::error::FilterError;
 use crate::health::Health;
-use crate::kalman::kf::{all_finite, symmetrise};
+use crate::kalman::kf::symmetrise;
 use crate::kalman::second_order_terms;
 use crate::kalman::{
     cholesky_repaired, ekf2_propagate, ekf2_update, gaussian_update, UpdateFactor,
@@ -270,21 +270,12 @@ pub fn ekf2_propagate_near_identity<const N: usize>(
     *p = b;
 }
 
-/// `ND` independent standard normal draws.
-fn standard_normal<G: Rng + ?Sized, const ND: usize>(rng: &mut G) -> SVector<f64, ND> {
-    let mut xi = SVector::<f64, ND>::zeros();
-    for v in xi.iter_mut() {
-        *v = StandardNormal.sample(rng);
-    }
-    xi
-}
-
 /// SPEC §5.4 (a) and (b) fused, for the [`MpfKernel::Sparse`] path: with `S = Jₙ P Jₙᵀ + cov_add
 /// = C Cᵀ` (the proposal covariance, which is also the innovation covariance of the
 /// pseudo-measurement), the draw is `xⁿ = mean + C ξ`, so the whitened innovation
-/// `C⁻¹ (xⁿ − mean)` is `ξ` itself: [`UpdateFactor`] is formed once and applied with `ξ`. Same
+/// `C⁻¹ (xⁿ − mean)` is `ξ` itself ([`UpdateFactor::condition_on_draw`]). Same
 /// result as the dense path (sample, then [`gaussian_update`]) up to round-off, with the same
-/// random draws; same repair and failure policy (`m`, `P` untouched on error).
+/// random draws; same repair and failure policy.
 fn sample_and_update_fused<G: Rng + ?Sized, const ND: usize, const NBL: usize>(
     prop: &Proposal<ND, NBL>,
     m: &mut SVector<f64, NBL>,
@@ -301,17 +292,8 @@ fn sample_and_update_fused<G: Rng + ?Sized, const ND: usize, const NBL: usize>(
         "proposal covariance",
         health,
     )?;
-    let xi = standard_normal::<G, ND>(rng);
-    let x_dyn = prop.mean + factor.chol * xi;
-    // The innovation x_dyn − mean must be finite, as in `gaussian_update`.
-    if !all_finite(&x_dyn) {
-        return Err(FilterError::NonFinite {
-            step: k,
-            which: "innovation",
-        });
-    }
-    factor.apply_whitened(m, p, &xi, k)?;
-    Ok(x_dyn)
+    let xi = standard_normal::<ND, G>(rng);
+    factor.condition_on_draw(m, p, &prop.mean, &xi, k)
 }
 
 /// Advances one particle through SPEC §5.4 (a)–(e) and returns `log N(y_k; ŷ, L)`.
@@ -348,7 +330,7 @@ where
         MpfKernel::Dense => {
             let s = prop.jac * *p * prop.jac.transpose() + prop.cov_add;
             let chol = cholesky_repaired(&s, k, "proposal covariance", health)?;
-            let x_dyn = prop.mean + chol * standard_normal::<G, ND>(rng);
+            let x_dyn = prop.mean + chol * standard_normal::<ND, G>(rng);
             gaussian_update(
                 m,
                 p,

@@ -42,7 +42,7 @@ use super::mlnrbpf::{standard_normal, LinkedRows};
 use super::{MarginalParticles, ParticleConfig, ParticleFilter, Posterior, StepInfo, WeightedSet};
 use crate::error::FilterError;
 use crate::health::Health;
-use crate::kalman::kf::{all_finite, gaussian_update_unscored};
+use crate::kalman::kf::{all_finite, cholesky_with, gaussian_update_unscored, Pivot};
 use crate::kalman::FactoredCov;
 use crate::model::{ConditionallyLinear, Layout};
 
@@ -84,32 +84,15 @@ pub fn psd_cholesky<const N: usize>(a: &SMatrix<f64, N, N>) -> Option<SMatrix<f6
         }
     }
     let tol = PSD_PIVOT_REL_TOL * max_diag;
-    let mut l = SMatrix::<f64, N, N>::zeros();
-    for j in 0..N {
-        let mut d = a[(j, j)];
-        for k in 0..j {
-            d -= l[(j, k)] * l[(j, k)];
-        }
+    cholesky_with(a, |_, d| {
         if d < -tol {
-            return None;
+            Pivot::Fail
+        } else if d <= tol {
+            Pivot::ZeroColumn
+        } else {
+            Pivot::Accept
         }
-        if d <= tol {
-            // Zero column: the remaining entries of this column stay 0.
-            continue;
-        }
-        let ljj = d.sqrt();
-        l[(j, j)] = ljj;
-        // 1/ljj as ljj/d: the square root and the division run side by side.
-        let inv = ljj * (1.0 / d);
-        for i in (j + 1)..N {
-            let mut s = a[(i, j)];
-            for k in 0..j {
-                s -= l[(i, k)] * l[(j, k)];
-            }
-            l[(i, j)] = s * inv;
-        }
-    }
-    Some(l)
+    })
 }
 
 /// Storvik's filter (SPEC §5.3) for `u ∈ R^NU`, `z ∈ R^NZ`, `NL` linked rows and `NY`
