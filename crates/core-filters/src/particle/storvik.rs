@@ -37,6 +37,7 @@
 use nalgebra::{SMatrix, SVector};
 use rand::Rng;
 use serde::{Deserialize, Serialize};
+use wide::{f64x4, CmpLe, CmpLt};
 
 use super::mlnrbpf::{standard_normal, LinkedRows};
 use super::{MarginalParticles, ParticleConfig, ParticleFilter, Posterior, StepInfo, WeightedSet};
@@ -95,6 +96,109 @@ pub fn psd_cholesky<const N: usize>(a: &SMatrix<f64, N, N>) -> Option<SMatrix<f6
     })
 }
 
+/// How many covariances [`LaneFactors::factorise`] factorises at once: four `f64` lanes fill one
+/// AVX2 register (two SSE2 registers on baseline x86-64).
+pub const CHOLESKY_LANES: usize = 4;
+
+/// The semidefinite factors ([`psd_cholesky`]) of [`CHOLESKY_LANES`] matrices, computed side by
+/// side and kept in lane layout: `l[j][i]` holds entry `(i, j)` of the four factors.
+///
+/// Why: one factorisation is a chain of dependent square roots, divisions and dot products that
+/// leaves most of the processor idle; four independent chains run side by side in about the
+/// time of one. The factors stay in lane layout because their one use, `L ξ` for the draw, reads
+/// them entry by entry anyway; writing them out as four matrices would cost as much as the
+/// factorisation.
+#[derive(Debug, Clone, Copy)]
+pub struct LaneFactors<const N: usize> {
+    l: [[f64x4; N]; N],
+    ok: [bool; CHOLESKY_LANES],
+}
+
+impl<const N: usize> Default for LaneFactors<N> {
+    fn default() -> Self {
+        Self {
+            l: [[f64x4::ZERO; N]; N],
+            ok: [false; CHOLESKY_LANES],
+        }
+    }
+}
+
+impl<const N: usize> LaneFactors<N> {
+    /// Factorises `a[b]` into lane `b` with the same operations in the same order as
+    /// [`psd_cholesky`], so each factor is bit for bit the one it returns. A lane whose pivot is
+    /// a zero column keeps that column exactly zero (a select, not a multiplication by zero,
+    /// which could give `−0`); a lane that fails goes on computing with meaningless values,
+    /// which [`LaneFactors::ok`] disowns.
+    #[inline]
+    pub fn factorise(&mut self, a: [&SMatrix<f64, N, N>; CHOLESKY_LANES]) {
+        let entry = |i: usize, j: usize| {
+            f64x4::new([a[0][(i, j)], a[1][(i, j)], a[2][(i, j)], a[3][(i, j)]])
+        };
+        let finite: [bool; CHOLESKY_LANES] = std::array::from_fn(|b| all_finite(a[b]));
+        let max_diag = f64x4::new(std::array::from_fn(|b| {
+            let mut max_diag = 0.0_f64;
+            for j in 0..N {
+                if a[b][(j, j)] > max_diag {
+                    max_diag = a[b][(j, j)];
+                }
+            }
+            max_diag
+        }));
+        let tol = f64x4::splat(PSD_PIVOT_REL_TOL) * max_diag;
+        let neg_tol = -tol;
+        // All bits set in the lanes whose pivot was clearly negative.
+        let mut failed = f64x4::ZERO;
+        let l = &mut self.l;
+        for j in 0..N {
+            let mut d = entry(j, j);
+            for k in 0..j {
+                d = d - l[k][j] * l[k][j];
+            }
+            failed = failed | d.cmp_lt(neg_tol);
+            let zero = d.cmp_le(tol);
+            let ljj = d.sqrt();
+            // Above the diagonal the factor is zero.
+            for i in 0..j {
+                l[j][i] = f64x4::ZERO;
+            }
+            l[j][j] = zero.blend(f64x4::ZERO, ljj);
+            let inv = ljj * (f64x4::ONE / d);
+            for i in (j + 1)..N {
+                let mut s = entry(i, j);
+                for k in 0..j {
+                    s = s - l[k][i] * l[k][j];
+                }
+                l[j][i] = zero.blend(f64x4::ZERO, s * inv);
+            }
+        }
+        let failed = failed.move_mask();
+        self.ok = std::array::from_fn(|b| finite[b] && failed & (1 << b) == 0);
+    }
+
+    /// Whether lane `b` has a factor (its matrix was finite and not indefinite).
+    pub fn ok(&self, b: usize) -> bool {
+        self.ok[b]
+    }
+
+    /// `L_b x` for lane `b`, summed over the columns in order as nalgebra's matrix–vector
+    /// product sums (`Σ_j L[:, j] x_j`, zeros included), so it equals `psd_cholesky(a) * x` to
+    /// the bit.
+    #[inline]
+    pub fn mul_vec(&self, b: usize, x: &SVector<f64, N>) -> SVector<f64, N> {
+        let col = |j: usize| SVector::<f64, N>::from_fn(|i, _| self.l[j][i].as_array_ref()[b]);
+        let mut out = col(0) * x[0];
+        for j in 1..N {
+            out += col(j) * x[j];
+        }
+        out
+    }
+
+    /// Lane `b`'s factor as a matrix, if it has one.
+    pub fn factor(&self, b: usize) -> Option<SMatrix<f64, N, N>> {
+        self.ok[b].then(|| SMatrix::from_fn(|i, j| self.l[j][i].as_array_ref()[b]))
+    }
+}
+
 /// Storvik's filter (SPEC §5.3) for `u ∈ R^NU`, `z ∈ R^NZ`, `NL` linked rows and `NY`
 /// measurements. All buffers are allocated in [`Storvik::new`]; `step` allocates nothing.
 pub struct Storvik<M, const NU: usize, const NZ: usize, const NL: usize, const NY: usize>
@@ -114,6 +218,8 @@ where
     r: SMatrix<f64, NY, NY>,
     /// The constant `R` factorised once (weights of step (ii)), or why it failed.
     r_noise: Result<FactoredCov<NY>, FilterError>,
+    /// Factors of `C` for four particles at a time (step (i)).
+    chols: LaneFactors<NZ>,
     setup_health: Health,
     health: Health,
 }
@@ -148,6 +254,7 @@ where
             r_noise,
             noise_sd,
             update,
+            chols: LaneFactors::default(),
             p: MarginalParticles::new(np),
             set: WeightedSet::new(&config),
             setup_health: health,
@@ -228,23 +335,25 @@ where
             .resample_pending(&mut self.set, rng, &mut self.health);
         let linked = &self.linked;
         let np = self.config.particles;
-        // The factor of particle i + 1 is computed while particle i is processed: the
-        // factorisation is a chain of dependent square roots and divisions, and interleaving it
-        // with independent work hides that latency. Random draws keep their order.
-        let mut next_chol = psd_cholesky(&self.p.cov[0]);
+        // The factors of C are computed four particles at a time (one particle's factorisation
+        // is a chain of dependent square roots and divisions; four run side by side). They take
+        // no random draw, so the draws keep their order. Past the last particle, the lanes
+        // repeat it and are discarded.
+        let chols = &mut self.chols;
         for i in 0..np {
-            let this_chol = next_chol;
-            if i + 1 < np {
-                next_chol = psd_cholesky(&self.p.cov[i + 1]);
+            let lane = i % CHOLESKY_LANES;
+            if lane == 0 {
+                let cov = &self.p.cov;
+                chols.factorise(std::array::from_fn(|b| &cov[(i + b).min(np - 1)]));
             }
             let (mu, cov, health) = (&mut self.p.mu[i], &mut self.p.cov[i], &mut self.health);
             // (i) z0 ~ N(μ, C) with a semidefinite factor of C.
-            let Some(c_chol) = this_chol else {
+            if !chols.ok(lane) {
                 health.cholesky_failures += 1;
                 self.set.log_w[i] = f64::NAN;
                 continue;
-            };
-            let z0 = *mu + c_chol * standard_normal::<NZ, G>(rng);
+            }
+            let z0 = *mu + chols.mul_vec(lane, &standard_normal::<NZ, G>(rng));
             // (ii) u_k ~ N(f + F z0, Q_u): linked rows f_L + F_L z0 + noise, others f + noise.
             let (f, F_L) = self.model.transition(k, &self.p.sampled[i]);
             let f_l = linked.pick(&f);
@@ -327,6 +436,87 @@ mod tests {
         let b = v * v.transpose();
         let l = psd_cholesky(&b).unwrap();
         assert!((l * l.transpose() - b).abs().max() < 1e-12);
+    }
+
+    /// A random symmetric 8 × 8 matrix of one of the kinds Storvik meets: definite (badly
+    /// scaled), semidefinite with fixed parameters (zero rows and columns) or a rank deficit,
+    /// indefinite, or with a non-finite entry.
+    fn random_case(rng: &mut rand_xoshiro::Xoshiro256PlusPlus, kind: u32) -> SMatrix<f64, 8, 8> {
+        use rand::Rng;
+        let scale = SVector::<f64, 8>::from_fn(|_, _| 10f64.powf(rng.random_range(-4.0..3.0)));
+        let rank = if kind == 1 {
+            rng.random_range(1..8)
+        } else {
+            8 + 2
+        };
+        let b = SMatrix::<f64, 8, 10>::from_fn(|_, c| {
+            if c < rank {
+                rng.random_range(-1.0..1.0)
+            } else {
+                0.0
+            }
+        });
+        let mut a = SMatrix::<f64, 8, 8>::from_diagonal(&scale)
+            * (b * b.transpose())
+            * SMatrix::<f64, 8, 8>::from_diagonal(&scale);
+        match kind {
+            // Fixed parameters: zero rows and columns.
+            2 => {
+                for _ in 0..rng.random_range(1..4) {
+                    let r = rng.random_range(0..8);
+                    a.row_mut(r).fill(0.0);
+                    a.column_mut(r).fill(0.0);
+                }
+            }
+            3 => {
+                let r = rng.random_range(0..8);
+                a[(r, r)] = -a[(r, r)] - 1.0;
+            }
+            4 => a[(rng.random_range(0..8), rng.random_range(0..8))] = f64::NAN,
+            5 => a[(rng.random_range(0..8), rng.random_range(0..8))] = f64::INFINITY,
+            _ => {}
+        }
+        a
+    }
+
+    #[test]
+    fn lanes_factor_bit_for_bit_as_one_at_a_time() {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_xoshiro::Xoshiro256PlusPlus::seed_from_u64(20261123);
+        let (mut some, mut none, mut zero_cols) = (0, 0, 0);
+        // One set of lanes reused throughout, as in the filter.
+        let mut lanes = LaneFactors::<8>::default();
+        for _ in 0..500 {
+            let cases: [SMatrix<f64, 8, 8>; CHOLESKY_LANES] = std::array::from_fn(|_| {
+                let kind = rng.random_range(0..6);
+                random_case(&mut rng, kind)
+            });
+            lanes.factorise(std::array::from_fn(|b| &cases[b]));
+            for (b, case) in cases.iter().enumerate() {
+                let want = psd_cholesky(case);
+                match (want, lanes.factor(b)) {
+                    (Some(w), Some(g)) => {
+                        some += 1;
+                        zero_cols += (0..8).filter(|&j| w[(j, j)] == 0.0).count();
+                        for (x, y) in w.iter().zip(g.iter()) {
+                            assert_eq!(x.to_bits(), y.to_bits(), "{case}");
+                        }
+                        let x = SVector::<f64, 8>::from_fn(|_, _| rng.random_range(-3.0..3.0));
+                        let (want_lx, got_lx) = (w * x, lanes.mul_vec(b, &x));
+                        for (p, q) in want_lx.iter().zip(got_lx.iter()) {
+                            assert_eq!(p.to_bits(), q.to_bits(), "{case}");
+                        }
+                    }
+                    (None, None) => none += 1,
+                    _ => panic!("lanes and one-at-a-time disagree on {case}"),
+                }
+            }
+        }
+        // Every kind of case occurred: factors, zero columns and failures.
+        assert!(
+            some > 800 && none > 500 && zero_cols > 300,
+            "{some} {none} {zero_cols}"
+        );
     }
 
     #[test]
