@@ -19,7 +19,7 @@ pub(crate) const LN_2PI: f64 = 1.837_877_066_409_345_5;
 
 /// A Cholesky pivot is accepted only if it exceeds this fraction of its own diagonal entry: a
 /// smaller pivot is round-off, not information (the matrix is numerically singular).
-const PIVOT_REL_TOL: f64 = 16.0 * f64::EPSILON;
+pub(crate) const PIVOT_REL_TOL: f64 = 16.0 * f64::EPSILON;
 
 /// Relative diagonal jitter tried in turn when the factorisation fails: the diagonal is scaled by
 /// `1 + τ`. The largest value bounds the perturbation of the covariance to one part in a million.
@@ -480,8 +480,9 @@ impl<const N: usize, const NY: usize> UpdateFactor<N, NY> {
 }
 
 /// The update of [`gaussian_update`] from the residual `y − ŷ`; returns the factor and the
-/// whitened residual `e = C⁻¹ (y − ŷ)`, from which the caller may score the measurement.
-fn update_from_residual<const N: usize, const NY: usize>(
+/// whitened residual `e = C⁻¹ (y − ŷ)`, from which the caller may score the measurement (Storvik's
+/// update of its sufficient statistics does not, and computes no logarithm).
+pub(crate) fn update_from_residual<const N: usize, const NY: usize>(
     m: &mut SVector<f64, N>,
     p: &mut SMatrix<f64, N, N>,
     residual: &SVector<f64, NY>,
@@ -501,22 +502,6 @@ fn update_from_residual<const N: usize, const NY: usize>(
     solve_lower_in_place(&factor.chol, &mut e);
     factor.apply_whitened(m, p, &e, step)?;
     Ok((factor.chol, e))
-}
-
-/// [`gaussian_update`] for a caller that does not use the log-likelihood (Storvik's update of the
-/// sufficient statistics): the same moments, without the logarithm.
-#[allow(clippy::too_many_arguments)]
-pub(crate) fn gaussian_update_unscored<const N: usize, const NY: usize>(
-    m: &mut SVector<f64, N>,
-    p: &mut SMatrix<f64, N, N>,
-    y: &SVector<f64, NY>,
-    y_hat: &SVector<f64, NY>,
-    jac: &SMatrix<f64, NY, N>,
-    s_add: &SMatrix<f64, NY, NY>,
-    step: usize,
-    health: &mut Health,
-) -> Result<(), FilterError> {
-    update_from_residual(m, p, &(y - y_hat), jac, s_add, step, health).map(|_| ())
 }
 
 /// The one Gaussian measurement update, SPEC §4. Given the predicted measurement `ŷ`, the

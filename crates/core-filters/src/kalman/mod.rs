@@ -9,10 +9,13 @@
 //! - [`ekf2`]: [`ekf2_propagate`], [`ekf2_update`], [`ekf2_moments`] (EKF1 = empty Hessians);
 //! - [`ukf`]: the scaled unscented transform and a UKF propagate/update pair (baseline);
 //! - [`linear`]: a linear-Gaussian model and the exact [`kalman_filter`] driver;
-//! - [`table1`]: SPEC Table I by computation.
+//! - [`table1`]: SPEC Table I by computation;
+//! - [`lanes`]: the Gaussian update of four problems at once in SIMD lanes, bit for bit the
+//!   scalar one.
 
 pub mod ekf2;
 pub mod kf;
+pub mod lanes;
 pub mod linear;
 pub mod second_order;
 pub mod table1;

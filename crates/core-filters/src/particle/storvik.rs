@@ -37,13 +37,17 @@
 use nalgebra::{SMatrix, SVector};
 use rand::Rng;
 use serde::{Deserialize, Serialize};
-use wide::{f64x4, CmpLe, CmpLt};
+use wide::{f64x4, CmpGt, CmpLe, CmpLt};
 
 use super::mlnrbpf::{standard_normal, LinkedRows};
 use super::{MarginalParticles, ParticleConfig, ParticleFilter, Posterior, StepInfo, WeightedSet};
 use crate::error::FilterError;
 use crate::health::Health;
-use crate::kalman::kf::{all_finite, cholesky_with, gaussian_update_unscored, Pivot};
+use crate::kalman::kf::{all_finite, cholesky_with, update_from_residual, Pivot};
+use crate::kalman::lanes::{
+    finite_lanes, gather_mat, gather_vec, gaussian_update, lane, mul_vec, scatter_mat, LaneMat,
+    LaneVec, Mask, LANES,
+};
 use crate::kalman::FactoredCov;
 use crate::model::{ConditionallyLinear, Layout};
 
@@ -96,29 +100,24 @@ pub fn psd_cholesky<const N: usize>(a: &SMatrix<f64, N, N>) -> Option<SMatrix<f6
     })
 }
 
-/// How many covariances [`LaneFactors::factorise`] factorises at once: four `f64` lanes fill one
-/// AVX2 register (two SSE2 registers on baseline x86-64).
-pub const CHOLESKY_LANES: usize = 4;
-
-/// The semidefinite factors ([`psd_cholesky`]) of [`CHOLESKY_LANES`] matrices, computed side by
-/// side and kept in lane layout: `l[j][i]` holds entry `(i, j)` of the four factors.
+/// The semidefinite factors ([`psd_cholesky`]) of [`LANES`] matrices, computed side by side and
+/// kept in lane layout: `l[j][i]` holds entry `(i, j)` of the four factors.
 ///
 /// Why: one factorisation is a chain of dependent square roots, divisions and dot products that
 /// leaves most of the processor idle; four independent chains run side by side in about the
 /// time of one. The factors stay in lane layout because their one use, `L ξ` for the draw, reads
-/// them entry by entry anyway; writing them out as four matrices would cost as much as the
-/// factorisation.
+/// them entry by entry anyway.
 #[derive(Debug, Clone, Copy)]
 pub struct LaneFactors<const N: usize> {
-    l: [[f64x4; N]; N],
-    ok: [bool; CHOLESKY_LANES],
+    l: LaneMat<N, N>,
+    ok: [bool; LANES],
 }
 
 impl<const N: usize> Default for LaneFactors<N> {
     fn default() -> Self {
         Self {
             l: [[f64x4::ZERO; N]; N],
-            ok: [false; CHOLESKY_LANES],
+            ok: [false; LANES],
         }
     }
 }
@@ -130,20 +129,14 @@ impl<const N: usize> LaneFactors<N> {
     /// which could give `−0`); a lane that fails goes on computing with meaningless values,
     /// which [`LaneFactors::ok`] disowns.
     #[inline]
-    pub fn factorise(&mut self, a: [&SMatrix<f64, N, N>; CHOLESKY_LANES]) {
-        let entry = |i: usize, j: usize| {
-            f64x4::new([a[0][(i, j)], a[1][(i, j)], a[2][(i, j)], a[3][(i, j)]])
-        };
-        let finite: [bool; CHOLESKY_LANES] = std::array::from_fn(|b| all_finite(a[b]));
-        let max_diag = f64x4::new(std::array::from_fn(|b| {
-            let mut max_diag = 0.0_f64;
-            for j in 0..N {
-                if a[b][(j, j)] > max_diag {
-                    max_diag = a[b][(j, j)];
-                }
-            }
-            max_diag
-        }));
+    #[allow(clippy::needless_range_loop, clippy::assign_op_pattern)] // the scalar order, spelled out
+    pub fn factorise(&mut self, a: &LaneMat<N, N>) {
+        let entry = |i: usize, j: usize| a[j][i];
+        let finite = finite_lanes(a);
+        let mut max_diag = f64x4::ZERO;
+        for j in 0..N {
+            max_diag = a[j][j].cmp_gt(max_diag).blend(a[j][j], max_diag);
+        }
         let tol = f64x4::splat(PSD_PIVOT_REL_TOL) * max_diag;
         let neg_tol = -tol;
         // All bits set in the lanes whose pivot was clearly negative.
@@ -171,8 +164,8 @@ impl<const N: usize> LaneFactors<N> {
                 l[j][i] = zero.blend(f64x4::ZERO, s * inv);
             }
         }
-        let failed = failed.move_mask();
-        self.ok = std::array::from_fn(|b| finite[b] && failed & (1 << b) == 0);
+        let ok = finite & !failed;
+        self.ok = std::array::from_fn(|b| lane(ok, b));
     }
 
     /// Whether lane `b` has a factor (its matrix was finite and not indefinite).
@@ -218,8 +211,12 @@ where
     r: SMatrix<f64, NY, NY>,
     /// The constant `R` factorised once (weights of step (ii)), or why it failed.
     r_noise: Result<FactoredCov<NY>, FilterError>,
-    /// Factors of `C` for four particles at a time (step (i)).
-    chols: LaneFactors<NZ>,
+    /// Scratch of the four particles processed together.
+    group: Box<LaneGroup<NZ, NL, NY>>,
+    /// Whether step (iii) runs in lanes: `Q_L` and `R` must be exactly symmetric, as the lane
+    /// updates require (the scalar update symmetrises them otherwise, so every particle takes
+    /// it), and [`Storvik::without_lanes`] was not asked for.
+    use_lanes: bool,
     setup_health: Health,
     health: Health,
 }
@@ -247,14 +244,16 @@ where
         let r = model.measurement_cov();
         let mut health = Health::default();
         let r_noise = FactoredCov::new(&r, "measurement covariance R", &mut health);
+        let linked = LinkedRows::new(model.linked_rows(), &noise_sd);
         Self {
             layout: model.layout(),
-            linked: LinkedRows::new(model.linked_rows(), &noise_sd),
             r,
             r_noise,
             noise_sd,
             update,
-            chols: LaneFactors::default(),
+            group: Box::default(),
+            use_lanes: r == r.transpose() && linked.q_l == linked.q_l.transpose(),
+            linked,
             p: MarginalParticles::new(np),
             set: WeightedSet::new(&config),
             setup_health: health,
@@ -262,6 +261,13 @@ where
             config,
             model,
         }
+    }
+
+    /// Every particle's step (iii) by the scalar updates, one particle at a time. The lanes give
+    /// the same results to the bit; this is the reference they are tested against.
+    pub fn without_lanes(mut self) -> Self {
+        self.use_lanes = false;
+        self
     }
 
     pub fn model(&self) -> &M {
@@ -290,6 +296,252 @@ where
     /// The normalised weights of the current step.
     pub fn weights(&self) -> &[f64] {
         &self.set.w
+    }
+}
+
+/// What step (iii) needs of one particle of a lane group, found in steps (i)–(ii): the
+/// residual and Jacobian of the linked rows, and the Jacobian and offset of `y_k` (`H(u_k)` and
+/// `h(u_k)` for [`StorvikUpdate::Exact`]; `G_z` and `g(z0)` for the linearised update, with the
+/// realisation `z0`).
+#[derive(Debug, Clone, Copy)]
+#[allow(non_snake_case)]
+struct Pending<const NZ: usize, const NL: usize, const NY: usize> {
+    residual_l: SVector<f64, NL>,
+    F_L: SMatrix<f64, NL, NZ>,
+    jac_y: SMatrix<f64, NY, NZ>,
+    offset_y: SVector<f64, NY>,
+    z0: SVector<f64, NZ>,
+}
+
+impl<const NZ: usize, const NL: usize, const NY: usize> Default for Pending<NZ, NL, NY> {
+    fn default() -> Self {
+        Self {
+            residual_l: SVector::zeros(),
+            F_L: SMatrix::zeros(),
+            jac_y: SMatrix::zeros(),
+            offset_y: SVector::zeros(),
+            z0: SVector::zeros(),
+        }
+    }
+}
+
+impl<const NZ: usize, const NL: usize, const NY: usize> Pending<NZ, NL, NY> {
+    /// `ŷ` of `y_k` given the moments after the linked rows: `H μ + h` (exact) or
+    /// `g(z0) + G_z (μ − z0)` (linearised).
+    fn y_hat(&self, update: StorvikUpdate, mu: &SVector<f64, NZ>) -> SVector<f64, NY> {
+        match update {
+            StorvikUpdate::Exact => self.jac_y * mu + self.offset_y,
+            StorvikUpdate::Linearised => self.offset_y + self.jac_y * (mu - self.z0),
+        }
+    }
+
+    /// Step (iii) of one particle with the scalar updates; the reference the lanes reproduce,
+    /// and the path of every particle they cannot take.
+    #[allow(clippy::too_many_arguments)]
+    fn update_scalar(
+        &self,
+        update: StorvikUpdate,
+        mu: &mut SVector<f64, NZ>,
+        cov: &mut SMatrix<f64, NZ, NZ>,
+        y: &SVector<f64, NY>,
+        q_l: &SMatrix<f64, NL, NL>,
+        r: &SMatrix<f64, NY, NY>,
+        k: usize,
+        health: &mut Health,
+    ) -> Result<(), FilterError> {
+        update_from_residual(mu, cov, &self.residual_l, &self.F_L, q_l, k, health)?;
+        let residual_y = y - self.y_hat(update, mu);
+        update_from_residual(mu, cov, &residual_y, &self.jac_y, r, k, health).map(|_| ())
+    }
+}
+
+/// Scratch of one lane group: the moments and step (iii) inputs of four particles in lanes.
+#[derive(Debug, Clone, Copy)]
+#[allow(non_snake_case)]
+struct LaneGroup<const NZ: usize, const NL: usize, const NY: usize> {
+    mu: LaneVec<NZ>,
+    cov: LaneMat<NZ, NZ>,
+    factors: LaneFactors<NZ>,
+    pending: [Pending<NZ, NL, NY>; LANES],
+    /// Whether each lane's particle reached step (iii).
+    ready: [bool; LANES],
+    residual_l: LaneVec<NL>,
+    F_L: LaneMat<NL, NZ>,
+    jac_y: LaneMat<NY, NZ>,
+    offset_y: LaneVec<NY>,
+    z0: LaneVec<NZ>,
+}
+
+impl<const NZ: usize, const NL: usize, const NY: usize> Default for LaneGroup<NZ, NL, NY> {
+    fn default() -> Self {
+        Self {
+            mu: [f64x4::ZERO; NZ],
+            cov: [[f64x4::ZERO; NZ]; NZ],
+            factors: LaneFactors::default(),
+            pending: [Pending::default(); LANES],
+            ready: [false; LANES],
+            residual_l: [f64x4::ZERO; NL],
+            F_L: [[f64x4::ZERO; NL]; NZ],
+            jac_y: [[f64x4::ZERO; NY]; NZ],
+            offset_y: [f64x4::ZERO; NY],
+            z0: [f64x4::ZERO; NZ],
+        }
+    }
+}
+
+impl<const NZ: usize, const NL: usize, const NY: usize> LaneGroup<NZ, NL, NY> {
+    /// Both updates of step (iii) in the lanes; returns the lanes that took the scalar
+    /// updates' straight path (see [`crate::kalman::lanes`]).
+    fn update(
+        &mut self,
+        update: StorvikUpdate,
+        y: &SVector<f64, NY>,
+        q_l: &SMatrix<f64, NL, NL>,
+        r: &SMatrix<f64, NY, NY>,
+    ) -> Mask {
+        let p = &self.pending;
+        gather_vec(
+            &mut self.residual_l,
+            std::array::from_fn(|b| &p[b].residual_l),
+        );
+        gather_mat(&mut self.F_L, std::array::from_fn(|b| &p[b].F_L));
+        gather_mat(&mut self.jac_y, std::array::from_fn(|b| &p[b].jac_y));
+        gather_vec(&mut self.offset_y, std::array::from_fn(|b| &p[b].offset_y));
+        let ok_l = gaussian_update(
+            &mut self.mu,
+            &mut self.cov,
+            &self.residual_l,
+            &self.F_L,
+            q_l,
+        );
+        // ŷ as `Pending::y_hat` computes it, lane by lane.
+        let y_hat: LaneVec<NY> = match update {
+            StorvikUpdate::Exact => {
+                let h_mu = mul_vec(&self.jac_y, &self.mu);
+                std::array::from_fn(|r| h_mu[r] + self.offset_y[r])
+            }
+            StorvikUpdate::Linearised => {
+                gather_vec(&mut self.z0, std::array::from_fn(|b| &p[b].z0));
+                let d: LaneVec<NZ> = std::array::from_fn(|j| self.mu[j] - self.z0[j]);
+                let g_d = mul_vec(&self.jac_y, &d);
+                std::array::from_fn(|r| self.offset_y[r] + g_d[r])
+            }
+        };
+        let residual_y: LaneVec<NY> = std::array::from_fn(|r| f64x4::splat(y[r]) - y_hat[r]);
+        let ok_y = gaussian_update(&mut self.mu, &mut self.cov, &residual_y, &self.jac_y, r);
+        ok_l & ok_y
+    }
+}
+
+impl<M, const NU: usize, const NZ: usize, const NL: usize, const NY: usize>
+    Storvik<M, NU, NZ, NL, NY>
+where
+    M: ConditionallyLinear<NU, NZ, NL, NY>,
+{
+    /// SPEC §5.3 (i)–(iii) for the `count ≤ 4` particles from `first` on: (i) and (ii) particle
+    /// by particle in order (they take the draws), then (iii) for all of them in SIMD lanes,
+    /// with the scalar update for any particle the lanes cannot take. Results are bit for bit
+    /// those of (i)–(iii) particle by particle.
+    #[allow(non_snake_case)]
+    fn step_group<G: Rng + ?Sized>(
+        &mut self,
+        k: usize,
+        y: &SVector<f64, NY>,
+        rng: &mut G,
+        r_noise: &FactoredCov<NY>,
+        first: usize,
+        count: usize,
+    ) {
+        let linked = &self.linked;
+        let g = &mut self.group;
+        // Lanes past the last particle repeat the group's first one and are discarded.
+        let member = |b: usize| first + if b < count { b } else { 0 };
+        gather_mat(&mut g.cov, std::array::from_fn(|b| &self.p.cov[member(b)]));
+        gather_vec(&mut g.mu, std::array::from_fn(|b| &self.p.mu[member(b)]));
+        g.factors.factorise(&g.cov);
+        for b in 0..count {
+            let i = first + b;
+            g.ready[b] = false;
+            // (i) z0 ~ N(μ, C) with a semidefinite factor of C.
+            if !g.factors.ok(b) {
+                self.health.cholesky_failures += 1;
+                self.set.log_w[i] = f64::NAN;
+                continue;
+            }
+            let mu = &self.p.mu[i];
+            let z0 = *mu + g.factors.mul_vec(b, &standard_normal::<NZ, G>(rng));
+            // (ii) u_k ~ N(f + F z0, Q_u): linked rows f_L + F_L z0 + noise, others f + noise.
+            let (f, F_L) = self.model.transition(k, &self.p.sampled[i]);
+            let f_l = linked.pick(&f);
+            let mut u_new = f;
+            linked.add_unlinked_noise(&mut u_new, &self.noise_sd, rng);
+            let mut u_l = f_l + F_L * z0;
+            for l in 0..NL {
+                let sd = self.noise_sd[linked.rows[l]];
+                if sd != 0.0 {
+                    u_l[l] += sd * standard_normal::<1, G>(rng)[0];
+                }
+            }
+            linked.scatter(&mut u_new, &u_l);
+            self.p.sampled[i] = u_new;
+            let (h, H) = self.model.observation(k, &u_new);
+            let y_z0 = H * z0 + h;
+            self.set.log_w[i] += r_noise.log_density(&(y - y_z0));
+            // (iii), prepared: the linked rows are linear in z with Jacobian F_L, noise Q_L; y_k
+            // follows them sequentially (block-diagonal noise).
+            let pending = &mut g.pending[b];
+            pending.residual_l = u_l - (f_l + F_L * *mu);
+            pending.F_L = F_L;
+            match self.update {
+                StorvikUpdate::Exact => {
+                    pending.jac_y = H;
+                    pending.offset_y = h;
+                }
+                StorvikUpdate::Linearised => {
+                    // G_z = H(u_k) + J_u F, F zero outside the linked rows.
+                    let J_u = self.model.observation_jacobian_u(k, &u_new, &z0);
+                    let mut G_z = H;
+                    for (l, &r) in linked.rows.iter().enumerate() {
+                        G_z += J_u.column(r) * F_L.row(l);
+                    }
+                    pending.jac_y = G_z;
+                    pending.offset_y = y_z0;
+                    pending.z0 = z0;
+                }
+            }
+            g.ready[b] = true;
+        }
+        // (iii) in lanes, if any particle got there and the noises allow it.
+        let ok = if self.use_lanes && g.ready[..count].contains(&true) {
+            g.update(self.update, y, &linked.q_l, &self.r)
+        } else {
+            f64x4::ZERO
+        };
+        for b in 0..count {
+            if !g.ready[b] {
+                continue;
+            }
+            let i = first + b;
+            let (mu, cov) = (&mut self.p.mu[i], &mut self.p.cov[i]);
+            if lane(ok, b) {
+                *mu = g.mu.map(|v| v.as_array_ref()[b]).into();
+                scatter_mat(&g.cov, b, cov);
+            } else if g.pending[b]
+                .update_scalar(
+                    self.update,
+                    mu,
+                    cov,
+                    y,
+                    &linked.q_l,
+                    &self.r,
+                    k,
+                    &mut self.health,
+                )
+                .is_err()
+            {
+                self.set.log_w[i] = f64::NAN;
+            }
+        }
     }
 }
 
@@ -333,71 +585,9 @@ where
         };
         self.p
             .resample_pending(&mut self.set, rng, &mut self.health);
-        let linked = &self.linked;
         let np = self.config.particles;
-        // The factors of C are computed four particles at a time (one particle's factorisation
-        // is a chain of dependent square roots and divisions; four run side by side). They take
-        // no random draw, so the draws keep their order. Past the last particle, the lanes
-        // repeat it and are discarded.
-        let chols = &mut self.chols;
-        for i in 0..np {
-            let lane = i % CHOLESKY_LANES;
-            if lane == 0 {
-                let cov = &self.p.cov;
-                chols.factorise(std::array::from_fn(|b| &cov[(i + b).min(np - 1)]));
-            }
-            let (mu, cov, health) = (&mut self.p.mu[i], &mut self.p.cov[i], &mut self.health);
-            // (i) z0 ~ N(μ, C) with a semidefinite factor of C.
-            if !chols.ok(lane) {
-                health.cholesky_failures += 1;
-                self.set.log_w[i] = f64::NAN;
-                continue;
-            }
-            let z0 = *mu + chols.mul_vec(lane, &standard_normal::<NZ, G>(rng));
-            // (ii) u_k ~ N(f + F z0, Q_u): linked rows f_L + F_L z0 + noise, others f + noise.
-            let (f, F_L) = self.model.transition(k, &self.p.sampled[i]);
-            let f_l = linked.pick(&f);
-            let mut u_new = f;
-            linked.add_unlinked_noise(&mut u_new, &self.noise_sd, rng);
-            let mut u_l = f_l + F_L * z0;
-            for l in 0..NL {
-                let sd = self.noise_sd[linked.rows[l]];
-                if sd != 0.0 {
-                    u_l[l] += sd * standard_normal::<1, G>(rng)[0];
-                }
-            }
-            linked.scatter(&mut u_new, &u_l);
-            self.p.sampled[i] = u_new;
-            let (h, H) = self.model.observation(k, &u_new);
-            let y_z0 = H * z0 + h;
-            self.set.log_w[i] += r_noise.log_density(&(y - y_z0));
-            // (iii) the linked rows: linear in z with Jacobian F_L and noise Q_L.
-            let mean_l = f_l + F_L * *mu;
-            if gaussian_update_unscored(mu, cov, &u_l, &mean_l, &F_L, &linked.q_l, k, health)
-                .is_err()
-            {
-                self.set.log_w[i] = f64::NAN;
-                continue;
-            }
-            // (iii) y_k, sequentially after the linked rows (block-diagonal noise).
-            let updated = match self.update {
-                StorvikUpdate::Exact => {
-                    gaussian_update_unscored(mu, cov, y, &(H * *mu + h), &H, &self.r, k, health)
-                }
-                StorvikUpdate::Linearised => {
-                    // G_z = H(u_k) + J_u F, F zero outside the linked rows.
-                    let J_u = self.model.observation_jacobian_u(k, &u_new, &z0);
-                    let mut G_z = H;
-                    for (l, &r) in linked.rows.iter().enumerate() {
-                        G_z += J_u.column(r) * F_L.row(l);
-                    }
-                    let y_hat = y_z0 + G_z * (*mu - z0);
-                    gaussian_update_unscored(mu, cov, y, &y_hat, &G_z, &self.r, k, health)
-                }
-            };
-            if updated.is_err() {
-                self.set.log_w[i] = f64::NAN;
-            }
+        for first in (0..np).step_by(LANES) {
+            self.step_group(k, y, rng, &r_noise, first, (np - first).min(LANES));
         }
         self.set.conclude(k, &mut self.health)
     }
@@ -487,11 +677,13 @@ mod tests {
         // One set of lanes reused throughout, as in the filter.
         let mut lanes = LaneFactors::<8>::default();
         for _ in 0..500 {
-            let cases: [SMatrix<f64, 8, 8>; CHOLESKY_LANES] = std::array::from_fn(|_| {
+            let cases: [SMatrix<f64, 8, 8>; LANES] = std::array::from_fn(|_| {
                 let kind = rng.random_range(0..6);
                 random_case(&mut rng, kind)
             });
-            lanes.factorise(std::array::from_fn(|b| &cases[b]));
+            let mut gathered = [[f64x4::ZERO; 8]; 8];
+            gather_mat(&mut gathered, std::array::from_fn(|b| &cases[b]));
+            lanes.factorise(&gathered);
             for (b, case) in cases.iter().enumerate() {
                 let want = psd_cholesky(case);
                 match (want, lanes.factor(b)) {
