@@ -57,13 +57,15 @@ pub fn lane(mask: Mask, b: usize) -> bool {
 #[inline]
 #[allow(clippy::eq_op)] // `v − v` is the test itself, not a mistake.
 pub fn finite_lanes<const R: usize, const C: usize>(m: &LaneMat<R, C>) -> Mask {
-    let mut sum = f64x4::ZERO;
-    for col in m {
-        for v in col {
-            sum = sum + (*v - *v);
+    // Four independent sums: one running sum would be a chain of dependent additions.
+    let mut sums = [f64x4::ZERO; 4];
+    for (j, col) in m.iter().enumerate() {
+        for (i, v) in col.iter().enumerate() {
+            let s = &mut sums[(j * R + i) % 4];
+            *s = *s + (*v - *v);
         }
     }
-    sum.cmp_eq(f64x4::ZERO)
+    ((sums[0] + sums[1]) + (sums[2] + sums[3])).cmp_eq(f64x4::ZERO)
 }
 
 /// Gathers four matrices into lanes.
@@ -154,7 +156,9 @@ pub fn mul_vec<const R: usize, const C: usize>(a: &LaneMat<R, C>, x: &LaneVec<C>
     out
 }
 
-/// `v[i] = keep ? new : v[i]` lane by lane.
+/// `keep ? new : old` lane by lane. The updates below take it only when some lanes keep and
+/// others do not: a select before a store becomes a masked store, which is slow on some
+/// processors, and nearly every entry is non-zero (or zero) in all four lanes at once.
 #[inline(always)]
 fn select(keep: Mask, new: f64x4, old: f64x4) -> f64x4 {
     keep.blend(new, old)
@@ -198,7 +202,11 @@ pub fn gaussian_update<const N: usize, const NY: usize>(
         for r in 0..NY {
             let d = jac[c][r];
             let nz = nonzero(d);
-            if nz.any() {
+            if nz.all() {
+                for i in 0..N {
+                    pjt[r][i] = pjt[r][i] + d * p[c][i];
+                }
+            } else if nz.any() {
                 for i in 0..N {
                     pjt[r][i] = select(nz, pjt[r][i] + d * p[c][i], pjt[r][i]);
                 }
@@ -211,7 +219,11 @@ pub fn gaussian_update<const N: usize, const NY: usize>(
         for i in 0..NY {
             let d = jac[c][i];
             let nz = nonzero(d);
-            if nz.any() {
+            if nz.all() {
+                for j in 0..=i {
+                    l[j][i] = l[j][i] + d * pjt[j][c];
+                }
+            } else if nz.any() {
                 for j in 0..=i {
                     l[j][i] = select(nz, l[j][i] + d * pjt[j][c], l[j][i]);
                 }
@@ -265,7 +277,11 @@ pub fn gaussian_update<const N: usize, const NY: usize>(
         for k in 0..i {
             let c = chol[k][i];
             let nz = nonzero(c);
-            if nz.any() {
+            if nz.all() {
+                for r in 0..N {
+                    wt[i][r] = wt[i][r] - c * wt[k][r];
+                }
+            } else if nz.any() {
                 for r in 0..N {
                     wt[i][r] = select(nz, wt[i][r] - c * wt[k][r], wt[i][r]);
                 }
