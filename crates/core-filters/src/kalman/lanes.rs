@@ -68,15 +68,58 @@ pub fn finite_lanes<const R: usize, const C: usize>(m: &LaneMat<R, C>) -> Mask {
     ((sums[0] + sums[1]) + (sums[2] + sums[3])).cmp_eq(f64x4::ZERO)
 }
 
-/// Gathers four matrices into lanes.
+/// The 4 × 4 transpose: lane `j` of output `i` is lane `i` of input `j`.
+#[inline(always)]
+fn transpose4(v: [f64x4; 4]) -> [f64x4; 4] {
+    let a = v.map(|x| x.to_array());
+    std::array::from_fn(|i| f64x4::new([a[0][i], a[1][i], a[2][i], a[3][i]]))
+}
+
+/// Gathers four matrices into lanes. Columns whose length is a multiple of four move as 4 × 4
+/// blocks (four loads and a transpose instead of sixteen single loads).
 #[inline]
 pub fn gather_mat<const R: usize, const C: usize>(
     out: &mut LaneMat<R, C>,
     a: [&SMatrix<f64, R, C>; LANES],
 ) {
-    for c in 0..C {
-        for r in 0..R {
-            out[c][r] = f64x4::new([a[0][(r, c)], a[1][(r, c)], a[2][(r, c)], a[3][(r, c)]]);
+    if R % 4 == 0 {
+        let chunk = |b: usize, c: usize, r: usize| {
+            let s = &a[b].as_slice()[c * R + r..c * R + r + 4];
+            f64x4::new([s[0], s[1], s[2], s[3]])
+        };
+        for c in 0..C {
+            for r in (0..R).step_by(4) {
+                let t = transpose4(std::array::from_fn(|b| chunk(b, c, r)));
+                out[c][r..r + 4].copy_from_slice(&t);
+            }
+        }
+    } else {
+        for c in 0..C {
+            for r in 0..R {
+                out[c][r] = f64x4::new([a[0][(r, c)], a[1][(r, c)], a[2][(r, c)], a[3][(r, c)]]);
+            }
+        }
+    }
+}
+
+/// Copies the four lanes into four matrices (the inverse of [`gather_mat`]).
+#[inline]
+pub fn scatter_all<const R: usize, const C: usize>(
+    m: &LaneMat<R, C>,
+    mut out: [&mut SMatrix<f64, R, C>; LANES],
+) {
+    if R % 4 == 0 {
+        for c in 0..C {
+            for r in (0..R).step_by(4) {
+                let t = transpose4([m[c][r], m[c][r + 1], m[c][r + 2], m[c][r + 3]]);
+                for (o, v) in out.iter_mut().zip(t) {
+                    o.as_mut_slice()[c * R + r..c * R + r + 4].copy_from_slice(&v.to_array());
+                }
+            }
+        }
+    } else {
+        for (b, o) in out.iter_mut().enumerate() {
+            scatter_mat(m, b, o);
         }
     }
 }
@@ -84,9 +127,7 @@ pub fn gather_mat<const R: usize, const C: usize>(
 /// Gathers four vectors into lanes.
 #[inline]
 pub fn gather_vec<const N: usize>(out: &mut LaneVec<N>, a: [&SVector<f64, N>; LANES]) {
-    for r in 0..N {
-        out[r] = f64x4::new([a[0][r], a[1][r], a[2][r], a[3][r]]);
-    }
+    gather_mat(std::array::from_mut(out), a);
 }
 
 /// Writes `a` into lane `b`.

@@ -45,7 +45,7 @@ use crate::error::FilterError;
 use crate::health::Health;
 use crate::kalman::kf::{all_finite, cholesky_with, update_from_residual, Pivot};
 use crate::kalman::lanes::{
-    finite_lanes, gather_mat, gather_vec, gaussian_update, lane, mul_vec, scatter_mat, LaneMat,
+    finite_lanes, gather_mat, gather_vec, gaussian_update, lane, mul_vec, scatter_all, LaneMat,
     LaneVec, Mask, LANES,
 };
 use crate::kalman::FactoredCov;
@@ -370,6 +370,9 @@ struct LaneGroup<const NZ: usize, const NL: usize, const NY: usize> {
     jac_y: LaneMat<NY, NZ>,
     offset_y: LaneVec<NY>,
     z0: LaneVec<NZ>,
+    /// Where the results of lanes without a particle to take them go.
+    spare_mu: [SVector<f64, NZ>; LANES],
+    spare_cov: [SMatrix<f64, NZ, NZ>; LANES],
 }
 
 impl<const NZ: usize, const NL: usize, const NY: usize> Default for LaneGroup<NZ, NL, NY> {
@@ -385,6 +388,8 @@ impl<const NZ: usize, const NL: usize, const NY: usize> Default for LaneGroup<NZ
             jac_y: [[f64x4::ZERO; NY]; NZ],
             offset_y: [f64x4::ZERO; NY],
             z0: [f64x4::ZERO; NZ],
+            spare_mu: [SVector::zeros(); LANES],
+            spare_cov: [SMatrix::zeros(); LANES],
         }
     }
 }
@@ -517,16 +522,33 @@ where
         } else {
             f64x4::ZERO
         };
+        // The lanes' results go to their particles, in one pass over all four (a lane whose
+        // particle does not take them writes to a spare).
+        let take: [bool; LANES] = std::array::from_fn(|b| b < count && g.ready[b] && lane(ok, b));
+        if take.contains(&true) {
+            let (mut mus, mut covs) = (
+                self.p.mu[first..first + count].iter_mut(),
+                self.p.cov[first..first + count].iter_mut(),
+            );
+            let (mut spare_mu, mut spare_cov) = (g.spare_mu.iter_mut(), g.spare_cov.iter_mut());
+            let mu_out = std::array::from_fn(|b| match mus.next() {
+                Some(own) if take[b] => own,
+                _ => spare_mu.next().expect("four spares"),
+            });
+            let cov_out = std::array::from_fn(|b| match covs.next() {
+                Some(own) if take[b] => own,
+                _ => spare_cov.next().expect("four spares"),
+            });
+            scatter_all(std::array::from_ref(&g.mu), mu_out);
+            scatter_all(&g.cov, cov_out);
+        }
         for b in 0..count {
-            if !g.ready[b] {
+            if !g.ready[b] || take[b] {
                 continue;
             }
             let i = first + b;
             let (mu, cov) = (&mut self.p.mu[i], &mut self.p.cov[i]);
-            if lane(ok, b) {
-                *mu = g.mu.map(|v| v.as_array_ref()[b]).into();
-                scatter_mat(&g.cov, b, cov);
-            } else if g.pending[b]
+            if g.pending[b]
                 .update_scalar(
                     self.update,
                     mu,
