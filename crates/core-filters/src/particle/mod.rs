@@ -161,6 +161,61 @@ impl<const NS: usize, const NM: usize> MarginalParticles<NS, NM> {
         }
     }
 
+    /// The resampling of [`MarginalParticles::resample_pending`] for a filter that rewrites
+    /// every particle's moments during its step (Storvik): only the sampled block moves now.
+    /// `source[i]` is set to the particle whose moments particle `i` starts from (its ancestor,
+    /// or itself when nothing was resampled); the step reads them with
+    /// [`MarginalParticles::moments_split`], writes particle `i`'s new moments to the back
+    /// buffers, and ends with [`MarginalParticles::swap_moments`]. Moving `(μ, C)` twice (once
+    /// to the new order, once to the updated values) would copy 576 bytes per particle more.
+    pub fn resample_sampled_only<G: Rng + ?Sized>(
+        &mut self,
+        set: &mut WeightedSet,
+        rng: &mut G,
+        health: &mut Health,
+        source: &mut [usize],
+    ) {
+        match set.take_pending(rng, health) {
+            Some(ancestors) => {
+                gather(&self.sampled, ancestors, &mut self.sampled_back);
+                std::mem::swap(&mut self.sampled, &mut self.sampled_back);
+                source.copy_from_slice(ancestors);
+            }
+            None => {
+                for (i, s) in source.iter_mut().enumerate() {
+                    *s = i;
+                }
+            }
+        }
+    }
+
+    /// The sampled block, the current moments (to read) and the back buffers (to write); see
+    /// [`MarginalParticles::resample_sampled_only`].
+    #[allow(clippy::type_complexity)]
+    pub fn moments_split(
+        &mut self,
+    ) -> (
+        &mut [SVector<f64, NS>],
+        &[SVector<f64, NM>],
+        &[SMatrix<f64, NM, NM>],
+        &mut [SVector<f64, NM>],
+        &mut [SMatrix<f64, NM, NM>],
+    ) {
+        (
+            &mut self.sampled,
+            &self.mu,
+            &self.cov,
+            &mut self.mu_back,
+            &mut self.cov_back,
+        )
+    }
+
+    /// Makes the moments written to the back buffers current.
+    pub fn swap_moments(&mut self) {
+        std::mem::swap(&mut self.mu, &mut self.mu_back);
+        std::mem::swap(&mut self.cov, &mut self.cov_back);
+    }
+
     /// Posterior moments: sampled entries averaged, marginalised ones as a Gaussian mixture.
     pub fn posterior(&self, layout: &Layout, w: &[f64], out: &mut Posterior) {
         fill_posterior(layout, w, &self.sampled, &self.mu, &self.cov, out);
