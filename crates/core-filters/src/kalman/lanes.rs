@@ -211,149 +211,202 @@ fn nonzero(d: f64x4) -> Mask {
     !d.cmp_eq(f64x4::ZERO)
 }
 
+/// The gain side of a Gaussian update in lanes, as [`super::kf::UpdateFactor::new`] computes
+/// it: `P Jᵀ` over the non-zeros of `J` and the lower Cholesky factor `C` of
+/// `L = J P Jᵀ + S`.
+#[derive(Debug, Clone, Copy)]
+pub struct LaneFactor<const N: usize, const NY: usize> {
+    /// `pjt[r][i]` is entry `(i, r)` of `P Jᵀ`.
+    pjt: [[f64x4; N]; NY],
+    /// `chol[j][i]` is entry `(i, j)` of `C`.
+    chol: [[f64x4; NY]; NY],
+}
+
+impl<const N: usize, const NY: usize> LaneFactor<N, NY> {
+    /// Factorises the innovation covariance of every lane. `s_add` (shared by the lanes) must
+    /// be exactly symmetric, so that `L` is (the scalar code would otherwise symmetrise it
+    /// first). Returns the lanes that took the scalar code's straight path: a non-finite
+    /// Jacobian or innovation covariance, or a pivot that would need the documented repair,
+    /// leaves a lane out.
+    pub fn new(
+        p: &LaneMat<N, N>,
+        jac: &LaneMat<NY, N>,
+        s_add: &SMatrix<f64, NY, NY>,
+    ) -> (Self, Mask) {
+        debug_assert_eq!(
+            *s_add,
+            s_add.transpose(),
+            "the added covariance must be symmetric"
+        );
+        let zero = f64x4::ZERO;
+        // A non-finite Jacobian makes the scalar innovation covariance non-finite, which the
+        // scalar code rejects.
+        let mut ok = finite_lanes(jac);
+        // P Jᵀ over the non-zeros of J (`sparse_pjt`).
+        let mut pjt = [[zero; N]; NY];
+        for c in 0..N {
+            for r in 0..NY {
+                let d = jac[c][r];
+                let nz = nonzero(d);
+                if nz.all() {
+                    for i in 0..N {
+                        pjt[r][i] = pjt[r][i] + d * p[c][i];
+                    }
+                } else if nz.any() {
+                    for i in 0..N {
+                        pjt[r][i] = select(nz, pjt[r][i] + d * p[c][i], pjt[r][i]);
+                    }
+                }
+            }
+        }
+        // L = J P Jᵀ + S, lower triangle over the non-zeros of J, mirrored (`innovation_cov`).
+        let mut l = [[zero; NY]; NY];
+        for c in 0..N {
+            for i in 0..NY {
+                let d = jac[c][i];
+                let nz = nonzero(d);
+                if nz.all() {
+                    for j in 0..=i {
+                        l[j][i] = l[j][i] + d * pjt[j][c];
+                    }
+                } else if nz.any() {
+                    for j in 0..=i {
+                        l[j][i] = select(nz, l[j][i] + d * pjt[j][c], l[j][i]);
+                    }
+                }
+            }
+        }
+        for j in 0..NY {
+            for i in (j + 1)..NY {
+                l[i][j] = l[j][i];
+            }
+        }
+        for j in 0..NY {
+            for i in 0..NY {
+                l[j][i] = l[j][i] + f64x4::splat(s_add[(i, j)]);
+            }
+        }
+        ok = ok & finite_lanes(&l);
+        // Cholesky factor of L (`try_cholesky`); a lane whose pivot fails would need the repair.
+        let mut chol = [[zero; NY]; NY];
+        let rel_tol = f64x4::splat(PIVOT_REL_TOL);
+        for j in 0..NY {
+            let mut d = l[j][j];
+            for k in 0..j {
+                d = d - chol[k][j] * chol[k][j];
+            }
+            ok = ok & d.cmp_gt(zero) & d.cmp_gt(rel_tol * l[j][j]);
+            let ljj = d.sqrt();
+            chol[j][j] = ljj;
+            let inv = ljj * (f64x4::ONE / d);
+            for i in (j + 1)..NY {
+                let mut s = l[j][i];
+                for k in 0..j {
+                    s = s - chol[k][i] * chol[k][j];
+                }
+                chol[j][i] = s * inv;
+            }
+        }
+        (Self { pjt, chol }, ok)
+    }
+
+    /// Lane `b`'s factor `C`.
+    pub fn chol(&self, b: usize) -> SMatrix<f64, NY, NY> {
+        get_lane_mat(&self.chol, b)
+    }
+
+    /// `e = C⁻¹ r` (`solve_lower_in_place`).
+    pub fn whiten(&self, residual: &LaneVec<NY>) -> LaneVec<NY> {
+        let chol = &self.chol;
+        let inv_diag: [f64x4; NY] = std::array::from_fn(|i| f64x4::ONE / chol[i][i]);
+        let mut e = *residual;
+        for i in 0..NY {
+            let mut s = e[i];
+            for k in 0..i {
+                s = s - chol[k][i] * e[k];
+            }
+            e[i] = s * inv_diag[i];
+        }
+        e
+    }
+
+    /// `m ← m + Wᵀ e`, `P ← P − Wᵀ W` for the whitened innovation `e`, as
+    /// [`super::kf::UpdateFactor::apply_whitened`]. Returns the lanes whose gain, mean and
+    /// covariance came out finite (the others would be the scalar code's errors). Consumes the
+    /// factor: its `P Jᵀ` becomes `Wᵀ` in place.
+    pub fn apply_whitened(
+        self,
+        m: &mut LaneVec<N>,
+        p: &mut LaneMat<N, N>,
+        e: &LaneVec<NY>,
+    ) -> Mask {
+        let chol = &self.chol;
+        // Wᵀ = (P Jᵀ) C⁻ᵀ column by column: wt[i][r] is entry (r, i).
+        let mut wt = self.pjt;
+        for i in 0..NY {
+            for k in 0..i {
+                let c = chol[k][i];
+                let nz = nonzero(c);
+                if nz.all() {
+                    for r in 0..N {
+                        wt[i][r] = wt[i][r] - c * wt[k][r];
+                    }
+                } else if nz.any() {
+                    for r in 0..N {
+                        wt[i][r] = select(nz, wt[i][r] - c * wt[k][r], wt[i][r]);
+                    }
+                }
+            }
+            let inv = f64x4::ONE / chol[i][i];
+            for r in 0..N {
+                wt[i][r] = wt[i][r] * inv;
+            }
+        }
+        let gain = mul_vec(&wt, e);
+        let new_m: LaneVec<N> = std::array::from_fn(|r| m[r] + gain[r]);
+        let mut ok = finite_lanes(&[new_m]) & finite_lanes(&wt);
+        // P − Wᵀ W on the lower triangle (the scalar update computes the upper one too, then
+        // overwrites it with the mirror), then mirrored.
+        for c in 0..N {
+            for d in 0..NY {
+                let a = wt[d][c];
+                for r in c..N {
+                    p[c][r] = p[c][r] - a * wt[d][r];
+                }
+            }
+        }
+        for c in 0..N {
+            for r in (c + 1)..N {
+                p[r][c] = p[c][r];
+            }
+        }
+        ok = ok & finite_lanes(p);
+        *m = new_m;
+        ok
+    }
+}
+
 /// The Gaussian update `m ← m + Wᵀ e`, `P ← P − Wᵀ W` with `e = C⁻¹ residual`, `W = C⁻¹ J P`,
-/// `C Cᵀ = J P Jᵀ + S`, in every lane, exactly as
-/// `kf::update_from_residual` computes it from the residual `y − ŷ`.
+/// `C Cᵀ = J P Jᵀ + S`, in every lane, exactly as `kf::update_from_residual` (the update of
+/// [`super::kf::gaussian_update`]) computes it from the residual `y − ŷ`.
 ///
-/// `s_add` (shared by the lanes) must be exactly symmetric, so that the innovation covariance is
-/// (the scalar update would otherwise symmetrise it first).
-///
-/// Returns the lanes that took the straight path. In the others `m` and `p` hold meaningless
-/// values: the caller redoes those problems with the scalar update from their original moments.
-#[allow(non_snake_case)]
+/// Returns the lanes that took the straight path, the factor `C` (`chol[j][i]` is entry
+/// `(i, j)`) and `e`, from which a caller may score the measurement. In the other lanes `m` and `p` hold meaningless values: the caller
+/// redoes those problems with the scalar update from their original moments.
 pub fn gaussian_update<const N: usize, const NY: usize>(
     m: &mut LaneVec<N>,
     p: &mut LaneMat<N, N>,
     residual: &LaneVec<NY>,
     jac: &LaneMat<NY, N>,
     s_add: &SMatrix<f64, NY, NY>,
-) -> Mask {
-    debug_assert_eq!(
-        *s_add,
-        s_add.transpose(),
-        "the added covariance must be symmetric"
-    );
-    let zero = f64x4::ZERO;
-    // The scalar update first rejects a non-finite residual; a non-finite Jacobian makes its
-    // innovation covariance non-finite, which it rejects too.
-    let mut ok = finite_lanes(&[*residual]) & finite_lanes(jac);
-    // P Jᵀ over the non-zeros of J (`sparse_pjt`): pjt[r][i] is entry (i, r).
-    let mut pjt = [[zero; N]; NY];
-    for c in 0..N {
-        for r in 0..NY {
-            let d = jac[c][r];
-            let nz = nonzero(d);
-            if nz.all() {
-                for i in 0..N {
-                    pjt[r][i] = pjt[r][i] + d * p[c][i];
-                }
-            } else if nz.any() {
-                for i in 0..N {
-                    pjt[r][i] = select(nz, pjt[r][i] + d * p[c][i], pjt[r][i]);
-                }
-            }
-        }
-    }
-    // L = J P Jᵀ + S, lower triangle over the non-zeros of J, mirrored (`innovation_cov`).
-    let mut l = [[zero; NY]; NY];
-    for c in 0..N {
-        for i in 0..NY {
-            let d = jac[c][i];
-            let nz = nonzero(d);
-            if nz.all() {
-                for j in 0..=i {
-                    l[j][i] = l[j][i] + d * pjt[j][c];
-                }
-            } else if nz.any() {
-                for j in 0..=i {
-                    l[j][i] = select(nz, l[j][i] + d * pjt[j][c], l[j][i]);
-                }
-            }
-        }
-    }
-    for j in 0..NY {
-        for i in (j + 1)..NY {
-            l[i][j] = l[j][i];
-        }
-    }
-    for j in 0..NY {
-        for i in 0..NY {
-            l[j][i] = l[j][i] + f64x4::splat(s_add[(i, j)]);
-        }
-    }
-    ok = ok & finite_lanes(&l);
-    // Cholesky factor of L (`try_cholesky`); a lane whose pivot fails would need the repair.
-    let mut chol = [[zero; NY]; NY];
-    let rel_tol = f64x4::splat(PIVOT_REL_TOL);
-    for j in 0..NY {
-        let mut d = l[j][j];
-        for k in 0..j {
-            d = d - chol[k][j] * chol[k][j];
-        }
-        ok = ok & d.cmp_gt(zero) & d.cmp_gt(rel_tol * l[j][j]);
-        let ljj = d.sqrt();
-        chol[j][j] = ljj;
-        let inv = ljj * (f64x4::ONE / d);
-        for i in (j + 1)..NY {
-            let mut s = l[j][i];
-            for k in 0..j {
-                s = s - chol[k][i] * chol[k][j];
-            }
-            chol[j][i] = s * inv;
-        }
-    }
-    // e = C⁻¹ residual (`solve_lower_in_place`).
-    let inv_diag: [f64x4; NY] = std::array::from_fn(|i| f64x4::ONE / chol[i][i]);
-    let mut e = *residual;
-    for i in 0..NY {
-        let mut s = e[i];
-        for k in 0..i {
-            s = s - chol[k][i] * e[k];
-        }
-        e[i] = s * inv_diag[i];
-    }
-    // Wᵀ = (P Jᵀ) C⁻ᵀ column by column (`apply_whitened`): wt[i][r] is entry (r, i).
-    let mut wt = pjt;
-    for i in 0..NY {
-        for k in 0..i {
-            let c = chol[k][i];
-            let nz = nonzero(c);
-            if nz.all() {
-                for r in 0..N {
-                    wt[i][r] = wt[i][r] - c * wt[k][r];
-                }
-            } else if nz.any() {
-                for r in 0..N {
-                    wt[i][r] = select(nz, wt[i][r] - c * wt[k][r], wt[i][r]);
-                }
-            }
-        }
-        let inv = f64x4::ONE / chol[i][i];
-        for r in 0..N {
-            wt[i][r] = wt[i][r] * inv;
-        }
-    }
-    let gain = mul_vec(&wt, &e);
-    let new_m: LaneVec<N> = std::array::from_fn(|r| m[r] + gain[r]);
-    ok = ok & finite_lanes(&[new_m]) & finite_lanes(&wt);
-    // P − Wᵀ W on the lower triangle (the scalar update computes the upper one too, then
-    // overwrites it with the mirror), then mirrored.
-    for c in 0..N {
-        for d in 0..NY {
-            let a = wt[d][c];
-            for r in c..N {
-                p[c][r] = p[c][r] - a * wt[d][r];
-            }
-        }
-    }
-    for c in 0..N {
-        for r in (c + 1)..N {
-            p[r][c] = p[c][r];
-        }
-    }
-    ok = ok & finite_lanes(p);
-    *m = new_m;
-    ok
+) -> (Mask, LaneMat<NY, NY>, LaneVec<NY>) {
+    // The scalar update first rejects a non-finite residual.
+    let residual_ok = finite_lanes(&[*residual]);
+    let (factor, factor_ok) = LaneFactor::new(p, jac, s_add);
+    let e = factor.whiten(residual);
+    let chol = factor.chol;
+    let applied = factor.apply_whitened(m, p, &e);
+    (residual_ok & factor_ok & applied, chol, e)
 }
 
 #[cfg(test)]
@@ -430,7 +483,7 @@ mod tests {
                 set_lane_vec(&mut residual, b, rb);
                 set_lane_mat(&mut jac, b, jb);
             }
-            let ok = gaussian_update(&mut m, &mut p, &residual, &jac, &s_add);
+            let (ok, _, _) = gaussian_update(&mut m, &mut p, &residual, &jac, &s_add);
             for (b, (mb, pb, rb, jb)) in problems.iter().enumerate() {
                 let (mut ms, mut ps) = (*mb, *pb);
                 let mut health = Health::default();

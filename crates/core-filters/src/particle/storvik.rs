@@ -426,7 +426,7 @@ impl<const NZ: usize, const NL: usize, const NY: usize> LaneGroup<NZ, NL, NY> {
         gather_mat(&mut self.F_L, std::array::from_fn(|b| &p[b].F_L));
         gather_mat(&mut self.jac_y, std::array::from_fn(|b| &p[b].jac_y));
         gather_vec(&mut self.offset_y, std::array::from_fn(|b| &p[b].offset_y));
-        let ok_l = gaussian_update(
+        let (ok_l, ..) = gaussian_update(
             &mut self.mu,
             &mut self.cov,
             &self.residual_l,
@@ -447,7 +447,7 @@ impl<const NZ: usize, const NL: usize, const NY: usize> LaneGroup<NZ, NL, NY> {
             }
         };
         let residual_y: LaneVec<NY> = std::array::from_fn(|r| f64x4::splat(y[r]) - y_hat[r]);
-        let ok_y = gaussian_update(&mut self.mu, &mut self.cov, &residual_y, &self.jac_y, r);
+        let (ok_y, ..) = gaussian_update(&mut self.mu, &mut self.cov, &residual_y, &self.jac_y, r);
         ok_l & ok_y
     }
 }
