@@ -213,6 +213,16 @@ pub(crate) fn log_det_half<const N: usize>(chol: &SMatrix<f64, N, N>) -> f64 {
     }
 }
 
+/// `log N(r; 0, L Lᵀ)` from the whitened residual `e = L⁻¹ r` and the lower factor `L`:
+/// `−½ |e|² − Σ ln L_jj − (N/2) ln 2π`.
+#[inline]
+pub(crate) fn whitened_loglik<const N: usize>(
+    e: &SVector<f64, N>,
+    chol: &SMatrix<f64, N, N>,
+) -> f64 {
+    -0.5 * e.norm_squared() - log_det_half(chol) - 0.5 * (N as f64) * LN_2PI
+}
+
 /// `log N(r; 0, L Lᵀ)` from the residual `r` and the lower factor `L`:
 /// `−½ |L⁻¹ r|² − Σ ln L_jj − (N/2) ln 2π`.
 pub fn log_normal_density_chol<const N: usize>(
@@ -221,7 +231,7 @@ pub fn log_normal_density_chol<const N: usize>(
 ) -> f64 {
     let mut e = *residual;
     solve_lower_in_place(chol, &mut e);
-    -0.5 * e.norm_squared() - log_det_half(chol) - 0.5 * (N as f64) * LN_2PI
+    whitened_loglik(&e, chol)
 }
 
 /// A constant Gaussian noise `N(0, R)` factorised once (the measurement noise of the particle
@@ -530,7 +540,7 @@ pub fn gaussian_update<const N: usize, const NY: usize>(
 ) -> Result<Innovation<NY>, FilterError> {
     let residual = y - y_hat;
     let (chol, e) = update_from_residual(m, p, &residual, jac, s_add, step, health)?;
-    let loglik = -0.5 * e.norm_squared() - log_det_half(&chol) - 0.5 * (NY as f64) * LN_2PI;
+    let loglik = whitened_loglik(&e, &chol);
     Ok(Innovation {
         residual,
         chol,

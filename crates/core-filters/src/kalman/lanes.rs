@@ -222,6 +222,15 @@ pub struct LaneFactor<const N: usize, const NY: usize> {
     chol: [[f64x4; NY]; NY],
 }
 
+impl<const N: usize, const NY: usize> Default for LaneFactor<N, NY> {
+    fn default() -> Self {
+        Self {
+            pjt: [[f64x4::ZERO; N]; NY],
+            chol: [[f64x4::ZERO; NY]; NY],
+        }
+    }
+}
+
 impl<const N: usize, const NY: usize> LaneFactor<N, NY> {
     /// Factorises the innovation covariance of every lane. `s_add` (shared by the lanes) must
     /// be exactly symmetric, so that `L` is (the scalar code would otherwise symmetrise it
