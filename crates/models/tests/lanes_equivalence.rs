@@ -54,53 +54,30 @@ enum Kind {
     Mln,
 }
 
+/// A filter's sampled blocks, means, covariances and weights.
+type Parts<'a> = (
+    &'a [SVector<f64, 8>],
+    &'a [SVector<f64, 8>],
+    &'a [nalgebra::SMatrix<f64, 8, 8>],
+    &'a [f64],
+);
+
 /// What the comparison reads of a filter.
 trait Inspect: ParticleFilter<3> {
-    fn parts(
-        &self,
-    ) -> (
-        &[SVector<f64, 8>],
-        &[SVector<f64, 8>],
-        &[nalgebra::SMatrix<f64, 8, 8>],
-        &[f64],
-    );
+    fn parts(&self) -> Parts<'_>;
 }
 
-impl Inspect for Storvik<PaperMln, 8, 8, 4, 3> {
-    fn parts(
-        &self,
-    ) -> (
-        &[SVector<f64, 8>],
-        &[SVector<f64, 8>],
-        &[nalgebra::SMatrix<f64, 8, 8>],
-        &[f64],
-    ) {
-        (
-            self.sampled(),
-            self.means(),
-            self.covariances(),
-            self.weights(),
-        )
-    }
+macro_rules! inspect {
+    ($($filter:ty),*) => {$(
+        impl Inspect for $filter {
+            fn parts(&self) -> Parts<'_> {
+                (self.sampled(), self.means(), self.covariances(), self.weights())
+            }
+        }
+    )*};
 }
 
-impl Inspect for MlnRbpf<PaperMln, 8, 8, 4, 3> {
-    fn parts(
-        &self,
-    ) -> (
-        &[SVector<f64, 8>],
-        &[SVector<f64, 8>],
-        &[nalgebra::SMatrix<f64, 8, 8>],
-        &[f64],
-    ) {
-        (
-            self.sampled(),
-            self.means(),
-            self.covariances(),
-            self.weights(),
-        )
-    }
-}
+inspect!(Storvik<PaperMln, 8, 8, 4, 3>, MlnRbpf<PaperMln, 8, 8, 4, 3>);
 
 fn config(np: usize) -> ParticleConfig {
     ParticleConfig {

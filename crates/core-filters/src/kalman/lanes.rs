@@ -40,12 +40,6 @@ pub type LaneVec<const N: usize> = [f64x4; N];
 /// A mask lane: all bits set (true) or none (false), as the comparisons of `wide` return.
 pub type Mask = f64x4;
 
-/// The mask with every lane true.
-#[inline]
-pub fn all_lanes() -> Mask {
-    f64x4::ZERO.cmp_eq(f64x4::ZERO)
-}
-
 /// Lane `b` of a mask.
 #[inline]
 pub fn lane(mask: Mask, b: usize) -> bool {
@@ -197,18 +191,24 @@ pub fn mul_vec<const R: usize, const C: usize>(a: &LaneMat<R, C>, x: &LaneVec<C>
     out
 }
 
-/// `keep ? new : old` lane by lane. The updates below take it only when some lanes keep and
-/// others do not: a select before a store becomes a masked store, which is slow on some
-/// processors, and nearly every entry is non-zero (or zero) in all four lanes at once.
-#[inline(always)]
-fn select(keep: Mask, new: f64x4, old: f64x4) -> f64x4 {
-    keep.blend(new, old)
-}
-
-/// The lanes where `d != 0` as Rust evaluates it (true for NaN).
-#[inline(always)]
-fn nonzero(d: f64x4) -> Mask {
-    !d.cmp_eq(f64x4::ZERO)
+/// The scalar code's `if d != 0.0 { … }` in lanes: `where_nonzero!(d, |keep| body)` runs
+/// `body`, which writes each result as `keep(new, old)`, with `keep` returning `new` where `d` is
+/// non-zero (as Rust evaluates `!=`, so NaN counts) and `old` elsewhere; not at all when `d` is
+/// zero in every lane. The body is expanded twice, once for all four lanes without a select:
+/// a select before a store becomes a masked store, which is slow on some processors, and a
+/// Jacobian's or factor's zeros are nearly always zero in all four lanes at once. (A closure
+/// taking the mask as an `Option` ran the updates about 10% slower.)
+macro_rules! where_nonzero {
+    ($d:expr, |$keep:ident| $body:expr) => {{
+        let nz = !$d.cmp_eq(f64x4::ZERO);
+        if nz.all() {
+            let $keep = |new: f64x4, _old: f64x4| new;
+            $body
+        } else if nz.any() {
+            let $keep = |new: f64x4, old: f64x4| nz.blend(new, old);
+            $body
+        }
+    }};
 }
 
 /// The gain side of a Gaussian update in lanes, as [`super::kf::UpdateFactor::new`] computes
@@ -256,16 +256,9 @@ impl<const N: usize, const NY: usize> LaneFactor<N, NY> {
         for c in 0..N {
             for r in 0..NY {
                 let d = jac[c][r];
-                let nz = nonzero(d);
-                if nz.all() {
-                    for i in 0..N {
-                        pjt[r][i] = pjt[r][i] + d * p[c][i];
-                    }
-                } else if nz.any() {
-                    for i in 0..N {
-                        pjt[r][i] = select(nz, pjt[r][i] + d * p[c][i], pjt[r][i]);
-                    }
-                }
+                where_nonzero!(d, |keep| for i in 0..N {
+                    pjt[r][i] = keep(pjt[r][i] + d * p[c][i], pjt[r][i]);
+                });
             }
         }
         // L = J P Jᵀ + S, lower triangle over the non-zeros of J, mirrored (`innovation_cov`).
@@ -273,16 +266,9 @@ impl<const N: usize, const NY: usize> LaneFactor<N, NY> {
         for c in 0..N {
             for i in 0..NY {
                 let d = jac[c][i];
-                let nz = nonzero(d);
-                if nz.all() {
-                    for j in 0..=i {
-                        l[j][i] = l[j][i] + d * pjt[j][c];
-                    }
-                } else if nz.any() {
-                    for j in 0..=i {
-                        l[j][i] = select(nz, l[j][i] + d * pjt[j][c], l[j][i]);
-                    }
-                }
+                where_nonzero!(d, |keep| for j in 0..=i {
+                    l[j][i] = keep(l[j][i] + d * pjt[j][c], l[j][i]);
+                });
             }
         }
         for j in 0..NY {
@@ -355,16 +341,9 @@ impl<const N: usize, const NY: usize> LaneFactor<N, NY> {
         for i in 0..NY {
             for k in 0..i {
                 let c = chol[k][i];
-                let nz = nonzero(c);
-                if nz.all() {
-                    for r in 0..N {
-                        wt[i][r] = wt[i][r] - c * wt[k][r];
-                    }
-                } else if nz.any() {
-                    for r in 0..N {
-                        wt[i][r] = select(nz, wt[i][r] - c * wt[k][r], wt[i][r]);
-                    }
-                }
+                where_nonzero!(c, |keep| for r in 0..N {
+                    wt[i][r] = keep(wt[i][r] - c * wt[k][r], wt[i][r]);
+                });
             }
             let inv = f64x4::ONE / chol[i][i];
             for r in 0..N {

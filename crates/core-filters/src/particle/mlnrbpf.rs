@@ -34,13 +34,14 @@ use nalgebra::{SMatrix, SVector};
 use rand::Rng;
 use rand_distr::{Distribution, StandardNormal};
 
+use super::lane_group::LaneMoments;
 use super::{MarginalParticles, ParticleConfig, ParticleFilter, Posterior, StepInfo, WeightedSet};
 use crate::error::FilterError;
 use crate::health::Health;
 use crate::kalman::kf::{all_finite, whitened_loglik};
 use crate::kalman::lanes::{
-    gather_mat, gather_vec, gaussian_update, get_lane_mat, get_lane_vec, lane, mul_vec,
-    scatter_all, LaneFactor, LaneMat, LaneVec, LANES,
+    gather_mat, gather_vec, gaussian_update, get_lane_mat, get_lane_vec, lane, mul_vec, LaneFactor,
+    LaneMat, LaneVec, LANES,
 };
 use crate::kalman::{kf_update, UpdateFactor};
 use crate::model::{ConditionallyLinear, Layout};
@@ -138,26 +139,18 @@ where
     use_lanes: bool,
 }
 
-/// What a particle of a lane group carries from its turn in (a) to (b)–(d) in lanes.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum LaneState {
-    /// Done: failed, or updated by the scalar code already.
-    Done,
-    /// Drawn; (b)–(d) in lanes.
-    Lanes,
-}
-
 /// Scratch of one lane group of the MLN-RBPF.
 #[derive(Debug, Clone)]
 #[allow(non_snake_case)]
 struct MlnGroup<const NU: usize, const NZ: usize, const NL: usize, const NY: usize> {
-    mu: LaneVec<NZ>,
-    cov: LaneMat<NZ, NZ>,
+    moments: LaneMoments<NZ>,
     F_L: LaneMat<NL, NZ>,
     xi: LaneVec<NL>,
     H: LaneMat<NY, NZ>,
     h: LaneVec<NY>,
-    state: [LaneState; LANES],
+    /// Whether each lane's particle was drawn for (b)–(d) in lanes (otherwise it failed, or the
+    /// scalar code has updated it already).
+    in_lanes: [bool; LANES],
     /// Per particle: `f` and `F_L` of the transition, the proposal mean, the draw and the
     /// observation `(h, H)`, kept for the scalar update should the lanes decline the particle.
     f: [SVector<f64, NU>; LANES],
@@ -168,8 +161,6 @@ struct MlnGroup<const NU: usize, const NZ: usize, const NL: usize, const NY: usi
     xi_of: [SVector<f64, NL>; LANES],
     h_of: [SVector<f64, NY>; LANES],
     H_of: [SMatrix<f64, NY, NZ>; LANES],
-    spare_mu: [SVector<f64, NZ>; LANES],
-    spare_cov: [SMatrix<f64, NZ, NZ>; LANES],
 }
 
 impl<const NU: usize, const NZ: usize, const NL: usize, const NY: usize> Default
@@ -177,13 +168,12 @@ impl<const NU: usize, const NZ: usize, const NL: usize, const NY: usize> Default
 {
     fn default() -> Self {
         Self {
-            mu: [f64x4::ZERO; NZ],
-            cov: [[f64x4::ZERO; NZ]; NZ],
+            moments: LaneMoments::default(),
             F_L: [[f64x4::ZERO; NL]; NZ],
             xi: [f64x4::ZERO; NL],
             H: [[f64x4::ZERO; NY]; NZ],
             h: [f64x4::ZERO; NY],
-            state: [LaneState::Done; LANES],
+            in_lanes: [false; LANES],
             f: [SVector::zeros(); LANES],
             F_L_of: [SMatrix::zeros(); LANES],
             mean_l: [SVector::zeros(); LANES],
@@ -191,8 +181,6 @@ impl<const NU: usize, const NZ: usize, const NL: usize, const NY: usize> Default
             xi_of: [SVector::zeros(); LANES],
             h_of: [SVector::zeros(); LANES],
             H_of: [SMatrix::zeros(); LANES],
-            spare_mu: [SVector::zeros(); LANES],
-            spare_cov: [SMatrix::zeros(); LANES],
         }
     }
 }
@@ -290,18 +278,12 @@ where
         for b in 0..count {
             (g.f[b], g.F_L_of[b]) = self.model.transition(k, &sampled[first + b]);
         }
-        gather_mat(
-            &mut g.cov,
-            std::array::from_fn(|b| &src_cov[source[first + member(b)]]),
-        );
-        gather_vec(
-            &mut g.mu,
-            std::array::from_fn(|b| &src_mu[source[first + member(b)]]),
-        );
+        g.moments
+            .gather(src_mu, src_cov, &source[first..first + count]);
         gather_mat(&mut g.F_L, std::array::from_fn(|b| &g.F_L_of[member(b)]));
         // (a)+(b): the innovation covariance of (b) is the proposal covariance of (a).
         let (proposal, straight) = if self.use_lanes {
-            LaneFactor::new(&g.cov, &g.F_L, &linked.q_l)
+            LaneFactor::new(&g.moments.cov, &g.F_L, &linked.q_l)
         } else {
             (LaneFactor::default(), f64x4::ZERO)
         };
@@ -313,31 +295,22 @@ where
             linked.add_unlinked_noise(&mut u_new, &self.noise_sd, rng);
             // (a) the linked rows with z marginalised: N(f_L + F_L μ, S), S = F_L C F_Lᵀ + Q_L.
             let mean_l = linked.pick(&g.f[b]) + F_L * *mu;
-            g.state[b] = LaneState::Done;
+            g.in_lanes[b] = false;
             if !lane(straight, b) {
                 // The scalar path, in place on the particle's new moments.
                 let (mu, cov) = (&mut dst_mu[i], &mut dst_cov[i]);
                 (*mu, *cov) = (src_mu[source[i]], src_cov[source[i]]);
-                let drawn =
-                    UpdateFactor::new(cov, F_L, &linked.q_l, k, "MLN proposal covariance", health)
-                        .and_then(|factor| {
-                            let xi = standard_normal::<NL, G>(rng);
-                            factor.condition_on_draw(mu, cov, &mean_l, &xi, k)
-                        });
-                if let Ok(u_l) = &drawn {
-                    linked.scatter(&mut u_new, u_l);
-                }
-                sampled[i] = u_new;
-                if drawn.is_err() {
-                    self.set.log_w[i] = f64::NAN;
-                    continue;
-                }
-                // (c) + (d): the KF update's log-likelihood is log N(y; H μ + h, H C Hᵀ + R).
-                let (h, H) = self.model.observation(k, &u_new);
-                match kf_update(mu, cov, y, &H, &h, &self.r, k, health) {
-                    Ok(inn) => self.set.log_w[i] += inn.loglik,
-                    Err(_) => self.set.log_w[i] = f64::NAN,
-                }
+                let scalar = Scalar {
+                    model: &self.model,
+                    linked,
+                    r: &self.r,
+                    k,
+                    y,
+                };
+                let draw = || standard_normal::<NL, G>(rng);
+                let (u, loglik) = scalar.particle(mu, cov, u_new, &mean_l, F_L, health, draw);
+                sampled[i] = u;
+                self.set.log_w[i] = loglik.map_or(f64::NAN, |l| self.set.log_w[i] + l);
                 continue;
             }
             let xi = standard_normal::<NL, G>(rng);
@@ -354,10 +327,9 @@ where
             sampled[i] = u_new;
             (g.h_of[b], g.H_of[b]) = self.model.observation(k, &u_new);
             (g.mean_l[b], g.xi_of[b]) = (mean_l, xi);
-            g.state[b] = LaneState::Lanes;
+            g.in_lanes[b] = true;
         }
-        let lanes_taken: [bool; LANES] =
-            std::array::from_fn(|b| b < count && g.state[b] == LaneState::Lanes);
+        let lanes_taken: [bool; LANES] = std::array::from_fn(|b| b < count && g.in_lanes[b]);
         if !lanes_taken.contains(&true) {
             return;
         }
@@ -365,58 +337,83 @@ where
         gather_vec(&mut g.xi, std::array::from_fn(|b| &g.xi_of[member(b)]));
         gather_mat(&mut g.H, std::array::from_fn(|b| &g.H_of[member(b)]));
         gather_vec(&mut g.h, std::array::from_fn(|b| &g.h_of[member(b)]));
-        let conditioned = proposal.apply_whitened(&mut g.mu, &mut g.cov, &g.xi);
-        let h_mu = mul_vec(&g.H, &g.mu);
+        let m = &mut g.moments;
+        let conditioned = proposal.apply_whitened(&mut m.mu, &mut m.cov, &g.xi);
+        let h_mu = mul_vec(&g.H, &m.mu);
         let residual: LaneVec<NY> =
             std::array::from_fn(|r| f64x4::splat(y[r]) - (h_mu[r] + g.h[r]));
-        let (updated, chol, e) = gaussian_update(&mut g.mu, &mut g.cov, &residual, &g.H, &self.r);
+        let (updated, chol, e) = gaussian_update(&mut m.mu, &mut m.cov, &residual, &g.H, &self.r);
         let ok = straight & conditioned & updated;
         let take: [bool; LANES] = std::array::from_fn(|b| lanes_taken[b] && lane(ok, b));
-        if take.contains(&true) {
-            let (mut mus, mut covs) = (
-                dst_mu[first..first + count].iter_mut(),
-                dst_cov[first..first + count].iter_mut(),
-            );
-            let (mut spare_mu, mut spare_cov) = (g.spare_mu.iter_mut(), g.spare_cov.iter_mut());
-            let mu_out = std::array::from_fn(|b| match mus.next() {
-                Some(own) if take[b] => own,
-                _ => spare_mu.next().expect("four spares"),
-            });
-            let cov_out = std::array::from_fn(|b| match covs.next() {
-                Some(own) if take[b] => own,
-                _ => spare_cov.next().expect("four spares"),
-            });
-            scatter_all(std::array::from_ref(&g.mu), mu_out);
-            scatter_all(&g.cov, cov_out);
-        }
+        let group = first..first + count;
+        m.write_back(take, &mut dst_mu[group.clone()], &mut dst_cov[group]);
         for b in 0..count {
             let i = first + b;
             if take[b] {
                 let (e, chol) = (get_lane_vec(&e, b), get_lane_mat(&chol, b));
                 self.set.log_w[i] += whitened_loglik(&e, &chol);
             } else if lanes_taken[b] {
-                // The scalar (b)–(d) from the particle's moments (no repair: the lanes' factor
-                // took the straight path, and the scalar one is the same).
-                let (mu, cov, health) = (&mut dst_mu[i], &mut dst_cov[i], &mut self.health);
+                // The scalar (b)–(d) from the particle's moments and its draw (no repair: the
+                // lanes' factor took the straight path, and the scalar one is the same).
+                let (mu, cov) = (&mut dst_mu[i], &mut dst_cov[i]);
                 (*mu, *cov) = (src_mu[source[i]], src_cov[source[i]]);
-                let F_L = &g.F_L_of[b];
-                let conditioned =
-                    UpdateFactor::new(cov, F_L, &linked.q_l, k, "MLN proposal covariance", health)
-                        .and_then(|factor| {
-                            factor.condition_on_draw(mu, cov, &g.mean_l[b], &g.xi_of[b], k)
-                        });
-                if conditioned.is_err() {
-                    // As the scalar step: a draw whose update failed is not kept in `u`.
-                    sampled[i] = g.u_drawless[b];
-                    self.set.log_w[i] = f64::NAN;
-                    continue;
-                }
-                match kf_update(mu, cov, y, &g.H_of[b], &g.h_of[b], &self.r, k, health) {
-                    Ok(inn) => self.set.log_w[i] += inn.loglik,
-                    Err(_) => self.set.log_w[i] = f64::NAN,
-                }
+                let scalar = Scalar {
+                    model: &self.model,
+                    linked,
+                    r: &self.r,
+                    k,
+                    y,
+                };
+                let (u_drawless, mean_l, F_L) = (g.u_drawless[b], &g.mean_l[b], &g.F_L_of[b]);
+                let draw = || g.xi_of[b];
+                let (u, loglik) =
+                    scalar.particle(mu, cov, u_drawless, mean_l, F_L, &mut self.health, draw);
+                sampled[i] = u;
+                self.set.log_w[i] = loglik.map_or(f64::NAN, |l| self.set.log_w[i] + l);
             }
         }
+    }
+}
+
+/// What the scalar path of one MLN-RBPF particle needs besides the particle.
+struct Scalar<'a, M, const NU: usize, const NL: usize, const NY: usize> {
+    model: &'a M,
+    linked: &'a LinkedRows<NU, NL>,
+    r: &'a SMatrix<f64, NY, NY>,
+    k: usize,
+    y: &'a SVector<f64, NY>,
+}
+
+impl<M, const NU: usize, const NL: usize, const NY: usize> Scalar<'_, M, NU, NL, NY> {
+    /// SPEC §5.2 (a)–(d) of one particle by the scalar code, in place on `(μ, C)`: the proposal
+    /// factor (with the documented repair), `ξ` from `draw` (the generator on the particle's
+    /// turn, its stored draw when the lanes declined it), (b), then (c)+(d). Returns `u_k` (its
+    /// linked rows are the draw only if (b) succeeded) and the log-likelihood, `None` on failure.
+    #[allow(clippy::too_many_arguments, non_snake_case)]
+    fn particle<const NZ: usize>(
+        &self,
+        mu: &mut SVector<f64, NZ>,
+        cov: &mut SMatrix<f64, NZ, NZ>,
+        mut u_new: SVector<f64, NU>,
+        mean_l: &SVector<f64, NL>,
+        F_L: &SMatrix<f64, NL, NZ>,
+        health: &mut Health,
+        draw: impl FnOnce() -> SVector<f64, NL>,
+    ) -> (SVector<f64, NU>, Option<f64>)
+    where
+        M: ConditionallyLinear<NU, NZ, NL, NY>,
+    {
+        let (k, linked) = (self.k, self.linked);
+        let drawn = UpdateFactor::new(cov, F_L, &linked.q_l, k, "MLN proposal covariance", health)
+            .and_then(|factor| factor.condition_on_draw(mu, cov, mean_l, &draw(), k));
+        let Ok(u_l) = drawn else {
+            return (u_new, None);
+        };
+        linked.scatter(&mut u_new, &u_l);
+        // (c) + (d): the KF update's log-likelihood is log N(y; H μ + h, H C Hᵀ + R).
+        let (h, H) = self.model.observation(k, &u_new);
+        let loglik = kf_update(mu, cov, self.y, &H, &h, self.r, k, health).map(|inn| inn.loglik);
+        (u_new, loglik.ok())
     }
 }
 

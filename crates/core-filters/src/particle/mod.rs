@@ -9,6 +9,7 @@
 //!   they are sampled (weighted particle average) or marginalised (Gaussian mixture, SPEC §7).
 
 pub mod bootstrap;
+pub mod lane_group;
 pub mod mlnrbpf;
 pub mod mpf;
 pub mod storvik;

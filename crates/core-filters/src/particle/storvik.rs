@@ -24,7 +24,7 @@
 //! written to the other buffer, so they are not copied twice).
 //!
 //! Speed, with results unchanged to the bit: the particles go through the step four at a time.
-//! The factors of their `C` are computed side by side in SIMD lanes ([`LaneFactors`]); steps (i)
+//! The factors of their `C` are computed side by side in SIMD lanes ([`PsdLaneFactors`]); steps (i)
 //! and (ii), which take the random draws, run particle by particle in order; then both updates
 //! of step (iii) run for the four in lanes ([`crate::kalman::lanes`]), each lane doing the scalar
 //! update's operations in its order. A particle the lanes cannot take (its scalar update would
@@ -49,14 +49,15 @@ use rand::Rng;
 use serde::{Deserialize, Serialize};
 use wide::{f64x4, CmpGt, CmpLe, CmpLt};
 
+use super::lane_group::LaneMoments;
 use super::mlnrbpf::{standard_normal, LinkedRows};
 use super::{MarginalParticles, ParticleConfig, ParticleFilter, Posterior, StepInfo, WeightedSet};
 use crate::error::FilterError;
 use crate::health::Health;
 use crate::kalman::kf::{all_finite, cholesky_with, update_from_residual, Pivot};
 use crate::kalman::lanes::{
-    finite_lanes, gather_mat, gather_vec, gaussian_update, lane, mul_vec, scatter_all, LaneMat,
-    LaneVec, Mask, LANES,
+    finite_lanes, gather_mat, gather_vec, gaussian_update, lane, mul_vec, LaneMat, LaneVec, Mask,
+    LANES,
 };
 use crate::kalman::FactoredCov;
 use crate::model::{ConditionallyLinear, Layout};
@@ -118,12 +119,12 @@ pub fn psd_cholesky<const N: usize>(a: &SMatrix<f64, N, N>) -> Option<SMatrix<f6
 /// time of one. The factors stay in lane layout because their one use, `L ξ` for the draw, reads
 /// them entry by entry anyway.
 #[derive(Debug, Clone, Copy)]
-pub struct LaneFactors<const N: usize> {
+pub struct PsdLaneFactors<const N: usize> {
     l: LaneMat<N, N>,
     ok: [bool; LANES],
 }
 
-impl<const N: usize> Default for LaneFactors<N> {
+impl<const N: usize> Default for PsdLaneFactors<N> {
     fn default() -> Self {
         Self {
             l: [[f64x4::ZERO; N]; N],
@@ -132,12 +133,12 @@ impl<const N: usize> Default for LaneFactors<N> {
     }
 }
 
-impl<const N: usize> LaneFactors<N> {
+impl<const N: usize> PsdLaneFactors<N> {
     /// Factorises `a[b]` into lane `b` with the same operations in the same order as
     /// [`psd_cholesky`], so each factor is bit for bit the one it returns. A lane whose pivot is
     /// a zero column keeps that column exactly zero (a select, not a multiplication by zero,
     /// which could give `−0`); a lane that fails goes on computing with meaningless values,
-    /// which [`LaneFactors::ok`] disowns.
+    /// which [`PsdLaneFactors::ok`] disowns.
     #[inline]
     #[allow(clippy::needless_range_loop, clippy::assign_op_pattern)] // the scalar order, spelled out
     pub fn factorise(&mut self, a: &LaneMat<N, N>) {
@@ -370,12 +371,11 @@ impl<const NZ: usize, const NL: usize, const NY: usize> Pending<NZ, NL, NY> {
 }
 
 /// Scratch of one lane group: the moments and step (iii) inputs of four particles in lanes.
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone)]
 #[allow(non_snake_case)]
 struct LaneGroup<const NZ: usize, const NL: usize, const NY: usize> {
-    mu: LaneVec<NZ>,
-    cov: LaneMat<NZ, NZ>,
-    factors: LaneFactors<NZ>,
+    moments: LaneMoments<NZ>,
+    factors: PsdLaneFactors<NZ>,
     pending: [Pending<NZ, NL, NY>; LANES],
     /// Whether each lane's particle reached step (iii).
     ready: [bool; LANES],
@@ -384,17 +384,13 @@ struct LaneGroup<const NZ: usize, const NL: usize, const NY: usize> {
     jac_y: LaneMat<NY, NZ>,
     offset_y: LaneVec<NY>,
     z0: LaneVec<NZ>,
-    /// Where the results of lanes without a particle to take them go.
-    spare_mu: [SVector<f64, NZ>; LANES],
-    spare_cov: [SMatrix<f64, NZ, NZ>; LANES],
 }
 
 impl<const NZ: usize, const NL: usize, const NY: usize> Default for LaneGroup<NZ, NL, NY> {
     fn default() -> Self {
         Self {
-            mu: [f64x4::ZERO; NZ],
-            cov: [[f64x4::ZERO; NZ]; NZ],
-            factors: LaneFactors::default(),
+            moments: LaneMoments::default(),
+            factors: PsdLaneFactors::default(),
             pending: [Pending::default(); LANES],
             ready: [false; LANES],
             residual_l: [f64x4::ZERO; NL],
@@ -402,8 +398,6 @@ impl<const NZ: usize, const NL: usize, const NY: usize> Default for LaneGroup<NZ
             jac_y: [[f64x4::ZERO; NY]; NZ],
             offset_y: [f64x4::ZERO; NY],
             z0: [f64x4::ZERO; NZ],
-            spare_mu: [SVector::zeros(); LANES],
-            spare_cov: [SMatrix::zeros(); LANES],
         }
     }
 }
@@ -427,8 +421,8 @@ impl<const NZ: usize, const NL: usize, const NY: usize> LaneGroup<NZ, NL, NY> {
         gather_mat(&mut self.jac_y, std::array::from_fn(|b| &p[b].jac_y));
         gather_vec(&mut self.offset_y, std::array::from_fn(|b| &p[b].offset_y));
         let (ok_l, ..) = gaussian_update(
-            &mut self.mu,
-            &mut self.cov,
+            &mut self.moments.mu,
+            &mut self.moments.cov,
             &self.residual_l,
             &self.F_L,
             q_l,
@@ -436,18 +430,24 @@ impl<const NZ: usize, const NL: usize, const NY: usize> LaneGroup<NZ, NL, NY> {
         // ŷ as `Pending::y_hat` computes it, lane by lane.
         let y_hat: LaneVec<NY> = match update {
             StorvikUpdate::Exact => {
-                let h_mu = mul_vec(&self.jac_y, &self.mu);
+                let h_mu = mul_vec(&self.jac_y, &self.moments.mu);
                 std::array::from_fn(|r| h_mu[r] + self.offset_y[r])
             }
             StorvikUpdate::Linearised => {
                 gather_vec(&mut self.z0, std::array::from_fn(|b| &p[b].z0));
-                let d: LaneVec<NZ> = std::array::from_fn(|j| self.mu[j] - self.z0[j]);
+                let d: LaneVec<NZ> = std::array::from_fn(|j| self.moments.mu[j] - self.z0[j]);
                 let g_d = mul_vec(&self.jac_y, &d);
                 std::array::from_fn(|r| self.offset_y[r] + g_d[r])
             }
         };
         let residual_y: LaneVec<NY> = std::array::from_fn(|r| f64x4::splat(y[r]) - y_hat[r]);
-        let (ok_y, ..) = gaussian_update(&mut self.mu, &mut self.cov, &residual_y, &self.jac_y, r);
+        let (ok_y, ..) = gaussian_update(
+            &mut self.moments.mu,
+            &mut self.moments.cov,
+            &residual_y,
+            &self.jac_y,
+            r,
+        );
         ok_l & ok_y
     }
 }
@@ -477,11 +477,9 @@ where
         // Particle i starts from the moments of particle source[i] (its ancestor) and its new
         // ones go to the back buffers.
         let (sampled, src_mu, src_cov, dst_mu, dst_cov) = self.p.moments_split();
-        // Lanes past the last particle repeat the group's first one and are discarded.
-        let member = |b: usize| source[first + if b < count { b } else { 0 }];
-        gather_mat(&mut g.cov, std::array::from_fn(|b| &src_cov[member(b)]));
-        gather_vec(&mut g.mu, std::array::from_fn(|b| &src_mu[member(b)]));
-        g.factors.factorise(&g.cov);
+        g.moments
+            .gather(src_mu, src_cov, &source[first..first + count]);
+        g.factors.factorise(&g.moments.cov);
         for b in 0..count {
             let i = first + b;
             g.ready[b] = false;
@@ -541,26 +539,10 @@ where
         } else {
             f64x4::ZERO
         };
-        // The lanes' results go to their particles, in one pass over all four (a lane whose
-        // particle does not take them writes to a spare).
         let take: [bool; LANES] = std::array::from_fn(|b| b < count && g.ready[b] && lane(ok, b));
-        if take.contains(&true) {
-            let (mut mus, mut covs) = (
-                dst_mu[first..first + count].iter_mut(),
-                dst_cov[first..first + count].iter_mut(),
-            );
-            let (mut spare_mu, mut spare_cov) = (g.spare_mu.iter_mut(), g.spare_cov.iter_mut());
-            let mu_out = std::array::from_fn(|b| match mus.next() {
-                Some(own) if take[b] => own,
-                _ => spare_mu.next().expect("four spares"),
-            });
-            let cov_out = std::array::from_fn(|b| match covs.next() {
-                Some(own) if take[b] => own,
-                _ => spare_cov.next().expect("four spares"),
-            });
-            scatter_all(std::array::from_ref(&g.mu), mu_out);
-            scatter_all(&g.cov, cov_out);
-        }
+        let group = first..first + count;
+        g.moments
+            .write_back(take, &mut dst_mu[group.clone()], &mut dst_cov[group]);
         for b in 0..count {
             if !g.ready[b] || take[b] {
                 continue;
@@ -718,7 +700,7 @@ mod tests {
         let mut rng = rand_xoshiro::Xoshiro256PlusPlus::seed_from_u64(20261123);
         let (mut some, mut none, mut zero_cols) = (0, 0, 0);
         // One set of lanes reused throughout, as in the filter.
-        let mut lanes = LaneFactors::<8>::default();
+        let mut lanes = PsdLaneFactors::<8>::default();
         for _ in 0..500 {
             let cases: [SMatrix<f64, 8, 8>; LANES] = std::array::from_fn(|_| {
                 let kind = rng.random_range(0..6);
