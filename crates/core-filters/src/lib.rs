@@ -20,10 +20,13 @@
 pub mod error;
 pub mod health;
 pub mod kalman;
+pub mod linalg;
 pub mod model;
 pub mod particle;
+pub mod real;
 pub mod resampling;
 pub mod rng;
+pub mod smc;
 pub mod weights;
 
 pub use error::FilterError;
