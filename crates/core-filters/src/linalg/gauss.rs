@@ -295,6 +295,8 @@ pub struct Factor<T> {
     pub chol: Vec<T>,
     /// Whitened innovation `e` (`q`).
     pub e: Vec<T>,
+    /// Scratch of the repair.
+    jittered: Vec<T>,
 }
 
 impl<T: Real> Factor<T> {
@@ -307,6 +309,7 @@ impl<T: Real> Factor<T> {
             cov: vec![zero(); q * q],
             chol: vec![zero(); q * q],
             e: vec![zero(); q],
+            jittered: vec![zero(); q * q],
         }
     }
 
@@ -362,6 +365,60 @@ impl<T: Real> Factor<T> {
         let ok = apply_whitened(mean, p, self.n, &self.pjt, q, &self.e);
         (loglik, ok & check.eq(zero()))
     }
+}
+
+/// [`Factor::compute`], and for one particle (`T::LANES == 1`) whose straight path failed the
+/// documented repair of [`Factor::compute_repaired`] (counted in `health`). A pack returns its
+/// straight-path mask: the batch layer redoes a failing lane as one particle. Returns the lanes
+/// that have a factor.
+#[inline]
+pub fn factorise<T: Real>(
+    factor: &mut Factor<T>,
+    p: &[T],
+    j: &Sparse<T>,
+    s_add: &[T],
+    step: usize,
+    which: &'static str,
+    health: &mut Health,
+) -> T::Mask {
+    let ok = factor.compute(p, j, s_add);
+    if T::LANES > 1 || T::mask_lane(ok, 0) {
+        return ok;
+    }
+    let _ = (step, which);
+    let q = factor.q;
+    let a = &factor.cov;
+    let mut finite = zero::<T>();
+    for v in &a[..q * q] {
+        finite += *v - *v;
+    }
+    if !T::mask_lane(finite.eq(zero()), 0) {
+        return ok;
+    }
+    let mut max_diag = zero::<T>();
+    for j in 0..q {
+        let d = a[j + j * q];
+        max_diag = T::select(d.gt(max_diag), d, max_diag);
+    }
+    let jit = &mut factor.jittered;
+    jit[..q * q].copy_from_slice(&a[..q * q]);
+    for tau in JITTER_STEPS {
+        for j in 0..q {
+            let d = a[j + j * q];
+            jit[j + j * q] = T::select(
+                d.gt(zero()),
+                d * T::splat(1.0 + tau),
+                d + T::splat(tau) * max_diag,
+            );
+        }
+        let fixed = cholesky(jit, q, &mut factor.chol);
+        if T::mask_lane(fixed, 0) {
+            health.jitter_added += 1;
+            return fixed;
+        }
+    }
+    health.cholesky_failures += 1;
+    ok
 }
 
 impl Factor<f64> {

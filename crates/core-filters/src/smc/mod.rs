@@ -1,5 +1,19 @@
 //! Particle filters on run-time dimensions.
 //!
 //! - [`model`]: the capability traits a model implements (augmented state space, conditionally
-//!   linear, conditionally quadratic), with staged transitions for semi-implicit schemes.
+//!   linear, conditionally quadratic), with staged transitions for semi-implicit schemes;
+//! - [`store`]: flat, preallocated particle storage;
+//! - [`runner`]: the one runner (resampling, ancestors, observers) and the [`runner::Filter`]
+//!   adapter trait;
+//! - [`batch`]: the batch layer that runs a filter's per-particle step for four particles at once
+//!   in SIMD lanes, bit for bit as one at a time;
+//! - [`mlnrbpf`]: the filters (SPEC §5).
+
+pub mod batch;
+pub mod mlnrbpf;
 pub mod model;
+pub mod runner;
+pub mod store;
+
+pub use runner::{run, Filter, Observer, Posterior, RunSummary, SmcConfig, StepInfo};
+pub use store::{Particles, Shape};

@@ -1,0 +1,249 @@
+//! The batch layer: runs a filter's per-particle step for one particle (`f64`) or for four
+//! particles side by side in SIMD lanes ([`Pack`]), with the same results to the bit.
+//!
+//! Each marginalized filter writes its step once, as [`ParticleStep::advance`], generic over
+//! [`Real`]; that function is the definition (it reads like the SPEC) and the test oracle. This
+//! layer owns everything around it, for every filter alike:
+//! - the random draws, taken particle by particle in order (all of a particle's draws at once),
+//!   so that the lanes consume the stream exactly as one particle at a time would;
+//! - gathering the ancestors' blocks into the lanes and scattering the results;
+//! - the fallback: a lane whose straight path failed (a factorisation that needs the documented
+//!   repair, a non-finite result) is redone by the `f64` step from its ancestor with the same
+//!   draws, which repairs, counts and reports exactly as for a lone particle;
+//! - particles with weight zero (possible with an ESS threshold) are copied, not advanced.
+//!
+//! Why lanes: one Gaussian update of a small marginalised block is a short chain of dependent
+//! operations that leaves most of the processor idle; four independent particles fill it. For a
+//! large block (hundreds of entries) one particle's update is long enough on its own, and the four
+//! lanes' covariances no longer fit the caches: [`Batch::new`] then runs particles one at a time.
+
+use rand_distr::{Distribution, StandardNormal};
+
+use crate::health::Health;
+use crate::linalg::pack::gather;
+use crate::real::{Pack, Real, PACK_LANES};
+use crate::rng::StreamRng;
+
+use super::store::{Particles, Shape};
+
+/// Largest marginalised dimension processed in lanes (a pack's covariance is then at most
+/// 48 × 48 × 32 bytes = 72 KiB, within the second-level cache of current processors).
+pub const MAX_LANE_DIM: usize = 48;
+
+/// One particle's blocks as the step sees them.
+pub struct Slots<'a, T> {
+    /// On entry a copy of the ancestor's sampled block (so static entries are already set); on
+    /// return the new sampled block.
+    pub sampled: &'a mut [T],
+    /// The marginalised Gaussian `N(mean, cov)`: the ancestor's on entry, updated in place.
+    pub mean: &'a mut [T],
+    pub cov: &'a mut [T],
+}
+
+/// A filter's per-particle step, written once for one particle or a pack of particles.
+pub trait ParticleStep: Sync {
+    /// The step's scratch for one number type (allocated once).
+    type Scratch<T: Real>: Send;
+    /// Allocates the scratch.
+    fn scratch<T: Real>(&self) -> Self::Scratch<T>;
+    /// Sizes of a particle's blocks.
+    fn shape(&self) -> Shape;
+    /// Standard normal draws per particle and step.
+    fn draws(&self) -> usize;
+    /// Advances one particle (or a pack) from step `k − 1` to `k` with the draws `xi`: `prev` is
+    /// the ancestor's sampled block, `slots` the particle's blocks (module docs). Returns
+    /// `log p(y_k | particle)` and the lanes whose straight path was valid. With `T = f64` the
+    /// step takes the documented repairs (counted in `health`) and the mask is false only when
+    /// the particle has no result.
+    #[allow(clippy::too_many_arguments)]
+    fn advance<T: Real>(
+        &self,
+        k: usize,
+        y: &[f64],
+        prev: &[T],
+        slots: Slots<'_, T>,
+        xi: &[T],
+        scratch: &mut Self::Scratch<T>,
+        health: &mut Health,
+    ) -> (T, T::Mask);
+}
+
+/// The buffers of the batch layer for one filter.
+pub struct Batch<S: ParticleStep> {
+    lanes: bool,
+    scalar: S::Scratch<f64>,
+    packed: S::Scratch<Pack>,
+    prev: Vec<Pack>,
+    sampled: Vec<Pack>,
+    mean: Vec<Pack>,
+    cov: Vec<Pack>,
+    xi: Vec<Pack>,
+    /// The draws of the particles of one group, particle after particle.
+    draws: Vec<f64>,
+}
+
+impl<S: ParticleStep> Batch<S> {
+    /// Buffers for `step`; lanes are used when the marginalised dimension is at most
+    /// [`MAX_LANE_DIM`] and `lanes` is asked for.
+    pub fn new(step: &S, lanes: bool) -> Self {
+        let shape = step.shape();
+        let nd = step.draws();
+        let use_lanes = lanes && shape.marginal <= MAX_LANE_DIM;
+        let z = Pack::splat(0.0);
+        let n = |len: usize| if use_lanes { vec![z; len] } else { Vec::new() };
+        Self {
+            lanes: use_lanes,
+            scalar: step.scratch(),
+            packed: step.scratch(),
+            prev: n(shape.sampled),
+            sampled: n(shape.sampled),
+            mean: n(shape.marginal),
+            cov: n(shape.marginal * shape.marginal),
+            xi: n(nd),
+            draws: vec![0.0; PACK_LANES * nd],
+        }
+    }
+
+    /// Whether particles go through the step four at a time.
+    pub fn uses_lanes(&self) -> bool {
+        self.lanes
+    }
+
+    /// One step of every particle (the contract of [`super::Filter::step`]).
+    #[allow(clippy::too_many_arguments)]
+    pub fn step(
+        &mut self,
+        step: &S,
+        k: usize,
+        y: &[f64],
+        src: &Particles,
+        ancestors: &[usize],
+        dst: &mut Particles,
+        log_w: &mut [f64],
+        rng: &mut StreamRng,
+        health: &mut Health,
+    ) {
+        let np = log_w.len();
+        let nd = step.draws();
+        let group = if self.lanes { PACK_LANES } else { 1 };
+        let mut first = 0;
+        while first < np {
+            let count = group.min(np - first);
+            for v in &mut self.draws[..count * nd] {
+                *v = StandardNormal.sample(rng);
+            }
+            if self.lanes && count > 1 {
+                self.pack_group(step, k, y, src, ancestors, dst, log_w, first, count, health);
+            } else {
+                for b in 0..count {
+                    self.one(step, k, y, src, ancestors, dst, log_w, first + b, b, health);
+                }
+            }
+            first += count;
+        }
+    }
+
+    /// Particle `i` through the `f64` step, with the draws of row `row` of the group.
+    #[allow(clippy::too_many_arguments)]
+    fn one(
+        &mut self,
+        step: &S,
+        k: usize,
+        y: &[f64],
+        src: &Particles,
+        ancestors: &[usize],
+        dst: &mut Particles,
+        log_w: &mut [f64],
+        i: usize,
+        row: usize,
+        health: &mut Health,
+    ) {
+        let a = ancestors[i];
+        dst.copy_from(i, src, a);
+        if log_w[i] == f64::NEG_INFINITY {
+            return;
+        }
+        let nd = step.draws();
+        let d = dst.particle_mut(i);
+        let (ll, ok) = step.advance(
+            k,
+            y,
+            src.sampled(a),
+            Slots {
+                sampled: d.sampled,
+                mean: d.mean,
+                cov: d.cov,
+            },
+            &self.draws[row * nd..(row + 1) * nd],
+            &mut self.scalar,
+            health,
+        );
+        log_w[i] += if ok { ll } else { f64::NAN };
+    }
+
+    /// The `count ≤ 4` particles from `first` on in lanes (lanes past `count` repeat the group's
+    /// first particle and are discarded).
+    #[allow(clippy::too_many_arguments)]
+    fn pack_group(
+        &mut self,
+        step: &S,
+        k: usize,
+        y: &[f64],
+        src: &Particles,
+        ancestors: &[usize],
+        dst: &mut Particles,
+        log_w: &mut [f64],
+        first: usize,
+        count: usize,
+        health: &mut Health,
+    ) {
+        let nd = step.draws();
+        let source = |b: usize| ancestors[first + if b < count { b } else { 0 }];
+        gather(
+            &mut self.prev,
+            std::array::from_fn(|b| src.sampled(source(b))),
+        );
+        self.sampled.copy_from_slice(&self.prev);
+        gather(&mut self.mean, std::array::from_fn(|b| src.mean(source(b))));
+        gather(&mut self.cov, std::array::from_fn(|b| src.cov(source(b))));
+        let row = |b: usize| if b < count { b } else { 0 };
+        let draws = &self.draws;
+        gather(
+            &mut self.xi,
+            std::array::from_fn(|b| &draws[row(b) * nd..(row(b) + 1) * nd]),
+        );
+        let (ll, ok) = step.advance(
+            k,
+            y,
+            &self.prev,
+            Slots {
+                sampled: &mut self.sampled,
+                mean: &mut self.mean,
+                cov: &mut self.cov,
+            },
+            &self.xi,
+            &mut self.packed,
+            health,
+        );
+        for b in 0..count {
+            let i = first + b;
+            if log_w[i] == f64::NEG_INFINITY {
+                dst.copy_from(i, src, ancestors[i]);
+            } else if Pack::mask_lane(ok, b) {
+                let d = dst.particle_mut(i);
+                for (o, v) in d.sampled.iter_mut().zip(&self.sampled) {
+                    *o = v.lane(b);
+                }
+                for (o, v) in d.mean.iter_mut().zip(&self.mean) {
+                    *o = v.lane(b);
+                }
+                for (o, v) in d.cov.iter_mut().zip(&self.cov) {
+                    *o = v.lane(b);
+                }
+                log_w[i] += ll.lane(b);
+            } else {
+                self.one(step, k, y, src, ancestors, dst, log_w, i, b, health);
+            }
+        }
+    }
+}

@@ -1,0 +1,323 @@
+//! The one generic runner (STYLE: particles' `SMC.__next__`, argmin's `Executor`): it owns the
+//! particle storage, the weights, the resampling decision and the ancestors, the time loop and the
+//! observers; a filter is a small adapter ([`Filter`]) that advances and weights particles.
+//!
+//! One step `k`:
+//! 1. if the previous step decided to resample, draw ancestors (from the filter's stream) and
+//!    reset the weights to uniform; otherwise every particle is its own ancestor;
+//! 2. the filter advances particle `i` from its ancestor's slot of the current store into slot `i`
+//!    of the other store and adds its log-likelihood increment to `log w_i` (NaN for a numerical
+//!    failure of that particle);
+//! 3. the stores are swapped; the weights are normalised with the one weight routine (SPEC §3:
+//!    log domain, NaN → −∞, all −∞ is a typed failure); the resampling decision is taken;
+//! 4. the posterior summary of the weighted set is handed to the observers (SPEC §5 (e):
+//!    estimate, then resample — the resampling itself happens at the start of the next step).
+//!
+//! A failure ends the run and is returned in the [`RunSummary`], never a panic.
+
+use serde::Serialize;
+
+use crate::error::FilterError;
+use crate::health::Health;
+use crate::model::{Layout, Slot};
+use crate::resampling::{ResamplePolicy, Resampler};
+use crate::rng::StreamRng;
+use crate::weights::{normalise_log_weights, reset_uniform};
+
+use super::store::{Particles, Shape};
+
+/// Settings shared by every particle filter.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, serde::Deserialize)]
+pub struct SmcConfig {
+    /// Number of particles `Np`.
+    pub particles: usize,
+    /// Resampling scheme and ESS threshold.
+    pub resampling: ResamplePolicy,
+}
+
+impl Default for SmcConfig {
+    fn default() -> Self {
+        Self {
+            particles: 500,
+            resampling: ResamplePolicy::default(),
+        }
+    }
+}
+
+/// A particle filter as the runner sees it: an adapter that initialises and advances particles.
+/// Object safe, so that a run can hold any filter as `Box<dyn Filter>`.
+pub trait Filter: Send {
+    /// Short algorithm name (`bootstrap`, `mln-rbpf`, `storvik`, `mpf-ekf2`).
+    fn name(&self) -> &'static str;
+    /// Where θ and the physical states live in a particle.
+    fn layout(&self) -> &Layout;
+    /// Sizes of a particle's blocks.
+    fn shape(&self) -> Shape;
+    /// Draws every particle from the prior and resets the filter's counters.
+    fn initialise(&mut self, rng: &mut StreamRng, particles: &mut Particles);
+    /// Advances every particle `i` from slot `ancestors[i]` of `src` to slot `i` of `dst` with the
+    /// measurement `y = y_k`, adding its log-likelihood increment to `log_w[i]` (NaN when a
+    /// numerical failure leaves the particle without a result). A particle whose `log_w` is −∞
+    /// is copied unchanged. Random draws are taken particle by particle, in order.
+    #[allow(clippy::too_many_arguments)]
+    fn step(
+        &mut self,
+        k: usize,
+        y: &[f64],
+        src: &Particles,
+        ancestors: &[usize],
+        dst: &mut Particles,
+        log_w: &mut [f64],
+        rng: &mut StreamRng,
+    ) -> Result<(), FilterError>;
+    /// Repairs counted so far.
+    fn health(&self) -> Health;
+}
+
+/// What one step reports.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct StepInfo {
+    /// Time step `k` (1-based: the first measurement is `y_1`).
+    pub k: usize,
+    /// `log p̂(y_k | y_{1:k−1})`.
+    pub loglik_increment: f64,
+    /// Effective sample size after the update, before resampling.
+    pub ess: f64,
+    /// Whether the particles will be resampled before the next step.
+    pub resampled: bool,
+}
+
+/// Posterior means and s.d.s of θ and of the physical states, in the order of the [`Layout`].
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct Posterior {
+    pub param_mean: Vec<f64>,
+    pub param_sd: Vec<f64>,
+    pub state_mean: Vec<f64>,
+    pub state_sd: Vec<f64>,
+}
+
+impl Posterior {
+    pub fn for_layout(layout: &Layout) -> Self {
+        Self {
+            param_mean: vec![0.0; layout.params.len()],
+            param_sd: vec![0.0; layout.params.len()],
+            state_mean: vec![0.0; layout.states.len()],
+            state_sd: vec![0.0; layout.states.len()],
+        }
+    }
+}
+
+/// The weighted particle set of the last completed step, as observers see it at the end.
+pub struct WeightedParticles<'a> {
+    pub layout: &'a Layout,
+    /// Normalised weights.
+    pub w: &'a [f64],
+    pub particles: &'a Particles,
+}
+
+impl WeightedParticles<'_> {
+    /// Posterior mean and s.d. of one slot (SPEC §7).
+    pub fn moments(&self, slot: Slot) -> (f64, f64) {
+        slot_moments(slot, self.w, self.particles)
+    }
+
+    /// Number of distinct values of sampled entry `j` (degeneracy; sorts, not for hot loops).
+    pub fn distinct(&self, j: usize) -> usize {
+        let mut v: Vec<f64> = (0..self.particles.len())
+            .map(|i| self.particles.sampled(i)[j])
+            .collect();
+        v.sort_by(f64::total_cmp);
+        v.dedup();
+        v.len()
+    }
+
+    /// Distinct-value counts of every parameter held in the sampled block.
+    pub fn distinct_sampled_params(&self) -> Vec<(String, usize)> {
+        self.layout
+            .param_names
+            .iter()
+            .zip(&self.layout.params)
+            .filter_map(|(name, slot)| match slot {
+                Slot::Sampled(j) => Some((name.clone(), self.distinct(*j))),
+                Slot::Marginal(_) => None,
+            })
+            .collect()
+    }
+}
+
+/// Receives what happens during a run. All methods have no-op defaults.
+pub trait Observer {
+    /// Called once before the first step.
+    fn on_start(&mut self, _layout: &Layout, _particles: usize) {}
+    /// Whether the posterior summary is needed at step `k` (skip the cost when decimating).
+    fn wants_posterior(&self, _k: usize) -> bool {
+        true
+    }
+    /// Called after every successful step with the posterior summary of that step.
+    fn on_step(&mut self, _info: &StepInfo, _posterior: &Posterior) {}
+    /// Called once at the end of a run that completed every step, with the weighted particles of
+    /// the last step (for credible intervals and degeneracy counts).
+    fn on_finish(&mut self, _last: &WeightedParticles<'_>) {}
+}
+
+/// An observer that records nothing.
+pub struct NoObserver;
+impl Observer for NoObserver {
+    fn wants_posterior(&self, _k: usize) -> bool {
+        false
+    }
+}
+
+/// How a run ended.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RunSummary {
+    /// Steps completed successfully.
+    pub steps_completed: usize,
+    /// Log-likelihood estimate over the completed steps.
+    pub loglik: f64,
+    /// Smallest and mean ESS over the completed steps (`None` when no step completed).
+    pub ess_min: Option<f64>,
+    pub ess_mean: Option<f64>,
+    /// The failure that ended the run early, if any.
+    pub failure: Option<FilterError>,
+    /// Repairs counted by the filter, and resampling events.
+    pub health: Health,
+}
+
+/// Posterior mean and s.d. of one named quantity (SPEC §7): a sampled entry is averaged over the
+/// weighted particles; a marginalised entry is the moment of the Gaussian mixture
+/// `Σ_i w_i N(μ_i, C_i)`: mean `Σ w μ`, variance `Σ w (C + μ²) − mean²`.
+pub fn slot_moments(slot: Slot, w: &[f64], p: &Particles) -> (f64, f64) {
+    let (mut m1, mut m2) = (0.0, 0.0);
+    match slot {
+        Slot::Sampled(j) => {
+            for (i, wi) in w.iter().enumerate() {
+                let v = p.sampled(i)[j];
+                m1 += wi * v;
+                m2 += wi * v * v;
+            }
+        }
+        Slot::Marginal(j) => {
+            let n = p.shape().marginal;
+            for (i, wi) in w.iter().enumerate() {
+                let mu = p.mean(i)[j];
+                m1 += wi * mu;
+                m2 += wi * (p.cov(i)[j + j * n] + mu * mu);
+            }
+        }
+    }
+    // Round-off can make a zero variance slightly negative.
+    (m1, (m2 - m1 * m1).max(0.0).sqrt())
+}
+
+/// Fills `out` from the layout with [`slot_moments`].
+pub fn fill_posterior(layout: &Layout, w: &[f64], p: &Particles, out: &mut Posterior) {
+    for (j, slot) in layout.params.iter().enumerate() {
+        (out.param_mean[j], out.param_sd[j]) = slot_moments(*slot, w, p);
+    }
+    for (j, slot) in layout.states.iter().enumerate() {
+        (out.state_mean[j], out.state_sd[j]) = slot_moments(*slot, w, p);
+    }
+}
+
+/// Runs `filter` on `ys` (row `k−1` holds `y_k`, `ny` values per row): initialises, then steps
+/// through every measurement. A step failure ends the run and is returned; the runner never
+/// panics on numerical failure.
+pub fn run(
+    filter: &mut dyn Filter,
+    config: &SmcConfig,
+    ys: &[f64],
+    ny: usize,
+    rng: &mut StreamRng,
+    observer: &mut dyn Observer,
+) -> RunSummary {
+    let np = config.particles;
+    assert!(np > 0, "a particle filter needs at least one particle");
+    assert!(
+        ny > 0 && ys.len() % ny == 0,
+        "measurements are rows of {ny}"
+    );
+    let layout = filter.layout().clone();
+    let shape = filter.shape();
+    let mut front = Particles::new(np, shape);
+    let mut back = Particles::new(np, shape);
+    let mut log_w = vec![0.0; np];
+    let mut w = vec![0.0; np];
+    let mut ancestors: Vec<usize> = (0..np).collect();
+    let mut resampler = Resampler::new(config.resampling.scheme, np);
+    let mut post = Posterior::for_layout(&layout);
+    filter.initialise(rng, &mut front);
+    reset_uniform(&mut log_w, &mut w);
+    observer.on_start(&layout, np);
+
+    let mut health_extra = Health::default();
+    let (mut loglik, mut ess_min, mut ess_sum) = (0.0, f64::INFINITY, 0.0);
+    let mut failure = None;
+    let mut done = 0;
+    let mut pending = false;
+    for (idx, y) in ys.chunks_exact(ny).enumerate() {
+        let k = idx + 1;
+        if y.iter().any(|v| !v.is_finite()) {
+            failure = Some(FilterError::NonFinite {
+                step: k,
+                which: "measurement",
+            });
+            break;
+        }
+        if pending {
+            resampler.resample(&w, &mut ancestors, rng);
+            reset_uniform(&mut log_w, &mut w);
+            health_extra.resamples += 1;
+        } else {
+            for (i, a) in ancestors.iter_mut().enumerate() {
+                *a = i;
+            }
+        }
+        if let Err(e) = filter.step(k, y, &front, &ancestors, &mut back, &mut log_w, rng) {
+            failure = Some(e);
+            break;
+        }
+        std::mem::swap(&mut front, &mut back);
+        let s = match normalise_log_weights(&mut log_w, &mut w, k, &mut health_extra) {
+            Ok(s) => s,
+            Err(e) => {
+                failure = Some(e);
+                break;
+            }
+        };
+        pending = config.resampling.should_resample(s.ess, np);
+        loglik += s.loglik_increment;
+        ess_min = ess_min.min(s.ess);
+        ess_sum += s.ess;
+        done = k;
+        let info = StepInfo {
+            k,
+            loglik_increment: s.loglik_increment,
+            ess: s.ess,
+            resampled: pending,
+        };
+        if observer.wants_posterior(k) {
+            fill_posterior(&layout, &w, &front, &mut post);
+        }
+        observer.on_step(&info, &post);
+    }
+    // The weighted set of the last step, when the run completed (after a failure the weights of
+    // the failing step are not a posterior).
+    if done > 0 && failure.is_none() {
+        observer.on_finish(&WeightedParticles {
+            layout: &layout,
+            w: &w,
+            particles: &front,
+        });
+    }
+    let mut health = filter.health();
+    health.absorb(&health_extra);
+    RunSummary {
+        steps_completed: done,
+        loglik,
+        ess_min: (done > 0).then_some(ess_min),
+        ess_mean: (done > 0).then(|| ess_sum / done as f64),
+        failure,
+        health,
+    }
+}

@@ -1,0 +1,95 @@
+//! Flat particle storage (STYLE lesson 4): per particle a sampled block and, for the marginalized
+//! filters, the Gaussian `N(μ, C)` of the marginalised block, each block contiguous, all particles
+//! in three `Vec<f64>` allocated once. The runner keeps two stores and swaps them: a step reads
+//! each particle's ancestor from one and writes the particle to the other, so resampling costs no
+//! extra copy.
+
+/// Sizes of one particle's blocks.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Shape {
+    /// Length of the sampled block.
+    pub sampled: usize,
+    /// Dimension of the marginalised Gaussian (0 for the bootstrap PF).
+    pub marginal: usize,
+}
+
+/// The particles of one step.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Particles {
+    np: usize,
+    shape: Shape,
+    sampled: Vec<f64>,
+    mean: Vec<f64>,
+    cov: Vec<f64>,
+}
+
+/// One particle's blocks, mutable.
+pub struct ParticleMut<'a> {
+    pub sampled: &'a mut [f64],
+    pub mean: &'a mut [f64],
+    pub cov: &'a mut [f64],
+}
+
+impl Particles {
+    /// Zeroed storage for `np` particles.
+    pub fn new(np: usize, shape: Shape) -> Self {
+        let nm = shape.marginal;
+        Self {
+            np,
+            shape,
+            sampled: vec![0.0; np * shape.sampled],
+            mean: vec![0.0; np * nm],
+            cov: vec![0.0; np * nm * nm],
+        }
+    }
+
+    pub fn len(&self) -> usize {
+        self.np
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.np == 0
+    }
+
+    pub fn shape(&self) -> Shape {
+        self.shape
+    }
+
+    #[inline]
+    pub fn sampled(&self, i: usize) -> &[f64] {
+        let s = self.shape.sampled;
+        &self.sampled[i * s..(i + 1) * s]
+    }
+
+    #[inline]
+    pub fn mean(&self, i: usize) -> &[f64] {
+        let n = self.shape.marginal;
+        &self.mean[i * n..(i + 1) * n]
+    }
+
+    #[inline]
+    pub fn cov(&self, i: usize) -> &[f64] {
+        let n = self.shape.marginal;
+        &self.cov[i * n * n..(i + 1) * n * n]
+    }
+
+    /// Particle `i`'s three blocks, mutable.
+    #[inline]
+    pub fn particle_mut(&mut self, i: usize) -> ParticleMut<'_> {
+        let (s, n) = (self.shape.sampled, self.shape.marginal);
+        ParticleMut {
+            sampled: &mut self.sampled[i * s..(i + 1) * s],
+            mean: &mut self.mean[i * n..(i + 1) * n],
+            cov: &mut self.cov[i * n * n..(i + 1) * n * n],
+        }
+    }
+
+    /// Copies particle `from` of `src` into particle `to` of `self`.
+    #[inline]
+    pub fn copy_from(&mut self, to: usize, src: &Particles, from: usize) {
+        let d = self.particle_mut(to);
+        d.sampled.copy_from_slice(src.sampled(from));
+        d.mean.copy_from_slice(src.mean(from));
+        d.cov.copy_from_slice(src.cov(from));
+    }
+}
