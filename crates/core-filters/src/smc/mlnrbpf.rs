@@ -304,6 +304,11 @@ impl<M: ConditionallyLinear> MlnRbpf<M> {
     pub fn model(&self) -> &M {
         self.step.model()
     }
+
+    /// Whether particles go through the step four at a time.
+    pub fn uses_lanes(&self) -> bool {
+        self.batch.uses_lanes()
+    }
 }
 
 impl<M: ConditionallyLinear> Filter for MlnRbpf<M> {

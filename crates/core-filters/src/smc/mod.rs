@@ -12,6 +12,7 @@
 pub mod batch;
 pub mod mlnrbpf;
 pub mod model;
+pub mod mpf;
 pub mod runner;
 pub mod store;
 

@@ -1,0 +1,424 @@
+//! MPF-EKF2: the marginalised particle filter with second-order EKF blocks (SPEC §5.4, with the
+//! exact derivatives of §6), on run-time dimensions.
+//!
+//! The state splits into a small sampled block `xⁿ` (particles) and a marginalised block `x^bl`
+//! carried per particle as a Gaussian `N(m, P)`. Given `xⁿ`, every map is at most quadratic in
+//! `x^bl`, so the EKF2 moments (SPEC §4) are exact moments of the maps of the Gaussian.
+//!
+//! One step `k` of one particle `(xⁿ_{k−1}, m, P)` ([`MpfStep::advance`]); for each stage of the
+//! sampled dynamics (forward Euler has one; a semi-implicit scheme samples the velocities first,
+//! then the hysteretic variables with the new velocities):
+//! - (a) proposal: `xⁿ_k[stage] ~ N(ψ(m) + ½tr(𝓗ⁱP), J P Jᵀ + ½tr(𝓗ⁱP𝓗^{i'}P) + Qₙ)`;
+//! - (b) EKF2 update of `x^bl_{k−1}` with that pseudo-measurement: same moments, one factor, and
+//!   the whitened innovation is the draw itself;
+//!
+//! then
+//! - (c) EKF2 propagate of `x^bl` through `φ_bl(xⁿ_{k−1}, xⁿ_k, ·)` at the updated mean, with the
+//!   near-identity kernel (`J = I + D`, [`ekf2_propagate_near_identity`]);
+//! - (d)+(e) EKF2 update with `y_k` at `xⁿ_k`; its innovation log-density is the particle's
+//!   weight factor. Normalising and resampling are the runner's.
+//!
+//! Entries of `xⁿ` in no stage (the Bouc–Wen exponents) are static and copied.
+//!
+//! Failure policy: a particle whose Gaussian computations fail even after the documented repair
+//! gets a NaN log-weight (mapped to −∞ and counted by the weight routine); the run fails only if
+//! every particle fails.
+
+use crate::error::FilterError;
+use crate::health::Health;
+use crate::linalg::gauss::factorise;
+use crate::linalg::{
+    ekf2_propagate_near_identity, Factor, PropagateScratch, SecondOrder, Sparse, SymEntries,
+};
+use crate::model::Layout;
+use crate::real::Real;
+use crate::rng::StreamRng;
+
+use super::batch::{Batch, ParticleStep, Slots};
+use super::model::{ConditionallyQuadratic, QuadraticDims};
+use super::runner::Filter;
+use super::store::{Particles, Shape};
+
+/// What one sampled stage needs, read once from the model.
+struct StagePlan {
+    rows: Vec<usize>,
+    hess: SecondOrder,
+    /// `Qₙ` of the stage (diagonal variances).
+    q: Vec<f64>,
+    jac: Sparse<f64>,
+}
+
+/// The per-particle step of the MPF-EKF2 (SPEC §5.4).
+pub struct MpfStep<M> {
+    model: M,
+    dims: QuadraticDims,
+    stages: Vec<StagePlan>,
+    d_pattern: Sparse<f64>,
+    marginal_hess: SecondOrder,
+    q_bl: SymEntries,
+    y_pattern: Sparse<f64>,
+    y_hess: SecondOrder,
+    r: Vec<f64>,
+    draws: usize,
+}
+
+/// Scratch of one stage.
+pub struct StageScratch<T> {
+    value: Vec<T>,
+    jac: Sparse<T>,
+    mean2: Vec<T>,
+    cov2: Vec<T>,
+    pred: Vec<T>,
+    s_add: Vec<T>,
+    drawn: Vec<T>,
+    factor: Factor<T>,
+}
+
+/// Scratch of one [`MpfStep`] for one number type.
+pub struct MpfScratch<T> {
+    stages: Vec<StageScratch<T>>,
+    phi: Vec<T>,
+    d: Sparse<T>,
+    propagate: PropagateScratch<T>,
+    h: Vec<T>,
+    jy: Sparse<T>,
+    mean2: Vec<T>,
+    cov2: Vec<T>,
+    s_add: Vec<T>,
+    resid: Vec<T>,
+    y_factor: Factor<T>,
+}
+
+/// Writes the additive covariance `Q (diagonal) + cov2 at the Hessian outputs` (`q × q`).
+#[inline]
+fn additive_cov<T: Real>(s_add: &mut [T], q: usize, diag: &[T], hess: &SecondOrder, cov2: &[T]) {
+    s_add[..q * q].fill(T::splat(0.0));
+    for i in 0..q {
+        s_add[i + i * q] = diag[i];
+    }
+    let k = hess.len();
+    for g in 0..k {
+        for h in 0..k {
+            s_add[hess.output(g) + hess.output(h) * q] += cov2[g + h * k];
+        }
+    }
+}
+
+impl<M: ConditionallyQuadratic> MpfStep<M> {
+    /// Reads the model's dimensions, stages, Hessians and noise, and records the Jacobian
+    /// patterns with one evaluation at zero.
+    #[track_caller]
+    pub fn new(model: M) -> Self {
+        let dims = model.dims();
+        let (nn, nbl, ny) = (dims.nn, dims.nbl, dims.ny);
+        let zn = vec![0.0; nn];
+        let zbl = vec![0.0; nbl];
+        let mut draws = 0;
+        let stages: Vec<StagePlan> = model
+            .sampled_stages()
+            .iter()
+            .enumerate()
+            .map(|(s, rows)| {
+                let q: Vec<f64> = model.sampled_noise_sd(s).iter().map(|v| v * v).collect();
+                assert_eq!(
+                    q.len(),
+                    rows.len(),
+                    "noise s.d. of every entry of stage {s}"
+                );
+                let mut jac = Sparse::recording(rows.len(), nbl);
+                let mut value = vec![0.0; rows.len()];
+                jac.start();
+                model.sampled_dynamics(s, 1, &zn, &zn, &zbl, &mut value, &mut jac);
+                jac.finish();
+                draws += rows.len();
+                StagePlan {
+                    rows: rows.clone(),
+                    hess: SecondOrder::new(model.sampled_hessians(s), nbl, rows.len()),
+                    q,
+                    jac,
+                }
+            })
+            .collect();
+        let mut d_pattern = Sparse::recording(nbl, nbl);
+        let mut phi = vec![0.0; nbl];
+        d_pattern.start();
+        model.marginal_dynamics(1, &zn, &zn, &zbl, &mut phi, &mut d_pattern);
+        d_pattern.finish();
+        let mut y_pattern = Sparse::recording(ny, nbl);
+        let mut h = vec![0.0; ny];
+        y_pattern.start();
+        model.observation(1, &zn, &zbl, &mut h, &mut y_pattern);
+        y_pattern.finish();
+        let r = model.measurement_cov();
+        assert_eq!(r.len(), ny * ny, "R is ny × ny");
+        Self {
+            marginal_hess: SecondOrder::new(model.marginal_hessians(), nbl, nbl),
+            y_hess: SecondOrder::new(model.observation_hessians(), nbl, ny),
+            q_bl: model.marginal_noise().clone(),
+            model,
+            dims,
+            stages,
+            d_pattern,
+            y_pattern,
+            r,
+            draws,
+        }
+    }
+
+    pub fn model(&self) -> &M {
+        &self.model
+    }
+}
+
+impl<M: ConditionallyQuadratic> ParticleStep for MpfStep<M> {
+    type Scratch<T: Real> = MpfScratch<T>;
+
+    fn scratch<T: Real>(&self) -> MpfScratch<T> {
+        let QuadraticDims { nbl, ny, .. } = self.dims;
+        let z = T::splat(0.0);
+        let stages = self
+            .stages
+            .iter()
+            .map(|p| {
+                let q = p.rows.len();
+                let k = p.hess.len();
+                StageScratch {
+                    value: vec![z; q],
+                    jac: Sparse::with_pattern_of(&p.jac),
+                    mean2: vec![z; k],
+                    cov2: vec![z; k * k],
+                    pred: vec![z; q],
+                    s_add: vec![z; q * q],
+                    drawn: vec![z; q],
+                    factor: Factor::new(nbl, q),
+                }
+            })
+            .collect();
+        let ky = self.y_hess.len();
+        MpfScratch {
+            stages,
+            phi: vec![z; nbl],
+            d: Sparse::with_pattern_of(&self.d_pattern),
+            propagate: PropagateScratch::new(nbl, &self.marginal_hess),
+            h: vec![z; ny],
+            jy: Sparse::with_pattern_of(&self.y_pattern),
+            mean2: vec![z; ky],
+            cov2: vec![z; ky * ky],
+            s_add: vec![z; ny * ny],
+            resid: vec![z; ny],
+            y_factor: Factor::new(nbl, ny),
+        }
+    }
+
+    fn shape(&self) -> Shape {
+        Shape {
+            sampled: self.dims.nn,
+            marginal: self.dims.nbl,
+        }
+    }
+
+    fn draws(&self) -> usize {
+        self.draws
+    }
+
+    /// SPEC §5.4 (a)–(e) for one particle (or a pack).
+    fn advance<T: Real>(
+        &self,
+        k: usize,
+        y: &[f64],
+        xn_prev: &[T],
+        p: Slots<'_, T>,
+        xi: &[T],
+        s: &mut MpfScratch<T>,
+        health: &mut Health,
+    ) -> (T, T::Mask) {
+        let (xn, m, cov) = (p.sampled, p.mean, p.cov);
+        let nbl = self.dims.nbl;
+        let mut ok = T::all_true();
+        let mut next_draw = 0;
+        for (st, plan) in self.stages.iter().enumerate() {
+            let ss = &mut s.stages[st];
+            let q = plan.rows.len();
+            // (a) the EKF2 moments of ψ: mean ψ(m) + ½tr(𝓗ⁱP), covariance J P Jᵀ + cov2 + Qₙ.
+            ss.jac.start();
+            self.model
+                .sampled_dynamics(st, k, xn_prev, xn, m, &mut ss.value, &mut ss.jac);
+            ss.jac.finish();
+            ss.pred.copy_from_slice(&ss.value);
+            if !plan.hess.is_empty() {
+                plan.hess.terms(cov, nbl, &mut ss.mean2, &mut ss.cov2);
+                for g in 0..plan.hess.len() {
+                    ss.pred[plan.hess.output(g)] += ss.mean2[g];
+                }
+            }
+            let q_diag: &mut [T] = &mut ss.drawn;
+            for (d, v) in q_diag.iter_mut().zip(&plan.q) {
+                *d = T::splat(*v);
+            }
+            additive_cov(&mut ss.s_add, q, q_diag, &plan.hess, &ss.cov2);
+            ok = ok
+                & factorise(
+                    &mut ss.factor,
+                    cov,
+                    &ss.jac,
+                    &ss.s_add,
+                    k,
+                    "proposal covariance",
+                    health,
+                );
+            // (a) the draw and (b) the update of x^bl_{k−1} with it (whitened innovation ξ).
+            let xi_s = &xi[next_draw..next_draw + q];
+            next_draw += q;
+            ok = ok
+                & ss.factor
+                    .condition_on_draw(m, cov, &ss.pred, xi_s, &mut ss.drawn);
+            for (i, &row) in plan.rows.iter().enumerate() {
+                xn[row] = ss.drawn[i];
+            }
+        }
+        // (c) propagate x^bl through φ_bl(xⁿ_{k−1}, xⁿ_k, ·) at the updated mean.
+        s.d.start();
+        self.model
+            .marginal_dynamics(k, xn_prev, xn, m, &mut s.phi, &mut s.d);
+        s.d.finish();
+        ekf2_propagate_near_identity(
+            m,
+            cov,
+            nbl,
+            &s.phi,
+            &s.d,
+            &self.marginal_hess,
+            &self.q_bl,
+            &mut s.propagate,
+        );
+        // (d)+(e) the EKF2 update with y_k; its innovation log-density is the weight factor.
+        s.jy.start();
+        self.model.observation(k, xn, m, &mut s.h, &mut s.jy);
+        s.jy.finish();
+        let ny = self.dims.ny;
+        for j in 0..ny {
+            s.resid[j] = T::splat(y[j]) - s.h[j];
+        }
+        if !self.y_hess.is_empty() {
+            self.y_hess.terms(cov, nbl, &mut s.mean2, &mut s.cov2);
+            for g in 0..self.y_hess.len() {
+                s.resid[self.y_hess.output(g)] -= s.mean2[g];
+            }
+        }
+        for v in s.s_add.iter_mut() {
+            *v = T::splat(0.0);
+        }
+        let k2 = self.y_hess.len();
+        for c in 0..ny {
+            for r in 0..ny {
+                s.s_add[r + c * ny] = T::splat(self.r[r + c * ny]);
+            }
+        }
+        for g in 0..k2 {
+            for h in 0..k2 {
+                s.s_add[self.y_hess.output(g) + self.y_hess.output(h) * ny] += s.cov2[g + h * k2];
+            }
+        }
+        ok = ok
+            & factorise(
+                &mut s.y_factor,
+                cov,
+                &s.jy,
+                &s.s_add,
+                k,
+                "innovation covariance",
+                health,
+            );
+        let (loglik, upd) = s.y_factor.update(m, cov, &s.resid);
+        debug_assert_eq!(next_draw, self.draws);
+        (loglik, ok & upd)
+    }
+}
+
+/// MPF-EKF2 (SPEC §5.4) as a [`Filter`]: the model's per-particle step run by the batch layer.
+pub struct MpfEkf2<M: ConditionallyQuadratic> {
+    step: MpfStep<M>,
+    batch: Batch<MpfStep<M>>,
+    layout: Layout,
+    health: Health,
+}
+
+impl<M: ConditionallyQuadratic> MpfEkf2<M> {
+    /// The filter with the batch layer's lanes where they pay.
+    pub fn new(model: M) -> Self {
+        Self::with_lanes(model, true)
+    }
+
+    /// `lanes = false` runs every particle through the `f64` step (the reference).
+    pub fn with_lanes(model: M, lanes: bool) -> Self {
+        let layout = model.layout();
+        let step = MpfStep::new(model);
+        let batch = Batch::new(&step, lanes);
+        Self {
+            step,
+            batch,
+            layout,
+            health: Health::default(),
+        }
+    }
+
+    pub fn model(&self) -> &M {
+        self.step.model()
+    }
+
+    /// Whether particles go through the step four at a time.
+    pub fn uses_lanes(&self) -> bool {
+        self.batch.uses_lanes()
+    }
+}
+
+impl<M: ConditionallyQuadratic> Filter for MpfEkf2<M> {
+    fn name(&self) -> &'static str {
+        "mpf-ekf2"
+    }
+
+    fn layout(&self) -> &Layout {
+        &self.layout
+    }
+
+    fn shape(&self) -> Shape {
+        self.step.shape()
+    }
+
+    fn initialise(&mut self, rng: &mut StreamRng, particles: &mut Particles) {
+        self.health = Health::default();
+        for i in 0..particles.len() {
+            let p = particles.particle_mut(i);
+            self.step.model.sample_initial(rng, p.sampled);
+            self.step.model.marginal_prior(rng, p.mean, p.cov);
+        }
+    }
+
+    fn step(
+        &mut self,
+        k: usize,
+        y: &[f64],
+        src: &Particles,
+        ancestors: &[usize],
+        dst: &mut Particles,
+        log_w: &mut [f64],
+        rng: &mut StreamRng,
+    ) -> Result<(), FilterError> {
+        self.batch.step(
+            &self.step,
+            k,
+            y,
+            src,
+            ancestors,
+            dst,
+            log_w,
+            rng,
+            &mut self.health,
+        );
+        Ok(())
+    }
+
+    fn health(&self) -> Health {
+        self.health
+    }
+}
