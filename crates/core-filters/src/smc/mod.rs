@@ -7,14 +7,17 @@
 //!   adapter trait;
 //! - [`batch`]: the batch layer that runs a filter's per-particle step for four particles at once
 //!   in SIMD lanes, bit for bit as one at a time;
-//! - [`mlnrbpf`]: the filters (SPEC §5).
+//! - [`bootstrap`], [`mlnrbpf`], [`storvik`], [`mpf`]: the four filters (SPEC §5), each a small
+//!   adapter around its per-particle step.
 
 pub mod batch;
+pub mod bootstrap;
 pub mod mlnrbpf;
 pub mod model;
 pub mod mpf;
 pub mod runner;
 pub mod store;
+pub mod storvik;
 
 pub use runner::{run, Filter, Observer, Posterior, RunSummary, SmcConfig, StepInfo};
 pub use store::{Particles, Shape};

@@ -59,6 +59,12 @@ impl Linked {
         }
     }
 
+    /// The same model with `y_k = c u_k + d z + η` for another `c`.
+    pub fn with_c(mut self, c: f64) -> Self {
+        self.c = c;
+        self
+    }
+
     /// Simulates `y_1..y_T` (flat) with the static parameter fixed at `z`.
     pub fn simulate<G: Rng + ?Sized>(&self, z: f64, t: usize, rng: &mut G) -> Vec<f64> {
         let mut u = self.u0_mean + self.u0_sd * normal(rng);

@@ -1,0 +1,496 @@
+//! Storvik's algorithm with Gaussian sufficient statistics (SPEC §5.3; Storvik 2002, with the
+//! paper's update, §3.3.2), on run-time dimensions.
+//!
+//! Same partition as the MLN-RBPF: each particle carries `u` and the sufficient statistics
+//! `s = (μ, C)` of the static block `z`. Per particle and step ([`StorvikStep::advance`]):
+//! - (i) draw a realisation `z0 ~ N(μ, C)` (semidefinite factor: fixed parameters and directions
+//!   the data pin down have zero spread, which is not a repair);
+//! - (ii) `u_k ~ N(f + F z0, Q_u)`, stage by stage; weight `N(y_k; H(u_k) z0 + h(u_k), R)`;
+//! - (iii) update `(μ, C)` with the stacked measurement `[u_{k,L}; y_k]`, noise
+//!   `blockdiag(Q_L, R)`, as sequential updates (one per stage's linked rows, then `y_k`; with
+//!   block-diagonal noise and measurements linear at a fixed point, sequential updates equal the
+//!   stacked one). For `y_k`:
+//!   - [`StorvikUpdate::Linearised`] (the paper's, default): `y_k` written through `u_{k−1}`,
+//!     `g(z) = H(u_k(z)) z + h(u_k(z))`, linearised at `z0`: `G = H(u_k) + J_u ∂u_k/∂z`,
+//!     `ŷ = g(z0) + G (μ − z0)`;
+//!   - [`StorvikUpdate::Exact`]: given `u_k`, `y_k` is linear in `z`: the KF update with
+//!     `(H(u_k), h(u_k))`, exactly as MLN-RBPF (d).
+//!
+//! Failure policy as the MLN-RBPF: a particle whose factorisation or update fails gets a NaN
+//! log-weight; `R` is factorised once, and if it cannot be every step fails.
+
+#![allow(non_snake_case)]
+
+use serde::{Deserialize, Serialize};
+
+use crate::error::FilterError;
+use crate::health::Health;
+use crate::linalg::gauss::{factorise, lower_mul, psd_cholesky};
+use crate::linalg::{Factor, FactoredNoise, Sparse};
+use crate::model::Layout;
+use crate::real::Real;
+use crate::rng::StreamRng;
+
+use super::batch::{Batch, ParticleStep, Slots};
+use super::model::{ConditionallyLinear, LinearDims, Stage};
+use super::runner::Filter;
+use super::store::{Particles, Shape};
+
+/// How Storvik's step (iii) treats the measurement `y_k` (SPEC §5.3).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum StorvikUpdate {
+    /// The paper's update: `y_k` through `u_{k−1}`, linearised at the realisation `z0`.
+    #[default]
+    Linearised,
+    /// Given `u_k`, `y_k` is linear in `z`: an exact KF update (no linearisation).
+    Exact,
+}
+
+impl StorvikUpdate {
+    pub fn name(self) -> &'static str {
+        match self {
+            StorvikUpdate::Linearised => "linearised",
+            StorvikUpdate::Exact => "exact",
+        }
+    }
+}
+
+struct StagePlan {
+    stage: Stage,
+    /// Per row of the stage: index into the stage's linked rows, if linked.
+    linked_index: Vec<Option<usize>>,
+    /// Per linked row: its position in the stage's rows.
+    linked_pos: Vec<usize>,
+    /// Per row of the stage: the noise s.d.
+    sd: Vec<f64>,
+    q_l: Vec<f64>,
+}
+
+/// The per-particle step of Storvik's algorithm (SPEC §5.3).
+pub struct StorvikStep<M> {
+    model: M,
+    dims: LinearDims,
+    update: StorvikUpdate,
+    stages: Vec<StagePlan>,
+    f_patterns: Vec<Sparse<f64>>,
+    h_pattern: Sparse<f64>,
+    ju_pattern: Sparse<f64>,
+    s_pattern: Sparse<f64>,
+    /// Entries of the sensitivity pattern by row.
+    s_rows: Vec<Vec<usize>>,
+    r: Vec<f64>,
+    noise: Result<FactoredNoise, FilterError>,
+    draws: usize,
+}
+
+/// Scratch of one [`StorvikStep`] for one number type.
+pub struct StorvikScratch<T> {
+    L: Vec<T>,
+    z0: Vec<T>,
+    /// `f` of every stage (kept for the updates of step (iii)).
+    f: Vec<Vec<T>>,
+    F: Vec<Sparse<T>>,
+    fz: Vec<T>,
+    resid_l: Vec<T>,
+    q_l: Vec<Vec<T>>,
+    factors: Vec<Factor<T>>,
+    h: Vec<T>,
+    H: Sparse<T>,
+    Ju: Sparse<T>,
+    S: Sparse<T>,
+    G: Sparse<T>,
+    yhat: Vec<T>,
+    resid: Vec<T>,
+    white: Vec<T>,
+    r: Vec<T>,
+    y_factor: Factor<T>,
+}
+
+impl<M: ConditionallyLinear> StorvikStep<M> {
+    /// Reads the model, records the Jacobian patterns and factorises `R` once.
+    #[track_caller]
+    pub fn new(model: M, update: StorvikUpdate) -> Self {
+        let dims = model.dims();
+        let LinearDims { nu, nz, ny } = dims;
+        let sd = model.process_noise_sd().to_vec();
+        assert_eq!(sd.len(), nu, "process noise s.d. of every row of u");
+        let mut draws = nz;
+        let stages: Vec<StagePlan> = model
+            .stages()
+            .iter()
+            .map(|st| {
+                let linked_index = st
+                    .rows
+                    .iter()
+                    .map(|r| st.linked.iter().position(|l| l == r))
+                    .collect();
+                let linked_pos = st
+                    .linked
+                    .iter()
+                    .map(|l| {
+                        st.rows
+                            .iter()
+                            .position(|r| r == l)
+                            .expect("a linked row is one of the stage's rows")
+                    })
+                    .collect();
+                let l = st.linked.len();
+                let mut q_l = vec![0.0; l * l];
+                for (i, &r) in st.linked.iter().enumerate() {
+                    q_l[i + i * l] = sd[r] * sd[r];
+                }
+                let row_sd: Vec<f64> = st.rows.iter().map(|&r| sd[r]).collect();
+                draws += row_sd.iter().filter(|s| **s != 0.0).count();
+                StagePlan {
+                    stage: st.clone(),
+                    linked_index,
+                    linked_pos,
+                    sd: row_sd,
+                    q_l,
+                }
+            })
+            .collect();
+        let zu = vec![0.0; nu];
+        let zz = vec![0.0; nz];
+        let mut f = vec![0.0; nu];
+        let f_patterns = stages
+            .iter()
+            .enumerate()
+            .map(|(s, plan)| {
+                let mut F = Sparse::recording(plan.stage.linked.len(), nz);
+                F.start();
+                model.transition(s, 1, &zu, &zu, &mut f, &mut F);
+                F.finish();
+                F
+            })
+            .collect();
+        let mut h = vec![0.0; ny];
+        let mut h_pattern = Sparse::recording(ny, nz);
+        h_pattern.start();
+        model.observation(1, &zu, &mut h, &mut h_pattern);
+        h_pattern.finish();
+        let mut ju_pattern = Sparse::recording(ny, nu);
+        ju_pattern.start();
+        model.observation_jacobian_u(1, &zu, &zz, &mut ju_pattern);
+        ju_pattern.finish();
+        let mut s_pattern = Sparse::recording(nu, nz);
+        s_pattern.start();
+        model.transition_sensitivity(1, &zu, &zu, &zz, &mut s_pattern);
+        s_pattern.finish();
+        let mut s_rows = vec![Vec::new(); nu];
+        for e in 0..s_pattern.nnz() {
+            s_rows[s_pattern.entry(e).0].push(e);
+        }
+        let r = model.measurement_cov();
+        assert_eq!(r.len(), ny * ny, "R is ny × ny");
+        let mut setup = Health::default();
+        let noise = FactoredNoise::new(&r, ny, "measurement covariance R", &mut setup);
+        Self {
+            model,
+            dims,
+            update,
+            stages,
+            f_patterns,
+            h_pattern,
+            ju_pattern,
+            s_pattern,
+            s_rows,
+            r,
+            noise,
+            draws,
+        }
+    }
+
+    pub fn model(&self) -> &M {
+        &self.model
+    }
+}
+
+impl<M: ConditionallyLinear> ParticleStep for StorvikStep<M> {
+    type Scratch<T: Real> = StorvikScratch<T>;
+
+    fn scratch<T: Real>(&self) -> StorvikScratch<T> {
+        let LinearDims { nu, nz, ny } = self.dims;
+        let z = T::splat(0.0);
+        let splat = |v: &[f64]| v.iter().map(|x| T::splat(*x)).collect::<Vec<T>>();
+        StorvikScratch {
+            L: vec![z; nz * nz],
+            z0: vec![z; nz],
+            f: self.stages.iter().map(|_| vec![z; nu]).collect(),
+            F: self
+                .f_patterns
+                .iter()
+                .map(Sparse::with_pattern_of)
+                .collect(),
+            fz: vec![z; nu],
+            resid_l: vec![z; nu],
+            q_l: self.stages.iter().map(|p| splat(&p.q_l)).collect(),
+            factors: self
+                .stages
+                .iter()
+                .map(|p| Factor::new(nz, p.stage.linked.len()))
+                .collect(),
+            h: vec![z; ny],
+            H: Sparse::with_pattern_of(&self.h_pattern),
+            Ju: Sparse::with_pattern_of(&self.ju_pattern),
+            S: Sparse::with_pattern_of(&self.s_pattern),
+            G: Sparse::dense(ny, nz),
+            yhat: vec![z; ny],
+            resid: vec![z; ny],
+            white: vec![z; ny],
+            r: splat(&self.r),
+            y_factor: Factor::new(nz, ny),
+        }
+    }
+
+    fn shape(&self) -> Shape {
+        Shape {
+            sampled: self.dims.nu,
+            marginal: self.dims.nz,
+        }
+    }
+
+    fn draws(&self) -> usize {
+        self.draws
+    }
+
+    /// SPEC §5.3 (i)–(iii) for one particle (or a pack).
+    fn advance<T: Real>(
+        &self,
+        k: usize,
+        y: &[f64],
+        u_prev: &[T],
+        p: Slots<'_, T>,
+        xi: &[T],
+        s: &mut StorvikScratch<T>,
+        health: &mut Health,
+    ) -> (T, T::Mask) {
+        let (u, mu, C) = (p.sampled, p.mean, p.cov);
+        let LinearDims { nz, ny, .. } = self.dims;
+        let noise = match &self.noise {
+            Ok(n) => n,
+            Err(_) => return (T::splat(f64::NAN), T::not(T::all_true())),
+        };
+        // (i) z0 = μ + L ξ with L the semidefinite factor of C.
+        let mut ok = psd_cholesky(C, nz, &mut s.L);
+        lower_mul(&s.L, nz, &xi[..nz], &mut s.z0);
+        for (z, m) in s.z0.iter_mut().zip(mu.iter()) {
+            *z += *m;
+        }
+        let mut next_draw = nz;
+        // (ii) u_k ~ N(f + F z0, Q_u), stage by stage.
+        for (st, plan) in self.stages.iter().enumerate() {
+            let (F, f) = (&mut s.F[st], &mut s.f[st]);
+            F.start();
+            self.model.transition(st, k, u_prev, u, f, F);
+            F.finish();
+            let l = plan.stage.linked.len();
+            s.fz[..l].fill(T::splat(0.0));
+            F.mul_add(&s.z0, &mut s.fz[..l]);
+            for (pos, &row) in plan.stage.rows.iter().enumerate() {
+                let mut v = f[pos];
+                if let Some(li) = plan.linked_index[pos] {
+                    v += s.fz[li];
+                }
+                if plan.sd[pos] != 0.0 {
+                    v += T::splat(plan.sd[pos]) * xi[next_draw];
+                    next_draw += 1;
+                }
+                u[row] = v;
+            }
+        }
+        // Weight N(y_k; H(u_k) z0 + h(u_k), R).
+        s.H.start();
+        self.model.observation(k, u, &mut s.h, &mut s.H);
+        s.H.finish();
+        s.yhat.copy_from_slice(&s.h);
+        s.H.mul_add(&s.z0, &mut s.yhat);
+        for j in 0..ny {
+            s.resid[j] = T::splat(y[j]) - s.yhat[j];
+        }
+        let loglik = noise.log_density(&s.resid, &mut s.white);
+        // (iii) the linked rows of every stage: linear in z along the sampled path.
+        for (st, plan) in self.stages.iter().enumerate() {
+            let l = plan.stage.linked.len();
+            if l == 0 {
+                continue;
+            }
+            let F = &s.F[st];
+            for (i, &pos) in plan.linked_pos.iter().enumerate() {
+                s.resid_l[i] = u[plan.stage.rows[pos]] - s.f[st][pos];
+            }
+            for e in 0..F.nnz() {
+                let (r, c, v) = F.entry(e);
+                s.resid_l[r] -= v * mu[c];
+            }
+            let factor = &mut s.factors[st];
+            ok = ok & factorise(factor, C, F, &s.q_l[st], k, "innovation covariance", health);
+            let (_, upd) = factor.update(mu, C, &s.resid_l[..l]);
+            ok = ok & upd;
+        }
+        // … then y_k.
+        match self.update {
+            StorvikUpdate::Exact => {
+                for j in 0..ny {
+                    s.resid[j] = T::splat(y[j]) - s.h[j];
+                }
+                for e in 0..s.H.nnz() {
+                    let (r, c, v) = s.H.entry(e);
+                    s.resid[r] -= v * mu[c];
+                }
+                ok = ok
+                    & factorise(
+                        &mut s.y_factor,
+                        C,
+                        &s.H,
+                        &s.r,
+                        k,
+                        "innovation covariance",
+                        health,
+                    );
+            }
+            StorvikUpdate::Linearised => {
+                // G = H(u_k) + J_u ∂u_k/∂z at z0, dense (ny × nz, column-major values).
+                s.Ju.start();
+                self.model.observation_jacobian_u(k, u, &s.z0, &mut s.Ju);
+                s.Ju.finish();
+                s.S.start();
+                self.model
+                    .transition_sensitivity(k, u_prev, u, &s.z0, &mut s.S);
+                s.S.finish();
+                let g = s.G.values_mut();
+                g.fill(T::splat(0.0));
+                for e in 0..s.H.nnz() {
+                    let (r, c, v) = s.H.entry(e);
+                    g[r + c * ny] += v;
+                }
+                for e in 0..s.Ju.nnz() {
+                    let (i, c, v) = s.Ju.entry(e);
+                    for &se in &self.s_rows[c] {
+                        let (_, j, sv) = s.S.entry(se);
+                        g[i + j * ny] += v * sv;
+                    }
+                }
+                // ŷ = g(z0) + G (μ − z0), g(z0) = h + H z0 (= s.yhat).
+                for j in 0..ny {
+                    s.resid[j] = T::splat(y[j]) - s.yhat[j];
+                }
+                for c in 0..nz {
+                    let d = mu[c] - s.z0[c];
+                    for r in 0..ny {
+                        s.resid[r] -= g[r + c * ny] * d;
+                    }
+                }
+                ok = ok
+                    & factorise(
+                        &mut s.y_factor,
+                        C,
+                        &s.G,
+                        &s.r,
+                        k,
+                        "innovation covariance",
+                        health,
+                    );
+            }
+        }
+        let (_, upd) = s.y_factor.update(mu, C, &s.resid);
+        debug_assert_eq!(next_draw, self.draws);
+        (loglik, ok & upd)
+    }
+}
+
+/// Storvik's algorithm (SPEC §5.3) as a [`Filter`].
+pub struct Storvik<M: ConditionallyLinear> {
+    step: StorvikStep<M>,
+    batch: Batch<StorvikStep<M>>,
+    layout: Layout,
+    health: Health,
+}
+
+impl<M: ConditionallyLinear> Storvik<M> {
+    pub fn new(model: M, update: StorvikUpdate) -> Self {
+        Self::with_lanes(model, update, true)
+    }
+
+    /// `lanes = false` runs every particle through the `f64` step (the reference).
+    pub fn with_lanes(model: M, update: StorvikUpdate, lanes: bool) -> Self {
+        let layout = model.layout();
+        let step = StorvikStep::new(model, update);
+        let batch = Batch::new(&step, lanes);
+        Self {
+            step,
+            batch,
+            layout,
+            health: Health::default(),
+        }
+    }
+
+    pub fn model(&self) -> &M {
+        self.step.model()
+    }
+
+    pub fn uses_lanes(&self) -> bool {
+        self.batch.uses_lanes()
+    }
+}
+
+impl<M: ConditionallyLinear> Filter for Storvik<M> {
+    fn name(&self) -> &'static str {
+        "storvik"
+    }
+
+    fn layout(&self) -> &Layout {
+        &self.layout
+    }
+
+    fn shape(&self) -> Shape {
+        self.step.shape()
+    }
+
+    fn initialise(&mut self, rng: &mut StreamRng, particles: &mut Particles) {
+        self.health = Health::default();
+        for i in 0..particles.len() {
+            let p = particles.particle_mut(i);
+            self.step.model.sample_initial(rng, p.sampled);
+            self.step.model.marginal_prior(rng, p.mean, p.cov);
+        }
+    }
+
+    fn step(
+        &mut self,
+        k: usize,
+        y: &[f64],
+        src: &Particles,
+        ancestors: &[usize],
+        dst: &mut Particles,
+        log_w: &mut [f64],
+        rng: &mut StreamRng,
+    ) -> Result<(), FilterError> {
+        if let Err(e) = &self.step.noise {
+            return Err(match e {
+                FilterError::NotPositiveDefinite { which, .. } => {
+                    FilterError::NotPositiveDefinite { step: k, which }
+                }
+                FilterError::NonFinite { which, .. } => FilterError::NonFinite { step: k, which },
+                other => other.clone(),
+            });
+        }
+        self.batch.step(
+            &self.step,
+            k,
+            y,
+            src,
+            ancestors,
+            dst,
+            log_w,
+            rng,
+            &mut self.health,
+        );
+        Ok(())
+    }
+
+    fn health(&self) -> Health {
+        self.health
+    }
+}
