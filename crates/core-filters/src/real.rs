@@ -128,9 +128,38 @@ pub fn downdate_lower_loops<T: Real>(p: &mut [T], n: usize, wt: &[T], q: usize) 
     }
 }
 
+/// Smallest dimension whose downdate [`Real::downdate_lower`] hands to faer for one particle.
+/// Below it the plain loops are as fast (the blocked kernel's set-up dominates); above it faer's
+/// cache-blocked, vectorised product wins (measured in `benches/`).
+pub const FAER_MIN_DIM: usize = 64;
+
 impl Real for f64 {
     const LANES: usize = 1;
     type Mask = bool;
+
+    /// Large problems go to faer's triangular product (`P += (−1) Wᵀ W` on the lower triangle);
+    /// small ones to the plain loops.
+    #[inline]
+    fn downdate_lower(p: &mut [f64], n: usize, wt: &[f64], q: usize) {
+        if n < FAER_MIN_DIM {
+            return downdate_lower_loops(p, n, wt, q);
+        }
+        use faer::linalg::matmul::triangular::{matmul, BlockStructure};
+        use faer::{Accum, MatMut, MatRef, Par};
+        let dst = MatMut::from_column_major_slice_mut(&mut p[..n * n], n, n);
+        let w = MatRef::from_column_major_slice(&wt[..n * q], n, q);
+        matmul(
+            dst,
+            BlockStructure::TriangularLower,
+            Accum::Add,
+            w,
+            BlockStructure::Rectangular,
+            w.transpose(),
+            BlockStructure::Rectangular,
+            -1.0,
+            Par::Seq,
+        );
+    }
 
     #[inline(always)]
     fn splat(v: f64) -> Self {
@@ -353,6 +382,33 @@ mod tests {
             );
             assert_eq!(pa.abs().ln().lane(i).to_bits(), a[i].abs().ln().to_bits());
             assert_eq!(Pack::mask_lane(pa.gt(pb), i), a[i] > b[i]);
+        }
+    }
+
+    #[test]
+    fn large_downdates_by_faer_equal_the_loops_to_round_off() {
+        let (n, q) = (FAER_MIN_DIM + 17, 9);
+        let wt: Vec<f64> = (0..n * q)
+            .map(|i| ((i * 7919) % 1000) as f64 / 500.0 - 1.0)
+            .collect();
+        let p0: Vec<f64> = (0..n * n)
+            .map(|i| ((i * 104729) % 997) as f64 / 100.0)
+            .collect();
+        let (mut a, mut b) = (p0.clone(), p0.clone());
+        f64::downdate_lower(&mut a, n, &wt, q);
+        downdate_lower_loops(&mut b, n, &wt, q);
+        for c in 0..n {
+            for r in c..n {
+                let (x, y) = (a[r + c * n], b[r + c * n]);
+                assert!(
+                    (x - y).abs() <= 1e-12 * (1.0 + y.abs()),
+                    "({r}, {c}): {x} vs {y}"
+                );
+            }
+            // The upper triangle is not touched.
+            for r in 0..c {
+                assert_eq!(a[r + c * n], p0[r + c * n]);
+            }
         }
     }
 
