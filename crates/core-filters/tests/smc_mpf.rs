@@ -476,3 +476,274 @@ fn mpf_lanes_equal_one_particle_at_a_time() {
         }
     }
 }
+
+/// Model C: bilinear sampled dynamics (non-empty Hessians), 2 dynamic sampled entries and 1
+/// static, 3 marginalised: `ψ₀ = xⁿ₀ + 0.1 x₀ + x₀ x₁`, `ψ₁ = 0.5 xⁿ₁ + x₁ x₂ − 0.3 x₂² + xⁿ₂ x₀`.
+struct Bilinear {
+    sampled_hess: SparseHessians,
+    empty: SparseHessians,
+    xn0: [f64; 3],
+    m0: [f64; 3],
+    p0: Matrix3<f64>,
+    qn_sd: Vec<f64>,
+    q_bl: SymEntries,
+    stages: Vec<Vec<usize>>,
+}
+
+impl Bilinear {
+    fn new() -> Self {
+        let mut h = SparseHessians::new();
+        h.push(0, 0, 1, 1.0);
+        h.push(1, 1, 2, 1.0);
+        h.push(1, 2, 2, -0.6);
+        Self {
+            sampled_hess: h,
+            empty: SparseHessians::new(),
+            xn0: [0.4, -1.0, 2.0],
+            m0: [0.7, -1.3, 0.5],
+            p0: Matrix3::new(0.5, 0.2, -0.1, 0.2, 0.8, 0.3, -0.1, 0.3, 0.6),
+            qn_sd: vec![0.1, 0.2],
+            q_bl: SymEntries::diagonal(&[1e-4, 1e-4, 0.0]),
+            stages: vec![vec![0, 1]],
+        }
+    }
+}
+
+impl ConditionallyQuadratic for Bilinear {
+    fn dims(&self) -> QuadraticDims {
+        QuadraticDims {
+            nn: 3,
+            nbl: 3,
+            ny: 1,
+        }
+    }
+    fn sampled_stages(&self) -> &[Vec<usize>] {
+        &self.stages
+    }
+    fn sample_initial(&self, _rng: &mut StreamRng, xn: &mut [f64]) {
+        xn.copy_from_slice(&self.xn0);
+    }
+    fn marginal_prior(&self, _rng: &mut StreamRng, mean: &mut [f64], cov: &mut [f64]) {
+        mean.copy_from_slice(&self.m0);
+        cov.copy_from_slice(self.p0.as_slice());
+    }
+    fn sampled_dynamics<T: Real>(
+        &self,
+        _stage: usize,
+        _k: usize,
+        xn: &[T],
+        _xn_new: &[T],
+        m: &[T],
+        value: &mut [T],
+        jac: &mut Sparse<T>,
+    ) {
+        let c = T::splat;
+        value[0] = xn[0] + c(0.1) * m[0] + m[0] * m[1];
+        value[1] = c(0.5) * xn[1] + m[1] * m[2] - c(0.3) * m[2] * m[2] + xn[2] * m[0];
+        jac.add(0, 0, c(0.1) + m[1]);
+        jac.add(0, 1, m[0]);
+        jac.add(1, 0, xn[2]);
+        jac.add(1, 1, m[2]);
+        jac.add(1, 2, m[1] - c(0.6) * m[2]);
+    }
+    fn sampled_hessians(&self, _stage: usize) -> &SparseHessians {
+        &self.sampled_hess
+    }
+    fn sampled_noise_sd(&self, _stage: usize) -> &[f64] {
+        &self.qn_sd
+    }
+    fn marginal_dynamics<T: Real>(
+        &self,
+        _k: usize,
+        _xn_prev: &[T],
+        _xn_new: &[T],
+        m: &[T],
+        value: &mut [T],
+        _d: &mut Sparse<T>,
+    ) {
+        value.copy_from_slice(m);
+    }
+    fn marginal_hessians(&self) -> &SparseHessians {
+        &self.empty
+    }
+    fn marginal_noise(&self) -> &SymEntries {
+        &self.q_bl
+    }
+    fn observation<T: Real>(
+        &self,
+        _k: usize,
+        xn: &[T],
+        m: &[T],
+        value: &mut [T],
+        jac: &mut Sparse<T>,
+    ) {
+        value[0] = m[0] + xn[0];
+        jac.add(0, 0, T::splat(1.0));
+    }
+    fn observation_hessians(&self) -> &SparseHessians {
+        &self.empty
+    }
+    fn measurement_cov(&self) -> Vec<f64> {
+        vec![0.1]
+    }
+    fn layout(&self) -> Layout {
+        Layout {
+            param_names: vec!["s".into()],
+            params: vec![Slot::Sampled(2)],
+            state_names: names(2, "u"),
+            states: vec![Slot::Sampled(0), Slot::Sampled(1)],
+        }
+    }
+}
+
+/// Exact mean and covariance of `f_i(x) = c_i + l_iᵀx + Σ q x_a x_b`, `x ~ N(μ, P)`, plus
+/// diagonal noise, by Isserlis' theorem.
+fn exact_quadratic_moments(
+    terms: &[(f64, Vector3<f64>, Vec<(usize, usize, f64)>); 2],
+    mu: &Vector3<f64>,
+    p: &Matrix3<f64>,
+    noise_var: &[f64],
+) -> (Vector2<f64>, Matrix2<f64>) {
+    let mut mean = Vector2::zeros();
+    for (i, (c, l, q)) in terms.iter().enumerate() {
+        mean[i] = c
+            + l.dot(mu)
+            + q.iter()
+                .map(|&(a, b, v)| v * (mu[a] * mu[b] + p[(a, b)]))
+                .sum::<f64>();
+    }
+    let lin_quad = |l: &Vector3<f64>, (a, b): (usize, usize)| -> f64 {
+        (0..3)
+            .map(|c| l[c] * (mu[a] * p[(b, c)] + mu[b] * p[(a, c)]))
+            .sum()
+    };
+    let quad_quad = |(a, b): (usize, usize), (c, d): (usize, usize)| -> f64 {
+        mu[a] * mu[c] * p[(b, d)]
+            + mu[a] * mu[d] * p[(b, c)]
+            + mu[b] * mu[c] * p[(a, d)]
+            + mu[b] * mu[d] * p[(a, c)]
+            + p[(a, c)] * p[(b, d)]
+            + p[(a, d)] * p[(b, c)]
+    };
+    let mut cov = Matrix2::zeros();
+    for i in 0..2 {
+        for j in 0..2 {
+            let (_, li, qi) = &terms[i];
+            let (_, lj, qj) = &terms[j];
+            let mut s = (li.transpose() * p * lj)[0];
+            for &(a, b, v) in qj {
+                s += v * lin_quad(li, (a, b));
+            }
+            for &(a, b, v) in qi {
+                s += v * lin_quad(lj, (a, b));
+            }
+            for &(a, b, v) in qi {
+                for &(c, d, w) in qj {
+                    s += v * w * quad_quad((a, b), (c, d));
+                }
+            }
+            cov[(i, j)] = s;
+        }
+        cov[(i, i)] += noise_var[i];
+    }
+    (mean, cov)
+}
+
+/// Keeps the sampled blocks of the last step.
+#[derive(Default)]
+struct LastSampled(Vec<Vec<f64>>);
+impl Observer for LastSampled {
+    fn on_finish(&mut self, last: &core_filters::smc::runner::WeightedParticles<'_>) {
+        self.0 = (0..last.particles.len())
+            .map(|i| last.particles.sampled(i).to_vec())
+            .collect();
+    }
+}
+
+#[test]
+fn bilinear_proposal_has_the_exact_moments() {
+    let model = Bilinear::new();
+    let (xn0, m0, p0) = (model.xn0, Vector3::from(model.m0), model.p0);
+    let terms = [
+        (xn0[0], Vector3::new(0.1, 0.0, 0.0), vec![(0, 1, 1.0)]),
+        (
+            0.5 * xn0[1],
+            Vector3::new(xn0[2], 0.0, 0.0),
+            vec![(1, 2, 1.0), (2, 2, -0.3)],
+        ),
+    ];
+    let (exact_mean, exact_cov) = exact_quadratic_moments(&terms, &m0, &p0, &[0.01, 0.04]);
+    let f = MpfEkf2::new(model);
+    let (mean, cov) = f
+        .particle_step()
+        .proposal_moments(0, 1, &xn0, m0.as_slice(), p0.as_slice());
+    for i in 0..2 {
+        assert!((mean[i] - exact_mean[i]).abs() < 1e-13, "mean {i}");
+        for j in 0..2 {
+            assert!(
+                (cov[i + 2 * j] - exact_cov[(i, j)]).abs() < 1e-13,
+                "cov {i}{j}"
+            );
+        }
+    }
+    // The particles drawn at step 1 (all from the same (xⁿ₀, m₀, P₀)) are i.i.d. draws of the
+    // proposal: their sample moments within Monte-Carlo standard errors.
+    let np = 20_000;
+    let mut f = MpfEkf2::new(Bilinear::new());
+    let mut last = LastSampled::default();
+    let s = run(
+        &mut f,
+        &config(np),
+        &[1.0],
+        1,
+        &mut stream(6, 0, "mpf"),
+        &mut last,
+    );
+    assert!(s.failure.is_none());
+    let n = np as f64;
+    let xs = &last.0;
+    let smean: Vec<f64> = (0..2)
+        .map(|i| xs.iter().map(|x| x[i]).sum::<f64>() / n)
+        .collect();
+    for i in 0..2 {
+        let se_mean = (exact_cov[(i, i)] / n).sqrt();
+        assert!((smean[i] - exact_mean[i]).abs() < 4.5 * se_mean, "mean {i}");
+        for j in 0..2 {
+            let c = xs
+                .iter()
+                .map(|x| (x[i] - smean[i]) * (x[j] - smean[j]))
+                .sum::<f64>()
+                / (n - 1.0);
+            let se =
+                ((exact_cov[(i, i)] * exact_cov[(j, j)] + exact_cov[(i, j)].powi(2)) / n).sqrt();
+            assert!((c - exact_cov[(i, j)]).abs() < 4.5 * se, "cov {i}{j}");
+        }
+    }
+    assert!(xs.iter().all(|x| x[2] == xn0[2]));
+}
+
+#[test]
+fn mpf_lanes_equal_one_particle_at_a_time_with_hessians() {
+    let ys: Vec<f64> = (0..20).map(|k| (k as f64 * 0.3).sin()).collect();
+    for np in [5, 12] {
+        let mut out = Vec::new();
+        for lanes in [false, true] {
+            let mut f = MpfEkf2::with_lanes(Bilinear::new(), lanes);
+            let mut t = Trace::default();
+            let s = run(
+                &mut f,
+                &config(np),
+                &ys,
+                1,
+                &mut stream(3, np as u64, "eq"),
+                &mut t,
+            );
+            let bits: Vec<Vec<u64>> =
+                t.0.iter()
+                    .map(|r| r.iter().map(|v| v.to_bits()).collect())
+                    .collect();
+            out.push((s.loglik.to_bits(), bits, s.health, s.steps_completed));
+        }
+        assert_eq!(out[0], out[1], "np {np}");
+    }
+}

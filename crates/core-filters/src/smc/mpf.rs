@@ -168,6 +168,38 @@ impl<M: ConditionallyQuadratic> MpfStep<M> {
     pub fn model(&self) -> &M {
         &self.model
     }
+
+    /// SPEC §5.4 (a) on its own, for tests and diagnostics: the mean and covariance (`q × q`,
+    /// column-major) of the proposal of stage `stage` for a particle at `(xⁿ_{k−1}, N(m, P))`,
+    /// computed by the same kernels as the step.
+    pub fn proposal_moments(
+        &self,
+        stage: usize,
+        k: usize,
+        xn_prev: &[f64],
+        m: &[f64],
+        p: &[f64],
+    ) -> (Vec<f64>, Vec<f64>) {
+        let nbl = self.dims.nbl;
+        let plan = &self.stages[stage];
+        let q = plan.rows.len();
+        let mut s = self.scratch::<f64>();
+        let ss = &mut s.stages[stage];
+        ss.jac.start();
+        self.model
+            .sampled_dynamics(stage, k, xn_prev, xn_prev, m, &mut ss.value, &mut ss.jac);
+        ss.jac.finish();
+        let mut mean = ss.value.clone();
+        if !plan.hess.is_empty() {
+            plan.hess.terms(p, nbl, &mut ss.mean2, &mut ss.cov2);
+            for g in 0..plan.hess.len() {
+                mean[plan.hess.output(g)] += ss.mean2[g];
+            }
+        }
+        additive_cov(&mut ss.s_add, q, &plan.q, &plan.hess, &ss.cov2);
+        ss.factor.compute(p, &ss.jac, &ss.s_add);
+        (mean, ss.factor.cov.clone())
+    }
 }
 
 impl<M: ConditionallyQuadratic> ParticleStep for MpfStep<M> {
@@ -364,6 +396,11 @@ impl<M: ConditionallyQuadratic> MpfEkf2<M> {
 
     pub fn model(&self) -> &M {
         self.step.model()
+    }
+
+    /// The per-particle step (for [`MpfStep::proposal_moments`]).
+    pub fn particle_step(&self) -> &MpfStep<M> {
+        &self.step
     }
 
     /// Whether particles go through the step four at a time.
