@@ -312,13 +312,13 @@ impl ChainTopology {
     pub fn accelerations<T: Real>(&self, p: &impl ChainView<T>, ground: T, out: &mut [T]) {
         let n = self.masses.len();
         let mut f = self.force(p, 0);
-        for j in 0..n {
+        for (j, (o, &m)) in out.iter_mut().zip(&self.masses).enumerate() {
             let f_next = if j + 1 < n {
                 self.force(p, j + 1)
             } else {
                 T::splat(0.0)
             };
-            out[j] = ground + (f_next - f) / T::splat(self.masses[j]);
+            *o = ground + (f_next - f) / T::splat(m);
             f = f_next;
         }
     }

@@ -38,7 +38,12 @@ fn augmented_maps_are_the_truth_simulator_stepped_by_each_scheme() {
             // Forward Euler: s + dt g(s), bit for bit.
             let aug = AugmentedChain::new(spec(&case, Discretisation::Euler)).unwrap();
             let euler: Vec<f64> = (0..d).map(|i| s[i] + DT * ds[i]).collect();
-            assert_eq!(&propagate(&aug, K, &p.augmented())[..d], &euler[..], "{}", case.name);
+            assert_eq!(
+                &propagate(&aug, K, &p.augmented())[..d],
+                &euler[..],
+                "{}",
+                case.name
+            );
             // Symplectic: v' = v + dt a(s); x' = x + dt v'; r' = r + dt ṙ(δv', r).
             let aug = AugmentedChain::new(spec(&case, Discretisation::Symplectic)).unwrap();
             let mut s2 = s.clone();
@@ -54,7 +59,12 @@ fn augmented_maps_are_the_truth_simulator_stepped_by_each_scheme() {
             for i in 2 * n..d {
                 want[i] = s[i] + DT * ds2[i];
             }
-            assert_eq!(&propagate(&aug, K, &p.augmented())[..d], &want[..], "{}", case.name);
+            assert_eq!(
+                &propagate(&aug, K, &p.augmented())[..d],
+                &want[..],
+                "{}",
+                case.name
+            );
         }
         // RK4 from rest over the whole excitation: the truth integrator, bit for bit.
         let p = random_point(&case, &mut rng);
@@ -64,7 +74,12 @@ fn augmented_maps_are_the_truth_simulator_stepped_by_each_scheme() {
         let mut x = p.with_states(&vec![0.0; p.states().len()]).augmented();
         for k in 1..ug.len() {
             x = propagate(&aug, k, &x);
-            assert_eq!(&x[..truth.dim()], truth.state(k), "{} RK4 step {k}", case.name);
+            assert_eq!(
+                &x[..truth.dim()],
+                truth.state(k),
+                "{} RK4 step {k}",
+                case.name
+            );
         }
     }
 }
@@ -83,10 +98,24 @@ fn process_noise_is_added_as_documented() {
     let clean = propagate(&aug, K, &x);
     // The velocity draw moves the displacement through the new velocity.
     for j in 0..n {
-        close(out[n + j] - clean[n + j], sp.q_vel * xi[n + j], 1e-9, "v noise");
-        close(out[j] - clean[j], sp.q_disp * xi[j] + DT * sp.q_vel * xi[n + j], 1e-9, "x noise");
+        close(
+            out[n + j] - clean[n + j],
+            sp.q_vel * xi[n + j],
+            1e-9,
+            "v noise",
+        );
+        close(
+            out[j] - clean[j],
+            sp.q_disp * xi[j] + DT * sp.q_vel * xi[n + j],
+            1e-9,
+            "x noise",
+        );
     }
-    assert_eq!(&out[aug.noise_dim()..], &x[aug.noise_dim()..], "θ carries no noise");
+    assert_eq!(
+        &out[aug.noise_dim()..],
+        &x[aug.noise_dim()..],
+        "θ carries no noise"
+    );
 }
 
 /// The old `FilterSpec` with the same numbers as a new spec of the paper's chain.
@@ -117,9 +146,18 @@ fn paper_preset_reproduces_the_old_partitions_for_forward_euler() {
     for kind in [MeasurementKind::Relative, MeasurementKind::Absolute] {
         let case = paper_case(kind);
         let (new, old) = old_spec(kind);
-        let (aug, old_aug) = (AugmentedChain::new(new.clone()).unwrap(), PaperAugmented::new(old.clone()).unwrap());
-        let (mln, old_mln) = (MlnChain::new(new.clone()).unwrap(), PaperMln::new(old.clone()).unwrap());
-        let (mpf, old_mpf) = (MpfChain::new(new.clone()).unwrap(), PaperMpf::new(old.clone()).unwrap());
+        let (aug, old_aug) = (
+            AugmentedChain::new(new.clone()).unwrap(),
+            PaperAugmented::new(old.clone()).unwrap(),
+        );
+        let (mln, old_mln) = (
+            MlnChain::new(new.clone()).unwrap(),
+            PaperMln::new(old.clone()).unwrap(),
+        );
+        let (mpf, old_mpf) = (
+            MpfChain::new(new.clone()).unwrap(),
+            PaperMpf::new(old.clone()).unwrap(),
+        );
         assert_eq!(aug.measurement_cov(), old_aug.measurement_cov().as_slice());
         let mut rng = stream(23, 0, "old");
         for _ in 0..6 {
@@ -127,14 +165,29 @@ fn paper_preset_reproduces_the_old_partitions_for_forward_euler() {
             // Augmented.
             let x = p.augmented();
             let old_next = old_aug.propagate(K, &SVector::<f64, 16>::from_column_slice(&x));
-            close_all(&propagate(&aug, K, &x), old_next.as_slice(), RO, "augmented propagate");
+            close_all(
+                &propagate(&aug, K, &x),
+                old_next.as_slice(),
+                RO,
+                "augmented propagate",
+            );
             let mut y = vec![0.0; 3];
             aug.measure(K, &x, &mut y);
-            close_all(&y, old_aug.measure(K, &SVector::from_column_slice(&x)).as_slice(), RO, "augmented measure");
+            close_all(
+                &y,
+                old_aug
+                    .measure(K, &SVector::from_column_slice(&x))
+                    .as_slice(),
+                RO,
+                "augmented measure",
+            );
 
             // MLN: (u, z) orders are the old ones.
             let (u, z) = split(&mln.layout(), &p, 8, 8);
-            let (us, zs) = (SVector::<f64, 8>::from_column_slice(&u), SVector::<f64, 8>::from_column_slice(&z));
+            let (us, zs) = (
+                SVector::<f64, 8>::from_column_slice(&u),
+                SVector::<f64, 8>::from_column_slice(&z),
+            );
             let (old_f, old_big_f) = old_mln.transition(K, &us);
             let mut f = vec![0.0; 7];
             let mut big_f = Sparse::recording(4, 8);
@@ -149,12 +202,25 @@ fn paper_preset_reproduces_the_old_partitions_for_forward_euler() {
             close_all(&big_h.to_dense(), old_big_h.as_slice(), RO, "MLN H");
             let mut ju = Sparse::recording(3, 8);
             mln.observation_jacobian_u(K, &u, &z, &mut ju);
-            close_all(&ju.to_dense(), old_mln.observation_jacobian_u(K, &us, &zs).as_slice(), RO, "MLN J_u");
-            close_all(mln.process_noise_sd(), old_mln.process_noise_sd().as_slice(), 0.0, "MLN Q");
+            close_all(
+                &ju.to_dense(),
+                old_mln.observation_jacobian_u(K, &us, &zs).as_slice(),
+                RO,
+                "MLN J_u",
+            );
+            close_all(
+                mln.process_noise_sd(),
+                old_mln.process_noise_sd().as_slice(),
+                0.0,
+                "MLN Q",
+            );
 
             // MPF: (xⁿ, x^bl) orders are SPEC §6's, as the old ones.
             let (xn, m) = split(&mpf.layout(), &p, 3, 13);
-            let (xns, ms) = (SVector::<f64, 3>::from_column_slice(&xn), SVector::<f64, 13>::from_column_slice(&m));
+            let (xns, ms) = (
+                SVector::<f64, 3>::from_column_slice(&xn),
+                SVector::<f64, 13>::from_column_slice(&m),
+            );
             let (old_v, old_j) = old_mpf.sampled_dynamics(K, &xns, &ms);
             let mut v = vec![0.0; 2];
             let mut jac = Sparse::recording(2, 13);
@@ -182,16 +248,29 @@ fn paper_preset_reproduces_the_old_partitions_for_forward_euler() {
         for (i, (new_h, old_h, outs)) in [
             (mpf.sampled_hessians(0), old_mpf.sampled_hessians(), 2),
             (mpf.marginal_hessians(), old_mpf.marginal_hessians(), 13),
-            (mpf.observation_hessians(), old_mpf.observation_hessians(), 3),
+            (
+                mpf.observation_hessians(),
+                old_mpf.observation_hessians(),
+                3,
+            ),
         ]
         .into_iter()
         .enumerate()
         {
             for o in 0..outs {
-                assert_eq!(new_h.dense(o, 13), old_h.dense(o, 13), "Hessian list {i} output {o}");
+                assert_eq!(
+                    new_h.dense(o, 13),
+                    old_h.dense(o, 13),
+                    "Hessian list {i} output {o}"
+                );
             }
         }
-        close_all(mpf.sampled_noise_sd(0), old_mpf.sampled_noise_sd().as_slice(), 0.0, "Qn");
+        close_all(
+            mpf.sampled_noise_sd(0),
+            old_mpf.sampled_noise_sd().as_slice(),
+            0.0,
+            "Qn",
+        );
         let mut q = vec![0.0; 169];
         mpf.marginal_noise().add_to(&mut q, 13);
         let old_q = old_mpf.marginal_noise_sd();
@@ -202,7 +281,9 @@ fn paper_preset_reproduces_the_old_partitions_for_forward_euler() {
 }
 
 fn pack(vs: &[Vec<f64>]) -> Vec<Pack> {
-    (0..vs[0].len()).map(|i| Pack::from_lanes(|b| vs[b][i])).collect()
+    (0..vs[0].len())
+        .map(|i| Pack::from_lanes(|b| vs[b][i]))
+        .collect()
 }
 
 #[track_caller]
@@ -210,7 +291,11 @@ fn same_lanes(p: &[Pack], s: &[Vec<f64>], what: &str) {
     for (b, sb) in s.iter().enumerate() {
         assert_eq!(p.len(), sb.len());
         for (i, v) in sb.iter().enumerate() {
-            assert_eq!(p[i].lane(b).to_bits(), v.to_bits(), "{what}: lane {b} entry {i}");
+            assert_eq!(
+                p[i].lane(b).to_bits(),
+                v.to_bits(),
+                "{what}: lane {b} entry {i}"
+            );
         }
     }
 }
@@ -227,7 +312,10 @@ fn pack_evaluation_is_the_scalar_evaluation_of_each_lane() {
             let what = format!("{} {disc}", case.name);
             // MLN.
             let d = mln.dims();
-            let uz: Vec<(Vec<f64>, Vec<f64>)> = pts.iter().map(|p| split(&mln.layout(), p, d.nu, d.nz)).collect();
+            let uz: Vec<(Vec<f64>, Vec<f64>)> = pts
+                .iter()
+                .map(|p| split(&mln.layout(), p, d.nu, d.nz))
+                .collect();
             let us: Vec<Vec<f64>> = uz.iter().map(|x| x.0.clone()).collect();
             let zs: Vec<Vec<f64>> = uz.iter().map(|x| x.1.clone()).collect();
             let u_new: Vec<Vec<f64>> = pts
@@ -284,11 +372,17 @@ fn pack_evaluation_is_the_scalar_evaluation_of_each_lane() {
 
             // MPF.
             let qd = mpf.dims();
-            let xm: Vec<(Vec<f64>, Vec<f64>)> = pts.iter().map(|p| split(&mpf.layout(), p, qd.nn, qd.nbl)).collect();
+            let xm: Vec<(Vec<f64>, Vec<f64>)> = pts
+                .iter()
+                .map(|p| split(&mpf.layout(), p, qd.nn, qd.nbl))
+                .collect();
             let xns: Vec<Vec<f64>> = xm.iter().map(|x| x.0.clone()).collect();
             let ms: Vec<Vec<f64>> = xm.iter().map(|x| x.1.clone()).collect();
             // Some new sampled values (any values serve for the comparison).
-            let xn_new: Vec<Vec<f64>> = xns.iter().map(|x| x.iter().map(|v| 0.9 * v + 0.01).collect()).collect();
+            let xn_new: Vec<Vec<f64>> = xns
+                .iter()
+                .map(|x| x.iter().map(|v| 0.9 * v + 0.01).collect())
+                .collect();
             let (xp, xnp, mp) = (pack(&xns), pack(&xn_new), pack(&ms));
             for (s, entries) in mpf.sampled_stages().iter().enumerate() {
                 let mut vp = vec![Pack::splat(0.0); entries.len()];
@@ -340,12 +434,21 @@ fn layouts_follow_spec_sections_5_2_and_6() {
     let l = mpf.layout();
     // SPEC §6: xⁿ = [ẋ1, r1, n]; x^bl = [x1 x2 x3 ẋ2 ẋ3 k1 k2 k3 c1 c2 c3 β γ].
     assert_eq!(l.states, [M(0), M(1), M(2), S(0), M(3), M(4), S(1)]);
-    assert_eq!(l.params, [M(5), M(6), M(7), M(8), M(9), M(10), M(11), M(12), S(2)]);
-    assert_eq!(l.param_names, ["k1", "k2", "k3", "c1", "c2", "c3", "beta", "gamma", "n"]);
+    assert_eq!(
+        l.params,
+        [M(5), M(6), M(7), M(8), M(9), M(10), M(11), M(12), S(2)]
+    );
+    assert_eq!(
+        l.param_names,
+        ["k1", "k2", "k3", "c1", "c2", "c3", "beta", "gamma", "n"]
+    );
     assert_eq!(mpf.sampled_stages(), [vec![0], vec![1]]);
     let mln = MlnChain::new(spec(&case, Discretisation::Euler)).unwrap();
     let l = mln.layout();
-    assert_eq!(l.params, [M(0), M(1), M(2), M(3), M(4), M(5), M(6), M(7), S(7)]);
+    assert_eq!(
+        l.params,
+        [M(0), M(1), M(2), M(3), M(4), M(5), M(6), M(7), S(7)]
+    );
     assert_eq!(mln.stages()[0].linked, [3, 4, 5, 6]);
 
     // 7 storeys, elements at 1 and 4: sampled velocities v1, v3, v4.
@@ -353,8 +456,14 @@ fn layouts_follow_spec_sections_5_2_and_6() {
     let mpf = MpfChain::new(spec(case, Discretisation::Euler)).unwrap();
     let l = mpf.layout();
     assert_eq!(l.state_names[14..], ["r1", "r4"]);
-    assert_eq!(&l.states[7..], [S(0), M(7), S(1), S(2), M(8), M(9), M(10), S(3), S(4)]);
-    assert_eq!(l.param_names[14..], ["beta1", "gamma1", "n1", "beta4", "gamma4", "n4"]);
+    assert_eq!(
+        &l.states[7..],
+        [S(0), M(7), S(1), S(2), M(8), M(9), M(10), S(3), S(4)]
+    );
+    assert_eq!(
+        l.param_names[14..],
+        ["beta1", "gamma1", "n1", "beta4", "gamma4", "n4"]
+    );
     assert_eq!(l.params[14..], [M(25), M(26), S(5), M(27), M(28), S(6)]);
     assert_eq!(mpf.dims().nbl, 29);
     let mln = MlnChain::new(spec(case, Discretisation::Symplectic)).unwrap();

@@ -42,7 +42,6 @@ fn aug_measure(aug: &AugmentedChain, p: &Point) -> Vec<f64> {
     y
 }
 
-
 /// One MLN stage at (u_prev, u_new): `f` and `F` (dense, `linked × nz`).
 fn mln_stage(mln: &MlnChain, stage: usize, u_prev: &[f64], u_new: &[f64]) -> (Vec<f64>, Vec<f64>) {
     let st = &mln.stages()[stage];
@@ -90,7 +89,12 @@ fn mln_maps_jacobians_and_sensitivity_match_the_physics() {
 
                 // The staged map equals the augmented map; n rows are copied.
                 let u_next = mln_step(&mln, &u, &z);
-                close_all(&u_next[..dyn_dim], &aug_next(&aug, &p), 1e-12, &format!("{what}: f + F z"));
+                close_all(
+                    &u_next[..dyn_dim],
+                    &aug_next(&aug, &p),
+                    1e-12,
+                    &format!("{what}: f + F z"),
+                );
                 assert_eq!(&u_next[dyn_dim..], &u[dyn_dim..], "n copied");
 
                 // F of each stage: central differences of the stage's physical map in z.
@@ -109,9 +113,17 @@ fn mln_maps_jacobians_and_sensitivity_match_the_physics() {
                                     // r rows with the new velocities held fixed.
                                     let e = row - 2 * n;
                                     let j = case.hysteretic[e];
-                                    let dv = u_new[n + j] - if j > 0 { u_new[n + j - 1] } else { 0.0 };
+                                    let dv =
+                                        u_new[n + j] - if j > 0 { u_new[n + j - 1] } else { 0.0 };
                                     let t = 2 * n + 3 * e;
-                                    u[row] + DT * bouc_wen_rate(dv, u[row], q.theta[t], q.theta[t + 1], q.theta[t + 2])
+                                    u[row]
+                                        + DT * bouc_wen_rate(
+                                            dv,
+                                            u[row],
+                                            q.theta[t],
+                                            q.theta[t + 1],
+                                            q.theta[t + 2],
+                                        )
                                 } else {
                                     full[row]
                                 }
@@ -139,12 +151,21 @@ fn mln_maps_jacobians_and_sensitivity_match_the_physics() {
                 mln.observation(K, &u, &mut h, &mut big_h);
                 let mut y = h.clone();
                 big_h.mul_add(&z, &mut y);
-                close_all(&y, &aug_measure(&aug, &p), 1e-12, &format!("{what}: h + H z"));
+                close_all(
+                    &y,
+                    &aug_measure(&aug, &p),
+                    1e-12,
+                    &format!("{what}: h + H z"),
+                );
                 let (_, fd) = fd_jacobian(&|z: &[f64]| aug_measure(&aug, &point_at(z)), &z, H);
                 close_all(&big_h.to_dense(), &fd, TOL, &format!("{what}: H"));
                 let mut ju = Sparse::recording(d.ny, d.nu);
                 mln.observation_jacobian_u(K, &u, &z, &mut ju);
-                let (_, fd) = fd_jacobian(&|u: &[f64]| aug_measure(&aug, &join(&layout, u, &z, n)), &u, H);
+                let (_, fd) = fd_jacobian(
+                    &|u: &[f64]| aug_measure(&aug, &join(&layout, u, &z, n)),
+                    &u,
+                    H,
+                );
                 close_all(&ju.to_dense(), &fd, TOL, &format!("{what}: J_u"));
             }
         }
@@ -152,7 +173,13 @@ fn mln_maps_jacobians_and_sensitivity_match_the_physics() {
 }
 
 /// Evaluates the MPF map of one stage: values and dense Jacobian (`rows × nbl`).
-fn mpf_stage(mpf: &MpfChain, stage: usize, xn_prev: &[f64], xn_new: &[f64], m: &[f64]) -> (Vec<f64>, Vec<f64>) {
+fn mpf_stage(
+    mpf: &MpfChain,
+    stage: usize,
+    xn_prev: &[f64],
+    xn_new: &[f64],
+    m: &[f64],
+) -> (Vec<f64>, Vec<f64>) {
     let rows = mpf.sampled_stages()[stage].len();
     let nbl = mpf.dims().nbl;
     let mut value = vec![0.0; rows];
@@ -161,7 +188,12 @@ fn mpf_stage(mpf: &MpfChain, stage: usize, xn_prev: &[f64], xn_new: &[f64], m: &
     (value, jac.to_dense())
 }
 
-fn mpf_marginal(mpf: &MpfChain, xn_prev: &[f64], xn_new: &[f64], m: &[f64]) -> (Vec<f64>, Vec<f64>) {
+fn mpf_marginal(
+    mpf: &MpfChain,
+    xn_prev: &[f64],
+    xn_new: &[f64],
+    m: &[f64],
+) -> (Vec<f64>, Vec<f64>) {
     let nbl = mpf.dims().nbl;
     let mut value = vec![0.0; nbl];
     let mut d = Sparse::recording(nbl, nbl);
@@ -215,7 +247,12 @@ fn check_hessians(
             let dense = hess.dense(i, nbl);
             for b in 0..nbl {
                 let fd = (jp[i + b * outputs] - jm[i + b * outputs]) / 2e-3;
-                close(dense[(b, a)], fd, 1e-9, &format!("{what}: Hessian {i} ({b}, {a})"));
+                close(
+                    dense[(b, a)],
+                    fd,
+                    1e-9,
+                    &format!("{what}: Hessian {i} ({b}, {a})"),
+                );
             }
         }
     }
@@ -239,7 +276,12 @@ fn mpf_maps_jacobians_and_hessians_match_the_physics() {
                 // The staged maps equal the augmented map; parameters and n are unchanged.
                 let (xn_new, m_new) = mpf_step(&mpf, &xn, &m);
                 let next = join(&layout, &xn_new, &m_new, n);
-                close_all(&next.states(), &aug_next(&aug, &p), 1e-12, &format!("{what}: staged step"));
+                close_all(
+                    &next.states(),
+                    &aug_next(&aug, &p),
+                    1e-12,
+                    &format!("{what}: staged step"),
+                );
                 assert_eq!(next.theta, p.theta, "{what}: parameters and n unchanged");
 
                 // ψ of each stage: Jacobian and Hessians by differences in m.
@@ -250,15 +292,28 @@ fn mpf_maps_jacobians_and_hessians_match_the_physics() {
                     close_all(&jac, &fd, TOL, &format!("{what}: ψ stage {s}"));
                     let rows = mpf.sampled_stages()[s].len();
                     let jac_of = |m: &[f64]| mpf_stage(&mpf, s, &xn, &xn_new, m).1;
-                    check_hessians(&jac_of, mpf.sampled_hessians(s), rows, &m, &format!("{what}: ψ stage {s}"));
+                    check_hessians(
+                        &jac_of,
+                        mpf.sampled_hessians(s),
+                        rows,
+                        &m,
+                        &format!("{what}: ψ stage {s}"),
+                    );
                 }
 
                 // φ_bl: D + I and the Hessians.
                 let (_, jac) = mpf_marginal(&mpf, &xn, &xn_new, &m);
-                let (_, fd) = fd_jacobian(&|m: &[f64]| mpf_marginal(&mpf, &xn, &xn_new, m).0, &m, H);
+                let (_, fd) =
+                    fd_jacobian(&|m: &[f64]| mpf_marginal(&mpf, &xn, &xn_new, m).0, &m, H);
                 close_all(&jac, &fd, TOL, &format!("{what}: D + I"));
                 let jac_of = |m: &[f64]| mpf_marginal(&mpf, &xn, &xn_new, m).1;
-                check_hessians(&jac_of, mpf.marginal_hessians(), d.nbl, &m, &format!("{what}: φ_bl"));
+                check_hessians(
+                    &jac_of,
+                    mpf.marginal_hessians(),
+                    d.nbl,
+                    &m,
+                    &format!("{what}: φ_bl"),
+                );
 
                 // Observation at (xⁿ_k, m): the augmented measurement; Jacobian and Hessians.
                 let (y, jac) = mpf_observation(&mpf, &xn, &m);
@@ -266,7 +321,13 @@ fn mpf_maps_jacobians_and_hessians_match_the_physics() {
                 let (_, fd) = fd_jacobian(&|m: &[f64]| mpf_observation(&mpf, &xn, m).0, &m, H);
                 close_all(&jac, &fd, TOL, &format!("{what}: observation Jacobian"));
                 let jac_of = |m: &[f64]| mpf_observation(&mpf, &xn, m).1;
-                check_hessians(&jac_of, mpf.observation_hessians(), d.ny, &m, &format!("{what}: y"));
+                check_hessians(
+                    &jac_of,
+                    mpf.observation_hessians(),
+                    d.ny,
+                    &m,
+                    &format!("{what}: y"),
+                );
             }
         }
     }
@@ -300,7 +361,11 @@ fn noise_levels_are_the_augmented_noise_seen_by_each_partition() {
             let mut q = vec![0.0; nbl * nbl];
             mpf.marginal_noise().add_to(&mut q, nbl);
             let mut expected = vec![0.0; nbl * nbl];
-            let sampled_xi: Vec<bool> = layout.states.iter().map(|s| matches!(s, Slot::Sampled(_))).collect();
+            let sampled_xi: Vec<bool> = layout
+                .states
+                .iter()
+                .map(|s| matches!(s, Slot::Sampled(_)))
+                .collect();
             for (a, sa) in layout.states.iter().enumerate() {
                 for (b, sb) in layout.states.iter().enumerate() {
                     if let (Slot::Marginal(i), Slot::Marginal(j)) = (*sa, *sb) {
@@ -315,8 +380,17 @@ fn noise_levels_are_the_augmented_noise_seen_by_each_partition() {
             // Sampled stage noise: the s.d. of each sampled entry's own draw.
             for (s, entries) in mpf.sampled_stages().iter().enumerate() {
                 for (i, &e) in entries.iter().enumerate() {
-                    let a = layout.states.iter().position(|sl| *sl == Slot::Sampled(e)).unwrap();
-                    close(mpf.sampled_noise_sd(s)[i], g[a + a * nd], 1e-12, &format!("{what}: Qn"));
+                    let a = layout
+                        .states
+                        .iter()
+                        .position(|sl| *sl == Slot::Sampled(e))
+                        .unwrap();
+                    close(
+                        mpf.sampled_noise_sd(s)[i],
+                        g[a + a * nd],
+                        1e-12,
+                        &format!("{what}: Qn"),
+                    );
                 }
             }
             assert!(nn >= case.ne());

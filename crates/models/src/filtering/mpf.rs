@@ -297,8 +297,8 @@ impl MpfChain {
         }
     }
 
-    /// `r_e + dt (g₀ + β g₁ + γ g₂)` at drift velocity `dv` (value) and its row of the Jacobian
-    /// (`dt g₁`, `dt g₂` at β_e, γ_e).
+    /// Returns `r_e + dt (g₀ + β g₁ + γ g₂)` at drift velocity `dv` and writes its row of the
+    /// Jacobian (`dt g₁`, `dt g₂` at β_e, γ_e).
     #[inline]
     fn write_r_map<T: Real>(
         &self,
@@ -307,18 +307,17 @@ impl MpfChain {
         xn_prev: &[T],
         m: &[T],
         row: usize,
-        value: &mut T,
         jac: &mut Sparse<T>,
-    ) {
+    ) -> T {
         let dt = T::splat(self.core.dt);
         let mut g = [T::splat(0.0); 1 + NLIN];
         let phi = [xn_prev[self.n_index(e)]];
         let r = xn_prev[self.r_index(e)];
         self.core.law.basis(dv, r, &phi, &mut g);
         let b = self.beta_index(e);
-        *value = r + dt * (g[0] + m[b] * g[1] + m[b + 1] * g[2]);
         jac.add(row, b, dt * g[1]);
         jac.add(row, b + 1, dt * g[2]);
+        r + dt * (g[0] + m[b] * g[1] + m[b + 1] * g[2])
     }
 }
 
@@ -398,8 +397,7 @@ impl ConditionallyQuadratic for MpfChain {
                 velocities(value, jac);
                 for (e, &j) in hyst.iter().enumerate() {
                     let dv = ChainTopology::drift_velocity(&p, j);
-                    let (v, _) = value.split_at_mut(nvs + e + 1);
-                    self.write_r_map(e, dv, xn_prev, m, nvs + e, &mut v[nvs + e], jac);
+                    value[nvs + e] = self.write_r_map(e, dv, xn_prev, m, nvs + e, jac);
                 }
             }
             (true, 0) => velocities(value, jac),
@@ -411,7 +409,7 @@ impl ConditionallyQuadratic for MpfChain {
                 };
                 for (e, &j) in hyst.iter().enumerate() {
                     let dv = ChainTopology::drift_velocity(&q, j);
-                    self.write_r_map(e, dv, xn_prev, m, e, &mut value[e], jac);
+                    value[e] = self.write_r_map(e, dv, xn_prev, m, e, jac);
                 }
             }
             _ => panic!("no stage {stage}"),

@@ -69,7 +69,9 @@ pub fn paper_case(kind: MeasurementKind) -> Case {
 pub fn spec(case: &Case, disc: Discretisation) -> ChainSpec {
     let mut rng = stream(99, 0, "filtering-tests-spec");
     let sensors = SensorLayout::new(case.n(), &case.sensors, case.kind).unwrap();
-    let ug: Vec<f64> = (0..=K + 2).map(|_| 4.0 * rng.random::<f64>() - 2.0).collect();
+    let ug: Vec<f64> = (0..=K + 2)
+        .map(|_| 4.0 * rng.random::<f64>() - 2.0)
+        .collect();
     let rms = RmsLevels {
         acc: (0..case.sensors.len()).map(|i| 1.0 + i as f64).collect(),
         ug: 3.0,
@@ -173,7 +175,12 @@ pub fn shear_chain(case: &Case, p: &Point) -> ShearChain {
 
 /// Splits a point into a partition's (sampled, marginal) vectors through its layout; entries the
 /// layout does not name (none for these partitions) stay 0.
-pub fn split(layout: &Layout, p: &Point, n_sampled: usize, n_marginal: usize) -> (Vec<f64>, Vec<f64>) {
+pub fn split(
+    layout: &Layout,
+    p: &Point,
+    n_sampled: usize,
+    n_marginal: usize,
+) -> (Vec<f64>, Vec<f64>) {
     let mut s = vec![0.0; n_sampled];
     let mut m = vec![0.0; n_marginal];
     let states = p.states();
