@@ -14,9 +14,11 @@
 
 pub mod dataset;
 pub mod excitation;
+pub mod filtering;
 pub mod integrate;
 pub mod partition;
 pub mod preset;
 pub mod priors;
 pub mod readers;
+pub mod sensors;
 pub mod structure;

@@ -16,6 +16,7 @@
 //! Parameter vector θ: `[k_1..k_N, c_1..c_N, then (β, γ, n) per Bouc–Wen element]`, which for the
 //! paper is `[k1 k2 k3 c1 c2 c3 β γ n]`.
 
+use core_filters::real::Real;
 use thiserror::Error;
 
 /// A Bouc–Wen hysteretic element replacing the linear spring of one element of the chain.
@@ -75,6 +76,8 @@ pub struct ShearChain {
     bouc_wen: Vec<BoucWen>,
     /// `bw_slot[j] = Some(e)` when element `j` is Bouc–Wen element `e`.
     bw_slot: Vec<Option<usize>>,
+    /// Masses and hysteretic elements: the force kernel shared with the filter partitions.
+    topology: ChainTopology,
 }
 
 /// `|r|^(n−1) r` and `|r|^n`, the two nonlinear terms of SPEC eq. 22 (`n ≥ 1`, so both are
@@ -86,11 +89,299 @@ fn bw_terms(r: f64, n: f64) -> (f64, f64) {
     (pow_nm1 * r, pow_nm1 * a)
 }
 
-/// Bouc–Wen rate `ṙ = δv − β|δv||r|^(n−1) r − γ δv |r|^n` (SPEC eq. 22).
+/// Bouc–Wen rate `ṙ = δv − β|δv||r|^(n−1) r − γ δv |r|^n` (SPEC eq. 22), through
+/// [`BoucWenLaw::rate`] (the one implementation of the law).
 #[inline]
 pub fn bouc_wen_rate(dv: f64, r: f64, beta: f64, gamma: f64, n: f64) -> f64 {
-    let (t1, t2) = bw_terms(r, n);
-    dv - beta * dv.abs() * t1 - gamma * dv * t2
+    BoucWenLaw.rate(dv, r, &[beta, gamma], &[n])
+}
+
+/// A hysteresis law of one element, written so that the filter partitions can see which
+/// parameters enter linearly:
+///
+/// `ṙ = g₀(δv, r; φ) + Σ_i θ_i g_i(δv, r; φ)`
+///
+/// with θ the law's *linear* shape parameters (marginalised by the MLN-RBPF, Storvik and the
+/// MPF-EKF2) and φ its *nonlinear* parameters (sampled). `δv` is the element's drift velocity and
+/// `r` its hysteretic variable. Adding a law means implementing this trait (and giving its
+/// parameters a prior); the truth simulator and every partition evaluate the rate through it.
+///
+/// The methods are generic over [`Real`]: anything without an exact SIMD form (`powf`, a branch
+/// on a particle's own value) goes through [`Real::per_lane`], so that lane `b` of a
+/// [`core_filters::real::Pack`] evaluation is bit for bit the `f64` evaluation of particle `b`.
+pub trait HysteresisLaw: std::fmt::Debug + Clone + Copy + Send + Sync + 'static {
+    /// Names of the linear shape parameters θ, in order.
+    const LINEAR: &'static [&'static str];
+    /// Names of the nonlinear parameters φ, in order.
+    const NONLINEAR: &'static [&'static str];
+
+    /// `g[0] = g₀`, `g[1 + i] = g_i` (`g.len() == 1 + LINEAR.len()`).
+    fn basis<T: Real>(&self, dv: T, r: T, phi: &[T], g: &mut [T]);
+
+    /// The rate `ṙ` at (θ, φ) (the truth simulator's form).
+    fn rate<T: Real>(&self, dv: T, r: T, theta: &[T], phi: &[T]) -> T;
+
+    /// `(∂ṙ/∂δv, ∂ṙ/∂r)` at (θ, φ).
+    fn rate_partials<T: Real>(&self, dv: T, r: T, theta: &[T], phi: &[T]) -> (T, T);
+}
+
+/// The Bouc–Wen law (SPEC eq. 22): θ = (β, γ), φ = (n),
+/// `g₀ = δv`, `g₁ = −|δv||r|^(n−1) r`, `g₂ = −δv|r|^n`.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct BoucWenLaw;
+
+impl BoucWenLaw {
+    /// `(|r|^(n−1) r, |r|^n)`, lane by lane through the scalar [`bw_terms`].
+    #[inline]
+    fn terms<T: Real>(r: T, n: T) -> (T, T) {
+        let [a, b] = T::per_lane([r, n], |[r, n]| {
+            let (a, b) = bw_terms(r, n);
+            [a, b]
+        });
+        (a, b)
+    }
+}
+
+impl HysteresisLaw for BoucWenLaw {
+    const LINEAR: &'static [&'static str] = &["beta", "gamma"];
+    const NONLINEAR: &'static [&'static str] = &["n"];
+
+    #[inline]
+    fn basis<T: Real>(&self, dv: T, r: T, phi: &[T], g: &mut [T]) {
+        let (t1, t2) = Self::terms(r, phi[0]);
+        g[0] = dv;
+        g[1] = -(dv.abs() * t1);
+        g[2] = -(dv * t2);
+    }
+
+    #[inline]
+    fn rate<T: Real>(&self, dv: T, r: T, theta: &[T], phi: &[T]) -> T {
+        let (t1, t2) = Self::terms(r, phi[0]);
+        dv - theta[0] * dv.abs() * t1 - theta[1] * dv * t2
+    }
+
+    /// `∂ṙ/∂δv = 1 − β sgn(δv)|r|^(n−1) r − γ|r|^n`,
+    /// `∂ṙ/∂r = −β|δv| n|r|^(n−1) − γ δv n|r|^(n−1) sgn(r)` (`d(|r|^(n−1) r)/dr = n|r|^(n−1)` for
+    /// `n ≥ 1`; `sgn(0) = 0`, the derivative of `|·|` at its kink taken as 0).
+    #[inline]
+    fn rate_partials<T: Real>(&self, dv: T, r: T, theta: &[T], phi: &[T]) -> (T, T) {
+        let [t1, t2, np, sdv, sr] = T::per_lane([dv, r, phi[0]], |[dv, r, n]| {
+            let (t1, t2) = bw_terms(r, n);
+            let sgn = |x: f64| {
+                if x > 0.0 {
+                    1.0
+                } else if x < 0.0 {
+                    -1.0
+                } else {
+                    0.0
+                }
+            };
+            [t1, t2, n * r.abs().powf(n - 1.0), sgn(dv), sgn(r)]
+        });
+        let (beta, gamma) = (theta[0], theta[1]);
+        let d_dv = T::splat(1.0) - beta * sdv * t1 - gamma * t2;
+        let d_r = -(beta * dv.abs() * np) - gamma * dv * np * sr;
+        (d_dv, d_r)
+    }
+}
+
+/// A point of the chain (states and parameters) seen through one representation's storage.
+/// Storeys `j` and elements are 0-based; `r(e)` is the hysteretic variable of element `e` (in
+/// the order of [`ChainTopology::hysteretic_storeys`]).
+pub trait ChainView<T: Real> {
+    fn x(&self, j: usize) -> T;
+    fn v(&self, j: usize) -> T;
+    fn r(&self, e: usize) -> T;
+    fn k(&self, j: usize) -> T;
+    fn c(&self, j: usize) -> T;
+}
+
+/// Masses and the positions of the hysteretic elements: everything the force kernel needs
+/// besides the point. The one implementation of the chain's forces and accelerations (SPEC §1):
+/// the truth simulator ([`ShearChain::rhs`]) and every filter partition
+/// (`crate::filtering`) evaluate them here.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ChainTopology {
+    masses: Vec<f64>,
+    /// `element[j] = Some(e)` when element `j` (storey `j−1` to `j`) is hysteretic element `e`.
+    element: Vec<Option<usize>>,
+    /// Storey of hysteretic element `e`.
+    storeys: Vec<usize>,
+}
+
+impl ChainTopology {
+    /// Masses (positive, finite) and the 0-based storeys of the hysteretic elements, in the
+    /// order of their `r` in the state.
+    pub fn new(masses: Vec<f64>, hysteretic: &[usize]) -> Result<Self, StructureError> {
+        let n = masses.len();
+        if n == 0 {
+            return Err(StructureError::NoStorey);
+        }
+        for (j, &m) in masses.iter().enumerate() {
+            if !(m > 0.0 && m.is_finite()) {
+                return Err(StructureError::NonPositiveMass {
+                    storey: j,
+                    value: m,
+                });
+            }
+        }
+        let mut element = vec![None; n];
+        for (e, &j) in hysteretic.iter().enumerate() {
+            if j >= n {
+                return Err(StructureError::ElementOutOfRange {
+                    storey: j,
+                    storeys: n,
+                });
+            }
+            if element[j].is_some() {
+                return Err(StructureError::DuplicateElement { storey: j });
+            }
+            element[j] = Some(e);
+        }
+        Ok(Self {
+            masses,
+            element,
+            storeys: hysteretic.to_vec(),
+        })
+    }
+
+    /// Number of storeys N.
+    pub fn storeys(&self) -> usize {
+        self.masses.len()
+    }
+
+    pub fn masses(&self) -> &[f64] {
+        &self.masses
+    }
+
+    /// 0-based storeys of the hysteretic elements, in element order.
+    pub fn hysteretic_storeys(&self) -> &[usize] {
+        &self.storeys
+    }
+
+    /// The hysteretic element at storey `j`, if any.
+    #[inline]
+    pub fn element_at(&self, j: usize) -> Option<usize> {
+        self.element[j]
+    }
+
+    /// Drift velocity `δv_j = v_j − v_{j−1}` (`v_{−1} = 0`).
+    #[inline]
+    pub fn drift_velocity<T: Real>(p: &impl ChainView<T>, j: usize) -> T {
+        if j == 0 {
+            p.v(0)
+        } else {
+            p.v(j) - p.v(j - 1)
+        }
+    }
+
+    /// `(d_j, δv_j)` with `F_j = k_j d_j + c_j δv_j`: `d_j = r_e` for a hysteretic element, the
+    /// drift `x_j − x_{j−1}` otherwise.
+    #[inline]
+    pub fn element_coordinates<T: Real>(&self, p: &impl ChainView<T>, j: usize) -> (T, T) {
+        let d = match self.element[j] {
+            Some(e) => p.r(e),
+            None if j == 0 => p.x(0),
+            None => p.x(j) - p.x(j - 1),
+        };
+        (d, Self::drift_velocity(p, j))
+    }
+
+    /// Force `F_j = k_j d_j + c_j δv_j` carried by element `j`.
+    #[inline]
+    pub fn force<T: Real>(&self, p: &impl ChainView<T>, j: usize) -> T {
+        let (d, dv) = self.element_coordinates(p, j);
+        p.k(j) * d + p.c(j) * dv
+    }
+
+    /// `a_j = ground + (F_{j+1} − F_j) / m_j` (`F_N = 0`): the relative acceleration for
+    /// `ground = −ü_g`.
+    #[inline]
+    pub fn acceleration<T: Real>(&self, p: &impl ChainView<T>, j: usize, ground: T) -> T {
+        let f = self.force(p, j);
+        let f_next = if j + 1 < self.masses.len() {
+            self.force(p, j + 1)
+        } else {
+            T::splat(0.0)
+        };
+        ground + (f_next - f) / T::splat(self.masses[j])
+    }
+
+    /// Every storey's acceleration, each element force evaluated once; `out` has length N.
+    #[inline]
+    pub fn accelerations<T: Real>(&self, p: &impl ChainView<T>, ground: T, out: &mut [T]) {
+        let n = self.masses.len();
+        let mut f = self.force(p, 0);
+        for (j, (o, &m)) in out.iter_mut().zip(&self.masses).enumerate() {
+            let f_next = if j + 1 < n {
+                self.force(p, j + 1)
+            } else {
+                T::splat(0.0)
+            };
+            *o = ground + (f_next - f) / T::splat(m);
+            f = f_next;
+        }
+    }
+}
+
+/// Names of θ for N storeys and hysteretic elements at `hysteretic` (0-based, element order):
+/// `k1..kN`, `c1..cN`, then per element the law's linear then nonlinear parameter names, bare
+/// for a single element (`beta`, `gamma`, `n`: the paper's notation) or suffixed by the 1-based
+/// storey for several (`beta4`).
+pub fn theta_names<L: HysteresisLaw>(n_storeys: usize, hysteretic: &[usize]) -> Vec<String> {
+    let mut names: Vec<String> = (1..=n_storeys).map(|j| format!("k{j}")).collect();
+    names.extend((1..=n_storeys).map(|j| format!("c{j}")));
+    let single = hysteretic.len() == 1;
+    for &j in hysteretic {
+        let s = if single {
+            String::new()
+        } else {
+            (j + 1).to_string()
+        };
+        for p in L::LINEAR.iter().chain(L::NONLINEAR) {
+            names.push(format!("{p}{s}"));
+        }
+    }
+    names
+}
+
+/// Names of the states: `x1..xN`, `v1..vN`, `r<s>` per hysteretic element (1-based storey).
+pub fn state_names(n_storeys: usize, hysteretic: &[usize]) -> Vec<String> {
+    let mut names: Vec<String> = (1..=n_storeys).map(|j| format!("x{j}")).collect();
+    names.extend((1..=n_storeys).map(|j| format!("v{j}")));
+    names.extend(hysteretic.iter().map(|j| format!("r{}", j + 1)));
+    names
+}
+
+/// A state vector `[x, v, r]` of a [`ShearChain`] with its parameters.
+struct StateView<'a> {
+    s: &'a [f64],
+    n: usize,
+    k: &'a [f64],
+    c: &'a [f64],
+}
+
+impl ChainView<f64> for StateView<'_> {
+    #[inline]
+    fn x(&self, j: usize) -> f64 {
+        self.s[j]
+    }
+    #[inline]
+    fn v(&self, j: usize) -> f64 {
+        self.s[self.n + j]
+    }
+    #[inline]
+    fn r(&self, e: usize) -> f64 {
+        self.s[2 * self.n + e]
+    }
+    #[inline]
+    fn k(&self, j: usize) -> f64 {
+        self.k[j]
+    }
+    #[inline]
+    fn c(&self, j: usize) -> f64 {
+        self.c[j]
+    }
 }
 
 impl ShearChain {
@@ -162,12 +453,15 @@ impl ShearChain {
             }
             bw_slot[bw.storey] = Some(e);
         }
+        let storeys: Vec<usize> = bouc_wen.iter().map(|bw| bw.storey).collect();
+        let topology = ChainTopology::new(masses.clone(), &storeys)?;
         Ok(Self {
             masses,
             k,
             c,
             bouc_wen,
             bw_slot,
+            topology,
         })
     }
 
@@ -206,21 +500,9 @@ impl ShearChain {
         2 * self.masses.len() + element
     }
 
-    /// Force carried by element `j` (spring or hysteretic part plus dashpot).
-    #[inline]
-    fn element_force(&self, state: &[f64], j: usize) -> f64 {
-        let n = self.masses.len();
-        let (xm, vm) = if j == 0 {
-            (0.0, 0.0)
-        } else {
-            (state[j - 1], state[n + j - 1])
-        };
-        let dv = state[n + j] - vm;
-        let spring = match self.bw_slot[j] {
-            Some(e) => self.k[j] * state[2 * n + e],
-            None => self.k[j] * (state[j] - xm),
-        };
-        spring + self.c[j] * dv
+    /// The masses and hysteretic elements (the force kernel shared with the partitions).
+    pub fn topology(&self) -> &ChainTopology {
+        &self.topology
     }
 
     #[track_caller]
@@ -235,16 +517,13 @@ impl ShearChain {
         self.check_state(state);
         let n = self.masses.len();
         assert_eq!(out.len(), n, "output has the wrong length");
-        let mut f_cur = self.element_force(state, 0);
-        for j in 0..n {
-            let f_next = if j + 1 < n {
-                self.element_force(state, j + 1)
-            } else {
-                0.0
-            };
-            out[j] = -ug + (f_next - f_cur) / self.masses[j];
-            f_cur = f_next;
-        }
+        let view = StateView {
+            s: state,
+            n,
+            k: &self.k,
+            c: &self.c,
+        };
+        self.topology.accelerations(&view, -ug, out);
     }
 
     /// Continuous right-hand side `dstate = g(state, ü_g)` (SPEC §1). No allocation.
@@ -312,29 +591,13 @@ impl ShearChain {
     /// `gamma`, `n` when the chain has a single Bouc–Wen element (the paper's notation), or
     /// `beta<s>`, `gamma<s>`, `n<s>` (1-based storey `s`) when it has several.
     pub fn theta_names(&self) -> Vec<String> {
-        let n = self.storeys();
-        let mut names: Vec<String> = (1..=n).map(|j| format!("k{j}")).collect();
-        names.extend((1..=n).map(|j| format!("c{j}")));
-        let single = self.bouc_wen.len() == 1;
-        for bw in &self.bouc_wen {
-            let s = if single {
-                String::new()
-            } else {
-                (bw.storey + 1).to_string()
-            };
-            names.extend([format!("beta{s}"), format!("gamma{s}"), format!("n{s}")]);
-        }
-        names
+        theta_names::<BoucWenLaw>(self.storeys(), self.topology.hysteretic_storeys())
     }
 
     /// Names of the state entries: `x1..xN`, `v1..vN`, `r<s>` per Bouc–Wen element (1-based
     /// storey `s`).
     pub fn state_names(&self) -> Vec<String> {
-        let n = self.storeys();
-        let mut names: Vec<String> = (1..=n).map(|j| format!("x{j}")).collect();
-        names.extend((1..=n).map(|j| format!("v{j}")));
-        names.extend(self.bouc_wen.iter().map(|bw| format!("r{}", bw.storey + 1)));
-        names
+        state_names(self.storeys(), self.topology.hysteretic_storeys())
     }
 
     /// The same chain (masses and Bouc–Wen storeys) with parameters θ in the order of

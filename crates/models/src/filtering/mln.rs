@@ -1,0 +1,399 @@
+//! Mixed linear/nonlinear partition of the general chain for MLN-RBPF and Storvik
+//! (SPEC §5.2–5.3 generalised, §9; derivation in `docs/partitions.md`).
+//!
+//! Sampled `u = [x1..xN, v1..vN, r_e…, n_e…]` (2N + 2E); marginalised
+//! `z = [k1..kN, c1..cN, (β_e, γ_e)…]` (2N + 2E). Given `u`, every acceleration is linear in
+//! `z` (`F_j = k_j d_j + c_j δv_j`) and every hysteretic rate is affine in `(β_e, γ_e)`
+//! (`ṙ = g₀ + β g₁ + γ g₂`), so:
+//!
+//! - Euler, one stage (rows x, v, r; linked: v and r rows):
+//!   `x' = x + dt v`, `v' = v − dt ü_g + dt·H_v(u) z`, `r' = r + dt g₀ + dt [g₁ g₂] (β, γ)`;
+//! - symplectic, stage 0 = v rows (all linked, as Euler); stage 1 = x rows (unlinked,
+//!   `x + dt v_new`) and r rows (linked, `r + dt(g₀ + β g₁ + γ g₂)` at `δv_new`), which is again
+//!   affine in `(β, γ)` because the new velocities are sampled before it.
+//!
+//! The n rows are set by no stage (copied).
+
+use super::{ChainCore, ChainSpec, Discretisation, SpecError, NLIN};
+use crate::structure::{ChainTopology, ChainView, HysteresisLaw};
+use core_filters::linalg::Sparse;
+use core_filters::model::{Layout, Slot};
+use core_filters::real::Real;
+use core_filters::rng::StreamRng;
+use core_filters::smc::model::{ConditionallyLinear, LinearDims, Stage};
+
+/// The chain partitioned for MLN-RBPF / Storvik.
+#[derive(Debug, Clone)]
+pub struct MlnChain {
+    core: ChainCore,
+    stages: Vec<Stage>,
+    noise_sd: Vec<f64>,
+    symplectic: bool,
+}
+
+/// `u` (and optionally `z`) as a chain point.
+struct View<'a, T> {
+    u: &'a [T],
+    z: &'a [T],
+    n: usize,
+}
+
+impl<T: Real> ChainView<T> for View<'_, T> {
+    #[inline(always)]
+    fn x(&self, j: usize) -> T {
+        self.u[j]
+    }
+    #[inline(always)]
+    fn v(&self, j: usize) -> T {
+        self.u[self.n + j]
+    }
+    #[inline(always)]
+    fn r(&self, e: usize) -> T {
+        self.u[2 * self.n + e]
+    }
+    #[inline(always)]
+    fn k(&self, j: usize) -> T {
+        self.z[j]
+    }
+    #[inline(always)]
+    fn c(&self, j: usize) -> T {
+        self.z[self.n + j]
+    }
+}
+
+impl MlnChain {
+    /// Validates the spec; Euler and symplectic only (RK4 is not linear in z given `u`).
+    pub fn new(spec: ChainSpec) -> Result<Self, SpecError> {
+        let core = ChainCore::new(spec)?;
+        let (n, ne) = (core.n, core.ne);
+        let symplectic = match core.spec.discretisation {
+            Discretisation::Euler => false,
+            Discretisation::Symplectic => true,
+            d => {
+                return Err(SpecError::Unsupported {
+                    partition: "MLN-RBPF/Storvik",
+                    discretisation: d,
+                })
+            }
+        };
+        let x_rows = 0..n;
+        let v_rows = n..2 * n;
+        let r_rows = 2 * n..2 * n + ne;
+        let stages = if symplectic {
+            vec![
+                Stage {
+                    rows: v_rows.clone().collect(),
+                    linked: v_rows.collect(),
+                },
+                Stage {
+                    rows: x_rows.chain(r_rows.clone()).collect(),
+                    linked: r_rows.collect(),
+                },
+            ]
+        } else {
+            vec![Stage {
+                rows: (0..2 * n + ne).collect(),
+                linked: v_rows.chain(r_rows).collect(),
+            }]
+        };
+        let mut noise_sd = vec![core.spec.q_disp; n];
+        noise_sd.extend(std::iter::repeat_n(core.spec.q_vel, n));
+        noise_sd.extend_from_slice(&core.spec.q_r);
+        noise_sd.extend(std::iter::repeat_n(0.0, ne));
+        Ok(Self {
+            core,
+            stages,
+            noise_sd,
+            symplectic,
+        })
+    }
+
+    pub fn spec(&self) -> &ChainSpec {
+        &self.core.spec
+    }
+
+    /// Column of β_e in z.
+    #[inline]
+    fn beta_col(&self, e: usize) -> usize {
+        2 * self.core.n + NLIN * e
+    }
+
+    /// Index of n_e in u.
+    #[inline]
+    fn n_index(&self, e: usize) -> usize {
+        2 * self.core.n + self.core.ne + e
+    }
+
+    /// Writes `scale · ∂a_j/∂z` at `u` into row `row`: `a_j = ground + (F_{j+1} − F_j)/m_j`
+    /// with `∂F_j/∂k_j = d_j`, `∂F_j/∂c_j = δv_j`. Fixed pattern: 2 entries, 4 below the top.
+    #[inline]
+    fn write_acceleration_row<T: Real>(
+        &self,
+        out: &mut Sparse<T>,
+        row: usize,
+        j: usize,
+        u: &[T],
+        scale: T,
+    ) {
+        let n = self.core.n;
+        let view = View { u, z: &[], n };
+        let s = scale * T::splat(self.core.inv_mass[j]);
+        let (d, dv) = self.core.topo.element_coordinates(&view, j);
+        out.add(row, j, -(s * d));
+        out.add(row, n + j, -(s * dv));
+        if j + 1 < n {
+            let (d, dv) = self.core.topo.element_coordinates(&view, j + 1);
+            out.add(row, j + 1, s * d);
+            out.add(row, n + j + 1, s * dv);
+        }
+    }
+
+    /// Writes `scale · ∂F_j/∂u` at `(u, z)` into row `row`.
+    #[inline]
+    fn write_force_gradient_u<T: Real>(
+        &self,
+        out: &mut Sparse<T>,
+        row: usize,
+        j: usize,
+        z: &[T],
+        scale: T,
+    ) {
+        let n = self.core.n;
+        let (k, c) = (scale * z[j], scale * z[n + j]);
+        match self.core.topo.element_at(j) {
+            Some(e) => out.add(row, 2 * n + e, k),
+            None => {
+                out.add(row, j, k);
+                if j > 0 {
+                    out.add(row, j - 1, -k);
+                }
+            }
+        }
+        out.add(row, n + j, c);
+        if j > 0 {
+            out.add(row, n + j - 1, -c);
+        }
+    }
+
+    /// Drift velocity of the element at storey `j` from the velocities in `u`.
+    #[inline]
+    fn drift_velocity<T: Real>(&self, u: &[T], j: usize) -> T {
+        ChainTopology::drift_velocity(
+            &View {
+                u,
+                z: &[],
+                n: self.core.n,
+            },
+            j,
+        )
+    }
+
+    /// `[g₀, g₁, g₂]` of element `e` at drift velocity `dv`, `r_e` and `n_e` from `u_prev`.
+    #[inline]
+    fn basis<T: Real>(&self, e: usize, dv: T, u_prev: &[T]) -> [T; 1 + NLIN] {
+        let mut g = [T::splat(0.0); 1 + NLIN];
+        let r = u_prev[2 * self.core.n + e];
+        let phi = [u_prev[self.n_index(e)]];
+        self.core.law.basis(dv, r, &phi, &mut g);
+        g
+    }
+}
+
+#[allow(non_snake_case)]
+impl ConditionallyLinear for MlnChain {
+    fn dims(&self) -> LinearDims {
+        let (n, ne) = (self.core.n, self.core.ne);
+        LinearDims {
+            nu: 2 * n + 2 * ne,
+            nz: 2 * n + NLIN * ne,
+            ny: self.core.sensors.len(),
+        }
+    }
+
+    fn stages(&self) -> &[Stage] {
+        &self.stages
+    }
+
+    fn process_noise_sd(&self) -> &[f64] {
+        &self.noise_sd
+    }
+
+    /// Zero states, each n_e drawn from its prior (SPEC §3).
+    fn sample_initial(&self, rng: &mut StreamRng, u: &mut [f64]) {
+        u.fill(0.0);
+        for (e, el) in self.core.spec.prior.elements.iter().enumerate() {
+            u[self.n_index(e)] = el.n.sample(rng);
+        }
+    }
+
+    /// θ's prior without the n's (z is θ with every n removed), diagonal.
+    fn marginal_prior(&self, rng: &mut StreamRng, mean: &mut [f64], cov: &mut [f64]) {
+        let (n, ne) = (self.core.n, self.core.ne);
+        let (m, v) = self.core.theta_prior(rng);
+        let nz = 2 * n + NLIN * ne;
+        cov.fill(0.0);
+        let mut i = 0;
+        for t in 0..m.len() {
+            let is_n = t >= 2 * n && (t - 2 * n) % 3 == 2;
+            if !is_n {
+                mean[i] = m[t];
+                cov[i + i * nz] = v[t];
+                i += 1;
+            }
+        }
+        debug_assert_eq!(i, nz);
+    }
+
+    /// SPEC §5.2: stage `stage` of the transition to k (module docs).
+    fn transition<T: Real>(
+        &self,
+        stage: usize,
+        k: usize,
+        u_prev: &[T],
+        u_new: &[T],
+        f: &mut [T],
+        F: &mut Sparse<T>,
+    ) {
+        let n = self.core.n;
+        let dt = T::splat(self.core.dt);
+        let ground = T::splat(self.core.transition_ground(k));
+        let hyst = &self.core.spec.hysteretic;
+        F.start();
+        match (self.symplectic, stage) {
+            (false, 0) => {
+                for j in 0..n {
+                    f[j] = u_prev[j] + dt * u_prev[n + j];
+                    f[n + j] = u_prev[n + j] + dt * ground;
+                    self.write_acceleration_row(F, j, j, u_prev, dt);
+                }
+                for (e, &j) in hyst.iter().enumerate() {
+                    let g = self.basis(e, self.drift_velocity(u_prev, j), u_prev);
+                    f[2 * n + e] = u_prev[2 * n + e] + dt * g[0];
+                    let b = self.beta_col(e);
+                    F.add(n + e, b, dt * g[1]);
+                    F.add(n + e, b + 1, dt * g[2]);
+                }
+            }
+            (true, 0) => {
+                for j in 0..n {
+                    f[j] = u_prev[n + j] + dt * ground;
+                    self.write_acceleration_row(F, j, j, u_prev, dt);
+                }
+            }
+            (true, 1) => {
+                for j in 0..n {
+                    f[j] = u_prev[j] + dt * u_new[n + j];
+                }
+                for (e, &j) in hyst.iter().enumerate() {
+                    let g = self.basis(e, self.drift_velocity(u_new, j), u_prev);
+                    f[n + e] = u_prev[2 * n + e] + dt * g[0];
+                    let b = self.beta_col(e);
+                    F.add(e, b, dt * g[1]);
+                    F.add(e, b + 1, dt * g[2]);
+                }
+            }
+            _ => panic!("no stage {stage}"),
+        }
+        F.finish();
+    }
+
+    /// `h(u_k)` = the ground term with ü_g,meas(k); `H(u_k)` = `∂a_s/∂z` per sensor storey s.
+    fn observation<T: Real>(&self, k: usize, u: &[T], h: &mut [T], H: &mut Sparse<T>) {
+        let ground = T::splat(self.core.measurement_ground(k));
+        H.start();
+        for (i, &s) in self.core.sensors.iter().enumerate() {
+            h[i] = ground;
+            self.write_acceleration_row(H, i, s, u, T::splat(1.0));
+        }
+        H.finish();
+    }
+
+    /// `∂/∂u [H(u) z + h]`: row i = `(−∂F_s/∂u + ∂F_{s+1}/∂u)/m_s` at z; the n columns are zero.
+    fn observation_jacobian_u<T: Real>(&self, _k: usize, _u: &[T], z: &[T], J: &mut Sparse<T>) {
+        let n = self.core.n;
+        J.start();
+        for (i, &s) in self.core.sensors.iter().enumerate() {
+            let inv = T::splat(self.core.inv_mass[s]);
+            self.write_force_gradient_u(J, i, s, z, -inv);
+            if s + 1 < n {
+                self.write_force_gradient_u(J, i, s + 1, z, inv);
+            }
+        }
+        J.finish();
+    }
+
+    /// `∂u_k/∂z` along the sampled path at z. Euler: the linked rows of F. Symplectic: v rows
+    /// `F_v`; x rows `dt·F_v`; r rows `F_r + dt·∂ṙ/∂δv·(F_v[j] − F_v[j−1])`.
+    fn transition_sensitivity<T: Real>(
+        &self,
+        _k: usize,
+        u_prev: &[T],
+        u_new: &[T],
+        z: &[T],
+        S: &mut Sparse<T>,
+    ) {
+        let n = self.core.n;
+        let dt = T::splat(self.core.dt);
+        let hyst = &self.core.spec.hysteretic;
+        S.start();
+        if self.symplectic {
+            for j in 0..n {
+                self.write_acceleration_row(S, n + j, j, u_prev, dt);
+                self.write_acceleration_row(S, j, j, u_prev, dt * dt);
+            }
+            for (e, &j) in hyst.iter().enumerate() {
+                let dv = self.drift_velocity(u_new, j);
+                let g = self.basis(e, dv, u_prev);
+                let b = self.beta_col(e);
+                let row = 2 * n + e;
+                S.add(row, b, dt * g[1]);
+                S.add(row, b + 1, dt * g[2]);
+                let phi = [u_prev[self.n_index(e)]];
+                let (d_dv, _) = self
+                    .core
+                    .law
+                    .rate_partials(dv, u_prev[row], &z[b..b + NLIN], &phi);
+                let coef = dt * d_dv;
+                self.write_acceleration_row(S, row, j, u_prev, coef * dt);
+                if j > 0 {
+                    self.write_acceleration_row(S, row, j - 1, u_prev, -(coef * dt));
+                }
+            }
+        } else {
+            for j in 0..n {
+                self.write_acceleration_row(S, n + j, j, u_prev, dt);
+            }
+            for (e, &j) in hyst.iter().enumerate() {
+                let g = self.basis(e, self.drift_velocity(u_prev, j), u_prev);
+                let b = self.beta_col(e);
+                S.add(2 * n + e, b, dt * g[1]);
+                S.add(2 * n + e, b + 1, dt * g[2]);
+            }
+        }
+        S.finish();
+    }
+
+    fn measurement_cov(&self) -> Vec<f64> {
+        self.core.measurement_cov()
+    }
+
+    /// k, c, β, γ marginal (z order), n_e sampled; states sampled.
+    fn layout(&self) -> Layout {
+        let (n, ne) = (self.core.n, self.core.ne);
+        let mut params: Vec<Slot> = (0..2 * n).map(Slot::Marginal).collect();
+        for e in 0..ne {
+            let b = self.beta_col(e);
+            params.extend([
+                Slot::Marginal(b),
+                Slot::Marginal(b + 1),
+                Slot::Sampled(self.n_index(e)),
+            ]);
+        }
+        Layout {
+            param_names: self.core.theta_names(),
+            params,
+            state_names: self.core.state_names(),
+            states: (0..2 * n + ne).map(Slot::Sampled).collect(),
+        }
+    }
+}

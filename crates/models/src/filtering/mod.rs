@@ -1,0 +1,161 @@
+//! Filter partitions of the general shear chain on run-time dimensions (SPEC §5, §9), for forward
+//! Euler and semi-implicit (symplectic) Euler, implementing the capability traits of
+//! `core_filters::smc::model`. Derivations: `docs/partitions.md`, `docs/discretisation.md`.
+//!
+//! The chain is data ([`ChainSpec`]): N storeys with masses, Bouc–Wen elements at any storeys,
+//! sensors at any storeys ([`crate::sensors`]). Every partition evaluates forces and accelerations
+//! through the one kernel [`crate::structure::ChainTopology`] and the hysteresis law through
+//! [`crate::structure::HysteresisLaw`], the same code as the truth simulator.
+//!
+//! - [`augmented::AugmentedChain`]: bootstrap PF (`StateSpace`, SPEC §5.1), Euler, symplectic, RK4;
+//! - [`mln::MlnChain`]: MLN-RBPF and Storvik (`ConditionallyLinear`, SPEC §5.2–5.3);
+//! - [`mpf::MpfChain`]: MPF-EKF2 (`ConditionallyQuadratic`, SPEC §5.4, §6).
+//!
+//! θ = [k1..kN, c1..cN, then per hysteretic element in storey order β, γ, n]; states
+//! x1..xN, v1..vN, r<s> (names from [`crate::structure::theta_names`] and
+//! [`crate::structure::state_names`]). The transition to step k uses `ug[k−1]`, the measurement
+//! at k uses `ug[k]` (SPEC §3).
+//!
+//! ```
+//! use core_filters::smc::model::ConditionallyQuadratic;
+//! use models::filtering::{ChainSpec, MpfChain, RmsLevels};
+//! use models::sensors::{MeasurementKind, SensorLayout};
+//!
+//! // A 7-storey chain, Bouc–Wen elements at storeys 1 and 4 (0-based 0 and 3), sensors at 2, 4, 7.
+//! let sensors = SensorLayout::new(7, &[2, 4, 7], MeasurementKind::Relative)?;
+//! let rms = RmsLevels { acc: vec![2.0; 3], ug: 3.0, drift_velocity: vec![0.5; 2] };
+//! let spec = ChainSpec::from_rms(0.005, vec![1.0; 7], vec![0, 3], sensors, vec![0.0; 11], &rms, 0.1)?;
+//! let mpf = MpfChain::new(spec)?;
+//! // Sampled: v1, v3, v4 (the drift velocities of the two elements), r1, r4, n1, n4.
+//! assert_eq!(mpf.dims().nn, 7);
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```
+
+pub mod augmented;
+pub mod discretisation;
+pub mod mln;
+pub mod mpf;
+pub mod prior;
+pub mod spec;
+
+pub use augmented::AugmentedChain;
+pub use discretisation::Discretisation;
+pub use mln::MlnChain;
+pub use mpf::MpfChain;
+pub use prior::{ChainPrior, ElementPrior};
+pub use spec::{ChainSpec, RmsLevels, SpecError};
+
+use crate::partition::MarginalPrior;
+use crate::structure::{state_names, theta_names, BoucWenLaw, ChainTopology, HysteresisLaw};
+use core_filters::rng::StreamRng;
+
+/// The hysteresis law of the partitions' elements.
+pub type Law = BoucWenLaw;
+/// Linear shape parameters per element (β, γ).
+pub(crate) const NLIN: usize = 2;
+/// Nonlinear parameters per element (n).
+pub(crate) const NNONLIN: usize = 1;
+const _: () = assert!(<Law as HysteresisLaw>::LINEAR.len() == NLIN);
+const _: () = assert!(<Law as HysteresisLaw>::NONLINEAR.len() == NNONLIN);
+
+/// What every partition shares: the validated spec, the force kernel and precomputed constants.
+#[derive(Debug, Clone)]
+pub(crate) struct ChainCore {
+    pub spec: ChainSpec,
+    pub topo: ChainTopology,
+    pub law: Law,
+    /// Storeys N.
+    pub n: usize,
+    /// Hysteretic elements E.
+    pub ne: usize,
+    pub dt: f64,
+    /// `1/m_j`.
+    pub inv_mass: Vec<f64>,
+    /// 0-based measured storeys.
+    pub sensors: Vec<usize>,
+    /// Moment-matched θ means and variances (SPEC §3), θ order.
+    pub theta_mean: Vec<f64>,
+    pub theta_var: Vec<f64>,
+}
+
+impl ChainCore {
+    pub fn new(spec: ChainSpec) -> Result<Self, SpecError> {
+        spec.validate()?;
+        let topo = ChainTopology::new(spec.masses.clone(), &spec.hysteretic).map_err(|e| {
+            SpecError::Invalid {
+                field: "hysteretic",
+                reason: e.to_string(),
+            }
+        })?;
+        let (theta_mean, theta_var) = spec.prior.moments();
+        Ok(Self {
+            n: spec.n_storeys(),
+            ne: spec.hysteretic.len(),
+            dt: spec.dt,
+            inv_mass: spec.masses.iter().map(|m| 1.0 / m).collect(),
+            sensors: spec.sensors.storeys().to_vec(),
+            theta_mean,
+            theta_var,
+            law: BoucWenLaw,
+            topo,
+            spec,
+        })
+    }
+
+    /// Ground term of the transition to step k: `−ü_g,meas(k−1)`.
+    #[inline]
+    #[track_caller]
+    pub fn transition_ground(&self, k: usize) -> f64 {
+        assert!(k >= 1, "the transition to step k needs k >= 1");
+        -self.spec.ug[k - 1]
+    }
+
+    /// Ground term of the measurement at step k (relative: `−ü_g,meas(k)`, absolute: 0).
+    #[inline]
+    pub fn measurement_ground(&self, k: usize) -> f64 {
+        self.spec.sensors.ground(self.spec.ug[k])
+    }
+
+    /// `R` (column-major, diagonal).
+    pub fn measurement_cov(&self) -> Vec<f64> {
+        let m = self.sensors.len();
+        let mut r = vec![0.0; m * m];
+        for (i, v) in self.spec.r_diag.iter().enumerate() {
+            r[i + i * m] = *v;
+        }
+        r
+    }
+
+    /// Index of the first θ entry of element `e` (β_e) in θ.
+    #[inline]
+    pub fn theta_element(&self, e: usize) -> usize {
+        2 * self.n + (NLIN + NNONLIN) * e
+    }
+
+    /// Mean and variance of the Gaussian prior of θ for one particle (SPEC §3): moment-matched,
+    /// or per-particle means drawn from the prior with variances `(rel_sd·mean)²` (zero for a
+    /// point mass). Start-up only.
+    pub fn theta_prior(&self, rng: &mut StreamRng) -> (Vec<f64>, Vec<f64>) {
+        match self.spec.marginal_prior {
+            MarginalPrior::MomentMatched => (self.theta_mean.clone(), self.theta_var.clone()),
+            MarginalPrior::PerParticle { rel_sd } => {
+                let mut mean = vec![0.0; self.theta_mean.len()];
+                self.spec.prior.sample_into(rng, &mut mean);
+                let var = mean
+                    .iter()
+                    .zip(&self.theta_var)
+                    .map(|(m, v0)| if *v0 > 0.0 { (rel_sd * m).powi(2) } else { 0.0 })
+                    .collect();
+                (mean, var)
+            }
+        }
+    }
+
+    pub fn theta_names(&self) -> Vec<String> {
+        theta_names::<Law>(self.n, &self.spec.hysteretic)
+    }
+
+    pub fn state_names(&self) -> Vec<String> {
+        state_names(self.n, &self.spec.hysteretic)
+    }
+}

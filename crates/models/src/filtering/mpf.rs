@@ -1,0 +1,531 @@
+//! Conditionally bilinear partition of the general chain for MPF-EKF2 (SPEC §5.4 and §6
+//! generalised, §9; derivation in `docs/partitions.md`).
+//!
+//! Sampled: what enters a hysteresis law nonlinearly. For the element at storey j: the velocities
+//! its drift rate depends on (`v_j`, and `v_{j−1}` for j ≥ 1 in 0-based storeys), `r_j` and `n_j`
+//! (static):
+//!
+//! `xⁿ = [sampled velocities by storey, r_e…, n_e…]`,
+//! `x^bl = [x1..xN, the other velocities by storey, k1..kN, c1..cN, (β_e, γ_e)…]`.
+//!
+//! For the paper's chain this is SPEC §6 exactly (`xⁿ = [ẋ1, r1, n]`,
+//! `x^bl = [x1 x2 x3 ẋ2 ẋ3 k1 k2 k3 c1 c2 c3 β γ]`). Given xⁿ, an element force
+//! `F_j = k_j d_j + c_j δv_j` has at most the products `k_j·x` and `c_j·v` (bilinear), and a
+//! hysteretic rate is affine in `(β, γ)`; so every map is at most bilinear in x^bl, with constant
+//! Hessians (±dt/m_j, ±1/m_j, ±dt²/m_j), built once.
+//!
+//! - Euler: one sampled stage (sampled velocities, then r's), `φ_bl` = Euler map of x and the
+//!   marginal velocities; `Q_bl` diagonal.
+//! - Symplectic: stage 0 = sampled velocities, stage 1 = r's with the *new* sampled velocities;
+//!   `φ_bl`: marginal velocities `v + dt a` (bilinear), displacements `x_j + dt v_j,new` with
+//!   `v_j,new` the marginal map (quadratic: Hessian `dt²·∂²a_j`) or the sampled new value
+//!   (affine); `Q_bl` adds `Var(x_j) += dt² q_vel²` and `Cov(x_j, v_j) = dt q_vel²` for every
+//!   marginal velocity (the same noise moves `x_j` through the new velocity).
+
+use super::{ChainCore, ChainSpec, Discretisation, SpecError, NLIN};
+use crate::structure::{ChainTopology, ChainView, HysteresisLaw};
+use core_filters::linalg::{Sparse, SymEntries};
+use core_filters::model::{Layout, Slot, SparseHessians};
+use core_filters::real::Real;
+use core_filters::rng::StreamRng;
+use core_filters::smc::model::{ConditionallyQuadratic, QuadraticDims};
+
+/// Where a storey's velocity lives.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Vel {
+    /// Entry of xⁿ.
+    Sampled(usize),
+    /// Entry of x^bl.
+    Marginal(usize),
+}
+
+/// The chain partitioned for MPF-EKF2.
+#[derive(Debug, Clone)]
+pub struct MpfChain {
+    core: ChainCore,
+    symplectic: bool,
+    /// Location of each storey's velocity.
+    vel: Vec<Vel>,
+    /// Storeys of the sampled velocities (increasing).
+    sampled_vel: Vec<usize>,
+    /// Storeys of the marginal velocities (increasing).
+    marginal_vel: Vec<usize>,
+    /// Offsets of k and c in x^bl.
+    k0: usize,
+    c0: usize,
+    /// Offset of (β_0, γ_0) in x^bl.
+    b0: usize,
+    stages: Vec<Vec<usize>>,
+    stage_noise: Vec<Vec<f64>>,
+    stage_hessians: Vec<SparseHessians>,
+    marginal_hessians: SparseHessians,
+    observation_hessians: SparseHessians,
+    marginal_noise: SymEntries,
+}
+
+/// (xⁿ, x^bl) as a chain point.
+struct View<'a, T> {
+    xn: &'a [T],
+    m: &'a [T],
+    p: &'a MpfChain,
+}
+
+impl<T: Real> ChainView<T> for View<'_, T> {
+    #[inline(always)]
+    fn x(&self, j: usize) -> T {
+        self.m[j]
+    }
+    #[inline(always)]
+    fn v(&self, j: usize) -> T {
+        match self.p.vel[j] {
+            Vel::Sampled(i) => self.xn[i],
+            Vel::Marginal(i) => self.m[i],
+        }
+    }
+    #[inline(always)]
+    fn r(&self, e: usize) -> T {
+        self.xn[self.p.r_index(e)]
+    }
+    #[inline(always)]
+    fn k(&self, j: usize) -> T {
+        self.m[self.p.k0 + j]
+    }
+    #[inline(always)]
+    fn c(&self, j: usize) -> T {
+        self.m[self.p.c0 + j]
+    }
+}
+
+impl MpfChain {
+    /// Validates the spec, builds the index maps, the stages and the constant Hessians; Euler
+    /// and symplectic only (RK4 is not bilinear in x^bl given xⁿ).
+    pub fn new(spec: ChainSpec) -> Result<Self, SpecError> {
+        let core = ChainCore::new(spec)?;
+        let (n, ne) = (core.n, core.ne);
+        let symplectic = match core.spec.discretisation {
+            Discretisation::Euler => false,
+            Discretisation::Symplectic => true,
+            d => {
+                return Err(SpecError::Unsupported {
+                    partition: "MPF-EKF2",
+                    discretisation: d,
+                })
+            }
+        };
+        let mut sampled = vec![false; n];
+        for &j in &core.spec.hysteretic {
+            sampled[j] = true;
+            if j > 0 {
+                sampled[j - 1] = true;
+            }
+        }
+        let sampled_vel: Vec<usize> = (0..n).filter(|&j| sampled[j]).collect();
+        let marginal_vel: Vec<usize> = (0..n).filter(|&j| !sampled[j]).collect();
+        let mut vel = vec![Vel::Sampled(0); n];
+        for (i, &j) in sampled_vel.iter().enumerate() {
+            vel[j] = Vel::Sampled(i);
+        }
+        for (i, &j) in marginal_vel.iter().enumerate() {
+            vel[j] = Vel::Marginal(n + i);
+        }
+        let nvm = marginal_vel.len();
+        let nvs = sampled_vel.len();
+        let (k0, c0, b0) = (n + nvm, 2 * n + nvm, 3 * n + nvm);
+        let mut me = Self {
+            core,
+            symplectic,
+            vel,
+            sampled_vel,
+            marginal_vel,
+            k0,
+            c0,
+            b0,
+            stages: Vec::new(),
+            stage_noise: Vec::new(),
+            stage_hessians: Vec::new(),
+            marginal_hessians: SparseHessians::new(),
+            observation_hessians: SparseHessians::new(),
+            marginal_noise: SymEntries::new(),
+        };
+        let dt = me.core.dt;
+        let (q_vel, q_disp) = (me.core.spec.q_vel, me.core.spec.q_disp);
+        // Sampled stages, their noise and Hessians (velocity rows: dt·∂²a_j; r rows affine).
+        let mut vel_hessians = SparseHessians::new();
+        for (i, &j) in me.sampled_vel.iter().enumerate() {
+            me.push_acceleration_hessian(&mut vel_hessians, i, j, dt);
+        }
+        let r_entries: Vec<usize> = (nvs..nvs + ne).collect();
+        if ne > 0 {
+            if symplectic {
+                me.stages = vec![(0..nvs).collect(), r_entries];
+                me.stage_noise = vec![vec![q_vel; nvs], me.core.spec.q_r.clone()];
+                me.stage_hessians = vec![vel_hessians, SparseHessians::new()];
+            } else {
+                me.stages = vec![(0..nvs + ne).collect()];
+                let mut q = vec![q_vel; nvs];
+                q.extend_from_slice(&me.core.spec.q_r);
+                me.stage_noise = vec![q];
+                me.stage_hessians = vec![vel_hessians];
+            }
+        }
+        // φ_bl Hessians and Q_bl.
+        let mut mh = SparseHessians::new();
+        let mut q = SymEntries::new();
+        for j in 0..n {
+            q.push(j, j, q_disp * q_disp);
+        }
+        for (i, &j) in me.marginal_vel.clone().iter().enumerate() {
+            let vi = n + i;
+            me.push_acceleration_hessian(&mut mh, vi, j, dt);
+            q.push(vi, vi, q_vel * q_vel);
+            if symplectic {
+                me.push_acceleration_hessian(&mut mh, j, j, dt * dt);
+                q.push(j, j, dt * dt * q_vel * q_vel);
+                q.push(j, vi, dt * q_vel * q_vel);
+            }
+        }
+        me.marginal_hessians = mh;
+        me.marginal_noise = q;
+        let mut oh = SparseHessians::new();
+        for (i, &s) in me.core.sensors.clone().iter().enumerate() {
+            me.push_acceleration_hessian(&mut oh, i, s, 1.0);
+        }
+        me.observation_hessians = oh;
+        Ok(me)
+    }
+
+    pub fn spec(&self) -> &ChainSpec {
+        &self.core.spec
+    }
+
+    #[inline]
+    fn nvs(&self) -> usize {
+        self.sampled_vel.len()
+    }
+
+    /// Index of r_e in xⁿ.
+    #[inline]
+    fn r_index(&self, e: usize) -> usize {
+        self.sampled_vel.len() + e
+    }
+
+    /// Index of n_e in xⁿ.
+    #[inline]
+    fn n_index(&self, e: usize) -> usize {
+        self.sampled_vel.len() + self.core.ne + e
+    }
+
+    /// Index of β_e in x^bl (γ_e follows).
+    #[inline]
+    fn beta_index(&self, e: usize) -> usize {
+        self.b0 + NLIN * e
+    }
+
+    /// Pushes the constant Hessian of `scale · F_j` w.r.t. x^bl as output `out`:
+    /// `k_j × x_j`, `k_j × x_{j−1}` (linear element) and `c_j × v` for marginal velocities.
+    fn push_force_hessian(&self, h: &mut SparseHessians, out: usize, j: usize, scale: f64) {
+        if self.core.topo.element_at(j).is_none() {
+            h.push(out, self.k0 + j, j, scale);
+            if j > 0 {
+                h.push(out, self.k0 + j, j - 1, -scale);
+            }
+        }
+        if let Vel::Marginal(i) = self.vel[j] {
+            h.push(out, self.c0 + j, i, scale);
+        }
+        if j > 0 {
+            if let Vel::Marginal(i) = self.vel[j - 1] {
+                h.push(out, self.c0 + j, i, -scale);
+            }
+        }
+    }
+
+    /// Pushes the Hessian of `scale · a_j`, `a_j = ground + (F_{j+1} − F_j)/m_j`.
+    fn push_acceleration_hessian(&self, h: &mut SparseHessians, out: usize, j: usize, scale: f64) {
+        let s = scale * self.core.inv_mass[j];
+        self.push_force_hessian(h, out, j, -s);
+        if j + 1 < self.core.n {
+            self.push_force_hessian(h, out, j + 1, s);
+        }
+    }
+
+    /// Writes `scale · ∂F_j/∂x^bl` at the point into row `row` (fixed pattern per j).
+    #[inline]
+    fn write_force_gradient<T: Real>(
+        &self,
+        out: &mut Sparse<T>,
+        row: usize,
+        j: usize,
+        p: &View<'_, T>,
+        s: T,
+    ) {
+        let (d, dv) = self.core.topo.element_coordinates(p, j);
+        out.add(row, self.k0 + j, s * d);
+        out.add(row, self.c0 + j, s * dv);
+        if self.core.topo.element_at(j).is_none() {
+            let k = s * p.k(j);
+            out.add(row, j, k);
+            if j > 0 {
+                out.add(row, j - 1, -k);
+            }
+        }
+        let c = s * p.c(j);
+        if let Vel::Marginal(i) = self.vel[j] {
+            out.add(row, i, c);
+        }
+        if j > 0 {
+            if let Vel::Marginal(i) = self.vel[j - 1] {
+                out.add(row, i, -c);
+            }
+        }
+    }
+
+    /// Writes `scale · ∂a_j/∂x^bl` at the point into row `row`.
+    #[inline]
+    fn write_acceleration_gradient<T: Real>(
+        &self,
+        out: &mut Sparse<T>,
+        row: usize,
+        j: usize,
+        p: &View<'_, T>,
+        scale: T,
+    ) {
+        let s = scale * T::splat(self.core.inv_mass[j]);
+        self.write_force_gradient(out, row, j, p, -s);
+        if j + 1 < self.core.n {
+            self.write_force_gradient(out, row, j + 1, p, s);
+        }
+    }
+
+    /// Returns `r_e + dt (g₀ + β g₁ + γ g₂)` at drift velocity `dv` and writes its row of the
+    /// Jacobian (`dt g₁`, `dt g₂` at β_e, γ_e).
+    #[inline]
+    fn write_r_map<T: Real>(
+        &self,
+        e: usize,
+        dv: T,
+        xn_prev: &[T],
+        m: &[T],
+        row: usize,
+        jac: &mut Sparse<T>,
+    ) -> T {
+        let dt = T::splat(self.core.dt);
+        let mut g = [T::splat(0.0); 1 + NLIN];
+        let phi = [xn_prev[self.n_index(e)]];
+        let r = xn_prev[self.r_index(e)];
+        self.core.law.basis(dv, r, &phi, &mut g);
+        let b = self.beta_index(e);
+        jac.add(row, b, dt * g[1]);
+        jac.add(row, b + 1, dt * g[2]);
+        r + dt * (g[0] + m[b] * g[1] + m[b + 1] * g[2])
+    }
+}
+
+impl ConditionallyQuadratic for MpfChain {
+    fn dims(&self) -> QuadraticDims {
+        let (n, ne) = (self.core.n, self.core.ne);
+        QuadraticDims {
+            nn: self.nvs() + 2 * ne,
+            nbl: 3 * n + self.marginal_vel.len() + NLIN * ne,
+            ny: self.core.sensors.len(),
+        }
+    }
+
+    fn sampled_stages(&self) -> &[Vec<usize>] {
+        &self.stages
+    }
+
+    /// Zero states, each n_e drawn from its prior (SPEC §3).
+    fn sample_initial(&self, rng: &mut StreamRng, xn: &mut [f64]) {
+        xn.fill(0.0);
+        for (e, el) in self.core.spec.prior.elements.iter().enumerate() {
+            xn[self.n_index(e)] = el.n.sample(rng);
+        }
+    }
+
+    /// States exactly zero (variance 0); k, c, β, γ from θ's Gaussian prior (SPEC §3).
+    fn marginal_prior(&self, rng: &mut StreamRng, mean: &mut [f64], cov: &mut [f64]) {
+        let n = self.core.n;
+        let nbl = self.dims().nbl;
+        let (m, v) = self.core.theta_prior(rng);
+        mean.fill(0.0);
+        cov.fill(0.0);
+        let mut set = |i: usize, t: usize| {
+            mean[i] = m[t];
+            cov[i + i * nbl] = v[t];
+        };
+        for j in 0..n {
+            set(self.k0 + j, j);
+            set(self.c0 + j, n + j);
+        }
+        for e in 0..self.core.ne {
+            let t = self.core.theta_element(e);
+            set(self.beta_index(e), t);
+            set(self.beta_index(e) + 1, t + 1);
+        }
+    }
+
+    /// ψ of stage `stage` (module docs) at `(xⁿ_{k−1}, m)` with ü_g,meas(k−1).
+    fn sampled_dynamics<T: Real>(
+        &self,
+        stage: usize,
+        k: usize,
+        xn_prev: &[T],
+        xn_new: &[T],
+        m: &[T],
+        value: &mut [T],
+        jac: &mut Sparse<T>,
+    ) {
+        let dt = T::splat(self.core.dt);
+        let ground = T::splat(self.core.transition_ground(k));
+        let p = View {
+            xn: xn_prev,
+            m,
+            p: self,
+        };
+        let nvs = self.nvs();
+        let hyst = &self.core.spec.hysteretic;
+        jac.start();
+        let velocities = |value: &mut [T], jac: &mut Sparse<T>| {
+            for (i, &j) in self.sampled_vel.iter().enumerate() {
+                value[i] = xn_prev[i] + dt * self.core.topo.acceleration(&p, j, ground);
+                self.write_acceleration_gradient(jac, i, j, &p, dt);
+            }
+        };
+        match (self.symplectic, stage) {
+            (false, 0) => {
+                velocities(value, jac);
+                for (e, &j) in hyst.iter().enumerate() {
+                    let dv = ChainTopology::drift_velocity(&p, j);
+                    value[nvs + e] = self.write_r_map(e, dv, xn_prev, m, nvs + e, jac);
+                }
+            }
+            (true, 0) => velocities(value, jac),
+            (true, 1) => {
+                let q = View {
+                    xn: xn_new,
+                    m,
+                    p: self,
+                };
+                for (e, &j) in hyst.iter().enumerate() {
+                    let dv = ChainTopology::drift_velocity(&q, j);
+                    value[e] = self.write_r_map(e, dv, xn_prev, m, e, jac);
+                }
+            }
+            _ => panic!("no stage {stage}"),
+        }
+        jac.finish();
+    }
+
+    fn sampled_hessians(&self, stage: usize) -> &SparseHessians {
+        &self.stage_hessians[stage]
+    }
+
+    fn sampled_noise_sd(&self, stage: usize) -> &[f64] {
+        &self.stage_noise[stage]
+    }
+
+    /// φ_bl (module docs) and `D = ∂φ_bl/∂x^bl − I`.
+    fn marginal_dynamics<T: Real>(
+        &self,
+        k: usize,
+        xn_prev: &[T],
+        xn_new: &[T],
+        m: &[T],
+        value: &mut [T],
+        d: &mut Sparse<T>,
+    ) {
+        let n = self.core.n;
+        let dt = T::splat(self.core.dt);
+        let ground = T::splat(self.core.transition_ground(k));
+        let p = View {
+            xn: xn_prev,
+            m,
+            p: self,
+        };
+        value.copy_from_slice(m);
+        d.start();
+        for (i, &j) in self.marginal_vel.iter().enumerate() {
+            let vi = n + i;
+            value[vi] = m[vi] + dt * self.core.topo.acceleration(&p, j, ground);
+            self.write_acceleration_gradient(d, vi, j, &p, dt);
+        }
+        for j in 0..n {
+            match (self.vel[j], self.symplectic) {
+                (Vel::Sampled(i), false) => value[j] = m[j] + dt * xn_prev[i],
+                (Vel::Sampled(i), true) => value[j] = m[j] + dt * xn_new[i],
+                (Vel::Marginal(vi), false) => {
+                    value[j] = m[j] + dt * m[vi];
+                    d.add(j, vi, dt);
+                }
+                (Vel::Marginal(vi), true) => {
+                    value[j] = m[j] + dt * value[vi];
+                    d.add(j, vi, dt);
+                    self.write_acceleration_gradient(d, j, j, &p, dt * dt);
+                }
+            }
+        }
+        d.finish();
+    }
+
+    fn marginal_hessians(&self) -> &SparseHessians {
+        &self.marginal_hessians
+    }
+
+    fn marginal_noise(&self) -> &SymEntries {
+        &self.marginal_noise
+    }
+
+    /// Accelerations at the sensor storeys at `(xⁿ_k, m)` with ü_g,meas(k).
+    fn observation<T: Real>(
+        &self,
+        k: usize,
+        xn: &[T],
+        m: &[T],
+        value: &mut [T],
+        jac: &mut Sparse<T>,
+    ) {
+        let ground = T::splat(self.core.measurement_ground(k));
+        let p = View { xn, m, p: self };
+        jac.start();
+        for (i, &s) in self.core.sensors.iter().enumerate() {
+            value[i] = self.core.topo.acceleration(&p, s, ground);
+            self.write_acceleration_gradient(jac, i, s, &p, T::splat(1.0));
+        }
+        jac.finish();
+    }
+
+    fn observation_hessians(&self) -> &SparseHessians {
+        &self.observation_hessians
+    }
+
+    fn measurement_cov(&self) -> Vec<f64> {
+        self.core.measurement_cov()
+    }
+
+    fn layout(&self) -> Layout {
+        let (n, ne) = (self.core.n, self.core.ne);
+        let mut params: Vec<Slot> = (0..n).map(|j| Slot::Marginal(self.k0 + j)).collect();
+        params.extend((0..n).map(|j| Slot::Marginal(self.c0 + j)));
+        for e in 0..ne {
+            let b = self.beta_index(e);
+            params.extend([
+                Slot::Marginal(b),
+                Slot::Marginal(b + 1),
+                Slot::Sampled(self.n_index(e)),
+            ]);
+        }
+        let mut states: Vec<Slot> = (0..n).map(Slot::Marginal).collect();
+        states.extend(self.vel.iter().map(|v| match *v {
+            Vel::Sampled(i) => Slot::Sampled(i),
+            Vel::Marginal(i) => Slot::Marginal(i),
+        }));
+        states.extend((0..ne).map(|e| Slot::Sampled(self.r_index(e))));
+        Layout {
+            param_names: self.core.theta_names(),
+            params,
+            state_names: self.core.state_names(),
+            states,
+        }
+    }
+}

@@ -1,0 +1,296 @@
+//! Priors of θ for a chain with any number of hysteretic elements (SPEC §3 per parameter).
+//!
+//! θ = [k1..kN, c1..cN, then per hysteretic element in storey order (β, γ, n)]. Defaults:
+//! k_j ~ LogNormal(median 10, log-sd 0.3), c_j ~ LogNormal(0.4, 0.5), per element (β, γ) uniform
+//! on the triangle {0 ≤ β ≤ 5, |γ| ≤ β} and n ~ U(1, 5). Every parameter can be overridden, or
+//! fixed (a point mass) by name. The old single-element `ParameterPrior` stays for the
+//! const-generic partitions.
+
+use crate::priors::{BetaGammaPrior, Prior, PriorError};
+use crate::structure::{theta_names, BoucWenLaw};
+use rand::Rng;
+use serde::{Deserialize, Serialize};
+
+/// Prior of one hysteretic (Bouc–Wen) element's parameters.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ElementPrior {
+    /// 0-based storey of the element.
+    pub storey: usize,
+    pub beta_gamma: BetaGammaPrior,
+    pub n: Prior,
+}
+
+/// Prior of the whole θ of a chain, independent across parameters (β, γ jointly per element).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ChainPrior {
+    pub k: Vec<Prior>,
+    pub c: Vec<Prior>,
+    /// One per hysteretic element, in storey order.
+    pub elements: Vec<ElementPrior>,
+}
+
+impl ChainPrior {
+    /// SPEC §3 defaults for N storeys and hysteretic elements at the 0-based `hysteretic` storeys.
+    pub fn paper(n_storeys: usize, hysteretic: &[usize]) -> Self {
+        Self {
+            k: vec![
+                Prior::LogNormal {
+                    median: 10.0,
+                    log_sd: 0.3
+                };
+                n_storeys
+            ],
+            c: vec![
+                Prior::LogNormal {
+                    median: 0.4,
+                    log_sd: 0.5
+                };
+                n_storeys
+            ],
+            elements: hysteretic
+                .iter()
+                .map(|&storey| ElementPrior {
+                    storey,
+                    beta_gamma: BetaGammaPrior::Triangle { beta_max: 5.0 },
+                    n: Prior::Uniform { lo: 1.0, hi: 5.0 },
+                })
+                .collect(),
+        }
+    }
+
+    pub fn n_storeys(&self) -> usize {
+        self.k.len()
+    }
+
+    /// 0-based storeys of the elements, in order.
+    pub fn hysteretic_storeys(&self) -> Vec<usize> {
+        self.elements.iter().map(|e| e.storey).collect()
+    }
+
+    /// Number of parameters 2N + 3E.
+    pub fn len(&self) -> usize {
+        2 * self.k.len() + 3 * self.elements.len()
+    }
+
+    /// Whether θ is empty (never: N ≥ 1 is checked by [`ChainPrior::validate`]).
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// Names of θ in order (see [`theta_names`]).
+    pub fn names(&self) -> Vec<String> {
+        theta_names::<BoucWenLaw>(self.n_storeys(), &self.hysteretic_storeys())
+    }
+
+    /// Checks every hyper-parameter; k, c and n must have non-negative support.
+    pub fn validate(&self) -> Result<(), PriorError> {
+        let n = self.n_storeys();
+        if self.c.len() != n {
+            return Err(PriorError::WrongLength {
+                which: "c",
+                expected: n,
+                got: self.c.len(),
+            });
+        }
+        let names = self.names();
+        for (j, p) in self.k.iter().enumerate() {
+            p.validate(&names[j], true)?;
+        }
+        for (j, p) in self.c.iter().enumerate() {
+            p.validate(&names[n + j], true)?;
+        }
+        for (e, el) in self.elements.iter().enumerate() {
+            el.beta_gamma.validate()?;
+            el.n.validate(&names[2 * n + 3 * e + 2], true)?;
+        }
+        Ok(())
+    }
+
+    /// Makes parameter `name` (as in [`ChainPrior::names`]) a point mass at `value`. Fixing β or
+    /// γ alone keeps the other's conditional prior on the triangle (`BetaGammaPrior`). On error
+    /// the prior is unchanged.
+    pub fn fix(&mut self, name: &str, value: f64) -> Result<(), PriorError> {
+        let i = self.names().iter().position(|s| s == name).ok_or_else(|| {
+            PriorError::UnknownParameter {
+                name: name.to_string(),
+            }
+        })?;
+        self.set(i, |slot| match slot {
+            Slot::Scalar(p) => *p = Prior::Fixed { value },
+            Slot::Beta(bg) => *bg = fix_beta(*bg, value),
+            Slot::Gamma(bg) => *bg = fix_gamma(*bg, value),
+        })
+    }
+
+    /// Replaces the prior of scalar parameter `name` (k, c or n; for β, γ set
+    /// [`ElementPrior::beta_gamma`]). On error the prior is unchanged.
+    pub fn set_prior(&mut self, name: &str, prior: Prior) -> Result<(), PriorError> {
+        let unknown = || PriorError::UnknownParameter {
+            name: name.to_string(),
+        };
+        let i = self
+            .names()
+            .iter()
+            .position(|s| s == name)
+            .ok_or_else(unknown)?;
+        let mut ok = true;
+        let r = self.set(i, |slot| match slot {
+            Slot::Scalar(p) => *p = prior,
+            _ => ok = false,
+        });
+        if ok {
+            r
+        } else {
+            Err(unknown())
+        }
+    }
+
+    fn set(&mut self, i: usize, f: impl FnOnce(Slot<'_>)) -> Result<(), PriorError> {
+        let n = self.n_storeys();
+        let mut next = self.clone();
+        let slot = if i < n {
+            Slot::Scalar(&mut next.k[i])
+        } else if i < 2 * n {
+            Slot::Scalar(&mut next.c[i - n])
+        } else {
+            let el = &mut next.elements[(i - 2 * n) / 3];
+            match (i - 2 * n) % 3 {
+                0 => Slot::Beta(&mut el.beta_gamma),
+                1 => Slot::Gamma(&mut el.beta_gamma),
+                _ => Slot::Scalar(&mut el.n),
+            }
+        };
+        f(slot);
+        next.validate()?;
+        *self = next;
+        Ok(())
+    }
+
+    /// Writes one draw of θ into `out` (length [`ChainPrior::len`]) without allocating.
+    pub fn sample_into<G: Rng + ?Sized>(&self, rng: &mut G, out: &mut [f64]) {
+        let n = self.n_storeys();
+        assert_eq!(out.len(), self.len(), "θ buffer has the wrong length");
+        for (o, p) in out[..n].iter_mut().zip(&self.k) {
+            *o = p.sample(rng);
+        }
+        for (o, p) in out[n..2 * n].iter_mut().zip(&self.c) {
+            *o = p.sample(rng);
+        }
+        for (e, el) in self.elements.iter().enumerate() {
+            let (b, g) = el.beta_gamma.sample(rng);
+            out[2 * n + 3 * e] = b;
+            out[2 * n + 3 * e + 1] = g;
+            out[2 * n + 3 * e + 2] = el.n.sample(rng);
+        }
+    }
+
+    /// Means and variances of θ (SPEC §3 moment matching; all components uncorrelated).
+    pub fn moments(&self) -> (Vec<f64>, Vec<f64>) {
+        let mut mean = Vec::with_capacity(self.len());
+        let mut var = Vec::with_capacity(self.len());
+        for p in self.k.iter().chain(&self.c) {
+            let (m, v) = p.moments();
+            mean.push(m);
+            var.push(v);
+        }
+        for el in &self.elements {
+            let (mb, mg, vb, vg) = el.beta_gamma.moments();
+            let (m, v) = el.n.moments();
+            mean.extend([mb, mg, m]);
+            var.extend([vb, vg, v]);
+        }
+        (mean, var)
+    }
+}
+
+enum Slot<'a> {
+    Scalar(&'a mut Prior),
+    Beta(&'a mut BetaGammaPrior),
+    Gamma(&'a mut BetaGammaPrior),
+}
+
+/// β fixed; γ keeps its conditional prior (uniform on (−β, β)) unless already fixed.
+fn fix_beta(bg: BetaGammaPrior, value: f64) -> BetaGammaPrior {
+    match bg {
+        BetaGammaPrior::Triangle { .. } | BetaGammaPrior::FixedBeta { .. } => {
+            BetaGammaPrior::FixedBeta { beta: value }
+        }
+        BetaGammaPrior::FixedGamma { gamma, .. } | BetaGammaPrior::Fixed { gamma, .. } => {
+            BetaGammaPrior::Fixed { beta: value, gamma }
+        }
+    }
+}
+
+/// γ fixed; β keeps its conditional prior (uniform on (|γ|, β_max)) unless already fixed.
+fn fix_gamma(bg: BetaGammaPrior, value: f64) -> BetaGammaPrior {
+    match bg {
+        BetaGammaPrior::Triangle { beta_max } | BetaGammaPrior::FixedGamma { beta_max, .. } => {
+            BetaGammaPrior::FixedGamma {
+                gamma: value,
+                beta_max,
+            }
+        }
+        BetaGammaPrior::FixedBeta { beta } | BetaGammaPrior::Fixed { beta, .. } => {
+            BetaGammaPrior::Fixed { beta, gamma: value }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::priors::ParameterPrior;
+    use core_filters::rng::stream;
+
+    #[test]
+    fn single_element_prior_equals_the_paper_prior() {
+        let p = ChainPrior::paper(3, &[0]);
+        let old = ParameterPrior::paper(3);
+        assert_eq!(p.moments(), old.moments());
+        assert_eq!(p.names(), crate::priors::parameter_names(3));
+        let (mut a, mut b) = (vec![0.0; 9], vec![0.0; 9]);
+        p.sample_into(&mut stream(1, 0, "t"), &mut a);
+        old.sample_into(&mut stream(1, 0, "t"), &mut b);
+        assert_eq!(a, b, "same draws from the same stream");
+    }
+
+    #[test]
+    fn several_elements_are_named_by_storey_and_fixable() {
+        let mut p = ChainPrior::paper(7, &[0, 3]);
+        assert_eq!(p.len(), 20);
+        let names = p.names();
+        assert_eq!(
+            &names[14..],
+            ["beta1", "gamma1", "n1", "beta4", "gamma4", "n4"]
+        );
+        p.fix("gamma4", 0.5).unwrap();
+        p.fix("n1", 2.0).unwrap();
+        p.fix("k7", 8.0).unwrap();
+        let (mean, var) = p.moments();
+        assert_eq!((mean[6], var[6]), (8.0, 0.0));
+        assert_eq!((mean[18], var[18]), (0.5, 0.0));
+        assert_eq!((mean[16], var[16]), (2.0, 0.0));
+        assert!(var[17] > 0.0, "β4 keeps its conditional prior");
+        let before = p.clone();
+        assert!(matches!(
+            p.fix("beta", 1.0),
+            Err(PriorError::UnknownParameter { .. })
+        ));
+        assert!(p.fix("k1", -1.0).is_err());
+        assert!(p.set_prior("beta1", Prior::Fixed { value: 1.0 }).is_err());
+        assert_eq!(p, before);
+        p.set_prior("c2", Prior::Uniform { lo: 0.1, hi: 0.5 })
+            .unwrap();
+        assert_eq!(p.c[1], Prior::Uniform { lo: 0.1, hi: 0.5 });
+        let mut rng = stream(2, 0, "t");
+        let mut th = vec![0.0; 20];
+        for _ in 0..200 {
+            p.sample_into(&mut rng, &mut th);
+            assert!(th[14] >= 0.0 && th[15].abs() <= th[14]);
+            assert!(th[17] >= 0.5 && (1.0..5.0).contains(&th[19]));
+            assert_eq!(th[18], 0.5);
+        }
+    }
+}

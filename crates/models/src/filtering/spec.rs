@@ -1,0 +1,274 @@
+//! [`ChainSpec`]: everything the run-time partitions need (SPEC §3, §9), validated field by field.
+
+use super::discretisation::Discretisation;
+use super::prior::ChainPrior;
+use crate::partition::MarginalPrior;
+use crate::priors::PriorError;
+use crate::sensors::{MeasurementKind, SensorError, SensorLayout};
+use serde::{Deserialize, Serialize};
+use thiserror::Error;
+
+/// Invalid spec or partition construction; every message names the field.
+#[derive(Debug, Clone, PartialEq, Error)]
+pub enum SpecError {
+    #[error("invalid chain spec: {field}: {reason}")]
+    Invalid { field: &'static str, reason: String },
+    #[error("invalid chain spec: {0}")]
+    Sensors(#[from] SensorError),
+    #[error("invalid chain spec: prior: {0}")]
+    Prior(#[from] PriorError),
+    #[error(
+        "invalid chain spec: discretisation: the {partition} partition does not support {discretisation} \
+         (it is not linear in the marginalised parameters given the sampled path)"
+    )]
+    Unsupported {
+        partition: &'static str,
+        discretisation: Discretisation,
+    },
+}
+
+fn invalid(field: &'static str, reason: impl Into<String>) -> SpecError {
+    SpecError::Invalid {
+        field,
+        reason: reason.into(),
+    }
+}
+
+/// The chain, data and filter settings of the run-time partitions.
+///
+/// Storeys are 0-based in `hysteretic` (as `crate::structure::BoucWen::storey`); the sensor
+/// layout takes and prints them 1-based.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ChainSpec {
+    /// Time step (s).
+    pub dt: f64,
+    /// Storey masses m_1..m_N (known); N = `masses.len()`.
+    pub masses: Vec<f64>,
+    /// 0-based storeys of the hysteretic (Bouc–Wen) elements, strictly increasing.
+    pub hysteretic: Vec<usize>,
+    /// Measured storeys and measurement kind.
+    pub sensors: SensorLayout,
+    /// Measured ground acceleration `ug[k] = ü_g,meas(t_k)`, k = 0..=K.
+    pub ug: Vec<f64>,
+    /// Process-noise s.d. of the displacements.
+    pub q_disp: f64,
+    /// Process-noise s.d. of the velocities.
+    pub q_vel: f64,
+    /// Process-noise s.d. of each hysteretic variable (one per element).
+    pub q_r: Vec<f64>,
+    /// Measurement-noise variances, one per sensor.
+    pub r_diag: Vec<f64>,
+    pub prior: ChainPrior,
+    #[serde(default)]
+    pub marginal_prior: MarginalPrior,
+    #[serde(default)]
+    pub discretisation: Discretisation,
+}
+
+/// RMS values of the clean simulated signals from which [`ChainSpec::from_rms`] sets the noise
+/// levels (SPEC §3).
+#[derive(Debug, Clone, PartialEq)]
+pub struct RmsLevels {
+    /// RMS of the measured channel of each sensor (in the layout's kind).
+    pub acc: Vec<f64>,
+    /// RMS of the ground acceleration.
+    pub ug: f64,
+    /// RMS of the drift velocity δv of each hysteretic element.
+    pub drift_velocity: Vec<f64>,
+}
+
+impl ChainSpec {
+    /// SPEC §3 settings from RMS values, generalised: R_ii = (nf·RMS a_i)² + (nf·RMS ü_g)² for
+    /// relative data, (nf·RMS a_i)² for absolute data (the excitation error does not enter an
+    /// absolute measurement); q_vel = dt·nf·RMS ü_g; q_r[e] = dt·0.05·RMS δv_e (the paper's σ_r,
+    /// independent of nf); q_disp = 1e−6. Prior [`ChainPrior::paper`], moment-matched marginal
+    /// prior, forward Euler. `noise_fraction` is 0.1 in the paper.
+    pub fn from_rms(
+        dt: f64,
+        masses: Vec<f64>,
+        hysteretic: Vec<usize>,
+        sensors: SensorLayout,
+        ug: Vec<f64>,
+        rms: &RmsLevels,
+        noise_fraction: f64,
+    ) -> Result<Self, SpecError> {
+        if rms.acc.len() != sensors.len() {
+            return Err(invalid(
+                "rms.acc",
+                format!("{} values for {} sensors", rms.acc.len(), sensors.len()),
+            ));
+        }
+        if rms.drift_velocity.len() != hysteretic.len() {
+            return Err(invalid(
+                "rms.drift_velocity",
+                format!(
+                    "{} values for {} hysteretic elements",
+                    rms.drift_velocity.len(),
+                    hysteretic.len()
+                ),
+            ));
+        }
+        let named = [("rms.ug", rms.ug), ("noise_fraction", noise_fraction)];
+        let acc = rms.acc.iter().map(|&a| ("rms.acc", a));
+        let dv = rms
+            .drift_velocity
+            .iter()
+            .map(|&a| ("rms.drift_velocity", a));
+        for (field, v) in named.into_iter().chain(acc).chain(dv) {
+            if !(v.is_finite() && v >= 0.0) {
+                return Err(invalid(field, format!("{v} is not a non-negative number")));
+            }
+        }
+        let nf = noise_fraction;
+        let excitation = match sensors.kind() {
+            MeasurementKind::Relative => (nf * rms.ug).powi(2),
+            MeasurementKind::Absolute => 0.0,
+        };
+        let spec = Self {
+            dt,
+            prior: ChainPrior::paper(masses.len(), &hysteretic),
+            q_disp: 1e-6,
+            q_vel: dt * nf * rms.ug,
+            q_r: rms.drift_velocity.iter().map(|v| dt * 0.05 * v).collect(),
+            r_diag: rms
+                .acc
+                .iter()
+                .map(|a| (nf * a).powi(2) + excitation)
+                .collect(),
+            masses,
+            hysteretic,
+            sensors,
+            ug,
+            marginal_prior: MarginalPrior::MomentMatched,
+            discretisation: Discretisation::Euler,
+        };
+        spec.validate()?;
+        Ok(spec)
+    }
+
+    /// Number of storeys N.
+    pub fn n_storeys(&self) -> usize {
+        self.masses.len()
+    }
+
+    /// Checks every field; the partitions' constructors call it.
+    pub fn validate(&self) -> Result<(), SpecError> {
+        let n = self.n_storeys();
+        if n == 0 {
+            return Err(invalid("masses", "at least one storey is required"));
+        }
+        if let Some(j) = self
+            .masses
+            .iter()
+            .position(|m| !(m.is_finite() && *m > 0.0))
+        {
+            return Err(invalid(
+                "masses",
+                format!(
+                    "mass of storey {} is {}, not positive",
+                    j + 1,
+                    self.masses[j]
+                ),
+            ));
+        }
+        if self.sensors.n_storeys() != n {
+            return Err(invalid(
+                "masses",
+                format!(
+                    "{n} masses, but the sensor layout was made for {} storeys",
+                    self.sensors.n_storeys()
+                ),
+            ));
+        }
+        if self.prior.n_storeys() != n || self.prior.c.len() != n {
+            return Err(invalid(
+                "masses",
+                format!(
+                    "{n} masses, but the prior has {} stiffness and {} damping priors",
+                    self.prior.n_storeys(),
+                    self.prior.c.len()
+                ),
+            ));
+        }
+        // Re-validate the layout itself (it may come from deserialisation of a changed file).
+        SensorLayout::new(n, &self.sensors.one_based(), self.sensors.kind())?;
+        for (i, &j) in self.hysteretic.iter().enumerate() {
+            if j >= n {
+                return Err(invalid(
+                    "hysteretic",
+                    format!("storey {} is outside the chain of {n} storeys", j + 1),
+                ));
+            }
+            if i > 0 && j <= self.hysteretic[i - 1] {
+                return Err(invalid(
+                    "hysteretic",
+                    format!(
+                        "storeys must be listed once, in increasing order ({} after {})",
+                        j + 1,
+                        self.hysteretic[i - 1] + 1
+                    ),
+                ));
+            }
+        }
+        if !(self.dt.is_finite() && self.dt > 0.0) {
+            return Err(invalid("dt", format!("{} is not positive", self.dt)));
+        }
+        if self.ug.len() < 2 {
+            return Err(invalid(
+                "ug",
+                "at least two samples (one step) are required",
+            ));
+        }
+        if let Some(k) = self.ug.iter().position(|u| !u.is_finite()) {
+            return Err(invalid("ug", format!("sample {k} is not finite")));
+        }
+        for (field, v) in [("q_disp", self.q_disp), ("q_vel", self.q_vel)] {
+            if !(v.is_finite() && v >= 0.0) {
+                return Err(invalid(field, format!("{v} is not a non-negative s.d.")));
+            }
+        }
+        if self.q_r.len() != self.hysteretic.len() {
+            return Err(invalid(
+                "q_r",
+                format!(
+                    "{} values for {} hysteretic elements",
+                    self.q_r.len(),
+                    self.hysteretic.len()
+                ),
+            ));
+        }
+        if let Some(q) = self.q_r.iter().find(|q| !(q.is_finite() && **q >= 0.0)) {
+            return Err(invalid("q_r", format!("{q} is not a non-negative s.d.")));
+        }
+        if self.r_diag.len() != self.sensors.len() {
+            return Err(invalid(
+                "r_diag",
+                format!(
+                    "{} variances for {} sensors",
+                    self.r_diag.len(),
+                    self.sensors.len()
+                ),
+            ));
+        }
+        if let Some(r) = self.r_diag.iter().find(|r| !(r.is_finite() && **r > 0.0)) {
+            return Err(invalid("r_diag", format!("variance {r} is not positive")));
+        }
+        if self.prior.hysteretic_storeys() != self.hysteretic {
+            return Err(invalid(
+                "prior",
+                "the element priors are not at the hysteretic storeys, in order",
+            ));
+        }
+        self.prior.validate()?;
+        if let MarginalPrior::PerParticle { rel_sd } = self.marginal_prior {
+            if !(rel_sd.is_finite() && rel_sd >= 0.0) {
+                return Err(invalid(
+                    "marginal_prior",
+                    format!("rel_sd {rel_sd} is not a non-negative number"),
+                ));
+            }
+        }
+        Ok(())
+    }
+}

@@ -1,0 +1,473 @@
+//! The run-time partitions agree with the truth simulator, with the old const-generic partitions
+//! of the paper's chain (forward Euler), and with themselves when evaluated for a SIMD pack of
+//! four particles; their layouts follow SPEC §5.2 and §6.
+
+mod filtering_support;
+
+use core_filters::linalg::Sparse;
+use core_filters::model::Slot;
+use core_filters::real::{Pack, Real};
+use core_filters::rng::stream;
+use core_filters::smc::model::{ConditionallyLinear, ConditionallyQuadratic, StateSpace};
+use filtering_support::*;
+use models::filtering::{AugmentedChain, Discretisation, MlnChain, MpfChain};
+use models::integrate::simulate_rk4;
+use models::partition::{FilterSpec, MarginalPrior, PaperAugmented, PaperMln, PaperMpf};
+use models::priors::ParameterPrior;
+use models::sensors::MeasurementKind;
+use nalgebra::SVector;
+
+fn propagate(aug: &AugmentedChain, k: usize, x: &[f64]) -> Vec<f64> {
+    let mut out = vec![0.0; x.len()];
+    aug.propagate(k, x, &vec![0.0; aug.noise_dim()], &mut out);
+    out
+}
+
+#[test]
+fn augmented_maps_are_the_truth_simulator_stepped_by_each_scheme() {
+    for case in cases() {
+        let mut rng = stream(21, 0, case.name);
+        for _ in 0..4 {
+            let p = random_point(&case, &mut rng);
+            let ch = shear_chain(&case, &p);
+            let s = p.states();
+            let (n, d) = (case.n(), s.len());
+            let ug = spec(&case, Discretisation::Euler).ug;
+            let mut ds = vec![0.0; d];
+            ch.rhs(&s, ug[K - 1], &mut ds);
+            // Forward Euler: s + dt g(s), bit for bit.
+            let aug = AugmentedChain::new(spec(&case, Discretisation::Euler)).unwrap();
+            let euler: Vec<f64> = (0..d).map(|i| s[i] + DT * ds[i]).collect();
+            assert_eq!(
+                &propagate(&aug, K, &p.augmented())[..d],
+                &euler[..],
+                "{}",
+                case.name
+            );
+            // Symplectic: v' = v + dt a(s); x' = x + dt v'; r' = r + dt ṙ(δv', r).
+            let aug = AugmentedChain::new(spec(&case, Discretisation::Symplectic)).unwrap();
+            let mut s2 = s.clone();
+            for j in 0..n {
+                s2[n + j] = s[n + j] + DT * ds[n + j];
+            }
+            let mut ds2 = vec![0.0; d];
+            ch.rhs(&s2, ug[K - 1], &mut ds2);
+            let mut want = s2.clone();
+            for j in 0..n {
+                want[j] = s[j] + DT * s2[n + j];
+            }
+            for i in 2 * n..d {
+                want[i] = s[i] + DT * ds2[i];
+            }
+            assert_eq!(
+                &propagate(&aug, K, &p.augmented())[..d],
+                &want[..],
+                "{}",
+                case.name
+            );
+        }
+        // RK4 from rest over the whole excitation: the truth integrator, bit for bit.
+        let p = random_point(&case, &mut rng);
+        let aug = AugmentedChain::new(spec(&case, Discretisation::Rk4)).unwrap();
+        let ug = aug.spec().ug.clone();
+        let truth = simulate_rk4(&shear_chain(&case, &p), &ug, DT);
+        let mut x = p.with_states(&vec![0.0; p.states().len()]).augmented();
+        for k in 1..ug.len() {
+            x = propagate(&aug, k, &x);
+            assert_eq!(
+                &x[..truth.dim()],
+                truth.state(k),
+                "{} RK4 step {k}",
+                case.name
+            );
+        }
+    }
+}
+
+#[test]
+fn process_noise_is_added_as_documented() {
+    let case = &cases()[0];
+    let sp = spec(case, Discretisation::Symplectic);
+    let aug = AugmentedChain::new(sp.clone()).unwrap();
+    let p = random_point(case, &mut stream(22, 0, "noise"));
+    let x = p.augmented();
+    let n = case.n();
+    let xi: Vec<f64> = (0..aug.noise_dim()).map(|i| 0.3 + 0.1 * i as f64).collect();
+    let mut out = vec![0.0; x.len()];
+    aug.propagate(K, &x, &xi, &mut out);
+    let clean = propagate(&aug, K, &x);
+    // The velocity draw moves the displacement through the new velocity.
+    for j in 0..n {
+        close(
+            out[n + j] - clean[n + j],
+            sp.q_vel * xi[n + j],
+            1e-9,
+            "v noise",
+        );
+        close(
+            out[j] - clean[j],
+            sp.q_disp * xi[j] + DT * sp.q_vel * xi[n + j],
+            1e-9,
+            "x noise",
+        );
+    }
+    assert_eq!(
+        &out[aug.noise_dim()..],
+        &x[aug.noise_dim()..],
+        "θ carries no noise"
+    );
+}
+
+/// The old `FilterSpec` with the same numbers as a new spec of the paper's chain.
+fn old_spec(kind: MeasurementKind) -> (models::filtering::ChainSpec, FilterSpec) {
+    let new = spec(&paper_case(kind), Discretisation::Euler);
+    let old = FilterSpec {
+        dt: new.dt,
+        masses: new.masses.clone(),
+        ug: new.ug.clone(),
+        q_disp_sd: new.q_disp,
+        q_vel_sd: new.q_vel,
+        q_r_sd: new.q_r[0],
+        r_diag: new.r_diag.clone(),
+        measurement: kind,
+        prior: ParameterPrior::paper(3),
+        marginal_prior: MarginalPrior::MomentMatched,
+    };
+    (new, old)
+}
+
+#[test]
+fn paper_preset_reproduces_the_old_partitions_for_forward_euler() {
+    use core_filters::model::{
+        ConditionallyLinear as OldLinear, ConditionallyQuadratic as OldQuadratic,
+        StateSpace as OldStateSpace,
+    };
+    const RO: f64 = 1e-13;
+    for kind in [MeasurementKind::Relative, MeasurementKind::Absolute] {
+        let case = paper_case(kind);
+        let (new, old) = old_spec(kind);
+        let (aug, old_aug) = (
+            AugmentedChain::new(new.clone()).unwrap(),
+            PaperAugmented::new(old.clone()).unwrap(),
+        );
+        let (mln, old_mln) = (
+            MlnChain::new(new.clone()).unwrap(),
+            PaperMln::new(old.clone()).unwrap(),
+        );
+        let (mpf, old_mpf) = (
+            MpfChain::new(new.clone()).unwrap(),
+            PaperMpf::new(old.clone()).unwrap(),
+        );
+        assert_eq!(aug.measurement_cov(), old_aug.measurement_cov().as_slice());
+        let mut rng = stream(23, 0, "old");
+        for _ in 0..6 {
+            let p = random_point(&case, &mut rng);
+            // Augmented.
+            let x = p.augmented();
+            let old_next = old_aug.propagate(K, &SVector::<f64, 16>::from_column_slice(&x));
+            close_all(
+                &propagate(&aug, K, &x),
+                old_next.as_slice(),
+                RO,
+                "augmented propagate",
+            );
+            let mut y = vec![0.0; 3];
+            aug.measure(K, &x, &mut y);
+            close_all(
+                &y,
+                old_aug
+                    .measure(K, &SVector::from_column_slice(&x))
+                    .as_slice(),
+                RO,
+                "augmented measure",
+            );
+
+            // MLN: (u, z) orders are the old ones.
+            let (u, z) = split(&mln.layout(), &p, 8, 8);
+            let (us, zs) = (
+                SVector::<f64, 8>::from_column_slice(&u),
+                SVector::<f64, 8>::from_column_slice(&z),
+            );
+            let (old_f, old_big_f) = old_mln.transition(K, &us);
+            let mut f = vec![0.0; 7];
+            let mut big_f = Sparse::recording(4, 8);
+            mln.transition(0, K, &u, &u, &mut f, &mut big_f);
+            close_all(&f, &old_f.as_slice()[..7], RO, "MLN f");
+            close_all(&big_f.to_dense(), old_big_f.as_slice(), RO, "MLN F");
+            let (old_h, old_big_h) = old_mln.observation(K, &us);
+            let mut h = vec![0.0; 3];
+            let mut big_h = Sparse::recording(3, 8);
+            mln.observation(K, &u, &mut h, &mut big_h);
+            close_all(&h, old_h.as_slice(), RO, "MLN h");
+            close_all(&big_h.to_dense(), old_big_h.as_slice(), RO, "MLN H");
+            let mut ju = Sparse::recording(3, 8);
+            mln.observation_jacobian_u(K, &u, &z, &mut ju);
+            close_all(
+                &ju.to_dense(),
+                old_mln.observation_jacobian_u(K, &us, &zs).as_slice(),
+                RO,
+                "MLN J_u",
+            );
+            close_all(
+                mln.process_noise_sd(),
+                old_mln.process_noise_sd().as_slice(),
+                0.0,
+                "MLN Q",
+            );
+
+            // MPF: (xⁿ, x^bl) orders are SPEC §6's, as the old ones.
+            let (xn, m) = split(&mpf.layout(), &p, 3, 13);
+            let (xns, ms) = (
+                SVector::<f64, 3>::from_column_slice(&xn),
+                SVector::<f64, 13>::from_column_slice(&m),
+            );
+            let (old_v, old_j) = old_mpf.sampled_dynamics(K, &xns, &ms);
+            let mut v = vec![0.0; 2];
+            let mut jac = Sparse::recording(2, 13);
+            mpf.sampled_dynamics(0, K, &xn, &xn, &m, &mut v, &mut jac);
+            close_all(&v, old_v.as_slice(), RO, "MPF ψ");
+            close_all(&jac.to_dense(), old_j.as_slice(), RO, "MPF ψ Jacobian");
+            let (old_v, old_j) = old_mpf.marginal_dynamics(K, &xns, &ms);
+            let mut v = vec![0.0; 13];
+            let mut d = Sparse::recording(13, 13);
+            mpf.marginal_dynamics(K, &xn, &xn, &m, &mut v, &mut d);
+            let mut jd = d.to_dense();
+            for i in 0..13 {
+                jd[i + 13 * i] += 1.0;
+            }
+            close_all(&v, old_v.as_slice(), RO, "MPF φ_bl");
+            close_all(&jd, old_j.as_slice(), RO, "MPF φ_bl Jacobian");
+            let (old_v, old_j) = old_mpf.observation(K, &xns, &ms);
+            let mut v = vec![0.0; 3];
+            let mut jac = Sparse::recording(3, 13);
+            ConditionallyQuadratic::observation(&mpf, K, &xn, &m, &mut v, &mut jac);
+            close_all(&v, old_v.as_slice(), RO, "MPF y");
+            close_all(&jac.to_dense(), old_j.as_slice(), RO, "MPF y Jacobian");
+        }
+        // Constant Hessians and noise levels.
+        for (i, (new_h, old_h, outs)) in [
+            (mpf.sampled_hessians(0), old_mpf.sampled_hessians(), 2),
+            (mpf.marginal_hessians(), old_mpf.marginal_hessians(), 13),
+            (
+                mpf.observation_hessians(),
+                old_mpf.observation_hessians(),
+                3,
+            ),
+        ]
+        .into_iter()
+        .enumerate()
+        {
+            for o in 0..outs {
+                assert_eq!(
+                    new_h.dense(o, 13),
+                    old_h.dense(o, 13),
+                    "Hessian list {i} output {o}"
+                );
+            }
+        }
+        close_all(
+            mpf.sampled_noise_sd(0),
+            old_mpf.sampled_noise_sd().as_slice(),
+            0.0,
+            "Qn",
+        );
+        let mut q = vec![0.0; 169];
+        mpf.marginal_noise().add_to(&mut q, 13);
+        let old_q = old_mpf.marginal_noise_sd();
+        for i in 0..13 {
+            assert_eq!(q[i + 13 * i], old_q[i] * old_q[i], "Q_bl {i}");
+        }
+    }
+}
+
+fn pack(vs: &[Vec<f64>]) -> Vec<Pack> {
+    (0..vs[0].len())
+        .map(|i| Pack::from_lanes(|b| vs[b][i]))
+        .collect()
+}
+
+#[track_caller]
+fn same_lanes(p: &[Pack], s: &[Vec<f64>], what: &str) {
+    for (b, sb) in s.iter().enumerate() {
+        assert_eq!(p.len(), sb.len());
+        for (i, v) in sb.iter().enumerate() {
+            assert_eq!(
+                p[i].lane(b).to_bits(),
+                v.to_bits(),
+                "{what}: lane {b} entry {i}"
+            );
+        }
+    }
+}
+
+#[test]
+fn pack_evaluation_is_the_scalar_evaluation_of_each_lane() {
+    for case in cases() {
+        for disc in [Discretisation::Euler, Discretisation::Symplectic] {
+            let mln = MlnChain::new(spec(&case, disc)).unwrap();
+            let mpf = MpfChain::new(spec(&case, disc)).unwrap();
+            let aug = AugmentedChain::new(spec(&case, disc)).unwrap();
+            let mut rng = stream(24, 0, case.name);
+            let pts: Vec<Point> = (0..4).map(|_| random_point(&case, &mut rng)).collect();
+            let what = format!("{} {disc}", case.name);
+            // MLN.
+            let d = mln.dims();
+            let uz: Vec<(Vec<f64>, Vec<f64>)> = pts
+                .iter()
+                .map(|p| split(&mln.layout(), p, d.nu, d.nz))
+                .collect();
+            let us: Vec<Vec<f64>> = uz.iter().map(|x| x.0.clone()).collect();
+            let zs: Vec<Vec<f64>> = uz.iter().map(|x| x.1.clone()).collect();
+            let u_new: Vec<Vec<f64>> = pts
+                .iter()
+                .zip(&us)
+                .map(|(p, u)| {
+                    let mut v = u.clone();
+                    let next = propagate(&aug, K, &p.augmented());
+                    v[..aug.noise_dim()].copy_from_slice(&next[..aug.noise_dim()]);
+                    v
+                })
+                .collect();
+            let (up, zp, unp) = (pack(&us), pack(&zs), pack(&u_new));
+            for (s, st) in mln.stages().iter().enumerate() {
+                let mut fp = vec![Pack::splat(0.0); st.rows.len()];
+                let mut big_fp = Sparse::<Pack>::recording(st.linked.len(), d.nz);
+                mln.transition(s, K, &up, &unp, &mut fp, &mut big_fp);
+                let (mut fs, mut big_fs) = (Vec::new(), Vec::new());
+                for b in 0..4 {
+                    let mut f = vec![0.0; st.rows.len()];
+                    let mut big_f = Sparse::<f64>::recording(st.linked.len(), d.nz);
+                    mln.transition(s, K, &us[b], &u_new[b], &mut f, &mut big_f);
+                    fs.push(f);
+                    big_fs.push(big_f.values().to_vec());
+                }
+                same_lanes(&fp, &fs, &format!("{what}: MLN f"));
+                same_lanes(big_fp.values(), &big_fs, &format!("{what}: MLN F"));
+            }
+            let mut sp = Sparse::<Pack>::recording(d.nu, d.nz);
+            mln.transition_sensitivity(K, &up, &unp, &zp, &mut sp);
+            let mut hp = vec![Pack::splat(0.0); d.ny];
+            let mut big_hp = Sparse::<Pack>::recording(d.ny, d.nz);
+            mln.observation(K, &up, &mut hp, &mut big_hp);
+            let mut jp = Sparse::<Pack>::recording(d.ny, d.nu);
+            mln.observation_jacobian_u(K, &up, &zp, &mut jp);
+            let (mut ss, mut hs, mut big_hs, mut js) = (vec![], vec![], vec![], vec![]);
+            for b in 0..4 {
+                let mut s = Sparse::<f64>::recording(d.nu, d.nz);
+                mln.transition_sensitivity(K, &us[b], &u_new[b], &zs[b], &mut s);
+                ss.push(s.values().to_vec());
+                let mut h = vec![0.0; d.ny];
+                let mut big_h = Sparse::<f64>::recording(d.ny, d.nz);
+                mln.observation(K, &us[b], &mut h, &mut big_h);
+                hs.push(h);
+                big_hs.push(big_h.values().to_vec());
+                let mut j = Sparse::<f64>::recording(d.ny, d.nu);
+                mln.observation_jacobian_u(K, &us[b], &zs[b], &mut j);
+                js.push(j.values().to_vec());
+            }
+            same_lanes(sp.values(), &ss, &format!("{what}: MLN sensitivity"));
+            same_lanes(&hp, &hs, &format!("{what}: MLN h"));
+            same_lanes(big_hp.values(), &big_hs, &format!("{what}: MLN H"));
+            same_lanes(jp.values(), &js, &format!("{what}: MLN J_u"));
+
+            // MPF.
+            let qd = mpf.dims();
+            let xm: Vec<(Vec<f64>, Vec<f64>)> = pts
+                .iter()
+                .map(|p| split(&mpf.layout(), p, qd.nn, qd.nbl))
+                .collect();
+            let xns: Vec<Vec<f64>> = xm.iter().map(|x| x.0.clone()).collect();
+            let ms: Vec<Vec<f64>> = xm.iter().map(|x| x.1.clone()).collect();
+            // Some new sampled values (any values serve for the comparison).
+            let xn_new: Vec<Vec<f64>> = xns
+                .iter()
+                .map(|x| x.iter().map(|v| 0.9 * v + 0.01).collect())
+                .collect();
+            let (xp, xnp, mp) = (pack(&xns), pack(&xn_new), pack(&ms));
+            for (s, entries) in mpf.sampled_stages().iter().enumerate() {
+                let mut vp = vec![Pack::splat(0.0); entries.len()];
+                let mut jp = Sparse::<Pack>::recording(entries.len(), qd.nbl);
+                mpf.sampled_dynamics(s, K, &xp, &xnp, &mp, &mut vp, &mut jp);
+                let (mut vs, mut jss) = (vec![], vec![]);
+                for b in 0..4 {
+                    let mut v = vec![0.0; entries.len()];
+                    let mut j = Sparse::<f64>::recording(entries.len(), qd.nbl);
+                    mpf.sampled_dynamics(s, K, &xns[b], &xn_new[b], &ms[b], &mut v, &mut j);
+                    vs.push(v);
+                    jss.push(j.values().to_vec());
+                }
+                same_lanes(&vp, &vs, &format!("{what}: MPF ψ {s}"));
+                same_lanes(jp.values(), &jss, &format!("{what}: MPF ψ Jacobian {s}"));
+            }
+            let mut vp = vec![Pack::splat(0.0); qd.nbl];
+            let mut dp = Sparse::<Pack>::recording(qd.nbl, qd.nbl);
+            mpf.marginal_dynamics(K, &xp, &xnp, &mp, &mut vp, &mut dp);
+            let mut yp = vec![Pack::splat(0.0); qd.ny];
+            let mut ojp = Sparse::<Pack>::recording(qd.ny, qd.nbl);
+            ConditionallyQuadratic::observation(&mpf, K, &xnp, &mp, &mut yp, &mut ojp);
+            let (mut vs, mut ds, mut ys, mut ojs) = (vec![], vec![], vec![], vec![]);
+            for b in 0..4 {
+                let mut v = vec![0.0; qd.nbl];
+                let mut dm = Sparse::<f64>::recording(qd.nbl, qd.nbl);
+                mpf.marginal_dynamics(K, &xns[b], &xn_new[b], &ms[b], &mut v, &mut dm);
+                vs.push(v);
+                ds.push(dm.values().to_vec());
+                let mut y = vec![0.0; qd.ny];
+                let mut oj = Sparse::<f64>::recording(qd.ny, qd.nbl);
+                ConditionallyQuadratic::observation(&mpf, K, &xn_new[b], &ms[b], &mut y, &mut oj);
+                ys.push(y);
+                ojs.push(oj.values().to_vec());
+            }
+            same_lanes(&vp, &vs, &format!("{what}: MPF φ_bl"));
+            same_lanes(dp.values(), &ds, &format!("{what}: MPF D"));
+            same_lanes(&yp, &ys, &format!("{what}: MPF y"));
+            same_lanes(ojp.values(), &ojs, &format!("{what}: MPF y Jacobian"));
+        }
+    }
+}
+
+#[test]
+fn layouts_follow_spec_sections_5_2_and_6() {
+    use Slot::{Marginal as M, Sampled as S};
+    let case = paper_case(MeasurementKind::Relative);
+    let mpf = MpfChain::new(spec(&case, Discretisation::Symplectic)).unwrap();
+    let l = mpf.layout();
+    // SPEC §6: xⁿ = [ẋ1, r1, n]; x^bl = [x1 x2 x3 ẋ2 ẋ3 k1 k2 k3 c1 c2 c3 β γ].
+    assert_eq!(l.states, [M(0), M(1), M(2), S(0), M(3), M(4), S(1)]);
+    assert_eq!(
+        l.params,
+        [M(5), M(6), M(7), M(8), M(9), M(10), M(11), M(12), S(2)]
+    );
+    assert_eq!(
+        l.param_names,
+        ["k1", "k2", "k3", "c1", "c2", "c3", "beta", "gamma", "n"]
+    );
+    assert_eq!(mpf.sampled_stages(), [vec![0], vec![1]]);
+    let mln = MlnChain::new(spec(&case, Discretisation::Euler)).unwrap();
+    let l = mln.layout();
+    assert_eq!(
+        l.params,
+        [M(0), M(1), M(2), M(3), M(4), M(5), M(6), M(7), S(7)]
+    );
+    assert_eq!(mln.stages()[0].linked, [3, 4, 5, 6]);
+
+    // 7 storeys, elements at 1 and 4: sampled velocities v1, v3, v4.
+    let case = &cases()[0];
+    let mpf = MpfChain::new(spec(case, Discretisation::Euler)).unwrap();
+    let l = mpf.layout();
+    assert_eq!(l.state_names[14..], ["r1", "r4"]);
+    assert_eq!(
+        &l.states[7..],
+        [S(0), M(7), S(1), S(2), M(8), M(9), M(10), S(3), S(4)]
+    );
+    assert_eq!(
+        l.param_names[14..],
+        ["beta1", "gamma1", "n1", "beta4", "gamma4", "n4"]
+    );
+    assert_eq!(l.params[14..], [M(25), M(26), S(5), M(27), M(28), S(6)]);
+    assert_eq!(mpf.dims().nbl, 29);
+    let mln = MlnChain::new(spec(case, Discretisation::Symplectic)).unwrap();
+    assert_eq!(mln.stages()[0].rows, (7..14).collect::<Vec<_>>());
+    assert_eq!(mln.stages()[1].rows, [0, 1, 2, 3, 4, 5, 6, 14, 15]);
+    assert_eq!(mln.stages()[1].linked, [14, 15]);
+}
