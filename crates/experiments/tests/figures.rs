@@ -113,6 +113,7 @@ fn record(algorithm: &str, run: u64, bias: f64) -> RunRecord {
             particle_steps_per_s: 1.0e5,
             validation_s: 0.1,
         },
+        warnings: Vec::new(),
     }
 }
 
