@@ -212,7 +212,10 @@ pub struct Finding {
 
 /// Records of one algorithm.
 fn of<'a>(records: &'a [RunRecord], algorithm: &str) -> Vec<&'a RunRecord> {
-    records.iter().filter(|r| r.algorithm == algorithm).collect()
+    records
+        .iter()
+        .filter(|r| r.algorithm == algorithm)
+        .collect()
 }
 
 /// Display name of an algorithm (record name → report label).
@@ -526,8 +529,10 @@ pub fn paper_findings(fig4: &[RunRecord], fig7: &[RunRecord]) -> Vec<Finding> {
             evidence: e.show(100.0, 1, "%"),
         });
     }
-    let present =
-        |p: &str| fig7.first().is_some_and(|r| r.param_names.iter().any(|n| n == p));
+    let present = |p: &str| {
+        fig7.first()
+            .is_some_and(|r| r.param_names.iter().any(|n| n == p))
+    };
     let fair: Vec<&str> = ["gamma", "n"].into_iter().filter(|p| present(p)).collect();
     if !fair.is_empty() {
         if let Some(f) = ratio_band(
