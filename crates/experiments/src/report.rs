@@ -252,6 +252,7 @@ pub fn write_report(
         o,
         "Paper: MPF-EKF2 is as good on k and c and has lower state-estimation error.\n"
     );
+    let _ = writeln!(o, "Fig. 6(b) shows the distribution over runs of each state's online NRMSE (box: quartiles and median, whiskers: smallest and largest run, dots: runs): one run can rank the algorithms either way. The records keep no state time histories, so the paper's one-run time history is not drawn.\n");
     if let (Some(a), Some(b)) = (
         first("fig6", Algorithm::MlnRbpf),
         first("fig6", Algorithm::MpfEkf2),
@@ -357,14 +358,16 @@ pub fn write_report(
         records.get("fig4").unwrap_or(&none),
         records.get("fig7").unwrap_or(&none),
     );
+    // A `|` inside a cell (|ratio − 1|) would end the cell.
+    let cell = |s: &str| s.replace('|', "\\|");
     for f in &findings {
         row(
             &mut o,
             &[
-                f.statement.clone(),
+                cell(&f.statement),
                 format!("**{}**", f.verdict.label()),
-                f.test.clone(),
-                f.evidence.clone(),
+                cell(&f.test),
+                cell(&f.evidence),
             ],
         );
     }
