@@ -79,7 +79,7 @@ impl Estimate {
     /// The ±2 s.e. interval, `None` when the estimate is not usable.
     fn interval(&self) -> Option<(f64, f64)> {
         (self.mean.is_finite() && self.se.is_finite())
-            .then(|| (self.mean - 2.0 * self.se, self.mean + 2.0 * self.se))
+            .then_some((self.mean - 2.0 * self.se, self.mean + 2.0 * self.se))
     }
 
     /// `mean ± se (n = …)` with `scale` applied (e.g. 100 for percent) and `unit` appended.
