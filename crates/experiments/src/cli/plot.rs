@@ -47,6 +47,12 @@ pub fn run(args: Args) -> Result<()> {
     for f in &p.written {
         println!("{}", f.display());
     }
+    if p.written.is_empty() {
+        eprintln!(
+            "note: nothing drawn: {} holds none of the data above",
+            args.record.display()
+        );
+    }
     Ok(())
 }
 
