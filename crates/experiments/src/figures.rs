@@ -5,13 +5,15 @@
 //! - [`hysteresis`]: restoring force k1·r1 against x1, true loop and validation loop
 //!   (Figs. 4 (b), 8);
 //! - [`crosses`]: θ_val / θ_true over many runs, a cross at the mean with arms of ± one s.d.
-//!   per algorithm (Fig. 7);
-//! - [`state_errors`]: mean online-state NRMSE per state and algorithm (Fig. 6 companion);
+//!   per algorithm, one panel (and scale) per parameter group (Fig. 7);
+//! - [`state_errors`]: distribution over runs of the online-state NRMSE per state and algorithm
+//!   (Fig. 6 (b));
 //! - [`validate_svg`]: a cheap well-formedness check of a written figure.
 //!
 //! Every function writes one SVG file, creating its parent directories. Non-finite values in a
 //! record (a diverged run, a failure mid-trace) leave gaps in the curves instead of corrupting
-//! the axes; values outside a panel's clamped range are drawn on its edge.
+//! the axes; every drawn mean, cross and run lies inside its axes (only a convergence figure's
+//! ±2 s.d. bands may be clipped, and the panel says so).
 
 use std::path::Path;
 
@@ -267,56 +269,42 @@ fn at(rows: &[Vec<f64>], k: usize, j: usize) -> f64 {
         .unwrap_or(f64::NAN)
 }
 
-/// Y range of one convergence panel: the posterior means ± 2 s.d. and the true value, clamped so
-/// that one diverging band does not flatten the panel: for a positive parameter never wider than
-/// [0, 4 × reference], the reference being the true value or, without one, the largest first
-/// posterior mean (the prior mean, which does not diverge with the filter).
-fn convergence_y_range(runs: &[(&str, &RunRecord)], j: usize, truth: Option<f64>) -> (f64, f64) {
-    let mut values = Vec::new();
-    let mut all_positive = true;
-    let mut first_mean = f64::NEG_INFINITY;
+/// Y range of one convergence panel and whether the ±2 s.d. bands were clipped. The range always
+/// contains every posterior mean and the true value (a mean of γ at −2.6 is drawn at −2.6, not on
+/// an edge); the bands widen it on each side by at most the larger of the core range's width and
+/// its largest |value|, so that one diverging band does not flatten the panel. Band
+/// parts beyond are drawn on the edge and the panel says so.
+pub fn convergence_y_range(
+    runs: &[(&str, &RunRecord)],
+    j: usize,
+    truth: Option<f64>,
+) -> ((f64, f64), bool) {
+    let mut means = Vec::new();
+    let mut bands = Vec::new();
     for (_, r) in runs {
         let tr = &r.trace;
-        let mut first = f64::NAN;
         for k in 0..tr.t.len() {
             let m = at(&tr.param_mean, k, j);
             if !m.is_finite() {
                 continue;
             }
-            all_positive &= m > 0.0;
-            if first.is_nan() {
-                first = m;
-            }
-            values.push(m);
+            means.push(m);
             let sd = at(&tr.param_sd, k, j);
             if sd.is_finite() {
-                values.push(m - 2.0 * sd);
-                values.push(m + 2.0 * sd);
+                bands.push(m - 2.0 * sd);
+                bands.push(m + 2.0 * sd);
             }
         }
-        if first.is_finite() {
-            first_mean = first_mean.max(first);
-        }
     }
-    if let Some(t) = truth {
-        values.push(t);
-    }
-    let Some((mut lo, mut hi)) = finite_range(values) else {
-        return (0.0, 1.0);
+    means.extend(truth);
+    let Some((core_lo, core_hi)) = finite_range(means) else {
+        return ((0.0, 1.0), false);
     };
-    let positive = match truth {
-        Some(t) => t > 0.0,
-        None => all_positive && first_mean > 0.0,
-    };
-    if positive {
-        let reference = truth.unwrap_or(first_mean);
-        lo = lo.max(0.0);
-        hi = hi.min(4.0 * reference);
-        if hi <= lo {
-            (lo, hi) = (0.0, 4.0 * reference);
-        }
-    }
-    padded((lo, hi))
+    let (band_lo, band_hi) = finite_range(bands).unwrap_or((core_lo, core_hi));
+    let reach = (core_hi - core_lo).max(core_lo.abs().max(core_hi.abs()));
+    let lo = band_lo.max(core_lo - reach).min(core_lo);
+    let hi = band_hi.min(core_hi + reach).max(core_hi);
+    (padded((lo, hi)), lo > band_lo || hi < band_hi)
 }
 
 /// Convergence figure (SPEC §8, Figs. 4, 5, 6, 8): one panel per parameter (3×3 for the nine
@@ -375,9 +363,14 @@ pub fn convergence(runs: &[(&str, &RunRecord)], path: &Path, title: &str) -> Res
 
     for (j, (name, area)) in names.iter().zip(&panels).enumerate() {
         let truth_j = truth(j);
-        let (lo, hi) = convergence_y_range(runs, j, truth_j);
+        let ((lo, hi), clipped) = convergence_y_range(runs, j, truth_j);
+        let caption = if clipped {
+            format!("{name} {} (bands clipped)", param_unit(name))
+        } else {
+            format!("{name} {}", param_unit(name))
+        };
         let mut chart = ChartBuilder::on(area)
-            .caption(format!("{name} {}", param_unit(name)), (FONT, CAPTION_SIZE))
+            .caption(caption, (FONT, CAPTION_SIZE))
             .margin(8)
             .x_label_area_size(48)
             .y_label_area_size(70)
@@ -626,22 +619,6 @@ pub fn crosses(groups: &[(&str, Vec<&RunRecord>)], path: &Path, title: &str) -> 
         });
     }
 
-    // Ratios to the truth: the axis always shows 1 and is clamped to [−1, 4] so that one
-    // wild estimate (β is poorly identified, SPEC §8) does not flatten the others.
-    let values = summaries.iter().flat_map(|s| {
-        s.mean
-            .iter()
-            .zip(&s.sd)
-            .flat_map(|(m, sd)| {
-                let sd = if sd.is_finite() { *sd } else { 0.0 };
-                [m - sd, m + sd]
-            })
-            .collect::<Vec<_>>()
-    });
-    let (lo, hi) = finite_range(values.chain([1.0])).unwrap_or((0.0, 2.0));
-    let (lo, hi) = padded((lo.clamp(-1.0, 0.9), hi.clamp(1.1, 4.0)));
-
-    let n = names.len();
     let g = groups.len().max(1);
     let width = 0.7 / g as f64;
     let offset = |i: usize| (i as f64 - (g as f64 - 1.0) / 2.0) * width;
@@ -665,56 +642,83 @@ pub fn crosses(groups: &[(&str, Vec<&RunRecord>)], path: &Path, title: &str) -> 
     entries.push((Swatch::Dashed(BLACK), "truth".to_string()));
     let (_, legend_h) = legend_layout(&entries);
 
+    // One panel per parameter group, each on its own scale, so that the stiffnesses' small
+    // differences are not flattened by the hysteresis parameters' large ones.
+    let panels = parameter_groups(names);
     create_parent(path)?;
     let root = SVGBackend::new(path, (WIDTH, 760 + legend_h)).into_drawing_area();
     let body = titled_root(&root, title)?;
     let (body, legend) = body.split_vertically(body.dim_in_pixel().1 - legend_h);
-    let mut chart = ChartBuilder::on(&body)
-        .margin(20)
-        .x_label_area_size(60)
-        .y_label_area_size(90)
-        .build_cartesian_2d(-0.5..(n as f64 - 0.5), lo..hi)?;
-    let yspan = hi - lo;
-    chart
-        .configure_mesh()
-        .disable_x_mesh()
-        .x_labels(0)
-        .y_label_formatter(&|v| tick(*v, yspan))
-        .x_desc("parameter")
-        .y_desc("θ_val / θ_true [-]")
-        .label_style((FONT, LABEL_SIZE))
-        .axis_desc_style((FONT, DESC_SIZE))
-        .light_line_style(WHITE)
-        .draw()?;
-    category_labels(&root, &chart, names, lo)?;
-    chart.draw_series(DashedLineSeries::new(
-        vec![(-0.5, 1.0), (n as f64 - 0.5, 1.0)],
-        10,
-        6,
-        BLACK.stroke_width(2),
-    ))?;
-
-    let clamp = |v: f64| v.clamp(lo, hi);
-    for (i, s) in summaries.iter().enumerate() {
-        let c = colour(i);
-        let arm = 0.35 * width;
-        for j in 0..n {
-            let (m, sd) = (s.mean[j], s.sd[j]);
-            if !m.is_finite() {
-                continue;
+    let (body_w, _) = body.dim_in_pixel();
+    // Widths in proportion to the parameters shown, plus room for each panel's y labels.
+    let weight = |p: &(String, Vec<usize>)| p.1.len() as f64 + 1.2;
+    let total: f64 = panels.iter().map(weight).sum();
+    let mut cuts = Vec::new();
+    let mut acc = 0.0;
+    for p in &panels[..panels.len() - 1] {
+        acc += weight(p);
+        cuts.push((acc / total * body_w as f64).round() as i32);
+    }
+    let areas = body.split_by_breakpoints(cuts, Vec::<i32>::new());
+    for ((group, idx), area) in panels.iter().zip(&areas) {
+        // Every drawn value is inside the axis: mean ± s.d. of every algorithm, and 1.
+        let values = summaries.iter().flat_map(|s| {
+            idx.iter()
+                .flat_map(|&j| {
+                    let sd = if s.sd[j].is_finite() { s.sd[j] } else { 0.0 };
+                    [s.mean[j] - sd, s.mean[j] + sd]
+                })
+                .collect::<Vec<_>>()
+        });
+        let (lo, hi) = padded(finite_range(values.chain([1.0])).unwrap_or((0.0, 2.0)));
+        let k = idx.len();
+        let mut chart = ChartBuilder::on(area)
+            .caption(group.clone(), (FONT, CAPTION_SIZE))
+            .margin(14)
+            .x_label_area_size(50)
+            .y_label_area_size(80)
+            .build_cartesian_2d(-0.5..(k as f64 - 0.5), lo..hi)?;
+        let yspan = hi - lo;
+        chart
+            .configure_mesh()
+            .disable_x_mesh()
+            .x_labels(0)
+            .y_labels(8)
+            .y_label_formatter(&|v| tick(*v, yspan))
+            .y_desc("θ_val / θ_true [-]")
+            .label_style((FONT, LABEL_SIZE))
+            .axis_desc_style((FONT, DESC_SIZE))
+            .light_line_style(WHITE)
+            .draw()?;
+        let sub: Vec<String> = idx.iter().map(|&j| names[j].clone()).collect();
+        category_labels(&root, &chart, &sub, lo)?;
+        chart.draw_series(DashedLineSeries::new(
+            vec![(-0.5, 1.0), (k as f64 - 0.5, 1.0)],
+            10,
+            6,
+            BLACK.stroke_width(2),
+        ))?;
+        for (i, s) in summaries.iter().enumerate() {
+            let c = colour(i);
+            let arm = 0.35 * width;
+            for (x0, &j) in idx.iter().enumerate() {
+                let (m, sd) = (s.mean[j], s.sd[j]);
+                if !m.is_finite() {
+                    continue;
+                }
+                let x = x0 as f64 + offset(i);
+                let sd = if sd.is_finite() { sd } else { 0.0 };
+                chart.draw_series(std::iter::once(PathElement::new(
+                    vec![(x, m - sd), (x, m + sd)],
+                    c.stroke_width(3),
+                )))?;
+                chart.draw_series(std::iter::once(PathElement::new(
+                    vec![(x - arm, m), (x + arm, m)],
+                    c.stroke_width(3),
+                )))?;
+                let (px, py) = chart.backend_coord(&(x, m));
+                root.draw(&marker(i, (px, py), c))?;
             }
-            let x = j as f64 + offset(i);
-            let sd = if sd.is_finite() { sd } else { 0.0 };
-            chart.draw_series(std::iter::once(PathElement::new(
-                vec![(x, clamp(m - sd)), (x, clamp(m + sd))],
-                c.stroke_width(3),
-            )))?;
-            chart.draw_series(std::iter::once(PathElement::new(
-                vec![(x - arm, clamp(m)), (x + arm, clamp(m))],
-                c.stroke_width(3),
-            )))?;
-            let (px, py) = chart.backend_coord(&(x, clamp(m)));
-            root.draw(&marker(i, (px, py), c))?;
         }
     }
     legend_strip(&legend, &entries)?;
@@ -723,9 +727,58 @@ pub fn crosses(groups: &[(&str, Vec<&RunRecord>)], path: &Path, title: &str) -> 
     Ok(())
 }
 
-/// State-error figure (companion of Fig. 6, SPEC §7): grouped bars of the online-state NRMSE per
-/// state (x axis) and algorithm (colour), the mean over the given runs with a ± one s.d.
-/// whisker. Failed runs and runs without online errors are skipped and counted in the legend.
+/// Parameters grouped for separate panels, in order of first appearance: stiffnesses `k…`,
+/// dampings `c…`, and the rest (the hysteresis parameters β, γ, n of SPEC §1). Empty groups are
+/// left out.
+pub fn parameter_groups(names: &[String]) -> Vec<(String, Vec<usize>)> {
+    let numbered = |name: &str, prefix: char| {
+        name.strip_prefix(prefix)
+            .is_some_and(|r| !r.is_empty() && r.chars().all(|c| c.is_ascii_digit()))
+    };
+    let mut groups: Vec<(String, Vec<usize>)> = vec![
+        ("stiffness".into(), Vec::new()),
+        ("damping".into(), Vec::new()),
+        ("hysteresis".into(), Vec::new()),
+    ];
+    for (j, name) in names.iter().enumerate() {
+        let g = if numbered(name, 'k') {
+            0
+        } else if numbered(name, 'c') {
+            1
+        } else {
+            2
+        };
+        groups[g].1.push(j);
+    }
+    groups.retain(|(_, idx)| !idx.is_empty());
+    groups
+}
+
+/// Quartiles (linear interpolation between order statistics) of sorted finite values.
+fn quartiles(sorted: &[f64]) -> Option<[f64; 5]> {
+    if sorted.is_empty() {
+        return None;
+    }
+    let q = |p: f64| {
+        let h = p * (sorted.len() - 1) as f64;
+        let (i, f) = (h.floor() as usize, h.fract());
+        let next = sorted[(i + 1).min(sorted.len() - 1)];
+        sorted[i] + f * (next - sorted[i])
+    };
+    Some([
+        sorted[0],
+        q(0.25),
+        q(0.5),
+        q(0.75),
+        sorted[sorted.len() - 1],
+    ])
+}
+
+/// State-error figure (Fig. 6 (b), SPEC §7): the distribution over runs of the online-state
+/// NRMSE, per state (x axis) and algorithm (colour): a box from the lower to the upper quartile
+/// with the median, whiskers to the smallest and largest run, and every run as a dot. One run of
+/// each algorithm can rank them either way; the distributions show whether the difference is
+/// systematic. Failed runs and runs without online errors are skipped and counted in the legend.
 pub fn state_errors(groups: &[(&str, Vec<&RunRecord>)], path: &Path, title: &str) -> Result<()> {
     // State names in order of first appearance over all records.
     let mut names: Vec<String> = Vec::new();
@@ -744,73 +797,62 @@ pub fn state_errors(groups: &[(&str, Vec<&RunRecord>)], path: &Path, title: &str
             path.display()
         );
     }
-    struct Summary {
-        mean: Vec<f64>,
-        sd: Vec<f64>,
-        used: usize,
-        skipped: usize,
-    }
-    let summaries: Vec<Summary> = groups
-        .iter()
-        .map(|(_, runs)| {
-            let usable: Vec<_> = runs
-                .iter()
-                .filter(|r| !r.is_failure())
-                .filter_map(|r| r.online_states.as_ref())
-                .collect();
-            let (mut mean, mut sd) = (Vec::new(), Vec::new());
-            for name in &names {
-                let column: Vec<f64> = usable
-                    .iter()
-                    .map(|s| {
-                        s.names
-                            .iter()
-                            .position(|n| n == name)
-                            .and_then(|p| s.errors.get(p))
-                            .map_or(f64::NAN, |e| e.nrmse)
-                    })
-                    .collect();
-                let (m, s, _) = mean_sd(&column);
-                mean.push(m);
-                sd.push(s);
-            }
-            Summary {
-                mean,
-                sd,
-                used: usable.len(),
-                skipped: runs.len() - usable.len(),
-            }
-        })
-        .collect();
-
-    let top = finite_range(summaries.iter().flat_map(|s| {
-        s.mean
+    // values[i][j]: the NRMSE of state j in every usable run of algorithm i.
+    let mut values: Vec<Vec<Vec<f64>>> = Vec::new();
+    let mut used = Vec::new();
+    let mut skipped = Vec::new();
+    for (_, runs) in groups {
+        let usable: Vec<_> = runs
             .iter()
-            .zip(&s.sd)
-            .map(|(m, sd)| m + if sd.is_finite() { *sd } else { 0.0 })
-            .collect::<Vec<_>>()
-    }))
-    .map_or(1.0, |(_, hi)| hi);
-    let top = if top > 0.0 { 1.1 * top } else { 1.0 };
+            .filter(|r| !r.is_failure())
+            .filter_map(|r| r.online_states.as_ref())
+            .collect();
+        values.push(
+            names
+                .iter()
+                .map(|name| {
+                    usable
+                        .iter()
+                        .filter_map(|s| {
+                            s.names
+                                .iter()
+                                .position(|n| n == name)
+                                .and_then(|p| s.errors.get(p))
+                                .map(|e| e.nrmse)
+                        })
+                        .filter(|v| v.is_finite())
+                        .collect()
+                })
+                .collect(),
+        );
+        used.push(usable.len());
+        skipped.push(runs.len() - usable.len());
+    }
+    // Every drawn value (every run) is inside the axis.
+    let top = finite_range(values.iter().flatten().flatten().copied()).map_or(1.0, |(_, hi)| hi);
+    let top = if top > 0.0 { 1.05 * top } else { 1.0 };
 
     let n = names.len();
     let g = groups.len().max(1);
     let width = 0.8 / g as f64;
     let offset = |i: usize| (i as f64 - (g as f64 - 1.0) / 2.0) * width;
 
-    let entries: Vec<(Swatch, String)> = groups
+    let mut entries: Vec<(Swatch, String)> = groups
         .iter()
-        .zip(&summaries)
         .enumerate()
-        .map(|(i, ((label, _), s))| {
-            let mut text = format!("{label} (n = {}", s.used);
-            if s.skipped > 0 {
-                text.push_str(&format!(", {} skipped", s.skipped));
+        .map(|(i, (label, _))| {
+            let mut text = format!("{label} (n = {}", used[i]);
+            if skipped[i] > 0 {
+                text.push_str(&format!(", {} skipped", skipped[i]));
             }
             text.push(')');
             (Swatch::Bar(colour(i)), text)
         })
         .collect();
+    entries.push((
+        Swatch::Line(BLACK),
+        "box: quartiles and median; whiskers: min–max; dots: runs".to_string(),
+    ));
     let (_, legend_h) = legend_layout(&entries);
 
     create_parent(path)?;
@@ -828,33 +870,213 @@ pub fn state_errors(groups: &[(&str, Vec<&RunRecord>)], path: &Path, title: &str
         .x_labels(0)
         .y_label_formatter(&|v| tick(*v, top))
         .x_desc("state")
-        .y_desc("NRMSE [-]")
+        .y_desc("online NRMSE [-]")
         .label_style((FONT, LABEL_SIZE))
         .axis_desc_style((FONT, DESC_SIZE))
         .light_line_style(WHITE)
         .draw()?;
     category_labels(&root, &chart, &names, 0.0)?;
 
-    for (i, s) in summaries.iter().enumerate() {
+    for (i, per_state) in values.iter().enumerate() {
         let c = colour(i);
-        for j in 0..n {
-            let m = s.mean[j];
-            if !m.is_finite() {
+        let half = 0.4 * width;
+        for (j, v) in per_state.iter().enumerate() {
+            let mut sorted = v.clone();
+            sorted.sort_by(f64::total_cmp);
+            let Some([min, q1, med, q3, max]) = quartiles(&sorted) else {
                 continue;
-            }
+            };
             let x = j as f64 + offset(i);
-            let m = m.clamp(0.0, top);
             chart.draw_series(std::iter::once(Rectangle::new(
-                [(x - 0.45 * width, 0.0), (x + 0.45 * width, m)],
-                c.mix(0.85).filled(),
+                [(x - half, q1), (x + half, q3)],
+                c.mix(0.35).filled(),
             )))?;
-            if s.sd[j].is_finite() && s.sd[j] > 0.0 {
-                let (a, b) = ((m - s.sd[j]).max(0.0), (m + s.sd[j]).min(top));
+            chart.draw_series(std::iter::once(Rectangle::new(
+                [(x - half, q1), (x + half, q3)],
+                c.stroke_width(2),
+            )))?;
+            for (a, b) in [(min, q1), (q3, max)] {
                 chart.draw_series(std::iter::once(PathElement::new(
                     vec![(x, a), (x, b)],
-                    BLACK.stroke_width(2),
+                    c.stroke_width(2),
                 )))?;
             }
+            chart.draw_series(std::iter::once(PathElement::new(
+                vec![(x - half, med), (x + half, med)],
+                BLACK.stroke_width(3),
+            )))?;
+            // Runs as dots, spread deterministically across the box's width.
+            let m = v.len().max(1) as f64;
+            chart.draw_series(v.iter().enumerate().map(|(k, &y)| {
+                let jitter = ((k as f64 + 0.5) / m - 0.5) * 1.6 * half;
+                Circle::new((x + jitter, y), 2, c.filled())
+            }))?;
+        }
+    }
+    legend_strip(&legend, &entries)?;
+    root.present()
+        .with_context(|| format!("writing {}", path.display()))?;
+    Ok(())
+}
+
+/// One line of a [`time_series`] panel.
+pub struct Series<'a> {
+    pub label: String,
+    pub t: &'a [f64],
+    pub y: &'a [f64],
+    /// Index into the palette; `None` draws in black.
+    pub colour: Option<usize>,
+}
+
+/// One panel of a [`time_series`] figure.
+pub struct Panel<'a> {
+    pub caption: String,
+    pub y_desc: String,
+    pub series: Vec<Series<'a>>,
+    /// Horizontal reference lines (e.g. ±2 for normalised innovations), dashed.
+    pub reference: Vec<f64>,
+}
+
+/// Time-series figure: panels stacked vertically, lines against t, every drawn value inside the
+/// axes; non-finite values leave gaps. Legend entries are taken from the first panel.
+pub fn time_series(panels: &[Panel<'_>], path: &Path, title: &str) -> Result<()> {
+    if panels.is_empty() {
+        bail!("time-series figure {}: no panels", path.display());
+    }
+    let (t0, t1) = padded(
+        finite_range(
+            panels
+                .iter()
+                .flat_map(|p| p.series.iter().flat_map(|s| s.t.iter().copied())),
+        )
+        .unwrap_or((0.0, 1.0)),
+    );
+    let colour_of = |s: &Series<'_>| s.colour.map_or(BLACK, colour);
+    let entries: Vec<(Swatch, String)> = panels[0]
+        .series
+        .iter()
+        .map(|s| (Swatch::Line(colour_of(s)), s.label.clone()))
+        .collect();
+    let (_, legend_h) = legend_layout(&entries);
+    let height = 60 + legend_h + 300 * panels.len() as u32;
+    create_parent(path)?;
+    let root = SVGBackend::new(path, (WIDTH, height)).into_drawing_area();
+    let body = titled_root(&root, title)?;
+    let (grid, legend) = body.split_vertically(body.dim_in_pixel().1 - legend_h);
+    let areas = grid.split_evenly((panels.len(), 1));
+    for (panel, area) in panels.iter().zip(&areas) {
+        let values = panel
+            .series
+            .iter()
+            .flat_map(|s| s.y.iter().copied())
+            .chain(panel.reference.iter().copied());
+        let (lo, hi) = padded(finite_range(values).unwrap_or((-1.0, 1.0)));
+        let mut chart = ChartBuilder::on(area)
+            .caption(panel.caption.clone(), (FONT, CAPTION_SIZE))
+            .margin(8)
+            .x_label_area_size(48)
+            .y_label_area_size(80)
+            .build_cartesian_2d(t0..t1, lo..hi)?;
+        let (tspan, yspan) = (t1 - t0, hi - lo);
+        chart
+            .configure_mesh()
+            .x_desc("t [s]")
+            .y_desc(panel.y_desc.clone())
+            .x_labels(8)
+            .y_labels(5)
+            .x_label_formatter(&|v| tick(*v, tspan))
+            .y_label_formatter(&|v| tick(*v, yspan))
+            .label_style((FONT, LABEL_SIZE))
+            .axis_desc_style((FONT, DESC_SIZE))
+            .light_line_style(WHITE)
+            .draw()?;
+        for r in &panel.reference {
+            chart.draw_series(DashedLineSeries::new(
+                vec![(t0, *r), (t1, *r)],
+                10,
+                6,
+                BLACK.stroke_width(1),
+            ))?;
+        }
+        for s in &panel.series {
+            let n = s.t.len().min(s.y.len());
+            let ok = |k: usize| s.t[k].is_finite() && s.y[k].is_finite();
+            for seg in segments(n, ok) {
+                let points: Vec<(f64, f64)> = seg.map(|k| (s.t[k], s.y[k])).collect();
+                chart.draw_series(LineSeries::new(points, colour_of(s).stroke_width(2)))?;
+            }
+        }
+    }
+    legend_strip(&legend, &entries)?;
+    root.present()
+        .with_context(|| format!("writing {}", path.display()))?;
+    Ok(())
+}
+
+/// Autocorrelation figure: for each channel a panel of the sample autocorrelation at lags
+/// 1, 2, … as stems, with the ±`bound` band of a white sequence dashed (1.96/√n for 95%).
+pub fn autocorrelation(
+    channels: &[(String, Vec<f64>)],
+    bound: f64,
+    path: &Path,
+    title: &str,
+) -> Result<()> {
+    if channels.is_empty() {
+        bail!("autocorrelation figure {}: no channels", path.display());
+    }
+    let entries = vec![
+        (
+            Swatch::Line(colour(0)),
+            "sample autocorrelation".to_string(),
+        ),
+        (
+            Swatch::Dashed(BLACK),
+            format!("±{bound:.3}: 95% band of a white sequence"),
+        ),
+    ];
+    let (_, legend_h) = legend_layout(&entries);
+    let height = 60 + legend_h + 260 * channels.len() as u32;
+    create_parent(path)?;
+    let root = SVGBackend::new(path, (WIDTH, height)).into_drawing_area();
+    let body = titled_root(&root, title)?;
+    let (grid, legend) = body.split_vertically(body.dim_in_pixel().1 - legend_h);
+    let areas = grid.split_evenly((channels.len(), 1));
+    for ((name, rho), area) in channels.iter().zip(&areas) {
+        let lags = rho.len().max(1) as f64;
+        let (lo, hi) = padded(
+            finite_range(rho.iter().copied().chain([bound, -bound, 0.0])).unwrap_or((-1.0, 1.0)),
+        );
+        let mut chart = ChartBuilder::on(area)
+            .caption(name.clone(), (FONT, CAPTION_SIZE))
+            .margin(8)
+            .x_label_area_size(48)
+            .y_label_area_size(80)
+            .build_cartesian_2d(0.0..lags + 0.5, lo..hi)?;
+        let yspan = hi - lo;
+        chart
+            .configure_mesh()
+            .x_desc("lag [steps]")
+            .y_desc("autocorrelation [-]")
+            .x_label_formatter(&|v| format!("{v:.0}"))
+            .y_label_formatter(&|v| tick(*v, yspan))
+            .label_style((FONT, LABEL_SIZE))
+            .axis_desc_style((FONT, DESC_SIZE))
+            .light_line_style(WHITE)
+            .draw()?;
+        for b in [bound, -bound] {
+            chart.draw_series(DashedLineSeries::new(
+                vec![(0.0, b), (lags + 0.5, b)],
+                10,
+                6,
+                BLACK.stroke_width(1),
+            ))?;
+        }
+        for (k, r) in rho.iter().enumerate().filter(|(_, r)| r.is_finite()) {
+            let x = (k + 1) as f64;
+            chart.draw_series(std::iter::once(PathElement::new(
+                vec![(x, 0.0), (x, *r)],
+                colour(0).stroke_width(3),
+            )))?;
         }
     }
     legend_strip(&legend, &entries)?;

@@ -6,8 +6,11 @@
 //! - [`metrics`]: θ_val, relative errors, CV(RMSE) and NRMSE (SPEC §7);
 //! - [`observe`]: the observer that records traces and online errors during a run;
 //! - [`record`]: the run record written for every run;
-//! - [`sweep`]: parallel, resumable, shardable sweeps over runs.
+//! - [`sweep`]: parallel, resumable, shardable sweeps over runs;
+//! - [`verdict`]: the paper's statements decided by stated tests on the records (REPORT.md);
+//! - [`checks`]: plausibility warnings on a finished run record.
 
+pub mod checks;
 pub mod cli;
 pub mod figures;
 pub mod metrics;
@@ -18,3 +21,4 @@ pub mod report;
 pub mod reproduce;
 pub mod study;
 pub mod sweep;
+pub mod verdict;

@@ -430,6 +430,7 @@ pub fn identify(input: &RunInput, algorithm: Algorithm, s: &FilterSettings) -> R
                 / d.wall_s.max(1e-12),
             validation_s,
         },
+        warnings: Vec::new(),
     })
 }
 

@@ -108,6 +108,10 @@ pub struct RunRecord {
     /// Decimated traces of posterior means and s.d.s (decimation stated inside).
     pub trace: Trace,
     pub timing: Timing,
+    /// Plausibility warnings with their reasons (`checks::check`): an impossible answer, a
+    /// posterior resting on few particles, a failure. Absent in records written before checks.
+    #[serde(default)]
+    pub warnings: Vec<crate::checks::Warning>,
 }
 
 impl RunRecord {

@@ -6,7 +6,9 @@ use std::collections::BTreeMap;
 use std::path::PathBuf;
 
 use core_filters::Health;
-use experiments::figures::{convergence, crosses, hysteresis, state_errors, validate_svg};
+use experiments::figures::{
+    convergence, convergence_y_range, crosses, hysteresis, state_errors, validate_svg,
+};
 use experiments::metrics::{SignalError, StateErrors};
 use experiments::observe::Trace;
 use experiments::record::{Loop, RunRecord, Timing, Validation, Versions};
@@ -113,6 +115,7 @@ fn record(algorithm: &str, run: u64, bias: f64) -> RunRecord {
             particle_steps_per_s: 1.0e5,
             validation_s: 0.1,
         },
+        warnings: Vec::new(),
     }
 }
 
@@ -173,7 +176,7 @@ fn convergence_survives_nan_and_missing_truth() {
     a.trace.param_sd[6][2] = f64::INFINITY;
     a.trace.param_mean[7].truncate(4);
     a.trace.t[9] = f64::NAN;
-    // One parameter diverges: its panel is clamped instead of flattened.
+    // One parameter diverges: its axis includes every mean (the bands are clipped).
     for row in a.trace.param_mean.iter_mut().skip(20) {
         row[8] = 1.0e6;
     }
@@ -353,4 +356,108 @@ fn validate_svg_rejects_non_svg() {
     std::fs::write(&p, "<?xml version=\"1.0\"?>\n<svg></svg>\n").unwrap();
     validate_svg(&p).unwrap();
     assert!(validate_svg(&dir.join("missing.svg")).is_err());
+}
+
+/// Numbers written as text between the first text `start` and the next text `end`.
+fn numbers_between(svg: &str, start: &str, end: &str) -> Vec<f64> {
+    let a = svg.find(start).unwrap_or_else(|| panic!("no {start}"));
+    let b = a + svg[a..].find(end).unwrap_or_else(|| panic!("no {end}"));
+    svg[a..b]
+        .split("</text>")
+        .filter_map(|chunk| chunk.rsplit('>').next())
+        .filter_map(|t| t.trim().parse::<f64>().ok())
+        .collect()
+}
+
+#[test]
+fn convergence_axes_include_every_mean() {
+    let dir = out_dir("convergence-negative");
+    // γ's posterior mean runs off to −2.6 although the truth (1) is positive (Fig. 4 (a)).
+    let mut a = record("Bootstrap", 0, 0.0);
+    for row in a.trace.param_mean.iter_mut().skip(5) {
+        row[7] = -2.60;
+    }
+    let path = dir.join("fig4a.svg");
+    convergence(&[("bootstrap PF", &a)], &path, "Fig. 4(a)").unwrap();
+    let svg = read(&path);
+    // Clipped at 0 (the former behaviour) the lowest tick would be 0; the axis reaches −2.6.
+    let ticks = numbers_between(&svg, "\ngamma [", "\nn [");
+    let lowest = ticks.iter().copied().fold(f64::INFINITY, f64::min);
+    assert!(lowest <= -2.0, "γ axis ticks {ticks:?}");
+    let ((lo, hi), _) = convergence_y_range(&[("bootstrap PF", &a)], 7, Some(1.0));
+    assert!(lo < -2.6 && hi > 1.0, "γ axis {lo}..{hi}");
+    // Every mean of every parameter is inside its axis.
+    for j in 0..9 {
+        let ((lo, hi), _) = convergence_y_range(&[("bootstrap PF", &a)], j, Some(THETA_TRUE[j]));
+        for row in &a.trace.param_mean {
+            assert!(
+                row[j] >= lo && row[j] <= hi,
+                "parameter {j}: {} outside {lo}..{hi}",
+                row[j]
+            );
+        }
+    }
+}
+
+#[test]
+fn crosses_panels_have_their_own_scales() {
+    let dir = out_dir("crosses-scales");
+    // Stiffness ratios within ±2%, β at 3 × its truth.
+    let runs: Vec<RunRecord> = (0..6)
+        .map(|i| {
+            let mut r = record("MLN-RBPF", i, 0.0);
+            for j in 0..3 {
+                r.theta_val[j] = 8.0 * (1.0 + 0.004 * (i as f64 - 2.5));
+            }
+            r.theta_val[6] = 6.0;
+            r
+        })
+        .collect();
+    let path = dir.join("fig7.svg");
+    crosses(&[("MLN-RBPF", runs.iter().collect())], &path, "Fig. 7").unwrap();
+    let svg = read(&path);
+    for caption in ["stiffness", "damping", "hysteresis"] {
+        assert!(has_label(&svg, caption), "panel {caption}");
+    }
+    let k_ticks = numbers_between(&svg, "\nstiffness\n", "\ndamping\n");
+    let (lo, hi) = k_ticks
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
+            (a.min(*v), b.max(*v))
+        });
+    assert!(
+        hi - lo < 0.2,
+        "stiffness panel spans {lo}..{hi}: differences of 1% must be visible"
+    );
+    let h_ticks = numbers_between(&svg, "\nhysteresis\n", "MLN-RBPF (n =");
+    assert!(
+        h_ticks.iter().any(|v| *v >= 3.0),
+        "β at 3 × truth inside its panel: {h_ticks:?}"
+    );
+}
+
+#[test]
+fn state_errors_draw_the_distribution_of_every_run() {
+    let dir = out_dir("states-distribution");
+    let a: Vec<RunRecord> = (0..50)
+        .map(|i| record("MLN-RBPF", i, 0.01 * i as f64))
+        .collect();
+    let b: Vec<RunRecord> = (0..50)
+        .map(|i| record("MPF-EKF2", i, -0.005 * i as f64))
+        .collect();
+    let path = dir.join("fig6b.svg");
+    state_errors(
+        &[
+            ("MLN-RBPF", a.iter().collect()),
+            ("MPF-EKF2", b.iter().collect()),
+        ],
+        &path,
+        "Fig. 6(b)",
+    )
+    .unwrap();
+    let svg = read(&path);
+    // One dot per run, state and algorithm.
+    assert_eq!(svg.matches("<circle").count(), 50 * 7 * 2);
+    assert!(svg.contains("quartiles"));
+    assert!(!svg.contains("NaN"));
 }

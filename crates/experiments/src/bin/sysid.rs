@@ -26,6 +26,8 @@ enum Command {
     Regression(cli::regression::Args),
     /// Merge the records of sharded sweeps.
     Merge(cli::merge::Args),
+    /// Draw the figures of one run record (convergence, ESS, hysteresis loop, residuals).
+    Plot(cli::plot::Args),
     /// Compute Table I (moments of z = xᵀx by linearisation, EKF2 and the unscented transform).
     Table1(cli::table1::Args),
 }
@@ -39,5 +41,6 @@ fn main() -> anyhow::Result<()> {
         Command::Reproduce(args) => cli::reproduce::run(args),
         Command::Merge(args) => cli::merge::run(args),
         Command::Regression(args) => cli::regression::run(args),
+        Command::Plot(args) => cli::plot::run(args),
     }
 }

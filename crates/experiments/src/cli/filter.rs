@@ -1,7 +1,7 @@
 //! `sysid filter`: one identification run on a data-set directory, written as a run record.
 
 use std::collections::BTreeMap;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
 use core_filters::particle::storvik::StorvikUpdate;
@@ -9,7 +9,9 @@ use core_filters::resampling::Scheme;
 use models::dataset::load_dir;
 use models::preset::Preset;
 
+use crate::checks;
 use crate::pipeline::{identify, Algorithm, FilterSettings, RunInput};
+use crate::record::RunRecord;
 use crate::sweep::write_atomic;
 
 /// Arguments of `sysid filter`.
@@ -132,28 +134,49 @@ pub fn run(args: Args) -> Result<()> {
         progress: true,
     };
     let record = identify(&input, args.algorithm, &settings)?;
-    write_atomic(&args.out, &record)?;
-    let theta: Vec<String> = record
-        .param_names
-        .iter()
-        .zip(&record.theta_val)
-        .map(|(n, v)| format!("{n}={v:.4}"))
-        .collect();
+    finish(record, &args.out)
+}
+
+/// Attaches the plausibility warnings (`checks::check`) to a finished run, writes its record,
+/// prints the summary table on stdout and the warnings on stderr, and returns an error — a
+/// non-zero exit of `sysid filter` — when the run failed or its answer is physically impossible.
+/// The record is written in every case.
+pub fn finish(mut record: RunRecord, out: &Path) -> Result<()> {
+    record.warnings = checks::check(&record);
+    write_atomic(out, &record)?;
     eprintln!(
-        "{}: {} steps, loglik {:.2}, {:.2} s ({:.2} M particle-steps/s); θ_val: {}",
+        "{}: {} of {} steps, loglik {:.2}, {:.2} s ({:.2} M particle-steps/s); record {}",
         record.algorithm,
         record.steps_completed,
+        record.steps_total,
         record.loglik,
         record.timing.wall_s,
         record.timing.particle_steps_per_s / 1e6,
-        theta.join(" ")
+        out.display()
     );
+    print!("{}", checks::summary_table(&record));
+    for w in &record.warnings {
+        eprintln!("warning: {}", w.message);
+    }
     if let Some(f) = &record.failure {
         bail!(
             "the run failed at step {} of {}: {f} (record written to {})",
             record.steps_completed + 1,
             record.steps_total,
-            args.out.display()
+            out.display()
+        );
+    }
+    if checks::is_fatal(&record.warnings) {
+        let params: Vec<&str> = record
+            .warnings
+            .iter()
+            .filter(|w| w.kind.is_fatal())
+            .filter_map(|w| w.parameter.as_deref())
+            .collect();
+        bail!(
+            "the result is physically impossible ({}): not an identification to use (record with its warnings written to {})",
+            params.join(", "),
+            out.display()
         );
     }
     Ok(())

@@ -2,6 +2,7 @@
 
 pub mod filter;
 pub mod merge;
+pub mod plot;
 pub mod regression;
 pub mod reproduce;
 pub mod simulate;

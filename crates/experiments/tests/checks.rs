@@ -1,0 +1,132 @@
+//! Plausibility warnings and the exit decision of `sysid filter` (`cli::filter::finish`, the
+//! function the binary calls after a run) on constructed records.
+
+mod common;
+
+use common::record;
+use experiments::checks::{check, summary_table, WarningKind};
+use experiments::cli::filter::finish;
+use experiments::record::RunRecord;
+
+fn out_path(test: &str) -> std::path::PathBuf {
+    let d = std::env::temp_dir().join(format!("checks-test-{}-{test}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d.join("run.json")
+}
+
+fn healthy() -> RunRecord {
+    record("mln-rbpf", 0, [1.0; 9], 0.05)
+}
+
+fn written(path: &std::path::Path) -> RunRecord {
+    serde_json::from_str(&std::fs::read_to_string(path).expect("record written"))
+        .expect("a run record")
+}
+
+#[test]
+fn a_healthy_run_has_no_warnings_and_succeeds() {
+    let r = healthy();
+    assert!(check(&r).is_empty(), "{:?}", check(&r));
+    let path = out_path("healthy");
+    finish(r, &path).expect("a healthy run exits successfully");
+    assert!(written(&path).warnings.is_empty());
+}
+
+#[test]
+fn a_negative_stiffness_is_impossible_and_exits_non_zero() {
+    let mut r = healthy();
+    // k3 = −4.43 (the field case of a stiff structure with the paper's priors).
+    r.theta_val[2] = -4.43;
+    let w = check(&r);
+    assert_eq!(w.len(), 1, "{w:?}");
+    assert_eq!(w[0].kind, WarningKind::NonPositive);
+    assert_eq!(w[0].parameter.as_deref(), Some("k3"));
+    assert!(
+        w[0].message.contains("physically impossible"),
+        "{}",
+        w[0].message
+    );
+    let path = out_path("negative");
+    let err = finish(r, &path).expect_err("an impossible result must not exit successfully");
+    assert!(err.to_string().contains("physically impossible"), "{err}");
+    assert!(err.to_string().contains("k3"), "{err}");
+    // The record is still written, with its warning.
+    let back = written(&path);
+    assert_eq!(back.warnings, w);
+    assert_eq!(back.theta_val[2], -4.43);
+}
+
+#[test]
+fn a_zero_damping_and_a_nan_are_impossible() {
+    let mut r = healthy();
+    r.theta_val[4] = 0.0;
+    r.theta_val[7] = f64::NAN;
+    let kinds: Vec<_> = check(&r).iter().map(|w| w.kind).collect();
+    assert_eq!(
+        kinds,
+        vec![WarningKind::NonPositive, WarningKind::NonFinite]
+    );
+    assert!(finish(r, &out_path("zero")).is_err());
+}
+
+#[test]
+fn negative_hysteresis_parameters_are_not_flagged() {
+    // γ may be negative in the Bouc–Wen model (SPEC §1); only k and c must be positive.
+    let mut r = healthy();
+    r.theta_val[7] = -0.5;
+    assert!(check(&r).is_empty());
+}
+
+#[test]
+fn few_distinct_values_and_tiny_ess_warn_without_failing() {
+    let mut r = healthy();
+    r.distinct_sampled.insert("n".into(), 1);
+    r.distinct_sampled.insert("beta".into(), 250);
+    r.ess_min = 3.0;
+    let w = check(&r);
+    let kinds: Vec<_> = w.iter().map(|w| w.kind).collect();
+    assert_eq!(kinds, vec![WarningKind::FewDistinct, WarningKind::TinyEss]);
+    assert_eq!(w[0].parameter.as_deref(), Some("n"));
+    let table = summary_table(&r);
+    assert!(table.contains("RESTS ON FEW PARTICLES"), "{table}");
+    assert!(table.contains("250 distinct values"), "{table}");
+    assert!(table.contains("(TINY)"), "{table}");
+    let path = out_path("few");
+    finish(r, &path).expect("unreliable but possible: warn, exit 0");
+    assert_eq!(written(&path).warnings, w);
+}
+
+#[test]
+fn a_failed_run_warns_and_exits_non_zero() {
+    let mut r = healthy();
+    r.failure = Some("all weights zero at step 412".into());
+    r.steps_completed = 411;
+    let w = check(&r);
+    assert_eq!(w[0].kind, WarningKind::Failed);
+    let err = finish(r, &out_path("failed")).unwrap_err();
+    assert!(err.to_string().contains("failed at step 412"), "{err}");
+}
+
+#[test]
+fn the_summary_table_gives_the_interval_of_every_parameter() {
+    let r = healthy();
+    let table = summary_table(&r);
+    // k1: θ_val 8, final s.d. 0.4 → [8 − 0.784, 8 + 0.784].
+    assert!(table.contains("[7.2160, 8.7840]"), "{table}");
+    for name in common::NAMES {
+        assert!(
+            table.lines().any(|l| l.starts_with(name)),
+            "{name}: {table}"
+        );
+    }
+    assert!(table.contains("±1.96 s.d."), "{table}");
+}
+
+#[test]
+fn records_without_warnings_still_load() {
+    let mut v = serde_json::to_value(healthy()).unwrap();
+    v.as_object_mut().unwrap().remove("warnings");
+    let r: RunRecord = serde_json::from_value(v).expect("warnings default to none");
+    assert!(r.warnings.is_empty());
+}
