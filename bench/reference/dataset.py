@@ -70,6 +70,11 @@ class DataSet:
         self.q_r_sd = self.dt * R1_NOISE_FRACTION * vel_rms[0]
 
         self.t, self.ug, self.y = _read_measured(csv_path)
+        samples = meta.get("samples")
+        if samples is not None and samples != len(self.t):
+            raise DataSetError(
+                f"{meta_path}: field samples: {samples}, but {csv_path} has {len(self.t)} rows"
+            )
         if len(self.t) < WINDOW + 2:
             raise DataSetError(f"{csv_path}: {len(self.t)} rows, need at least {WINDOW + 2}")
         steps = np.diff(self.t)
