@@ -1,4 +1,3 @@
-#!/usr/bin/env python3
 """Do `sysid filter` and a reference implementation compute the same filter? θ_val over seeds.
 
 Runs one algorithm (mln-rbpf or bootstrap) with filter seeds 1..S on one data set, on our side

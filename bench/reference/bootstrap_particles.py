@@ -1,4 +1,3 @@
-#!/usr/bin/env python3
 """Bootstrap particle filter (SPEC §5.1) for the paper's 3-storey chain with the `particles` package.
 
 An independent reference written with Nicolas Chopin's `particles` (PyPI), the way its

@@ -1,4 +1,3 @@
-#!/usr/bin/env python3
 """Particle-steps per second of `sysid filter` beside the independent references, on one data set.
 
 In one invocation, for each round: `sysid filter --algorithm mln-rbpf`, `mlnrbpf_numpy.py`,

@@ -1,4 +1,3 @@
-#!/usr/bin/env python3
 """MLN-RBPF (SPEC §5.2) for the paper's 3-storey chain, vectorised across particles with numpy.
 
 An independent reference: written from SPEC §1–3 and §5.2 only, sharing no code with the Rust

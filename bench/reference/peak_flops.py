@@ -1,4 +1,3 @@
-#!/usr/bin/env python3
 """Double-precision peak of one core: the nominal figure and a practical one from a numpy matmul.
 
 Nominal: clock × flops per cycle, with 16 double-precision flops per cycle for AVX2 FMA code
@@ -116,7 +115,7 @@ def main(argv=None):
             f"nominal peak per core at {ghz:.3f} GHz: AVX2 FMA (16 flops/cycle) "
             f"{16 * ghz:.1f} GFLOP/s; two 512-bit FMA pipes (32 flops/cycle) {32 * ghz:.1f} GFLOP/s"
         )
-    blas = blas_kernel()  # before numba loads other BLAS libraries
+    blas = blas_kernel()  # before numba loads a second BLAS build
     measured_ghz = clock_ghz(args.mul_latency)
     if measured_ghz:
         print(
