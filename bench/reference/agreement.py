@@ -65,9 +65,9 @@ def main(argv=None):
         for seed in seeds:
             for side in ("ours", "theirs"):
                 out = os.path.join(keep, f"{args.algorithm}_{side}_{seed}.json")
-                _, th, ll, _ = run_one(args, args.algorithm, side, seed, out)
-                theta[side].append(th)
-                loglik[side].append(ll)
+                result = run_one(args, args.algorithm, side, seed, out)
+                theta[side].append(result["theta"])
+                loglik[side].append(result["loglik"])
             print(
                 f"seed {seed}: loglik ours {loglik['ours'][-1]:.1f}, "
                 f"theirs {loglik['theirs'][-1]:.1f}",
@@ -75,6 +75,8 @@ def main(argv=None):
             )
 
     S = args.seeds
+    if S < 10:
+        print(f"note: with {S} seeds the standard errors, and so z, are rough; use 20 or more")
     print(
         f"\n{args.algorithm}, {args.particles} particles, filter seeds {seeds[0]}..{seeds[-1]}, "
         f"data {os.path.basename(os.path.normpath(args.data))}\n"
