@@ -8,6 +8,7 @@
 //! - [`record`]: the run record written for every run;
 //! - [`sweep`]: parallel, resumable, shardable sweeps over runs.
 
+pub mod calibration;
 pub mod cli;
 pub mod figures;
 pub mod metrics;
