@@ -157,7 +157,7 @@ fn point_mass_beside_a_continuous_part() {
         "Q(0.6)",
     );
     // ½ N(0, 1) + ½ δ(5): Q(0.3) = Φ⁻¹(0.6) lies in the continuous part although the point
-    // mass is inside the search's first bracket.
+    // mass is inside the root finder's first bracket.
     let m = GaussianMixture::new(&[0.5, 0.5], &[0.0, 5.0], &[1.0, 0.0]).unwrap();
     assert_close(
         m.quantile(0.3).unwrap(),
@@ -262,7 +262,7 @@ fn random_mixture(seed: u64, n: usize, point_every: usize) -> (Vec<f64>, Vec<f64
 }
 
 /// F(x) of the mixture by composite Simpson integration of the continuous density from
-/// min μ − 12 max σ (plus the point masses ≤ x): independent of the erfc in the library.
+/// min μ − 12 max σ (plus the point masses ≤ x): independent of the erfc used by the crate.
 fn cdf_by_integration(w: &[f64], mu: &[f64], var: &[f64], x: f64) -> f64 {
     let total: f64 = w.iter().sum();
     let start = mu.iter().fold(f64::INFINITY, |a, &m| a.min(m))
