@@ -665,13 +665,15 @@ pub fn coverage_figure(sweep: &SweepCalibration, path: &Path, title: &str) -> Re
     }
 
     // Legend: algorithms, then the diagonal and the band, two per row.
-    let n_all = sweep
-        .algorithms
-        .iter()
-        .flat_map(|a| &a.params)
-        .map(|p| p.runs)
-        .filter(|&n| n > 0)
-        .min();
+    let ns = || {
+        sweep
+            .algorithms
+            .iter()
+            .flat_map(|a| &a.params)
+            .map(|p| p.runs)
+            .filter(|&n| n > 0)
+    };
+    let (n_min, n_max) = (ns().min(), ns().max());
     let mut entries: Vec<(Option<usize>, String)> = sweep
         .algorithms
         .iter()
@@ -686,9 +688,14 @@ pub fn coverage_figure(sweep: &SweepCalibration, path: &Path, title: &str) -> Re
     entries.push((None, "perfect calibration".to_string()));
     entries.push((
         None,
-        match n_all {
-            Some(n) => format!("grey: nominal ± {VERDICT_SE} s.e. (n = {n})"),
-            None => "grey: no runs".to_string(),
+        match (n_min, n_max) {
+            (Some(lo), Some(hi)) if lo == hi => {
+                format!("grey: nominal ± {VERDICT_SE} s.e. (n = {lo})")
+            }
+            (Some(lo), _) => {
+                format!("grey: nominal ± {VERDICT_SE} s.e. at each panel's smallest n (≥ {lo})")
+            }
+            _ => "grey: no runs".to_string(),
         },
     ));
     let (w, _) = legend.dim_in_pixel();
