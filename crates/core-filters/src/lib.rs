@@ -17,6 +17,7 @@
 //! - [`rng`]: reproducible random streams derived from (master seed, run, purpose);
 //! - [`health`] and [`error`]: counted repairs and typed failures.
 
+pub mod credible;
 pub mod error;
 pub mod health;
 pub mod kalman;

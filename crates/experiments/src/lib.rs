@@ -10,6 +10,7 @@
 //! - [`verdict`]: the paper's statements decided by stated tests on the records (REPORT.md);
 //! - [`checks`]: plausibility warnings on a finished run record.
 
+pub mod calibration;
 pub mod checks;
 pub mod cli;
 pub mod figures;
