@@ -2,7 +2,9 @@
 //! last `l` steps, decimated traces of posterior means and s.d.s, online state errors against the
 //! truth when it is known, and the ESS trace.
 
-use core_filters::particle::{Observer, Posterior, StepInfo};
+use core_filters::model::Layout;
+use core_filters::smc::runner::WeightedParticles;
+use core_filters::smc::{Observer, Posterior, StepInfo};
 use serde::{Deserialize, Serialize};
 
 use crate::metrics::ErrorSums;
@@ -41,6 +43,8 @@ pub struct Recorder<'a> {
     pub state_sums: Vec<ErrorSums>,
     /// Optional progress bar advanced every 64 steps (terminal runs of `sysid filter`).
     pub progress: Option<indicatif::ProgressBar>,
+    /// Distinct values of each sampled parameter at the end of a completed run (degeneracy).
+    pub distinct: Vec<(String, usize)>,
 }
 
 impl<'a> Recorder<'a> {
@@ -69,6 +73,7 @@ impl<'a> Recorder<'a> {
             truth,
             state_sums: vec![ErrorSums::default(); n_states],
             progress: None,
+            distinct: Vec::new(),
         }
     }
 
@@ -82,6 +87,14 @@ impl<'a> Recorder<'a> {
 }
 
 impl Observer for Recorder<'_> {
+    fn on_start(&mut self, layout: &Layout, _particles: usize) {
+        self.last = Posterior::for_layout(layout);
+    }
+
+    fn on_finish(&mut self, last: &WeightedParticles<'_>) {
+        self.distinct = last.distinct_sampled_params();
+    }
+
     fn on_step(&mut self, info: &StepInfo, post: &Posterior) {
         let k = info.k;
         if k + self.window > self.total_steps {

@@ -9,21 +9,21 @@ use std::collections::BTreeMap;
 use std::time::Instant;
 
 use anyhow::{anyhow, bail, Context, Result};
-use core_filters::particle::bootstrap::BootstrapPf;
-use core_filters::particle::mlnrbpf::MlnRbpf;
-use core_filters::particle::mpf::MpfEkf2;
-use core_filters::particle::storvik::{Storvik, StorvikUpdate};
-use core_filters::particle::{run, ParticleConfig, ParticleFilter};
 use core_filters::resampling::{ResamplePolicy, Scheme};
 use core_filters::rng::{purpose, stream};
+use core_filters::smc::bootstrap::BootstrapPf;
+use core_filters::smc::mlnrbpf::MlnRbpf;
+use core_filters::smc::mpf::MpfEkf2;
+use core_filters::smc::storvik::{Storvik, StorvikUpdate};
+use core_filters::smc::{run, Filter, RunSummary, SmcConfig};
 use models::dataset::LoadedDataset;
-use models::integrate::{simulate_adaptive, Tolerance};
-use models::partition::{
-    AugmentedChain, FilterSpec, MarginalPrior, MeasurementKind, MlnChain, MpfChain,
+use models::filtering::{
+    AugmentedChain, ChainPrior, ChainSpec, Discretisation, MlnChain, MpfChain, RmsLevels,
 };
-use models::priors::ParameterPrior;
+use models::integrate::{simulate_adaptive, Tolerance};
+use models::partition::MarginalPrior;
+use models::sensors::{MeasurementKind, SensorLayout};
 use models::structure::ShearChain;
-use nalgebra::SVector;
 use serde::{Deserialize, Serialize};
 
 use crate::metrics::{relative_errors, ErrorSums, StateErrors};
@@ -96,14 +96,16 @@ pub struct FilterSettings {
     pub storvik_update: StorvikUpdate,
     /// Point-mass priors: parameter name → value (e.g. `k1 = 8.0`).
     pub fix: BTreeMap<String, f64>,
-    /// Prior of θ; absent: SPEC §3's priors for the data set's storey count.
-    pub prior: Option<ParameterPrior>,
+    /// Prior of θ; absent: SPEC §3's priors for the data set's structure.
+    pub prior: Option<ChainPrior>,
     /// Gaussian prior of the marginalised block.
     pub marginal_prior: MarginalPrior,
     /// Noise fraction used to set R and Q from RMS values (SPEC §3: 0.1).
     pub noise_fraction: f64,
     /// Which accelerations the data hold (relative, SPEC §2, or absolute).
     pub measurement: MeasurementKind,
+    /// Discretisation of the equations of motion inside the filters (SPEC §3: forward Euler).
+    pub discretisation: Discretisation,
     /// Storey masses; absent: the data set's structure, or unit masses for field data.
     pub masses: Option<Vec<f64>>,
     /// θ_val averages the posterior mean over the last `window` steps (SPEC eq. 26: 80).
@@ -129,6 +131,7 @@ impl Default for FilterSettings {
             marginal_prior: MarginalPrior::MomentMatched,
             noise_fraction: 0.1,
             measurement: MeasurementKind::Relative,
+            discretisation: Discretisation::Euler,
             masses: None,
             window: 80,
             trace_every: 10,
@@ -150,41 +153,84 @@ pub struct RunInput<'a> {
     pub progress: bool,
 }
 
-/// RMS values that set Q and R (SPEC §3): from the data set's metadata (clean signals) when
-/// present, otherwise estimated from the measured signals.
-fn rms_values(data: &LoadedDataset, nf: f64) -> (Vec<f64>, f64, f64) {
+/// Root mean square of a signal.
+fn rms_of(v: impl Iterator<Item = f64>) -> f64 {
+    let (s, n) = v.fold((0.0, 0usize), |(s, n), x| (s + x * x, n + 1));
+    (s / n.max(1) as f64).sqrt()
+}
+
+/// RMS values that set Q and R (SPEC §3): from the data set's metadata and truth (clean signals)
+/// when present, otherwise estimated from the measured signals. `hysteretic` are the 0-based
+/// storeys of the hysteretic elements (one drift-velocity RMS each).
+fn rms_levels(data: &LoadedDataset, hysteretic: &[usize], nf: f64) -> RmsLevels {
+    let k = data.len();
+    let n = data.channels;
     if let Some(meta) = &data.meta {
-        return (meta.rms.acc.clone(), meta.rms.ug, meta.rms.vel[0]);
+        // The drift velocity of element j is v_j − v_{j−1}: from the true states when present.
+        let drift = hysteretic
+            .iter()
+            .map(|&j| match &data.truth {
+                Some(t) => rms_of((0..t.states.len()).map(|i| {
+                    let st = t.states.state(i);
+                    st[n + j] - if j == 0 { 0.0 } else { st[n + j - 1] }
+                })),
+                None => meta.rms.vel[j],
+            })
+            .collect();
+        return RmsLevels {
+            acc: meta.rms.acc.clone(),
+            ug: meta.rms.ug,
+            drift_velocity: drift,
+        };
     }
     // Field data: a measured channel holds the clean signal plus noise of s.d. nf·RMS(clean),
     // so RMS(measured) = RMS(clean)·√(1 + nf²).
-    let rms = |v: &mut dyn Iterator<Item = f64>| {
-        let (s, n) = v.fold((0.0, 0usize), |(s, n), x| (s + x * x, n + 1));
-        (s / n.max(1) as f64).sqrt() / (1.0 + nf * nf).sqrt()
-    };
-    let k = data.len();
-    let acc: Vec<f64> = (0..data.channels)
-        .map(|j| rms(&mut (0..k).map(|i| data.y(i)[j])))
+    let clean = (1.0 + nf * nf).sqrt();
+    let acc: Vec<f64> = (0..n)
+        .map(|j| rms_of((0..k).map(|i| data.y(i)[j])) / clean)
         .collect();
-    let ug = rms(&mut data.ug_meas.iter().copied());
-    // RMS of ẋ1: trapezoidal integral of the measured relative acceleration of storey 1 with
-    // its linear trend removed (the drift of integrated noise).
-    let mut v = vec![0.0; k];
-    for i in 1..k {
-        v[i] = v[i - 1] + 0.5 * data.dt * (data.y(i - 1)[0] + data.y(i)[0]);
+    let ug = rms_of(data.ug_meas.iter().copied()) / clean;
+    // Velocities: trapezoidal integrals of the measured relative accelerations with their linear
+    // trend removed (the drift of integrated noise).
+    let velocity = |j: usize| -> Vec<f64> {
+        let mut v = vec![0.0; k];
+        for i in 1..k {
+            v[i] = v[i - 1] + 0.5 * data.dt * (data.y(i - 1)[j] + data.y(i)[j]);
+        }
+        let slope = v[k - 1] / (k.max(2) - 1) as f64;
+        v.iter()
+            .enumerate()
+            .map(|(i, x)| x - slope * i as f64)
+            .collect()
+    };
+    let drift = hysteretic
+        .iter()
+        .map(|&j| {
+            let vj = velocity(j);
+            if j == 0 {
+                rms_of(vj.into_iter())
+            } else {
+                let vm = velocity(j - 1);
+                rms_of(vj.iter().zip(&vm).map(|(a, b)| a - b))
+            }
+        })
+        .collect();
+    RmsLevels {
+        acc,
+        ug,
+        drift_velocity: drift,
     }
-    let slope = v[k - 1] / (k.max(2) - 1) as f64;
-    let v1 =
-        rms(&mut v.iter().enumerate().map(|(i, x)| x - slope * i as f64)) * (1.0 + nf * nf).sqrt();
-    (acc, ug, v1)
 }
 
-/// Builds the filter specification of a run.
-pub fn filter_spec(
+/// Builds the specification of a run's filter partitions: the structure (masses and hysteretic
+/// storeys from the data set's structure; for field data the settings' masses or unit masses and
+/// a hysteretic element between the ground and storey 1), every storey measured, noise levels
+/// from RMS values (SPEC §3), the prior and the discretisation.
+pub fn chain_spec(
     data: &LoadedDataset,
     chain: Option<&ShearChain>,
     s: &FilterSettings,
-) -> Result<FilterSpec> {
+) -> Result<ChainSpec> {
     let n = data.channels;
     let masses = match (&s.masses, chain) {
         (Some(m), _) => m.clone(),
@@ -194,24 +240,33 @@ pub fn filter_spec(
     if masses.len() != n {
         bail!("{} masses given for {n} measured storeys", masses.len());
     }
-    let (acc, ug, v1) = rms_values(data, s.noise_fraction);
-    let mut spec = FilterSpec::from_rms(
-        data.dt,
-        masses,
-        data.ug_meas.clone(),
-        &acc,
-        ug,
-        v1,
-        s.noise_fraction,
-    )?;
+    let hysteretic: Vec<usize> = match chain {
+        Some(c) => c.bouc_wen().iter().map(|b| b.storey).collect(),
+        None => vec![0],
+    };
     // The data set says what its accelerometers measure; the settings apply to field data.
-    spec.measurement = match data.meta.as_ref().map(|m| m.config.measurement) {
+    let kind = match data.meta.as_ref().map(|m| m.config.measurement) {
         Some(models::dataset::MeasurementKind::Absolute) => MeasurementKind::Absolute,
         Some(models::dataset::MeasurementKind::Relative) => MeasurementKind::Relative,
         None => s.measurement,
     };
+    let sensors = SensorLayout::all(n, kind)?;
+    let rms = rms_levels(data, &hysteretic, s.noise_fraction);
+    let mut spec = ChainSpec::from_rms(
+        data.dt,
+        masses,
+        hysteretic.clone(),
+        sensors,
+        data.ug_meas.clone(),
+        &rms,
+        s.noise_fraction,
+    )?;
     spec.marginal_prior = s.marginal_prior;
-    let mut prior = s.prior.clone().unwrap_or_else(|| ParameterPrior::paper(n));
+    spec.discretisation = s.discretisation;
+    let mut prior = s
+        .prior
+        .clone()
+        .unwrap_or_else(|| ChainPrior::paper(n, &hysteretic));
     for (name, value) in &s.fix {
         prior
             .fix(name, *value)
@@ -222,9 +277,24 @@ pub fn filter_spec(
     Ok(spec)
 }
 
-/// What the generic driver returns.
+/// The filter of `algorithm` on the partitions of `spec` (no size table: every dimension is the
+/// structure's).
+pub fn build_filter(
+    algorithm: Algorithm,
+    spec: ChainSpec,
+    s: &FilterSettings,
+) -> Result<Box<dyn Filter>> {
+    Ok(match algorithm {
+        Algorithm::Bootstrap => Box::new(BootstrapPf::new(AugmentedChain::new(spec)?)),
+        Algorithm::MlnRbpf => Box::new(MlnRbpf::new(MlnChain::new(spec)?)),
+        Algorithm::Storvik => Box::new(Storvik::new(MlnChain::new(spec)?, s.storvik_update)),
+        Algorithm::MpfEkf2 => Box::new(MpfEkf2::new(MpfChain::new(spec)?)),
+    })
+}
+
+/// What the driver returns.
 struct Driven {
-    summary: core_filters::particle::RunSummary,
+    summary: RunSummary,
     distinct: Vec<(String, usize)>,
     param_names: Vec<String>,
     theta_val: Vec<f64>,
@@ -234,11 +304,12 @@ struct Driven {
     wall_s: f64,
 }
 
-fn drive<const NY: usize, F: ParticleFilter<NY>>(
-    mut filter: F,
+fn drive(
+    filter: &mut dyn Filter,
     input: &RunInput,
     s: &FilterSettings,
     algorithm: Algorithm,
+    pc: &SmcConfig,
 ) -> Driven {
     let data = input.data;
     let layout = filter.layout().clone();
@@ -256,8 +327,9 @@ fn drive<const NY: usize, F: ParticleFilter<NY>>(
         })
     });
     let steps = data.len() - 1;
-    let ys: Vec<SVector<f64, NY>> = (1..=steps)
-        .map(|k| SVector::<f64, NY>::from_column_slice(data.y(k)))
+    let ny = data.channels;
+    let ys: Vec<f64> = (1..=steps)
+        .flat_map(|k| data.y(k).iter().copied())
         .collect();
     let mut recorder = Recorder::new(
         steps,
@@ -286,13 +358,13 @@ fn drive<const NY: usize, F: ParticleFilter<NY>>(
         &format!("{}/{}", purpose::FILTER, algorithm.name()),
     );
     let start = Instant::now();
-    let summary = run(&mut filter, &ys, &mut rng, &mut recorder);
+    let summary = run(filter, pc, &ys, ny, &mut rng, &mut recorder);
     let wall_s = start.elapsed().as_secs_f64();
     if let Some(bar) = &recorder.progress {
         bar.finish_and_clear();
     }
     Driven {
-        distinct: filter.distinct_sampled_params(),
+        distinct: std::mem::take(&mut recorder.distinct),
         param_names: layout.param_names.clone(),
         theta_val: recorder.theta_val(),
         theta_sd_final: recorder.last.param_sd.clone(),
@@ -304,32 +376,6 @@ fn drive<const NY: usize, F: ParticleFilter<NY>>(
         wall_s,
     }
 }
-
-/// Builds and runs the filter for a storey count compiled in (const dimensions).
-macro_rules! dispatch {
-    ($alg:expr, $spec:expr, $pc:expr, $input:expr, $s:expr, $n:expr; $( $ns:literal => ($nx:literal, $nu:literal, $nl:literal, $nbl:literal) ),* ) => {
-        match $n {
-            $( $ns => match $alg {
-                Algorithm::Bootstrap => drive::<$ns, _>(
-                    BootstrapPf::new(AugmentedChain::<$nx, $ns>::new($spec)?, $pc), $input, $s, $alg),
-                Algorithm::MlnRbpf => drive::<$ns, _>(
-                    MlnRbpf::new(MlnChain::<$nu, $nu, $nl, $ns>::new($spec)?, $pc), $input, $s, $alg),
-                Algorithm::Storvik => drive::<$ns, _>(
-                    Storvik::with_update(MlnChain::<$nu, $nu, $nl, $ns>::new($spec)?, $pc, $s.storvik_update),
-                    $input, $s, $alg),
-                Algorithm::MpfEkf2 => drive::<$ns, _>(
-                    MpfEkf2::new(MpfChain::<$nbl, $ns>::new($spec)?, $pc), $input, $s, $alg),
-            }, )*
-            other => bail!(
-                "{other} storeys: the filters are compiled for {} storeys (add the size to `pipeline::dispatch!`)",
-                [$($ns.to_string()),*].join(", ")
-            ),
-        }
-    };
-}
-
-/// Storey counts the filters are compiled for.
-pub const SUPPORTED_STOREYS: [usize; 3] = [2, 3, 5];
 
 /// Runs one algorithm on one data set and returns its record.
 pub fn identify(input: &RunInput, algorithm: Algorithm, s: &FilterSettings) -> Result<RunRecord> {
@@ -348,20 +394,16 @@ pub fn identify(input: &RunInput, algorithm: Algorithm, s: &FilterSettings) -> R
             bail!("ess_threshold {t} must be in (0, 1]");
         }
     }
-    let spec = filter_spec(data, input.chain, s)?;
-    let pc = ParticleConfig {
+    let spec = chain_spec(data, input.chain, s)?;
+    let pc = SmcConfig {
         particles: s.particles,
         resampling: ResamplePolicy {
             scheme: s.resampling,
             ess_threshold: s.ess_threshold,
         },
     };
-    let n = data.channels;
-    // The partition takes the spec by value; the record still needs it afterwards.
-    let d: Driven = dispatch!(algorithm, spec.clone(), pc, input, s, n;
-        2 => (12, 6, 3, 9),
-        3 => (16, 8, 4, 13),
-        5 => (24, 12, 6, 21));
+    let mut filter = build_filter(algorithm, spec.clone(), s)?;
+    let d = drive(filter.as_mut(), input, s, algorithm, &pc);
 
     let steps = data.len() - 1;
     let theta_true = data.meta.as_ref().map(|m| m.theta_true.clone());
@@ -391,9 +433,10 @@ pub fn identify(input: &RunInput, algorithm: Algorithm, s: &FilterSettings) -> R
         "filter": s,
         "data": data.meta.as_ref().map(|m| serde_json::to_value(&m.config).ok()),
         "spec": {
-            "dt": spec.dt, "masses": spec.masses, "q_disp_sd": spec.q_disp_sd,
-            "q_vel_sd": spec.q_vel_sd, "q_r_sd": spec.q_r_sd, "r_diag": spec.r_diag,
-            "prior": spec.prior,
+            "dt": spec.dt, "masses": spec.masses, "hysteretic": spec.hysteretic,
+            "sensors": spec.sensors, "q_disp": spec.q_disp, "q_vel": spec.q_vel,
+            "q_r": spec.q_r, "r_diag": spec.r_diag, "prior": spec.prior,
+            "discretisation": spec.discretisation,
         },
     });
     Ok(RunRecord {
@@ -413,8 +456,8 @@ pub fn identify(input: &RunInput, algorithm: Algorithm, s: &FilterSettings) -> R
         loglik: d.summary.loglik,
         steps_total: steps,
         steps_completed: d.summary.steps_completed,
-        ess_min: d.summary.ess_min,
-        ess_mean: d.summary.ess_mean,
+        ess_min: d.summary.ess_min.unwrap_or(f64::NAN),
+        ess_mean: d.summary.ess_mean.unwrap_or(f64::NAN),
         distinct_sampled: d.distinct.into_iter().collect(),
         failures,
         failure: d.summary.failure.as_ref().map(|f| f.to_string()),

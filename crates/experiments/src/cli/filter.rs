@@ -4,8 +4,8 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
-use core_filters::particle::storvik::StorvikUpdate;
 use core_filters::resampling::Scheme;
+use core_filters::smc::storvik::StorvikUpdate;
 use models::dataset::load_dir;
 use models::preset::Preset;
 
