@@ -746,6 +746,58 @@ mod tests {
     }
 
     #[test]
+    fn hysteresis_law_basis_partials_and_packs() {
+        use core_filters::real::Pack;
+        let law = BoucWenLaw;
+        let pts = [
+            (0.7, 0.3, 2.0, 1.0, 2.0),
+            (-1.2, -0.45, 1.5, -0.7, 1.3),
+            (0.4, -0.2, 0.5, 0.5, 1.0),
+            (-0.3, 0.55, 3.0, -2.5, 4.2),
+        ];
+        for &(dv, r, b, g, n) in &pts {
+            // The basis recombines to the rate, and the rate is the simulator's.
+            let mut basis = [0.0; 3];
+            law.basis(dv, r, &[n], &mut basis);
+            let rate = law.rate(dv, r, &[b, g], &[n]);
+            assert!((basis[0] + b * basis[1] + g * basis[2] - rate).abs() < 1e-14);
+            assert_eq!(rate, bouc_wen_rate(dv, r, b, g, n));
+            // Partials by central differences (smooth away from δv = 0 and r = 0).
+            let (d_dv, d_r) = law.rate_partials(dv, r, &[b, g], &[n]);
+            let h = 1e-6;
+            let fd_dv = (law.rate(dv + h, r, &[b, g], &[n]) - law.rate(dv - h, r, &[b, g], &[n]))
+                / (2.0 * h);
+            let fd_r = (law.rate(dv, r + h, &[b, g], &[n]) - law.rate(dv, r - h, &[b, g], &[n]))
+                / (2.0 * h);
+            assert!((d_dv - fd_dv).abs() < 1e-7, "{d_dv} vs {fd_dv}");
+            assert!((d_r - fd_r).abs() < 1e-7, "{d_r} vs {fd_r}");
+        }
+        // A pack of the four points is the scalar evaluation of each lane, bit for bit.
+        let lane = |f: fn(&(f64, f64, f64, f64, f64)) -> f64| Pack::from_lanes(|i| f(&pts[i]));
+        let (dv, r, b, g, n) = (
+            lane(|p| p.0),
+            lane(|p| p.1),
+            lane(|p| p.2),
+            lane(|p| p.3),
+            lane(|p| p.4),
+        );
+        let mut basis = [Pack::splat(0.0); 3];
+        law.basis(dv, r, &[n], &mut basis);
+        let rate = law.rate(dv, r, &[b, g], &[n]);
+        let (d_dv, d_r) = law.rate_partials(dv, r, &[b, g], &[n]);
+        for (i, &(dv, r, b, g, n)) in pts.iter().enumerate() {
+            let mut s = [0.0; 3];
+            law.basis(dv, r, &[n], &mut s);
+            let (sd, sr) = law.rate_partials(dv, r, &[b, g], &[n]);
+            let scalar = [s[0], s[1], s[2], law.rate(dv, r, &[b, g], &[n]), sd, sr];
+            let packed = [basis[0], basis[1], basis[2], rate, d_dv, d_r];
+            for (p, v) in packed.iter().zip(scalar) {
+                assert_eq!(p.lane(i).to_bits(), v.to_bits());
+            }
+        }
+    }
+
+    #[test]
     fn bouc_wen_at_zero_is_finite_for_n_equal_one() {
         assert_eq!(bouc_wen_rate(0.7, 0.0, 2.0, 1.0, 1.0), 0.7);
         assert_eq!(bouc_wen_rate(0.7, 0.0, 2.0, 1.0, 2.0), 0.7);
