@@ -492,4 +492,19 @@ fn layouts_follow_spec_sections_5_2_and_6() {
     assert_eq!(sampled, ["v1", "v5", "v6", "r1", "r6"]);
     let mln = MlnChain::new(spec(&case, Discretisation::Euler)).unwrap();
     assert_eq!((mln.dims().nu, mln.dims().nz), (24, 24));
+
+    // A linear chain: nothing sampled by the MPF-EKF2, no n in the MLN partition.
+    let case = Case {
+        name: "linear",
+        masses: vec![1.0; 4],
+        hysteretic: vec![],
+        sensors: vec![2, 4],
+        kind: MeasurementKind::Absolute,
+    };
+    let mpf = MpfChain::new(spec(&case, Discretisation::Symplectic)).unwrap();
+    assert_eq!((mpf.dims().nn, mpf.dims().nbl), (0, 16));
+    assert!(mpf.sampled_stages().is_empty());
+    let mln = MlnChain::new(spec(&case, Discretisation::Symplectic)).unwrap();
+    assert_eq!((mln.dims().nu, mln.dims().nz), (8, 8));
+    assert_eq!(mln.stages()[1].linked, Vec::<usize>::new());
 }

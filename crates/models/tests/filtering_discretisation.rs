@@ -172,7 +172,7 @@ fn malformed_specs_get_errors_naming_the_field() {
         "prior",
     );
 
-    // Sensor layouts: storey 0, duplicates, out of range, unsorted.
+    // Sensor layouts: storey 0, a storey listed twice, out of range, unsorted.
     let kind = MeasurementKind::Relative;
     for (storeys, want) in [
         (vec![0, 2], SensorError::StoreyZero),
