@@ -12,6 +12,12 @@
 //! and storey `j` obeys `m_j ẍ_j = −m_j ü_g − f_j + f_{j+1}` (`f_N = 0`). For the paper's
 //! three-storey chain with unit masses this is exactly SPEC §1.
 //!
+//! One physics source: the forces and accelerations are evaluated by one kernel,
+//! [`ChainTopology`] (over any [`ChainView`] of a point), and the hysteretic rate by one
+//! implementation of a [`HysteresisLaw`] ([`BoucWenLaw`]); the truth simulator
+//! ([`ShearChain::rhs`]) and every filter partition (`crate::filtering`) use both, generic over
+//! one particle (`f64`) or a SIMD pack of particles.
+//!
 //! State layout: `[x_1..x_N, v_1..v_N, r_e for each Bouc–Wen element in order]`.
 //! Parameter vector θ: `[k_1..k_N, c_1..c_N, then (β, γ, n) per Bouc–Wen element]`, which for the
 //! paper is `[k1 k2 k3 c1 c2 c3 β γ n]`.
@@ -74,8 +80,6 @@ pub struct ShearChain {
     k: Vec<f64>,
     c: Vec<f64>,
     bouc_wen: Vec<BoucWen>,
-    /// `bw_slot[j] = Some(e)` when element `j` is Bouc–Wen element `e`.
-    bw_slot: Vec<Option<usize>>,
     /// Masses and hysteretic elements: the force kernel shared with the filter partitions.
     topology: ChainTopology,
 }
@@ -460,7 +464,6 @@ impl ShearChain {
             k,
             c,
             bouc_wen,
-            bw_slot,
             topology,
         })
     }
