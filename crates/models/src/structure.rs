@@ -12,6 +12,12 @@
 //! and storey `j` obeys `m_j ẍ_j = −m_j ü_g − f_j + f_{j+1}` (`f_N = 0`). For the paper's
 //! three-storey chain with unit masses this is exactly SPEC §1.
 //!
+//! One physics source: the forces and accelerations are evaluated by one kernel,
+//! [`ChainTopology`] (over any [`ChainView`] of a point), and the hysteretic rate by one
+//! implementation of a [`HysteresisLaw`] ([`BoucWenLaw`]); the truth simulator
+//! ([`ShearChain::rhs`]) and every filter partition (`crate::filtering`) use both, generic over
+//! one particle (`f64`) or a SIMD pack of particles.
+//!
 //! State layout: `[x_1..x_N, v_1..v_N, r_e for each Bouc–Wen element in order]`.
 //! Parameter vector θ: `[k_1..k_N, c_1..c_N, then (β, γ, n) per Bouc–Wen element]`, which for the
 //! paper is `[k1 k2 k3 c1 c2 c3 β γ n]`.
@@ -74,8 +80,6 @@ pub struct ShearChain {
     k: Vec<f64>,
     c: Vec<f64>,
     bouc_wen: Vec<BoucWen>,
-    /// `bw_slot[j] = Some(e)` when element `j` is Bouc–Wen element `e`.
-    bw_slot: Vec<Option<usize>>,
     /// Masses and hysteretic elements: the force kernel shared with the filter partitions.
     topology: ChainTopology,
 }
@@ -460,7 +464,6 @@ impl ShearChain {
             k,
             c,
             bouc_wen,
-            bw_slot,
             topology,
         })
     }
@@ -743,6 +746,58 @@ mod tests {
             Err(StructureError::ExponentBelowOne { .. })
         ));
         assert!(paper().with_theta(&[1.0; 4]).is_err());
+    }
+
+    #[test]
+    fn hysteresis_law_basis_partials_and_packs() {
+        use core_filters::real::Pack;
+        let law = BoucWenLaw;
+        let pts = [
+            (0.7, 0.3, 2.0, 1.0, 2.0),
+            (-1.2, -0.45, 1.5, -0.7, 1.3),
+            (0.4, -0.2, 0.5, 0.5, 1.0),
+            (-0.3, 0.55, 3.0, -2.5, 4.2),
+        ];
+        for &(dv, r, b, g, n) in &pts {
+            // The basis recombines to the rate, and the rate is the simulator's.
+            let mut basis = [0.0; 3];
+            law.basis(dv, r, &[n], &mut basis);
+            let rate = law.rate(dv, r, &[b, g], &[n]);
+            assert!((basis[0] + b * basis[1] + g * basis[2] - rate).abs() < 1e-14);
+            assert_eq!(rate, bouc_wen_rate(dv, r, b, g, n));
+            // Partials by central differences (smooth away from δv = 0 and r = 0).
+            let (d_dv, d_r) = law.rate_partials(dv, r, &[b, g], &[n]);
+            let h = 1e-6;
+            let fd_dv = (law.rate(dv + h, r, &[b, g], &[n]) - law.rate(dv - h, r, &[b, g], &[n]))
+                / (2.0 * h);
+            let fd_r = (law.rate(dv, r + h, &[b, g], &[n]) - law.rate(dv, r - h, &[b, g], &[n]))
+                / (2.0 * h);
+            assert!((d_dv - fd_dv).abs() < 1e-7, "{d_dv} vs {fd_dv}");
+            assert!((d_r - fd_r).abs() < 1e-7, "{d_r} vs {fd_r}");
+        }
+        // A pack of the four points is the scalar evaluation of each lane, bit for bit.
+        let lane = |f: fn(&(f64, f64, f64, f64, f64)) -> f64| Pack::from_lanes(|i| f(&pts[i]));
+        let (dv, r, b, g, n) = (
+            lane(|p| p.0),
+            lane(|p| p.1),
+            lane(|p| p.2),
+            lane(|p| p.3),
+            lane(|p| p.4),
+        );
+        let mut basis = [Pack::splat(0.0); 3];
+        law.basis(dv, r, &[n], &mut basis);
+        let rate = law.rate(dv, r, &[b, g], &[n]);
+        let (d_dv, d_r) = law.rate_partials(dv, r, &[b, g], &[n]);
+        for (i, &(dv, r, b, g, n)) in pts.iter().enumerate() {
+            let mut s = [0.0; 3];
+            law.basis(dv, r, &[n], &mut s);
+            let (sd, sr) = law.rate_partials(dv, r, &[b, g], &[n]);
+            let scalar = [s[0], s[1], s[2], law.rate(dv, r, &[b, g], &[n]), sd, sr];
+            let packed = [basis[0], basis[1], basis[2], rate, d_dv, d_r];
+            for (p, v) in packed.iter().zip(scalar) {
+                assert_eq!(p.lane(i).to_bits(), v.to_bits());
+            }
+        }
     }
 
     #[test]

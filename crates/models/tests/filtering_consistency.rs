@@ -470,4 +470,41 @@ fn layouts_follow_spec_sections_5_2_and_6() {
     assert_eq!(mln.stages()[0].rows, (7..14).collect::<Vec<_>>());
     assert_eq!(mln.stages()[1].rows, [0, 1, 2, 3, 4, 5, 6, 14, 15]);
     assert_eq!(mln.stages()[1].linked, [14, 15]);
+
+    // The 10-storey example of docs/partitions.md: elements at 1 and 6, sensors at 1, 3, 6, 10.
+    let case = Case {
+        name: "10 storeys",
+        masses: vec![1.0; 10],
+        hysteretic: vec![0, 5],
+        sensors: vec![1, 3, 6, 10],
+        kind: MeasurementKind::Relative,
+    };
+    let mpf = MpfChain::new(spec(&case, Discretisation::Euler)).unwrap();
+    assert_eq!((mpf.dims().nn, mpf.dims().nbl, mpf.dims().ny), (7, 41, 4));
+    let l = mpf.layout();
+    let sampled: Vec<&str> = l
+        .state_names
+        .iter()
+        .zip(&l.states)
+        .filter(|(_, s)| matches!(s, S(_)))
+        .map(|(n, _)| n.as_str())
+        .collect();
+    assert_eq!(sampled, ["v1", "v5", "v6", "r1", "r6"]);
+    let mln = MlnChain::new(spec(&case, Discretisation::Euler)).unwrap();
+    assert_eq!((mln.dims().nu, mln.dims().nz), (24, 24));
+
+    // A linear chain: nothing sampled by the MPF-EKF2, no n in the MLN partition.
+    let case = Case {
+        name: "linear",
+        masses: vec![1.0; 4],
+        hysteretic: vec![],
+        sensors: vec![2, 4],
+        kind: MeasurementKind::Absolute,
+    };
+    let mpf = MpfChain::new(spec(&case, Discretisation::Symplectic)).unwrap();
+    assert_eq!((mpf.dims().nn, mpf.dims().nbl), (0, 16));
+    assert!(mpf.sampled_stages().is_empty());
+    let mln = MlnChain::new(spec(&case, Discretisation::Symplectic)).unwrap();
+    assert_eq!((mln.dims().nu, mln.dims().nz), (8, 8));
+    assert_eq!(mln.stages()[1].linked, Vec::<usize>::new());
 }

@@ -172,7 +172,7 @@ fn malformed_specs_get_errors_naming_the_field() {
         "prior",
     );
 
-    // Sensor layouts: storey 0, duplicates, out of range, unsorted.
+    // Sensor layouts: storey 0, a storey listed twice, out of range, unsorted.
     let kind = MeasurementKind::Relative;
     for (storeys, want) in [
         (vec![0, 2], SensorError::StoreyZero),
@@ -269,5 +269,78 @@ fn from_rms_follows_spec_section_3_for_both_measurement_kinds() {
         let mut x = vec![1.0; aug.dim()];
         aug.sample_initial(&mut rng, &mut x);
         assert!(x[..9].iter().all(|&v| v == 0.0) && x[9..].iter().all(|v| v.is_finite()));
+    }
+}
+
+#[test]
+fn marginal_priors_follow_spec_section_3_for_every_partition() {
+    use core_filters::smc::model::{ConditionallyLinear, ConditionallyQuadratic};
+    use models::partition::MarginalPrior;
+    let case = &cases()[0];
+    let mut s = spec(case, Discretisation::Euler);
+    s.prior.fix("k3", 8.0).unwrap();
+    let (mean, var) = s.prior.moments();
+    let mut rng = stream(5, 0, "priors");
+    for per_particle in [false, true] {
+        if per_particle {
+            s.marginal_prior = MarginalPrior::PerParticle { rel_sd: 0.1 };
+        }
+        let mln = MlnChain::new(s.clone()).unwrap();
+        let mpf = MpfChain::new(s.clone()).unwrap();
+        // θ index of every marginal entry, from the layouts.
+        for (layout, nm, which) in [
+            (mln.layout(), mln.dims().nz, "mln"),
+            (mpf.layout(), mpf.dims().nbl, "mpf"),
+        ] {
+            let mut mu = vec![0.0; nm];
+            let mut cov = vec![0.0; nm * nm];
+            if which == "mln" {
+                mln.marginal_prior(&mut rng, &mut mu, &mut cov);
+            } else {
+                mpf.marginal_prior(&mut rng, &mut mu, &mut cov);
+            }
+            let mut is_param = vec![false; nm];
+            for (t, slot) in layout.params.iter().enumerate() {
+                if let core_filters::model::Slot::Marginal(i) = *slot {
+                    is_param[i] = true;
+                    let v = cov[i + i * nm];
+                    if per_particle {
+                        let want = if var[t] > 0.0 {
+                            (0.1 * mu[i]).powi(2)
+                        } else {
+                            0.0
+                        };
+                        close(v, want, 1e-15, &format!("{which} per-particle var {t}"));
+                    } else {
+                        assert_eq!((mu[i], v), (mean[t], var[t]), "{which} θ {t}");
+                    }
+                }
+            }
+            // States start exactly at zero; the covariance is diagonal.
+            for i in 0..nm {
+                if !is_param[i] {
+                    assert_eq!((mu[i], cov[i + i * nm]), (0.0, 0.0), "{which} state {i}");
+                }
+                for j in 0..nm {
+                    if i != j {
+                        assert_eq!(cov[i + j * nm], 0.0);
+                    }
+                }
+            }
+            let core_filters::model::Slot::Marginal(k3) = layout.params[2] else {
+                panic!("k3 is marginal")
+            };
+            assert_eq!((mu[k3], cov[k3 + k3 * nm]), (8.0, 0.0), "{which}: k3 fixed");
+        }
+        let mut u = vec![1.0; mln.dims().nu];
+        mln.sample_initial(&mut rng, &mut u);
+        assert!(
+            u[..16].iter().all(|&v| v == 0.0) && u[16..].iter().all(|v| (1.0..5.0).contains(v))
+        );
+        let mut xn = vec![1.0; mpf.dims().nn];
+        mpf.sample_initial(&mut rng, &mut xn);
+        assert!(
+            xn[..5].iter().all(|&v| v == 0.0) && xn[5..].iter().all(|v| (1.0..5.0).contains(v))
+        );
     }
 }

@@ -21,6 +21,9 @@
 //!   `v_j,new` the marginal map (quadratic: Hessian `dt²·∂²a_j`) or the sampled new value
 //!   (affine); `Q_bl` adds `Var(x_j) += dt² q_vel²` and `Cov(x_j, v_j) = dt q_vel²` for every
 //!   marginal velocity (the same noise moves `x_j` through the new velocity).
+//!
+//! A chain without hysteretic element samples nothing: xⁿ is empty and there are no sampled
+//! stages, so the MPF-EKF2 reduces to an EKF2 (exact here: a KF with bilinear terms) on x^bl.
 
 use super::{ChainCore, ChainSpec, Discretisation, SpecError, NLIN};
 use crate::structure::{ChainTopology, ChainView, HysteresisLaw};

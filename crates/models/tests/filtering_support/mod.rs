@@ -33,7 +33,7 @@ impl Case {
 }
 
 /// The 7-storey chain with hysteresis at storeys 1 and 4 and sensors at 2, 4, 7 (non-unit
-/// masses), relative and absolute; the paper's 3-storey chain.
+/// masses), relative and absolute; the paper's 3-storey chain; a linear 4-storey chain.
 pub fn cases() -> Vec<Case> {
     let masses7 = vec![1.0, 1.3, 0.8, 1.1, 0.9, 1.2, 0.7];
     vec![
@@ -52,6 +52,13 @@ pub fn cases() -> Vec<Case> {
             kind: MeasurementKind::Absolute,
         },
         paper_case(MeasurementKind::Relative),
+        Case {
+            name: "4-storey linear",
+            masses: vec![1.0, 0.9, 1.1, 1.2],
+            hysteretic: vec![],
+            sensors: vec![2, 4],
+            kind: MeasurementKind::Absolute,
+        },
     ]
 }
 
