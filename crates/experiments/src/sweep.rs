@@ -129,11 +129,11 @@ pub enum Recompute {
 impl Recompute {
     pub fn describe(self) -> &'static str {
         match self {
-            Recompute::Missing => "no record",
-            Recompute::NotResuming => "record present, not resuming",
-            Recompute::Unreadable => "record unreadable",
-            Recompute::NoFingerprint => "record without fingerprint (older version)",
-            Recompute::FingerprintChanged => "fingerprint changed",
+            Recompute::Missing => "without a record",
+            Recompute::NotResuming => "with a record, not resuming (no --resume)",
+            Recompute::Unreadable => "with an unreadable record",
+            Recompute::NoFingerprint => "with a record without fingerprint (older version)",
+            Recompute::FingerprintChanged => "with a record of another fingerprint",
         }
     }
 }

@@ -73,7 +73,10 @@ impl DirLock {
         let text = serde_json::to_string_pretty(&me)? + "\n";
         for _ in 0..5 {
             match publish(&path, &text) {
-                Ok(()) => return Ok(Self { path, holder: me }),
+                Ok(()) => {
+                    clean_leftovers(dir);
+                    return Ok(Self { path, holder: me });
+                }
                 Err(e) if e.kind() == ErrorKind::AlreadyExists => {}
                 Err(e) => return Err(e).with_context(|| format!("creating {}", path.display())),
             }
@@ -174,6 +177,29 @@ fn take_over(path: &Path, stale: &str) -> Result<()> {
     }
     let _ = fs::remove_file(&aside);
     Ok(())
+}
+
+/// Removes the temporary and set-aside lock files (`.sysid.lock.tmp<pid>`,
+/// `.sysid.lock.stale<pid>`) of processes that have ended.
+fn clean_leftovers(dir: &Path) {
+    let Ok(entries) = fs::read_dir(dir) else {
+        return;
+    };
+    for entry in entries.flatten() {
+        let name = entry.file_name();
+        let pid = name.to_str().and_then(|n| {
+            let rest = n.strip_prefix(LOCK_FILE)?;
+            let digits = rest
+                .strip_prefix(".tmp")
+                .or_else(|| rest.strip_prefix(".stale"))?;
+            digits.parse::<u32>().ok()
+        });
+        if let Some(pid) = pid {
+            if pid != std::process::id() && !is_running(pid, None) {
+                let _ = fs::remove_file(entry.path());
+            }
+        }
+    }
 }
 
 /// Whether a process with id `pid` (and, when known, kernel start time `start`) is running on
@@ -288,8 +314,14 @@ mod tests {
             u32::MAX - 1
         };
         fs::write(dir.join(LOCK_FILE), serde_json::to_string(&dead).unwrap()).unwrap();
+        let leftover = dir.join(format!("{LOCK_FILE}.tmp4294967"));
+        fs::write(&leftover, "{").unwrap();
         let lock = DirLock::acquire(&dir).unwrap();
         assert_eq!(lock.holder().pid, std::process::id());
+        assert!(
+            !leftover.exists(),
+            "a dead writer's temporary lock file was kept"
+        );
         drop(lock);
         fs::remove_dir_all(&dir).unwrap();
     }
