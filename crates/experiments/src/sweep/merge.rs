@@ -1,9 +1,9 @@
 //! Merging the record directories of sharded sweeps.
 //!
 //! In two phases, so that a bad part writes nothing: first every source record is read, parsed
-//! and checked (fingerprint included), duplicates across parts are compared, and every record
-//! already in a destination is read and classified; any problem stops the merge with the list of
-//! files and reasons. Then each record is copied byte for byte with an atomic write (temporary
+//! and checked (fingerprint included), records with the same name in two parts are compared, and
+//! every record already in a destination is read and classified; any problem stops the merge
+//! with the list of files and reasons. Then each record is copied byte for byte with an atomic write (temporary
 //! file and rename in the destination), so a merge killed at any point leaves only complete
 //! records, and running it again finishes the job.
 
