@@ -120,7 +120,9 @@ fn main() -> Result<()> {
             shard,
             resume,
         } => {
+            let started = std::time::Instant::now();
             let sysid = build_sysid(&root)?;
+            let build_s = started.elapsed().as_secs_f64();
             let out = if quick {
                 "results/paper-quick"
             } else {
@@ -145,7 +147,13 @@ fn main() -> Result<()> {
             if resume {
                 cmd.arg("--resume");
             }
-            run(&mut cmd)
+            run(&mut cmd)?;
+            eprintln!(
+                "reproduce-paper: {:.0} s in all (build {build_s:.0} s, reproduction {:.0} s)",
+                started.elapsed().as_secs_f64(),
+                started.elapsed().as_secs_f64() - build_s
+            );
+            Ok(())
         }
         Task::Regression { threads, resume } => {
             let sysid = build_sysid(&root)?;
