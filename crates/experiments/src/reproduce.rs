@@ -21,7 +21,7 @@ use crate::record::RunRecord;
 use crate::study::Study;
 use crate::sweep::lock::DirLock;
 use crate::sweep::progress::clock;
-use crate::sweep::{run_sweep, Shard, SweepOptions};
+use crate::sweep::{run_sweep, write_bytes_atomic, Shard, SweepOptions};
 
 /// The studies of the reproduction, in the order they run.
 pub const STUDIES: [&str; 5] = ["fig4", "fig5", "fig6", "fig8", "fig7"];
@@ -242,16 +242,16 @@ pub fn reproduce(opts: &Options) -> Result<Done> {
         .collect();
     let total_s = start.elapsed().as_secs_f64();
     let summary_path = opts.out.join("summary.json");
-    std::fs::write(
+    write_bytes_atomic(
         &summary_path,
-        serde_json::to_string_pretty(&serde_json::json!({
+        (serde_json::to_string_pretty(&serde_json::json!({
             "quick": opts.quick,
             "wall_s": { "sweeps": sweep_s, "total": total_s },
             "runs": { "executed": executed, "reused": done.reused, "total": total_jobs },
             "studies": summary,
-        }))? + "\n",
-    )
-    .with_context(|| format!("writing {}", summary_path.display()))?;
+        }))? + "\n")
+            .as_bytes(),
+    )?;
     let report = crate::report::write_report(
         opts,
         &studies,
@@ -265,7 +265,7 @@ pub fn reproduce(opts: &Options) -> Result<Done> {
         },
     )?;
     let path = opts.out.join("REPORT.md");
-    std::fs::write(&path, report).with_context(|| format!("writing {}", path.display()))?;
+    write_bytes_atomic(&path, report.as_bytes())?;
     eprintln!(
         "wrote {}; {total_jobs} runs: {executed} executed ({} failed), {} reused; {}",
         path.display(),
