@@ -220,6 +220,18 @@ where
             .iter()
             .filter(|d| matches!(d, Decision::Run(_)))
             .count();
+        let replaced = decisions
+            .iter()
+            .filter(|d| matches!(d, Decision::Run(Recompute::NotResuming)))
+            .count();
+        if opts.progress && replaced > 0 {
+            eprintln!(
+                "{}: computing all {pending} runs; the {replaced} records already in {} are \
+                 replaced as runs finish (--resume reuses those whose fingerprint matches)",
+                opts.label,
+                dir.display()
+            );
+        }
         let progress = Progress::new(&opts.label, pending, opts.progress);
         let records: Vec<(R, Option<Recompute>)> = mine
             .par_iter()
