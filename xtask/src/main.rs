@@ -1,9 +1,12 @@
 //! `cargo xtask <task>`: project tasks written as plain Rust (the cargo-xtask pattern).
 //!
-//! - `reproduce-paper [--quick] [--threads N] [--shard i/n]`: builds `sysid` in release and runs
-//!   `sysid reproduce` from the workspace root into `results/paper/` (or `results/paper-quick/`).
+//! - `reproduce-paper [--quick] [--resume] [--threads N] [--shard i/n]`: builds `sysid` in release
+//!   and runs `sysid reproduce` from the workspace root into `results/paper/` (or
+//!   `results/paper-quick/`). Every run is computed unless `--resume` is given; then records whose
+//!   fingerprint matches are reused.
 //! - `regression [--threads N] [--resume]`: builds `sysid` in release and runs `sysid regression`
 //!   (`experiments/regression.toml` into `results/regression/`); fails when a bound is breached.
+//!   Every run is computed unless `--resume` is given.
 //! - `bench [--full]`: runs the criterion benchmarks of `core-filters` (short measurement times
 //!   unless `--full`), then appends one dated line per benchmark to `results/perf/history.csv`
 //!   and prints the change against the previous line of the same benchmark.
@@ -33,16 +36,22 @@ enum Task {
         /// Worker threads (0: one per core).
         #[arg(long, default_value_t = 0)]
         threads: usize,
-        /// Run part i of n of every sweep (then `sysid merge` and run again without it).
+        /// Run part i of n of every sweep (then `sysid merge`, and run again with `--resume`
+        /// and without `--shard` to draw).
         #[arg(long)]
         shard: Option<String>,
+        /// Reuse the existing records whose fingerprint (configuration, data, seed, numerics
+        /// version) matches; without it, every run is computed.
+        #[arg(long)]
+        resume: bool,
     },
     /// Identification-accuracy regression check (experiments/regression.toml).
     Regression {
         /// Worker threads (0: one per core).
         #[arg(long, default_value_t = 0)]
         threads: usize,
-        /// Reuse the records of an interrupted check instead of recomputing every run.
+        /// Reuse the records of an interrupted check whose fingerprint matches instead of
+        /// computing every run.
         #[arg(long)]
         resume: bool,
     },
@@ -87,12 +96,13 @@ fn run(cmd: &mut Command) -> Result<()> {
     Ok(())
 }
 
-/// Builds the release `sysid` and returns its path.
+/// Builds the release `sysid` (with cargo's own progress: a first build takes minutes) and
+/// returns its path.
 fn build_sysid(root: &Path) -> Result<PathBuf> {
+    eprintln!("building sysid (release; a first build takes a few minutes)");
     run(Command::new(cargo()).current_dir(root).args([
         "build",
         "--release",
-        "--quiet",
         "-p",
         "experiments",
         "--bin",
@@ -108,8 +118,11 @@ fn main() -> Result<()> {
             quick,
             threads,
             shard,
+            resume,
         } => {
+            let started = std::time::Instant::now();
             let sysid = build_sysid(&root)?;
+            let build_s = started.elapsed().as_secs_f64();
             let out = if quick {
                 "results/paper-quick"
             } else {
@@ -131,7 +144,16 @@ fn main() -> Result<()> {
             if let Some(s) = shard {
                 cmd.args(["--shard", &s]);
             }
-            run(&mut cmd)
+            if resume {
+                cmd.arg("--resume");
+            }
+            run(&mut cmd)?;
+            eprintln!(
+                "reproduce-paper: {:.0} s in all (build {build_s:.0} s, reproduction {:.0} s)",
+                started.elapsed().as_secs_f64(),
+                started.elapsed().as_secs_f64() - build_s
+            );
+            Ok(())
         }
         Task::Regression { threads, resume } => {
             let sysid = build_sysid(&root)?;
@@ -145,9 +167,10 @@ fn main() -> Result<()> {
                 "--threads",
                 &threads.to_string(),
             ]);
-            // Records of an earlier check may come from other code: recompute unless asked.
-            if !resume {
-                cmd.arg("--fresh");
+            // Every run is computed by the code being checked unless asked to resume (then only
+            // records with a matching fingerprint are reused).
+            if resume {
+                cmd.arg("--resume");
             }
             run(&mut cmd)
         }

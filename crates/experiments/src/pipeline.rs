@@ -28,7 +28,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::metrics::{relative_errors, ErrorSums, StateErrors};
 use crate::observe::{Recorder, TruthStates};
-use crate::record::{Loop, RunRecord, Timing, Validation, Versions};
+use crate::record::{Fingerprint, Loop, RunRecord, Timing, Validation, Versions};
 
 /// The identification algorithms (SPEC §5).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
@@ -466,6 +466,13 @@ pub fn identify(input: &RunInput, algorithm: Algorithm, s: &FilterSettings) -> R
         validation,
         config,
         versions: Versions::current(),
+        fingerprint: Some(Fingerprint::of_run(
+            algorithm.name(),
+            input.seed,
+            input.run,
+            s,
+            data,
+        )),
         trace: d.trace,
         timing: Timing {
             wall_s: d.wall_s,

@@ -4,15 +4,39 @@
 //! Everything in a record is a deterministic function of (data, configuration, seed) except the
 //! `timing` object, so two runs with the same seed give identical records once `timing` is
 //! removed, whatever the number of threads.
+//!
+//! A record is always readable by the tool that wrote it: a number that is not finite (an ESS
+//! minimum over no completed step, a relative error against a true value of 0, …) is written as
+//! one of the strings `"NaN"`, `"inf"`, `"-inf"` ([`number`]), never as `null`. Reading a record
+//! checks it ([`RunRecord::check`]): its schema, its fingerprint ([`fingerprint`]) and the
+//! consistency of its fields.
+//!
+//! Schema history: 1 — non-finite numbers written as `null`, no fingerprint; 2 — non-finite
+//! numbers as named strings, `fingerprint` and `versions.numerics` added. Records of schema 1
+//! are still read (they have no fingerprint, so a resumed sweep computes them again).
+
+pub mod fingerprint;
+pub mod number;
 
 use std::collections::BTreeMap;
 
 use core_filters::Health;
 use serde::{Deserialize, Serialize};
 
-use crate::metrics::StateErrors;
+use crate::metrics::{SignalError, StateErrors};
 use crate::observe::Trace;
 use crate::sweep::SweepRecord;
+
+pub use fingerprint::Fingerprint;
+
+/// The record schema this build writes (see the schema history above).
+pub const RECORD_SCHEMA: u32 = 2;
+
+/// Version of the numerics: **bump it whenever a change of the code changes results** (a filter,
+/// a Kalman step, the data generation, a metric, the order of floating-point operations). It is
+/// part of every record's fingerprint, so that a resumed sweep never reuses a record computed by
+/// code that gives other numbers.
+pub const NUMERICS_VERSION: u32 = 1;
 
 /// Versions and provenance written into every record.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -21,13 +45,17 @@ pub struct Versions {
     pub toolkit: String,
     /// Schema version of the record.
     pub record_schema: u32,
+    /// [`NUMERICS_VERSION`] of the code that computed the record (absent in schema 1).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub numerics: Option<u32>,
 }
 
 impl Versions {
     pub fn current() -> Self {
         Self {
             toolkit: env!("CARGO_PKG_VERSION").to_string(),
-            record_schema: 1,
+            record_schema: RECORD_SCHEMA,
+            numerics: Some(NUMERICS_VERSION),
         }
     }
 }
@@ -36,17 +64,22 @@ impl Versions {
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct Timing {
     /// Wall time of the filter run (s), excluding data loading and validation.
+    #[serde(with = "number::scalar")]
     pub wall_s: f64,
     /// Particles × steps / wall_s.
+    #[serde(with = "number::scalar")]
     pub particle_steps_per_s: f64,
     /// Wall time of the validation integration (s).
+    #[serde(with = "number::scalar")]
     pub validation_s: f64,
 }
 
 /// A hysteresis loop: restoring force of element 1 (k1·r1) against its drift x1, decimated.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct Loop {
+    #[serde(with = "number::vec")]
     pub x: Vec<f64>,
+    #[serde(with = "number::vec")]
     pub force: Vec<f64>,
 }
 
@@ -55,6 +88,7 @@ pub struct Loop {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Validation {
     /// Errors of the validation states against the true states.
+    #[serde(with = "state_errors")]
     pub states: StateErrors,
     /// Validation loop and true loop (decimated), when the record keeps loops.
     pub loop_validation: Option<Loop>,
@@ -77,19 +111,27 @@ pub struct RunRecord {
     pub particles: usize,
     pub param_names: Vec<String>,
     /// True θ (null for field data).
+    #[serde(with = "number::opt_vec")]
     pub theta_true: Option<Vec<f64>>,
     /// θ_val: posterior mean averaged over the last `window` steps (SPEC eq. 26).
+    #[serde(with = "number::vec")]
     pub theta_val: Vec<f64>,
     pub window: usize,
-    /// Posterior s.d. of θ at the last completed step.
+    /// Posterior s.d. of θ at the last completed step (empty when no step completed).
+    #[serde(with = "number::vec")]
     pub theta_sd_final: Vec<f64>,
-    /// |θ_val − θ_true| / θ_true (null for field data).
+    /// |θ_val − θ_true| / θ_true (null for field data; `"inf"` or `"NaN"` where θ_true = 0).
+    #[serde(with = "number::opt_vec")]
     pub rel_error: Option<Vec<f64>>,
     /// Log-likelihood estimate over the completed steps.
+    #[serde(with = "number::scalar")]
     pub loglik: f64,
     pub steps_total: usize,
     pub steps_completed: usize,
+    /// Smallest and mean ESS over the completed steps (`"inf"` and `"NaN"` when none completed).
+    #[serde(with = "number::scalar")]
     pub ess_min: f64,
+    #[serde(with = "number::scalar")]
     pub ess_mean: f64,
     /// Distinct values of each sampled static parameter at the end (degeneracy).
     pub distinct_sampled: BTreeMap<String, usize>,
@@ -100,12 +142,17 @@ pub struct RunRecord {
     /// Numerical repairs counted by the filter.
     pub health: Health,
     /// Online state-estimate errors against the truth (null for field data).
+    #[serde(with = "opt_state_errors")]
     pub online_states: Option<StateErrors>,
     pub validation: Option<Validation>,
     /// The full configuration of the run (data and filter).
     pub config: serde_json::Value,
     pub versions: Versions,
+    /// What determined the result (absent in schema 1).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub fingerprint: Option<Fingerprint>,
     /// Decimated traces of posterior means and s.d.s (decimation stated inside).
+    #[serde(with = "trace_repr")]
     pub trace: Trace,
     pub timing: Timing,
     /// Plausibility warnings with their reasons (`checks::check`): an impossible answer, a
@@ -133,10 +180,217 @@ impl RunRecord {
         v.as_object_mut().expect("object").remove("timing");
         serde_json::to_string(&v).expect("serialises")
     }
+
+    /// Checks a record just read: a schema this build knows, a fingerprint that is the hash of
+    /// its inputs and agrees with the record's own algorithm, seed, run, numerics version and
+    /// filter settings (schema 2 on), and consistent sizes and step counts.
+    pub fn check(&self) -> Result<(), String> {
+        let schema = self.versions.record_schema;
+        if schema == 0 || schema > RECORD_SCHEMA {
+            return Err(format!(
+                "record schema {schema} is not one this sysid reads (1 to {RECORD_SCHEMA}); \
+                 it was written by another version of the tool"
+            ));
+        }
+        if schema >= 2 {
+            let f = self
+                .fingerprint
+                .as_ref()
+                .ok_or("a record of schema 2 has no fingerprint")?;
+            f.verify()?;
+            let inputs = &f.inputs;
+            let agree = |key: &str, value: serde_json::Value| -> Result<(), String> {
+                if inputs.get(key) == Some(&value) {
+                    Ok(())
+                } else {
+                    Err(format!(
+                        "the fingerprint's `{key}` ({}) disagrees with the record ({value})",
+                        inputs.get(key).unwrap_or(&serde_json::Value::Null)
+                    ))
+                }
+            };
+            agree("algorithm", self.algorithm.clone().into())?;
+            agree("seed", self.seed.into())?;
+            agree("run", self.run.into())?;
+            agree(
+                "numerics",
+                self.versions
+                    .numerics
+                    .ok_or("a record of schema 2 has no numerics version")?
+                    .into(),
+            )?;
+            agree(
+                "filter",
+                self.config
+                    .get("filter")
+                    .cloned()
+                    .unwrap_or(serde_json::Value::Null),
+            )?;
+        }
+        let n = self.param_names.len();
+        let sized = |what: &str, len: usize| -> Result<(), String> {
+            if len == n {
+                Ok(())
+            } else {
+                Err(format!("{what} has {len} entries for {n} parameters"))
+            }
+        };
+        sized("theta_val", self.theta_val.len())?;
+        if !self.theta_sd_final.is_empty() {
+            sized("theta_sd_final", self.theta_sd_final.len())?;
+        }
+        if let Some(t) = &self.theta_true {
+            sized("theta_true", t.len())?;
+        }
+        if let Some(e) = &self.rel_error {
+            sized("rel_error", e.len())?;
+        }
+        if self.steps_completed > self.steps_total {
+            return Err(format!(
+                "steps_completed {} exceeds steps_total {}",
+                self.steps_completed, self.steps_total
+            ));
+        }
+        if self.failure.is_none() && self.steps_completed != self.steps_total {
+            return Err(format!(
+                "the run completed {} of {} steps but records no failure",
+                self.steps_completed, self.steps_total
+            ));
+        }
+        Ok(())
+    }
 }
 
 impl SweepRecord for RunRecord {
     fn failed(&self) -> bool {
         self.is_failure()
+    }
+    fn fingerprint(&self) -> Option<&str> {
+        self.fingerprint.as_ref().map(|f| f.sha256.as_str())
+    }
+    fn check(&self) -> Result<(), String> {
+        RunRecord::check(self)
+    }
+}
+
+/// [`SignalError`] with the record's number encoding (its type lives with the metrics).
+#[derive(Serialize, Deserialize)]
+struct SignalErrorRepr {
+    #[serde(with = "number::scalar")]
+    rmse: f64,
+    #[serde(with = "number::scalar")]
+    cv_rmse: f64,
+    #[serde(with = "number::scalar")]
+    nrmse: f64,
+}
+
+#[derive(Serialize, Deserialize)]
+struct StateErrorsRepr {
+    names: Vec<String>,
+    errors: Vec<SignalErrorRepr>,
+}
+
+impl From<&StateErrors> for StateErrorsRepr {
+    fn from(s: &StateErrors) -> Self {
+        Self {
+            names: s.names.clone(),
+            errors: s
+                .errors
+                .iter()
+                .map(|e| SignalErrorRepr {
+                    rmse: e.rmse,
+                    cv_rmse: e.cv_rmse,
+                    nrmse: e.nrmse,
+                })
+                .collect(),
+        }
+    }
+}
+
+impl From<StateErrorsRepr> for StateErrors {
+    fn from(s: StateErrorsRepr) -> Self {
+        Self {
+            names: s.names,
+            errors: s
+                .errors
+                .into_iter()
+                .map(|e| SignalError {
+                    rmse: e.rmse,
+                    cv_rmse: e.cv_rmse,
+                    nrmse: e.nrmse,
+                })
+                .collect(),
+        }
+    }
+}
+
+mod state_errors {
+    use super::*;
+    use serde::{Deserializer, Serializer};
+
+    pub fn serialize<S: Serializer>(x: &StateErrors, s: S) -> Result<S::Ok, S::Error> {
+        StateErrorsRepr::from(x).serialize(s)
+    }
+    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<StateErrors, D::Error> {
+        StateErrorsRepr::deserialize(d).map(Into::into)
+    }
+}
+
+mod opt_state_errors {
+    use super::*;
+    use serde::{Deserializer, Serializer};
+
+    pub fn serialize<S: Serializer>(x: &Option<StateErrors>, s: S) -> Result<S::Ok, S::Error> {
+        x.as_ref().map(StateErrorsRepr::from).serialize(s)
+    }
+    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<Option<StateErrors>, D::Error> {
+        Ok(Option::<StateErrorsRepr>::deserialize(d)?.map(Into::into))
+    }
+}
+
+/// [`Trace`] with the record's number encoding (its type lives with the observer).
+#[derive(Serialize, Deserialize)]
+struct TraceRepr {
+    every: usize,
+    #[serde(with = "number::vec")]
+    t: Vec<f64>,
+    #[serde(with = "number::vec_vec")]
+    param_mean: Vec<Vec<f64>>,
+    #[serde(with = "number::vec_vec")]
+    param_sd: Vec<Vec<f64>>,
+    #[serde(with = "number::vec")]
+    ess: Vec<f64>,
+}
+
+mod trace_repr {
+    use super::*;
+    use serde::{Deserializer, Serializer};
+
+    pub fn serialize<S: Serializer>(x: &Trace, s: S) -> Result<S::Ok, S::Error> {
+        let Trace {
+            every,
+            t,
+            param_mean,
+            param_sd,
+            ess,
+        } = x.clone();
+        TraceRepr {
+            every,
+            t,
+            param_mean,
+            param_sd,
+            ess,
+        }
+        .serialize(s)
+    }
+    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<Trace, D::Error> {
+        let r = TraceRepr::deserialize(d)?;
+        Ok(Trace {
+            every: r.every,
+            t: r.t,
+            param_mean: r.param_mean,
+            param_sd: r.param_sd,
+            ess: r.ess,
+        })
     }
 }

@@ -1,6 +1,10 @@
 //! The paper reproduction (SPEC §8): runs every study of `experiments/`, draws every figure from
 //! the records, and writes `summary.json` and `REPORT.md` with the paper's statements beside our
 //! measurements.
+//!
+//! Every run is computed unless the caller asks to resume; then a record is reused only when its
+//! fingerprint matches the job's (see [`crate::sweep`]). The output directory is locked for the
+//! whole reproduction ([`crate::sweep::lock`]).
 
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
@@ -15,7 +19,9 @@ use crate::metrics::mean_sd;
 use crate::pipeline::Algorithm;
 use crate::record::RunRecord;
 use crate::study::Study;
-use crate::sweep::{run_sweep, Shard, SweepOptions};
+use crate::sweep::lock::DirLock;
+use crate::sweep::progress::clock;
+use crate::sweep::{run_sweep, write_bytes_atomic, Shard, SweepOptions};
 
 /// The studies of the reproduction, in the order they run.
 pub const STUDIES: [&str; 5] = ["fig4", "fig5", "fig6", "fig8", "fig7"];
@@ -33,7 +39,23 @@ pub struct Options {
     pub quick: bool,
     pub threads: usize,
     pub shard: Shard,
+    /// Show progress and the summary of each sweep on stderr.
     pub progress: bool,
+    /// Reuse records whose fingerprint matches (otherwise every run is computed).
+    pub resume: bool,
+}
+
+/// What a reproduction did.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct Done {
+    /// Runs of this shard.
+    pub total: usize,
+    /// Runs computed by this invocation.
+    pub executed: usize,
+    /// Records reused (resume with a matching fingerprint).
+    pub reused: usize,
+    /// Computed runs that failed.
+    pub failed: usize,
 }
 
 /// Per algorithm and parameter: statistics of θ_val over the runs of a study.
@@ -145,13 +167,14 @@ fn by_algorithm<'a>(
 }
 
 /// Runs the reproduction. With a shard other than `0/1`, only runs this shard's records (no
-/// figures, no report): merge the shards' `records/` and run again without `--shard` to draw.
-pub fn reproduce(opts: &Options) -> Result<()> {
+/// figures, no report): merge the shards' `records/` and run again without `--shard` (with
+/// `--resume`) to draw. Returns what was done.
+pub fn reproduce(opts: &Options) -> Result<Done> {
     let start = Instant::now();
+    let _lock = DirLock::acquire(&opts.out)?;
     let mut studies = BTreeMap::new();
     let mut records = BTreeMap::new();
-    let mut executed = 0usize;
-    let mut total_jobs = 0usize;
+    let mut done = Done::default();
     for name in STUDIES {
         let path = opts.experiments.join(format!("{name}.toml"));
         let mut study = Study::load(&path)?;
@@ -159,41 +182,44 @@ pub fn reproduce(opts: &Options) -> Result<()> {
             study = study.quick();
         }
         let dir = opts.out.join("records").join(name);
-        let jobs = study.jobs();
-        total_jobs += jobs
-            .iter()
-            .enumerate()
-            .filter(|(i, _)| opts.shard.contains(*i))
-            .count();
-        executed += jobs
-            .iter()
-            .enumerate()
-            .filter(|(i, j)| {
-                opts.shard.contains(*i)
-                    && !crate::sweep::record_path(&dir, &Study::job_id(j)).exists()
-            })
-            .count();
         let sweep = SweepOptions {
             threads: opts.threads,
             shard: opts.shard,
             progress: opts.progress,
             label: name.to_string(),
+            resume: opts.resume,
         };
-        let recs = run_sweep(&jobs, Study::job_id, &dir, &sweep, |job| {
-            study
-                .run_job(job)
-                .with_context(|| format!("{name}: {}", Study::job_id(job)))
-        })?;
-        eprintln!("{name}: {} runs", recs.len());
-        records.insert(name, recs);
+        let outcome = run_sweep(
+            &study.jobs(),
+            Study::job_id,
+            |job| study.job_fingerprint(job),
+            &dir,
+            &sweep,
+            |job| {
+                study
+                    .run_job(job)
+                    .with_context(|| format!("{name}: {}", Study::job_id(job)))
+            },
+        )?;
+        done.total += outcome.records.len();
+        done.executed += outcome.executed;
+        done.reused += outcome.reused;
+        done.failed += outcome.failed;
+        records.insert(name, outcome.records);
         studies.insert(name, study);
     }
+    let (executed, total_jobs) = (done.executed, done.total);
     if opts.shard != Shard::default() {
         eprintln!(
-            "shard {}/{} done; merge the shards' records and run again to draw",
-            opts.shard.index, opts.shard.count
+            "shard {}/{}: {total_jobs} runs, {executed} executed ({} failed), {} reused, {}; \
+             merge the shards' records (`sysid merge`) and run `sysid reproduce --resume` to draw",
+            opts.shard.index,
+            opts.shard.count,
+            done.failed,
+            done.reused,
+            clock(start.elapsed())
         );
-        return Ok(());
+        return Ok(done);
     }
     let sweep_s = start.elapsed().as_secs_f64();
 
@@ -216,16 +242,16 @@ pub fn reproduce(opts: &Options) -> Result<()> {
         .collect();
     let total_s = start.elapsed().as_secs_f64();
     let summary_path = opts.out.join("summary.json");
-    std::fs::write(
+    write_bytes_atomic(
         &summary_path,
-        serde_json::to_string_pretty(&serde_json::json!({
+        (serde_json::to_string_pretty(&serde_json::json!({
             "quick": opts.quick,
             "wall_s": { "sweeps": sweep_s, "total": total_s },
-            "runs": { "executed": executed, "total": total_jobs },
+            "runs": { "executed": executed, "reused": done.reused, "total": total_jobs },
             "studies": summary,
-        }))? + "\n",
-    )
-    .with_context(|| format!("writing {}", summary_path.display()))?;
+        }))? + "\n")
+            .as_bytes(),
+    )?;
     let report = crate::report::write_report(
         opts,
         &studies,
@@ -239,9 +265,15 @@ pub fn reproduce(opts: &Options) -> Result<()> {
         },
     )?;
     let path = opts.out.join("REPORT.md");
-    std::fs::write(&path, report).with_context(|| format!("writing {}", path.display()))?;
-    eprintln!("wrote {} ({total_s:.1} s)", path.display());
-    Ok(())
+    write_bytes_atomic(&path, report.as_bytes())?;
+    eprintln!(
+        "wrote {}; {total_jobs} runs: {executed} executed ({} failed), {} reused; {}",
+        path.display(),
+        done.failed,
+        done.reused,
+        clock(start.elapsed())
+    );
+    Ok(done)
 }
 
 fn draw(

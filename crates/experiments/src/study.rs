@@ -1,6 +1,8 @@
 //! Experiment configs (one TOML per figure or study in `experiments/`) and their expansion into
 //! jobs: algorithm × particles × resampling × run. Every job regenerates its data set from
-//! `(master_seed, run)`, so all algorithms of one run see the identical data set.
+//! `(master_seed, run)`, so all algorithms of one run see the identical data set. A job's
+//! fingerprint ([`Study::job_fingerprint`]) is the one its record will carry, so a resumed sweep
+//! can tell whether an existing record is this job's result.
 
 use std::path::Path;
 
@@ -10,7 +12,7 @@ use models::dataset::{generate, DatasetConfig};
 use serde::{Deserialize, Serialize};
 
 use crate::pipeline::{identify, Algorithm, FilterSettings, RunInput};
-use crate::record::RunRecord;
+use crate::record::{Fingerprint, RunRecord};
 
 /// The data of a study.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -159,14 +161,34 @@ impl Study {
         Ok(c)
     }
 
+    /// The filter settings of a job: the study's, with the job's particles and resampling.
+    pub fn settings(&self, job: &Job) -> FilterSettings {
+        let mut settings = self.filter.clone();
+        settings.particles = job.particles;
+        settings.resampling = job.resampling;
+        settings
+    }
+
+    /// The fingerprint (SHA-256, hex) the record of `job` carries when computed by this build:
+    /// the job's data set is generated (a few milliseconds) and hashed with the settings, seed,
+    /// run, algorithm and numerics version.
+    pub fn job_fingerprint(&self, job: &Job) -> Result<String> {
+        let data = generate(&self.dataset_config(job.run)?)?;
+        Ok(Fingerprint::of_run(
+            job.algorithm.name(),
+            self.sweep.master_seed,
+            job.run,
+            &self.settings(job),
+            &data.to_loaded(),
+        )
+        .sha256)
+    }
+
     /// Runs one job: generate the run's data set, identify, return the record. Errors are
     /// configuration errors; numerical failures are inside the record.
     pub fn run_job(&self, job: &Job) -> Result<RunRecord> {
         let data = generate(&self.dataset_config(job.run)?)?;
         let loaded = data.to_loaded();
-        let mut settings = self.filter.clone();
-        settings.particles = job.particles;
-        settings.resampling = job.resampling;
         let input = RunInput {
             data: &loaded,
             chain: Some(&data.chain),
@@ -175,6 +197,6 @@ impl Study {
             run: job.run,
             progress: false,
         };
-        identify(&input, job.algorithm, &settings)
+        identify(&input, job.algorithm, &self.settings(job))
     }
 }

@@ -3,24 +3,45 @@
 //! - Parallel over runs with rayon, **ordered collect**: results come back in job order whatever
 //!   the thread count, and every run draws only from its own seeded streams, so records are the
 //!   same byte for byte with 1 or N threads (timings aside).
-//! - Each record is written atomically (temporary file, then rename) into `dir/<id>.json` the
-//!   moment its run finishes; a sweep started again skips the jobs whose record exists, so an
-//!   interrupted sweep resumes without losing or duplicating anything.
+//! - Each record is written atomically (temporary file `<id>.json.tmp<pid>` in the same
+//!   directory, then rename) into `dir/<id>.json` the moment its run finishes, so an interrupted
+//!   sweep never leaves a half-written record; temporary files of processes that have ended are
+//!   removed by the next sweep or merge of the directory.
+//! - A sweep computes every run unless asked to **resume**; then it reuses an existing record
+//!   only when it reads back, passes its checks and its fingerprint equals the job's (the hash of
+//!   everything that determines the result, see [`crate::record::fingerprint`]), and says how
+//!   many it reused and recomputed, and why.
 //! - `--shard i/n` runs the jobs whose index is `i` modulo `n` (e.g. one Slurm array task each);
-//!   [`merge`] gathers the shard directories into one.
+//!   [`merge`] gathers the shard directories into one, checking every record.
+//! - [`lock::DirLock`] keeps a second writer out of an output directory.
 
+pub mod lock;
+mod merge;
+pub mod progress;
+
+pub use merge::{merge, study_pairs, MergeReport};
+
+use std::collections::BTreeMap;
 use std::fs;
 use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::time::Instant;
 
-use anyhow::{bail, Context, Result};
-use indicatif::{ProgressBar, ProgressStyle};
+use anyhow::{Context, Result};
 use rayon::prelude::*;
 use serde::{de::DeserializeOwned, Serialize};
 
-/// A record that can say whether its run failed (for the progress bar's failure count).
+use progress::{clock, Progress};
+
+/// A record a sweep can reuse: it says whether its run failed, what determined it, and checks
+/// itself after it is read.
 pub trait SweepRecord: Serialize + DeserializeOwned + Send {
+    /// Whether the run failed (for the progress count).
     fn failed(&self) -> bool;
+    /// The fingerprint of everything that determined the record (`None`: written by a tool that
+    /// did not record one).
+    fn fingerprint(&self) -> Option<&str>;
+    /// Checks a record just read (schema, fingerprint, consistency).
+    fn check(&self) -> Result<(), String>;
 }
 
 /// Part `index` of `count` of a sweep (`0 ≤ index < count`).
@@ -69,10 +90,13 @@ pub struct SweepOptions {
     /// Worker threads (0: rayon's default, one per core).
     pub threads: usize,
     pub shard: Shard,
-    /// Draw a progress bar on stderr (only when it is a terminal).
+    /// Show progress on stderr (a bar in a terminal, plain lines elsewhere) and a summary.
     pub progress: bool,
-    /// Label of the progress bar.
+    /// Name of the sweep in progress lines.
     pub label: String,
+    /// Reuse existing records whose fingerprint matches the job's (otherwise every run of the
+    /// shard is computed).
+    pub resume: bool,
 }
 
 impl Default for SweepOptions {
@@ -82,59 +106,169 @@ impl Default for SweepOptions {
             shard: Shard::default(),
             progress: true,
             label: "runs".into(),
+            resume: false,
         }
     }
 }
 
-/// Runs `run` on every job of this shard whose record is not yet in `dir`, writing each record to
-/// `dir/<id(job)>.json` as soon as it is done. An `Err` from `run` is a configuration error and
-/// stops the sweep (records already written stay); numerical failures belong inside records.
-/// Returns the records of this shard, in job order
-/// (finished earlier or now).
+/// Why a run was computed rather than reused.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
+pub enum Recompute {
+    /// No record in the directory.
+    Missing,
+    /// A record exists, but the sweep was not asked to resume.
+    NotResuming,
+    /// The record does not parse or fails its checks.
+    Unreadable,
+    /// The record carries no fingerprint (written by an older version).
+    NoFingerprint,
+    /// The record was computed from other inputs (configuration, data, seed or numerics).
+    FingerprintChanged,
+}
+
+impl Recompute {
+    pub fn describe(self) -> &'static str {
+        match self {
+            Recompute::Missing => "without a record",
+            Recompute::NotResuming => "with a record, not resuming (no --resume)",
+            Recompute::Unreadable => "with an unreadable record",
+            Recompute::NoFingerprint => "with a record without fingerprint (older version)",
+            Recompute::FingerprintChanged => "with a record of another fingerprint",
+        }
+    }
+}
+
+/// What a sweep did.
+#[derive(Debug, Clone)]
+pub struct SweepOutcome<R> {
+    /// The records of this shard, in job order.
+    pub records: Vec<R>,
+    /// Runs computed by this sweep.
+    pub executed: usize,
+    /// Records reused (resume with a matching fingerprint).
+    pub reused: usize,
+    /// Runs computed, by reason.
+    pub recomputed: BTreeMap<Recompute, usize>,
+    /// Executed runs that failed.
+    pub failed: usize,
+    pub wall_s: f64,
+}
+
+impl<R> SweepOutcome<R> {
+    /// `12 runs: 10 executed (1 failed), 2 reused; recomputed: 10 no record — 3.4 s`.
+    pub fn summary(&self) -> String {
+        let mut s = format!(
+            "{} runs: {} executed ({} failed), {} reused",
+            self.records.len(),
+            self.executed,
+            self.failed,
+            self.reused
+        );
+        if !self.recomputed.is_empty() {
+            let why: Vec<String> = self
+                .recomputed
+                .iter()
+                .map(|(r, n)| format!("{n} {}", r.describe()))
+                .collect();
+            s.push_str(&format!("; computed because: {}", why.join(", ")));
+        }
+        s.push_str(&format!(
+            " — {}",
+            clock(std::time::Duration::from_secs_f64(self.wall_s))
+        ));
+        s
+    }
+}
+
+enum Decision<R> {
+    Reuse(R),
+    Run(Recompute),
+}
+
+/// Runs the jobs of this shard into `dir/<id(job)>.json`. Without `opts.resume` every job is
+/// computed (an existing record is replaced when its run finishes); with it, a job whose record
+/// reads back and carries the fingerprint `fingerprint(job)` is reused. An `Err` from `run` or
+/// `fingerprint` is a configuration error and stops the sweep (records already written stay);
+/// numerical failures belong inside records.
 pub fn run_sweep<J, R>(
     jobs: &[J],
     id: impl Fn(&J) -> String + Sync,
+    fingerprint: impl Fn(&J) -> Result<String> + Sync,
     dir: &Path,
     opts: &SweepOptions,
     run: impl Fn(&J) -> Result<R> + Sync,
-) -> Result<Vec<R>>
+) -> Result<SweepOutcome<R>>
 where
     J: Sync,
     R: SweepRecord,
 {
+    let start = Instant::now();
     fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-    let mine: Vec<(usize, &J)> = jobs
+    clean_stale_temporaries(dir)?;
+    let mine: Vec<&J> = jobs
         .iter()
         .enumerate()
         .filter(|(i, _)| opts.shard.contains(*i))
+        .map(|(_, j)| j)
         .collect();
-    let pending = mine
-        .iter()
-        .filter(|(_, j)| !record_path(dir, &id(j)).exists())
-        .count();
-    let bar = progress_bar(opts, mine.len() as u64, (mine.len() - pending) as u64);
-    let failures = AtomicU64::new(0);
-    let work = || -> Result<Vec<R>> {
-        mine.par_iter()
-            .map(|(_, job)| {
-                let path = record_path(dir, &id(job));
-                let record = if path.exists() {
-                    read_record(&path)?
-                } else {
+    let work = || -> Result<SweepOutcome<R>> {
+        let decisions: Vec<Decision<R>> = mine
+            .par_iter()
+            .map(|job| decide(dir, &id(job), opts.resume, || fingerprint(job)))
+            .collect::<Result<_>>()?;
+        let pending = decisions
+            .iter()
+            .filter(|d| matches!(d, Decision::Run(_)))
+            .count();
+        let replaced = decisions
+            .iter()
+            .filter(|d| matches!(d, Decision::Run(Recompute::NotResuming)))
+            .count();
+        if opts.progress && replaced > 0 {
+            eprintln!(
+                "{}: computing all {pending} runs; the {replaced} records already in {} are \
+                 replaced as runs finish (--resume reuses those whose fingerprint matches)",
+                opts.label,
+                dir.display()
+            );
+        }
+        let progress = Progress::new(&opts.label, pending, opts.progress);
+        let records: Vec<(R, Option<Recompute>)> = mine
+            .par_iter()
+            .zip(decisions)
+            .map(|(job, decision)| match decision {
+                Decision::Reuse(r) => Ok((r, None)),
+                Decision::Run(why) => {
                     let r = run(job)?;
-                    write_atomic(&path, &r)?;
-                    bar.inc(1);
-                    r
-                };
-                if record.failed() {
-                    let f = failures.fetch_add(1, Ordering::Relaxed) + 1;
-                    bar.set_message(format!("{f} failed"));
+                    write_atomic(&record_path(dir, &id(job)), &r)?;
+                    progress.inc(r.failed());
+                    Ok((r, Some(why)))
                 }
-                Ok(record)
             })
-            .collect()
+            .collect::<Result<_>>()?;
+        progress.finish();
+        let mut out = SweepOutcome {
+            records: Vec::with_capacity(records.len()),
+            executed: 0,
+            reused: 0,
+            recomputed: BTreeMap::new(),
+            failed: 0,
+            wall_s: 0.0,
+        };
+        for (r, why) in records {
+            match why {
+                Some(why) => {
+                    out.executed += 1;
+                    out.failed += usize::from(r.failed());
+                    *out.recomputed.entry(why).or_default() += 1;
+                }
+                None => out.reused += 1,
+            }
+            out.records.push(r);
+        }
+        Ok(out)
     };
-    let out = if opts.threads > 0 {
+    let mut out = if opts.threads > 0 {
         rayon::ThreadPoolBuilder::new()
             .num_threads(opts.threads)
             .build()
@@ -143,24 +277,39 @@ where
     } else {
         work()
     }?;
-    bar.finish_and_clear();
+    out.wall_s = start.elapsed().as_secs_f64();
+    if opts.progress {
+        eprintln!("{}: {}", opts.label, out.summary());
+    }
     Ok(out)
 }
 
-fn progress_bar(opts: &SweepOptions, len: u64, done: u64) -> ProgressBar {
-    use std::io::IsTerminal;
-    if !opts.progress || !std::io::stderr().is_terminal() {
-        return ProgressBar::hidden();
+/// Whether the record of one job can be reused.
+fn decide<R: SweepRecord>(
+    dir: &Path,
+    id: &str,
+    resume: bool,
+    expected: impl FnOnce() -> Result<String>,
+) -> Result<Decision<R>> {
+    let path = record_path(dir, id);
+    if !path.exists() {
+        return Ok(Decision::Run(Recompute::Missing));
     }
-    let bar = ProgressBar::new(len);
-    bar.set_style(
-        ProgressStyle::with_template("{prefix:>12} [{bar:30}] {pos}/{len} runs, ETA {eta} {msg}")
-            .expect("valid template")
-            .progress_chars("=> "),
-    );
-    bar.set_prefix(opts.label.clone());
-    bar.set_position(done);
-    bar
+    if !resume {
+        return Ok(Decision::Run(Recompute::NotResuming));
+    }
+    let record: R = match read_record(&path) {
+        Ok(r) => r,
+        Err(e) => {
+            eprintln!("{e:#}: computing it again");
+            return Ok(Decision::Run(Recompute::Unreadable));
+        }
+    };
+    Ok(match record.fingerprint() {
+        None => Decision::Run(Recompute::NoFingerprint),
+        Some(f) if f == expected()? => Decision::Reuse(record),
+        Some(_) => Decision::Run(Recompute::FingerprintChanged),
+    })
 }
 
 /// Where the record of job `id` lives.
@@ -168,57 +317,78 @@ pub fn record_path(dir: &Path, id: &str) -> PathBuf {
     dir.join(format!("{id}.json"))
 }
 
-/// Reads one record, naming the file in the error.
-pub fn read_record<R: DeserializeOwned>(path: &Path) -> Result<R> {
-    let text = fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
-    serde_json::from_str(&text).with_context(|| format!("parsing record {}", path.display()))
+/// Reads one record and checks it; errors name the file and say what is wrong (a record cut
+/// short, a value that is not a number, a fingerprint that does not match, …).
+pub fn read_record<R: SweepRecord>(path: &Path) -> Result<R> {
+    let text = fs::read(path).with_context(|| format!("reading {}", path.display()))?;
+    parse_record(&text).with_context(|| format!("record {}", path.display()))
 }
 
-/// Writes `value` as pretty JSON to `path` atomically (temporary file in the same directory, then
-/// rename), so that an interrupted sweep never leaves a half-written record behind.
+/// Parses and checks the text of one record.
+pub fn parse_record<R: SweepRecord>(text: &[u8]) -> Result<R> {
+    let record: R = serde_json::from_slice(text).map_err(|e| {
+        let what = if e.is_eof() {
+            "is cut short (an interrupted write?)"
+        } else {
+            "is not a valid run record"
+        };
+        anyhow::anyhow!("{what}: {e}")
+    })?;
+    record
+        .check()
+        .map_err(|e| anyhow::anyhow!("fails its checks: {e}"))?;
+    Ok(record)
+}
+
+/// Writes `value` as pretty JSON to `path` atomically (see [`write_bytes_atomic`]).
 pub fn write_atomic<T: Serialize>(path: &Path, value: &T) -> Result<()> {
     let text = serde_json::to_string_pretty(value).context("serialising a record")?;
-    let tmp = path.with_extension(format!("json.tmp{}", std::process::id()));
-    fs::write(&tmp, text + "\n").with_context(|| format!("writing {}", tmp.display()))?;
+    write_bytes_atomic(path, (text + "\n").as_bytes())
+}
+
+/// Writes `bytes` to `path` atomically: a temporary file `<name>.tmp<pid>` in the same
+/// directory, then a rename over `path`. An interruption leaves either the old file or the new
+/// one, never a part of either (and possibly the temporary file, removed by the next sweep or
+/// merge of the directory).
+pub fn write_bytes_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
+    let name = path
+        .file_name()
+        .with_context(|| format!("{} names no file", path.display()))?;
+    let mut tmp_name = name.to_os_string();
+    tmp_name.push(format!(".tmp{}", std::process::id()));
+    let tmp = path.with_file_name(tmp_name);
+    fs::write(&tmp, bytes).with_context(|| format!("writing {}", tmp.display()))?;
     fs::rename(&tmp, path).with_context(|| format!("renaming into {}", path.display()))?;
     Ok(())
 }
 
-/// Copies every record of the shard directories `parts` into `into`. A record present in two
-/// parts must be identical (same job run twice); otherwise merging fails.
-pub fn merge(parts: &[PathBuf], into: &Path) -> Result<usize> {
-    fs::create_dir_all(into).with_context(|| format!("creating {}", into.display()))?;
-    let mut copied = 0;
-    for part in parts {
-        let entries = fs::read_dir(part).with_context(|| format!("reading {}", part.display()))?;
-        let mut names: Vec<PathBuf> = entries
-            .filter_map(|e| e.ok().map(|e| e.path()))
-            .filter(|p| p.extension().is_some_and(|x| x == "json"))
-            .collect();
-        names.sort();
-        for src in names {
-            let dst = into.join(src.file_name().expect("file name"));
-            let text = fs::read(&src).with_context(|| format!("reading {}", src.display()))?;
-            if dst.exists() {
-                let old = fs::read(&dst).with_context(|| format!("reading {}", dst.display()))?;
-                if old != text && !same_but_timing(&old, &text) {
-                    bail!(
-                        "{} and {} hold different records for the same run",
-                        src.display(),
-                        dst.display()
-                    );
-                }
-                continue;
-            }
-            fs::write(&dst, &text).with_context(|| format!("writing {}", dst.display()))?;
-            copied += 1;
+/// Removes the temporary files `*.json.tmp<pid>` that processes which have ended left in `dir`
+/// (a sweep or merge killed between writing a record and renaming it); returns how many.
+pub fn clean_stale_temporaries(dir: &Path) -> Result<usize> {
+    let Ok(entries) = fs::read_dir(dir) else {
+        return Ok(0);
+    };
+    let mut removed = 0;
+    for entry in entries.flatten() {
+        let name = entry.file_name();
+        let Some(pid) = name
+            .to_str()
+            .and_then(|n| n.rsplit_once(".json.tmp"))
+            .and_then(|(_, pid)| pid.parse::<u32>().ok())
+        else {
+            continue;
+        };
+        if pid != std::process::id() && !lock::is_running(pid, None) {
+            fs::remove_file(entry.path())
+                .with_context(|| format!("removing {}", entry.path().display()))?;
+            removed += 1;
         }
     }
-    Ok(copied)
+    Ok(removed)
 }
 
 /// Two JSON records equal once their `timing` objects are removed.
-fn same_but_timing(a: &[u8], b: &[u8]) -> bool {
+pub(crate) fn same_but_timing(a: &[u8], b: &[u8]) -> bool {
     let strip = |x: &[u8]| -> Option<serde_json::Value> {
         let mut v: serde_json::Value = serde_json::from_slice(x).ok()?;
         v.as_object_mut()?.remove("timing");

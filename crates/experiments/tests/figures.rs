@@ -109,6 +109,7 @@ fn record(algorithm: &str, run: u64, bias: f64) -> RunRecord {
         }),
         config: serde_json::json!({}),
         versions: Versions::current(),
+        fingerprint: None,
         trace,
         timing: Timing {
             wall_s: 1.0,

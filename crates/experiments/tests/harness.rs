@@ -1,12 +1,14 @@
-//! The sweep harness: thread-count invariance, resume after interruption, shard + merge, and a
-//! smoke test of the whole reproduction in `--quick` form.
+//! The sweep harness: thread-count invariance, resume after interruption (only records whose
+//! fingerprint matches are reused), shard + merge, and a smoke test of the whole reproduction in
+//! `--quick` form: on an empty directory it executes every run, a changed study config is
+//! computed again even with `--resume`, an unchanged one is reused.
 
 use std::path::{Path, PathBuf};
 
 use experiments::record::RunRecord;
-use experiments::reproduce::{figure_files, reproduce, Options};
+use experiments::reproduce::{figure_files, reproduce, Done, Options};
 use experiments::study::Study;
-use experiments::sweep::{merge, run_sweep, Shard, SweepOptions};
+use experiments::sweep::{merge, run_sweep, Recompute, Shard, SweepOptions, SweepOutcome};
 
 fn temp_dir(tag: &str) -> PathBuf {
     let d = std::env::temp_dir().join(format!("sysid-harness-{tag}-{}", std::process::id()));
@@ -35,17 +37,33 @@ loop_every = 20
     toml::from_str(text).unwrap()
 }
 
-fn sweep(study: &Study, dir: &Path, threads: usize, shard: Shard) -> Vec<RunRecord> {
+fn sweep_with(
+    study: &Study,
+    dir: &Path,
+    threads: usize,
+    shard: Shard,
+    resume: bool,
+) -> SweepOutcome<RunRecord> {
     let opts = SweepOptions {
         threads,
         shard,
         progress: false,
         label: "test".into(),
+        resume,
     };
-    run_sweep(&study.jobs(), Study::job_id, dir, &opts, |j| {
-        study.run_job(j)
-    })
+    run_sweep(
+        &study.jobs(),
+        Study::job_id,
+        |j| study.job_fingerprint(j),
+        dir,
+        &opts,
+        |j| study.run_job(j),
+    )
     .unwrap()
+}
+
+fn sweep(study: &Study, dir: &Path, threads: usize, shard: Shard) -> Vec<RunRecord> {
+    sweep_with(study, dir, threads, shard, false).records
 }
 
 fn canonical(records: &[RunRecord]) -> Vec<String> {
@@ -83,6 +101,14 @@ fn sweeps_are_thread_count_invariant_resumable_and_shardable() {
         "1 thread and 2 threads differ"
     );
 
+    // Every record carries the fingerprint its job predicts.
+    for (job, r) in study.jobs().iter().zip(&a) {
+        assert_eq!(
+            r.fingerprint.as_ref().unwrap().sha256,
+            study.job_fingerprint(job).unwrap()
+        );
+    }
+
     // Resume: drop some records (as if the sweep was interrupted) and run again.
     let resumed = temp_dir("resume");
     sweep(&study, &resumed, 2, Shard::default());
@@ -94,13 +120,47 @@ fn sweeps_are_thread_count_invariant_resumable_and_shardable() {
         }
     }
     assert!(removed > 0);
-    let c = sweep(&study, &resumed, 2, Shard::default());
-    assert_eq!(canonical(&a), canonical(&c), "resumed sweep differs");
+    let c = sweep_with(&study, &resumed, 2, Shard::default(), true);
+    assert_eq!((c.executed, c.reused), (removed, 12 - removed));
+    assert_eq!(c.recomputed.get(&Recompute::Missing), Some(&removed));
+    assert_eq!(
+        canonical(&a),
+        canonical(&c.records),
+        "resumed sweep differs"
+    );
     assert_eq!(
         read_dir_records(&resumed),
         read_dir_records(&one),
         "files differ"
     );
+    // Without --resume every run is computed again.
+    let again = sweep_with(&study, &resumed, 2, Shard::default(), false);
+    assert_eq!((again.executed, again.reused), (12, 0));
+    assert_eq!(again.recomputed.get(&Recompute::NotResuming), Some(&12));
+
+    // A changed master seed or duration: nothing is reused, even when resuming.
+    for change in [
+        |s: &mut Study| s.sweep.master_seed += 1,
+        |s: &mut Study| s.data.duration = Some(1.5),
+    ] {
+        let mut changed = study.clone();
+        change(&mut changed);
+        let d = sweep_with(&changed, &resumed, 2, Shard::default(), true);
+        assert_eq!((d.executed, d.reused), (12, 0));
+        assert_eq!(d.recomputed.get(&Recompute::FingerprintChanged), Some(&12));
+        // Put the original records back for what follows.
+        let back = sweep_with(&study, &resumed, 2, Shard::default(), true);
+        assert_eq!(back.executed, 12);
+    }
+
+    // A damaged record is computed again, with the reason.
+    let victim = resumed.join(format!("{}.json", Study::job_id(&study.jobs()[5])));
+    let text = std::fs::read(&victim).unwrap();
+    std::fs::write(&victim, &text[..text.len() / 2]).unwrap();
+    let e = sweep_with(&study, &resumed, 2, Shard::default(), true);
+    assert_eq!((e.executed, e.reused), (1, 11));
+    assert_eq!(e.recomputed.get(&Recompute::Unreadable), Some(&1));
+    assert_eq!(read_dir_records(&resumed), read_dir_records(&one));
 
     // Shards 0/2 and 1/2 into separate directories, merged, equal the unsharded sweep.
     let s0 = temp_dir("shard0");
@@ -109,30 +169,45 @@ fn sweeps_are_thread_count_invariant_resumable_and_shardable() {
     let r1 = sweep(&study, &s1, 1, Shard { index: 1, count: 2 });
     assert_eq!(r0.len() + r1.len(), 12);
     let merged = temp_dir("merged");
-    let n = merge(&[s0.clone(), s1.clone()], &merged).unwrap();
-    assert_eq!(n, 12);
+    let pairs = |parts: &[&PathBuf]| -> Vec<(PathBuf, PathBuf)> {
+        parts
+            .iter()
+            .map(|p| ((*p).clone(), merged.clone()))
+            .collect()
+    };
+    let n = merge::<RunRecord>(&pairs(&[&s0, &s1])).unwrap();
+    assert_eq!((n.copied, n.present, n.replaced.len()), (12, 0, 0));
     assert_eq!(
         read_dir_records(&merged),
         read_dir_records(&one),
         "merged shards differ"
     );
     // Merging the same part twice is idempotent.
-    assert_eq!(merge(&[s0], &merged).unwrap(), 0);
+    let again = merge::<RunRecord>(&pairs(&[&s0])).unwrap();
+    assert_eq!((again.copied, again.present), (0, 6));
+}
+
+fn quick(experiments: &Path, out: &Path, resume: bool) -> Done {
+    reproduce(&Options {
+        experiments: experiments.to_path_buf(),
+        out: out.to_path_buf(),
+        quick: true,
+        threads: 0,
+        shard: Shard::default(),
+        progress: false,
+        resume,
+    })
+    .unwrap()
 }
 
 #[test]
 fn quick_reproduction_draws_every_figure_and_the_report() {
     let out = temp_dir("quick");
     let experiments = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../experiments");
-    reproduce(&Options {
-        experiments,
-        out: out.clone(),
-        quick: true,
-        threads: 0,
-        shard: Shard::default(),
-        progress: false,
-    })
-    .unwrap();
+    // A fresh output directory: every run is executed.
+    let done = quick(&experiments, &out, false);
+    assert_eq!(done.total, 22);
+    assert_eq!((done.executed, done.reused), (22, 0));
     for f in figure_files(&out) {
         experiments::figures::validate_svg(&f).unwrap_or_else(|e| panic!("{}: {e:#}", f.display()));
     }
@@ -152,4 +227,25 @@ fn quick_reproduction_draws_every_figure_and_the_report() {
     assert!(summary["studies"]["fig7"]
         .as_array()
         .is_some_and(|a| a.len() == 4));
+    assert_eq!(summary["runs"]["executed"], 22);
+
+    // The same configs with --resume: everything is reused.
+    let same = quick(&experiments, &out, true);
+    assert_eq!((same.executed, same.reused), (0, 22));
+
+    // Changed configs (fig7's master seed, fig4's quick duration) with --resume: the records of
+    // those studies are computed again, the others reused.
+    let changed = temp_dir("quick-changed-configs");
+    for name in experiments::reproduce::STUDIES {
+        let file = format!("{name}.toml");
+        let mut text = std::fs::read_to_string(experiments.join(&file)).unwrap();
+        match name {
+            "fig7" => text = text.replace("master_seed = 2016", "master_seed = 2017"),
+            "fig4" => text = text.replace("duration = 8.0", "duration = 7.0"),
+            _ => {}
+        }
+        std::fs::write(changed.join(&file), text).unwrap();
+    }
+    let redone = quick(&changed, &out, true);
+    assert_eq!((redone.executed, redone.reused), (16 + 1, 5));
 }

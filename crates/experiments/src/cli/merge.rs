@@ -1,10 +1,17 @@
 //! `sysid merge`: gather the record directories of several shards into one.
+//!
+//! Every source record is parsed and checked (fingerprint included) before anything is written;
+//! a corrupt one is reported by name and the merge exits non-zero without writing. Each record is
+//! then written atomically, so the merge can be interrupted and run again. The destination is
+//! locked against other writers (`reproduce`, `merge`, `regression`) for the duration.
 
 use std::path::PathBuf;
 
-use anyhow::{Context, Result};
+use anyhow::Result;
 
-use crate::sweep::merge;
+use crate::record::RunRecord;
+use crate::sweep::lock::DirLock;
+use crate::sweep::{merge, study_pairs};
 
 /// Arguments of `sysid merge`.
 #[derive(Debug, clap::Args)]
@@ -19,22 +26,24 @@ pub struct Args {
 
 /// Runs `sysid merge`.
 pub fn run(args: Args) -> Result<()> {
-    let mut total = 0;
-    for part in &args.parts {
-        let records = part.join("records");
-        let studies = std::fs::read_dir(&records)
-            .with_context(|| format!("reading {}", records.display()))?;
-        for entry in studies {
-            let dir = entry?.path();
-            if dir.is_dir() {
-                let name = dir.file_name().expect("directory name").to_owned();
-                total += merge(
-                    std::slice::from_ref(&dir),
-                    &args.into.join("records").join(name),
-                )?;
-            }
-        }
+    let _lock = DirLock::acquire(&args.into)?;
+    let pairs = study_pairs(&args.parts, &args.into)?;
+    let report = merge::<RunRecord>(&pairs)?;
+    for (path, why) in &report.replaced {
+        eprintln!("replaced {}: {why}", path.display());
     }
-    eprintln!("merged {total} records into {}", args.into.display());
+    if report.cleaned > 0 {
+        eprintln!(
+            "removed {} temporary file(s) left by interrupted writers",
+            report.cleaned
+        );
+    }
+    eprintln!(
+        "merged into {}: {} copied, {} replaced, {} already present",
+        args.into.display(),
+        report.copied,
+        report.replaced.len(),
+        report.present
+    );
     Ok(())
 }

@@ -26,6 +26,7 @@ use crate::metrics::mean_sd;
 use crate::record::RunRecord;
 use crate::reproduce::{algorithm_stats, AlgorithmStats};
 use crate::study::Study;
+use crate::sweep::lock::DirLock;
 use crate::sweep::{run_sweep, Shard, SweepOptions};
 
 /// Arguments of `sysid regression`.
@@ -40,8 +41,13 @@ pub struct Args {
     /// Worker threads (0: one per core).
     #[arg(long, default_value_t = 0)]
     pub threads: usize,
-    /// Delete the records of a previous sweep first, so that every run is computed by the code
-    /// being checked (without it, existing records are reused: resume after an interruption).
+    /// Reuse the records of an earlier check whose fingerprint (configuration, data, seed,
+    /// numerics version) matches the run's, e.g. after an interruption; without it, every run is
+    /// computed by the code being checked.
+    #[arg(long, conflicts_with = "fresh")]
+    pub resume: bool,
+    /// Delete the records directory of an earlier check first (every run is computed anyway
+    /// without `--resume`; this also removes records of runs no longer in the study).
     #[arg(long)]
     pub fresh: bool,
 }
@@ -294,6 +300,7 @@ pub fn run(args: Args) -> Result<()> {
     let start = Instant::now();
     let file = RegressionFile::load(&args.config)?;
     let study = &file.study;
+    let _lock = DirLock::acquire(&args.out)?;
     let dir = args.out.join("records");
     if args.fresh && dir.exists() {
         std::fs::remove_dir_all(&dir).with_context(|| format!("removing {}", dir.display()))?;
@@ -304,12 +311,21 @@ pub fn run(args: Args) -> Result<()> {
         shard: Shard::default(),
         progress: true,
         label: study.name.clone(),
+        resume: args.resume,
     };
-    let records = run_sweep(&jobs, Study::job_id, &dir, &sweep, |job| {
-        study
-            .run_job(job)
-            .with_context(|| format!("{}: {}", study.name, Study::job_id(job)))
-    })?;
+    let outcome = run_sweep(
+        &jobs,
+        Study::job_id,
+        |job| study.job_fingerprint(job),
+        &dir,
+        &sweep,
+        |job| {
+            study
+                .run_job(job)
+                .with_context(|| format!("{}: {}", study.name, Study::job_id(job)))
+        },
+    )?;
+    let records = outcome.records;
     let stats: Vec<AlgorithmStats> = study
         .sweep
         .algorithms
@@ -324,9 +340,11 @@ pub fn run(args: Args) -> Result<()> {
     let wall_s = start.elapsed().as_secs_f64();
     print!("{}", format_table(&checks));
     println!(
-        "{} runs of {} in {wall_s:.1} s ({})",
+        "{} runs of {} ({} executed, {} reused) in {wall_s:.1} s ({})",
         records.len(),
         study.name,
+        outcome.executed,
+        outcome.reused,
         args.config.display()
     );
     let summary = args.out.join("regression.json");
@@ -335,6 +353,7 @@ pub fn run(args: Args) -> Result<()> {
         serde_json::to_string_pretty(&serde_json::json!({
             "config": args.config,
             "wall_s": wall_s,
+            "runs": { "executed": outcome.executed, "reused": outcome.reused, "total": records.len() },
             "stats": stats,
             "checks": checks.iter().map(|c| serde_json::json!({
                 "check": c, "ok": c.ok()

@@ -22,9 +22,14 @@ pub struct Args {
     #[arg(long, default_value_t = 0)]
     pub threads: usize,
     /// Run only part i of n of every sweep (e.g. one task of a Slurm job array); merge the
-    /// shards' records with `sysid merge`, then run without `--shard` to draw and report.
+    /// shards' records with `sysid merge`, then run without `--shard` and with `--resume` to
+    /// draw and report.
     #[arg(long, default_value = "0/1")]
     pub shard: Shard,
+    /// Reuse the records of the output directory whose fingerprint (configuration, data, seed,
+    /// numerics version) matches the run's; without it, every run is computed.
+    #[arg(long)]
+    pub resume: bool,
 }
 
 /// Runs `sysid reproduce`.
@@ -36,5 +41,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         threads: args.threads,
         shard: args.shard,
         progress: true,
-    })
+        resume: args.resume,
+    })?;
+    Ok(())
 }

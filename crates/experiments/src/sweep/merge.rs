@@ -1,0 +1,182 @@
+//! Merging the record directories of sharded sweeps.
+//!
+//! In two phases, so that a bad part writes nothing: first every source record is read, parsed
+//! and checked (fingerprint included), records with the same name in two parts are compared, and
+//! every record already in a destination is read and classified; any problem stops the merge
+//! with the list of files and reasons. Then each record is copied byte for byte with an atomic write (temporary
+//! file and rename in the destination), so a merge killed at any point leaves only complete
+//! records, and running it again finishes the job.
+
+use std::collections::BTreeMap;
+use std::fs;
+use std::path::{Path, PathBuf};
+
+use anyhow::{bail, Context, Result};
+
+use super::{
+    clean_stale_temporaries, parse_record, same_but_timing, write_bytes_atomic, SweepRecord,
+};
+
+/// What a merge did.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct MergeReport {
+    /// Records copied into a destination that had none.
+    pub copied: usize,
+    /// Records the destination already held (same fingerprint, same results).
+    pub present: usize,
+    /// Destination records replaced, with the reason (unreadable, or computed from other inputs).
+    pub replaced: Vec<(PathBuf, String)>,
+    /// Stale temporary files removed from the destinations.
+    pub cleaned: usize,
+}
+
+struct Planned {
+    src: PathBuf,
+    dst: PathBuf,
+    bytes: Vec<u8>,
+    fingerprint: Option<String>,
+    replaces: Option<String>,
+}
+
+/// Merges records: each pair is (source directory, destination directory); every `*.json` of a
+/// source goes to the destination under the same name. A record in two sources must be the same
+/// run (same fingerprint, same results but timings). A destination record that does not read
+/// back, or that was computed from other inputs, is replaced (and reported); one with the same
+/// fingerprint but other results is a conflict. Any unreadable source record or conflict stops
+/// the merge before anything is written.
+pub fn merge<R: SweepRecord>(pairs: &[(PathBuf, PathBuf)]) -> Result<MergeReport> {
+    let mut report = MergeReport::default();
+    let mut problems: Vec<String> = Vec::new();
+    let mut plan: BTreeMap<PathBuf, Planned> = BTreeMap::new();
+    for (src_dir, dst_dir) in pairs {
+        let mut names: Vec<PathBuf> = fs::read_dir(src_dir)
+            .with_context(|| format!("reading {}", src_dir.display()))?
+            .filter_map(|e| e.ok().map(|e| e.path()))
+            .filter(|p| p.extension().is_some_and(|x| x == "json") && p.is_file())
+            .collect();
+        names.sort();
+        for src in names {
+            let dst = dst_dir.join(src.file_name().expect("a file name"));
+            let bytes = fs::read(&src).with_context(|| format!("reading {}", src.display()))?;
+            let record: R = match parse_record(&bytes) {
+                Ok(r) => r,
+                Err(e) => {
+                    problems.push(format!("{}: {e:#}", src.display()));
+                    continue;
+                }
+            };
+            let Some(fingerprint) = record.fingerprint().map(str::to_string) else {
+                problems.push(format!(
+                    "{}: has no fingerprint (written by an older sysid); compute this part again",
+                    src.display()
+                ));
+                continue;
+            };
+            if let Some(other) = plan.get(&dst) {
+                if other.fingerprint.as_deref() != Some(&fingerprint)
+                    || !same_but_timing(&other.bytes, &bytes)
+                {
+                    problems.push(format!(
+                        "{} and {} hold different runs under one name",
+                        other.src.display(),
+                        src.display()
+                    ));
+                }
+                continue;
+            }
+            plan.insert(
+                dst.clone(),
+                Planned {
+                    src,
+                    dst,
+                    bytes,
+                    fingerprint: Some(fingerprint),
+                    replaces: None,
+                },
+            );
+        }
+    }
+    for p in plan.values_mut() {
+        if !p.dst.exists() {
+            continue;
+        }
+        let old = fs::read(&p.dst).with_context(|| format!("reading {}", p.dst.display()))?;
+        match parse_record::<R>(&old) {
+            Err(e) => p.replaces = Some(format!("unreadable: {e:#}")),
+            Ok(r) if r.fingerprint() != p.fingerprint.as_deref() => {
+                p.replaces = Some(match r.fingerprint() {
+                    None => "written by an older sysid (no fingerprint)".into(),
+                    Some(f) => format!(
+                        "computed from other inputs (fingerprint {} instead of {})",
+                        short(f),
+                        short(p.fingerprint.as_deref().unwrap_or(""))
+                    ),
+                })
+            }
+            Ok(_) if same_but_timing(&old, &p.bytes) => {
+                p.replaces = Some(String::new());
+            }
+            Ok(_) => problems.push(format!(
+                "{} and {} have the same fingerprint but different results",
+                p.src.display(),
+                p.dst.display()
+            )),
+        }
+    }
+    if !problems.is_empty() {
+        bail!(
+            "{} problem(s) found; nothing was written:\n  {}",
+            problems.len(),
+            problems.join("\n  ")
+        );
+    }
+    let mut dst_dirs: Vec<&PathBuf> = pairs.iter().map(|(_, d)| d).collect();
+    dst_dirs.sort();
+    dst_dirs.dedup();
+    for d in dst_dirs {
+        fs::create_dir_all(d).with_context(|| format!("creating {}", d.display()))?;
+        report.cleaned += clean_stale_temporaries(d)?;
+    }
+    for p in plan.into_values() {
+        match p.replaces {
+            Some(why) if why.is_empty() => {
+                report.present += 1;
+                continue;
+            }
+            Some(why) => report.replaced.push((p.dst.clone(), why)),
+            None => report.copied += 1,
+        }
+        write_bytes_atomic(&p.dst, &p.bytes)?;
+    }
+    Ok(report)
+}
+
+/// The first 12 hex digits of a fingerprint, for messages.
+fn short(f: &str) -> &str {
+    &f[..f.len().min(12)]
+}
+
+/// The study directories of a shard's output (`PART/records/<study>/`) paired with their
+/// destination under `into`.
+pub fn study_pairs(parts: &[PathBuf], into: &Path) -> Result<Vec<(PathBuf, PathBuf)>> {
+    let mut pairs = Vec::new();
+    for part in parts {
+        let records = part.join("records");
+        let studies = fs::read_dir(&records).with_context(|| {
+            format!(
+                "reading {} (a part is the output directory of `sysid reproduce --shard`)",
+                records.display()
+            )
+        })?;
+        let mut dirs: Vec<PathBuf> = studies
+            .filter_map(|e| e.ok().map(|e| e.path()))
+            .filter(|p| p.is_dir())
+            .collect();
+        dirs.sort();
+        for dir in dirs {
+            let name = dir.file_name().expect("a directory name").to_owned();
+            pairs.push((dir, into.join("records").join(name)));
+        }
+    }
+    Ok(pairs)
+}
