@@ -439,7 +439,7 @@ pub fn identify(input: &RunInput, algorithm: Algorithm, s: &FilterSettings) -> R
             "discretisation": spec.discretisation,
         },
     });
-    Ok(RunRecord {
+    let mut record = RunRecord {
         experiment: input.experiment.to_string(),
         algorithm: algorithm.name().to_string(),
         seed: input.seed,
@@ -481,7 +481,10 @@ pub fn identify(input: &RunInput, algorithm: Algorithm, s: &FilterSettings) -> R
             validation_s,
         },
         warnings: Vec::new(),
-    })
+    };
+    // A result that is physically impossible or rests on few particles says so (issue 16).
+    record.warnings = crate::checks::check(&record);
+    Ok(record)
 }
 
 /// The validation run (SPEC §7): θ_val, zero initial conditions, clean excitation, adaptive

@@ -36,7 +36,7 @@ pub const RECORD_SCHEMA: u32 = 2;
 /// a Kalman step, the data generation, a metric, the order of floating-point operations). It is
 /// part of every record's fingerprint, so that a resumed sweep never reuses a record computed by
 /// code that gives other numbers.
-pub const NUMERICS_VERSION: u32 = 1;
+pub const NUMERICS_VERSION: u32 = 2;
 
 /// Versions and provenance written into every record.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
