@@ -64,16 +64,25 @@ pub const MAX_FILE_BYTES: u64 = 1 << 30;
 /// A value outside its limit.
 #[derive(Debug, Clone, PartialEq, Error)]
 pub enum LimitError {
-    #[error("{value} is not a finite number")]
+    #[error("{} is not a finite number", num(*.value))]
     NotFinite { value: f64 },
-    #[error("{value} is below the minimum {min}")]
+    #[error("{} is below the minimum {}", num(*.value), num(*.min))]
     TooSmall { value: f64, min: f64 },
-    #[error("{value} exceeds the maximum {max}")]
+    #[error("{} exceeds the maximum {}", num(*.value), num(*.max))]
     TooLarge { value: f64, max: f64 },
     #[error("{value} exceeds the maximum {max}")]
     CountTooLarge { value: u128, max: u128 },
     #[error("must be at least {min}, got {value}")]
     CountTooSmall { value: u128, min: u128 },
+}
+
+/// A number as a person reads it: `1e308`, not 309 digits.
+pub fn num(v: f64) -> String {
+    if v != 0.0 && v.is_finite() && !(1e-4..1e7).contains(&v.abs()) {
+        format!("{v:e}")
+    } else {
+        format!("{v}")
+    }
 }
 
 /// `value` is finite and within `[min, max]`.
@@ -239,6 +248,10 @@ mod tests {
         assert!(check_table(usize::MAX, usize::MAX).is_err());
         assert!(check_value(1e308).is_err());
         assert!(check_time(1e300).is_err());
+        assert_eq!(
+            check_noise_fraction(1e308).unwrap_err().to_string(),
+            "1e308 exceeds the maximum 10"
+        );
     }
 
     #[test]
