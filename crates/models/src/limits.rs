@@ -166,8 +166,9 @@ pub fn samples_for_duration(duration: f64, dt: f64) -> Result<usize, LimitError>
         });
     }
     let intervals = (duration / dt * (1.0 + 1e-9)).floor();
-    // (MAX_SAMPLES − 1)·dt is the longest duration; say it in seconds.
-    if !(intervals < MAX_SAMPLES as f64) {
+    // (MAX_SAMPLES − 1)·dt is the longest duration; say it in seconds. (`dt` is checked, so
+    // `intervals` is a number, possibly +∞.)
+    if intervals >= MAX_SAMPLES as f64 || intervals.is_nan() {
         return Err(LimitError::TooLarge {
             value: duration,
             max: max_duration(dt),

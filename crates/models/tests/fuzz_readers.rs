@@ -302,7 +302,7 @@ fn fuzz_dataset_csv_files() {
     let dir = scratch("dataset");
     let t = template();
     let which = |i: usize| ALL[i % 2];
-    let seed = |i: usize| if i % 2 == 0 { &t.0 } else { &t.1 };
+    let seed = |i: usize| if which(i) == ALL[0] { &t.0 } else { &t.1 };
     run(
         "dataset",
         4,

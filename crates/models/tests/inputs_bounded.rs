@@ -143,7 +143,8 @@ fn a_resampled_record_is_bounded_before_allocation() {
 #[test]
 fn generation_settings_are_bounded() {
     let base = DatasetConfig::from_preset("paper-3dof", 1).unwrap();
-    let cases: [(&str, Box<dyn Fn(&mut DatasetConfig)>); 8] = [
+    type Change = Box<dyn Fn(&mut DatasetConfig)>;
+    let cases: [(&str, Change); 8] = [
         ("noise_fraction", Box::new(|c| c.noise_fraction = 1e308)),
         ("noise_fraction", Box::new(|c| c.noise_fraction = -0.1)),
         ("storeys", Box::new(|c| c.storeys = Some(1_000_000_000))),
