@@ -14,8 +14,10 @@
 //!   the true states, one `r` column per Bouc–Wen element (1-based storey `s`);
 //! - `dataset.json` (optional): [`DatasetMeta`] (config, true parameters, noise levels, RMS).
 //!
-//! Numbers are written with Rust's `{}` formatting of `f64`, the shortest decimal that parses
-//! back to the same bits, so a directory round-trips bit for bit.
+//! Numbers are written as the shortest decimal that parses back to the same bits (Rust's `{}`
+//! formatting of `f64`, or `{:e}` outside `[1e-5, 1e16)` so that no number takes more than 24
+//! characters), so a directory round-trips bit for bit. Every written value is within
+//! `±MAX_ABS_VALUE` ([`limits`]), so every data set written loads back.
 
 use crate::excitation::{self, rms, GroundMotion, KanaiTajimi};
 use crate::integrate::{simulate_rk4, Trajectory};
@@ -214,6 +216,13 @@ pub enum DatasetError {
     },
     #[error("the simulated response is not finite at t = {t} (unstable structure or input?)")]
     NonFinite { t: f64 },
+    #[error(
+        "the simulated response reaches {} at t = {t} s, beyond the limit ±{} on data values \
+         (unstable structure or input?)",
+        limits::num(*.value),
+        limits::num(limits::MAX_ABS_VALUE)
+    )]
+    Unbounded { t: f64, value: f64 },
     #[error("{file}: {source}")]
     Io {
         file: PathBuf,
@@ -375,6 +384,22 @@ pub fn generate(config: &DatasetConfig) -> Result<Dataset, DatasetError> {
             format!("{kk} samples × {} columns of truth: {e}", chain.dim() + 2),
         )
     })?;
+    // What is written must load back: every value within the limit on data values, the input
+    // first.
+    let beyond = |row: &[f64]| {
+        row.iter()
+            .copied()
+            .find(|v| limits::check_value(*v).is_err())
+    };
+    if let Some(k) = ug_clean
+        .iter()
+        .position(|u| limits::check_value(*u).is_err())
+    {
+        return Err(DatasetError::Unbounded {
+            t: k as f64 * dt,
+            value: ug_clean[k],
+        });
+    }
     let truth = simulate_rk4(&chain, &ug_clean, dt);
     if let Some(k) = truth
         .rows()
@@ -388,6 +413,17 @@ pub fn generate(config: &DatasetConfig) -> Result<Dataset, DatasetError> {
         if config.measurement == MeasurementKind::Absolute {
             row.iter_mut().for_each(|a| *a += ug_clean[k]);
         }
+    }
+    let first_beyond = truth
+        .rows()
+        .zip(y_clean.chunks_exact(n))
+        .enumerate()
+        .find_map(|(k, (x, y))| beyond(x).or_else(|| beyond(y)).map(|v| (k, v)));
+    if let Some((k, value)) = first_beyond {
+        return Err(DatasetError::Unbounded {
+            t: k as f64 * dt,
+            value,
+        });
     }
     let column_rms = |buf: &[f64], cols: usize, j: usize| -> f64 {
         rms(&buf
@@ -528,9 +564,9 @@ impl Dataset {
         }
         s.push('\n');
         for k in 0..self.len() {
-            write!(s, "{},{}", self.t[k], self.ug_meas[k]).unwrap();
-            for a in self.y(k) {
-                write!(s, ",{a}").unwrap();
+            write!(s, "{},{}", Num(self.t[k]), Num(self.ug_meas[k])).unwrap();
+            for &a in self.y(k) {
+                write!(s, ",{}", Num(a)).unwrap();
             }
             s.push('\n');
         }
@@ -545,9 +581,9 @@ impl Dataset {
         }
         s.push('\n');
         for k in 0..self.len() {
-            write!(s, "{},{}", self.t[k], self.ug_clean[k]).unwrap();
-            for v in self.truth.state(k) {
-                write!(s, ",{v}").unwrap();
+            write!(s, "{},{}", Num(self.t[k]), Num(self.ug_clean[k])).unwrap();
+            for &v in self.truth.state(k) {
+                write!(s, ",{}", Num(v)).unwrap();
             }
             s.push('\n');
         }
@@ -584,6 +620,22 @@ impl Dataset {
         };
         let json = serde_json::to_string_pretty(&meta).expect("meta is serialisable");
         write_file(staging, META, json.as_bytes())
+    }
+}
+
+/// An `f64` written as the shortest decimal that parses back to the same bits: plain for
+/// `1e-5 ≤ |v| < 1e16` and zero, in exponent form otherwise (plain `{}` would spell `1e-300`
+/// with 300 zeros).
+struct Num(f64);
+
+impl std::fmt::Display for Num {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let a = self.0.abs();
+        if a == 0.0 || (1e-5..1e16).contains(&a) {
+            write!(f, "{}", self.0)
+        } else {
+            write!(f, "{:e}", self.0)
+        }
     }
 }
 
@@ -1026,6 +1078,43 @@ mod tests {
                 ..
             })
         ));
+    }
+
+    #[test]
+    fn numbers_are_short_and_round_trip() {
+        for v in [
+            0.0,
+            -0.0,
+            0.005,
+            -1.9307402050781252e-7,
+            1e-300,
+            -5e-324,
+            f64::MAX,
+            1e15 + 0.5,
+            1e16,
+            -1.2345678901234567e-300,
+        ] {
+            let s = Num(v).to_string();
+            assert!(s.len() <= 24, "{s}");
+            assert_eq!(s.parse::<f64>().unwrap().to_bits(), v.to_bits(), "{s}");
+        }
+        // So the largest table (24 characters and a separator a number) fits in the largest
+        // file the readers accept.
+        assert!((limits::MAX_CELLS as u64) * 25 < limits::MAX_FILE_BYTES);
+        assert_eq!(Num(0.005).to_string(), "0.005");
+        assert_eq!(Num(1e-300).to_string(), "1e-300");
+    }
+
+    #[test]
+    fn a_response_beyond_the_value_limit_is_an_error() {
+        let mut c = DatasetConfig::from_preset("paper-3dof", 1).unwrap();
+        c.excitation = ExcitationSource::Harmonic {
+            amplitude: 1e11,
+            omega: 4.0,
+        };
+        c.duration = Some(1.0);
+        c.scale = 100.0;
+        assert!(matches!(generate(&c), Err(DatasetError::Unbounded { .. })));
     }
 
     #[test]

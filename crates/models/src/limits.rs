@@ -57,9 +57,10 @@ pub const MAX_PARTICLES: usize = 10_000_000;
 /// (2·10⁸, 1.6 GB).
 pub const MAX_PARTICLE_CELLS: usize = 200_000_000;
 
-/// Largest input file the readers accept (1 GiB; 10⁷ samples of a 3-storey data set are
-/// about 400 MB of text).
-pub const MAX_FILE_BYTES: u64 = 1 << 30;
+/// Largest input file the readers accept (2 GiB): a table of [`MAX_CELLS`] numbers, each
+/// printed in at most 24 characters plus a separator, is 1.25 GB, so every data set
+/// `simulate` can write loads back.
+pub const MAX_FILE_BYTES: u64 = 1 << 31;
 
 /// A value outside its limit.
 #[derive(Debug, Clone, PartialEq, Error)]
