@@ -233,8 +233,15 @@ impl Staging {
             std::fs::rename(from, to).map_err(|e| io_error(&self.target, e))
         };
         if !self.target.exists() {
-            rename(&self.dir, &self.target)?;
-        } else if exchange(&self.dir, &self.target).map_err(|e| io_error(&self.target, e))? {
+            if let Err(e) = rename(&self.dir, &self.target) {
+                // E.g. another writer created the target meanwhile: leave it, drop ours.
+                let _ = std::fs::remove_dir_all(&self.dir);
+                return Err(e);
+            }
+        } else if exchange(&self.dir, &self.target).map_err(|e| {
+            let _ = std::fs::remove_dir_all(&self.dir);
+            io_error(&self.target, e)
+        })? {
             // `self.dir` now holds the old data set.
             std::fs::remove_dir_all(&self.dir).map_err(|e| io_error(&self.dir, e))?;
         } else {
@@ -249,8 +256,16 @@ impl Staging {
                     .next()
                     .unwrap_or_default()
             ));
-            rename(&self.target, &aside)?;
-            rename(&self.dir, &self.target)?;
+            if let Err(e) = rename(&self.target, &aside) {
+                let _ = std::fs::remove_dir_all(&self.dir);
+                return Err(e);
+            }
+            if let Err(e) = rename(&self.dir, &self.target) {
+                // Put the old data set back; ours is dropped.
+                let _ = std::fs::rename(&aside, &self.target);
+                let _ = std::fs::remove_dir_all(&self.dir);
+                return Err(e);
+            }
             std::fs::remove_dir_all(&aside).map_err(|e| io_error(&aside, e))?;
         }
         sync_dir(&parent)?;
