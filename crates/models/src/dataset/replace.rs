@@ -227,6 +227,12 @@ impl Staging {
 
     /// Puts the staged directory in place of the target (see the module doc).
     pub(crate) fn commit(self) -> Result<(), DatasetError> {
+        self.commit_using(true)
+    }
+
+    /// [`Staging::commit`], with the atomic exchange or (`try_exchange = false`, for the tests
+    /// of the fallback) without it.
+    fn commit_using(self, try_exchange: bool) -> Result<(), DatasetError> {
         sync_dir(&self.dir)?;
         let (parent, name) = split(&self.target)?;
         let rename = |from: &Path, to: &Path| {
@@ -238,10 +244,12 @@ impl Staging {
                 let _ = std::fs::remove_dir_all(&self.dir);
                 return Err(e);
             }
-        } else if exchange(&self.dir, &self.target).map_err(|e| {
-            let _ = std::fs::remove_dir_all(&self.dir);
-            io_error(&self.target, e)
-        })? {
+        } else if try_exchange
+            && exchange(&self.dir, &self.target).map_err(|e| {
+                let _ = std::fs::remove_dir_all(&self.dir);
+                io_error(&self.target, e)
+            })?
+        {
             // `self.dir` now holds the old data set.
             std::fs::remove_dir_all(&self.dir).map_err(|e| io_error(&self.dir, e))?;
         } else {
@@ -279,5 +287,79 @@ impl Staging {
     /// Removes the staged directory after a failure.
     pub(crate) fn abandon(self) {
         let _ = std::fs::remove_dir_all(&self.dir);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn scratch(name: &str) -> PathBuf {
+        let d = std::env::temp_dir().join(format!("replace-{}-{name}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&d);
+        std::fs::create_dir_all(&d).unwrap();
+        d
+    }
+
+    fn write_set(target: &Path, content: &str, try_exchange: bool) {
+        let s = stage(target).unwrap();
+        std::fs::write(s.dir.join(MEASURED), content).unwrap();
+        s.commit_using(try_exchange).unwrap();
+    }
+
+    fn entries(dir: &Path) -> Vec<String> {
+        let mut v: Vec<String> = std::fs::read_dir(dir)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .collect();
+        v.sort();
+        v
+    }
+
+    #[test]
+    fn both_paths_replace_the_set_and_leave_nothing_beside_it() {
+        for try_exchange in [true, false] {
+            let d = scratch(&format!("paths-{try_exchange}"));
+            let target = d.join("ds");
+            write_set(&target, "one", try_exchange);
+            write_set(&target, "two", try_exchange);
+            assert_eq!(
+                std::fs::read_to_string(target.join(MEASURED)).unwrap(),
+                "two"
+            );
+            assert_eq!(entries(&d), vec!["ds".to_string()]);
+            assert_eq!(entries(&target), vec![MEASURED.to_string()]);
+        }
+    }
+
+    #[test]
+    fn an_abandoned_staging_leaves_the_old_set() {
+        let d = scratch("abandon");
+        let target = d.join("ds");
+        write_set(&target, "one", true);
+        let s = stage(&target).unwrap();
+        std::fs::write(s.dir.join(MEASURED), "partial").unwrap();
+        s.abandon();
+        assert_eq!(
+            std::fs::read_to_string(target.join(MEASURED)).unwrap(),
+            "one"
+        );
+        assert_eq!(entries(&d), vec!["ds".to_string()]);
+    }
+
+    #[cfg(unix)]
+    #[test]
+    fn a_symbolic_link_is_kept_and_its_target_replaced() {
+        let d = scratch("link");
+        let real = d.join("real");
+        write_set(&real, "one", true);
+        let link = d.join("link");
+        std::os::unix::fs::symlink(&real, &link).unwrap();
+        write_set(&link, "two", true);
+        assert!(std::fs::symlink_metadata(&link)
+            .unwrap()
+            .file_type()
+            .is_symlink());
+        assert_eq!(std::fs::read_to_string(real.join(MEASURED)).unwrap(), "two");
     }
 }
