@@ -376,7 +376,10 @@ mod tests {
             assert_eq!((pa - pb).lane(i).to_bits(), (a[i] - b[i]).to_bits());
             assert_eq!((pa * pb).lane(i).to_bits(), (a[i] * b[i]).to_bits());
             assert_eq!((pa / pb).lane(i).to_bits(), (a[i] / b[i]).to_bits());
-            assert_eq!(pa.abs().sqrt().lane(i).to_bits(), a[i].abs().sqrt().to_bits());
+            assert_eq!(
+                pa.abs().sqrt().lane(i).to_bits(),
+                a[i].abs().sqrt().to_bits()
+            );
             assert_eq!(pa.abs().ln().lane(i).to_bits(), a[i].abs().ln().to_bits());
             assert_eq!(Pack::mask_lane(pa.gt(pb), i), a[i] > b[i]);
         }

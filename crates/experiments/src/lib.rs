@@ -3,6 +3,7 @@
 //! Everything with I/O: experiment configs, sweeps over runs, metrics, run records, figures,
 //! reports, and the subcommands of the `sysid` command-line tool (module [`cli`]).
 //!
+//! - [`limits`]: checks of user-given filter settings against the limits of `models::limits`;
 //! - [`metrics`]: θ_val, relative errors, CV(RMSE) and NRMSE (SPEC §7);
 //! - [`observe`]: the observer that records traces and online errors during a run;
 //! - [`record`]: the run record written for every run;
@@ -14,6 +15,7 @@ pub mod calibration;
 pub mod checks;
 pub mod cli;
 pub mod figures;
+pub mod limits;
 pub mod metrics;
 pub mod observe;
 pub mod pipeline;

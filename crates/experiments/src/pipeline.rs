@@ -386,14 +386,7 @@ pub fn identify(input: &RunInput, algorithm: Algorithm, s: &FilterSettings) -> R
             data.len()
         );
     }
-    if s.particles == 0 {
-        bail!("particles must be at least 1");
-    }
-    if let Some(t) = s.ess_threshold {
-        if !(t > 0.0 && t <= 1.0) {
-            bail!("ess_threshold {t} must be in (0, 1]");
-        }
-    }
+    crate::limits::check_filter_settings(s)?;
     let spec = chain_spec(data, input.chain, s)?;
     let pc = SmcConfig {
         particles: s.particles,
@@ -403,6 +396,11 @@ pub fn identify(input: &RunInput, algorithm: Algorithm, s: &FilterSettings) -> R
         },
     };
     let mut filter = build_filter(algorithm, spec.clone(), s)?;
+    let shape = filter.shape();
+    crate::limits::check_particle_cloud(
+        s.particles,
+        shape.sampled + shape.marginal * (shape.marginal + 1),
+    )?;
     let d = drive(filter.as_mut(), input, s, algorithm, &pc);
 
     let steps = data.len() - 1;

@@ -58,6 +58,9 @@ pub struct QuickSection {
     pub duration: Option<f64>,
 }
 
+/// Most runs a study may have (a sweep's records are kept in one directory).
+pub const MAX_RUNS: usize = 100_000;
+
 /// One study (`experiments/<name>.toml`).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -99,6 +102,14 @@ impl Study {
         if self.sweep.particles.contains(&0) {
             bail!("particles must be at least 1");
         }
+        for &p in &self.sweep.particles {
+            crate::limits::check_count(p, 1, crate::limits::MAX_PARTICLES)
+                .context("field `sweep.particles`")?;
+        }
+        crate::limits::check_count(self.sweep.runs as usize, 1, MAX_RUNS)
+            .context("field `sweep.runs`")?;
+        crate::limits::check_filter_settings(&self.filter).context("table `filter`")?;
+        models::dataset::check_config(&self.dataset_config(0)?).context("table `data`")?;
         Ok(())
     }
 

@@ -95,14 +95,22 @@ fn a_hopeless_measurement_is_a_recorded_failure_and_a_nonzero_exit() {
     let dir = temp_dir("fail");
     let data = dir.join("d");
     simulate(&data);
-    // Replace one measured acceleration by 1e300: every particle's likelihood underflows to 0.
+    // Replace one measured acceleration by 1e11 (within the limits on data values): every
+    // particle's likelihood underflows to 0.
     let path = data.join("measured.csv");
     let text = std::fs::read_to_string(&path).unwrap();
     let mut lines: Vec<String> = text.lines().map(String::from).collect();
     let mut cells: Vec<String> = lines[50].split(',').map(String::from).collect();
-    cells[2] = "1e300".into();
+    cells[2] = "1e11".into();
     lines[50] = cells.join(",");
     std::fs::write(&path, lines.join("\n") + "\n").unwrap();
+    // The edited file no longer matches the digest in dataset.json: drop the digests, as in a
+    // data set written before they existed.
+    let meta_path = data.join("dataset.json");
+    let mut meta: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&meta_path).unwrap()).unwrap();
+    meta.as_object_mut().unwrap().remove("files");
+    std::fs::write(&meta_path, serde_json::to_string_pretty(&meta).unwrap()).unwrap();
     let out = dir.join("r.json");
     let o = sysid()
         .args([

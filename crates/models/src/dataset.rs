@@ -14,21 +14,31 @@
 //!   the true states, one `r` column per Bouc–Wen element (1-based storey `s`);
 //! - `dataset.json` (optional): [`DatasetMeta`] (config, true parameters, noise levels, RMS).
 //!
-//! Numbers are written with Rust's `{}` formatting of `f64`, the shortest decimal that parses
-//! back to the same bits, so a directory round-trips bit for bit.
+//! Numbers are written as the shortest decimal that parses back to the same bits (Rust's `{}`
+//! formatting of `f64`, or `{:e}` outside `[1e-5, 1e16)` so that no number takes more than 24
+//! characters), so a directory round-trips bit for bit. Every written value is within
+//! `±MAX_ABS_VALUE` ([`limits`]), so every data set written loads back.
 
 use crate::excitation::{self, rms, GroundMotion, KanaiTajimi};
 use crate::integrate::{simulate_rk4, Trajectory};
+use crate::limits;
 use crate::preset::{Preset, PresetError, HARMONIC_DURATION};
 use crate::readers::{self, parse_field, uniform_step, ReadError, Units};
 use crate::structure::ShearChain;
 use core_filters::rng::{purpose, stream};
 use rand_distr::{Distribution, StandardNormal};
 use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
 use std::fmt::Write as _;
 use std::io::Write as _;
 use std::path::{Path, PathBuf};
 use thiserror::Error;
+
+mod integrity;
+pub mod replace;
+
+pub use integrity::FileDigest;
+use integrity::MetaFile;
 
 /// Where the ground acceleration comes from.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -206,6 +216,13 @@ pub enum DatasetError {
     },
     #[error("the simulated response is not finite at t = {t} (unstable structure or input?)")]
     NonFinite { t: f64 },
+    #[error(
+        "the simulated response reaches {} at t = {t} s, beyond the limit ±{} on data values \
+         (unstable structure or input?)",
+        limits::num(*.value),
+        limits::num(limits::MAX_ABS_VALUE)
+    )]
+    Unbounded { t: f64, value: f64 },
     #[error("{file}: {source}")]
     Io {
         file: PathBuf,
@@ -219,6 +236,17 @@ pub enum DatasetError {
         column: usize,
         message: String,
     },
+    #[error("{file}: cannot write (temporary copy {temp}): {source}")]
+    Write {
+        file: PathBuf,
+        temp: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error("{dir}: {message}")]
+    NotADataset { dir: PathBuf, message: String },
+    #[error("{file}: {message}")]
+    Checksum { file: PathBuf, message: String },
     #[error("{file}:{line}: field `{field}`: {message}")]
     Mismatch {
         file: PathBuf,
@@ -236,20 +264,51 @@ fn invalid(field: &'static str, message: impl Into<String>) -> DatasetError {
 }
 
 /// The excitation of `config`, scaled, at `config.dt`, truncated to `config.duration`.
+///
+/// Every size is bounded before it is allocated: the synthetic records' length by
+/// [`limits::samples_for_duration`], a user record by its reader, and its resampled length
+/// again by [`limits::samples_for_duration`].
 pub fn ground_motion(config: &DatasetConfig) -> Result<GroundMotion, DatasetError> {
+    check_config(config)?;
     let full = config.duration.unwrap_or(HARMONIC_DURATION);
+    let synthetic_len = || {
+        limits::samples_for_duration(full, config.dt)
+            .map_err(|e| invalid("duration", e.to_string()))
+    };
     let raw = match &config.excitation {
         ExcitationSource::ElCentro => excitation::el_centro(),
         ExcitationSource::KanaiTajimi { params } => {
+            synthetic_len()?;
+            check_kanai_tajimi(params)?;
             let mut rng = stream(config.seed, config.run, purpose::EXCITATION);
             excitation::kanai_tajimi(params, full, config.dt, &mut rng)
         }
         ExcitationSource::Harmonic { amplitude, omega } => {
+            synthetic_len()?;
+            for (field, v) in [("amplitude", *amplitude), ("omega", *omega)] {
+                limits::check_range(v, -limits::MAX_ABS_VALUE, limits::MAX_ABS_VALUE)
+                    .map_err(|e| invalid(field, e.to_string()))?;
+            }
             excitation::harmonic(*amplitude, *omega, full, config.dt)
         }
         ExcitationSource::Csv { path, units } => readers::read_csv(path, *units)?,
         ExcitationSource::At2 { path } => readers::read_at2(path)?,
     };
+    // The resampled record covers min(record, requested duration); bound its length first.
+    let span = config
+        .duration
+        .map_or(raw.duration(), |d| d.min(raw.duration()));
+    if span > 0.0 {
+        limits::samples_for_duration(span, config.dt).map_err(|e| {
+            invalid(
+                "dt",
+                format!(
+                    "resampling the {:.6} s record at dt = {} s: {e}",
+                    span, config.dt
+                ),
+            )
+        })?;
+    }
     let mut gm = raw.scaled(config.scale);
     if (gm.dt - config.dt).abs() > 1e-9 * config.dt {
         gm = gm.resample_linear(config.dt);
@@ -265,23 +324,19 @@ pub fn ground_motion(config: &DatasetConfig) -> Result<GroundMotion, DatasetErro
     Ok(gm)
 }
 
-/// Generates the data set of `config` (SPEC §2).
-pub fn generate(config: &DatasetConfig) -> Result<Dataset, DatasetError> {
-    if !(config.dt > 0.0 && config.dt.is_finite()) {
-        return Err(invalid(
-            "dt",
-            format!("{} is not a positive time step", config.dt),
-        ));
-    }
+/// Checks every size and value of `config` against the [`limits`] (SPEC §2 ranges far
+/// beyond any real use), before anything is allocated from them.
+pub fn check_config(config: &DatasetConfig) -> Result<(), DatasetError> {
+    limits::check_dt(config.dt).map_err(|e| invalid("dt", format!("{e} (s)")))?;
     if !(config.noise_fraction >= 0.0 && config.noise_fraction.is_finite()) {
         return Err(invalid(
             "noise_fraction",
             format!("{} is not a non-negative number", config.noise_fraction),
         ));
     }
-    if !config.scale.is_finite() {
-        return Err(invalid("scale", format!("{} is not finite", config.scale)));
-    }
+    limits::check_noise_fraction(config.noise_fraction)
+        .map_err(|e| invalid("noise_fraction", e.to_string()))?;
+    limits::check_scale(config.scale).map_err(|e| invalid("scale", e.to_string()))?;
     if let Some(d) = config.duration {
         if !(d > 0.0 && d.is_finite()) {
             return Err(invalid(
@@ -289,7 +344,32 @@ pub fn generate(config: &DatasetConfig) -> Result<Dataset, DatasetError> {
                 format!("{d} is not a positive duration"),
             ));
         }
+        limits::samples_for_duration(d, config.dt)
+            .map_err(|e| invalid("duration", format!("{e} (s)")))?;
     }
+    if let Some(n) = config.storeys {
+        limits::check_storeys(n).map_err(|e| invalid("storeys", e.to_string()))?;
+    }
+    Ok(())
+}
+
+fn check_kanai_tajimi(p: &KanaiTajimi) -> Result<(), DatasetError> {
+    for (field, v) in [
+        ("omega_g", p.omega_g),
+        ("zeta_g", p.zeta_g),
+        ("omega_f", p.omega_f),
+        ("zeta_f", p.zeta_f),
+        ("pga", p.pga),
+    ] {
+        limits::check_range(v, 0.0, limits::MAX_ABS_VALUE)
+            .map_err(|e| invalid(field, e.to_string()))?;
+    }
+    Ok(())
+}
+
+/// Generates the data set of `config` (SPEC §2).
+pub fn generate(config: &DatasetConfig) -> Result<Dataset, DatasetError> {
+    check_config(config)?;
     let preset = Preset::from_name(&config.preset, config.storeys)?;
     let chain = preset.chain;
     let gm = ground_motion(config)?;
@@ -297,6 +377,29 @@ pub fn generate(config: &DatasetConfig) -> Result<Dataset, DatasetError> {
     let ug_clean = gm.acc;
     let kk = ug_clean.len();
     let n = chain.storeys();
+    // The truth table (t, ug and the states) is the widest one allocated.
+    limits::check_table(kk, chain.dim() + 2).map_err(|e| {
+        invalid(
+            "duration",
+            format!("{kk} samples × {} columns of truth: {e}", chain.dim() + 2),
+        )
+    })?;
+    // What is written must load back: every value within the limit on data values, the input
+    // first.
+    let beyond = |row: &[f64]| {
+        row.iter()
+            .copied()
+            .find(|v| limits::check_value(*v).is_err())
+    };
+    if let Some(k) = ug_clean
+        .iter()
+        .position(|u| limits::check_value(*u).is_err())
+    {
+        return Err(DatasetError::Unbounded {
+            t: k as f64 * dt,
+            value: ug_clean[k],
+        });
+    }
     let truth = simulate_rk4(&chain, &ug_clean, dt);
     if let Some(k) = truth
         .rows()
@@ -310,6 +413,17 @@ pub fn generate(config: &DatasetConfig) -> Result<Dataset, DatasetError> {
         if config.measurement == MeasurementKind::Absolute {
             row.iter_mut().for_each(|a| *a += ug_clean[k]);
         }
+    }
+    let first_beyond = truth
+        .rows()
+        .zip(y_clean.chunks_exact(n))
+        .enumerate()
+        .find_map(|(k, (x, y))| beyond(x).or_else(|| beyond(y)).map(|v| (k, v)));
+    if let Some((k, value)) = first_beyond {
+        return Err(DatasetError::Unbounded {
+            t: k as f64 * dt,
+            value,
+        });
     }
     let column_rms = |buf: &[f64], cols: usize, j: usize| -> f64 {
         rms(&buf
@@ -441,12 +555,8 @@ impl Dataset {
         }
     }
 
-    /// Writes `measured.csv`, `truth.csv` and `dataset.json` into `dir` (created if needed).
-    pub fn write_dir(&self, dir: &Path) -> Result<(), DatasetError> {
-        std::fs::create_dir_all(dir).map_err(|source| DatasetError::Io {
-            file: dir.to_path_buf(),
-            source,
-        })?;
+    /// The text of `measured.csv`.
+    fn measured_csv(&self) -> String {
         let n = self.channels();
         let mut s = String::from("t,ug");
         for j in 1..=n {
@@ -454,30 +564,78 @@ impl Dataset {
         }
         s.push('\n');
         for k in 0..self.len() {
-            write!(s, "{},{}", self.t[k], self.ug_meas[k]).unwrap();
-            for a in self.y(k) {
-                write!(s, ",{a}").unwrap();
+            write!(s, "{},{}", Num(self.t[k]), Num(self.ug_meas[k])).unwrap();
+            for &a in self.y(k) {
+                write!(s, ",{}", Num(a)).unwrap();
             }
             s.push('\n');
         }
-        write_file(&dir.join(MEASURED), s.as_bytes())?;
+        s
+    }
 
+    /// The text of `truth.csv`.
+    fn truth_csv(&self) -> String {
         let mut s = String::from("t,ug");
         for name in &self.state_names {
             write!(s, ",{name}").unwrap();
         }
         s.push('\n');
         for k in 0..self.len() {
-            write!(s, "{},{}", self.t[k], self.ug_clean[k]).unwrap();
-            for v in self.truth.state(k) {
-                write!(s, ",{v}").unwrap();
+            write!(s, "{},{}", Num(self.t[k]), Num(self.ug_clean[k])).unwrap();
+            for &v in self.truth.state(k) {
+                write!(s, ",{}", Num(v)).unwrap();
             }
             s.push('\n');
         }
-        write_file(&dir.join(TRUTH), s.as_bytes())?;
+        s
+    }
 
-        let json = serde_json::to_string_pretty(&self.meta()).expect("meta is serialisable");
-        write_file(&dir.join(META), json.as_bytes())
+    /// Writes `measured.csv`, `truth.csv` and `dataset.json` (which records the size and
+    /// SHA-256 of both CSV files) as the directory `dir`.
+    ///
+    /// The directory is written under a temporary sibling name and renamed into place, so an
+    /// interruption leaves either the previous data set or the new one, never a mix and never
+    /// nothing (see [`replace`] for the one platform-dependent window). An existing `dir` is
+    /// replaced only when it holds nothing but data-set files.
+    pub fn write_dir(&self, dir: &Path) -> Result<(), DatasetError> {
+        let staging = replace::stage(dir)?;
+        match self.write_files(&staging) {
+            Ok(()) => staging.commit(),
+            Err(e) => {
+                staging.abandon();
+                Err(e)
+            }
+        }
+    }
+
+    fn write_files(&self, staging: &replace::Staging) -> Result<(), DatasetError> {
+        let mut files = BTreeMap::new();
+        for (name, text) in [(MEASURED, self.measured_csv()), (TRUTH, self.truth_csv())] {
+            write_file(staging, name, text.as_bytes())?;
+            files.insert(name.to_string(), FileDigest::of(text.as_bytes()));
+        }
+        let meta = MetaFile {
+            meta: self.meta(),
+            files: Some(files),
+        };
+        let json = serde_json::to_string_pretty(&meta).expect("meta is serialisable");
+        write_file(staging, META, json.as_bytes())
+    }
+}
+
+/// An `f64` written as the shortest decimal that parses back to the same bits: plain for
+/// `1e-5 ≤ |v| < 1e16` and zero, in exponent form otherwise (plain `{}` would spell `1e-300`
+/// with 300 zeros).
+struct Num(f64);
+
+impl std::fmt::Display for Num {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let a = self.0.abs();
+        if a == 0.0 || (1e-5..1e16).contains(&a) {
+            write!(f, "{}", self.0)
+        } else {
+            write!(f, "{:e}", self.0)
+        }
     }
 }
 
@@ -486,13 +644,17 @@ pub const MEASURED: &str = "measured.csv";
 pub const TRUTH: &str = "truth.csv";
 pub const META: &str = "dataset.json";
 
-fn write_file(path: &Path, bytes: &[u8]) -> Result<(), DatasetError> {
-    let io = |source| DatasetError::Io {
-        file: path.to_path_buf(),
+/// Writes and flushes one file of a staged directory; errors name the real file.
+fn write_file(staging: &replace::Staging, name: &str, bytes: &[u8]) -> Result<(), DatasetError> {
+    let path = staging.dir.join(name);
+    let io = |source| DatasetError::Write {
+        file: staging.real(name),
+        temp: path.clone(),
         source,
     };
-    let mut f = std::fs::File::create(path).map_err(io)?;
-    f.write_all(bytes).map_err(io)
+    let mut f = std::fs::File::create(&path).map_err(io)?;
+    f.write_all(bytes).map_err(io)?;
+    f.sync_all().map_err(io)
 }
 
 /// The true states of a loaded directory (`truth.csv`).
@@ -541,12 +703,50 @@ struct Table {
     lines: Vec<usize>,
 }
 
-fn read_table(path: &Path) -> Result<Table, DatasetError> {
-    let text = std::fs::read_to_string(path).map_err(|source| ReadError::Io {
-        file: path.to_path_buf(),
-        source,
-    })?;
-    let mut lines = text.lines().enumerate();
+/// The bytes of a data file, after checking its size against `MAX_FILE_BYTES`. `Ok(None)`
+/// when the file does not exist.
+fn read_bytes(path: &Path) -> Result<Option<Vec<u8>>, DatasetError> {
+    let io = |source| -> DatasetError {
+        ReadError::Io {
+            file: path.to_path_buf(),
+            source,
+        }
+        .into()
+    };
+    let bytes = match std::fs::metadata(path) {
+        Ok(m) => m.len(),
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
+        Err(e) => return Err(io(e)),
+    };
+    if bytes > limits::MAX_FILE_BYTES {
+        return Err(ReadError::FileTooLarge {
+            file: path.to_path_buf(),
+            bytes,
+            max: limits::MAX_FILE_BYTES,
+        }
+        .into());
+    }
+    std::fs::read(path).map(Some).map_err(io)
+}
+
+/// `bytes` as UTF-8 text; the error names the file and the line of the first invalid byte.
+fn utf8(path: &Path, bytes: Vec<u8>) -> Result<String, DatasetError> {
+    String::from_utf8(bytes).map_err(|e| {
+        let at = e.utf8_error().valid_up_to();
+        let line = e.as_bytes()[..at].iter().filter(|&&b| b == b'\n').count() + 1;
+        DatasetError::Mismatch {
+            file: path.to_path_buf(),
+            line,
+            field: "text".to_string(),
+            message: format!("not valid UTF-8 (byte {at})"),
+        }
+    })
+}
+
+/// Parses a CSV table with a header and at most `max_columns` columns, within
+/// [`limits::check_table`]. A leading byte-order mark is skipped.
+fn parse_table(path: &Path, text: &str, max_columns: usize) -> Result<Table, DatasetError> {
+    let mut lines = readers::strip_bom(text).lines().enumerate();
     let names: Vec<String> = match lines.next() {
         Some((_, h)) => h.split(',').map(|s| s.trim().to_string()).collect(),
         None => {
@@ -558,12 +758,26 @@ fn read_table(path: &Path) -> Result<Table, DatasetError> {
             .into())
         }
     };
+    if names.len() > max_columns {
+        return Err(header_error(
+            path,
+            "header",
+            format!(
+                "{} columns, at most {max_columns} expected ({} storeys at most)",
+                names.len(),
+                limits::MAX_STOREYS
+            ),
+        ));
+    }
     let mut values = Vec::new();
     let mut rows = Vec::new();
     for (i, l) in lines {
         let line = i + 1;
         if l.trim().is_empty() {
             continue;
+        }
+        if let Err(e) = limits::check_table(rows.len() + 1, names.len()) {
+            return Err(readers::limit_error(path, line, &names[0], e).into());
         }
         let fields: Vec<&str> = l.split(',').collect();
         if fields.len() != names.len() {
@@ -575,8 +789,12 @@ fn read_table(path: &Path) -> Result<Table, DatasetError> {
             }
             .into());
         }
-        for (name, f) in names.iter().zip(&fields) {
-            values.push(parse_field(path, line, name, f)?);
+        for (j, (name, f)) in names.iter().zip(&fields).enumerate() {
+            values.push(if j == 0 {
+                readers::parse_time(path, line, name, f)?
+            } else {
+                parse_field(path, line, name, f)?
+            });
         }
         rows.push(line);
     }
@@ -616,11 +834,84 @@ fn header_error(file: &Path, field: &str, message: String) -> DatasetError {
     .into()
 }
 
+/// Reads and parses `dataset.json` (`Ok(None)` when absent).
+fn read_meta(jpath: &Path) -> Result<Option<(MetaFile, String)>, DatasetError> {
+    let Some(bytes) = read_bytes(jpath)? else {
+        return Ok(None);
+    };
+    let text = utf8(jpath, bytes)?;
+    let parsed: MetaFile =
+        serde_json::from_str(readers::strip_bom(&text)).map_err(|e| DatasetError::Json {
+            file: jpath.to_path_buf(),
+            line: e.line(),
+            column: e.column(),
+            message: e.to_string(),
+        })?;
+    Ok(Some((parsed, text)))
+}
+
 /// Loads a data-set directory written by [`Dataset::write_dir`] (or by hand: only
 /// `measured.csv` is required).
+///
+/// When `dataset.json` records the digests of the CSV files (data sets written by this
+/// version), each file is checked against them before it is parsed, and a file that does not
+/// belong is refused by name; older data sets (no digests) and field data (no `dataset.json`)
+/// load unchecked. The metadata is checked against the data, the limits and the structure it
+/// names.
 pub fn load_dir(dir: &Path) -> Result<LoadedDataset, DatasetError> {
     let mpath = dir.join(MEASURED);
-    let m = read_table(&mpath)?;
+    let jpath = dir.join(META);
+    let tpath = dir.join(TRUTH);
+    let meta_file = read_meta(&jpath)?;
+    let digests = meta_file.as_ref().and_then(|(m, _)| m.files.clone());
+
+    let Some(mbytes) = read_bytes(&mpath)? else {
+        let mut message = "not found".to_string();
+        if !dir.exists() {
+            if let Some(aside) = replace::aside_copies(dir).last() {
+                message = format!(
+                    "not found; an interrupted write left the previous data set at {}",
+                    aside.display()
+                );
+            }
+        }
+        return Err(ReadError::Io {
+            file: mpath,
+            source: std::io::Error::new(std::io::ErrorKind::NotFound, message),
+        }
+        .into());
+    };
+    let tbytes = read_bytes(&tpath)?;
+    if let Some(files) = &digests {
+        for (name, content, path) in [
+            (MEASURED, Some(&mbytes), &mpath),
+            (TRUTH, tbytes.as_ref(), &tpath),
+        ] {
+            match (files.get(name), content) {
+                (Some(d), Some(c)) => integrity::verify(&jpath, path, name, c, d)?,
+                (Some(_), None) => {
+                    return Err(DatasetError::Checksum {
+                        file: path.clone(),
+                        message: format!("missing, but {} records it", jpath.display()),
+                    })
+                }
+                (None, Some(_)) => {
+                    return Err(DatasetError::Checksum {
+                        file: path.clone(),
+                        message: format!(
+                            "not recorded in {}: it does not belong with this dataset.json",
+                            jpath.display()
+                        ),
+                    })
+                }
+                (None, None) => {}
+            }
+        }
+    }
+
+    let mtext = utf8(&mpath, mbytes)?;
+    let m = parse_table(&mpath, &mtext, 2 + limits::MAX_STOREYS)?;
+    drop(mtext);
     let channels = m.names.len().saturating_sub(2);
     let expected: Vec<String> = ["t".to_string(), "ug".to_string()]
         .into_iter()
@@ -647,21 +938,12 @@ pub fn load_dir(dir: &Path) -> Result<LoadedDataset, DatasetError> {
         .flat_map(|row| row[2..].iter().copied())
         .collect();
 
-    let jpath = dir.join(META);
-    let meta: Option<DatasetMeta> = match std::fs::read_to_string(&jpath) {
-        Ok(text) => Some(serde_json::from_str(&text).map_err(|e| DatasetError::Json {
-            file: jpath.clone(),
-            line: e.line(),
-            column: e.column(),
-            message: e.to_string(),
-        })?),
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => None,
-        Err(source) => {
-            return Err(DatasetError::Io {
-                file: jpath,
-                source,
-            })
+    let meta = match meta_file {
+        Some((mf, text)) => {
+            integrity::check_meta(&jpath, &text, &mf.meta, t.len(), channels)?;
+            Some(mf.meta)
         }
+        None => None,
     };
     // The metadata carries dt exactly; the grid estimate (t_last − t_0)/(K − 1) may differ in
     // the last bit.
@@ -675,89 +957,20 @@ pub fn load_dir(dir: &Path) -> Result<LoadedDataset, DatasetError> {
                     message: format!("dt = {} but {MEASURED} has dt = {dt_grid}", meta.dt),
                 });
             }
-            if meta.samples != t.len() || meta.storeys != channels {
-                return Err(DatasetError::Mismatch {
-                    file: jpath,
-                    line: 1,
-                    field: "samples".to_string(),
-                    message: format!(
-                        "{} samples × {} channels, but {MEASURED} has {} × {channels}",
-                        meta.samples,
-                        meta.storeys,
-                        t.len()
-                    ),
-                });
-            }
             meta.dt
         }
         None => dt_grid,
     };
 
-    let tpath = dir.join(TRUTH);
-    let truth = if tpath.exists() {
-        let tr = read_table(&tpath)?;
-        let w = tr.names.len();
-        if w < 2 + 2 * channels || tr.names[0] != "t" || tr.names[1] != "ug" {
-            return Err(header_error(
-                &tpath,
-                "header",
-                format!(
-                    "expected `t,ug,x1..x{channels},v1..v{channels},r...`, found `{}`",
-                    tr.names.join(",")
-                ),
-            ));
+    let truth = match tbytes {
+        Some(tbytes) => {
+            let ttext = utf8(&tpath, tbytes)?;
+            // t, ug, x, v and at most one r per storey.
+            let tr = parse_table(&tpath, &ttext, 2 + 3 * channels)?;
+            drop(ttext);
+            Some(check_truth(&tpath, tr, &t, channels, dt)?)
         }
-        for j in 0..channels {
-            for (off, p) in [(2, "x"), (2 + channels, "v")] {
-                let want = format!("{p}{}", j + 1);
-                if tr.names[off + j] != want {
-                    return Err(header_error(
-                        &tpath,
-                        &tr.names[off + j],
-                        format!("expected column `{want}`"),
-                    ));
-                }
-            }
-        }
-        if let Some(bad) = tr.names[2 + 2 * channels..]
-            .iter()
-            .find(|n| !n.starts_with('r'))
-        {
-            return Err(header_error(
-                &tpath,
-                bad,
-                "expected a Bouc–Wen column `r<storey>`".to_string(),
-            ));
-        }
-        let tt = tr.column(0);
-        if tt.len() != t.len() {
-            return Err(DatasetError::Mismatch {
-                file: tpath,
-                line: *tr.lines.last().unwrap_or(&1),
-                field: "t".to_string(),
-                message: format!("{} rows, {MEASURED} has {}", tt.len(), t.len()),
-            });
-        }
-        if let Some(k) = (0..t.len()).find(|&k| (tt[k] - t[k]).abs() > 1e-9 * dt) {
-            return Err(DatasetError::Mismatch {
-                file: tpath,
-                line: tr.lines[k],
-                field: "t".to_string(),
-                message: format!("t = {} but {MEASURED} has t = {}", tt[k], t[k]),
-            });
-        }
-        let states: Vec<f64> = tr
-            .values
-            .chunks_exact(w)
-            .flat_map(|row| row[2..].iter().copied())
-            .collect();
-        Some(LoadedTruth {
-            ug_clean: tr.column(1),
-            states: Trajectory::from_flat(w - 2, dt, states),
-            state_names: tr.names[2..].to_vec(),
-        })
-    } else {
-        None
+        None => None,
     };
     Ok(LoadedDataset {
         dt,
@@ -767,6 +980,76 @@ pub fn load_dir(dir: &Path) -> Result<LoadedDataset, DatasetError> {
         channels,
         truth,
         meta,
+    })
+}
+
+/// Checks the header and the times of `truth.csv` against `measured.csv`.
+fn check_truth(
+    tpath: &Path,
+    tr: Table,
+    t: &[f64],
+    channels: usize,
+    dt: f64,
+) -> Result<LoadedTruth, DatasetError> {
+    let w = tr.names.len();
+    if w < 2 + 2 * channels || tr.names[0] != "t" || tr.names[1] != "ug" {
+        return Err(header_error(
+            tpath,
+            "header",
+            format!(
+                "expected `t,ug,x1..x{channels},v1..v{channels},r...`, found `{}`",
+                tr.names.join(",")
+            ),
+        ));
+    }
+    for j in 0..channels {
+        for (off, p) in [(2, "x"), (2 + channels, "v")] {
+            let want = format!("{p}{}", j + 1);
+            if tr.names[off + j] != want {
+                return Err(header_error(
+                    tpath,
+                    &tr.names[off + j],
+                    format!("expected column `{want}`"),
+                ));
+            }
+        }
+    }
+    if let Some(bad) = tr.names[2 + 2 * channels..]
+        .iter()
+        .find(|n| !n.starts_with('r'))
+    {
+        return Err(header_error(
+            tpath,
+            bad,
+            "expected a Bouc–Wen column `r<storey>`".to_string(),
+        ));
+    }
+    let tt = tr.column(0);
+    if tt.len() != t.len() {
+        return Err(DatasetError::Mismatch {
+            file: tpath.to_path_buf(),
+            line: *tr.lines.last().unwrap_or(&1),
+            field: "t".to_string(),
+            message: format!("{} rows, {MEASURED} has {}", tt.len(), t.len()),
+        });
+    }
+    if let Some(k) = (0..t.len()).find(|&k| (tt[k] - t[k]).abs() > 1e-9 * dt) {
+        return Err(DatasetError::Mismatch {
+            file: tpath.to_path_buf(),
+            line: tr.lines[k],
+            field: "t".to_string(),
+            message: format!("t = {} but {MEASURED} has t = {}", tt[k], t[k]),
+        });
+    }
+    let states: Vec<f64> = tr
+        .values
+        .chunks_exact(w)
+        .flat_map(|row| row[2..].iter().copied())
+        .collect();
+    Ok(LoadedTruth {
+        ug_clean: tr.column(1),
+        states: Trajectory::from_flat(w - 2, dt, states),
+        state_names: tr.names[2..].to_vec(),
     })
 }
 
@@ -795,6 +1078,43 @@ mod tests {
                 ..
             })
         ));
+    }
+
+    #[test]
+    fn numbers_are_short_and_round_trip() {
+        for v in [
+            0.0,
+            -0.0,
+            0.005,
+            -1.9307402050781252e-7,
+            1e-300,
+            -5e-324,
+            f64::MAX,
+            1e15 + 0.5,
+            1e16,
+            -1.2345678901234567e-300,
+        ] {
+            let s = Num(v).to_string();
+            assert!(s.len() <= 24, "{s}");
+            assert_eq!(s.parse::<f64>().unwrap().to_bits(), v.to_bits(), "{s}");
+        }
+        // So the largest table (24 characters and a separator a number) fits in the largest
+        // file the readers accept.
+        assert!((limits::MAX_CELLS as u64) * 25 < limits::MAX_FILE_BYTES);
+        assert_eq!(Num(0.005).to_string(), "0.005");
+        assert_eq!(Num(1e-300).to_string(), "1e-300");
+    }
+
+    #[test]
+    fn a_response_beyond_the_value_limit_is_an_error() {
+        let mut c = DatasetConfig::from_preset("paper-3dof", 1).unwrap();
+        c.excitation = ExcitationSource::Harmonic {
+            amplitude: 1e11,
+            omega: 4.0,
+        };
+        c.duration = Some(1.0);
+        c.scale = 100.0;
+        assert!(matches!(generate(&c), Err(DatasetError::Unbounded { .. })));
     }
 
     #[test]

@@ -46,7 +46,9 @@ impl GroundMotion {
 
     /// Linear interpolation onto the grid `k·new_dt` covering the same duration. The number of
     /// samples is `floor(duration/new_dt) + 1`, with a relative slack of 1e-9 so that
-    /// 31.18 s / 0.005 s gives 6236 intervals despite rounding.
+    /// 31.18 s / 0.005 s gives 6236 intervals despite rounding. That many samples are
+    /// allocated: callers bound them first with [`crate::limits::samples_for_duration`] (as
+    /// [`crate::dataset::ground_motion`] does).
     #[track_caller]
     pub fn resample_linear(&self, new_dt: f64) -> GroundMotion {
         assert!(new_dt > 0.0, "new_dt must be positive");
@@ -77,9 +79,11 @@ impl GroundMotion {
         }
     }
 
-    /// The samples with `t ≤ duration` (a relative slack of 1e-9 absorbs rounding).
+    /// The samples with `t ≤ duration` (a relative slack of 1e-9 absorbs rounding); never more
+    /// than the record holds, whatever `duration` is.
     pub fn truncated(&self, duration: f64) -> GroundMotion {
-        let keep = ((duration / self.dt) * (1.0 + 1e-9)).floor().max(0.0) as usize + 1;
+        let keep =
+            (((duration / self.dt) * (1.0 + 1e-9)).floor().max(0.0) as usize).saturating_add(1);
         GroundMotion {
             dt: self.dt,
             acc: self.acc[..keep.min(self.acc.len())].to_vec(),
@@ -124,7 +128,9 @@ pub fn paper_default() -> GroundMotion {
         .resample_linear(DEFAULT_DT)
 }
 
-/// `a·sin(ω t)` sampled at `k·dt` for `t ≤ duration` (SPEC §2 harmonic input).
+/// `a·sin(ω t)` sampled at `k·dt` for `t ≤ duration` (SPEC §2 harmonic input). The
+/// `floor(duration/dt) + 1` samples are allocated: callers bound them first with
+/// [`crate::limits::samples_for_duration`].
 pub fn harmonic(amplitude: f64, omega: f64, duration: f64, dt: f64) -> GroundMotion {
     assert!(dt > 0.0, "dt must be positive");
     let n = ((duration / dt) * (1.0 + 1e-9)).floor().max(0.0) as usize + 1;
@@ -175,6 +181,8 @@ pub fn envelope(t: f64) -> f64 {
 /// ground acceleration is `e(t)·ẍ_f`, i.e. the transfer function
 /// `(ω_g² + 2ζ_gω_g s)/(s² + 2ζ_gω_g s + ω_g²) · s²/(s² + 2ζ_fω_f s + ω_f²)`. Each step is
 /// integrated with RK4 (ω_g·dt = 0.08 at dt = 0.005 s, well inside RK4's accurate range).
+/// Callers bound the `floor(duration/dt) + 1` samples first with
+/// [`crate::limits::samples_for_duration`].
 pub fn kanai_tajimi<R: Rng + ?Sized>(
     params: &KanaiTajimi,
     duration: f64,
@@ -247,6 +255,8 @@ mod tests {
         assert!((h.acc[100] - 3.0 * (4.0f64 * 0.5).sin()).abs() < 1e-12);
         let t = h.truncated(1.0);
         assert_eq!(t.len(), 201);
+        assert_eq!(h.truncated(f64::INFINITY).len(), h.len());
+        assert_eq!(h.truncated(1e300).len(), h.len());
         assert_eq!(h.scaled(2.0).acc[7], 2.0 * h.acc[7]);
         assert!((rms(&[3.0, -4.0]) - (12.5f64).sqrt()).abs() < 1e-15);
     }

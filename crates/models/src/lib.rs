@@ -8,6 +8,7 @@
 //! - [`integrate`]: classical RK4 (truth) and adaptive Dormand–Prince 5(4) (validation);
 //! - [`excitation`] and [`readers`]: ground motions (El Centro, Kanai–Tajimi, harmonic, user
 //!   records in CSV and PEER `.AT2`); [`ground_motions`]: vendored PEER NGA records by name;
+//! - [`limits`]: the limits on every size and value that comes from a user;
 //! - [`dataset`]: truth and noisy measurements from named random streams;
 //! - [`priors`] and [`partition`]: the priors of SPEC §3 and the three filter partitions
 //!   (augmented state, MLN-RBPF/Storvik, MPF-EKF2) implementing the `core-filters` traits.
@@ -17,6 +18,7 @@ pub mod excitation;
 pub mod filtering;
 pub mod ground_motions;
 pub mod integrate;
+pub mod limits;
 pub mod partition;
 pub mod preset;
 pub mod priors;

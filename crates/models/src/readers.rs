@@ -1,10 +1,14 @@
 //! Readers of user ground-motion records (SPEC §2): CSV `t,acc` and PEER NGA `.AT2`.
 //!
 //! Every error names the file, the 1-based line number and the field, and no input makes a
-//! reader panic. Records are returned as a [`GroundMotion`] in m/s² whose time origin is the
-//! first sample.
+//! reader panic or allocate beyond the [`limits`](crate::limits): the file size, the number of
+//! samples (and an AT2 header's `NPTS`) are checked before anything is allocated from them, the
+//! time step must lie in `[MIN_DT, MAX_DT]` and every value within `±MAX_ABS_VALUE`. A UTF-8
+//! byte-order mark at the start of a file is skipped. Records are returned as a
+//! [`GroundMotion`] in m/s² whose time origin is the first sample.
 
 use crate::excitation::{GroundMotion, G};
+use crate::limits::{self, LimitError};
 use std::path::{Path, PathBuf};
 use thiserror::Error;
 
@@ -90,6 +94,16 @@ pub enum ReadError {
         field: String,
         message: String,
     },
+    #[error("{file}:{line}: field `{field}`: {source}")]
+    Limit {
+        file: PathBuf,
+        line: usize,
+        field: String,
+        #[source]
+        source: LimitError,
+    },
+    #[error("{file}: {bytes} bytes, more than the {max} bytes a record or data file may have")]
+    FileTooLarge { file: PathBuf, bytes: u64, max: u64 },
     #[error("{file}: empty record ({found} samples, at least {needed} needed)")]
     Empty {
         file: PathBuf,
@@ -98,8 +112,41 @@ pub enum ReadError {
     },
 }
 
-/// Parses one numeric field (Fortran `D` exponents accepted), rejecting NaN and infinities.
+/// A [`ReadError::Limit`] at `file:line`, field `field`.
+pub(crate) fn limit_error(file: &Path, line: usize, field: &str, source: LimitError) -> ReadError {
+    ReadError::Limit {
+        file: file.to_path_buf(),
+        line,
+        field: field.to_string(),
+        source,
+    }
+}
+
+/// Parses one data value (Fortran `D` exponents accepted), rejecting NaN, infinities and
+/// values beyond `±MAX_ABS_VALUE`.
 pub(crate) fn parse_field(
+    file: &Path,
+    line: usize,
+    field: &str,
+    raw: &str,
+) -> Result<f64, ReadError> {
+    let v = parse_number(file, line, field, raw)?;
+    limits::check_value(v).map_err(|e| limit_error(file, line, field, e))
+}
+
+/// Parses one time stamp, rejecting NaN, infinities and values beyond `±MAX_ABS_TIME`.
+pub(crate) fn parse_time(
+    file: &Path,
+    line: usize,
+    field: &str,
+    raw: &str,
+) -> Result<f64, ReadError> {
+    let v = parse_number(file, line, field, raw)?;
+    limits::check_time(v).map_err(|e| limit_error(file, line, field, e))
+}
+
+/// Parses one number (Fortran `D` exponents accepted), rejecting NaN and infinities.
+pub(crate) fn parse_number(
     file: &Path,
     line: usize,
     field: &str,
@@ -126,10 +173,17 @@ pub(crate) fn parse_field(
     Ok(v)
 }
 
-/// Checks that `times` (with their 1-based line numbers) increase strictly and lie on a uniform
-/// grid; returns the step. Rounding of printed times is tolerated up to 1% of a step, far
-/// below any real gap or jitter.
+/// Checks that `times` (with their 1-based line numbers; at least two) increase strictly and lie
+/// on a uniform grid whose step is within `[MIN_DT, MAX_DT]`; returns the step. Rounding of
+/// printed times is tolerated up to 1% of a step, far below any real gap or jitter.
 pub(crate) fn uniform_step(file: &Path, times: &[(usize, f64)]) -> Result<f64, ReadError> {
+    if times.len() < 2 {
+        return Err(ReadError::Empty {
+            file: file.to_path_buf(),
+            found: times.len(),
+            needed: 2,
+        });
+    }
     for w in times.windows(2) {
         if w[1].1 <= w[0].1 {
             return Err(ReadError::NonMonotonicTime {
@@ -143,6 +197,7 @@ pub(crate) fn uniform_step(file: &Path, times: &[(usize, f64)]) -> Result<f64, R
     // Local check first, so that a gap is reported where it occurs: every step within 5 % of
     // the first one (printed times rounded to a few digits stay well inside).
     let dt1 = times[1].1 - times[0].1;
+    limits::check_dt(dt1).map_err(|e| step_error(file, times[1].0, e))?;
     for w in times.windows(2) {
         if ((w[1].1 - w[0].1) - dt1).abs() > 0.05 * dt1 {
             return Err(ReadError::NonUniformTime {
@@ -158,6 +213,7 @@ pub(crate) fn uniform_step(file: &Path, times: &[(usize, f64)]) -> Result<f64, R
     let n = times.len();
     let t0 = times[0].1;
     let dt = (times[n - 1].1 - t0) / (n - 1) as f64;
+    limits::check_dt(dt).map_err(|e| step_error(file, times[n - 1].0, e))?;
     for (k, &(line, t)) in times.iter().enumerate() {
         let expected = t0 + k as f64 * dt;
         if (t - expected).abs() > 0.01 * dt {
@@ -173,11 +229,50 @@ pub(crate) fn uniform_step(file: &Path, times: &[(usize, f64)]) -> Result<f64, R
     Ok(dt)
 }
 
-fn read_text(path: &Path) -> Result<String, ReadError> {
-    std::fs::read_to_string(path).map_err(|source| ReadError::Io {
+fn step_error(file: &Path, line: usize, e: LimitError) -> ReadError {
+    let message = format!("time step: {e} (s)");
+    ReadError::Header {
+        file: file.to_path_buf(),
+        line,
+        field: "t".to_string(),
+        message,
+    }
+}
+
+/// Reads a whole text file after checking its size against `MAX_FILE_BYTES`.
+pub(crate) fn read_text(path: &Path) -> Result<String, ReadError> {
+    let io = |source| ReadError::Io {
         file: path.to_path_buf(),
         source,
-    })
+    };
+    let bytes = std::fs::metadata(path).map_err(io)?.len();
+    if bytes > limits::MAX_FILE_BYTES {
+        return Err(ReadError::FileTooLarge {
+            file: path.to_path_buf(),
+            bytes,
+            max: limits::MAX_FILE_BYTES,
+        });
+    }
+    std::fs::read_to_string(path).map_err(io)
+}
+
+/// `text` without a leading UTF-8 byte-order mark (which some spreadsheet programs write and
+/// no editor shows).
+pub(crate) fn strip_bom(text: &str) -> &str {
+    text.strip_prefix('\u{feff}').unwrap_or(text)
+}
+
+/// Error for the sample beyond `MAX_SAMPLES` at `line`.
+pub(crate) fn too_many_samples(file: &Path, line: usize, field: &str) -> ReadError {
+    limit_error(
+        file,
+        line,
+        field,
+        LimitError::CountTooLarge {
+            value: limits::MAX_SAMPLES as u128 + 1,
+            max: limits::MAX_SAMPLES as u128,
+        },
+    )
 }
 
 /// Reads a CSV record `t,acc` (one header line optional; blank lines and lines starting with
@@ -192,7 +287,7 @@ pub fn parse_csv(file: &Path, text: &str, units: Units) -> Result<GroundMotion, 
     let mut times = Vec::new();
     let mut acc = Vec::new();
     let mut seen_first = false;
-    for (i, raw) in text.lines().enumerate() {
+    for (i, raw) in strip_bom(text).lines().enumerate() {
         let line = i + 1;
         let l = raw.trim();
         if l.is_empty() || l.starts_with('#') {
@@ -214,7 +309,10 @@ pub fn parse_csv(file: &Path, text: &str, units: Units) -> Result<GroundMotion, 
                 found: fields.len(),
             });
         }
-        let t = parse_field(file, line, "t", fields[0])?;
+        if acc.len() == limits::MAX_SAMPLES {
+            return Err(too_many_samples(file, line, "t"));
+        }
+        let t = parse_time(file, line, "t", fields[0])?;
         let a = parse_field(file, line, "acc", fields[1])?;
         times.push((line, t));
         acc.push(a * units.to_si());
@@ -272,23 +370,36 @@ fn parse_at2_header(file: &Path, line: &str) -> Result<(usize, f64), ReadError> 
             (toks[0].to_string(), toks[1].to_string())
         }
     };
-    let npts_f = parse_field(file, 4, "NPTS", &npts_raw)?;
+    // NPTS is bounded before it becomes a size: `NPTS= 1e30` once overflowed a capacity.
+    let npts_f = parse_number(file, 4, "NPTS", &npts_raw)?;
     if npts_f < 1.0 || npts_f.fract() != 0.0 {
         return Err(header_err(
             "NPTS",
             format!("`{npts_raw}` is not a positive integer"),
         ));
     }
-    let dt = parse_field(file, 4, "DT", &dt_raw)?;
+    if npts_f > limits::MAX_SAMPLES as f64 {
+        return Err(limit_error(
+            file,
+            4,
+            "NPTS",
+            LimitError::TooLarge {
+                value: npts_f,
+                max: limits::MAX_SAMPLES as f64,
+            },
+        ));
+    }
+    let dt = parse_number(file, 4, "DT", &dt_raw)?;
     if dt <= 0.0 {
         return Err(header_err("DT", format!("`{dt_raw}` is not positive")));
     }
+    let dt = limits::check_dt(dt).map_err(|e| limit_error(file, 4, "DT", e))?;
     Ok((npts_f as usize, dt))
 }
 
 /// Parses AT2 text as [`read_at2`] does; `file` is used in error messages only.
 pub fn parse_at2(file: &Path, text: &str) -> Result<GroundMotion, ReadError> {
-    let lines: Vec<&str> = text.lines().collect();
+    let lines: Vec<&str> = strip_bom(text).lines().collect();
     if lines.len() < 4 {
         return Err(ReadError::Header {
             file: file.to_path_buf(),
@@ -302,18 +413,24 @@ pub fn parse_at2(file: &Path, text: &str) -> Result<GroundMotion, ReadError> {
     }
     let (npts, dt) = parse_at2_header(file, lines[3])?;
     let mut acc = Vec::with_capacity(npts);
+    // Values beyond NPTS are counted, not kept.
+    let mut extra = 0usize;
     for (i, l) in lines.iter().enumerate().skip(4) {
         for tok in l.split_whitespace() {
+            if acc.len() == npts {
+                extra += 1;
+                continue;
+            }
             let field = format!("value {}", acc.len() + 1);
             acc.push(parse_field(file, i + 1, &field, tok)? * G);
         }
     }
-    if acc.len() != npts {
+    if acc.len() != npts || extra > 0 {
         return Err(ReadError::NptsMismatch {
             file: file.to_path_buf(),
             line: 4,
             declared: npts,
-            found: acc.len(),
+            found: acc.len() + extra,
         });
     }
     if acc.len() < 2 {

@@ -85,7 +85,8 @@ impl SecondOrder {
         let k = self.groups.len();
         let at = |i: usize, j: usize| p[i + j * n];
         let pair = |t1: &Term, t2: &Term| {
-            T::splat(t1.weight * t2.weight) * (at(t1.a, t2.a) * at(t1.b, t2.b) + at(t1.a, t2.b) * at(t1.b, t2.a))
+            T::splat(t1.weight * t2.weight)
+                * (at(t1.a, t2.a) * at(t1.b, t2.b) + at(t1.a, t2.b) * at(t1.b, t2.a))
         };
         for (g1, &(_, s1, e1)) in self.groups.iter().enumerate() {
             let ts1 = &self.terms[s1..e1];
@@ -129,7 +130,9 @@ mod tests {
         h.push(0, 1, 3, 2.0);
         h.push(2, 1, 2, -1.0);
         // A symmetric positive definite P.
-        let a = [1.0, 0.3, -0.2, 0.5, 0.7, 1.1, 0.4, -0.6, 0.2, 0.9, 1.3, 0.1, -0.4, 0.8, 0.6, 1.2];
+        let a = [
+            1.0, 0.3, -0.2, 0.5, 0.7, 1.1, 0.4, -0.6, 0.2, 0.9, 1.3, 0.1, -0.4, 0.8, 0.6, 1.2,
+        ];
         let mut p = vec![0.0; n * n];
         for i in 0..n {
             for j in 0..n {

@@ -7,28 +7,38 @@ use experiments::cli;
 #[command(
     name = "sysid",
     version,
-    about = "Online Bayesian identification of hysteretic structures"
+    about = "Online Bayesian identification of hysteretic structures",
+    allow_negative_numbers = true
 )]
 struct Cli {
     #[command(subcommand)]
     command: Command,
 }
 
+/// Every subcommand accepts negative numbers as values (`--scale -1` flips the sign of the
+/// excitation); an unsigned option given a negative number then gets clap's "invalid value"
+/// message instead of "unexpected argument".
 #[derive(Subcommand)]
 enum Command {
     /// Simulate a structure under an excitation and write a noisy data set.
+    #[command(allow_negative_numbers = true)]
     Simulate(cli::simulate::Args),
     /// Run one identification filter on a data set and write a run record.
+    #[command(allow_negative_numbers = true)]
     Filter(cli::filter::Args),
     /// Reproduce the paper: every study, figure and the report.
+    #[command(allow_negative_numbers = true)]
     Reproduce(cli::reproduce::Args),
     /// Identification-accuracy regression check against reviewed thresholds.
+    #[command(allow_negative_numbers = true)]
     Regression(cli::regression::Args),
     /// Merge the records of sharded sweeps.
+    #[command(allow_negative_numbers = true)]
     Merge(cli::merge::Args),
     /// Draw the figures of one run record (convergence, ESS, hysteresis loop, residuals).
     Plot(cli::plot::Args),
     /// Compute Table I (moments of z = xᵀx by linearisation, EKF2 and the unscented transform).
+    #[command(allow_negative_numbers = true)]
     Table1(cli::table1::Args),
 }
 

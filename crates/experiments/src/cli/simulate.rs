@@ -1,9 +1,15 @@
 //! `sysid simulate`: simulate a structure under an excitation and write a data-set directory
 //! (`measured.csv`, `truth.csv`, `dataset.json`; SPEC §2).
+//!
+//! Every flag is checked against `models::limits` before anything is generated, and the
+//! directory is written under a temporary name and swapped into place
+//! ([`models::dataset::Dataset::write_dir`]): an interrupted `simulate` leaves the previous data
+//! set or the new one, never a mix.
 
-use anyhow::Context;
+use anyhow::{bail, Context};
 use models::dataset::{self, DatasetConfig, ExcitationSource, MeasurementKind};
 use models::excitation::KanaiTajimi;
+use models::limits;
 use models::preset::{HARMONIC_AMPLITUDE, HARMONIC_OMEGA};
 use models::readers::Units;
 use std::path::PathBuf;
@@ -30,7 +36,7 @@ pub struct Args {
     /// Run index (selects independent noise streams for the same seed).
     #[arg(long, default_value_t = 0)]
     pub run: u64,
-    /// Output directory (created if needed).
+    /// Output directory: a new directory, or an existing data set to replace.
     #[arg(long)]
     pub out: PathBuf,
     /// Excitation: elcentro, kanai-tajimi, harmonic, or a path to a `.csv` (`t,acc`) or `.AT2`
@@ -80,8 +86,26 @@ fn excitation_source(arg: &str, units: UnitsArg) -> ExcitationSource {
     }
 }
 
+/// Checks the flags a user gives against the limits; errors name the flag.
+fn check_flags(args: &Args) -> anyhow::Result<()> {
+    if let Some(n) = args.storeys {
+        limits::check_storeys(n).context("--storeys")?;
+    }
+    if let Some(s) = args.scale {
+        limits::check_scale(s).context("--scale")?;
+    }
+    limits::check_noise_fraction(args.noise_fraction).context("--noise-fraction")?;
+    if let Some(d) = args.duration {
+        if !(d > 0.0 && d.is_finite()) {
+            bail!("--duration: {d} is not a positive number of seconds");
+        }
+    }
+    Ok(())
+}
+
 /// Runs `sysid simulate`.
 pub fn run(args: Args) -> anyhow::Result<()> {
+    check_flags(&args)?;
     let mut config = DatasetConfig::from_preset(&args.preset, args.seed)?;
     config.run = args.run;
     config.storeys = args.storeys;
@@ -101,6 +125,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     if args.absolute {
         config.measurement = MeasurementKind::Absolute;
+    }
+    if let Some(d) = config.duration {
+        limits::samples_for_duration(d, config.dt)
+            .with_context(|| format!("--duration at dt = {} s", config.dt))?;
     }
     let ds = dataset::generate(&config)?;
     ds.write_dir(&args.out)

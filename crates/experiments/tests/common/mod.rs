@@ -60,6 +60,7 @@ pub fn record(algorithm: &str, run: u64, ratios: [f64; 9], nrmse: f64) -> RunRec
         }),
         config: serde_json::json!({}),
         versions: Versions::current(),
+        fingerprint: None,
         trace: Trace::default(),
         timing: Timing {
             wall_s: 1.0,

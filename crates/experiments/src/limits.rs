@@ -1,0 +1,125 @@
+//! Checks of the filter settings a user gives (config file, study file, command line) against
+//! the limits of [`models::limits`], the one place where every limit is defined.
+//!
+//! [`check_filter_settings`] must run before a filter is built from the settings (the pipeline
+//! calls it first thing in a run); [`check_particle_cloud`] once the number of values per
+//! particle is known (it depends on the algorithm and the storey count);
+//! [`load_filter_settings`] reads, parses and checks a filter config file, naming the file in
+//! every error.
+
+use std::path::Path;
+
+use anyhow::{bail, Context, Result};
+pub use models::limits::*;
+
+use crate::pipeline::FilterSettings;
+
+/// Checks the user-given sizes and values of `s`; the error names the settings field.
+///
+/// - `particles` in `1..=MAX_PARTICLES`;
+/// - `window` (θ_val averaging, SPEC eq. 26) in `1..=MAX_SAMPLES`: 0 has no mean;
+/// - `noise_fraction` in `[MIN_FILTER_NOISE_FRACTION, MAX_FILTER_NOISE_FRACTION]`;
+/// - `ess_threshold` in `(0, 1]`;
+/// - `masses`: at most `MAX_STOREYS`, each finite and positive;
+/// - `fix`: finite values.
+pub fn check_filter_settings(s: &FilterSettings) -> Result<()> {
+    check_count(s.particles, 1, MAX_PARTICLES).context("field `particles`")?;
+    check_window(s.window).context("field `window`")?;
+    check_filter_noise_fraction(s.noise_fraction).context("field `noise_fraction`")?;
+    if let Some(t) = s.ess_threshold {
+        if !(t > 0.0 && t <= 1.0) {
+            bail!("field `ess_threshold`: {t} is not in (0, 1]");
+        }
+    }
+    if let Some(m) = &s.masses {
+        check_count(m.len(), 1, MAX_STOREYS).context("field `masses`: number of storeys")?;
+        if let Some((i, v)) = m
+            .iter()
+            .enumerate()
+            .find(|(_, v)| !(v.is_finite() && **v > 0.0 && **v <= MAX_ABS_VALUE))
+        {
+            bail!(
+                "field `masses`: mass {} = {v} is not a positive number",
+                i + 1
+            );
+        }
+    }
+    if let Some((name, v)) = s.fix.iter().find(|(_, v)| check_value(**v).is_err()) {
+        bail!(
+            "field `fix`: value of {name}: {}",
+            check_value(*v).unwrap_err()
+        );
+    }
+    Ok(())
+}
+
+/// Checks a particle count against the limits once the number of values each particle holds
+/// (state, parameters and any Kalman moments) is known.
+pub fn check_particle_cloud(particles: usize, per_particle: usize) -> Result<()> {
+    check_particles(particles, per_particle).with_context(|| {
+        format!("field `particles`: {particles} particles of {per_particle} values each")
+    })?;
+    Ok(())
+}
+
+/// Reads a filter config file (TOML, [`FilterSettings`]) and checks it; every error names the
+/// file.
+pub fn load_filter_settings(path: &Path) -> Result<FilterSettings> {
+    let bytes = std::fs::metadata(path)
+        .with_context(|| format!("reading config {}", path.display()))?
+        .len();
+    if bytes > MAX_FILE_BYTES {
+        bail!(
+            "config {}: {bytes} bytes, more than the {MAX_FILE_BYTES} bytes a config may have",
+            path.display()
+        );
+    }
+    let text = std::fs::read_to_string(path)
+        .with_context(|| format!("reading config {}", path.display()))?;
+    let text = text.strip_prefix('\u{feff}').unwrap_or(&text);
+    let s: FilterSettings =
+        toml::from_str(text).with_context(|| format!("parsing config {}", path.display()))?;
+    check_filter_settings(&s).with_context(|| format!("config {}", path.display()))?;
+    Ok(s)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn err(s: &FilterSettings) -> String {
+        format!("{:#}", check_filter_settings(s).unwrap_err())
+    }
+
+    #[test]
+    fn defaults_pass_and_each_bad_field_is_named() {
+        let ok = FilterSettings::default();
+        check_filter_settings(&ok).unwrap();
+        let mut s = ok.clone();
+        s.window = 0;
+        assert!(err(&s).contains("`window`"), "{}", err(&s));
+        let mut s = ok.clone();
+        s.particles = 0;
+        assert!(err(&s).contains("`particles`"));
+        s.particles = usize::MAX;
+        assert!(err(&s).contains("`particles`"));
+        let mut s = ok.clone();
+        s.noise_fraction = 1e-9;
+        assert!(err(&s).contains("`noise_fraction`"));
+        s.noise_fraction = 1e308;
+        assert!(err(&s).contains("`noise_fraction`"));
+        let mut s = ok.clone();
+        s.ess_threshold = Some(0.0);
+        assert!(err(&s).contains("`ess_threshold`"));
+        let mut s = ok.clone();
+        s.masses = Some(vec![1.0, -1.0]);
+        assert!(err(&s).contains("mass 2"));
+        s.masses = Some(vec![1.0; MAX_STOREYS + 1]);
+        assert!(err(&s).contains("`masses`"));
+        let mut s = ok.clone();
+        s.fix.insert("k1".into(), 1e300);
+        assert!(err(&s).contains("k1"));
+        check_particle_cloud(500, 20).unwrap();
+        assert!(check_particle_cloud(MAX_PARTICLES, 1000).is_err());
+    }
+}

@@ -1,0 +1,228 @@
+//! What makes the files of a data-set directory one data set: `dataset.json` records the size
+//! and SHA-256 of each CSV file written with it, and its own content is checked against the
+//! data and against the structure it names, so that no later stage indexes past an array or
+//! rebuilds a structure the data do not belong to.
+
+use super::{DatasetError, DatasetMeta};
+use crate::limits;
+use crate::preset::Preset;
+use serde::{Deserialize, Serialize};
+use sha2::{Digest, Sha256};
+use std::collections::BTreeMap;
+use std::path::Path;
+
+/// Size and SHA-256 (lowercase hex) of one file of a data set.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct FileDigest {
+    pub bytes: u64,
+    pub sha256: String,
+}
+
+impl FileDigest {
+    /// The digest of `content`.
+    pub fn of(content: &[u8]) -> Self {
+        let hash = Sha256::digest(content);
+        let mut sha256 = String::with_capacity(64);
+        for b in hash {
+            use std::fmt::Write as _;
+            let _ = write!(sha256, "{b:02x}");
+        }
+        Self {
+            bytes: content.len() as u64,
+            sha256,
+        }
+    }
+}
+
+/// The content of `dataset.json`: the metadata and, from this version on, the digests of the
+/// CSV files it was written with (absent in data sets written before: they load unchecked).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub(crate) struct MetaFile {
+    #[serde(flatten)]
+    pub(crate) meta: DatasetMeta,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub(crate) files: Option<BTreeMap<String, FileDigest>>,
+}
+
+/// 1-based line of the first occurrence of `"key"` in a JSON text (1 when absent), so that a
+/// semantic error points near the field.
+pub(crate) fn json_line(text: &str, key: &str) -> usize {
+    let needle = format!("\"{key}\"");
+    text.find(&needle)
+        .map_or(1, |pos| text[..pos].matches('\n').count() + 1)
+}
+
+/// Checks `content` of `file` (named `name` in the data set) against its recorded digest.
+pub(crate) fn verify(
+    meta_file: &Path,
+    file: &Path,
+    name: &str,
+    content: &[u8],
+    recorded: &FileDigest,
+) -> Result<(), DatasetError> {
+    let found = FileDigest::of(content);
+    let what = if found.bytes != recorded.bytes {
+        format!(
+            "{} bytes, but {} records {} bytes",
+            found.bytes,
+            meta_file.display(),
+            recorded.bytes
+        )
+    } else if found.sha256 != recorded.sha256 {
+        format!(
+            "SHA-256 {}, but {} records {}",
+            found.sha256,
+            meta_file.display(),
+            recorded.sha256
+        )
+    } else {
+        return Ok(());
+    };
+    Err(DatasetError::Checksum {
+        file: file.to_path_buf(),
+        message: format!(
+            "{what}: `{name}` does not belong with this dataset.json (files of different \
+             data sets mixed, or edited by hand); regenerate the data set, or remove \
+             dataset.json to load the data without metadata"
+        ),
+    })
+}
+
+/// Checks the metadata against the limits, against itself, against the structure it names and
+/// against the measured data (`samples` rows, `channels` acceleration channels).
+pub(crate) fn check_meta(
+    file: &Path,
+    text: &str,
+    meta: &DatasetMeta,
+    samples: usize,
+    channels: usize,
+) -> Result<(), DatasetError> {
+    let bad = |field: &str, message: String| DatasetError::Mismatch {
+        file: file.to_path_buf(),
+        line: json_line(text, field.rsplit('.').next().unwrap_or(field)),
+        field: field.to_string(),
+        message,
+    };
+    let lim = |field: &str, r: Result<f64, limits::LimitError>| -> Result<(), DatasetError> {
+        r.map(|_| ()).map_err(|e| bad(field, e.to_string()))
+    };
+    lim("dt", limits::check_dt(meta.dt))?;
+    lim("config.dt", limits::check_dt(meta.config.dt))?;
+    if meta.samples != samples || meta.storeys != channels {
+        return Err(bad(
+            "samples",
+            format!(
+                "{} samples × {} channels, but {} has {} × {channels}",
+                meta.samples,
+                meta.storeys,
+                super::MEASURED,
+                samples
+            ),
+        ));
+    }
+    if let Some(n) = meta.config.storeys {
+        limits::check_storeys(n).map_err(|e| bad("config.storeys", e.to_string()))?;
+    }
+    lim(
+        "noise.fraction",
+        limits::check_noise_fraction(meta.noise.fraction),
+    )?;
+    lim(
+        "config.noise_fraction",
+        limits::check_noise_fraction(meta.config.noise_fraction),
+    )?;
+    lim("config.scale", limits::check_scale(meta.config.scale))?;
+    let n = channels;
+    let nbw = meta.bouc_wen_storeys.len();
+    let lengths: [(&str, usize, usize); 9] = [
+        ("rms.acc", meta.rms.acc.len(), n),
+        ("rms.vel", meta.rms.vel.len(), n),
+        ("rms.disp", meta.rms.disp.len(), n),
+        ("rms.r", meta.rms.r.len(), nbw),
+        ("noise.acc_sd", meta.noise.acc_sd.len(), n),
+        ("max_abs_r", meta.max_abs_r.len(), nbw),
+        ("saturation", meta.saturation.len(), nbw),
+        ("theta_true", meta.theta_true.len(), meta.theta_names.len()),
+        ("state_names", meta.state_names.len(), 2 * n + nbw),
+    ];
+    for (field, found, want) in lengths {
+        if found != want {
+            return Err(bad(
+                field,
+                format!("{found} entries, {want} expected ({n} storeys, {nbw} Bouc–Wen elements)"),
+            ));
+        }
+    }
+    // Non-negative finite magnitudes (an RMS or a s.d.), bounded like data values.
+    let magnitudes = [
+        ("rms.acc", &meta.rms.acc[..]),
+        ("rms.vel", &meta.rms.vel[..]),
+        ("rms.disp", &meta.rms.disp[..]),
+        ("rms.r", &meta.rms.r[..]),
+        ("noise.acc_sd", &meta.noise.acc_sd[..]),
+        ("max_abs_r", &meta.max_abs_r[..]),
+        ("rms.ug", std::slice::from_ref(&meta.rms.ug)),
+        ("noise.ug_sd", std::slice::from_ref(&meta.noise.ug_sd)),
+    ];
+    for (field, values) in magnitudes {
+        for &v in values {
+            lim(field, limits::check_range(v, 0.0, limits::MAX_ABS_VALUE))?;
+        }
+    }
+    for &v in &meta.theta_true {
+        lim(
+            "theta_true",
+            limits::check_range(v, -limits::MAX_ABS_VALUE, limits::MAX_ABS_VALUE),
+        )?;
+    }
+    // The structure the metadata names must be the one the data were generated with.
+    let preset = Preset::from_name(&meta.config.preset, meta.config.storeys)
+        .map_err(|e| bad("preset", e.to_string()))?;
+    let chain = preset.chain;
+    if chain.storeys() != n {
+        return Err(bad(
+            "storeys",
+            format!(
+                "preset `{}` has {} storeys, the data {n} channels",
+                meta.config.preset,
+                chain.storeys()
+            ),
+        ));
+    }
+    let bw: Vec<usize> = chain.bouc_wen().iter().map(|b| b.storey).collect();
+    if bw != meta.bouc_wen_storeys {
+        return Err(bad(
+            "bouc_wen_storeys",
+            format!(
+                "{:?}, but preset `{}` has Bouc–Wen elements at {bw:?}",
+                meta.bouc_wen_storeys, meta.config.preset
+            ),
+        ));
+    }
+    if chain.theta_names() != meta.theta_names {
+        return Err(bad(
+            "theta_names",
+            format!(
+                "{:?}, but preset `{}` has {:?}",
+                meta.theta_names,
+                meta.config.preset,
+                chain.theta_names()
+            ),
+        ));
+    }
+    if chain.state_names() != meta.state_names {
+        return Err(bad(
+            "state_names",
+            format!(
+                "{:?}, but preset `{}` has {:?}",
+                meta.state_names,
+                meta.config.preset,
+                chain.state_names()
+            ),
+        ));
+    }
+    chain
+        .with_theta(&meta.theta_true)
+        .map_err(|e| bad("theta_true", e.to_string()))?;
+    Ok(())
+}
