@@ -45,6 +45,10 @@ pub struct Args {
     /// Storvik's update of step (iii): linearised (the paper's) or exact.
     #[arg(long, value_parser = parse_storvik)]
     pub storvik_update: Option<StorvikUpdate>,
+    /// Discretisation of the equations of motion inside the filter: euler (the paper's),
+    /// symplectic (semi-implicit Euler: velocities first), or rk4 (bootstrap PF only).
+    #[arg(long)]
+    pub discretisation: Option<models::filtering::Discretisation>,
     /// TOML file with filter settings (priors, noise fraction, masses, …); command-line options
     /// override it.
     #[arg(long)]
@@ -105,6 +109,9 @@ pub fn run(args: Args) -> Result<()> {
     }
     if args.ess_threshold.is_some() {
         settings.ess_threshold = args.ess_threshold;
+    }
+    if let Some(d) = args.discretisation {
+        settings.discretisation = d;
     }
     if let Some(u) = args.storvik_update {
         settings.storvik_update = u;
