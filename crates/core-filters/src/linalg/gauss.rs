@@ -527,6 +527,11 @@ pub fn cholesky_repaired(
 pub struct FactoredNoise {
     q: usize,
     chol: Vec<f64>,
+    /// `1 / C_ii`.
+    inv_diag: Vec<f64>,
+    /// Whether `R` is diagonal (the usual case: independent sensors), so that the whitened
+    /// residual is `r_i / C_ii` with no solve.
+    diagonal: bool,
     /// `−½ ln det R − (q/2) ln 2π`.
     log_norm: f64,
 }
@@ -541,13 +546,29 @@ impl FactoredNoise {
     ) -> Result<Self, FilterError> {
         let chol = cholesky_repaired(r, q, 0, which, health)?;
         let log_norm = -log_det_half(&chol, q) - 0.5 * q as f64 * LN_2PI;
-        Ok(Self { q, chol, log_norm })
+        let inv_diag = (0..q).map(|i| 1.0 / chol[i + i * q]).collect();
+        let diagonal = (0..q).all(|j| (j + 1..q).all(|i| chol[i + j * q] == 0.0));
+        Ok(Self {
+            q,
+            chol,
+            inv_diag,
+            diagonal,
+            log_norm,
+        })
     }
 
     /// `log N(r; 0, R)`; `scratch` has length `q` and is overwritten.
     #[inline]
     pub fn log_density<T: Real>(&self, residual: &[T], scratch: &mut [T]) -> T {
         let q = self.q;
+        if self.diagonal {
+            let mut sq = zero::<T>();
+            for (r, d) in residual[..q].iter().zip(&self.inv_diag) {
+                let e = *r * T::splat(*d);
+                sq += e * e;
+            }
+            return T::splat(-0.5) * sq + T::splat(self.log_norm);
+        }
         scratch[..q].copy_from_slice(&residual[..q]);
         for i in 0..q {
             let mut s = scratch[i];
