@@ -252,7 +252,7 @@ pub fn write_report(
         o,
         "Paper: MPF-EKF2 is as good on k and c and has lower state-estimation error.\n"
     );
-    let _ = writeln!(o, "Fig. 6(b) shows the distribution over runs of each state's online NRMSE (box: quartiles and median, whiskers: smallest and largest run, dots: runs): one run can rank the algorithms either way. The records keep no state time histories, so the paper's one-run time history is not drawn.\n");
+    let _ = writeln!(o, "Fig. 6(b) shows, for MLN-RBPF and MPF-EKF2 over the runs of the Fig. 7 sweep, the distribution of each state's online NRMSE (box: quartiles and median, whiskers: smallest and largest run, dots: runs): one run can rank the algorithms either way. The records keep no state time histories, so the paper's one-run time history is not drawn.\n");
     if let (Some(a), Some(b)) = (
         first("fig6", Algorithm::MlnRbpf),
         first("fig6", Algorithm::MpfEkf2),

@@ -26,7 +26,10 @@
 //! counted in [`Health`]) and typed errors; a pack lane whose straight path fails is redone by
 //! that scalar code.
 
-#![allow(clippy::needless_range_loop)] // index loops spell out the order of operations
+#![allow(clippy::needless_range_loop)]
+// index loops spell out the order of operations
+// `v − v` is the finiteness test itself (+0 for a finite v, NaN otherwise), not a mistake.
+#![allow(clippy::eq_op)]
 
 use crate::error::FilterError;
 use crate::health::Health;
