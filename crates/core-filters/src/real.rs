@@ -424,6 +424,6 @@ mod tests {
         assert_eq!(s.lane(1), 0.0);
         assert_eq!(s.lane(3), -3.0);
         assert!(!Pack::any(Pack::not(Pack::all_true())));
-        assert!(f64::NAN.finite() == false && 2.0_f64.finite());
+        assert!(!f64::NAN.finite() && 2.0_f64.finite());
     }
 }

@@ -373,22 +373,20 @@ impl<T: Real> Factor<T> {
 /// [`Factor::compute`], and for one particle (`T::LANES == 1`) whose straight path failed the
 /// documented repair of [`Factor::compute_repaired`] (counted in `health`). A pack returns its
 /// straight-path mask: the batch layer redoes a failing lane as one particle. Returns the lanes
-/// that have a factor.
+/// that have a factor; a particle without one gets weight zero from its filter (a per-particle
+/// failure is counted, not returned as an error: it does not end the run).
 #[inline]
 pub fn factorise<T: Real>(
     factor: &mut Factor<T>,
     p: &[T],
     j: &Sparse<T>,
     s_add: &[T],
-    step: usize,
-    which: &'static str,
     health: &mut Health,
 ) -> T::Mask {
     let ok = factor.compute(p, j, s_add);
     if T::LANES > 1 || T::mask_lane(ok, 0) {
         return ok;
     }
-    let _ = (step, which);
     let q = factor.q;
     let a = &factor.cov;
     let mut finite = zero::<T>();

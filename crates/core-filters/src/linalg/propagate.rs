@@ -87,6 +87,7 @@ impl<T: Real> PropagateScratch<T> {
 /// EKF2 propagate with `J = I + D` (module docs). `value` = φ(m); `d` = `J − I` at `m` (`n × n`
 /// sparse); the Hessian terms use `P` before propagation. `p` is left exactly symmetric.
 #[inline]
+#[allow(clippy::too_many_arguments)]
 pub fn ekf2_propagate_near_identity<T: Real>(
     m: &mut [T],
     p: &mut [T],

@@ -237,7 +237,7 @@ impl<M: ConditionallyLinear> ParticleStep for MlnStep<M> {
             }
             F.mul_add(mu, &mut s.pred[..l]);
             let factor = &mut s.factors[st];
-            ok = ok & factorise(factor, C, F, &s.q_l[st], k, "proposal covariance", health);
+            ok = ok & factorise(factor, C, F, &s.q_l[st], health);
             // (a) u_L = mean + chol(S) ξ and (b) the update of (μ, C) with it: whitened by ξ.
             let xi_l = &xi[next_draw..next_draw + l];
             next_draw += l;
@@ -258,16 +258,7 @@ impl<M: ConditionallyLinear> ParticleStep for MlnStep<M> {
             let (r, c, v) = s.H.entry(e);
             s.resid[r] -= v * mu[c];
         }
-        ok = ok
-            & factorise(
-                &mut s.y_factor,
-                C,
-                &s.H,
-                &s.r,
-                k,
-                "innovation covariance",
-                health,
-            );
+        ok = ok & factorise(&mut s.y_factor, C, &s.H, &s.r, health);
         let (loglik, upd) = s.y_factor.update(mu, C, &s.resid);
         (loglik, ok & upd)
     }

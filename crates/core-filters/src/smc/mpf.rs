@@ -24,6 +24,8 @@
 //! gets a NaN log-weight (mapped to −∞ and counted by the weight routine); the run fails only if
 //! every particle fails.
 
+#![allow(clippy::needless_range_loop)] // index loops over measurement channels read like the SPEC
+
 use crate::error::FilterError;
 use crate::health::Health;
 use crate::linalg::gauss::factorise;
@@ -288,16 +290,7 @@ impl<M: ConditionallyQuadratic> ParticleStep for MpfStep<M> {
                 *d = T::splat(*v);
             }
             additive_cov(&mut ss.s_add, q, q_diag, &plan.hess, &ss.cov2);
-            ok = ok
-                & factorise(
-                    &mut ss.factor,
-                    cov,
-                    &ss.jac,
-                    &ss.s_add,
-                    k,
-                    "proposal covariance",
-                    health,
-                );
+            ok = ok & factorise(&mut ss.factor, cov, &ss.jac, &ss.s_add, health);
             // (a) the draw and (b) the update of x^bl_{k−1} with it (whitened innovation ξ).
             let xi_s = &xi[next_draw..next_draw + q];
             next_draw += q;
@@ -351,16 +344,7 @@ impl<M: ConditionallyQuadratic> ParticleStep for MpfStep<M> {
                 s.s_add[self.y_hess.output(g) + self.y_hess.output(h) * ny] += s.cov2[g + h * k2];
             }
         }
-        ok = ok
-            & factorise(
-                &mut s.y_factor,
-                cov,
-                &s.jy,
-                &s.s_add,
-                k,
-                "innovation covariance",
-                health,
-            );
+        ok = ok & factorise(&mut s.y_factor, cov, &s.jy, &s.s_add, health);
         let (loglik, upd) = s.y_factor.update(m, cov, &s.resid);
         debug_assert_eq!(next_draw, self.draws);
         (loglik, ok & upd)

@@ -19,6 +19,7 @@
 //! Failure policy as the MLN-RBPF: a particle whose factorisation or update fails gets a NaN
 //! log-weight; `R` is factorised once, and if it cannot be every step fails.
 
+#![allow(clippy::needless_range_loop)] // index loops over measurement channels read like the SPEC
 #![allow(non_snake_case)]
 
 use serde::{Deserialize, Serialize};
@@ -325,7 +326,7 @@ impl<M: ConditionallyLinear> ParticleStep for StorvikStep<M> {
                 s.resid_l[r] -= v * mu[c];
             }
             let factor = &mut s.factors[st];
-            ok = ok & factorise(factor, C, F, &s.q_l[st], k, "innovation covariance", health);
+            ok = ok & factorise(factor, C, F, &s.q_l[st], health);
             let (_, upd) = factor.update(mu, C, &s.resid_l[..l]);
             ok = ok & upd;
         }
@@ -339,16 +340,7 @@ impl<M: ConditionallyLinear> ParticleStep for StorvikStep<M> {
                     let (r, c, v) = s.H.entry(e);
                     s.resid[r] -= v * mu[c];
                 }
-                ok = ok
-                    & factorise(
-                        &mut s.y_factor,
-                        C,
-                        &s.H,
-                        &s.r,
-                        k,
-                        "innovation covariance",
-                        health,
-                    );
+                ok = ok & factorise(&mut s.y_factor, C, &s.H, &s.r, health);
             }
             StorvikUpdate::Linearised => {
                 // G = H(u_k) + J_u ∂u_k/∂z at z0, dense (ny × nz, column-major values).
@@ -382,16 +374,7 @@ impl<M: ConditionallyLinear> ParticleStep for StorvikStep<M> {
                         s.resid[r] -= g[r + c * ny] * d;
                     }
                 }
-                ok = ok
-                    & factorise(
-                        &mut s.y_factor,
-                        C,
-                        &s.G,
-                        &s.r,
-                        k,
-                        "innovation covariance",
-                        health,
-                    );
+                ok = ok & factorise(&mut s.y_factor, C, &s.G, &s.r, health);
             }
         }
         let (_, upd) = s.y_factor.update(mu, C, &s.resid);
