@@ -3,6 +3,7 @@
 //! sparse Hessians of SPEC §6. Inputs are seeded; set-up is outside the timed closure.
 
 use core_filters::kalman::{ekf2_propagate, ekf2_update, kf_update, second_order_terms};
+use core_filters::model::SparseHessians;
 use core_filters::rng::stream;
 use core_filters::Health;
 use criterion::{black_box, criterion_group, criterion_main, BatchSize, Criterion};
@@ -39,11 +40,43 @@ fn kf_update_8x3(c: &mut Criterion) {
     });
 }
 
-/// The paper-size MPF-EKF2 bench model, for its SPEC §6 Hessians.
-#[allow(dead_code)]
-#[path = "mpf.rs"]
-mod mpf_bench;
-use mpf_bench::chain::spec6_hessians;
+/// The constant Hessians of SPEC §6 (the paper's chain partitioned for the MPF-EKF2; x^bl index
+/// 0 x1, 1 x2, 2 x3, 3 ẋ2, 4 ẋ3, 5 k1, 6 k2, 7 k3, 8 c1, 9 c2, 10 c3, 11 β, 12 γ): of ψ_ẋ1, of
+/// φ_bl and of the three measured accelerations.
+fn spec6_hessians(dt: f64) -> (SparseHessians, SparseHessians, SparseHessians) {
+    let mut sampled = SparseHessians::new();
+    for (a, b, v) in [(6, 1, dt), (6, 0, -dt), (9, 3, dt)] {
+        sampled.push(0, a, b, v);
+    }
+    let mut marginal = SparseHessians::new();
+    let phi3 = [
+        (6, 0, 1.0),
+        (6, 1, -1.0),
+        (7, 2, 1.0),
+        (7, 1, -1.0),
+        (9, 3, -1.0),
+        (10, 4, 1.0),
+        (10, 3, -1.0),
+    ];
+    let phi4 = [(7, 1, 1.0), (7, 2, -1.0), (10, 3, 1.0), (10, 4, -1.0)];
+    for (a, b, v) in phi3 {
+        marginal.push(3, a, b, dt * v);
+    }
+    for (a, b, v) in phi4 {
+        marginal.push(4, a, b, dt * v);
+    }
+    let mut obs = SparseHessians::new();
+    for (a, b, v) in [(6, 1, 1.0), (6, 0, -1.0), (9, 3, 1.0)] {
+        obs.push(0, a, b, v);
+    }
+    for (a, b, v) in phi3 {
+        obs.push(1, a, b, v);
+    }
+    for (a, b, v) in phi4 {
+        obs.push(2, a, b, v);
+    }
+    (sampled, marginal, obs)
+}
 
 fn ekf2_mpf_step(c: &mut Criterion) {
     let dt = 0.005;

@@ -23,7 +23,6 @@ pub mod health;
 pub mod kalman;
 pub mod linalg;
 pub mod model;
-pub mod particle;
 pub mod real;
 pub mod resampling;
 pub mod rng;

@@ -18,10 +18,10 @@ use core_filters::smc::storvik::{Storvik, StorvikUpdate};
 use core_filters::smc::{run, Filter, RunSummary, SmcConfig};
 use models::dataset::LoadedDataset;
 use models::filtering::{
-    AugmentedChain, ChainPrior, ChainSpec, Discretisation, MlnChain, MpfChain, RmsLevels,
+    AugmentedChain, ChainPrior, ChainSpec, Discretisation, MarginalPrior, MlnChain, MpfChain,
+    RmsLevels,
 };
 use models::integrate::{simulate_adaptive, Tolerance};
-use models::partition::MarginalPrior;
 use models::sensors::{MeasurementKind, SensorLayout};
 use models::structure::ShearChain;
 use serde::{Deserialize, Serialize};

@@ -19,7 +19,6 @@ pub mod filtering;
 pub mod ground_motions;
 pub mod integrate;
 pub mod limits;
-pub mod partition;
 pub mod preset;
 pub mod priors;
 pub mod readers;

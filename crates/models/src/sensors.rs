@@ -7,7 +7,16 @@
 //! - [`MeasurementKind::Relative`]: `y = ẍ_s = −ü_g + (F_{s+1} − F_s)/m_s` (SPEC eq. 29b, `h = −ü_g`);
 //! - [`MeasurementKind::Absolute`]: `y = ẍ_s + ü_g = (F_{s+1} − F_s)/m_s` (no `ü_g` term).
 
-pub use crate::partition::MeasurementKind;
+/// What the accelerometers measure (SPEC §2).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum MeasurementKind {
+    /// Relative accelerations ẍ_j (eq. 29b: h = −ü_g).
+    #[default]
+    Relative,
+    /// Absolute accelerations ẍ_j + ü_g (h has no ü_g term).
+    Absolute,
+}
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
 

@@ -66,15 +66,12 @@ pub(crate) fn all_finite<const R: usize, const C: usize>(a: &SMatrix<f64, R, C>)
 pub(crate) enum Pivot {
     /// `l_jj = √d`.
     Accept,
-    /// A direction of zero variance: column `j` stays zero.
-    ZeroColumn,
     /// The matrix is not (semi)definite: give up.
     Fail,
 }
 
 /// Lower Cholesky factor of `a` (dot-product form) with the pivot rule `decide(j, d)`; `None` as
-/// soon as a pivot fails. The callers differ only in that rule: [`try_cholesky`] (definite) and
-/// Storvik's semidefinite factor.
+/// soon as a pivot fails ([`try_cholesky`] gives the rule of a definite matrix).
 #[inline]
 pub(crate) fn cholesky_with<const N: usize>(
     a: &SMatrix<f64, N, N>,
@@ -88,7 +85,6 @@ pub(crate) fn cholesky_with<const N: usize>(
         }
         match decide(j, d) {
             Pivot::Fail => return None,
-            Pivot::ZeroColumn => continue,
             Pivot::Accept => {}
         }
         let ljj = d.sqrt();

@@ -15,7 +15,6 @@
 
 pub mod ekf2;
 pub mod kf;
-pub mod lanes;
 pub mod linear;
 pub mod second_order;
 pub mod table1;

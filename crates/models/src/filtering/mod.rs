@@ -42,10 +42,9 @@ pub use augmented::AugmentedChain;
 pub use discretisation::Discretisation;
 pub use mln::MlnChain;
 pub use mpf::MpfChain;
-pub use prior::{ChainPrior, ElementPrior};
+pub use prior::{ChainPrior, ElementPrior, MarginalPrior};
 pub use spec::{ChainSpec, RmsLevels, SpecError};
 
-use crate::partition::MarginalPrior;
 use crate::structure::{state_names, theta_names, BoucWenLaw, ChainTopology, HysteresisLaw};
 use core_filters::rng::StreamRng;
 

@@ -294,3 +294,16 @@ mod tests {
         }
     }
 }
+
+/// Gaussian prior of the marginalised block (SPEC §3).
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
+pub enum MarginalPrior {
+    /// One Gaussian moment-matched to the priors, identical for all particles.
+    #[default]
+    MomentMatched,
+    /// Per-particle means drawn from the true priors, covariance diag((rel_sd·mean)²) where
+    /// `mean` is the particle's drawn mean. Parameters with a point-mass prior keep variance 0.
+    /// Note that a draw of γ close to 0 gets a correspondingly small variance.
+    PerParticle { rel_sd: f64 },
+}

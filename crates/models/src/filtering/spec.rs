@@ -2,7 +2,7 @@
 
 use super::discretisation::Discretisation;
 use super::prior::ChainPrior;
-use crate::partition::MarginalPrior;
+use super::prior::MarginalPrior;
 use crate::priors::PriorError;
 use crate::sensors::{MeasurementKind, SensorError, SensorLayout};
 use serde::{Deserialize, Serialize};
