@@ -516,28 +516,10 @@ pub fn markdown(sweep: &SweepCalibration) -> String {
 // Figure
 // ---------------------------------------------------------------------------------------------
 
-// Fonts, sizes and palette as in `figures` (sans-serif; plotters units, the SVG backend writes
-// size / 1.24 px; Okabe–Ito colours).
-const FONT: &str = "sans-serif";
-const TITLE_SIZE: f64 = 32.0;
-const CAPTION_SIZE: f64 = 26.0;
-const DESC_SIZE: f64 = 21.0;
-const LABEL_SIZE: f64 = 20.0;
-const WIDTH: u32 = 1200;
-const PALETTE: [RGBColor; 7] = [
-    RGBColor(0, 114, 178),
-    RGBColor(213, 94, 0),
-    RGBColor(0, 158, 115),
-    RGBColor(204, 121, 167),
-    RGBColor(230, 159, 0),
-    RGBColor(86, 180, 233),
-    RGBColor(120, 120, 120),
-];
-const LEGEND_ROW: i32 = 34;
+// Fonts, sizes and palette of every figure of the project.
+use crate::figures::{colour, CAPTION_SIZE, DESC_SIZE, FONT, LABEL_SIZE, TITLE_SIZE, WIDTH};
 
-fn colour(i: usize) -> RGBColor {
-    PALETTE[i % PALETTE.len()]
-}
+const LEGEND_ROW: i32 = 34;
 
 /// Marker of algorithm `i` at pixel (x, y): circle, triangle, square, diamond.
 fn marker<DB: DrawingBackend>(

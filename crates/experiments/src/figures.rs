@@ -27,17 +27,17 @@ use crate::metrics::mean_sd;
 use crate::record::RunRecord;
 
 /// Font family of all text (the SVG backend writes `<text>` elements; the viewer lays them out).
-const FONT: &str = "sans-serif";
+pub(crate) const FONT: &str = "sans-serif";
 /// Font sizes in plotters units; the SVG backend writes `size / 1.24` px, so these give ≥ 16 px
 /// tick labels, ≥ 17 px axis descriptions and ≥ 20 px titles.
-const TITLE_SIZE: f64 = 32.0;
-const CAPTION_SIZE: f64 = 26.0;
-const DESC_SIZE: f64 = 21.0;
-const LABEL_SIZE: f64 = 20.0;
-const WIDTH: u32 = 1200;
+pub(crate) const TITLE_SIZE: f64 = 32.0;
+pub(crate) const CAPTION_SIZE: f64 = 26.0;
+pub(crate) const DESC_SIZE: f64 = 21.0;
+pub(crate) const LABEL_SIZE: f64 = 20.0;
+pub(crate) const WIDTH: u32 = 1200;
 
 /// Colour-blind-safe palette (Okabe–Ito), one colour per run or algorithm, cycled.
-const PALETTE: [RGBColor; 7] = [
+pub(crate) const PALETTE: [RGBColor; 7] = [
     RGBColor(0, 114, 178),
     RGBColor(213, 94, 0),
     RGBColor(0, 158, 115),
@@ -47,7 +47,7 @@ const PALETTE: [RGBColor; 7] = [
     RGBColor(120, 120, 120),
 ];
 
-fn colour(i: usize) -> RGBColor {
+pub(crate) fn colour(i: usize) -> RGBColor {
     PALETTE[i % PALETTE.len()]
 }
 
