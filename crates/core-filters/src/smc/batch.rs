@@ -19,11 +19,14 @@
 
 use rand_distr::{Distribution, StandardNormal};
 
+use crate::error::FilterError;
 use crate::health::Health;
 use crate::linalg::pack::gather;
+use crate::model::Layout;
 use crate::real::{Pack, Real, PACK_LANES};
 use crate::rng::StreamRng;
 
+use super::runner::Filter;
 use super::store::{Particles, Shape};
 
 /// Largest marginalised dimension processed in lanes (a pack's covariance is then at most
@@ -41,7 +44,24 @@ pub struct Slots<'a, T> {
 }
 
 /// A filter's per-particle step, written once for one particle or a pack of particles.
-pub trait ParticleStep: Sync {
+pub trait ParticleStep: Sync + Send {
+    /// Short algorithm name (`mln-rbpf`, `storvik`, `mpf-ekf2`).
+    fn name(&self) -> &'static str;
+    /// Where θ and the physical states live in a particle.
+    fn layout(&self) -> Layout;
+    /// Draws one particle's sampled block and Gaussian from the prior.
+    fn initialise(
+        &self,
+        rng: &mut StreamRng,
+        sampled: &mut [f64],
+        mean: &mut [f64],
+        cov: &mut [f64],
+    );
+    /// A failure of the whole step, before any particle moves (e.g. an `R` that could not be
+    /// factorised); none by default.
+    fn check(&self, _k: usize) -> Result<(), FilterError> {
+        Ok(())
+    }
     /// The step's scratch for one number type (allocated once).
     type Scratch<T: Real>: Send;
     /// Allocates the scratch.
@@ -245,5 +265,89 @@ impl<S: ParticleStep> Batch<S> {
                 self.one(step, k, y, src, ancestors, dst, log_w, i, b, health);
             }
         }
+    }
+}
+
+/// A marginalized particle filter as the runner sees it: a per-particle step ([`ParticleStep`])
+/// and the batch layer that runs it. The MLN-RBPF, Storvik and the MPF-EKF2 are this adapter
+/// around their own step.
+pub struct Marginalized<S: ParticleStep> {
+    step: S,
+    batch: Batch<S>,
+    layout: Layout,
+    health: Health,
+}
+
+impl<S: ParticleStep> Marginalized<S> {
+    /// The filter of `step`; `lanes = false` runs every particle through the `f64` step (the
+    /// reference the lanes are tested against).
+    pub fn from_step(step: S, lanes: bool) -> Self {
+        Self {
+            layout: step.layout(),
+            batch: Batch::new(&step, lanes),
+            step,
+            health: Health::default(),
+        }
+    }
+
+    /// The per-particle step.
+    pub fn particle_step(&self) -> &S {
+        &self.step
+    }
+
+    /// Whether particles go through the step four at a time.
+    pub fn uses_lanes(&self) -> bool {
+        self.batch.uses_lanes()
+    }
+}
+
+impl<S: ParticleStep> Filter for Marginalized<S> {
+    fn name(&self) -> &'static str {
+        self.step.name()
+    }
+
+    fn layout(&self) -> &Layout {
+        &self.layout
+    }
+
+    fn shape(&self) -> Shape {
+        self.step.shape()
+    }
+
+    fn initialise(&mut self, rng: &mut StreamRng, particles: &mut Particles) {
+        self.health = Health::default();
+        for i in 0..particles.len() {
+            let p = particles.particle_mut(i);
+            self.step.initialise(rng, p.sampled, p.mean, p.cov);
+        }
+    }
+
+    fn step(
+        &mut self,
+        k: usize,
+        y: &[f64],
+        src: &Particles,
+        ancestors: &[usize],
+        dst: &mut Particles,
+        log_w: &mut [f64],
+        rng: &mut StreamRng,
+    ) -> Result<(), FilterError> {
+        self.step.check(k)?;
+        self.batch.step(
+            &self.step,
+            k,
+            y,
+            src,
+            ancestors,
+            dst,
+            log_w,
+            rng,
+            &mut self.health,
+        );
+        Ok(())
+    }
+
+    fn health(&self) -> Health {
+        self.health
     }
 }

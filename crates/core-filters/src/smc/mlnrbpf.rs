@@ -24,7 +24,6 @@
 
 #![allow(non_snake_case)] // F, H, C as in the SPEC
 
-use crate::error::FilterError;
 use crate::health::Health;
 use crate::linalg::gauss::factorise;
 use crate::linalg::{Factor, Sparse};
@@ -32,10 +31,9 @@ use crate::model::Layout;
 use crate::real::Real;
 use crate::rng::StreamRng;
 
-use super::batch::{Batch, ParticleStep, Slots};
+use super::batch::{Marginalized, ParticleStep, Slots};
 use super::model::{ConditionallyLinear, LinearDims, Stage};
-use super::runner::Filter;
-use super::store::{Particles, Shape};
+use super::store::Shape;
 
 /// The per-particle step of the MLN-RBPF (SPEC §5.2) and what it needs from the model, read once.
 pub struct MlnStep<M> {
@@ -163,6 +161,19 @@ impl<M: ConditionallyLinear> MlnStep<M> {
 impl<M: ConditionallyLinear> ParticleStep for MlnStep<M> {
     type Scratch<T: Real> = MlnScratch<T>;
 
+    fn name(&self) -> &'static str {
+        "mln-rbpf"
+    }
+
+    fn layout(&self) -> Layout {
+        self.model.layout()
+    }
+
+    fn initialise(&self, rng: &mut StreamRng, u: &mut [f64], mu: &mut [f64], cov: &mut [f64]) {
+        self.model.sample_initial(rng, u);
+        self.model.marginal_prior(rng, mu, cov);
+    }
+
     fn scratch<T: Real>(&self) -> MlnScratch<T> {
         let LinearDims { nu, nz, ny } = self.dims;
         let splat = |v: &[f64]| v.iter().map(|x| T::splat(*x)).collect::<Vec<T>>();
@@ -264,13 +275,8 @@ impl<M: ConditionallyLinear> ParticleStep for MlnStep<M> {
     }
 }
 
-/// MLN-RBPF (SPEC §5.2) as a [`Filter`]: the model's per-particle step run by the batch layer.
-pub struct MlnRbpf<M: ConditionallyLinear> {
-    step: MlnStep<M>,
-    batch: Batch<MlnStep<M>>,
-    layout: Layout,
-    health: Health,
-}
+/// MLN-RBPF (SPEC §5.2) as a [`super::Filter`]: its per-particle step run by the batch layer.
+pub type MlnRbpf<M> = Marginalized<MlnStep<M>>;
 
 impl<M: ConditionallyLinear> MlnRbpf<M> {
     /// The filter with the batch layer's lanes where they pay ([`Batch::new`]).
@@ -278,77 +284,12 @@ impl<M: ConditionallyLinear> MlnRbpf<M> {
         Self::with_lanes(model, true)
     }
 
-    /// `lanes = false` runs every particle through the `f64` step (the reference the lanes are
-    /// tested against).
+    /// `lanes = false` runs every particle through the `f64` step (the reference).
     pub fn with_lanes(model: M, lanes: bool) -> Self {
-        let layout = model.layout();
-        let step = MlnStep::new(model);
-        let batch = Batch::new(&step, lanes);
-        Self {
-            step,
-            batch,
-            layout,
-            health: Health::default(),
-        }
+        Marginalized::from_step(MlnStep::new(model), lanes)
     }
 
     pub fn model(&self) -> &M {
-        self.step.model()
-    }
-
-    /// Whether particles go through the step four at a time.
-    pub fn uses_lanes(&self) -> bool {
-        self.batch.uses_lanes()
-    }
-}
-
-impl<M: ConditionallyLinear> Filter for MlnRbpf<M> {
-    fn name(&self) -> &'static str {
-        "mln-rbpf"
-    }
-
-    fn layout(&self) -> &Layout {
-        &self.layout
-    }
-
-    fn shape(&self) -> Shape {
-        self.step.shape()
-    }
-
-    fn initialise(&mut self, rng: &mut StreamRng, particles: &mut Particles) {
-        self.health = Health::default();
-        for i in 0..particles.len() {
-            let p = particles.particle_mut(i);
-            self.step.model.sample_initial(rng, p.sampled);
-            self.step.model.marginal_prior(rng, p.mean, p.cov);
-        }
-    }
-
-    fn step(
-        &mut self,
-        k: usize,
-        y: &[f64],
-        src: &Particles,
-        ancestors: &[usize],
-        dst: &mut Particles,
-        log_w: &mut [f64],
-        rng: &mut StreamRng,
-    ) -> Result<(), FilterError> {
-        self.batch.step(
-            &self.step,
-            k,
-            y,
-            src,
-            ancestors,
-            dst,
-            log_w,
-            rng,
-            &mut self.health,
-        );
-        Ok(())
-    }
-
-    fn health(&self) -> Health {
-        self.health
+        self.particle_step().model()
     }
 }

@@ -26,7 +26,6 @@
 
 #![allow(clippy::needless_range_loop)] // index loops over measurement channels read like the SPEC
 
-use crate::error::FilterError;
 use crate::health::Health;
 use crate::linalg::gauss::factorise;
 use crate::linalg::{
@@ -36,10 +35,9 @@ use crate::model::Layout;
 use crate::real::Real;
 use crate::rng::StreamRng;
 
-use super::batch::{Batch, ParticleStep, Slots};
+use super::batch::{Marginalized, ParticleStep, Slots};
 use super::model::{ConditionallyQuadratic, QuadraticDims};
-use super::runner::Filter;
-use super::store::{Particles, Shape};
+use super::store::Shape;
 
 /// What one sampled stage needs, read once from the model.
 struct StagePlan {
@@ -207,6 +205,19 @@ impl<M: ConditionallyQuadratic> MpfStep<M> {
 impl<M: ConditionallyQuadratic> ParticleStep for MpfStep<M> {
     type Scratch<T: Real> = MpfScratch<T>;
 
+    fn name(&self) -> &'static str {
+        "mpf-ekf2"
+    }
+
+    fn layout(&self) -> Layout {
+        self.model.layout()
+    }
+
+    fn initialise(&self, rng: &mut StreamRng, xn: &mut [f64], m: &mut [f64], p: &mut [f64]) {
+        self.model.sample_initial(rng, xn);
+        self.model.marginal_prior(rng, m, p);
+    }
+
     fn scratch<T: Real>(&self) -> MpfScratch<T> {
         let QuadraticDims { nbl, ny, .. } = self.dims;
         let z = T::splat(0.0);
@@ -351,13 +362,8 @@ impl<M: ConditionallyQuadratic> ParticleStep for MpfStep<M> {
     }
 }
 
-/// MPF-EKF2 (SPEC §5.4) as a [`Filter`]: the model's per-particle step run by the batch layer.
-pub struct MpfEkf2<M: ConditionallyQuadratic> {
-    step: MpfStep<M>,
-    batch: Batch<MpfStep<M>>,
-    layout: Layout,
-    health: Health,
-}
+/// MPF-EKF2 (SPEC §5.4) as a [`super::Filter`]: its per-particle step run by the batch layer.
+pub type MpfEkf2<M> = Marginalized<MpfStep<M>>;
 
 impl<M: ConditionallyQuadratic> MpfEkf2<M> {
     /// The filter with the batch layer's lanes where they pay.
@@ -367,79 +373,10 @@ impl<M: ConditionallyQuadratic> MpfEkf2<M> {
 
     /// `lanes = false` runs every particle through the `f64` step (the reference).
     pub fn with_lanes(model: M, lanes: bool) -> Self {
-        let layout = model.layout();
-        let step = MpfStep::new(model);
-        let batch = Batch::new(&step, lanes);
-        Self {
-            step,
-            batch,
-            layout,
-            health: Health::default(),
-        }
+        Marginalized::from_step(MpfStep::new(model), lanes)
     }
 
     pub fn model(&self) -> &M {
-        self.step.model()
-    }
-
-    /// The per-particle step (for [`MpfStep::proposal_moments`]).
-    pub fn particle_step(&self) -> &MpfStep<M> {
-        &self.step
-    }
-
-    /// Whether particles go through the step four at a time.
-    pub fn uses_lanes(&self) -> bool {
-        self.batch.uses_lanes()
-    }
-}
-
-impl<M: ConditionallyQuadratic> Filter for MpfEkf2<M> {
-    fn name(&self) -> &'static str {
-        "mpf-ekf2"
-    }
-
-    fn layout(&self) -> &Layout {
-        &self.layout
-    }
-
-    fn shape(&self) -> Shape {
-        self.step.shape()
-    }
-
-    fn initialise(&mut self, rng: &mut StreamRng, particles: &mut Particles) {
-        self.health = Health::default();
-        for i in 0..particles.len() {
-            let p = particles.particle_mut(i);
-            self.step.model.sample_initial(rng, p.sampled);
-            self.step.model.marginal_prior(rng, p.mean, p.cov);
-        }
-    }
-
-    fn step(
-        &mut self,
-        k: usize,
-        y: &[f64],
-        src: &Particles,
-        ancestors: &[usize],
-        dst: &mut Particles,
-        log_w: &mut [f64],
-        rng: &mut StreamRng,
-    ) -> Result<(), FilterError> {
-        self.batch.step(
-            &self.step,
-            k,
-            y,
-            src,
-            ancestors,
-            dst,
-            log_w,
-            rng,
-            &mut self.health,
-        );
-        Ok(())
-    }
-
-    fn health(&self) -> Health {
-        self.health
+        self.particle_step().model()
     }
 }

@@ -32,10 +32,9 @@ use crate::model::Layout;
 use crate::real::Real;
 use crate::rng::StreamRng;
 
-use super::batch::{Batch, ParticleStep, Slots};
+use super::batch::{Marginalized, ParticleStep, Slots};
 use super::model::{ConditionallyLinear, LinearDims, Stage};
-use super::runner::Filter;
-use super::store::{Particles, Shape};
+use super::store::Shape;
 
 /// How Storvik's step (iii) treats the measurement `y_k` (SPEC §5.3).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
@@ -211,6 +210,33 @@ impl<M: ConditionallyLinear> StorvikStep<M> {
 impl<M: ConditionallyLinear> ParticleStep for StorvikStep<M> {
     type Scratch<T: Real> = StorvikScratch<T>;
 
+    fn name(&self) -> &'static str {
+        "storvik"
+    }
+
+    fn layout(&self) -> Layout {
+        self.model.layout()
+    }
+
+    fn initialise(&self, rng: &mut StreamRng, u: &mut [f64], mu: &mut [f64], cov: &mut [f64]) {
+        self.model.sample_initial(rng, u);
+        self.model.marginal_prior(rng, mu, cov);
+    }
+
+    /// `R` is factorised once; if it could not be, every step fails with that error.
+    fn check(&self, k: usize) -> Result<(), FilterError> {
+        match &self.noise {
+            Ok(_) => Ok(()),
+            Err(FilterError::NotPositiveDefinite { which, .. }) => {
+                Err(FilterError::NotPositiveDefinite { step: k, which })
+            }
+            Err(FilterError::NonFinite { which, .. }) => {
+                Err(FilterError::NonFinite { step: k, which })
+            }
+            Err(e) => Err(e.clone()),
+        }
+    }
+
     fn scratch<T: Real>(&self) -> StorvikScratch<T> {
         let LinearDims { nu, nz, ny } = self.dims;
         let z = T::splat(0.0);
@@ -383,13 +409,9 @@ impl<M: ConditionallyLinear> ParticleStep for StorvikStep<M> {
     }
 }
 
-/// Storvik's algorithm (SPEC §5.3) as a [`Filter`].
-pub struct Storvik<M: ConditionallyLinear> {
-    step: StorvikStep<M>,
-    batch: Batch<StorvikStep<M>>,
-    layout: Layout,
-    health: Health,
-}
+/// Storvik's algorithm (SPEC §5.3) as a [`super::Filter`]: its per-particle step run by the batch
+/// layer.
+pub type Storvik<M> = Marginalized<StorvikStep<M>>;
 
 impl<M: ConditionallyLinear> Storvik<M> {
     pub fn new(model: M, update: StorvikUpdate) -> Self {
@@ -398,82 +420,10 @@ impl<M: ConditionallyLinear> Storvik<M> {
 
     /// `lanes = false` runs every particle through the `f64` step (the reference).
     pub fn with_lanes(model: M, update: StorvikUpdate, lanes: bool) -> Self {
-        let layout = model.layout();
-        let step = StorvikStep::new(model, update);
-        let batch = Batch::new(&step, lanes);
-        Self {
-            step,
-            batch,
-            layout,
-            health: Health::default(),
-        }
+        Marginalized::from_step(StorvikStep::new(model, update), lanes)
     }
 
     pub fn model(&self) -> &M {
-        self.step.model()
-    }
-
-    pub fn uses_lanes(&self) -> bool {
-        self.batch.uses_lanes()
-    }
-}
-
-impl<M: ConditionallyLinear> Filter for Storvik<M> {
-    fn name(&self) -> &'static str {
-        "storvik"
-    }
-
-    fn layout(&self) -> &Layout {
-        &self.layout
-    }
-
-    fn shape(&self) -> Shape {
-        self.step.shape()
-    }
-
-    fn initialise(&mut self, rng: &mut StreamRng, particles: &mut Particles) {
-        self.health = Health::default();
-        for i in 0..particles.len() {
-            let p = particles.particle_mut(i);
-            self.step.model.sample_initial(rng, p.sampled);
-            self.step.model.marginal_prior(rng, p.mean, p.cov);
-        }
-    }
-
-    fn step(
-        &mut self,
-        k: usize,
-        y: &[f64],
-        src: &Particles,
-        ancestors: &[usize],
-        dst: &mut Particles,
-        log_w: &mut [f64],
-        rng: &mut StreamRng,
-    ) -> Result<(), FilterError> {
-        if let Err(e) = &self.step.noise {
-            return Err(match e {
-                FilterError::NotPositiveDefinite { which, .. } => {
-                    FilterError::NotPositiveDefinite { step: k, which }
-                }
-                FilterError::NonFinite { which, .. } => FilterError::NonFinite { step: k, which },
-                other => other.clone(),
-            });
-        }
-        self.batch.step(
-            &self.step,
-            k,
-            y,
-            src,
-            ancestors,
-            dst,
-            log_w,
-            rng,
-            &mut self.health,
-        );
-        Ok(())
-    }
-
-    fn health(&self) -> Health {
-        self.health
+        self.particle_step().model()
     }
 }
