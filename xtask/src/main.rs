@@ -185,7 +185,15 @@ fn bench(root: &Path, full: bool) -> Result<()> {
     cmd.current_dir(root)
         // The bench targets only (`--benches` would also run the library's unit tests, whose
         // harness rejects criterion's options).
-        .args(["bench", "-p", "core-filters", "--bench", "*"]);
+        .args([
+            "bench",
+            "-p",
+            "core-filters",
+            "-p",
+            "experiments",
+            "--bench",
+            "*",
+        ]);
     if !full {
         // Enough for a few-percent median on steps of 10 µs to 10 ms; trends, not proofs.
         cmd.args([
