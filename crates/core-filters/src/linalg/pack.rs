@@ -30,8 +30,32 @@ pub fn gather(out: &mut [Pack], src: [&[f64]; PACK_LANES]) {
 }
 
 /// `dst[b][i]` = lane `b` of `src[i]`, for the lanes `b` with `take[b]`.
+///
+/// When every lane is taken (the usual case) the pack slice is transposed four entries at a time
+/// and each particle receives four contiguous values per block, instead of four passes that
+/// each extract one lane of every pack.
 #[inline]
 pub fn scatter(src: &[Pack], dst: [Option<&mut [f64]>; PACK_LANES]) {
+    if dst.iter().all(Option::is_some) {
+        let mut d = dst.map(|d| d.expect("every lane is taken"));
+        let len = src.len().min(d.iter().map(|x| x.len()).min().unwrap_or(0));
+        let blocks = len / 4;
+        for blk in 0..blocks {
+            let i = 4 * blk;
+            let rows: [[f64; 4]; 4] = std::array::from_fn(|j| *src[i + j].0.as_array_ref());
+            let t = transpose4(rows);
+            for (b, lane) in d.iter_mut().enumerate() {
+                lane[i..i + 4].copy_from_slice(t[b].as_array_ref());
+            }
+        }
+        for i in 4 * blocks..len {
+            let v = src[i].0.as_array_ref();
+            for (b, lane) in d.iter_mut().enumerate() {
+                lane[i] = v[b];
+            }
+        }
+        return;
+    }
     for (b, d) in dst.into_iter().enumerate() {
         if let Some(d) = d {
             for (o, v) in d.iter_mut().zip(src) {
@@ -59,5 +83,16 @@ mod tests {
         let dst = std::array::from_fn(|_| Some(it.next().unwrap().as_mut_slice()));
         scatter(&packed, dst);
         assert_eq!(back, parts);
+        // Some lanes only: the others are left untouched.
+        let mut partial = vec![vec![-1.0; 7]; 4];
+        let mut it = partial.iter_mut().enumerate();
+        let dst = std::array::from_fn(|_| {
+            let (b, v) = it.next().unwrap();
+            (b % 2 == 0).then_some(v.as_mut_slice())
+        });
+        scatter(&packed, dst);
+        assert_eq!(partial[0], parts[0]);
+        assert_eq!(partial[1], vec![-1.0; 7]);
+        assert_eq!(partial[2], parts[2]);
     }
 }
