@@ -23,6 +23,7 @@ pub mod health;
 pub mod kalman;
 pub mod linalg;
 pub mod model;
+pub mod pmmh;
 pub mod real;
 pub mod resampling;
 pub mod rng;

@@ -20,6 +20,7 @@ pub mod metrics;
 pub mod observe;
 pub mod pipeline;
 pub mod record;
+pub mod reference;
 pub mod report;
 pub mod reproduce;
 pub mod study;

@@ -35,6 +35,8 @@ enum Command {
     /// Merge the records of sharded sweeps.
     #[command(allow_negative_numbers = true)]
     Merge(cli::merge::Args),
+    /// Reference posterior of θ for one (short) data set by particle marginal Metropolis–Hastings.
+    Reference(cli::reference::Args),
     /// Draw the figures of one run record (convergence, ESS, hysteresis loop, residuals).
     Plot(cli::plot::Args),
     /// Compute Table I (moments of z = xᵀx by linearisation, EKF2 and the unscented transform).
@@ -48,6 +50,7 @@ fn main() -> anyhow::Result<()> {
         Command::Simulate(args) => cli::simulate::run(args),
         Command::Filter(args) => cli::filter::run(args),
         Command::Table1(args) => cli::table1::run(args),
+        Command::Reference(args) => cli::reference::run(args),
         Command::Reproduce(args) => cli::reproduce::run(args),
         Command::Merge(args) => cli::merge::run(args),
         Command::Regression(args) => cli::regression::run(args),

@@ -3,6 +3,7 @@
 pub mod filter;
 pub mod merge;
 pub mod plot;
+pub mod reference;
 pub mod regression;
 pub mod reproduce;
 pub mod simulate;
