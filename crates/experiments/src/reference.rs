@@ -352,6 +352,105 @@ pub fn run_chain(
     pmmh(target, &u0, config, rng, on_iteration)
 }
 
+/// One algorithm's final posteriors against the reference, per parameter, over its runs
+/// (several filter seeds on the reference's data set).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Comparison {
+    pub algorithm: String,
+    pub param: String,
+    pub runs: usize,
+    /// Mean over runs of (online final mean − reference mean) / reference s.d.
+    pub mean_shift_in_ref_sd: f64,
+    /// Run-to-run s.d. of the online final mean, in reference s.d.
+    pub spread_in_ref_sd: f64,
+    /// Mean over runs of online s.d. / reference s.d.
+    pub sd_ratio: f64,
+}
+
+/// The comparisons of every algorithm and parameter present in both (records of failed runs
+/// are left out). The online posterior is the last step's (`theta_sd_final` and the mean of the
+/// last step's posterior are what a user reads at the end of the record; θ_val averages the
+/// last window, which on a short record is close to it).
+pub fn compare(
+    reference: &[ParamSummary],
+    records: &[crate::record::RunRecord],
+) -> Vec<Comparison> {
+    let mut algorithms: Vec<&str> = records.iter().map(|r| r.algorithm.as_str()).collect();
+    algorithms.sort();
+    algorithms.dedup();
+    let mut out = Vec::new();
+    for alg in algorithms {
+        for p in reference {
+            let mut shifts = Vec::new();
+            let mut ratios = Vec::new();
+            for r in records
+                .iter()
+                .filter(|r| r.algorithm == alg && r.failure.is_none())
+            {
+                let Some(i) = r.param_names.iter().position(|n| *n == p.name) else {
+                    continue;
+                };
+                let (Some(m), Some(sd)) = (r.theta_val.get(i), r.theta_sd_final.get(i)) else {
+                    continue;
+                };
+                shifts.push((m - p.mean) / p.sd);
+                ratios.push(sd / p.sd);
+            }
+            if shifts.is_empty() {
+                continue;
+            }
+            let n = shifts.len() as f64;
+            let mean = shifts.iter().sum::<f64>() / n;
+            let spread = if shifts.len() > 1 {
+                (shifts.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1.0)).sqrt()
+            } else {
+                f64::NAN
+            };
+            out.push(Comparison {
+                algorithm: alg.to_string(),
+                param: p.name.clone(),
+                runs: shifts.len(),
+                mean_shift_in_ref_sd: mean,
+                spread_in_ref_sd: spread,
+                sd_ratio: ratios.iter().sum::<f64>() / n,
+            });
+        }
+    }
+    out
+}
+
+/// The comparison as a markdown table, with the reference beside it.
+pub fn compare_markdown(
+    reference: &[ParamSummary],
+    records: &[crate::record::RunRecord],
+) -> String {
+    use std::fmt::Write as _;
+    let mut o = String::new();
+    let _ = writeln!(o, "| parameter | reference mean ± s.d. (truth) | algorithm | runs | shift of the online mean (ref. s.d.) | run-to-run spread (ref. s.d.) | online s.d. / ref. s.d. |");
+    let _ = writeln!(o, "|---|---|---|---|---|---|---|");
+    for c in compare(reference, records) {
+        let p = reference
+            .iter()
+            .find(|p| p.name == c.param)
+            .expect("from the reference");
+        let truth = p.truth.map(|t| format!(" ({t:.4})")).unwrap_or_default();
+        let _ = writeln!(
+            o,
+            "| {} | {:.4} ± {:.4}{} | {} | {} | {:+.2} | {:.2} | {:.3} |",
+            c.param,
+            p.mean,
+            p.sd,
+            truth,
+            c.algorithm,
+            c.runs,
+            c.mean_shift_in_ref_sd,
+            c.spread_in_ref_sd,
+            c.sd_ratio
+        );
+    }
+    o
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

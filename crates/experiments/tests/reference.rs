@@ -2,9 +2,11 @@
 //! MPF-EKF2 is an exact Rao–Blackwellised particle filter, so its likelihood estimate and the
 //! bootstrap PF's (the textbook unbiased estimator) estimate the same p(y | θ).
 
+mod common;
+
 use core_filters::rng::stream;
 use experiments::pipeline::{chain_spec, Algorithm, FilterSettings};
-use experiments::reference::{FilterLikelihood, ThetaMap};
+use experiments::reference::{compare, FilterLikelihood, ParamSummary, ThetaMap};
 use models::dataset::{generate, DatasetConfig};
 
 /// `log mean exp` of independent log-likelihood estimates (an estimate of log p(y | θ) whose
@@ -59,4 +61,32 @@ fn mpf_and_bootstrap_estimate_the_same_likelihood_at_fixed_theta() {
         (lm - lb).abs() < 4.0 * se + bias,
         "MPF-EKF2 {lm:.3} ± {sm:.3} vs bootstrap {lb:.3} ± {sb:.3}"
     );
+}
+
+/// The comparison with the reference on constructed records whose answer is known: k1's online
+/// means are 8.1 and 8.3 against a reference 8.0 ± 0.1 (shifts +1 and +3 reference s.d., mean
+/// +2, spread √2), online s.d. 0.05 × 8 = 0.4 (ratio 4); a failed run is left out.
+#[test]
+fn comparison_against_the_reference_on_constructed_records() {
+    let reference = vec![ParamSummary {
+        name: "k1".into(),
+        mean: 8.0,
+        sd: 0.1,
+        quantiles: [7.8, 7.93, 8.0, 8.07, 8.2],
+        ess: 500.0,
+        truth: Some(8.0),
+    }];
+    let mut ratios = [1.0; 9];
+    ratios[0] = 8.1 / 8.0;
+    let a = common::record("mpf-ekf2", 0, ratios, 0.1);
+    ratios[0] = 8.3 / 8.0;
+    let b = common::record("mpf-ekf2", 1, ratios, 0.1);
+    let mut failed = common::record("mpf-ekf2", 2, [2.0; 9], 0.1);
+    failed.failure = Some("constructed".into());
+    let c = compare(&reference, &[a, b, failed]);
+    assert_eq!(c.len(), 1);
+    assert_eq!(c[0].runs, 2);
+    assert!((c[0].mean_shift_in_ref_sd - 2.0).abs() < 1e-9);
+    assert!((c[0].spread_in_ref_sd - 2f64.sqrt()).abs() < 1e-9);
+    assert!((c[0].sd_ratio - 4.0).abs() < 1e-9);
 }

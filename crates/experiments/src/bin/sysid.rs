@@ -37,6 +37,8 @@ enum Command {
     Merge(cli::merge::Args),
     /// Reference posterior of θ for one (short) data set by particle marginal Metropolis–Hastings.
     Reference(cli::reference::Args),
+    /// Compare online filters' final posteriors (run records) with a reference posterior.
+    CompareReference(cli::reference::CompareArgs),
     /// Draw the figures of one run record (convergence, ESS, hysteresis loop, residuals).
     Plot(cli::plot::Args),
     /// Compute Table I (moments of z = xᵀx by linearisation, EKF2 and the unscented transform).
@@ -51,6 +53,7 @@ fn main() -> anyhow::Result<()> {
         Command::Filter(args) => cli::filter::run(args),
         Command::Table1(args) => cli::table1::run(args),
         Command::Reference(args) => cli::reference::run(args),
+        Command::CompareReference(args) => cli::reference::compare(args),
         Command::Reproduce(args) => cli::reproduce::run(args),
         Command::Merge(args) => cli::merge::run(args),
         Command::Regression(args) => cli::regression::run(args),

@@ -9,7 +9,7 @@ use core_filters::pmmh::PmmhConfig;
 use core_filters::rng::stream;
 use models::dataset::load_dir;
 use models::preset::Preset;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use crate::pipeline::{chain_spec, Algorithm, FilterSettings};
 use crate::reference::{run_chain, summarise, FilterLikelihood, ParamSummary, ThetaMap};
@@ -47,7 +47,7 @@ pub struct Args {
 }
 
 /// What `sysid reference` writes.
-#[derive(Debug, Serialize)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct ReferenceRecord {
     pub data: String,
     pub steps: usize,
@@ -204,4 +204,37 @@ pub fn run(args: Args) -> Result<()> {
     );
     crate::sweep::write_atomic(&args.out, &record)
         .with_context(|| format!("writing {}", args.out.display()))
+}
+
+/// Arguments of `sysid compare-reference`.
+#[derive(Debug, clap::Args)]
+pub struct CompareArgs {
+    /// The reference posterior written by `sysid reference`.
+    #[arg(long)]
+    pub reference: PathBuf,
+    /// Run records of online filters on the same data set.
+    #[arg(required = true)]
+    pub records: Vec<PathBuf>,
+    /// Write the markdown table here (default: stdout only).
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+}
+
+/// `sysid compare-reference`: the online filters' final posteriors against the reference.
+pub fn compare(args: CompareArgs) -> Result<()> {
+    let text = std::fs::read_to_string(&args.reference)
+        .with_context(|| format!("reading {}", args.reference.display()))?;
+    let reference: ReferenceRecord = serde_json::from_str(&text)
+        .with_context(|| format!("parsing {}", args.reference.display()))?;
+    let mut records = Vec::new();
+    for p in &args.records {
+        let r: crate::record::RunRecord = crate::sweep::read_record(p)?;
+        records.push(r);
+    }
+    let md = crate::reference::compare_markdown(&reference.params, &records);
+    print!("{md}");
+    if let Some(out) = &args.out {
+        std::fs::write(out, &md).with_context(|| format!("writing {}", out.display()))?;
+    }
+    Ok(())
 }
