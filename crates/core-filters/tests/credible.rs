@@ -519,3 +519,80 @@ fn ill_scaled_mixtures_give_certified_quantiles() {
         }
     }
 }
+
+/// The intervals of a particle set read each slot from the right block: a marginalised slot is
+/// the mixture of the particles' means and covariance diagonals (entry `j + j·n`), a sampled slot
+/// the weighted sample of that entry — checked against the two shapes built by hand.
+#[test]
+fn weighted_particles_read_the_right_block_of_each_slot() {
+    use core_filters::model::{Layout, Slot};
+    use core_filters::smc::runner::WeightedParticles;
+    use core_filters::smc::{Particles, Shape};
+
+    let np = 5;
+    let shape = Shape {
+        sampled: 2,
+        marginal: 2,
+    };
+    let mut p = Particles::new(np, shape);
+    for i in 0..np {
+        let x = i as f64;
+        let b = p.particle_mut(i);
+        b.sampled.copy_from_slice(&[10.0 + x, -x * x]);
+        b.mean.copy_from_slice(&[1.0 + 0.1 * x, 5.0 - x]);
+        // Covariance [[v0, c], [c, v1]] in column-major order; the off-diagonal must be ignored.
+        b.cov
+            .copy_from_slice(&[0.01 * (1.0 + x), 0.3, 0.3, 0.25 + 0.5 * x]);
+    }
+    let w = [0.1, 0.3, 0.2, 0.25, 0.15];
+    let layout = Layout {
+        param_names: vec!["a".into(), "b".into(), "c".into()],
+        params: vec![Slot::Marginal(1), Slot::Sampled(0), Slot::Marginal(0)],
+        state_names: vec![],
+        states: vec![],
+    };
+    let wp = WeightedParticles {
+        layout: &layout,
+        w: &w,
+        particles: &p,
+    };
+    let levels = STANDARD_LEVELS;
+    for j in 0..2 {
+        let means: Vec<f64> = (0..np).map(|i| p.mean(i)[j]).collect();
+        let vars: Vec<f64> = (0..np).map(|i| p.cov(i)[j + 2 * j]).collect();
+        let want = intervals(&GaussianMixture::new(&w, &means, &vars).unwrap(), &levels);
+        assert_eq!(
+            wp.central_intervals(Slot::Marginal(j), &levels).unwrap(),
+            want
+        );
+        let values: Vec<f64> = (0..np).map(|i| p.sampled(i)[j]).collect();
+        let mut want = want.clone();
+        WeightedSample::new(&values, &w)
+            .unwrap()
+            .central_intervals(&levels, &mut want)
+            .unwrap();
+        assert_eq!(
+            wp.central_intervals(Slot::Sampled(j), &levels).unwrap(),
+            want
+        );
+    }
+    // One particle with all the weight: the marginal slot is N(μ, v), μ ± z √v.
+    let w1 = [0.0, 0.0, 1.0, 0.0, 0.0];
+    let wp1 = WeightedParticles {
+        layout: &layout,
+        w: &w1,
+        particles: &p,
+    };
+    let ci = wp1.central_intervals(Slot::Marginal(1), &[0.95]).unwrap()[0];
+    let (mu, sd) = (3.0, 1.25f64.sqrt());
+    assert_close(ci.lo, mu - Z[2].1 * sd, 1e-9, "lo");
+    assert_close(ci.hi, mu + Z[2].1 * sd, 1e-9, "hi");
+    // The sampled slot of one particle is a point mass.
+    let ci = wp1.central_intervals(Slot::Sampled(1), &[0.5]).unwrap()[0];
+    assert_eq!((ci.lo, ci.hi), (-4.0, -4.0));
+    // Bad levels are typed errors, not panics.
+    assert_eq!(
+        wp.central_intervals(Slot::Sampled(0), &[1.0]),
+        Err(CredibleError::InvalidLevel { level: 1.0 })
+    );
+}

@@ -132,8 +132,9 @@ pub fn is_fatal(warnings: &[Warning]) -> bool {
 }
 
 /// The terminal summary of a run: per parameter θ_val (posterior mean averaged over the last
-/// `window` steps, SPEC eq. 26), an approximate 95% interval θ_val ± 1.96 × the final posterior
-/// s.d. (Gaussian approximation, not a calibrated credible interval), and the Monte-Carlo
+/// `window` steps, SPEC eq. 26), the central 95 % credible interval of the last step's particle
+/// posterior from the record (θ_val ± 1.96 final s.d., marked `*`, for a record without one),
+/// and the Monte-Carlo
 /// reliability of the estimate: the number of distinct particle values of a sampled parameter
 /// (flagged below [`FEW_DISTINCT`]), the ESS for the others.
 pub fn summary_table(r: &RunRecord) -> String {
@@ -148,12 +149,27 @@ pub fn summary_table(r: &RunRecord) -> String {
     let _ = writeln!(
         o,
         "{:<name_w$}  {:>12}  {:>27}  Monte-Carlo reliability",
-        "parameter", "θ_val", "≈95% interval (±1.96 s.d.)"
+        "parameter", "θ_val", "95% credible interval"
     );
+    let mut approximated = false;
     for (j, name) in r.param_names.iter().enumerate() {
         let v = r.theta_val.get(j).copied().unwrap_or(f64::NAN);
-        let sd = r.theta_sd_final.get(j).copied().unwrap_or(f64::NAN);
-        let interval = format!("[{:.4}, {:.4}]", v - 1.96 * sd, v + 1.96 * sd);
+        // The central 95 % interval of the last step's particle posterior; a record without it
+        // (written before intervals were recorded, or a failed run) falls back to ±1.96 s.d.,
+        // marked with `*`.
+        let interval = match r
+            .credible
+            .iter()
+            .find(|p| &p.parameter == name)
+            .and_then(|p| p.at(0.95))
+        {
+            Some(ci) => format!("[{:.4}, {:.4}]", ci.lo, ci.hi),
+            None => {
+                approximated = true;
+                let sd = r.theta_sd_final.get(j).copied().unwrap_or(f64::NAN);
+                format!("*[{:.4}, {:.4}]", v - 1.96 * sd, v + 1.96 * sd)
+            }
+        };
         let reliability = match r.distinct_sampled.get(name) {
             Some(&d) if d < FEW_DISTINCT => {
                 format!("sampled, {d} distinct value(s): RESTS ON FEW PARTICLES")
@@ -168,12 +184,20 @@ pub fn summary_table(r: &RunRecord) -> String {
     }
     let _ = writeln!(
         o,
-        "ESS over the run: min {:.1}, mean {:.1} of {} particles{}. Intervals: Gaussian approximation from the final posterior s.d., not checked for calibration.",
+        "ESS over the run: min {:.1}, mean {:.1} of {} particles{}. Intervals: central 95 % of the \
+         last step's particle posterior (Gaussian mixture for marginalised, weighted sample for \
+         sampled parameters){}; they hold the filter's own uncertainty, not the Monte-Carlo \
+         error of one run — their coverage is measured in docs/calibration.md.",
         r.ess_min,
         r.ess_mean,
         r.particles,
         if r.ess_min < TINY_ESS_ABS.max(TINY_ESS_FRACTION * r.particles as f64) {
             " (TINY)"
+        } else {
+            ""
+        },
+        if approximated {
+            "; * marks θ_val ± 1.96 s.d. where the record holds no interval"
         } else {
             ""
         }

@@ -9,11 +9,13 @@
 //! - [`record`]: the run record written for every run;
 //! - [`sweep`]: parallel, resumable, shardable sweeps over runs;
 //! - [`verdict`]: the paper's statements decided by stated tests on the records (REPORT.md);
-//! - [`checks`]: plausibility warnings on a finished run record.
+//! - [`checks`]: plausibility warnings on a finished run record;
+//! - [`calibration`] and [`coverage`]: coverage of credible intervals over a sweep with known truth.
 
 pub mod calibration;
 pub mod checks;
 pub mod cli;
+pub mod coverage;
 pub mod figures;
 pub mod limits;
 pub mod metrics;

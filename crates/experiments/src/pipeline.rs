@@ -296,6 +296,7 @@ pub fn build_filter(
 struct Driven {
     summary: RunSummary,
     distinct: Vec<(String, usize)>,
+    credible: Vec<crate::observe::ParamIntervals>,
     param_names: Vec<String>,
     theta_val: Vec<f64>,
     theta_sd_final: Vec<f64>,
@@ -365,6 +366,7 @@ fn drive(
     }
     Driven {
         distinct: std::mem::take(&mut recorder.distinct),
+        credible: std::mem::take(&mut recorder.credible),
         param_names: layout.param_names.clone(),
         theta_val: recorder.theta_val(),
         theta_sd_final: recorder.last.param_sd.clone(),
@@ -479,6 +481,7 @@ pub fn identify(input: &RunInput, algorithm: Algorithm, s: &FilterSettings) -> R
             validation_s,
         },
         warnings: Vec::new(),
+        credible: d.credible,
     };
     // A result that is physically impossible or rests on few particles says so (issue 16).
     record.warnings = crate::checks::check(&record);

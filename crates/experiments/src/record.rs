@@ -159,6 +159,11 @@ pub struct RunRecord {
     /// posterior resting on few particles, a failure. Absent in records written before checks.
     #[serde(default)]
     pub warnings: Vec<crate::checks::Warning>,
+    /// Central 50/90/95 % credible intervals of every parameter from the last step's particle
+    /// posterior ([`crate::observe::ParamIntervals`]); empty for a failed run and in records
+    /// written before intervals were recorded.
+    #[serde(default)]
+    pub credible: Vec<crate::observe::ParamIntervals>,
 }
 
 impl RunRecord {

@@ -300,6 +300,8 @@ pub fn write_report(
         }
         let _ = writeln!(o);
     }
+    crate::coverage::report(&mut o, &crate::reproduce::STUDIES, studies, records)?;
+
     // Fig. 8
     let _ = writeln!(o, "## Fig. 8 — one MPF-EKF2 run\n");
     let _ = writeln!(

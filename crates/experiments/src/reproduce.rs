@@ -240,6 +240,20 @@ pub fn reproduce(opts: &Options) -> Result<Done> {
             )
         })
         .collect();
+    // Coverage of every study with a known truth (SPEC §9), and its figure for the Fig. 7 sweep.
+    let mut coverage = BTreeMap::new();
+    for name in STUDIES {
+        if let Some(c) = crate::coverage::study_coverage(&studies[name], &records[name])? {
+            coverage.insert(name, c);
+        }
+    }
+    if let Some(c) = coverage.get("fig7") {
+        crate::calibration::coverage_figure(
+            &c.calibration,
+            &opts.out.join("fig7_coverage.svg"),
+            "Fig. 7 sweep — coverage of central credible intervals",
+        )?;
+    }
     let total_s = start.elapsed().as_secs_f64();
     let summary_path = opts.out.join("summary.json");
     write_bytes_atomic(
@@ -249,6 +263,7 @@ pub fn reproduce(opts: &Options) -> Result<Done> {
             "wall_s": { "sweeps": sweep_s, "total": total_s },
             "runs": { "executed": executed, "reused": done.reused, "total": total_jobs },
             "studies": summary,
+            "coverage": coverage,
         }))? + "\n")
             .as_bytes(),
     )?;
@@ -384,6 +399,7 @@ pub fn figure_files(out: &Path) -> Vec<PathBuf> {
         "fig7_theta_val_crosses",
         "fig8a_mpfekf2_convergence",
         "fig8b_mpfekf2_loop",
+        "fig7_coverage",
     ]
     .iter()
     .map(|n| out.join(format!("{n}.svg")))

@@ -4,8 +4,10 @@
 mod common;
 
 use common::record;
+use core_filters::credible::CredibleInterval;
 use experiments::checks::{check, summary_table, WarningKind};
 use experiments::cli::filter::finish;
+use experiments::observe::{ParamIntervals, PosteriorShape};
 use experiments::record::RunRecord;
 
 fn out_path(test: &str) -> std::path::PathBuf {
@@ -110,17 +112,35 @@ fn a_failed_run_warns_and_exits_non_zero() {
 
 #[test]
 fn the_summary_table_gives_the_interval_of_every_parameter() {
-    let r = healthy();
+    let mut r = healthy();
     let table = summary_table(&r);
-    // k1: θ_val 8, final s.d. 0.4 → [8 − 0.784, 8 + 0.784].
-    assert!(table.contains("[7.2160, 8.7840]"), "{table}");
+    // No recorded intervals: k1 θ_val 8, final s.d. 0.4 → *[8 − 0.784, 8 + 0.784], marked.
+    assert!(table.contains("*[7.2160, 8.7840]"), "{table}");
     for name in common::NAMES {
         assert!(
             table.lines().any(|l| l.starts_with(name)),
             "{name}: {table}"
         );
     }
-    assert!(table.contains("±1.96 s.d."), "{table}");
+    assert!(
+        table.contains("θ_val ± 1.96 s.d. where the record"),
+        "{table}"
+    );
+    // With the record's intervals, the 95 % one is shown (not the 50 or 90 %), unmarked.
+    r.credible = vec![ParamIntervals {
+        parameter: "k1".into(),
+        shape: PosteriorShape::GaussianMixture,
+        intervals: [(0.5, 7.9, 8.1), (0.9, 7.5, 8.6), (0.95, 7.25, 8.75)]
+            .iter()
+            .map(|&(level, lo, hi)| CredibleInterval { level, lo, hi })
+            .collect(),
+        error: None,
+    }];
+    let table = summary_table(&r);
+    let k1 = table.lines().find(|l| l.starts_with("k1")).unwrap();
+    assert!(k1.contains(" [7.2500, 8.7500]"), "{table}");
+    // The other parameters still have no interval in the record.
+    assert!(table.contains("*["), "{table}");
 }
 
 #[test]

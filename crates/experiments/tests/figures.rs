@@ -117,6 +117,7 @@ fn record(algorithm: &str, run: u64, bias: f64) -> RunRecord {
             validation_s: 0.1,
         },
         warnings: Vec::new(),
+        credible: Vec::new(),
     }
 }
 

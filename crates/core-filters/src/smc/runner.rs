@@ -17,6 +17,7 @@
 
 use serde::Serialize;
 
+use crate::credible::{CredibleError, CredibleInterval, GaussianMixture, WeightedSample};
 use crate::error::FilterError;
 use crate::health::Health;
 use crate::model::{Layout, Slot};
@@ -129,6 +130,42 @@ impl WeightedParticles<'_> {
         v.sort_by(f64::total_cmp);
         v.dedup();
         v.len()
+    }
+
+    /// Central credible intervals of one slot at each of `levels` (SPEC §9 "Calibration"): the
+    /// weighted sample `Σ w_i δ(x − x_i)` of a sampled entry, the Gaussian mixture
+    /// `Σ w_i N(μ_i, C_i)` of a marginalised one (see [`crate::credible`]). Allocates two
+    /// vectors of `Np`; meant for the end of a run, not for every step.
+    pub fn central_intervals(
+        &self,
+        slot: Slot,
+        levels: &[f64],
+    ) -> Result<Vec<CredibleInterval>, CredibleError> {
+        let np = self.particles.len();
+        let mut out = vec![
+            CredibleInterval {
+                level: f64::NAN,
+                lo: f64::NAN,
+                hi: f64::NAN,
+            };
+            levels.len()
+        ];
+        match slot {
+            Slot::Sampled(j) => {
+                let values: Vec<f64> = (0..np).map(|i| self.particles.sampled(i)[j]).collect();
+                WeightedSample::new(&values, self.w)?.central_intervals(levels, &mut out)?;
+            }
+            Slot::Marginal(j) => {
+                let n = self.particles.shape().marginal;
+                let means: Vec<f64> = (0..np).map(|i| self.particles.mean(i)[j]).collect();
+                // Round-off in a covariance update can leave a variance a hair below zero.
+                let vars: Vec<f64> = (0..np)
+                    .map(|i| self.particles.cov(i)[j + j * n].max(0.0))
+                    .collect();
+                GaussianMixture::new(self.w, &means, &vars)?.central_intervals(levels, &mut out)?;
+            }
+        }
+        Ok(out)
     }
 
     /// Distinct-value counts of every parameter held in the sampled block.

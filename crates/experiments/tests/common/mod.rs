@@ -68,6 +68,7 @@ pub fn record(algorithm: &str, run: u64, ratios: [f64; 9], nrmse: f64) -> RunRec
             validation_s: 0.1,
         },
         warnings: Vec::new(),
+        credible: Vec::new(),
     }
 }
 
