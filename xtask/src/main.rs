@@ -1,7 +1,7 @@
 //! `cargo xtask <task>`: project tasks written as plain Rust (the cargo-xtask pattern).
 //!
 //! - `reproduce-paper [--quick] [--resume] [--threads N] [--shard i/n]`: builds `sysid` in release
-//!   and runs `sysid reproduce` from the workspace root into `results/paper/` (or
+//!   (the libraries it builds are the ones `cargo test --workspace --release` links) and runs `sysid reproduce` from the workspace root into `results/paper/` (or
 //!   `results/paper-quick/`). Every run is computed unless `--resume` is given; then records whose
 //!   fingerprint matches are reused.
 //! - `regression [--threads N] [--resume]`: builds `sysid` in release and runs `sysid regression`
@@ -185,7 +185,15 @@ fn bench(root: &Path, full: bool) -> Result<()> {
     cmd.current_dir(root)
         // The bench targets only (`--benches` would also run the library's unit tests, whose
         // harness rejects criterion's options).
-        .args(["bench", "-p", "core-filters", "--bench", "*"]);
+        .args(["bench", "-p", "core-filters", "--bench", "*"])
+        // The bench profile keeps debug assertions for `cargo test --release`; the benchmarks
+        // measure the code `sysid` runs, without them.
+        .args([
+            "--config",
+            "profile.bench.debug-assertions=false",
+            "--config",
+            "profile.bench.overflow-checks=false",
+        ]);
     if !full {
         // Enough for a few-percent median on steps of 10 µs to 10 ms; trends, not proofs.
         cmd.args([
