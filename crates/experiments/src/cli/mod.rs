@@ -5,5 +5,6 @@ pub mod merge;
 pub mod plot;
 pub mod regression;
 pub mod reproduce;
+pub mod scaling;
 pub mod simulate;
 pub mod table1;
