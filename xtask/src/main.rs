@@ -1,9 +1,12 @@
 //! `cargo xtask <task>`: project tasks written as plain Rust (the cargo-xtask pattern).
 //!
 //! - `reproduce-paper [--quick] [--resume] [--threads N] [--shard i/n]`: builds `sysid` in release
-//!   and runs `sysid reproduce` from the workspace root into `results/paper/` (or
+//!   (the libraries it builds are the ones `cargo test --workspace --release` links) and runs `sysid reproduce` from the workspace root into `results/paper/` (or
 //!   `results/paper-quick/`). Every run is computed unless `--resume` is given; then records whose
 //!   fingerprint matches are reused.
+//! - `reproduce-scaling [--quick] [--resume] [--threads N] [--shard i/n]`: builds `sysid` in
+//!   release and runs `sysid scaling` (`experiments/scaling.toml`) into `results/scaling/` (or
+//!   `results/scaling-quick/`); sharded and resumed like `reproduce-paper`.
 //! - `regression [--threads N] [--resume]`: builds `sysid` in release and runs `sysid regression`
 //!   (`experiments/regression.toml` into `results/regression/`); fails when a bound is breached.
 //!   Every run is computed unless `--resume` is given.
@@ -42,6 +45,24 @@ enum Task {
         shard: Option<String>,
         /// Reuse the existing records whose fingerprint (configuration, data, seed, numerics
         /// version) matches; without it, every run is computed.
+        #[arg(long)]
+        resume: bool,
+    },
+    /// The scaling study (experiments/scaling.toml): records, figures and REPORT.md under
+    /// results/scaling.
+    ReproduceScaling {
+        /// The study's quick form (writes results/scaling-quick).
+        #[arg(long)]
+        quick: bool,
+        /// Worker threads (0: one per core).
+        #[arg(long, default_value_t = 0)]
+        threads: usize,
+        /// Run part i of n of the sweep (then `sysid merge`, and run again with `--resume` and
+        /// without `--shard` to write the report).
+        #[arg(long)]
+        shard: Option<String>,
+        /// Reuse the existing records whose fingerprint matches; without it, every run is
+        /// computed.
         #[arg(long)]
         resume: bool,
     },
@@ -155,6 +176,47 @@ fn main() -> Result<()> {
             );
             Ok(())
         }
+        Task::ReproduceScaling {
+            quick,
+            threads,
+            shard,
+            resume,
+        } => {
+            let started = std::time::Instant::now();
+            let sysid = build_sysid(&root)?;
+            let build_s = started.elapsed().as_secs_f64();
+            let out = if quick {
+                "results/scaling-quick"
+            } else {
+                "results/scaling"
+            };
+            let mut cmd = Command::new(sysid);
+            cmd.current_dir(&root).args([
+                "scaling",
+                "--config",
+                "experiments/scaling.toml",
+                "--out",
+                out,
+                "--threads",
+                &threads.to_string(),
+            ]);
+            if quick {
+                cmd.arg("--quick");
+            }
+            if let Some(s) = shard {
+                cmd.args(["--shard", &s]);
+            }
+            if resume {
+                cmd.arg("--resume");
+            }
+            run(&mut cmd)?;
+            eprintln!(
+                "reproduce-scaling: {:.0} s in all (build {build_s:.0} s, study {:.0} s)",
+                started.elapsed().as_secs_f64(),
+                started.elapsed().as_secs_f64() - build_s
+            );
+            Ok(())
+        }
         Task::Regression { threads, resume } => {
             let sysid = build_sysid(&root)?;
             let mut cmd = Command::new(sysid);
@@ -193,6 +255,14 @@ fn bench(root: &Path, full: bool) -> Result<()> {
             "experiments",
             "--bench",
             "*",
+        ])
+        // The bench profile keeps debug assertions for `cargo test --release`; the benchmarks
+        // measure the code `sysid` runs, without them.
+        .args([
+            "--config",
+            "profile.bench.debug-assertions=false",
+            "--config",
+            "profile.bench.overflow-checks=false",
         ]);
     if !full {
         // Enough for a few-percent median on steps of 10 µs to 10 ms; trends, not proofs.

@@ -8,6 +8,7 @@
 //! - [`observe`]: the observer that records traces and online errors during a run;
 //! - [`record`]: the run record written for every run;
 //! - [`sweep`]: parallel, resumable, shardable sweeps over runs;
+//! - [`scaling`]: the scaling study (chains of 3 to 40 storeys), its figures and report;
 //! - [`verdict`]: the paper's statements decided by stated tests on the records (REPORT.md);
 //! - [`checks`]: plausibility warnings on a finished run record;
 //! - [`calibration`] and [`coverage`]: coverage of credible intervals over a sweep with known truth.
@@ -25,6 +26,7 @@ pub mod record;
 pub mod reference;
 pub mod report;
 pub mod reproduce;
+pub mod scaling;
 pub mod study;
 pub mod sweep;
 pub mod verdict;

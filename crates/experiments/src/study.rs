@@ -1,5 +1,6 @@
 //! Experiment configs (one TOML per figure or study in `experiments/`) and their expansion into
-//! jobs: algorithm × particles × resampling × run. Every job regenerates its data set from
+//! jobs: structure × algorithm × particles × resampling × run (the structure axis is optional:
+//! without it every job uses the data section's structure). Every job regenerates its data set from
 //! `(master_seed, run)`, so all algorithms of one run see the identical data set. A job's
 //! fingerprint ([`Study::job_fingerprint`]) is the one its record will carry, so a resumed sweep
 //! can tell whether an existing record is this job's result.
@@ -39,6 +40,109 @@ pub struct SweepSection {
     pub particles: Vec<usize>,
     #[serde(default = "default_resampling")]
     pub resampling: Vec<Scheme>,
+    /// The structure axis (`[[sweep.structures]]`); empty: the data section's structure only.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub structures: Vec<Structure>,
+}
+
+/// One structure of the structure axis: a shear chain of the data section's preset with its own
+/// storey count, hysteretic storeys, sensors, record length, algorithms and runs.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Structure {
+    /// Name in record ids and reports (letters, digits and `-`).
+    pub label: String,
+    pub storeys: usize,
+    /// 1-based storeys with a Bouc–Wen element; absent: the preset's (storey 1).
+    pub hysteretic: Option<Vec<usize>>,
+    /// 1-based measured storeys; absent: every storey.
+    pub sensors: Option<Vec<usize>>,
+    /// Duration of the data (s); absent: the data section's.
+    pub duration: Option<f64>,
+    /// Algorithms run on this structure (a subset of the sweep's); absent: the sweep's.
+    pub algorithms: Option<Vec<Algorithm>>,
+    /// Runs 0..runs on this structure (at most the sweep's); absent: the sweep's.
+    pub runs: Option<u64>,
+}
+
+impl Structure {
+    /// Whether this build can generate the structure's data: the data configuration places
+    /// the Bouc–Wen element at storey 1 and measures every storey; other layouts need the
+    /// `hysteretic` and `sensors` fields of the data configuration.
+    pub fn unsupported(&self) -> Option<String> {
+        let every: Vec<usize> = (1..=self.storeys).collect();
+        if self.hysteretic.as_ref().is_some_and(|h| h != &[1]) {
+            return Some(format!(
+                "structure `{}`: hysteretic storeys {:?} need a data configuration with \
+                 hysteretic storeys, which this build does not have",
+                self.label,
+                self.hysteretic.as_deref().unwrap_or_default()
+            ));
+        }
+        if self.sensors.as_ref().is_some_and(|s| s != &every) {
+            return Some(format!(
+                "structure `{}`: sensors {:?} need a data configuration with a sensor layout, \
+                 which this build does not have",
+                self.label,
+                self.sensors.as_deref().unwrap_or_default()
+            ));
+        }
+        None
+    }
+
+    fn check(&self, sweep: &SweepSection) -> Result<()> {
+        let ctx = || format!("structure `{}` of `sweep.structures`", self.label);
+        if self.label.is_empty()
+            || !self
+                .label
+                .chars()
+                .all(|c| c.is_ascii_alphanumeric() || c == '-')
+        {
+            bail!("{}: the label must be letters, digits and `-`", ctx());
+        }
+        crate::limits::check_count(self.storeys, 1, models::limits::MAX_STOREYS)
+            .with_context(|| format!("{}: field `storeys`", ctx()))?;
+        for (field, list) in [("hysteretic", &self.hysteretic), ("sensors", &self.sensors)] {
+            if let Some(list) = list {
+                if list.is_empty() {
+                    bail!("{}: field `{field}` is empty", ctx());
+                }
+                if let Some(s) = list.iter().find(|&&s| s == 0 || s > self.storeys) {
+                    bail!(
+                        "{}: field `{field}`: storey {s} is not in 1..={}",
+                        ctx(),
+                        self.storeys
+                    );
+                }
+                let mut sorted = list.clone();
+                sorted.sort_unstable();
+                sorted.dedup();
+                if sorted.len() != list.len() {
+                    bail!("{}: field `{field}` repeats a storey", ctx());
+                }
+            }
+        }
+        if let Some(d) = self.duration {
+            if !(d.is_finite() && d > 0.0) {
+                bail!("{}: field `duration` must be positive, got {d}", ctx());
+            }
+        }
+        if let Some(algs) = &self.algorithms {
+            if let Some(a) = algs.iter().find(|a| !sweep.algorithms.contains(a)) {
+                bail!(
+                    "{}: algorithm `{}` is not one of the sweep's algorithms",
+                    ctx(),
+                    a.name()
+                );
+            }
+        }
+        if let Some(r) = self.runs {
+            if r == 0 || r > sweep.runs {
+                bail!("{}: field `runs` must be in 1..={}", ctx(), sweep.runs);
+            }
+        }
+        Ok(())
+    }
 }
 
 fn default_particles() -> Vec<usize> {
@@ -77,6 +181,8 @@ pub struct Study {
 /// One run of a study.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Job {
+    /// Index into the sweep's structures (`None`: no structure axis).
+    pub structure: Option<usize>,
     pub algorithm: Algorithm,
     pub particles: usize,
     pub resampling: Scheme,
@@ -110,6 +216,20 @@ impl Study {
             .context("field `sweep.runs`")?;
         crate::limits::check_filter_settings(&self.filter).context("table `filter`")?;
         models::dataset::check_config(&self.dataset_config(0)?).context("table `data`")?;
+        let mut labels = std::collections::BTreeSet::new();
+        for (i, st) in self.sweep.structures.iter().enumerate() {
+            st.check(&self.sweep)?;
+            if !labels.insert(st.label.as_str()) {
+                bail!(
+                    "structure label `{}` appears twice in `sweep.structures`",
+                    st.label
+                );
+            }
+            if st.unsupported().is_none() {
+                models::dataset::check_config(&self.structure_config(Some(i), 0)?)
+                    .with_context(|| format!("structure `{}`", st.label))?;
+            }
+        }
         Ok(())
     }
 
@@ -122,24 +242,46 @@ impl Study {
             if q.duration.is_some() {
                 s.data.duration = q.duration;
             }
+            for st in &mut s.sweep.structures {
+                st.runs = Some(st.runs.unwrap_or(q.runs).min(q.runs));
+                if let Some(d) = q.duration {
+                    st.duration = Some(st.duration.map_or(d, |own| own.min(d)));
+                }
+            }
         }
         s
     }
 
     /// The jobs, in a fixed order (algorithm-major within each run, so that a partial sweep
     /// has complete runs first).
+    /// With a structure axis, every structure's run `r` comes before any run `r + 1`.
     pub fn jobs(&self) -> Vec<Job> {
+        let structures: Vec<Option<usize>> = if self.sweep.structures.is_empty() {
+            vec![None]
+        } else {
+            (0..self.sweep.structures.len()).map(Some).collect()
+        };
         let mut out = Vec::new();
         for run in 0..self.sweep.runs {
-            for &particles in &self.sweep.particles {
-                for &resampling in &self.sweep.resampling {
-                    for &algorithm in &self.sweep.algorithms {
-                        out.push(Job {
-                            algorithm,
-                            particles,
-                            resampling,
-                            run,
-                        });
+            for &structure in &structures {
+                let st = structure.map(|i| &self.sweep.structures[i]);
+                if st.and_then(|s| s.runs).is_some_and(|r| run >= r) {
+                    continue;
+                }
+                let algorithms = st
+                    .and_then(|s| s.algorithms.as_ref())
+                    .unwrap_or(&self.sweep.algorithms);
+                for &particles in &self.sweep.particles {
+                    for &resampling in &self.sweep.resampling {
+                        for &algorithm in algorithms {
+                            out.push(Job {
+                                structure,
+                                algorithm,
+                                particles,
+                                resampling,
+                                run,
+                            });
+                        }
                     }
                 }
             }
@@ -156,6 +298,32 @@ impl Study {
             job.resampling.name(),
             job.run
         )
+    }
+
+    /// File stem of a job's record, prefixed by its structure's label when the study has a
+    /// structure axis.
+    pub fn record_id(&self, job: &Job) -> String {
+        match job.structure {
+            Some(i) => format!("{}-{}", self.sweep.structures[i].label, Self::job_id(job)),
+            None => Self::job_id(job),
+        }
+    }
+
+    /// The data-set configuration of run `run` on structure `structure` (an index into the
+    /// sweep's structures; `None`: the data section's).
+    pub fn structure_config(&self, structure: Option<usize>, run: u64) -> Result<DatasetConfig> {
+        let mut c = self.dataset_config(run)?;
+        if let Some(i) = structure {
+            let st = &self.sweep.structures[i];
+            if let Some(why) = st.unsupported() {
+                bail!("{why}");
+            }
+            c.storeys = Some(st.storeys);
+            if st.duration.is_some() {
+                c.duration = st.duration;
+            }
+        }
+        Ok(c)
     }
 
     /// The data-set configuration of run `run`.
@@ -184,7 +352,7 @@ impl Study {
     /// the job's data set is generated (a few milliseconds) and hashed with the settings, seed,
     /// run, algorithm and numerics version.
     pub fn job_fingerprint(&self, job: &Job) -> Result<String> {
-        let data = generate(&self.dataset_config(job.run)?)?;
+        let data = generate(&self.structure_config(job.structure, job.run)?)?;
         Ok(Fingerprint::of_run(
             job.algorithm.name(),
             self.sweep.master_seed,
@@ -198,7 +366,7 @@ impl Study {
     /// Runs one job: generate the run's data set, identify, return the record. Errors are
     /// configuration errors; numerical failures are inside the record.
     pub fn run_job(&self, job: &Job) -> Result<RunRecord> {
-        let data = generate(&self.dataset_config(job.run)?)?;
+        let data = generate(&self.structure_config(job.structure, job.run)?)?;
         let loaded = data.to_loaded();
         let input = RunInput {
             data: &loaded,

@@ -32,6 +32,9 @@ enum Command {
     /// Identification-accuracy regression check against reviewed thresholds.
     #[command(allow_negative_numbers = true)]
     Regression(cli::regression::Args),
+    /// The scaling study: chains of 3 to 40 storeys, cost and accuracy per algorithm.
+    #[command(allow_negative_numbers = true)]
+    Scaling(cli::scaling::Args),
     /// Merge the records of sharded sweeps.
     #[command(allow_negative_numbers = true)]
     Merge(cli::merge::Args),
@@ -56,6 +59,7 @@ fn main() -> anyhow::Result<()> {
         Command::CompareReference(args) => cli::reference::compare(args),
         Command::Reproduce(args) => cli::reproduce::run(args),
         Command::Merge(args) => cli::merge::run(args),
+        Command::Scaling(args) => cli::scaling::run(args),
         Command::Regression(args) => cli::regression::run(args),
         Command::Plot(args) => cli::plot::run(args),
     }

@@ -6,5 +6,6 @@ pub mod plot;
 pub mod reference;
 pub mod regression;
 pub mod reproduce;
+pub mod scaling;
 pub mod simulate;
 pub mod table1;

@@ -1,0 +1,607 @@
+//! The scaling study (`experiments/scaling.toml`, `sysid scaling`, `cargo xtask
+//! reproduce-scaling`): the identification of shear chains of 3 to 40 storeys by every
+//! algorithm, to test the paper's closing claim that the MPF-EKF2's sampled dimension "does no
+//! longer scale with the dimension of the problem" (SPEC §5.4, §9).
+//!
+//! The study is an ordinary [`Study`] with a structure axis; this module runs its sweep
+//! (resumable and shardable like every sweep, [`crate::sweep`]), then reduces the records to one
+//! [`Cell`] per structure and algorithm (accuracy, ESS, failures, cost per particle-step), fits
+//! the growth of the cost with the marginalised dimension, draws two figures and writes
+//! `cells.csv`, `summary.json` and `REPORT.md`.
+//!
+//! Costs are measured twice: the records' wall times, and the CPU time of the thread that ran
+//! each job (written beside its record as `<id>.cpu`, see [`thread_cpu_s`]). On a machine shared
+//! with other work the wall time of a run grows with the load while its CPU time does not, so
+//! the cost figure and fits use CPU time when every run of a cell has it.
+//!
+//! Structures this build cannot generate (hysteresis above storey 1, sparse sensors) are listed
+//! in the report as not run; so are runs a sweep has not computed yet.
+
+use std::collections::BTreeMap;
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::{Context, Result};
+use serde::Serialize;
+
+use crate::metrics::mean_sd;
+use crate::pipeline::Algorithm;
+use crate::record::RunRecord;
+use crate::study::{Job, Study};
+use crate::sweep::lock::DirLock;
+use crate::sweep::progress::clock;
+use crate::sweep::{run_sweep, write_bytes_atomic, Shard, SweepOptions};
+
+mod figures;
+mod report;
+
+/// Options of a scaling study run.
+#[derive(Debug, Clone)]
+pub struct Options {
+    /// The study file (`experiments/scaling.toml`).
+    pub config: PathBuf,
+    pub out: PathBuf,
+    pub quick: bool,
+    pub threads: usize,
+    pub shard: Shard,
+    pub progress: bool,
+    pub resume: bool,
+}
+
+/// Sampled and marginalised dimensions of one algorithm on one chain (SPEC §5, §9;
+/// `docs/partitions.md`). `storeys` N, `hysteretic` the 1-based storeys of the Bouc–Wen
+/// elements (E of them).
+///
+/// - bootstrap PF: everything sampled, `2N + E` states and `2N + 3E` parameters;
+/// - MLN-RBPF and Storvik: sampled `[x, v, r, n]` (2N + 2E), marginalised `[k, c, β, γ]`
+///   (2N + 2E);
+/// - MPF-EKF2: sampled the velocities the hysteresis laws read (`v_j`, and `v_{j−1}` above the
+///   first storey), `r` and `n` of each element; marginalised the rest: 4N + 2E minus the
+///   sampled velocities.
+pub fn dimensions(algorithm: Algorithm, storeys: usize, hysteretic: &[usize]) -> (usize, usize) {
+    let (n, e) = (storeys, hysteretic.len());
+    match algorithm {
+        Algorithm::Bootstrap => (4 * n + 4 * e, 0),
+        Algorithm::MlnRbpf | Algorithm::Storvik => (2 * n + 2 * e, 2 * n + 2 * e),
+        Algorithm::MpfEkf2 => {
+            let mut velocities: Vec<usize> = hysteretic
+                .iter()
+                .flat_map(|&s| if s > 1 { vec![s, s - 1] } else { vec![s] })
+                .collect();
+            velocities.sort_unstable();
+            velocities.dedup();
+            let sv = velocities.len();
+            (sv + 2 * e, 4 * n + 2 * e - sv)
+        }
+    }
+}
+
+/// Statistics over the runs of one algorithm on one structure.
+#[derive(Debug, Clone, Serialize)]
+pub struct Cell {
+    pub structure: String,
+    pub storeys: usize,
+    /// 1-based hysteretic storeys and measured storeys.
+    pub hysteretic: Vec<usize>,
+    pub sensors: Vec<usize>,
+    /// Filter steps per run (the record length over dt).
+    pub steps: usize,
+    pub algorithm: String,
+    pub sampled_dim: usize,
+    pub marginalised_dim: usize,
+    pub particles: usize,
+    /// Runs planned, runs with a record, runs that failed.
+    pub runs_planned: usize,
+    pub runs: usize,
+    pub failed: usize,
+    /// Mean over completed runs of the storey-averaged relative error of k (and c), and the
+    /// run-to-run s.d. of that average.
+    pub k_error_mean: f64,
+    pub k_error_sd: f64,
+    /// The storey whose k has the largest mean relative error, and that error.
+    pub k_error_worst: f64,
+    pub c_error_mean: f64,
+    pub c_error_sd: f64,
+    /// Mean over runs of the mean online-state NRMSE.
+    pub state_nrmse: f64,
+    /// Mean over runs of the mean ESS, as a fraction of the particles.
+    pub ess_fraction: f64,
+    /// Median over runs of the wall time per particle-step (µs) and the mean wall time per run.
+    pub us_per_particle_step: f64,
+    pub wall_s_mean: f64,
+    /// Median over runs of the thread CPU time per particle-step (µs), data generation
+    /// included; NaN unless every run has its `.cpu` file.
+    pub cpu_us_per_particle_step: f64,
+}
+
+/// CPU time (s) consumed so far by the calling thread (NaN where the clock is unavailable).
+pub fn thread_cpu_s() -> f64 {
+    #[cfg(unix)]
+    {
+        let mut ts = libc::timespec {
+            tv_sec: 0,
+            tv_nsec: 0,
+        };
+        // SAFETY: `ts` is a valid, writable timespec; the call writes only into it.
+        let rc = unsafe { libc::clock_gettime(libc::CLOCK_THREAD_CPUTIME_ID, &mut ts) };
+        if rc == 0 {
+            return ts.tv_sec as f64 + 1e-9 * ts.tv_nsec as f64;
+        }
+    }
+    f64::NAN
+}
+
+/// Path of the CPU-time file of record `id`.
+pub fn cpu_path(records: &Path, id: &str) -> PathBuf {
+    records.join(format!("{id}.cpu"))
+}
+
+/// The CPU seconds of record `id`, if its file exists and holds a positive number.
+pub fn read_cpu(records: &Path, id: &str) -> Option<f64> {
+    let text = std::fs::read_to_string(cpu_path(records, id)).ok()?;
+    text.trim()
+        .parse::<f64>()
+        .ok()
+        .filter(|v| v.is_finite() && *v > 0.0)
+}
+
+/// Storey-averaged relative error of the parameters named `<prefix><digits>` of one record.
+fn group_error(r: &RunRecord, prefix: char) -> Option<f64> {
+    let errs = r.rel_error.as_ref()?;
+    let picked: Vec<f64> = r
+        .param_names
+        .iter()
+        .zip(errs)
+        .filter(|(n, _)| is_storey_param(n, prefix))
+        .map(|(_, e)| *e)
+        .collect();
+    (!picked.is_empty()).then(|| picked.iter().sum::<f64>() / picked.len() as f64)
+}
+
+fn is_storey_param(name: &str, prefix: char) -> bool {
+    name.strip_prefix(prefix)
+        .is_some_and(|d| !d.is_empty() && d.chars().all(|c| c.is_ascii_digit()))
+}
+
+fn median(mut v: Vec<f64>) -> f64 {
+    v.retain(|x| x.is_finite());
+    if v.is_empty() {
+        return f64::NAN;
+    }
+    v.sort_by(f64::total_cmp);
+    let m = v.len() / 2;
+    if v.len() % 2 == 1 {
+        v[m]
+    } else {
+        0.5 * (v[m - 1] + v[m])
+    }
+}
+
+/// The statistics of `records` (the runs of one algorithm on one structure).
+#[allow(clippy::too_many_arguments)]
+pub fn cell(
+    structure: &str,
+    storeys: usize,
+    hysteretic: &[usize],
+    sensors: &[usize],
+    steps: usize,
+    algorithm: Algorithm,
+    particles: usize,
+    runs_planned: usize,
+    records: &[&RunRecord],
+    cpu_s: &[Option<f64>],
+) -> Cell {
+    let ok: Vec<&RunRecord> = records
+        .iter()
+        .copied()
+        .filter(|r| !r.is_failure())
+        .collect();
+    let (k_mean, k_sd, _) = mean_sd(
+        &ok.iter()
+            .filter_map(|r| group_error(r, 'k'))
+            .collect::<Vec<_>>(),
+    );
+    let (c_mean, c_sd, _) = mean_sd(
+        &ok.iter()
+            .filter_map(|r| group_error(r, 'c'))
+            .collect::<Vec<_>>(),
+    );
+    let k_worst = (1..=storeys)
+        .map(|j| {
+            let name = format!("k{j}");
+            mean_sd(
+                &ok.iter()
+                    .filter_map(|r| {
+                        let i = r.param_names.iter().position(|n| *n == name)?;
+                        r.rel_error.as_ref().map(|e| e[i])
+                    })
+                    .collect::<Vec<_>>(),
+            )
+            .0
+        })
+        .filter(|e| e.is_finite())
+        .fold(f64::NAN, f64::max);
+    let (sampled_dim, marginalised_dim) = dimensions(algorithm, storeys, hysteretic);
+    let avg = |f: &dyn Fn(&RunRecord) -> Option<f64>| {
+        mean_sd(&ok.iter().filter_map(|r| f(r)).collect::<Vec<_>>()).0
+    };
+    Cell {
+        structure: structure.to_string(),
+        storeys,
+        hysteretic: hysteretic.to_vec(),
+        sensors: sensors.to_vec(),
+        steps,
+        algorithm: algorithm.name().to_string(),
+        sampled_dim,
+        marginalised_dim,
+        particles,
+        runs_planned,
+        runs: records.len(),
+        failed: records.len() - ok.len(),
+        k_error_mean: k_mean,
+        k_error_sd: k_sd,
+        k_error_worst: k_worst,
+        c_error_mean: c_mean,
+        c_error_sd: c_sd,
+        state_nrmse: avg(&|r| r.online_states.as_ref().map(|s| s.mean_nrmse())),
+        ess_fraction: avg(&|r| Some(r.ess_mean / r.particles as f64)),
+        // Every run's cost, failed or not, up to where it stopped: timings of all records.
+        us_per_particle_step: median(
+            records
+                .iter()
+                .map(|r| 1e6 / r.timing.particle_steps_per_s)
+                .collect(),
+        ),
+        wall_s_mean: mean_sd(&records.iter().map(|r| r.timing.wall_s).collect::<Vec<_>>()).0,
+        cpu_us_per_particle_step: if !records.is_empty() && cpu_s.iter().all(Option::is_some) {
+            median(
+                records
+                    .iter()
+                    .zip(cpu_s)
+                    .map(|(r, c)| {
+                        1e6 * c.unwrap_or(f64::NAN)
+                            / (r.particles * r.steps_completed.max(1)) as f64
+                    })
+                    .collect(),
+            )
+        } else {
+            f64::NAN
+        },
+    }
+}
+
+/// Least-squares slope and intercept of `ln y` against `ln x` over the finite positive pairs
+/// (`None` with fewer than two distinct x).
+pub fn log_log_fit(points: &[(f64, f64)]) -> Option<(f64, f64)> {
+    let p: Vec<(f64, f64)> = points
+        .iter()
+        .filter(|(x, y)| x.is_finite() && y.is_finite() && *x > 0.0 && *y > 0.0)
+        .map(|(x, y)| (x.ln(), y.ln()))
+        .collect();
+    let n = p.len() as f64;
+    let mx = p.iter().map(|q| q.0).sum::<f64>() / n;
+    let my = p.iter().map(|q| q.1).sum::<f64>() / n;
+    let sxx: f64 = p.iter().map(|q| (q.0 - mx).powi(2)).sum();
+    if p.len() < 2 || sxx <= 1e-12 {
+        return None;
+    }
+    let sxy: f64 = p.iter().map(|q| (q.0 - mx) * (q.1 - my)).sum();
+    let slope = sxy / sxx;
+    Some((slope, my - slope * mx))
+}
+
+/// The study as run (quick or not).
+pub fn load(opts: &Options) -> Result<Study> {
+    let study = Study::load(&opts.config)?;
+    Ok(if opts.quick { study.quick() } else { study })
+}
+
+/// Runs the study's sweep (the structures this build can generate), then, unless sharded,
+/// writes the cells, figures and report. Returns the cells.
+pub fn run(opts: &Options) -> Result<Vec<Cell>> {
+    let start = Instant::now();
+    let _lock = DirLock::acquire(&opts.out)?;
+    let study = load(opts)?;
+    let jobs: Vec<Job> = study
+        .jobs()
+        .into_iter()
+        .filter(|j| {
+            j.structure
+                .is_none_or(|i| study.sweep.structures[i].unsupported().is_none())
+        })
+        .collect();
+    let sweep = SweepOptions {
+        threads: opts.threads,
+        shard: opts.shard,
+        progress: opts.progress,
+        label: study.name.clone(),
+        resume: opts.resume,
+    };
+    let records_dir = opts.out.join("records");
+    let outcome = run_sweep(
+        &jobs,
+        |j| study.record_id(j),
+        |j| study.job_fingerprint(j),
+        &records_dir,
+        &sweep,
+        |j| {
+            let id = study.record_id(j);
+            let cpu0 = thread_cpu_s();
+            let record = study
+                .run_job(j)
+                .with_context(|| format!("{}: {id}", study.name))?;
+            let cpu = thread_cpu_s() - cpu0;
+            let path = cpu_path(&records_dir, &id);
+            if cpu.is_finite() {
+                write_bytes_atomic(&path, format!("{cpu}\n").as_bytes())?;
+            } else if path.exists() {
+                std::fs::remove_file(&path)
+                    .with_context(|| format!("removing {}", path.display()))?;
+            }
+            Ok(record)
+        },
+    )?;
+    if opts.progress {
+        eprintln!("{}: {}", study.name, outcome.summary());
+    }
+    if opts.shard != Shard::default() {
+        eprintln!(
+            "shard {}/{}: merge the shards' records (`sysid merge`) and run `sysid scaling \
+             --resume` to write the report",
+            opts.shard.index, opts.shard.count
+        );
+        return Ok(Vec::new());
+    }
+    let sweep_s = start.elapsed().as_secs_f64();
+    let cpu: Vec<Option<f64>> = jobs
+        .iter()
+        .map(|j| read_cpu(&records_dir, &study.record_id(j)))
+        .collect();
+    let cells = cells(&study, &jobs, &outcome.records, &cpu)?;
+    write_outputs(opts, &study, &cells, sweep_s)?;
+    eprintln!(
+        "wrote {}; {}",
+        opts.out.join("REPORT.md").display(),
+        clock(start.elapsed())
+    );
+    Ok(cells)
+}
+
+/// One cell per structure and algorithm, in the study's order, from the records of `jobs`.
+/// `cpu_s[i]` is the CPU time of `records[i]`, when known.
+pub fn cells(
+    study: &Study,
+    jobs: &[Job],
+    records: &[RunRecord],
+    cpu_s: &[Option<f64>],
+) -> Result<Vec<Cell>> {
+    type Runs<'a> = (Vec<&'a RunRecord>, Vec<Option<f64>>);
+    let mut by_key: BTreeMap<(usize, Algorithm), Runs> = BTreeMap::new();
+    for ((job, rec), cpu) in jobs.iter().zip(records).zip(cpu_s) {
+        if let Some(i) = job.structure {
+            let e = by_key.entry((i, job.algorithm)).or_default();
+            e.0.push(rec);
+            e.1.push(*cpu);
+        }
+    }
+    let particles = study.sweep.particles.first().copied().unwrap_or(0);
+    let mut out = Vec::new();
+    for (i, st) in study.sweep.structures.iter().enumerate() {
+        let hysteretic = st.hysteretic.clone().unwrap_or_else(|| vec![1]);
+        let sensors = st
+            .sensors
+            .clone()
+            .unwrap_or_else(|| (1..=st.storeys).collect());
+        let algorithms = st.algorithms.as_ref().unwrap_or(&study.sweep.algorithms);
+        let runs_planned = st.runs.unwrap_or(study.sweep.runs) as usize;
+        let steps = if st.unsupported().is_none() {
+            let c = study.structure_config(Some(i), 0)?;
+            models::dataset::ground_motion(&c)?.len().saturating_sub(1)
+        } else {
+            0
+        };
+        for &a in algorithms {
+            let (recs, cpu) = by_key.get(&(i, a)).cloned().unwrap_or_default();
+            out.push(cell(
+                &st.label,
+                st.storeys,
+                &hysteretic,
+                &sensors,
+                steps,
+                a,
+                particles,
+                runs_planned,
+                &recs,
+                &cpu,
+            ));
+        }
+    }
+    Ok(out)
+}
+
+/// Header of `cells.csv`.
+pub const CSV_HEADER: &str = "structure,storeys,hysteretic,sensors,steps,algorithm,\
+sampled_dim,marginalised_dim,particles,runs_planned,runs,failed,k_error_mean,k_error_sd,\
+k_error_worst,c_error_mean,c_error_sd,state_nrmse,ess_fraction,us_per_particle_step,wall_s_mean,\
+cpu_us_per_particle_step";
+
+/// `cells.csv`: one line per cell (lists joined by `;`).
+pub fn csv(cells: &[Cell]) -> String {
+    let join = |v: &[usize]| {
+        v.iter()
+            .map(|s| s.to_string())
+            .collect::<Vec<_>>()
+            .join(";")
+    };
+    let mut out = format!("{CSV_HEADER}\n");
+    for c in cells {
+        let _ = writeln!(
+            out,
+            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
+            c.structure,
+            c.storeys,
+            join(&c.hysteretic),
+            join(&c.sensors),
+            c.steps,
+            c.algorithm,
+            c.sampled_dim,
+            c.marginalised_dim,
+            c.particles,
+            c.runs_planned,
+            c.runs,
+            c.failed,
+            c.k_error_mean,
+            c.k_error_sd,
+            c.k_error_worst,
+            c.c_error_mean,
+            c.c_error_sd,
+            c.state_nrmse,
+            c.ess_fraction,
+            c.us_per_particle_step,
+            c.wall_s_mean,
+            c.cpu_us_per_particle_step
+        );
+    }
+    out
+}
+
+/// The cost fit of one algorithm: µs per particle-step against the marginalised dimension over
+/// the structures of one family (the base-hysteresis, all-sensor chains).
+#[derive(Debug, Clone, Serialize)]
+pub struct CostFit {
+    pub algorithm: String,
+    /// Whether the points are CPU times (every cell of the algorithm has them) or wall times.
+    pub cpu: bool,
+    /// Points (marginalised dimension, or the sampled one for the bootstrap PF; µs).
+    pub points: Vec<(f64, f64)>,
+    pub slope: Option<f64>,
+    pub intercept: Option<f64>,
+}
+
+/// Whether a cell belongs to the reference family: Bouc–Wen at storey 1 only, every storey
+/// measured.
+pub fn is_reference(c: &Cell) -> bool {
+    c.hysteretic == [1] && c.sensors.len() == c.storeys
+}
+
+/// The cost fits of the reference family, one per algorithm with runs.
+pub fn cost_fits(cells: &[Cell]) -> Vec<CostFit> {
+    let mut algs: Vec<&str> = Vec::new();
+    for c in cells {
+        if !algs.contains(&c.algorithm.as_str()) {
+            algs.push(&c.algorithm);
+        }
+    }
+    algs.into_iter()
+        .map(|a| {
+            let mine: Vec<&Cell> = cells
+                .iter()
+                .filter(|c| c.algorithm == a && is_reference(c) && c.runs > 0)
+                .collect();
+            let cpu =
+                !mine.is_empty() && mine.iter().all(|c| c.cpu_us_per_particle_step.is_finite());
+            let points: Vec<(f64, f64)> = mine
+                .iter()
+                .map(|c| {
+                    let us = if cpu {
+                        c.cpu_us_per_particle_step
+                    } else {
+                        c.us_per_particle_step
+                    };
+                    (cost_dimension(c) as f64, us)
+                })
+                .collect();
+            let fit = log_log_fit(&points);
+            CostFit {
+                algorithm: a.to_string(),
+                cpu,
+                points,
+                slope: fit.map(|f| f.0),
+                intercept: fit.map(|f| f.1),
+            }
+        })
+        .filter(|f| !f.points.is_empty())
+        .collect()
+}
+
+/// The dimension the cost is plotted against: the marginalised one, or for the bootstrap PF
+/// (which marginalises nothing) its sampled dimension.
+pub fn cost_dimension(c: &Cell) -> usize {
+    if c.marginalised_dim > 0 {
+        c.marginalised_dim
+    } else {
+        c.sampled_dim
+    }
+}
+
+fn write_outputs(opts: &Options, study: &Study, cells: &[Cell], sweep_s: f64) -> Result<()> {
+    let out = &opts.out;
+    write_bytes_atomic(&out.join("cells.csv"), csv(cells).as_bytes())?;
+    let fits = cost_fits(cells);
+    figures::cost(&fits, &out.join("cost_vs_dimension.svg"))?;
+    figures::accuracy(cells, &out.join("accuracy_vs_storeys.svg"))?;
+    let unsupported: Vec<String> = study
+        .sweep
+        .structures
+        .iter()
+        .filter_map(|s| s.unsupported())
+        .collect();
+    write_bytes_atomic(
+        &out.join("summary.json"),
+        (serde_json::to_string_pretty(&serde_json::json!({
+            "study": study.name,
+            "quick": opts.quick,
+            "sweep_wall_s": sweep_s,
+            "cells": cells,
+            "cost_fits": fits,
+            "not_run": unsupported,
+        }))? + "\n")
+            .as_bytes(),
+    )?;
+    let text = report::write(study, cells, &fits, &unsupported, opts.quick);
+    write_bytes_atomic(&out.join("REPORT.md"), text.as_bytes())
+}
+
+/// The report's directory-relative path of a figure (for links).
+pub fn figure_name(path: &Path) -> String {
+    path.file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn dimensions_of_the_paper_chain() {
+        // SPEC §6: the MPF-EKF2 samples [ẋ1, r1, n] and marginalises 13 values at N = 3.
+        assert_eq!(dimensions(Algorithm::MpfEkf2, 3, &[1]), (3, 13));
+        assert_eq!(dimensions(Algorithm::MpfEkf2, 40, &[1]), (3, 161));
+        assert_eq!(dimensions(Algorithm::MlnRbpf, 3, &[1]), (8, 8));
+        assert_eq!(dimensions(Algorithm::Bootstrap, 3, &[1]), (16, 0));
+        // Elements at storeys 1, 2 and 6 read v1, v2 and v5, v6: four sampled velocities.
+        assert_eq!(dimensions(Algorithm::MpfEkf2, 10, &[1, 2, 6]), (10, 42));
+    }
+
+    #[test]
+    fn log_log_slope() {
+        let pts: Vec<(f64, f64)> = [10.0, 20.0, 40.0]
+            .iter()
+            .map(|&x| (x, 3.0 * x * x))
+            .collect();
+        let (s, b) = log_log_fit(&pts).unwrap();
+        assert!((s - 2.0).abs() < 1e-12 && (b - 3f64.ln()).abs() < 1e-12);
+        assert!(log_log_fit(&[(10.0, 1.0)]).is_none());
+        assert!(log_log_fit(&[(10.0, 1.0), (10.0, 2.0)]).is_none());
+    }
+
+    #[test]
+    fn storey_parameters() {
+        assert!(is_storey_param("k12", 'k'));
+        assert!(!is_storey_param("k", 'k'));
+        assert!(!is_storey_param("c1", 'k'));
+        assert!(!is_storey_param("kx", 'k'));
+    }
+}

@@ -1,0 +1,228 @@
+//! The scaling study: the structure axis of a study (jobs, ids, checks, quick form), the
+//! committed `experiments/scaling.toml`, and a small study run end to end (records, cells,
+//! figures, report) and resumed.
+
+use std::path::{Path, PathBuf};
+
+use experiments::figures::validate_svg;
+use experiments::pipeline::Algorithm;
+use experiments::scaling::{self, Options};
+use experiments::study::Study;
+use experiments::sweep::Shard;
+
+fn temp_dir(tag: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("sysid-scaling-{tag}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+fn workspace() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
+}
+
+const SMALL: &str = r#"
+name = "small-scaling"
+description = "scaling test"
+[data]
+preset = "shear-chain"
+duration = 1.0
+[sweep]
+algorithms = ["mln-rbpf", "mpf-ekf2", "bootstrap"]
+runs = 2
+master_seed = 7
+particles = [30]
+[filter]
+trace_every = 0
+loop_every = 0
+validate = false
+[quick]
+runs = 1
+particles = 20
+duration = 0.5
+
+[[sweep.structures]]
+label = "n2"
+storeys = 2
+
+[[sweep.structures]]
+label = "n4"
+storeys = 4
+duration = 0.5
+algorithms = ["mln-rbpf", "mpf-ekf2"]
+runs = 1
+
+[[sweep.structures]]
+label = "n4-sparse"
+storeys = 4
+sensors = [3, 4]
+"#;
+
+fn write_study(dir: &Path, text: &str) -> PathBuf {
+    let p = dir.join("study.toml");
+    std::fs::write(&p, text).unwrap();
+    p
+}
+
+#[test]
+fn structure_axis_jobs_ids_and_configs() {
+    let dir = temp_dir("axis");
+    let study = Study::load(&write_study(&dir, SMALL)).unwrap();
+    let jobs = study.jobs();
+    // Run 0: n2 × 3 algorithms, n4 × 2, n4-sparse × 3; run 1: n2 × 3, n4-sparse × 3.
+    assert_eq!(jobs.len(), 3 + 2 + 3 + 3 + 3);
+    assert!(jobs[..8].iter().all(|j| j.run == 0));
+    assert!(jobs
+        .iter()
+        .all(|j| !(j.structure == Some(1) && (j.run > 0 || j.algorithm == Algorithm::Bootstrap))));
+    assert_eq!(
+        study.record_id(&jobs[3]),
+        "n4-mln-rbpf-np30-systematic-run000"
+    );
+    let c = study.structure_config(Some(1), 0).unwrap();
+    assert_eq!((c.storeys, c.duration), (Some(4), Some(0.5)));
+    assert_eq!(
+        study.structure_config(Some(0), 1).unwrap().duration,
+        Some(1.0)
+    );
+    // A sparse layout needs the data configuration's sensor layout: named, not silently ignored.
+    let err = study.structure_config(Some(2), 0).unwrap_err().to_string();
+    assert!(
+        err.contains("n4-sparse") && err.contains("sensors"),
+        "{err}"
+    );
+    // The quick form caps every structure's runs and duration.
+    let q = study.quick();
+    assert!(q.sweep.structures.iter().all(|s| s.runs == Some(1)));
+    assert!(q.sweep.structures.iter().all(|s| s.duration == Some(0.5)));
+    assert_eq!(q.jobs().len(), 3 + 2 + 3);
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn bad_structures_are_named() {
+    let dir = temp_dir("bad");
+    for (bad, needle) in [
+        ("sensors = [0, 4]", "field `sensors`: storey 0"),
+        ("sensors = [4, 4]", "field `sensors` repeats"),
+        ("hysteretic = [5]", "field `hysteretic`: storey 5"),
+        ("sensors = []", "field `sensors` is empty"),
+        ("runs = 3", "field `runs`"),
+        ("algorithms = [\"storvik\"]", "algorithm `storvik`"),
+        ("duration = -1.0", "field `duration`"),
+    ] {
+        let text = SMALL.replace("sensors = [3, 4]", bad);
+        let err = format!("{:#}", Study::load(&write_study(&dir, &text)).unwrap_err());
+        assert!(
+            err.contains(needle) && err.contains("n4-sparse") && err.contains("study.toml"),
+            "{bad}: {err}"
+        );
+    }
+    let twice = SMALL.replace("label = \"n4\"", "label = \"n2\"");
+    let err = format!("{:#}", Study::load(&write_study(&dir, &twice)).unwrap_err());
+    assert!(err.contains("`n2` appears twice"), "{err}");
+    let label = SMALL.replace("label = \"n4\"", "label = \"n 4\"");
+    let err = format!("{:#}", Study::load(&write_study(&dir, &label)).unwrap_err());
+    assert!(err.contains("label"), "{err}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn the_committed_study_loads() {
+    let study = Study::load(&workspace().join("experiments/scaling.toml")).unwrap();
+    let labels: Vec<&str> = study
+        .sweep
+        .structures
+        .iter()
+        .map(|s| s.label.as_str())
+        .collect();
+    for n in [3, 5, 10, 20, 40] {
+        assert!(labels.contains(&format!("n{n}-base-all").as_str()));
+        assert!(labels.contains(&format!("n{n}-base-sparse").as_str()));
+    }
+    for s in &study.sweep.structures {
+        // ≥ 10 runs per cell, ≥ 5 at 40 storeys; the bootstrap PF up to 10 storeys; a shorter
+        // record from 20 storeys on.
+        let runs = s.runs.unwrap_or(study.sweep.runs);
+        assert!(runs >= if s.storeys >= 40 { 5 } else { 10 }, "{}", s.label);
+        let algs = s.algorithms.as_ref().unwrap_or(&study.sweep.algorithms);
+        assert_eq!(
+            algs.contains(&Algorithm::Bootstrap),
+            s.storeys <= 10,
+            "{}",
+            s.label
+        );
+        assert_eq!(s.duration.is_some(), s.storeys >= 20, "{}", s.label);
+        if s.label.contains("three") {
+            assert!(s.storeys >= 10);
+            assert_eq!(s.hysteretic.as_deref(), Some(&[1, 2, 3][..]));
+        }
+        if let Some(sensors) = &s.sensors {
+            let mut every_third: Vec<usize> = (3..=s.storeys).step_by(3).collect();
+            if every_third.last() != Some(&s.storeys) {
+                every_third.push(s.storeys);
+            }
+            assert_eq!(sensors, &every_third, "{}", s.label);
+        }
+    }
+    assert_eq!(study.sweep.particles, vec![500]);
+}
+
+#[test]
+fn small_study_end_to_end_and_resumed() {
+    let dir = temp_dir("e2e");
+    let config = write_study(&dir, SMALL);
+    let out = dir.join("out");
+    let opts = Options {
+        config,
+        out: out.clone(),
+        quick: false,
+        threads: 2,
+        shard: Shard::default(),
+        progress: false,
+        resume: false,
+    };
+    let cells = scaling::run(&opts).unwrap();
+    // n2: 3 algorithms, n4: 2, n4-sparse: 3 (not run by this build).
+    assert_eq!(cells.len(), 8);
+    let n2: Vec<_> = cells.iter().filter(|c| c.structure == "n2").collect();
+    assert!(n2
+        .iter()
+        .all(|c| c.runs == 2 && c.runs_planned == 2 && c.steps == 200));
+    let mpf = n2.iter().find(|c| c.algorithm == "mpf-ekf2").unwrap();
+    assert_eq!((mpf.sampled_dim, mpf.marginalised_dim), (3, 9));
+    assert!(mpf.us_per_particle_step > 0.0 && mpf.k_error_mean.is_finite());
+    assert!(cells
+        .iter()
+        .filter(|c| c.structure == "n4-sparse")
+        .all(|c| c.runs == 0));
+    for f in ["cost_vs_dimension.svg", "accuracy_vs_storeys.svg"] {
+        validate_svg(&out.join(f)).unwrap();
+    }
+    let csv = std::fs::read_to_string(out.join("cells.csv")).unwrap();
+    assert_eq!(csv.lines().count(), 1 + 8);
+    assert!(csv.starts_with(scaling::CSV_HEADER));
+    let report = std::fs::read_to_string(out.join("REPORT.md")).unwrap();
+    assert!(report.contains("## Beyond the paper: larger structures"));
+    assert!(report.contains("does no longer scale with the dimension of the problem"));
+    assert!(
+        report.contains("structure `n4-sparse`: sensors"),
+        "{report}"
+    );
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    assert_eq!(summary["cells"].as_array().unwrap().len(), 8);
+    // Resumed: every record is reused, the cells are the same but for the timings.
+    let again = scaling::run(&Options {
+        resume: true,
+        ..opts
+    })
+    .unwrap();
+    for (a, b) in cells.iter().zip(&again) {
+        assert_eq!(
+            (a.runs, a.failed, a.k_error_mean.to_bits()),
+            (b.runs, b.failed, b.k_error_mean.to_bits())
+        );
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}
