@@ -14,6 +14,7 @@
 pub mod calibration;
 pub mod checks;
 pub mod cli;
+pub mod field;
 pub mod figures;
 pub mod limits;
 pub mod metrics;
