@@ -107,14 +107,7 @@ fn structure_flags(args: &Args) -> Result<StructureSettings> {
 
 /// A flag's name for a key of the `[structure]` table.
 fn flag_name(key: &str) -> String {
-    let value = match key {
-        "storeys" => " N",
-        "hysteretic" => " S1,S2,...",
-        "masses" => " M1,...,MN",
-        "measurement" => " absolute|relative",
-        _ => "",
-    };
-    format!("--{key}{value}")
+    format!("--{key}")
 }
 
 fn parse_storvik(s: &str) -> Result<StorvikUpdate, String> {
