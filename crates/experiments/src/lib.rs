@@ -17,6 +17,7 @@ pub mod calibration;
 pub mod checks;
 pub mod cli;
 pub mod coverage;
+pub mod field;
 pub mod figures;
 pub mod limits;
 pub mod metrics;

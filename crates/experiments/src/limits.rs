@@ -20,7 +20,7 @@ use crate::pipeline::FilterSettings;
 /// - `window` (θ_val averaging, SPEC eq. 26) in `1..=MAX_SAMPLES`: 0 has no mean;
 /// - `noise_fraction` in `[MIN_FILTER_NOISE_FRACTION, MAX_FILTER_NOISE_FRACTION]`;
 /// - `ess_threshold` in `(0, 1]`;
-/// - `masses`: at most `MAX_STOREYS`, each finite and positive;
+/// - `structure.masses`: at most `MAX_STOREYS`, each finite and positive;
 /// - `fix`: finite values.
 pub fn check_filter_settings(s: &FilterSettings) -> Result<()> {
     check_count(s.particles, 1, MAX_PARTICLES).context("field `particles`")?;
@@ -31,7 +31,7 @@ pub fn check_filter_settings(s: &FilterSettings) -> Result<()> {
             bail!("field `ess_threshold`: {t} is not in (0, 1]");
         }
     }
-    if let Some(m) = &s.masses {
+    if let Some(m) = &s.structure.masses {
         check_count(m.len(), 1, MAX_STOREYS).context("field `masses`: number of storeys")?;
         if let Some((i, v)) = m
             .iter()
@@ -112,9 +112,9 @@ mod tests {
         s.ess_threshold = Some(0.0);
         assert!(err(&s).contains("`ess_threshold`"));
         let mut s = ok.clone();
-        s.masses = Some(vec![1.0, -1.0]);
+        s.structure.masses = Some(vec![1.0, -1.0]);
         assert!(err(&s).contains("mass 2"));
-        s.masses = Some(vec![1.0; MAX_STOREYS + 1]);
+        s.structure.masses = Some(vec![1.0; MAX_STOREYS + 1]);
         assert!(err(&s).contains("`masses`"));
         let mut s = ok.clone();
         s.fix.insert("k1".into(), 1e300);

@@ -22,10 +22,11 @@ use models::filtering::{
     RmsLevels,
 };
 use models::integrate::{simulate_adaptive, Tolerance};
-use models::sensors::{MeasurementKind, SensorLayout};
+use models::sensors::MeasurementKind;
 use models::structure::ShearChain;
 use serde::{Deserialize, Serialize};
 
+use crate::field::{resolve_for_run, StructureSettings};
 use crate::metrics::{relative_errors, ErrorSums, StateErrors};
 use crate::observe::{Recorder, TruthStates};
 use crate::record::{Fingerprint, Loop, RunRecord, Timing, Validation, Versions};
@@ -102,12 +103,12 @@ pub struct FilterSettings {
     pub marginal_prior: MarginalPrior,
     /// Noise fraction used to set R and Q from RMS values (SPEC §3: 0.1).
     pub noise_fraction: f64,
-    /// Which accelerations the data hold (relative, SPEC §2, or absolute).
-    pub measurement: MeasurementKind,
     /// Discretisation of the equations of motion inside the filters (SPEC §3: forward Euler).
     pub discretisation: Discretisation,
-    /// Storey masses; absent: the data set's structure, or unit masses for field data.
-    pub masses: Option<Vec<f64>>,
+    /// The building of field data (`[structure]`: storeys, hysteretic storeys, masses,
+    /// measurement kind); data with `dataset.json` carry their own (`field::resolve`).
+    #[serde(skip_serializing_if = "StructureSettings::is_empty")]
+    pub structure: StructureSettings,
     /// θ_val averages the posterior mean over the last `window` steps (SPEC eq. 26: 80).
     pub window: usize,
     /// Keep one trace step in `trace_every` (0: no trace).
@@ -130,9 +131,8 @@ impl Default for FilterSettings {
             prior: None,
             marginal_prior: MarginalPrior::MomentMatched,
             noise_fraction: 0.1,
-            measurement: MeasurementKind::Relative,
             discretisation: Discretisation::Euler,
-            masses: None,
+            structure: StructureSettings::default(),
             window: 80,
             trace_every: 10,
             validate: true,
@@ -160,11 +160,19 @@ fn rms_of(v: impl Iterator<Item = f64>) -> f64 {
 }
 
 /// RMS values that set Q and R (SPEC §3): from the data set's metadata and truth (clean signals)
-/// when present, otherwise estimated from the measured signals. `hysteretic` are the 0-based
-/// storeys of the hysteretic elements (one drift-velocity RMS each).
-fn rms_levels(data: &LoadedDataset, hysteretic: &[usize], nf: f64) -> RmsLevels {
+/// when present, otherwise estimated from the measured signals. `storeys` is N, `sensors` the
+/// 0-based storey of each channel, `hysteretic` the 0-based storeys of the hysteretic elements
+/// (one drift-velocity RMS each).
+fn rms_levels(
+    data: &LoadedDataset,
+    storeys: usize,
+    sensors: &[usize],
+    kind: MeasurementKind,
+    hysteretic: &[usize],
+    nf: f64,
+) -> RmsLevels {
     let k = data.len();
-    let n = data.channels;
+    let n = storeys;
     if let Some(meta) = &data.meta {
         // The drift velocity of element j is v_j − v_{j−1}: from the true states when present.
         let drift = hysteretic
@@ -186,16 +194,25 @@ fn rms_levels(data: &LoadedDataset, hysteretic: &[usize], nf: f64) -> RmsLevels 
     // Field data: a measured channel holds the clean signal plus noise of s.d. nf·RMS(clean),
     // so RMS(measured) = RMS(clean)·√(1 + nf²).
     let clean = (1.0 + nf * nf).sqrt();
-    let acc: Vec<f64> = (0..n)
-        .map(|j| rms_of((0..k).map(|i| data.y(i)[j])) / clean)
+    let m = sensors.len();
+    let acc: Vec<f64> = (0..m)
+        .map(|c| rms_of((0..k).map(|i| data.y(i)[c])) / clean)
         .collect();
     let ug = rms_of(data.ug_meas.iter().copied()) / clean;
-    // Velocities: trapezoidal integrals of the measured relative accelerations with their linear
-    // trend removed (the drift of integrated noise).
-    let velocity = |j: usize| -> Vec<f64> {
+    // Relative velocity of channel c: the trapezoidal integral of its relative acceleration
+    // (absolute minus ü_g for absolute data) with its linear trend removed (the drift of
+    // integrated noise).
+    let relative = |i: usize, c: usize| -> f64 {
+        let y = data.y(i)[c];
+        match kind {
+            MeasurementKind::Relative => y,
+            MeasurementKind::Absolute => y - data.ug_meas[i],
+        }
+    };
+    let velocity = |c: usize| -> Vec<f64> {
         let mut v = vec![0.0; k];
         for i in 1..k {
-            v[i] = v[i - 1] + 0.5 * data.dt * (data.y(i - 1)[j] + data.y(i)[j]);
+            v[i] = v[i - 1] + 0.5 * data.dt * (relative(i - 1, c) + relative(i, c));
         }
         let slope = v[k - 1] / (k.max(2) - 1) as f64;
         v.iter()
@@ -203,15 +220,24 @@ fn rms_levels(data: &LoadedDataset, hysteretic: &[usize], nf: f64) -> RmsLevels 
             .map(|(i, x)| x - slope * i as f64)
             .collect()
     };
+    let channel = |storey: usize| sensors.iter().position(|&s| s == storey);
     let drift = hysteretic
         .iter()
         .map(|&j| {
-            let vj = velocity(j);
-            if j == 0 {
-                rms_of(vj.into_iter())
-            } else {
-                let vm = velocity(j - 1);
-                rms_of(vj.iter().zip(&vm).map(|(a, b)| a - b))
+            match (channel(j), j.checked_sub(1).map(channel)) {
+                // The element's storey and the one below (or the ground) are measured.
+                (Some(c), None) => rms_of(velocity(c).into_iter()),
+                (Some(c), Some(Some(b))) => {
+                    let (vj, vb) = (velocity(c), velocity(b));
+                    rms_of(vj.iter().zip(&vb).map(|(a, b)| a - b))
+                }
+                // Otherwise the mean drift per storey below the nearest measured storey s
+                // (above j when there is one): RMS v_s / (s + 1). A scale only, for the
+                // hysteretic variable's process noise (q_r = 0.05·dt·RMS δv, SPEC §3).
+                _ => {
+                    let c = sensors.iter().position(|&s| s >= j).unwrap_or(m - 1);
+                    rms_of(velocity(c).into_iter()) / (sensors[c] + 1) as f64
+                }
             }
         })
         .collect();
@@ -222,39 +248,37 @@ fn rms_levels(data: &LoadedDataset, hysteretic: &[usize], nf: f64) -> RmsLevels 
     }
 }
 
-/// Builds the specification of a run's filter partitions: the structure (masses and hysteretic
-/// storeys from the data set's structure; for field data the settings' masses or unit masses and
-/// a hysteretic element between the ground and storey 1), every storey measured, noise levels
+/// Builds the specification of a run's filter partitions: the structure of the data
+/// ([`resolve_for_run`]: `dataset.json`, else the true chain, else the settings' `[structure]`
+/// for field data — refused when incomplete), the measured storeys of the header, noise levels
 /// from RMS values (SPEC §3), the prior and the discretisation.
 pub fn chain_spec(
     data: &LoadedDataset,
     chain: Option<&ShearChain>,
     s: &FilterSettings,
 ) -> Result<ChainSpec> {
-    let n = data.channels;
-    let masses = match (&s.masses, chain) {
-        (Some(m), _) => m.clone(),
-        (None, Some(c)) => c.masses().to_vec(),
-        (None, None) => vec![1.0; n],
-    };
-    if masses.len() != n {
-        bail!("{} masses given for {n} measured storeys", masses.len());
+    let structure = resolve_for_run(data, chain, &s.structure)?;
+    let n = structure.storeys;
+    let hysteretic = structure.hysteretic_zero_based();
+    let sensors = structure.sensor_layout()?;
+    if sensors.len() != data.channels {
+        bail!(
+            "{} sensors in the structure, {} channels in the data",
+            sensors.len(),
+            data.channels
+        );
     }
-    let hysteretic: Vec<usize> = match chain {
-        Some(c) => c.bouc_wen().iter().map(|b| b.storey).collect(),
-        None => vec![0],
-    };
-    // The data set says what its accelerometers measure; the settings apply to field data.
-    let kind = match data.meta.as_ref().map(|m| m.config.measurement) {
-        Some(models::dataset::MeasurementKind::Absolute) => MeasurementKind::Absolute,
-        Some(models::dataset::MeasurementKind::Relative) => MeasurementKind::Relative,
-        None => s.measurement,
-    };
-    let sensors = SensorLayout::all(n, kind)?;
-    let rms = rms_levels(data, &hysteretic, s.noise_fraction);
+    let rms = rms_levels(
+        data,
+        n,
+        sensors.storeys(),
+        sensors.kind(),
+        &hysteretic,
+        s.noise_fraction,
+    );
     let mut spec = ChainSpec::from_rms(
         data.dt,
-        masses,
+        structure.masses,
         hysteretic.clone(),
         sensors,
         data.ug_meas.clone(),

@@ -65,8 +65,10 @@ fn study_seeds() -> Vec<Vec<u8>> {
 fn filter_seeds() -> Vec<Vec<u8>> {
     let defaults = toml::to_string(&FilterSettings::default()).unwrap();
     let custom = "particles = 300\nresampling = \"stratified\"\ness_threshold = 0.5\n\
-                  noise_fraction = 0.1\nwindow = 80\nmasses = [1.0, 1.0, 1.0]\n\
-                  trace_every = 10\nvalidate = false\nloop_every = 0\n\n[fix]\nk1 = 8.0\nn = 2.0\n";
+                  noise_fraction = 0.1\nwindow = 80\n\
+                  trace_every = 10\nvalidate = false\nloop_every = 0\n\n[fix]\nk1 = 8.0\nn = 2.0\n\n\
+                  [structure]\nstoreys = 3\nhysteretic = [1]\nmasses = [1.0, 1.0, 1.0]\n\
+                  measurement = \"absolute\"\n";
     vec![defaults.into_bytes(), custom.as_bytes().to_vec()]
 }
 

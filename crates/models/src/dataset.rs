@@ -9,21 +9,26 @@
 //! (the filters use `k = 1..K`).
 //!
 //! A data-set directory holds
-//! - `measured.csv`: header `t,ug,a1,...,aN` (measured excitation and accelerations);
+//! - `measured.csv`: header `t,ug,a<s>...` (measured excitation and accelerations), one column
+//!   `a<s>` per measured storey `s` (1-based, increasing: `t,ug,a1,a3,a5`); the header is what
+//!   says which storeys are measured, with or without `dataset.json`;
 //! - `truth.csv` (optional): header `t,ug,x1..xN,v1..vN,r<s>...` with the clean excitation and
-//!   the true states, one `r` column per Bouc–Wen element (1-based storey `s`);
-//! - `dataset.json` (optional): [`DatasetMeta`] (config, true parameters, noise levels, RMS).
+//!   the true states of every storey, one `r` column per Bouc–Wen element (1-based storey `s`);
+//! - `dataset.json` (optional): [`DatasetMeta`] (config, the structure as a
+//!   [`StructureDescription`], true parameters, noise levels, RMS).
 //!
 //! Numbers are written as the shortest decimal that parses back to the same bits (Rust's `{}`
 //! formatting of `f64`, or `{:e}` outside `[1e-5, 1e16)` so that no number takes more than 24
 //! characters), so a directory round-trips bit for bit. Every written value is within
 //! `±MAX_ABS_VALUE` ([`limits`]), so every data set written loads back.
 
+use crate::description::{check_storey_list, DescriptionError, StructureDescription};
 use crate::excitation::{self, rms, GroundMotion, KanaiTajimi};
 use crate::integrate::{simulate_rk4, Trajectory};
 use crate::limits;
 use crate::preset::{Preset, PresetError, HARMONIC_DURATION};
 use crate::readers::{self, parse_field, uniform_step, ReadError, Units};
+use crate::sensors::SensorLayout;
 use crate::structure::ShearChain;
 use core_filters::rng::{purpose, stream};
 use rand_distr::{Distribution, StandardNormal};
@@ -37,6 +42,7 @@ use thiserror::Error;
 mod integrity;
 pub mod replace;
 
+pub use crate::sensors::MeasurementKind;
 pub use integrity::FileDigest;
 use integrity::MetaFile;
 
@@ -69,16 +75,6 @@ impl ExcitationSource {
     }
 }
 
-/// What the accelerometers measure (SPEC §2).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum MeasurementKind {
-    /// Relative accelerations ẍ (paper eq. 29b, `h = −ü_g`).
-    Relative,
-    /// Absolute accelerations ẍ + ü_g.
-    Absolute,
-}
-
 /// Everything that defines a data set.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct DatasetConfig {
@@ -86,6 +82,13 @@ pub struct DatasetConfig {
     pub preset: String,
     /// Storey count override (same per-storey values).
     pub storeys: Option<usize>,
+    /// 1-based storeys with a Bouc–Wen element (each with the preset element's β, γ, n);
+    /// `None`: the preset's (storey 1).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub hysteretic: Option<Vec<usize>>,
+    /// 1-based measured storeys; `None`: every storey.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sensors: Option<Vec<usize>>,
     pub excitation: ExcitationSource,
     /// Amplitude scale applied to the excitation.
     pub scale: f64,
@@ -121,6 +124,8 @@ impl DatasetConfig {
         Ok(Self {
             preset: preset.to_string(),
             storeys: None,
+            hysteretic: None,
+            sensors: None,
             excitation,
             scale,
             duration,
@@ -133,10 +138,52 @@ impl DatasetConfig {
     }
 }
 
+impl DatasetConfig {
+    /// The preset with the storey count and hysteretic storeys of this config.
+    fn preset_structure(&self) -> Result<Preset, DatasetError> {
+        let mut p = Preset::from_name(&self.preset, self.storeys)?;
+        if let Some(h) = &self.hysteretic {
+            check_storey_list("hysteretic", h, p.chain.storeys(), true).map_err(described)?;
+            p.set_hysteretic(h)?;
+        }
+        Ok(p)
+    }
+
+    /// The true structure this config generates (SPEC §1): the preset's values for its storey
+    /// count, Bouc–Wen elements at the hysteretic storeys.
+    pub fn chain(&self) -> Result<ShearChain, DatasetError> {
+        Ok(self.preset_structure()?.chain)
+    }
+
+    /// The structure as `dataset.json` records it: masses, hysteretic storeys, measured storeys
+    /// and measurement kind.
+    pub fn description(&self) -> Result<StructureDescription, DatasetError> {
+        let chain = self.chain()?;
+        let n = chain.storeys();
+        let d = StructureDescription {
+            storeys: n,
+            masses: chain.masses().to_vec(),
+            hysteretic: chain.bouc_wen().iter().map(|b| b.storey + 1).collect(),
+            sensors: self.sensors.clone().unwrap_or_else(|| (1..=n).collect()),
+            measurement: self.measurement,
+        };
+        d.validate().map_err(described)?;
+        Ok(d)
+    }
+}
+
+/// A description error as a config error naming the same field.
+fn described(e: DescriptionError) -> DatasetError {
+    DatasetError::InvalidConfig {
+        field: e.field,
+        message: e.message,
+    }
+}
+
 /// RMS values of the clean signals over the whole record (SPEC §3 uses them for R and Q).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct RmsValues {
-    /// Per measured acceleration channel (relative or absolute as measured).
+    /// Per measured acceleration channel, in header order (relative or absolute as measured).
     pub acc: Vec<f64>,
     /// Clean ground acceleration.
     pub ug: f64,
@@ -164,7 +211,12 @@ pub struct DatasetMeta {
     pub config: DatasetConfig,
     pub dt: f64,
     pub samples: usize,
+    /// Number of storeys N (measured or not).
     pub storeys: usize,
+    /// The structure: masses, hysteretic and measured storeys, measurement kind (absent in data
+    /// sets written before it was recorded: then the preset's, every storey measured).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub structure: Option<StructureDescription>,
     /// 0-based element indices of the Bouc–Wen elements.
     pub bouc_wen_storeys: Vec<usize>,
     pub theta_names: Vec<String>,
@@ -179,18 +231,39 @@ pub struct DatasetMeta {
     pub run: u64,
 }
 
+impl DatasetMeta {
+    /// The structure of the data set: as recorded, or for data sets written before it was
+    /// recorded, the one their config generates (every storey measured).
+    pub fn structure(&self) -> Result<StructureDescription, DatasetError> {
+        match &self.structure {
+            Some(d) => Ok(d.clone()),
+            None => self.config.description(),
+        }
+    }
+
+    /// The true structure with θ_true (for the validation run).
+    pub fn true_chain(&self) -> Result<ShearChain, DatasetError> {
+        self.config
+            .chain()?
+            .with_theta(&self.theta_true)
+            .map_err(|e| invalid("theta_true", e.to_string()))
+    }
+}
+
 /// A generated data set.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Dataset {
     pub config: DatasetConfig,
     pub chain: ShearChain,
+    /// The measured storeys and what they measure.
+    pub sensors: SensorLayout,
     pub dt: f64,
     pub t: Vec<f64>,
     pub ug_clean: Vec<f64>,
     pub ug_meas: Vec<f64>,
-    /// Clean accelerations, row-major `K × N`.
+    /// Clean accelerations, row-major `K × channels` (one channel per measured storey).
     pub y_clean: Vec<f64>,
-    /// Measured accelerations, row-major `K × N`.
+    /// Measured accelerations, row-major `K × channels`.
     pub y_meas: Vec<f64>,
     /// True states at every sample (RK4, clean excitation).
     pub truth: Trajectory,
@@ -350,6 +423,11 @@ pub fn check_config(config: &DatasetConfig) -> Result<(), DatasetError> {
     if let Some(n) = config.storeys {
         limits::check_storeys(n).map_err(|e| invalid("storeys", e.to_string()))?;
     }
+    if config.hysteretic.is_some() || config.sensors.is_some() {
+        // The storey lists against the structure they describe (hysteretic storey > N, sensor
+        // 0, duplicates, no sensor), each error naming its field.
+        config.description()?;
+    }
     Ok(())
 }
 
@@ -370,13 +448,14 @@ fn check_kanai_tajimi(p: &KanaiTajimi) -> Result<(), DatasetError> {
 /// Generates the data set of `config` (SPEC §2).
 pub fn generate(config: &DatasetConfig) -> Result<Dataset, DatasetError> {
     check_config(config)?;
-    let preset = Preset::from_name(&config.preset, config.storeys)?;
-    let chain = preset.chain;
+    let chain = config.chain()?;
+    let sensors = config.description()?.sensor_layout().map_err(described)?;
     let gm = ground_motion(config)?;
     let dt = config.dt;
     let ug_clean = gm.acc;
     let kk = ug_clean.len();
     let n = chain.storeys();
+    let m = sensors.len();
     // The truth table (t, ug and the states) is the widest one allocated.
     limits::check_table(kk, chain.dim() + 2).map_err(|e| {
         invalid(
@@ -407,16 +486,21 @@ pub fn generate(config: &DatasetConfig) -> Result<Dataset, DatasetError> {
     {
         return Err(DatasetError::NonFinite { t: k as f64 * dt });
     }
-    let mut y_clean = vec![0.0; kk * n];
-    for (k, row) in y_clean.chunks_exact_mut(n).enumerate() {
-        chain.relative_accelerations(truth.state(k), ug_clean[k], row);
-        if config.measurement == MeasurementKind::Absolute {
-            row.iter_mut().for_each(|a| *a += ug_clean[k]);
+    // Every storey's acceleration, then the measured storeys' channels.
+    let mut all = vec![0.0; n];
+    let mut y_clean = vec![0.0; kk * m];
+    for (k, row) in y_clean.chunks_exact_mut(m).enumerate() {
+        chain.relative_accelerations(truth.state(k), ug_clean[k], &mut all);
+        for (y, &s) in row.iter_mut().zip(sensors.storeys()) {
+            *y = all[s];
+            if config.measurement == MeasurementKind::Absolute {
+                *y += ug_clean[k];
+            }
         }
     }
     let first_beyond = truth
         .rows()
-        .zip(y_clean.chunks_exact(n))
+        .zip(y_clean.chunks_exact(m))
         .enumerate()
         .find_map(|(k, (x, y))| beyond(x).or_else(|| beyond(y)).map(|v| (k, v)));
     if let Some((k, value)) = first_beyond {
@@ -435,7 +519,7 @@ pub fn generate(config: &DatasetConfig) -> Result<Dataset, DatasetError> {
     };
     let d = chain.dim();
     let rms_values = RmsValues {
-        acc: (0..n).map(|j| column_rms(&y_clean, n, j)).collect(),
+        acc: (0..m).map(|j| column_rms(&y_clean, m, j)).collect(),
         ug: rms(&ug_clean),
         vel: (0..n)
             .map(|j| column_rms(truth.as_flat(), d, n + j))
@@ -453,7 +537,7 @@ pub fn generate(config: &DatasetConfig) -> Result<Dataset, DatasetError> {
     };
     let mut rng = stream(config.seed, config.run, purpose::MEASUREMENT_NOISE);
     let mut y_meas = y_clean.clone();
-    for row in y_meas.chunks_exact_mut(n) {
+    for row in y_meas.chunks_exact_mut(m) {
         for (y, sd) in row.iter_mut().zip(&noise.acc_sd) {
             let z: f64 = StandardNormal.sample(&mut rng);
             *y += sd * z;
@@ -480,6 +564,7 @@ pub fn generate(config: &DatasetConfig) -> Result<Dataset, DatasetError> {
         state_names: chain.state_names(),
         truth,
         chain,
+        sensors,
         rms: rms_values,
         noise,
     })
@@ -495,9 +580,9 @@ impl Dataset {
         self.t.is_empty()
     }
 
-    /// Number of acceleration channels (storeys).
+    /// Number of acceleration channels (measured storeys).
     pub fn channels(&self) -> usize {
-        self.chain.storeys()
+        self.sensors.len()
     }
 
     /// Measured accelerations at sample `k`.
@@ -522,7 +607,14 @@ impl Dataset {
             config: self.config.clone(),
             dt: self.dt,
             samples: self.len(),
-            storeys: self.channels(),
+            storeys: self.chain.storeys(),
+            structure: Some(StructureDescription {
+                storeys: self.chain.storeys(),
+                masses: self.chain.masses().to_vec(),
+                hysteretic: self.chain.bouc_wen().iter().map(|b| b.storey + 1).collect(),
+                sensors: self.sensors.one_based(),
+                measurement: self.sensors.kind(),
+            }),
             bouc_wen_storeys: self.chain.bouc_wen().iter().map(|b| b.storey).collect(),
             theta_names: self.theta_names.clone(),
             theta_true: self.theta_true.clone(),
@@ -546,6 +638,7 @@ impl Dataset {
             ug_meas: self.ug_meas.clone(),
             y_meas: self.y_meas.clone(),
             channels: self.channels(),
+            sensors: self.sensors.one_based(),
             truth: Some(LoadedTruth {
                 ug_clean: self.ug_clean.clone(),
                 states: self.truth.clone(),
@@ -557,10 +650,9 @@ impl Dataset {
 
     /// The text of `measured.csv`.
     fn measured_csv(&self) -> String {
-        let n = self.channels();
         let mut s = String::from("t,ug");
-        for j in 1..=n {
-            write!(s, ",a{j}").unwrap();
+        for name in self.sensors.channel_names() {
+            write!(s, ",{name}").unwrap();
         }
         s.push('\n');
         for k in 0..self.len() {
@@ -676,6 +768,8 @@ pub struct LoadedDataset {
     /// Row-major `K × channels`.
     pub y_meas: Vec<f64>,
     pub channels: usize,
+    /// 1-based measured storey of each channel, increasing (from the header of `measured.csv`).
+    pub sensors: Vec<usize>,
     pub truth: Option<LoadedTruth>,
     pub meta: Option<DatasetMeta>,
 }
@@ -912,21 +1006,8 @@ pub fn load_dir(dir: &Path) -> Result<LoadedDataset, DatasetError> {
     let mtext = utf8(&mpath, mbytes)?;
     let m = parse_table(&mpath, &mtext, 2 + limits::MAX_STOREYS)?;
     drop(mtext);
-    let channels = m.names.len().saturating_sub(2);
-    let expected: Vec<String> = ["t".to_string(), "ug".to_string()]
-        .into_iter()
-        .chain((1..=channels).map(|j| format!("a{j}")))
-        .collect();
-    if channels == 0 || m.names != expected {
-        return Err(header_error(
-            &mpath,
-            "header",
-            format!(
-                "expected `t,ug,a1,...,aN` (N ≥ 1), found `{}`",
-                m.names.join(",")
-            ),
-        ));
-    }
+    let sensors = measured_storeys(&mpath, &m.names)?;
+    let channels = sensors.len();
     let t = m.column(0);
     let times: Vec<(usize, f64)> = m.lines.iter().copied().zip(t.iter().copied()).collect();
     let dt_grid = uniform_step(&mpath, &times)?;
@@ -940,7 +1021,7 @@ pub fn load_dir(dir: &Path) -> Result<LoadedDataset, DatasetError> {
 
     let meta = match meta_file {
         Some((mf, text)) => {
-            integrity::check_meta(&jpath, &text, &mf.meta, t.len(), channels)?;
+            integrity::check_meta(&jpath, &text, &mf.meta, t.len(), &mpath, &sensors)?;
             Some(mf.meta)
         }
         None => None,
@@ -966,9 +1047,10 @@ pub fn load_dir(dir: &Path) -> Result<LoadedDataset, DatasetError> {
         Some(tbytes) => {
             let ttext = utf8(&tpath, tbytes)?;
             // t, ug, x, v and at most one r per storey.
-            let tr = parse_table(&tpath, &ttext, 2 + 3 * channels)?;
+            let tr = parse_table(&tpath, &ttext, 2 + 3 * limits::MAX_STOREYS)?;
             drop(ttext);
-            Some(check_truth(&tpath, tr, &t, channels, dt)?)
+            let storeys = meta.as_ref().map(|m| m.storeys);
+            Some(check_truth(&tpath, tr, &t, &sensors, storeys, dt)?)
         }
         None => None,
     };
@@ -978,21 +1060,101 @@ pub fn load_dir(dir: &Path) -> Result<LoadedDataset, DatasetError> {
         ug_meas,
         y_meas,
         channels,
+        sensors,
         truth,
         meta,
     })
 }
 
+/// The 1-based measured storeys named by the header of `measured.csv`: `t,ug,a<s>...` with at
+/// least one channel, each `a<s>` spelled with its storey number `s ≥ 1`, increasing. Errors
+/// name the file and the column.
+fn measured_storeys(path: &Path, names: &[String]) -> Result<Vec<usize>, DatasetError> {
+    let rule = "the header is `t,ug` then one column `a<s>` per measured storey s (1-based, \
+                increasing), e.g. `t,ug,a1,a3,a5`";
+    for (j, want) in ["t", "ug"].into_iter().enumerate() {
+        if names.get(j).map(String::as_str) != Some(want) {
+            let found = names.get(j).map_or("", String::as_str);
+            return Err(header_error(
+                path,
+                if found.is_empty() { want } else { found },
+                format!("column {} must be `{want}`: {rule}", j + 1),
+            ));
+        }
+    }
+    if names.len() < 3 {
+        return Err(header_error(
+            path,
+            "header",
+            format!("no acceleration column: {rule}"),
+        ));
+    }
+    let mut storeys: Vec<usize> = Vec::with_capacity(names.len() - 2);
+    for name in &names[2..] {
+        let s = name
+            .strip_prefix('a')
+            .and_then(|d| d.parse::<usize>().ok())
+            .filter(|s| format!("a{s}") == *name)
+            .ok_or_else(|| header_error(path, name, format!("not a channel name: {rule}")))?;
+        if s == 0 {
+            return Err(header_error(
+                path,
+                name,
+                "storey 0 does not exist (storeys are numbered from 1)".to_string(),
+            ));
+        }
+        if storeys.contains(&s) {
+            return Err(header_error(
+                path,
+                name,
+                format!("storey {s} is measured twice"),
+            ));
+        }
+        if let Some(&before) = storeys.last() {
+            if s < before {
+                return Err(header_error(
+                    path,
+                    name,
+                    format!("columns must be in increasing storey order (a{s} after a{before})"),
+                ));
+            }
+        }
+        storeys.push(s);
+    }
+    Ok(storeys)
+}
+
 /// Checks the header and the times of `truth.csv` against `measured.csv`.
+///
+/// `truth.csv` holds every storey: N is `storeys` (from `dataset.json`) or, for data without
+/// metadata, the number of `x` columns; every measured storey must be one of them.
 fn check_truth(
     tpath: &Path,
     tr: Table,
     t: &[f64],
-    channels: usize,
+    sensors: &[usize],
+    storeys: Option<usize>,
     dt: f64,
 ) -> Result<LoadedTruth, DatasetError> {
     let w = tr.names.len();
-    if w < 2 + 2 * channels || tr.names[0] != "t" || tr.names[1] != "ug" {
+    let channels = storeys.unwrap_or_else(|| {
+        tr.names
+            .iter()
+            .skip(2)
+            .take_while(|n| n.starts_with('x'))
+            .count()
+    });
+    if let Some(&top) = sensors.iter().find(|&&s| s > channels) {
+        return Err(header_error(
+            tpath,
+            "header",
+            format!(
+                "{channels} storeys, but {MEASURED} has a column a{top} (storey {top}): \
+                 truth.csv must hold every storey"
+            ),
+        ));
+    }
+    if channels == 0 || w < 2 + 2 * channels || tr.names[0] != "t" || tr.names[1] != "ug" {
         return Err(header_error(
             tpath,
             "header",

@@ -9,11 +9,13 @@
 //! - [`excitation`] and [`readers`]: ground motions (El Centro, Kanai–Tajimi, harmonic, user
 //!   records in CSV and PEER `.AT2`); [`ground_motions`]: vendored PEER NGA records by name;
 //! - [`limits`]: the limits on every size and value that comes from a user;
-//! - [`dataset`]: truth and noisy measurements from named random streams;
+//! - [`dataset`]: truth and noisy measurements from named random streams; [`description`]: a
+//!   building as a user describes it (storeys, masses, hysteretic storeys, sensors);
 //! - [`priors`] and [`partition`]: the priors of SPEC §3 and the three filter partitions
 //!   (augmented state, MLN-RBPF/Storvik, MPF-EKF2) implementing the `core-filters` traits.
 
 pub mod dataset;
+pub mod description;
 pub mod excitation;
 pub mod filtering;
 pub mod ground_motions;

@@ -7,7 +7,7 @@
 //!   element at storey 1, El Centro × 3.0 ([`Preset::with_storeys`]).
 
 use crate::excitation::{self, GroundMotion, DEFAULT_DT, EL_CENTRO_SCALE};
-use crate::structure::{BoucWen, ShearChain};
+use crate::structure::{BoucWen, ShearChain, StructureError};
 use thiserror::Error;
 
 /// Amplitude (m/s²), frequency (rad/s) and duration (s) of the harmonic preset (SPEC §2).
@@ -54,13 +54,21 @@ pub struct Preset {
 }
 
 /// Unknown preset name or impossible storey count.
-#[derive(Debug, Clone, PartialEq, Eq, Error)]
+#[derive(Debug, Clone, PartialEq, Error)]
 pub enum PresetError {
     #[error("unknown preset `{name}`; valid presets: {}", Preset::NAMES.join(", "))]
     Unknown { name: String },
     #[error("a shear chain needs at least one storey, got {storeys}")]
     NoStorey { storeys: usize },
+    #[error("hysteretic: {0}")]
+    Structure(#[from] StructureError),
 }
+
+/// The Bouc–Wen element of every preset (SPEC §1): β = 2, γ = 1, n = 2. An element placed at
+/// another storey ([`Preset::set_hysteretic`]) gets the same parameters.
+pub const BOUC_WEN_BETA: f64 = 2.0;
+pub const BOUC_WEN_GAMMA: f64 = 1.0;
+pub const BOUC_WEN_N: f64 = 2.0;
 
 impl Preset {
     /// Names accepted by [`Preset::from_name`].
@@ -78,9 +86,9 @@ impl Preset {
             vec![0.25; storeys],
             vec![BoucWen {
                 storey: 0,
-                beta: 2.0,
-                gamma: 1.0,
-                n: 2.0,
+                beta: BOUC_WEN_BETA,
+                gamma: BOUC_WEN_GAMMA,
+                n: BOUC_WEN_N,
             }],
         )
         .expect("the preset values are valid"))
@@ -142,6 +150,29 @@ impl Preset {
         Ok(p)
     }
 
+    /// Moves the Bouc–Wen elements to the 1-based `storeys` (increasing; empty: a linear chain),
+    /// each with the preset element's β, γ, n (SPEC §1). Masses, k and c are unchanged. The
+    /// same law everywhere is the neutral choice: an element higher up sees smaller drifts and
+    /// may stay nearly elastic, which `sysid simulate` shows as `max|r|/sat` per element.
+    pub fn set_hysteretic(&mut self, storeys: &[usize]) -> Result<(), PresetError> {
+        let elements = storeys
+            .iter()
+            .map(|&s| BoucWen {
+                storey: s.wrapping_sub(1),
+                beta: BOUC_WEN_BETA,
+                gamma: BOUC_WEN_GAMMA,
+                n: BOUC_WEN_N,
+            })
+            .collect();
+        self.chain = ShearChain::new(
+            self.chain.masses().to_vec(),
+            self.chain.stiffness().to_vec(),
+            self.chain.damping().to_vec(),
+            elements,
+        )?;
+        Ok(())
+    }
+
     /// The preset's default excitation sampled at its `dt`.
     pub fn ground_motion(&self) -> GroundMotion {
         self.excitation.ground_motion(self.dt)
@@ -173,5 +204,19 @@ mod tests {
             assert!(err.contains(n), "{err}");
         }
         assert!(Preset::from_name("shear-chain", Some(0)).is_err());
+    }
+
+    #[test]
+    fn hysteretic_elements_move_with_the_preset_law() {
+        let mut p = Preset::from_name("shear-chain", Some(10)).unwrap();
+        p.set_hysteretic(&[1, 6]).unwrap();
+        let bw = p.chain.bouc_wen();
+        assert_eq!(bw.len(), 2);
+        assert_eq!((bw[0].storey, bw[1].storey), (0, 5));
+        assert_eq!((bw[1].beta, bw[1].gamma, bw[1].n), (2.0, 1.0, 2.0));
+        assert_eq!(p.chain.theta().len(), 2 * 10 + 6);
+        assert!(p.set_hysteretic(&[11]).is_err());
+        p.set_hysteretic(&[]).unwrap();
+        assert!(p.chain.bouc_wen().is_empty());
     }
 }

@@ -17,6 +17,36 @@ pub enum MeasurementKind {
     /// Absolute accelerations ẍ_j + ü_g (h has no ü_g term).
     Absolute,
 }
+
+impl MeasurementKind {
+    /// The name users write (`relative`, `absolute`).
+    pub fn name(self) -> &'static str {
+        match self {
+            MeasurementKind::Relative => "relative",
+            MeasurementKind::Absolute => "absolute",
+        }
+    }
+}
+
+impl std::fmt::Display for MeasurementKind {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl std::str::FromStr for MeasurementKind {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "relative" => Ok(MeasurementKind::Relative),
+            "absolute" => Ok(MeasurementKind::Absolute),
+            _ => Err(format!(
+                "unknown measurement kind `{s}` (expected absolute or relative)"
+            )),
+        }
+    }
+}
+
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
 

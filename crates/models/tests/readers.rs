@@ -197,8 +197,25 @@ fn dataset_loader_rejects_malformed_directories() {
     assert!(e.to_string().contains("measured.csv"), "{e}");
     let m = write(&d, "measured.csv", "t,ug,a1\n0,0,0\n0.005,1,abc\n");
     assert_names(&load_dir(&d).unwrap_err().to_string(), &m, 3, "a1");
-    let m = write(&d, "measured.csv", "t,ug,a2\n0,0,0\n0.005,1,2\n");
+    // The header names the measured storeys: `a<s>`, s ≥ 1, once each, increasing.
+    for (header, column) in [
+        ("t,ug,a0", "a0"),
+        ("t,ug,a3,a3", "a3"),
+        ("t,ug,a3,a1", "a1"),
+        ("t,ug,a01", "a01"),
+        ("t,ug,x1", "x1"),
+        ("t,u,a1", "u"),
+    ] {
+        let cols = header.split(',').count();
+        let row = |t: &str| format!("{t}{}", ",0".repeat(cols - 1));
+        let text = format!("{header}\n{}\n{}\n", row("0"), row("0.005"));
+        let m = write(&d, "measured.csv", &text);
+        assert_names(&load_dir(&d).unwrap_err().to_string(), &m, 1, column);
+    }
+    let m = write(&d, "measured.csv", "t,ug\n0,0\n0.005,1\n");
     assert_names(&load_dir(&d).unwrap_err().to_string(), &m, 1, "header");
+    write(&d, "measured.csv", "t,ug,a2,a5\n0,0,0,0\n0.005,1,2,3\n");
+    assert_eq!(load_dir(&d).unwrap().sensors, [2, 5]);
     let m = write(&d, "measured.csv", "t,ug,a1\n0,0,0\n0.005,1\n");
     assert!(load_dir(&d)
         .unwrap_err()

@@ -6,10 +6,12 @@ use std::path::{Path, PathBuf};
 use anyhow::{bail, Context, Result};
 use core_filters::resampling::Scheme;
 use core_filters::smc::storvik::StorvikUpdate;
-use models::dataset::load_dir;
-use models::preset::Preset;
+use models::dataset::{load_dir, MEASURED, META};
+use models::sensors::MeasurementKind;
 
 use crate::checks;
+use crate::cli::simulate::parse_storeys;
+use crate::field::{self, StructureSettings};
 use crate::pipeline::{identify, Algorithm, FilterSettings, RunInput};
 use crate::record::RunRecord;
 use crate::sweep::write_atomic;
@@ -59,6 +61,53 @@ pub struct Args {
     /// Experiment name written into the record.
     #[arg(long, default_value = "cli")]
     pub experiment: String,
+    /// Field data (no dataset.json): number of storeys N.
+    #[arg(long)]
+    pub storeys: Option<usize>,
+    /// Field data: 1-based storeys with a Bouc–Wen element, e.g. `1,4`, or `none`.
+    #[arg(long)]
+    pub hysteretic: Option<String>,
+    /// Field data: storey masses `m1,...,mN`, or one value for every storey.
+    #[arg(long)]
+    pub masses: Option<String>,
+    /// Field data: what the accelerometers record, absolute (ẍ + ü_g, real accelerometers) or
+    /// relative (ẍ).
+    #[arg(long)]
+    pub measurement: Option<MeasurementKind>,
+}
+
+/// The structure flags as a `[structure]` table; errors name the flag.
+fn structure_flags(args: &Args) -> Result<StructureSettings> {
+    let masses = match &args.masses {
+        Some(m) => Some(
+            m.split(',')
+                .map(|part| {
+                    let part = part.trim();
+                    part.parse::<f64>()
+                        .ok()
+                        .filter(|v| v.is_finite() && *v > 0.0)
+                        .with_context(|| {
+                            format!("--masses: `{part}` is not a positive mass (a comma list m1,...,mN, or one value)")
+                        })
+                })
+                .collect::<Result<Vec<f64>>>()?,
+        ),
+        None => None,
+    };
+    Ok(StructureSettings {
+        storeys: args.storeys,
+        hysteretic: match &args.hysteretic {
+            Some(h) => Some(parse_storeys("--hysteretic", h, true)?),
+            None => None,
+        },
+        masses,
+        measurement: args.measurement,
+    })
+}
+
+/// A flag's name for a key of the `[structure]` table.
+fn flag_name(key: &str) -> String {
+    format!("--{key}")
 }
 
 fn parse_storvik(s: &str) -> Result<StorvikUpdate, String> {
@@ -93,12 +142,7 @@ pub fn parse_fix(s: &str) -> Result<BTreeMap<String, f64>> {
 /// Runs `sysid filter`.
 pub fn run(args: Args) -> Result<()> {
     let mut settings = match &args.config {
-        Some(path) => {
-            let text = std::fs::read_to_string(path)
-                .with_context(|| format!("reading config {}", path.display()))?;
-            toml::from_str::<FilterSettings>(&text)
-                .with_context(|| format!("parsing config {}", path.display()))?
-        }
+        Some(path) => crate::limits::load_filter_settings(path)?,
         None => FilterSettings::default(),
     };
     if let Some(p) = args.particles {
@@ -119,15 +163,34 @@ pub fn run(args: Args) -> Result<()> {
     if let Some(f) = &args.fix {
         settings.fix.extend(parse_fix(f)?);
     }
+    let flags = structure_flags(&args)?;
     let data = load_dir(&args.data)
         .with_context(|| format!("loading data set {}", args.data.display()))?;
+    let measured = args.data.join(MEASURED);
+    let config_name = args
+        .config
+        .as_ref()
+        .map_or_else(String::new, |p| p.display().to_string());
+    let table_name = |key: &str| format!("[structure] `{key}` in {config_name}");
+    let both_name = |key: &str| format!("{} (or {})", flag_name(key), field::table_key(key));
+    if data.meta.is_some() {
+        // Simulated data carry their structure: a stated key must agree with it.
+        field::resolve(&data, None, &flags, &measured, &flag_name)?;
+        field::resolve(&data, None, &settings.structure, &measured, &table_name)?;
+        settings.structure = StructureSettings::default();
+    } else {
+        // Field data: flags over the config table; refused by name when incomplete.
+        settings.structure.overlay(&flags);
+        let d = field::resolve(&data, None, &settings.structure, &measured, &both_name)?;
+        eprintln!(
+            "field data: {} storeys, masses {:?}, hysteretic storeys {:?}, {} accelerations at storeys {:?} (no {META})",
+            d.storeys, d.masses, d.hysteretic, d.measurement, d.sensors
+        );
+    }
     // The true structure, for the validation run, when the data set says what it is.
     let chain = match &data.meta {
         Some(meta) => Some(
-            Preset::from_name(&meta.config.preset, meta.config.storeys)
-                .context("rebuilding the data set's structure")?
-                .chain
-                .with_theta(&meta.theta_true)
+            meta.true_chain()
                 .context("rebuilding the data set's structure")?,
         ),
         None => None,

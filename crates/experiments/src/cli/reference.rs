@@ -8,7 +8,6 @@ use anyhow::{bail, Context, Result};
 use core_filters::pmmh::PmmhConfig;
 use core_filters::rng::stream;
 use models::dataset::load_dir;
-use models::preset::Preset;
 use serde::{Deserialize, Serialize};
 
 use crate::pipeline::{chain_spec, Algorithm, FilterSettings};
@@ -79,10 +78,7 @@ pub fn run(args: Args) -> Result<()> {
         .with_context(|| format!("loading data set {}", args.data.display()))?;
     let chain = match &data.meta {
         Some(meta) => Some(
-            Preset::from_name(&meta.config.preset, meta.config.storeys)
-                .context("rebuilding the data set's structure")?
-                .chain
-                .with_theta(&meta.theta_true)
+            meta.true_chain()
                 .context("rebuilding the data set's structure")?,
         ),
         None => None,

@@ -55,6 +55,13 @@ pub struct Args {
     /// Number of storeys (same per-storey values as the preset).
     #[arg(long)]
     pub storeys: Option<usize>,
+    /// Storeys with a Bouc–Wen element, 1-based and increasing, e.g. `1,4` (each with the
+    /// preset's β = 2, γ = 1, n = 2), or `none` for a linear building. Default: storey 1.
+    #[arg(long)]
+    pub hysteretic: Option<String>,
+    /// Measured storeys, 1-based and increasing, e.g. `1,3,5`. Default: every storey.
+    #[arg(long)]
+    pub sensors: Option<String>,
     /// Measure absolute accelerations ẍ + ü_g instead of relative ones.
     #[arg(long)]
     pub absolute: bool,
@@ -86,6 +93,26 @@ fn excitation_source(arg: &str, units: UnitsArg) -> ExcitationSource {
     }
 }
 
+/// Parses a comma list of 1-based storeys (`1,4`); `none` (when allowed) is the empty list.
+/// Errors name the flag.
+pub fn parse_storeys(flag: &str, s: &str, allow_none: bool) -> anyhow::Result<Vec<usize>> {
+    if allow_none && s.trim() == "none" {
+        return Ok(Vec::new());
+    }
+    s.split(',')
+        .map(|part| {
+            let part = part.trim();
+            part.parse::<usize>().map_err(|_| {
+                anyhow::anyhow!(
+                    "{flag}: `{part}` is not a storey number (a comma list of storeys numbered \
+                     from 1, e.g. 1,4{})",
+                    if allow_none { ", or none" } else { "" }
+                )
+            })
+        })
+        .collect()
+}
+
 /// Checks the flags a user gives against the limits; errors name the flag.
 fn check_flags(args: &Args) -> anyhow::Result<()> {
     if let Some(n) = args.storeys {
@@ -109,6 +136,20 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let mut config = DatasetConfig::from_preset(&args.preset, args.seed)?;
     config.run = args.run;
     config.storeys = args.storeys;
+    if let Some(h) = &args.hysteretic {
+        config.hysteretic = Some(parse_storeys("--hysteretic", h, true)?);
+    }
+    if let Some(s) = &args.sensors {
+        config.sensors = Some(parse_storeys("--sensors", s, false)?);
+    }
+    // The storey lists against the building, each error naming its flag.
+    if let Err(models::dataset::DatasetError::InvalidConfig { field, message }) =
+        dataset::check_config(&config)
+    {
+        if field == "hysteretic" || field == "sensors" {
+            bail!("--{field}: {message}");
+        }
+    }
     config.noise_fraction = args.noise_fraction;
     if let Some(e) = &args.excitation {
         config.excitation = excitation_source(e, args.units);
@@ -144,14 +185,28 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             None => format!("max|r{}| = {:.4}", st + 1, m),
         })
         .collect();
-    let acc: Vec<String> = ds.rms.acc.iter().map(|a| format!("{a:.4}")).collect();
+    let acc: Vec<String> = ds
+        .sensors
+        .channel_names()
+        .iter()
+        .zip(&ds.rms.acc)
+        .map(|(c, a)| format!("{c} {a:.4}"))
+        .collect();
     println!(
-        "{}: {} samples, dt = {} s, {:.2} s; {}; RMS ug = {:.4}, acc = [{}] m/s²",
+        "{}: {} storeys, {} accelerations at storeys {:?}; {} samples, dt = {} s, {:.2} s; {}; \
+         RMS ug = {:.4}, acc = [{}] m/s²",
         args.out.display(),
+        ds.chain.storeys(),
+        ds.sensors.kind(),
+        ds.sensors.one_based(),
         ds.len(),
         ds.dt,
         ds.t.last().copied().unwrap_or(0.0),
-        r_summary.join(", "),
+        if r_summary.is_empty() {
+            "linear (no Bouc–Wen element)".to_string()
+        } else {
+            r_summary.join(", ")
+        },
         ds.rms.ug,
         acc.join(", ")
     );

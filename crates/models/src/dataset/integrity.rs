@@ -5,7 +5,6 @@
 
 use super::{DatasetError, DatasetMeta};
 use crate::limits;
-use crate::preset::Preset;
 use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
 use std::collections::BTreeMap;
@@ -89,14 +88,17 @@ pub(crate) fn verify(
 }
 
 /// Checks the metadata against the limits, against itself, against the structure it names and
-/// against the measured data (`samples` rows, `channels` acceleration channels).
+/// against the measured data (`samples` rows; `sensors`, the 1-based storeys named by the header
+/// of `measured` file).
 pub(crate) fn check_meta(
     file: &Path,
     text: &str,
     meta: &DatasetMeta,
     samples: usize,
-    channels: usize,
+    measured: &Path,
+    sensors: &[usize],
 ) -> Result<(), DatasetError> {
+    let channels = sensors.len();
     let bad = |field: &str, message: String| DatasetError::Mismatch {
         file: file.to_path_buf(),
         line: json_line(text, field.rsplit('.').next().unwrap_or(field)),
@@ -108,20 +110,73 @@ pub(crate) fn check_meta(
     };
     lim("dt", limits::check_dt(meta.dt))?;
     lim("config.dt", limits::check_dt(meta.config.dt))?;
-    if meta.samples != samples || meta.storeys != channels {
+    if meta.samples != samples {
         return Err(bad(
             "samples",
             format!(
-                "{} samples × {} channels, but {} has {} × {channels}",
+                "{} samples, but {} has {samples}",
                 meta.samples,
-                meta.storeys,
-                super::MEASURED,
-                samples
+                measured.display()
             ),
         ));
     }
     if let Some(n) = meta.config.storeys {
         limits::check_storeys(n).map_err(|e| bad("config.storeys", e.to_string()))?;
+    }
+    limits::check_storeys(meta.storeys).map_err(|e| bad("storeys", e.to_string()))?;
+    // The structure it records, valid and the one its config generates.
+    let generated = meta.config.description().map_err(|e| match e {
+        DatasetError::InvalidConfig { field, message } => bad(&format!("config.{field}"), message),
+        other => bad("preset", other.to_string()),
+    })?;
+    let structure = match &meta.structure {
+        Some(d) => {
+            d.validate()
+                .map_err(|e| bad(&format!("structure.{}", e.field), e.message))?;
+            if *d != generated {
+                return Err(bad(
+                    "structure",
+                    format!("{d:?} is not the structure its config generates ({generated:?})"),
+                ));
+            }
+            d.clone()
+        }
+        None => generated,
+    };
+    if meta.storeys != structure.storeys {
+        return Err(bad(
+            "storeys",
+            format!(
+                "{} storeys, but its structure has {}",
+                meta.storeys, structure.storeys
+            ),
+        ));
+    }
+    // The measured storeys: the header of measured.csv against the recorded sensors.
+    if structure.sensors != sensors {
+        let column = structure
+            .sensors
+            .iter()
+            .zip(sensors)
+            .find(|(a, b)| a != b)
+            .map(|(_, b)| format!("a{b}"))
+            .or_else(|| {
+                sensors
+                    .get(structure.sensors.len())
+                    .map(|b| format!("a{b}"))
+            })
+            .unwrap_or_else(|| "header".to_string());
+        return Err(DatasetError::Mismatch {
+            file: measured.to_path_buf(),
+            line: 1,
+            field: column,
+            message: format!(
+                "the header measures storeys {sensors:?}, but {} records sensors {:?} \
+                 (files of different data sets mixed?)",
+                file.display(),
+                structure.sensors
+            ),
+        });
     }
     lim(
         "noise.fraction",
@@ -132,14 +187,14 @@ pub(crate) fn check_meta(
         limits::check_noise_fraction(meta.config.noise_fraction),
     )?;
     lim("config.scale", limits::check_scale(meta.config.scale))?;
-    let n = channels;
+    let n = meta.storeys;
     let nbw = meta.bouc_wen_storeys.len();
     let lengths: [(&str, usize, usize); 9] = [
-        ("rms.acc", meta.rms.acc.len(), n),
+        ("rms.acc", meta.rms.acc.len(), channels),
         ("rms.vel", meta.rms.vel.len(), n),
         ("rms.disp", meta.rms.disp.len(), n),
         ("rms.r", meta.rms.r.len(), nbw),
-        ("noise.acc_sd", meta.noise.acc_sd.len(), n),
+        ("noise.acc_sd", meta.noise.acc_sd.len(), channels),
         ("max_abs_r", meta.max_abs_r.len(), nbw),
         ("saturation", meta.saturation.len(), nbw),
         ("theta_true", meta.theta_true.len(), meta.theta_names.len()),
@@ -149,7 +204,10 @@ pub(crate) fn check_meta(
         if found != want {
             return Err(bad(
                 field,
-                format!("{found} entries, {want} expected ({n} storeys, {nbw} Bouc–Wen elements)"),
+                format!(
+                    "{found} entries, {want} expected ({n} storeys, {channels} measured, \
+                     {nbw} Bouc–Wen elements)"
+                ),
             ));
         }
     }
@@ -176,14 +234,15 @@ pub(crate) fn check_meta(
         )?;
     }
     // The structure the metadata names must be the one the data were generated with.
-    let preset = Preset::from_name(&meta.config.preset, meta.config.storeys)
+    let chain = meta
+        .config
+        .chain()
         .map_err(|e| bad("preset", e.to_string()))?;
-    let chain = preset.chain;
     if chain.storeys() != n {
         return Err(bad(
             "storeys",
             format!(
-                "preset `{}` has {} storeys, the data {n} channels",
+                "{n} storeys, but its config (preset `{}`) has {}",
                 meta.config.preset,
                 chain.storeys()
             ),
