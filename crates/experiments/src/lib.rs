@@ -14,6 +14,8 @@
 pub mod calibration;
 pub mod checks;
 pub mod cli;
+pub mod decimate;
+pub mod discretisation;
 pub mod figures;
 pub mod limits;
 pub mod metrics;
