@@ -175,7 +175,7 @@ pub fn reproduce(opts: &Options) -> Result<Done> {
     let mut studies = BTreeMap::new();
     let mut records = BTreeMap::new();
     let mut done = Done::default();
-    for name in STUDIES {
+    for &name in STUDIES.iter().chain(&crate::discretisation::STUDIES) {
         let path = opts.experiments.join(format!("{name}.toml"));
         let mut study = Study::load(&path)?;
         if opts.quick {
@@ -189,6 +189,16 @@ pub fn reproduce(opts: &Options) -> Result<Done> {
             label: name.to_string(),
             resume: opts.resume,
         };
+        // The discretisation studies take over the Fig. 7 records that are the same jobs.
+        let reuse = match crate::discretisation::STUDIES.contains(&name) {
+            true => crate::discretisation::Reuse::new(
+                records
+                    .get(crate::discretisation::SOURCE)
+                    .into_iter()
+                    .flatten(),
+            ),
+            false => crate::discretisation::Reuse::default(),
+        };
         let outcome = run_sweep(
             &study.jobs(),
             Study::job_id,
@@ -196,11 +206,18 @@ pub fn reproduce(opts: &Options) -> Result<Done> {
             &dir,
             &sweep,
             |job| {
-                study
-                    .run_job(job)
+                reuse
+                    .run(&study, job)
                     .with_context(|| format!("{name}: {}", Study::job_id(job)))
             },
         )?;
+        if opts.progress && reuse.taken() > 0 {
+            eprintln!(
+                "{name}: {} records taken over from {} (same fingerprint)",
+                reuse.taken(),
+                crate::discretisation::SOURCE
+            );
+        }
         done.total += outcome.records.len();
         done.executed += outcome.executed;
         done.reused += outcome.reused;
@@ -227,7 +244,7 @@ pub fn reproduce(opts: &Options) -> Result<Done> {
         out: opts.out.join("table1"),
     })?;
     draw(opts, &studies, &records)?;
-    let summary: BTreeMap<&str, Vec<AlgorithmStats>> = STUDIES
+    let mut summary: BTreeMap<&str, Vec<AlgorithmStats>> = STUDIES
         .iter()
         .map(|name| {
             let groups = by_algorithm(&studies[name], &records[name]);
@@ -240,6 +257,7 @@ pub fn reproduce(opts: &Options) -> Result<Done> {
             )
         })
         .collect();
+    summary.extend(crate::discretisation::summary(&records));
     let total_s = start.elapsed().as_secs_f64();
     let summary_path = opts.out.join("summary.json");
     write_bytes_atomic(
