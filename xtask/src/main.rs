@@ -8,7 +8,9 @@
 //!   release and runs `sysid scaling` (`experiments/scaling.toml`) into `results/scaling/` (or
 //!   `results/scaling-quick/`); sharded and resumed like `reproduce-paper`.
 //! - `regression [--threads N] [--resume]`: builds `sysid` in release and runs `sysid regression`
-//!   (`experiments/regression.toml` into `results/regression/`); fails when a bound is breached.
+//!   on `experiments/regression.toml` (into `results/regression/`) and
+//!   `experiments/regression-symplectic.toml` (into `results/regression-symplectic/`); fails when
+//!   a bound is breached.
 //!   Every run is computed unless `--resume` is given.
 //! - `bench [--full]`: runs the criterion benchmarks of `core-filters` (short measurement times
 //!   unless `--full`), then appends one dated line per benchmark to `results/perf/history.csv`
@@ -219,22 +221,32 @@ fn main() -> Result<()> {
         }
         Task::Regression { threads, resume } => {
             let sysid = build_sysid(&root)?;
-            let mut cmd = Command::new(sysid);
-            cmd.current_dir(&root).args([
-                "regression",
-                "--config",
-                "experiments/regression.toml",
-                "--out",
-                "results/regression",
-                "--threads",
-                &threads.to_string(),
-            ]);
-            // Every run is computed by the code being checked unless asked to resume (then only
-            // records with a matching fingerprint are reused).
-            if resume {
-                cmd.arg("--resume");
+            // The paper's (forward Euler) filters, then the symplectic scheme's bounds.
+            for (config, out) in [
+                ("experiments/regression.toml", "results/regression"),
+                (
+                    "experiments/regression-symplectic.toml",
+                    "results/regression-symplectic",
+                ),
+            ] {
+                let mut cmd = Command::new(&sysid);
+                cmd.current_dir(&root).args([
+                    "regression",
+                    "--config",
+                    config,
+                    "--out",
+                    out,
+                    "--threads",
+                    &threads.to_string(),
+                ]);
+                // Every run is computed by the code being checked unless asked to resume (then
+                // only records with a matching fingerprint are reused).
+                if resume {
+                    cmd.arg("--resume");
+                }
+                run(&mut cmd)?;
             }
-            run(&mut cmd)
+            Ok(())
         }
         Task::Bench { full } => bench(&root, full),
     }

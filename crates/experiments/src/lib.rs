@@ -17,6 +17,8 @@ pub mod calibration;
 pub mod checks;
 pub mod cli;
 pub mod coverage;
+pub mod decimate;
+pub mod discretisation;
 pub mod field;
 pub mod figures;
 pub mod limits;

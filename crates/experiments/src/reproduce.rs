@@ -175,8 +175,12 @@ pub fn reproduce(opts: &Options) -> Result<Done> {
     let mut studies = BTreeMap::new();
     let mut records = BTreeMap::new();
     let mut done = Done::default();
-    for name in STUDIES {
+    for &name in STUDIES.iter().chain(&crate::discretisation::STUDIES) {
         let path = opts.experiments.join(format!("{name}.toml"));
+        // The section beyond the paper runs when its studies are configured.
+        if crate::discretisation::STUDIES.contains(&name) && !path.exists() {
+            continue;
+        }
         let mut study = Study::load(&path)?;
         if opts.quick {
             study = study.quick();
@@ -189,6 +193,16 @@ pub fn reproduce(opts: &Options) -> Result<Done> {
             label: name.to_string(),
             resume: opts.resume,
         };
+        // The discretisation studies take over the Fig. 7 records that are the same jobs.
+        let reuse = match crate::discretisation::STUDIES.contains(&name) {
+            true => crate::discretisation::Reuse::new(
+                records
+                    .get(crate::discretisation::SOURCE)
+                    .into_iter()
+                    .flatten(),
+            ),
+            false => crate::discretisation::Reuse::default(),
+        };
         let outcome = run_sweep(
             &study.jobs(),
             Study::job_id,
@@ -196,11 +210,18 @@ pub fn reproduce(opts: &Options) -> Result<Done> {
             &dir,
             &sweep,
             |job| {
-                study
-                    .run_job(job)
+                reuse
+                    .run(&study, job)
                     .with_context(|| format!("{name}: {}", Study::job_id(job)))
             },
         )?;
+        if opts.progress && reuse.taken() > 0 {
+            eprintln!(
+                "{name}: {} records taken over from {} (same fingerprint)",
+                reuse.taken(),
+                crate::discretisation::SOURCE
+            );
+        }
         done.total += outcome.records.len();
         done.executed += outcome.executed;
         done.reused += outcome.reused;
@@ -227,7 +248,8 @@ pub fn reproduce(opts: &Options) -> Result<Done> {
         out: opts.out.join("table1"),
     })?;
     draw(opts, &studies, &records)?;
-    let summary: BTreeMap<&str, Vec<AlgorithmStats>> = STUDIES
+    crate::discretisation::draw(&opts.out, &records)?;
+    let mut summary: BTreeMap<&str, Vec<AlgorithmStats>> = STUDIES
         .iter()
         .map(|name| {
             let groups = by_algorithm(&studies[name], &records[name]);
@@ -254,6 +276,7 @@ pub fn reproduce(opts: &Options) -> Result<Done> {
             "Fig. 7 sweep — coverage of central credible intervals",
         )?;
     }
+    summary.extend(crate::discretisation::summary(&records));
     let total_s = start.elapsed().as_secs_f64();
     let summary_path = opts.out.join("summary.json");
     write_bytes_atomic(

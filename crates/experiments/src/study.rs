@@ -1,6 +1,7 @@
 //! Experiment configs (one TOML per figure or study in `experiments/`) and their expansion into
-//! jobs: structure × algorithm × particles × resampling × run (the structure axis is optional:
-//! without it every job uses the data section's structure). Every job regenerates its data set from
+//! jobs: structure × algorithm × particles × resampling × discretisation × run (the structure
+//! axis is optional: without it every job uses the data section's structure). Every job
+//! regenerates its data set from
 //! `(master_seed, run)`, so all algorithms of one run see the identical data set. A job's
 //! fingerprint ([`Study::job_fingerprint`]) is the one its record will carry, so a resumed sweep
 //! can tell whether an existing record is this job's result.
@@ -9,7 +10,9 @@ use std::path::Path;
 
 use anyhow::{bail, Context, Result};
 use core_filters::resampling::Scheme;
-use models::dataset::{generate, DatasetConfig};
+use models::dataset::{generate, DatasetConfig, LoadedDataset};
+use models::filtering::Discretisation;
+use models::structure::ShearChain;
 use serde::{Deserialize, Serialize};
 
 use crate::pipeline::{identify, Algorithm, FilterSettings, RunInput};
@@ -26,6 +29,10 @@ pub struct DataSection {
     pub scale: Option<f64>,
     /// Duration (s) (default: the whole record).
     pub duration: Option<f64>,
+    /// Keep one sample in `decimate` of the generated data (a lower-rate logger; see
+    /// [`crate::decimate`]); absent: every sample.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub decimate: Option<usize>,
 }
 
 /// The sweep axes.
@@ -43,6 +50,10 @@ pub struct SweepSection {
     /// The structure axis (`[[sweep.structures]]`); empty: the data section's structure only.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub structures: Vec<Structure>,
+    /// Discretisations of the filters' equations of motion (`docs/discretisation.md`); absent:
+    /// the `[filter]` table's (forward Euler unless set).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub discretisations: Option<Vec<Discretisation>>,
 }
 
 /// One structure of the structure axis: a shear chain of the data section's preset with its own
@@ -186,6 +197,7 @@ pub struct Job {
     pub algorithm: Algorithm,
     pub particles: usize,
     pub resampling: Scheme,
+    pub discretisation: Discretisation,
     pub run: u64,
 }
 
@@ -215,6 +227,17 @@ impl Study {
         crate::limits::check_count(self.sweep.runs as usize, 1, MAX_RUNS)
             .context("field `sweep.runs`")?;
         crate::limits::check_filter_settings(&self.filter).context("table `filter`")?;
+        if self
+            .sweep
+            .discretisations
+            .as_ref()
+            .is_some_and(Vec::is_empty)
+        {
+            bail!("field `sweep.discretisations`: give at least one discretisation");
+        }
+        if let Some(f) = self.data.decimate {
+            crate::decimate::check_factor(f).context("field `data.decimate`")?;
+        }
         models::dataset::check_config(&self.dataset_config(0)?).context("table `data`")?;
         let mut labels = std::collections::BTreeSet::new();
         for (i, st) in self.sweep.structures.iter().enumerate() {
@@ -273,14 +296,17 @@ impl Study {
                     .unwrap_or(&self.sweep.algorithms);
                 for &particles in &self.sweep.particles {
                     for &resampling in &self.sweep.resampling {
-                        for &algorithm in algorithms {
-                            out.push(Job {
-                                structure,
-                                algorithm,
-                                particles,
-                                resampling,
-                                run,
-                            });
+                        for &discretisation in &self.discretisations() {
+                            for &algorithm in algorithms {
+                                out.push(Job {
+                                    structure,
+                                    algorithm,
+                                    particles,
+                                    resampling,
+                                    discretisation,
+                                    run,
+                                });
+                            }
                         }
                     }
                 }
@@ -289,10 +315,22 @@ impl Study {
         out
     }
 
-    /// File stem of a job's record.
+    /// The discretisations of the sweep (the `[filter]` table's when the sweep names none).
+    pub fn discretisations(&self) -> Vec<Discretisation> {
+        self.sweep
+            .discretisations
+            .clone()
+            .unwrap_or_else(|| vec![self.filter.discretisation])
+    }
+
+    /// File stem of a job's record (forward Euler, the paper's, carries no suffix).
     pub fn job_id(job: &Job) -> String {
+        let scheme = match job.discretisation {
+            Discretisation::Euler => String::new(),
+            d => format!("-{}", d.name()),
+        };
         format!(
-            "{}-np{}-{}-run{:03}",
+            "{}-np{}-{}{scheme}-run{:03}",
             job.algorithm.name(),
             job.particles,
             job.resampling.name(),
@@ -340,25 +378,36 @@ impl Study {
         Ok(c)
     }
 
-    /// The filter settings of a job: the study's, with the job's particles and resampling.
+    /// The filter settings of a job: the study's, with the job's particles, resampling and
+    /// discretisation.
     pub fn settings(&self, job: &Job) -> FilterSettings {
         let mut settings = self.filter.clone();
         settings.particles = job.particles;
         settings.resampling = job.resampling;
+        settings.discretisation = job.discretisation;
         settings
+    }
+
+    /// The data set of run `run` as the filters see it (decimated when the study says so), with
+    /// its true structure.
+    pub fn data(&self, structure: Option<usize>, run: u64) -> Result<(LoadedDataset, ShearChain)> {
+        let data = generate(&self.structure_config(structure, run)?)?;
+        let loaded = crate::decimate::decimate(&data.to_loaded(), self.data.decimate.unwrap_or(1))
+            .context("field `data.decimate`")?;
+        Ok((loaded, data.chain))
     }
 
     /// The fingerprint (SHA-256, hex) the record of `job` carries when computed by this build:
     /// the job's data set is generated (a few milliseconds) and hashed with the settings, seed,
     /// run, algorithm and numerics version.
     pub fn job_fingerprint(&self, job: &Job) -> Result<String> {
-        let data = generate(&self.structure_config(job.structure, job.run)?)?;
+        let (data, _) = self.data(job.structure, job.run)?;
         Ok(Fingerprint::of_run(
             job.algorithm.name(),
             self.sweep.master_seed,
             job.run,
             &self.settings(job),
-            &data.to_loaded(),
+            &data,
         )
         .sha256)
     }
@@ -366,11 +415,10 @@ impl Study {
     /// Runs one job: generate the run's data set, identify, return the record. Errors are
     /// configuration errors; numerical failures are inside the record.
     pub fn run_job(&self, job: &Job) -> Result<RunRecord> {
-        let data = generate(&self.structure_config(job.structure, job.run)?)?;
-        let loaded = data.to_loaded();
+        let (loaded, chain) = self.data(job.structure, job.run)?;
         let input = RunInput {
             data: &loaded,
-            chain: Some(&data.chain),
+            chain: Some(&chain),
             experiment: &self.name,
             seed: self.sweep.master_seed,
             run: job.run,

@@ -206,9 +206,13 @@ fn quick_reproduction_draws_every_figure_and_the_report() {
     let experiments = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../experiments");
     // A fresh output directory: every run is executed.
     let done = quick(&experiments, &out, false);
-    assert_eq!(done.total, 22);
-    assert_eq!((done.executed, done.reused), (22, 0));
-    for f in figure_files(&out) {
+    // 22 runs of the paper's studies, 2 × 12 of the discretisation studies.
+    assert_eq!(done.total, 46);
+    assert_eq!((done.executed, done.reused), (46, 0));
+    for f in figure_files(&out)
+        .into_iter()
+        .chain(experiments::discretisation::figure_files(&out))
+    {
         experiments::figures::validate_svg(&f).unwrap_or_else(|e| panic!("{}: {e:#}", f.display()));
     }
     let report = std::fs::read_to_string(out.join("REPORT.md")).unwrap();
@@ -219,6 +223,7 @@ fn quick_reproduction_draws_every_figure_and_the_report() {
         "Fig. 8",
         "What matches",
         "Provenance",
+        "Beyond the paper: discretisation",
     ] {
         assert!(report.contains(needle), "REPORT.md lacks {needle}");
     }
@@ -227,11 +232,11 @@ fn quick_reproduction_draws_every_figure_and_the_report() {
     assert!(summary["studies"]["fig7"]
         .as_array()
         .is_some_and(|a| a.len() == 4));
-    assert_eq!(summary["runs"]["executed"], 22);
+    assert_eq!(summary["runs"]["executed"], 46);
 
     // The same configs with --resume: everything is reused.
     let same = quick(&experiments, &out, true);
-    assert_eq!((same.executed, same.reused), (0, 22));
+    assert_eq!((same.executed, same.reused), (0, 46));
 
     // Changed configs (fig7's master seed, fig4's quick duration) with --resume: the records of
     // those studies are computed again, the others reused.

@@ -1,0 +1,109 @@
+//! The discretisation study's machinery: the sweep's discretisation axis, the decimated data and
+//! the take-over of records only for the same job (same fingerprint).
+
+use experiments::discretisation::{scheme, Reuse};
+use experiments::study::Study;
+use models::filtering::Discretisation;
+
+fn study(extra_data: &str, schemes: &str) -> Study {
+    let text = format!(
+        r#"
+name = "t"
+description = "test"
+[data]
+preset = "paper-3dof"
+duration = 1.0
+{extra_data}
+[sweep]
+algorithms = ["mln-rbpf", "mpf-ekf2"]
+{schemes}
+runs = 2
+master_seed = 9
+particles = [20]
+[filter]
+trace_every = 0
+loop_every = 0
+validate = false
+"#
+    );
+    let dir =
+        std::env::temp_dir().join(format!("sysid-disc-{}-{}", std::process::id(), text.len()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("t.toml");
+    std::fs::write(&path, text).unwrap();
+    Study::load(&path).unwrap()
+}
+
+#[test]
+fn the_axis_multiplies_the_jobs_and_reaches_the_settings() {
+    let s = study("", r#"discretisations = ["euler", "symplectic"]"#);
+    let jobs = s.jobs();
+    assert_eq!(jobs.len(), 2 * 2 * 2);
+    let ids: Vec<String> = jobs.iter().map(Study::job_id).collect();
+    assert!(ids.contains(&"mln-rbpf-np20-systematic-run000".to_string()));
+    assert!(ids.contains(&"mpf-ekf2-np20-systematic-symplectic-run001".to_string()));
+    for j in &jobs {
+        assert_eq!(s.settings(j).discretisation, j.discretisation);
+    }
+    // Without the axis: the [filter] table's scheme, and the fingerprint of an Euler job is the
+    // one of the same job in a study that names the axis.
+    let plain = study("", "");
+    assert!(plain
+        .jobs()
+        .iter()
+        .all(|j| j.discretisation == Discretisation::Euler));
+    assert_eq!(
+        plain.job_fingerprint(&plain.jobs()[0]).unwrap(),
+        s.job_fingerprint(&s.jobs()[0]).unwrap()
+    );
+}
+
+#[test]
+fn decimated_data_have_twice_the_step_and_their_own_fingerprint() {
+    let full = study("", "");
+    let half = study("decimate = 2", "");
+    let (a, _) = full.data(None, 0).unwrap();
+    let (b, _) = half.data(None, 0).unwrap();
+    assert_eq!(b.dt, 2.0 * a.dt);
+    assert_eq!(b.len(), a.len().div_ceil(2));
+    assert_eq!(b.y(3), a.y(6));
+    let job = &full.jobs()[0];
+    assert_ne!(
+        full.job_fingerprint(job).unwrap(),
+        half.job_fingerprint(job).unwrap()
+    );
+    let r = half.run_job(job).unwrap();
+    assert_eq!(r.steps_total, b.len() - 1);
+}
+
+#[test]
+fn a_record_is_taken_over_only_for_the_same_job() {
+    let s = study("", r#"discretisations = ["euler", "symplectic"]"#);
+    let jobs = s.jobs();
+    let euler = jobs
+        .iter()
+        .find(|j| j.discretisation == Discretisation::Euler)
+        .unwrap();
+    let symplectic = jobs
+        .iter()
+        .find(|j| j.discretisation == Discretisation::Symplectic && j.run == euler.run)
+        .unwrap();
+    let mut source = s.run_job(euler).unwrap();
+    source.experiment = "fig7".into();
+    let reuse = Reuse::new([&source]);
+    let taken = reuse.run(&s, euler).unwrap();
+    assert_eq!(reuse.taken(), 1);
+    assert_eq!(taken.experiment, "t");
+    assert_eq!(taken.theta_val, source.theta_val);
+    let computed = reuse.run(&s, symplectic).unwrap();
+    assert_eq!(reuse.taken(), 1, "a symplectic job is not the Euler record");
+    assert_eq!(scheme(&computed), Some(Discretisation::Symplectic));
+    assert_eq!(scheme(&taken), Some(Discretisation::Euler));
+    // A different data set (decimated) with the same job is not taken over either.
+    let half = study(
+        "decimate = 2",
+        r#"discretisations = ["euler", "symplectic"]"#,
+    );
+    reuse.run(&half, euler).unwrap();
+    assert_eq!(reuse.taken(), 1);
+}
