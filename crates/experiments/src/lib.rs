@@ -21,6 +21,7 @@ pub mod limits;
 pub mod metrics;
 pub mod observe;
 pub mod pipeline;
+mod pool;
 pub mod record;
 pub mod report;
 pub mod reproduce;
