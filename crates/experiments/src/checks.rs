@@ -28,6 +28,20 @@ pub const TINY_ESS_ABS: f64 = 10.0;
 /// …or below this fraction of the particles, whichever is larger.
 pub const TINY_ESS_FRACTION: f64 = 0.02;
 
+/// Independent filters pooled in the run (`pool` of its settings; 1 when absent).
+pub fn pooled_filters(r: &RunRecord) -> usize {
+    r.config
+        .get("filter")
+        .and_then(|f| f.get("pool"))
+        .and_then(|p| p.as_u64())
+        .map_or(1, |p| p.max(1) as usize)
+}
+
+/// Particles of one filter of the run: the ESS is that of one filter.
+fn particles_per_filter(r: &RunRecord) -> usize {
+    r.particles / pooled_filters(r)
+}
+
 /// What a warning is about.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
@@ -112,14 +126,14 @@ pub fn check(r: &RunRecord) -> Vec<Warning> {
             });
         }
     }
-    let tiny = TINY_ESS_ABS.max(TINY_ESS_FRACTION * r.particles as f64);
+    let tiny = TINY_ESS_ABS.max(TINY_ESS_FRACTION * particles_per_filter(r) as f64);
     if r.ess_min.is_finite() && r.ess_min < tiny && r.steps_completed > 0 {
         out.push(Warning {
             kind: WarningKind::TinyEss,
             parameter: None,
             message: format!(
                 "the effective sample size fell to {:.1} of {} particles (mean {:.1}): at that step the estimate rested on a few particles",
-                r.ess_min, r.particles, r.ess_mean
+                r.ess_min, particles_per_filter(r), r.ess_mean
             ),
         });
     }
@@ -152,6 +166,7 @@ pub fn summary_table(r: &RunRecord) -> String {
         "parameter", "θ_val", "95% credible interval"
     );
     let mut approximated = false;
+    let pool = pooled_filters(r);
     for (j, name) in r.param_names.iter().enumerate() {
         let v = r.theta_val.get(j).copied().unwrap_or(f64::NAN);
         // The central 95 % interval of the last step's particle posterior; a record without it
@@ -170,13 +185,22 @@ pub fn summary_table(r: &RunRecord) -> String {
                 format!("*[{:.4}, {:.4}]", v - 1.96 * sd, v + 1.96 * sd)
             }
         };
-        let reliability = match r.distinct_sampled.get(name) {
+        let mut reliability = match r.distinct_sampled.get(name) {
             Some(&d) if d < FEW_DISTINCT => {
                 format!("sampled, {d} distinct value(s): RESTS ON FEW PARTICLES")
             }
             Some(&d) => format!("sampled, {d} distinct values"),
             None => "marginalised (Gaussian per particle)".to_string(),
         };
+        // Pooled filters measure the Monte-Carlo error of θ_val.
+        if let Some(se) = r
+            .credible
+            .iter()
+            .find(|p| &p.parameter == name)
+            .and_then(|p| p.mc_se)
+        {
+            let _ = write!(reliability, "; θ_val MC s.e. {se:.4}");
+        }
         let _ = writeln!(
             o,
             "{name:<name_w$}  {v:>12.4}  {interval:>27}  {reliability}"
@@ -184,14 +208,18 @@ pub fn summary_table(r: &RunRecord) -> String {
     }
     let _ = writeln!(
         o,
-        "ESS over the run: min {:.1}, mean {:.1} of {} particles{}. Intervals: central 95 % of the \
-         last step's particle posterior (Gaussian mixture for marginalised, weighted sample for \
-         sampled parameters){}; they hold the filter's own uncertainty, not the Monte-Carlo \
-         error of one run — their coverage is measured in docs/calibration.md.",
+        "ESS over the run: min {:.1}, mean {:.1} of {} particles{}{}. Intervals: central 95 % of \
+         the last step's particle posterior (Gaussian mixture for marginalised, weighted sample \
+         for sampled parameters){}; {} — their coverage is measured in docs/calibration.md.",
         r.ess_min,
         r.ess_mean,
-        r.particles,
-        if r.ess_min < TINY_ESS_ABS.max(TINY_ESS_FRACTION * r.particles as f64) {
+        particles_per_filter(r),
+        if pool > 1 {
+            format!(" per filter, {pool} filters pooled")
+        } else {
+            String::new()
+        },
+        if r.ess_min < TINY_ESS_ABS.max(TINY_ESS_FRACTION * particles_per_filter(r) as f64) {
             " (TINY)"
         } else {
             ""
@@ -200,6 +228,11 @@ pub fn summary_table(r: &RunRecord) -> String {
             "; * marks θ_val ± 1.96 s.d. where the record holds no interval"
         } else {
             ""
+        },
+        if pool > 1 {
+            "pooled over the filters, so they include the spread between them"
+        } else {
+            "one filter's posterior does not include its own Monte-Carlo error"
         }
     );
     o

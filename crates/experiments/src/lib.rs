@@ -25,6 +25,7 @@ pub mod limits;
 pub mod metrics;
 pub mod observe;
 pub mod pipeline;
+mod pool;
 pub mod record;
 pub mod reference;
 pub mod report;

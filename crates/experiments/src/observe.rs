@@ -5,7 +5,7 @@
 use core_filters::credible::{CredibleInterval, STANDARD_LEVELS};
 use core_filters::model::{Layout, Slot};
 use core_filters::smc::runner::WeightedParticles;
-use core_filters::smc::{Observer, Posterior, StepInfo};
+use core_filters::smc::{Observer, Particles, Posterior, StepInfo};
 use serde::{Deserialize, Serialize};
 
 use crate::metrics::ErrorSums;
@@ -52,6 +52,11 @@ pub struct ParamIntervals {
     /// Why the intervals could not be computed (a non-finite particle value, …).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub error: Option<String>,
+    /// Monte-Carlo standard error of θ_val, from the spread of the θ_vals of independent
+    /// filters pooled into this run (s.d. over filters / √filters); absent for a single filter,
+    /// whose posterior does not know its own Monte-Carlo error.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub mc_se: Option<f64>,
 }
 
 impl ParamIntervals {
@@ -83,9 +88,17 @@ pub fn final_intervals(last: &WeightedParticles<'_>) -> Vec<ParamIntervals> {
                 shape,
                 intervals,
                 error,
+                mc_se: None,
             }
         })
         .collect()
+}
+
+/// The normalised weights and the particles of a run's last step, kept for pooling.
+#[derive(Debug, Clone)]
+pub struct FinalParticles {
+    pub w: Vec<f64>,
+    pub particles: Particles,
 }
 
 /// The true state signals, for online errors: `truth[k][j]` is the true value at step `k` of the
@@ -111,6 +124,9 @@ pub struct Recorder<'a> {
     pub distinct: Vec<(String, usize)>,
     /// Central credible intervals of θ at the end of a completed run ([`ParamIntervals`]).
     pub credible: Vec<ParamIntervals>,
+    /// Keep a copy of the final weighted particles (for pooling several filters).
+    pub keep_final: bool,
+    pub final_particles: Option<FinalParticles>,
 }
 
 impl<'a> Recorder<'a> {
@@ -141,6 +157,8 @@ impl<'a> Recorder<'a> {
             progress: None,
             distinct: Vec::new(),
             credible: Vec::new(),
+            keep_final: false,
+            final_particles: None,
         }
     }
 
@@ -161,6 +179,12 @@ impl Observer for Recorder<'_> {
     fn on_finish(&mut self, last: &WeightedParticles<'_>) {
         self.distinct = last.distinct_sampled_params();
         self.credible = final_intervals(last);
+        if self.keep_final {
+            self.final_particles = Some(FinalParticles {
+                w: last.w.to_vec(),
+                particles: last.particles.clone(),
+            });
+        }
     }
 
     fn on_step(&mut self, info: &StepInfo, post: &Posterior) {

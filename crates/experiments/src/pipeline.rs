@@ -118,6 +118,17 @@ pub struct FilterSettings {
     /// Keep the validation and true hysteresis loops in the record, one point in `loop_every`
     /// (0: no loops).
     pub loop_every: usize,
+    /// Independent filters pooled into one answer, splitting `particles` between them (1: one
+    /// filter, the paper's). The posterior is the equal-weight mixture of the filters' final
+    /// particle posteriors and θ_val the mean of their θ_vals, whose Monte-Carlo s.e. — the
+    /// s.d. of the filters' θ_vals over √pool — every record then carries beside its intervals
+    /// (`docs/calibration.md`). Absent from a record's settings when 1.
+    #[serde(skip_serializing_if = "is_one")]
+    pub pool: usize,
+}
+
+fn is_one(v: &usize) -> bool {
+    *v == 1
 }
 
 impl Default for FilterSettings {
@@ -137,6 +148,24 @@ impl Default for FilterSettings {
             trace_every: 10,
             validate: true,
             loop_every: 4,
+            pool: 1,
+        }
+    }
+}
+
+impl FilterSettings {
+    /// The settings `sysid filter` uses without a configuration file: the SPEC's, except where
+    /// the coverage measurements of `docs/calibration.md` showed them over-confident — resample
+    /// only when the ESS falls below half the particles (path degeneracy), pool 4 independent
+    /// filters so that the posterior includes their spread and θ_val comes with its Monte-Carlo
+    /// s.e., and semi-implicit Euler inside the filters (forward Euler biases the dampings,
+    /// SPEC §9). The paper's studies keep [`FilterSettings::default`].
+    pub fn recommended() -> Self {
+        Self {
+            ess_threshold: Some(0.5),
+            pool: 4,
+            discretisation: Discretisation::Symplectic,
+            ..Self::default()
         }
     }
 }
@@ -317,24 +346,29 @@ pub fn build_filter(
 }
 
 /// What the driver returns.
-struct Driven {
-    summary: RunSummary,
-    distinct: Vec<(String, usize)>,
-    credible: Vec<crate::observe::ParamIntervals>,
-    param_names: Vec<String>,
-    theta_val: Vec<f64>,
-    theta_sd_final: Vec<f64>,
-    trace: crate::observe::Trace,
-    online: Option<StateErrors>,
-    wall_s: f64,
+pub(crate) struct Driven {
+    pub(crate) summary: RunSummary,
+    pub(crate) distinct: Vec<(String, usize)>,
+    pub(crate) credible: Vec<crate::observe::ParamIntervals>,
+    pub(crate) param_names: Vec<String>,
+    pub(crate) theta_val: Vec<f64>,
+    pub(crate) theta_sd_final: Vec<f64>,
+    pub(crate) trace: crate::observe::Trace,
+    pub(crate) online: Option<StateErrors>,
+    pub(crate) wall_s: f64,
+    /// The final weights and particles, kept for pooling (`s.pool > 1`).
+    pub(crate) final_particles: Option<crate::observe::FinalParticles>,
 }
 
+/// Runs filter `member` of a pool (0: the only filter of an unpooled run, on the stream
+/// `filter/<algorithm>`; member m > 0 on `filter/<algorithm>/pool<m>`).
 fn drive(
     filter: &mut dyn Filter,
     input: &RunInput,
     s: &FilterSettings,
     algorithm: Algorithm,
     pc: &SmcConfig,
+    member: usize,
 ) -> Driven {
     let data = input.data;
     let layout = filter.layout().clone();
@@ -377,11 +411,12 @@ fn drive(
         bar.set_prefix(algorithm.name());
         recorder.progress = Some(bar);
     }
-    let mut rng = stream(
-        input.seed,
-        input.run,
-        &format!("{}/{}", purpose::FILTER, algorithm.name()),
-    );
+    recorder.keep_final = s.pool > 1;
+    let name = match member {
+        0 => format!("{}/{}", purpose::FILTER, algorithm.name()),
+        m => format!("{}/{}/pool{m}", purpose::FILTER, algorithm.name()),
+    };
+    let mut rng = stream(input.seed, input.run, &name);
     let start = Instant::now();
     let summary = run(filter, pc, &ys, ny, &mut rng, &mut recorder);
     let wall_s = start.elapsed().as_secs_f64();
@@ -397,6 +432,7 @@ fn drive(
         online: truth_rows
             .as_ref()
             .map(|_| StateErrors::from_sums(&layout.state_names, &recorder.state_sums)),
+        final_particles: recorder.final_particles.take(),
         trace: recorder.trace,
         summary,
         wall_s,
@@ -427,7 +463,33 @@ pub fn identify(input: &RunInput, algorithm: Algorithm, s: &FilterSettings) -> R
         s.particles,
         shape.sampled + shape.marginal * (shape.marginal + 1),
     )?;
-    let d = drive(filter.as_mut(), input, s, algorithm, &pc);
+    let d = if s.pool > 1 {
+        if s.particles < s.pool {
+            bail!(
+                "field `pool`: {} particles cannot make {} filters",
+                s.particles,
+                s.pool
+            );
+        }
+        // Np/M particles each, the first Np mod M filters one more.
+        let (each, extra) = (s.particles / s.pool, s.particles % s.pool);
+        let layout = filter.layout().clone();
+        let members: Vec<Driven> = (0..s.pool)
+            .map(|m| {
+                let member = SmcConfig {
+                    particles: each + usize::from(m < extra),
+                    ..pc
+                };
+                drive(filter.as_mut(), input, s, algorithm, &member, m)
+            })
+            .collect();
+        crate::pool::combine(&layout, members)
+    } else {
+        if s.pool == 0 {
+            bail!("field `pool`: 0 filters (1 runs one filter)");
+        }
+        drive(filter.as_mut(), input, s, algorithm, &pc, 0)
+    };
 
     let steps = data.len() - 1;
     let theta_true = data.meta.as_ref().map(|m| m.theta_true.clone());

@@ -135,6 +135,7 @@ fn the_summary_table_gives_the_interval_of_every_parameter() {
             .map(|&(level, lo, hi)| CredibleInterval { level, lo, hi })
             .collect(),
         error: None,
+        mc_se: None,
     }];
     let table = summary_table(&r);
     let k1 = table.lines().find(|l| l.starts_with("k1")).unwrap();

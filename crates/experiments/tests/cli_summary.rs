@@ -16,10 +16,15 @@ fn filter_prints_a_summary_table_and_records_its_warnings() {
         .unwrap();
     assert!(st.success());
     let out = dir.join("r.json");
+    // The paper's settings: a configuration file over the SPEC defaults, here empty.
+    let paper = dir.join("paper.toml");
+    std::fs::write(&paper, "").unwrap();
     // The bootstrap PF with 50 particles over 600 steps, resampling at every step: its static
     // parameters coalesce onto a few ancestors (SPEC §8, Fig. 4).
     let o = Command::new(env!("CARGO_BIN_EXE_sysid"))
         .args(["filter", "--algorithm", "bootstrap", "--particles", "50"])
+        .arg("--config")
+        .arg(&paper)
         .args(["--seed", "3", "--data"])
         .arg(&data)
         .arg("--out")
@@ -29,7 +34,7 @@ fn filter_prints_a_summary_table_and_records_its_warnings() {
     let stdout = String::from_utf8_lossy(&o.stdout);
     let stderr = String::from_utf8_lossy(&o.stderr);
     assert!(o.status.success(), "{stderr}");
-    assert!(stdout.contains("≈95% interval (±1.96 s.d.)"), "{stdout}");
+    assert!(stdout.contains("95% credible interval"), "{stdout}");
     for name in ["k1", "c3", "beta", "gamma", "n"] {
         assert!(
             stdout.lines().any(|l| l.starts_with(name)),
@@ -46,4 +51,31 @@ fn filter_prints_a_summary_table_and_records_its_warnings() {
         "{}",
         r["warnings"]
     );
+    // The record carries the 50/90/95 % intervals of every parameter.
+    let c = r["credible"].as_array().expect("intervals in the record");
+    assert_eq!(c.len(), 9);
+    assert!(c
+        .iter()
+        .all(|p| p["intervals"].as_array().unwrap().len() == 3));
+    assert!(r["config"]["filter"].get("pool").is_none());
+
+    // Without a configuration file: the recommended settings, 4 pooled filters that report
+    // the Monte-Carlo s.e. of θ_val.
+    let out = dir.join("recommended.json");
+    let o = Command::new(env!("CARGO_BIN_EXE_sysid"))
+        .args(["filter", "--algorithm", "mpf-ekf2", "--particles", "40"])
+        .args(["--seed", "3", "--data"])
+        .arg(&data)
+        .arg("--out")
+        .arg(&out)
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(stdout.contains("θ_val MC s.e."), "{stdout}");
+    assert!(stdout.contains("4 filters pooled"), "{stdout}");
+    let r: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
+    assert_eq!(r["config"]["filter"]["pool"], 4);
+    assert_eq!(r["config"]["filter"]["ess_threshold"], 0.5);
 }

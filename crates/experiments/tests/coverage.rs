@@ -45,6 +45,7 @@ fn run(i: u64) -> RunRecord {
                 })
                 .collect(),
             error: None,
+            mc_se: None,
         })
         .collect();
     // Through JSON, as a sweep reads its records.

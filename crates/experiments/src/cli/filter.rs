@@ -41,7 +41,8 @@ pub struct Args {
     /// Resampling scheme: systematic, stratified, multinomial or residual.
     #[arg(long)]
     pub resampling: Option<Scheme>,
-    /// Resample only when ESS < threshold × particles (default: every step).
+    /// Resample only when ESS < threshold × particles (default without --config: 0.5; with a
+    /// config file: its value, or every step).
     #[arg(long)]
     pub ess_threshold: Option<f64>,
     /// Storvik's update of step (iii): linearised (the paper's) or exact.
@@ -51,8 +52,9 @@ pub struct Args {
     /// symplectic (semi-implicit Euler: velocities first), or rk4 (bootstrap PF only).
     #[arg(long)]
     pub discretisation: Option<models::filtering::Discretisation>,
-    /// TOML file with filter settings (priors, noise fraction, masses, …); command-line options
-    /// override it.
+    /// TOML file with filter settings (priors, noise fraction, masses, …) over the SPEC's (the
+    /// paper's) defaults; command-line options override it. Without it: the recommended
+    /// settings of docs/calibration.md.
     #[arg(long)]
     pub config: Option<PathBuf>,
     /// Fix parameters at values, e.g. `k1=8,n=2`.
@@ -143,7 +145,7 @@ pub fn parse_fix(s: &str) -> Result<BTreeMap<String, f64>> {
 pub fn run(args: Args) -> Result<()> {
     let mut settings = match &args.config {
         Some(path) => crate::limits::load_filter_settings(path)?,
-        None => FilterSettings::default(),
+        None => FilterSettings::recommended(),
     };
     if let Some(p) = args.particles {
         settings.particles = p;

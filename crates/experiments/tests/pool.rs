@@ -1,0 +1,84 @@
+//! Pooled independent filters (`pool`): the pooled θ_val is the mean of the filters' θ_vals and
+//! its Monte-Carlo s.e. their s.d. over √M; the first filter draws from the unpooled run's
+//! stream; the intervals are those of the pooled posterior; a pool larger than the particles is
+//! a named error; an unpooled run's settings are written without the field.
+
+use experiments::pipeline::{identify, Algorithm, FilterSettings, RunInput};
+use models::dataset::{generate, DatasetConfig};
+
+#[test]
+fn two_pooled_filters_average_and_measure_their_spread() {
+    let mut config = DatasetConfig::from_preset("paper-3dof", 3).unwrap();
+    config.duration = Some(2.0);
+    let data = generate(&config).unwrap();
+    let loaded = data.to_loaded();
+    let input = RunInput {
+        data: &loaded,
+        chain: Some(&data.chain),
+        experiment: "pool",
+        seed: 3,
+        run: 0,
+        progress: false,
+    };
+    let single = FilterSettings {
+        particles: 40,
+        validate: false,
+        ..FilterSettings::default()
+    };
+    let pooled = FilterSettings {
+        particles: 80,
+        pool: 2,
+        ..single.clone()
+    };
+    for alg in [Algorithm::MpfEkf2, Algorithm::MlnRbpf] {
+        let first = identify(&input, alg, &single).unwrap();
+        let r = identify(&input, alg, &pooled).unwrap();
+        assert!(r.failure.is_none() && first.failure.is_none());
+        assert_eq!(r.credible.len(), r.param_names.len());
+        assert!(first.credible.iter().all(|c| c.mc_se.is_none()));
+        for (j, name) in r.param_names.iter().enumerate() {
+            // With two filters θ_val = (θ0 + θ1)/2 and s.e. = |θ0 − θ1|/√2/√2 = |θ_val − θ0|.
+            let c = &r.credible[j];
+            assert_eq!(&c.parameter, name);
+            let se = c
+                .mc_se
+                .expect("a pooled run measures its Monte-Carlo error");
+            let want = (r.theta_val[j] - first.theta_val[j]).abs();
+            assert!(
+                (se - want).abs() <= 1e-12 * (1.0 + want),
+                "{} {name}: s.e. {se} vs |θ_val − θ0| = {want}",
+                alg.name()
+            );
+            assert_eq!(c.intervals.len(), 3);
+            assert!(c
+                .intervals
+                .windows(2)
+                .all(|w| w[0].lo >= w[1].lo && w[0].hi <= w[1].hi));
+            assert!(r.theta_sd_final[j] >= 0.0);
+        }
+        // The two filters' particles together: the exponent n keeps at least the first's values.
+        assert!(r.distinct_sampled["n"] >= first.distinct_sampled["n"]);
+    }
+    // Fewer particles than filters, or no filter, is an error naming the field.
+    for (particles, pool) in [(1, 2), (40, 0)] {
+        let bad = FilterSettings {
+            particles,
+            pool,
+            ..single.clone()
+        };
+        let err = identify(&input, Algorithm::MpfEkf2, &bad).unwrap_err();
+        assert!(format!("{err:#}").contains("`pool`"), "{err:#}");
+    }
+    // Particles that do not split evenly: the first filters take one more.
+    let uneven = FilterSettings {
+        particles: 41,
+        pool: 2,
+        ..single.clone()
+    };
+    let r = identify(&input, Algorithm::MpfEkf2, &uneven).unwrap();
+    assert!(r.failure.is_none() && r.credible.iter().all(|c| c.mc_se.is_some()));
+    // Unpooled settings are written as before (records and fingerprints unchanged).
+    let v = serde_json::to_value(&single).unwrap();
+    assert!(v.get("pool").is_none(), "{v}");
+    assert_eq!(serde_json::to_value(&pooled).unwrap()["pool"], 2);
+}
