@@ -23,6 +23,7 @@ pub mod pipeline;
 pub mod record;
 pub mod report;
 pub mod reproduce;
+pub mod scaled_prior;
 pub mod study;
 pub mod sweep;
 pub mod verdict;

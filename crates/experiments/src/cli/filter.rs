@@ -305,7 +305,48 @@ pub fn run(args: Args) -> Result<()> {
         run: args.run,
         progress: true,
     };
+    if let Some(p) = crate::pipeline::prior_from_data(&data, chain.as_ref(), &settings)? {
+        eprintln!("{}", p.describe());
+    }
     let record = identify(&input, algorithm, &settings)?;
+    if data.meta.is_none() {
+        // Field data: the noise levels were chosen from the measured signals (SPEC §3); say which.
+        let spec = &record.config["spec"];
+        let sd = |v: &serde_json::Value| -> String {
+            let items: Vec<String> = v
+                .as_array()
+                .map(|a| {
+                    a.iter()
+                        .filter_map(|x| x.as_f64())
+                        .map(|x| format!("{:.3e}", x.sqrt()))
+                        .collect()
+                })
+                .unwrap_or_default();
+            items.join(", ")
+        };
+        let num =
+            |v: &serde_json::Value| v.as_f64().map_or("?".to_string(), |x| format!("{x:.3e}"));
+        let list = |v: &serde_json::Value| -> String {
+            let items: Vec<String> = v
+                .as_array()
+                .map(|a| {
+                    a.iter()
+                        .filter_map(|x| x.as_f64())
+                        .map(|x| format!("{x:.3e}"))
+                        .collect()
+                })
+                .unwrap_or_default();
+            items.join(", ")
+        };
+        eprintln!(
+            "noise levels from the data (noise fraction {}): measurement s.d. [{}] m/s², process s.d. x {}, v {}, r [{}] (recorded under config.spec)",
+            settings.noise_fraction,
+            sd(&spec["r_diag"]),
+            num(&spec["q_disp"]),
+            num(&spec["q_vel"]),
+            list(&spec["q_r"]),
+        );
+    }
     finish(record, &out)
 }
 
