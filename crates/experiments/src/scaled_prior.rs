@@ -129,7 +129,7 @@ pub fn scaled_prior(data: &LoadedDataset, d: &StructureDescription) -> Result<Sc
         2.0 * std::f64::consts::TAU / duration,
         0.5 * std::f64::consts::PI / dt,
     );
-    if !(w_lo < w_hi) {
+    if w_lo >= w_hi || !w_lo.is_finite() {
         bail!(
             "the record ({duration} s at dt = {dt} s) is too short to read the building's \
              frequency from it: give a `prior` in the config"
