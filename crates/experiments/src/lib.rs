@@ -30,6 +30,7 @@ pub mod record;
 pub mod reference;
 pub mod report;
 pub mod reproduce;
+pub mod scaled_prior;
 pub mod scaling;
 pub mod study;
 pub mod sweep;

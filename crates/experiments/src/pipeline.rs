@@ -307,7 +307,7 @@ pub fn chain_spec(
     );
     let mut spec = ChainSpec::from_rms(
         data.dt,
-        structure.masses,
+        structure.masses.clone(),
         hysteretic.clone(),
         sensors,
         data.ug_meas.clone(),
@@ -316,10 +316,13 @@ pub fn chain_spec(
     )?;
     spec.marginal_prior = s.marginal_prior;
     spec.discretisation = s.discretisation;
-    let mut prior = s
-        .prior
-        .clone()
-        .unwrap_or_else(|| ChainPrior::paper(n, &hysteretic));
+    // Default priors: SPEC §3's for simulated data (the paper's scale); for field data scaled
+    // from the measured response (`scaled_prior`).
+    let mut prior = match (&s.prior, is_field_data(data, chain)) {
+        (Some(p), _) => p.clone(),
+        (None, true) => crate::scaled_prior::scaled_prior(data, &structure)?.prior,
+        (None, false) => ChainPrior::paper(n, &hysteretic),
+    };
     for (name, value) in &s.fix {
         prior
             .fix(name, *value)
@@ -328,6 +331,25 @@ pub fn chain_spec(
     spec.prior = prior;
     spec.validate()?;
     Ok(spec)
+}
+
+/// Field data: neither `dataset.json` nor a known true structure.
+pub fn is_field_data(data: &LoadedDataset, chain: Option<&ShearChain>) -> bool {
+    data.meta.is_none() && chain.is_none()
+}
+
+/// The data-scaled default prior of a field-data run (printed by `sysid filter` and recorded
+/// under `config.prior_from_data`), `None` when the run uses another prior.
+pub fn prior_from_data(
+    data: &LoadedDataset,
+    chain: Option<&ShearChain>,
+    s: &FilterSettings,
+) -> Result<Option<crate::scaled_prior::ScaledPrior>> {
+    if s.prior.is_some() || !is_field_data(data, chain) {
+        return Ok(None);
+    }
+    let structure = resolve_for_run(data, chain, &s.structure)?;
+    Ok(Some(crate::scaled_prior::scaled_prior(data, &structure)?))
 }
 
 /// The filter of `algorithm` on the partitions of `spec` (no size table: every dimension is the
@@ -514,7 +536,8 @@ pub fn identify(input: &RunInput, algorithm: Algorithm, s: &FilterSettings) -> R
     if let Some(f) = &d.summary.failure {
         failures.insert(f.kind().to_string(), 1);
     }
-    let config = serde_json::json!({
+    let scaled = prior_from_data(data, input.chain, s)?;
+    let mut config = serde_json::json!({
         "algorithm": algorithm.name(),
         "filter": s,
         "data": data.meta.as_ref().map(|m| serde_json::to_value(&m.config).ok()),
@@ -525,6 +548,9 @@ pub fn identify(input: &RunInput, algorithm: Algorithm, s: &FilterSettings) -> R
             "discretisation": spec.discretisation,
         },
     });
+    if let Some(p) = scaled {
+        config["prior_from_data"] = serde_json::to_value(p).expect("serialisable");
+    }
     let mut record = RunRecord {
         experiment: input.experiment.to_string(),
         algorithm: algorithm.name().to_string(),

@@ -368,3 +368,41 @@ fn sparse_sensors_and_two_hysteretic_storeys_round_trip_through_every_algorithm(
         serde_json::json!([1.0, 1.0, 1.0, 1.0])
     );
 }
+
+#[test]
+fn printed_defaults_and_the_field_example_parse() {
+    let o = run(&["filter", "--print-config"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let text = String::from_utf8(o.stdout).unwrap();
+    let parsed: FilterSettings = toml::from_str(&text).unwrap();
+    assert_eq!(parsed, FilterSettings::default());
+    // Every key of the settings is documented (as a key or a commented example).
+    for key in [
+        "particles",
+        "resampling",
+        "ess_threshold",
+        "storvik_update",
+        "noise_fraction",
+        "discretisation",
+        "window",
+        "trace_every",
+        "validate",
+        "loop_every",
+        "marginal_prior",
+        "[fix]",
+        "[structure]",
+        "storeys",
+        "hysteretic",
+        "masses",
+        "measurement",
+        "[prior]",
+    ] {
+        assert!(text.contains(key), "{key} missing from --print-config");
+    }
+    let example =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../experiments/examples/field.toml");
+    let s = experiments::limits::load_filter_settings(&example).unwrap();
+    assert_eq!(s.structure.storeys, Some(5));
+    assert_eq!(s.structure.measurement, Some(MeasurementKind::Absolute));
+    assert!(s.structure.hysteretic.is_some() && s.structure.masses.is_some());
+}

@@ -165,7 +165,8 @@ mod tests {
 
     #[test]
     fn every_malformed_field_is_named() {
-        let cases: [(fn(&mut StructureDescription), &str, &str); 8] = [
+        type Edit = fn(&mut StructureDescription);
+        let cases: [(Edit, &str, &str); 8] = [
             (
                 |d| d.hysteretic = vec![1, 11],
                 "hysteretic",

@@ -20,12 +20,12 @@ use crate::sweep::write_atomic;
 #[derive(Debug, clap::Args)]
 pub struct Args {
     /// Algorithm: bootstrap, mln-rbpf, storvik or mpf-ekf2.
-    #[arg(long)]
-    pub algorithm: Algorithm,
+    #[arg(long, required_unless_present = "print_config")]
+    pub algorithm: Option<Algorithm>,
     /// Data-set directory as written by `sysid simulate` (`measured.csv`; `truth.csv` and
     /// `dataset.json` optional).
-    #[arg(long)]
-    pub data: PathBuf,
+    #[arg(long, required_unless_present = "print_config")]
+    pub data: Option<PathBuf>,
     /// Number of particles (default 500, or the config file's value).
     #[arg(long)]
     pub particles: Option<usize>,
@@ -36,8 +36,11 @@ pub struct Args {
     #[arg(long, default_value_t = 0)]
     pub run: u64,
     /// Where to write the run record (JSON).
+    #[arg(long, required_unless_present = "print_config")]
+    pub out: Option<PathBuf>,
+    /// Print every key of a `--config` file with its default and meaning, and exit.
     #[arg(long)]
-    pub out: PathBuf,
+    pub print_config: bool,
     /// Resampling scheme: systematic, stratified, multinomial or residual.
     #[arg(long)]
     pub resampling: Option<Scheme>,
@@ -141,8 +144,107 @@ pub fn parse_fix(s: &str) -> Result<BTreeMap<String, f64>> {
     Ok(out)
 }
 
+/// Every key of a filter config (`--config`) with its default value and meaning, as a TOML file
+/// that parses back to the defaults.
+pub fn commented_defaults() -> String {
+    let d = FilterSettings::default();
+    let q = |v: &dyn erased::Show| v.show();
+    format!(
+        r#"# Filter settings of `sysid filter --config FILE.toml` (and the [filter] table of a study).
+# Every key is optional; shown here with its default. Command-line options override the file.
+
+# Number of particles Np (SPEC §3).
+particles = {particles}
+# Resampling scheme: "systematic", "stratified", "multinomial" or "residual".
+resampling = {resampling}
+# Resample only when ESS < ess_threshold × particles, in (0, 1]; absent: every step (SPEC §3).
+# ess_threshold = 0.5
+# Storvik's step (iii): "linearised" (the paper's) or "exact".
+storvik_update = {storvik}
+# Noise fraction nf: R and Q are set from nf × RMS of the signals (SPEC §3).
+noise_fraction = {nf}
+# Discretisation inside the filters: "euler" (the paper's), "symplectic", "rk4" (bootstrap only).
+discretisation = {disc}
+# θ_val averages the posterior mean over the last `window` steps (SPEC eq. 26).
+window = {window}
+# Keep one trace step in `trace_every` in the record (0: no trace).
+trace_every = {trace}
+# Run the validation integration with θ_val when the truth is known (SPEC §7).
+validate = {validate}
+# Keep one hysteresis-loop point in `loop_every` in the record (0: no loops).
+loop_every = {loops}
+# Gaussian prior of the marginalised block: {{ kind = "moment_matched" }} (one moment-matched
+# Gaussian) or {{ kind = "per_particle", rel_sd = 0.1 }} (means drawn per particle).
+marginal_prior = {{ kind = "moment_matched" }}
+
+# Point-mass priors: parameter name = value (k1..kN, c1..cN, beta, gamma, n; with several
+# hysteretic elements beta4, gamma4, n4 for the element at storey 4).
+[fix]
+# k1 = 8.0
+
+# The building of field data (no dataset.json); data sets with dataset.json carry their own and
+# a key here must agree with it. See docs/structures.md.
+[structure]
+# Number of storeys N.
+# storeys = 3
+# 1-based storeys with a Bouc–Wen element ([] for a linear building).
+# hysteretic = [1]
+# Storey masses m1..mN, or one value for every storey ([1.0]: k and c per unit mass).
+# masses = [1.0, 1.0, 1.0]
+# What the accelerometers record: "absolute" (ẍ + ü_g, real accelerometers) or "relative" (ẍ).
+# measurement = "absolute"
+
+# Prior of θ; absent: SPEC §3's for the structure (k ~ LogNormal(10, 0.3), c ~ LogNormal(0.4,
+# 0.5), per element (β, γ) uniform on the triangle 0 ≤ β ≤ 5, |γ| ≤ β, n ~ U(1, 5)). When given,
+# it has one entry per storey in k and c and one element per hysteretic storey (0-based storey):
+# [prior]
+# k = [{{ kind = "log_normal", median = 10.0, log_sd = 0.3 }}, ...]
+# c = [{{ kind = "log_normal", median = 0.4, log_sd = 0.5 }}, ...]
+# elements = [{{ storey = 0, beta_gamma = {{ kind = "triangle", beta_max = 5.0 }}, n = {{ kind = "uniform", lo = 1.0, hi = 5.0 }} }}]
+"#,
+        particles = d.particles,
+        resampling = q(&d.resampling),
+        storvik = q(&d.storvik_update),
+        nf = q(&d.noise_fraction),
+        disc = q(&d.discretisation),
+        window = d.window,
+        trace = d.trace_every,
+        validate = d.validate,
+        loops = d.loop_every,
+    )
+}
+
+/// A value as TOML writes it (through serde, so the printed defaults are the real ones).
+mod erased {
+    pub trait Show {
+        fn show(&self) -> String;
+    }
+    impl<T: serde::Serialize> Show for T {
+        fn show(&self) -> String {
+            #[derive(serde::Serialize)]
+            struct W<'a, T> {
+                v: &'a T,
+            }
+            let text = toml::to_string(&W { v: self }).expect("a default serialises");
+            text.trim()
+                .strip_prefix("v = ")
+                .expect("one key")
+                .to_string()
+        }
+    }
+}
+
 /// Runs `sysid filter`.
 pub fn run(args: Args) -> Result<()> {
+    if args.print_config {
+        print!("{}", commented_defaults());
+        return Ok(());
+    }
+    let (Some(algorithm), Some(data_dir), Some(out)) =
+        (args.algorithm, args.data.clone(), args.out.clone())
+    else {
+        bail!("--algorithm, --data and --out are required");
+    };
     let mut settings = match &args.config {
         Some(path) => crate::limits::load_filter_settings(path)?,
         None => FilterSettings::recommended(),
@@ -166,9 +268,9 @@ pub fn run(args: Args) -> Result<()> {
         settings.fix.extend(parse_fix(f)?);
     }
     let flags = structure_flags(&args)?;
-    let data = load_dir(&args.data)
-        .with_context(|| format!("loading data set {}", args.data.display()))?;
-    let measured = args.data.join(MEASURED);
+    let data =
+        load_dir(&data_dir).with_context(|| format!("loading data set {}", data_dir.display()))?;
+    let measured = data_dir.join(MEASURED);
     let config_name = args
         .config
         .as_ref()
@@ -205,8 +307,49 @@ pub fn run(args: Args) -> Result<()> {
         run: args.run,
         progress: true,
     };
-    let record = identify(&input, args.algorithm, &settings)?;
-    finish(record, &args.out)
+    if let Some(p) = crate::pipeline::prior_from_data(&data, chain.as_ref(), &settings)? {
+        eprintln!("{}", p.describe());
+    }
+    let record = identify(&input, algorithm, &settings)?;
+    if data.meta.is_none() {
+        // Field data: the noise levels were chosen from the measured signals (SPEC §3); say which.
+        let spec = &record.config["spec"];
+        let sd = |v: &serde_json::Value| -> String {
+            let items: Vec<String> = v
+                .as_array()
+                .map(|a| {
+                    a.iter()
+                        .filter_map(|x| x.as_f64())
+                        .map(|x| format!("{:.3e}", x.sqrt()))
+                        .collect()
+                })
+                .unwrap_or_default();
+            items.join(", ")
+        };
+        let num =
+            |v: &serde_json::Value| v.as_f64().map_or("?".to_string(), |x| format!("{x:.3e}"));
+        let list = |v: &serde_json::Value| -> String {
+            let items: Vec<String> = v
+                .as_array()
+                .map(|a| {
+                    a.iter()
+                        .filter_map(|x| x.as_f64())
+                        .map(|x| format!("{x:.3e}"))
+                        .collect()
+                })
+                .unwrap_or_default();
+            items.join(", ")
+        };
+        eprintln!(
+            "noise levels from the data (noise fraction {}): measurement s.d. [{}] m/s², process s.d. x {}, v {}, r [{}] (recorded under config.spec)",
+            settings.noise_fraction,
+            sd(&spec["r_diag"]),
+            num(&spec["q_disp"]),
+            num(&spec["q_vel"]),
+            list(&spec["q_r"]),
+        );
+    }
+    finish(record, &out)
 }
 
 /// Attaches the plausibility warnings (`checks::check`) to a finished run, writes its record,
