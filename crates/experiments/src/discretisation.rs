@@ -86,11 +86,7 @@ pub const ALGORITHMS: [Algorithm; 3] = [Algorithm::MlnRbpf, Algorithm::Storvik, 
 pub const SCHEMES: [Discretisation; 2] = [Discretisation::Euler, Discretisation::Symplectic];
 
 /// The records of one study, algorithm and scheme.
-pub fn arm<'a>(
-    records: &'a [RunRecord],
-    algorithm: Algorithm,
-    d: Discretisation,
-) -> Vec<&'a RunRecord> {
+pub fn arm(records: &[RunRecord], algorithm: Algorithm, d: Discretisation) -> Vec<&RunRecord> {
     records
         .iter()
         .filter(|r| r.algorithm == algorithm.name() && scheme(r) == Some(d))
