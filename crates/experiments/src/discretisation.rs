@@ -401,6 +401,16 @@ pub fn findings(recs: &[RunRecord], dt: f64) -> Vec<Finding> {
             verdict: within(&d, 0.5 * pred, 1.5 * pred),
             evidence: d.show(1.0, 3, ""),
         });
+        let sym = Estimate::of(&values(&s(&cr)));
+        out.push(Finding {
+            statement: format!(
+                "{}: the symplectic damping is unbiased within 5%",
+                a.label()
+            ),
+            test: "mean over runs of the symplectic mean c θ_val/θ_true within [0.95, 1.05]".into(),
+            verdict: within(&sym, 0.95, 1.05),
+            evidence: sym.show(1.0, 3, ""),
+        });
         let be = |r: &RunRecord| (ratio(r, "beta") - 1.0).abs();
         let d = paired_difference(&e(&be), &s(&be));
         out.push(Finding {
