@@ -86,11 +86,7 @@ pub const ALGORITHMS: [Algorithm; 3] = [Algorithm::MlnRbpf, Algorithm::Storvik, 
 pub const SCHEMES: [Discretisation; 2] = [Discretisation::Euler, Discretisation::Symplectic];
 
 /// The records of one study, algorithm and scheme.
-pub fn arm<'a>(
-    records: &'a [RunRecord],
-    algorithm: Algorithm,
-    d: Discretisation,
-) -> Vec<&'a RunRecord> {
+pub fn arm(records: &[RunRecord], algorithm: Algorithm, d: Discretisation) -> Vec<&RunRecord> {
     records
         .iter()
         .filter(|r| r.algorithm == algorithm.name() && scheme(r) == Some(d))
@@ -404,6 +400,16 @@ pub fn findings(recs: &[RunRecord], dt: f64) -> Vec<Finding> {
             ),
             verdict: within(&d, 0.5 * pred, 1.5 * pred),
             evidence: d.show(1.0, 3, ""),
+        });
+        let sym = Estimate::of(&values(&s(&cr)));
+        out.push(Finding {
+            statement: format!(
+                "{}: the symplectic damping is unbiased within 5%",
+                a.label()
+            ),
+            test: "mean over runs of the symplectic mean c θ_val/θ_true within [0.95, 1.05]".into(),
+            verdict: within(&sym, 0.95, 1.05),
+            evidence: sym.show(1.0, 3, ""),
         });
         let be = |r: &RunRecord| (ratio(r, "beta") - 1.0).abs();
         let d = paired_difference(&e(&be), &s(&be));
