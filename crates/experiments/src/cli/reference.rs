@@ -36,8 +36,12 @@ pub struct Args {
     #[arg(long, default_value_t = 20)]
     pub probe: usize,
     /// Start the chain at the true θ (when the data set knows it) instead of the prior medians.
-    #[arg(long)]
+    #[arg(long, conflicts_with = "start_from")]
     pub start_at_truth: bool,
+    /// Start the chain at the θ_val of a run record (e.g. an online filter's answer on the same
+    /// data).
+    #[arg(long)]
+    pub start_from: Option<PathBuf>,
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
     /// Output file (JSON).
@@ -88,9 +92,21 @@ pub fn run(args: Args) -> Result<()> {
     let names = spec.prior.names();
     let map = ThetaMap::new(&spec.prior)?;
     let truth = data.meta.as_ref().map(|m| m.theta_true.clone());
-    let start: Vec<f64> = match (&truth, args.start_at_truth) {
-        (Some(t), true) => t.clone(),
-        (None, true) => bail!("--start-at-truth: {} has no true θ", args.data.display()),
+    let start: Vec<f64> = match (&truth, args.start_at_truth, &args.start_from) {
+        (Some(t), true, _) => t.clone(),
+        (None, true, _) => bail!("--start-at-truth: {} has no true θ", args.data.display()),
+        (_, false, Some(path)) => {
+            let r: crate::record::RunRecord = crate::sweep::read_record(path)?;
+            if r.param_names != names {
+                bail!(
+                    "--start-from {}: its parameters {:?} are not this data set's {:?}",
+                    path.display(),
+                    r.param_names,
+                    names
+                );
+            }
+            r.theta_val
+        }
         _ => {
             // Prior medians (the middle of uniform priors; β, γ at the triangle's centre line).
             map.theta(&vec![0.0; map.dim()])
