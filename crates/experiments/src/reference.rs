@@ -352,6 +352,43 @@ pub fn run_chain(
     pmmh(target, &u0, config, rng, on_iteration)
 }
 
+/// Several chains' summaries of the same posterior pooled as an equal-weight mixture: mean the
+/// mean of the means, variance the mean variance plus the variance of the means (so chains that
+/// disagree widen the reference instead of hiding it), ESS summed; quantiles are not pooled
+/// (NaN) unless there is one chain.
+pub fn pool_chains(chains: &[Vec<ParamSummary>]) -> anyhow::Result<Vec<ParamSummary>> {
+    let Some(first) = chains.first() else {
+        bail!("no reference chain given");
+    };
+    if chains.len() == 1 {
+        return Ok(first.clone());
+    }
+    let mut out = Vec::new();
+    for (i, p) in first.iter().enumerate() {
+        let same: Vec<&ParamSummary> = chains
+            .iter()
+            .map(|c| c.get(i).filter(|q| q.name == p.name))
+            .collect::<Option<_>>()
+            .ok_or_else(|| anyhow::anyhow!("the chains do not have the same parameters"))?;
+        let m = same.len() as f64;
+        let mean = same.iter().map(|q| q.mean).sum::<f64>() / m;
+        let var = same
+            .iter()
+            .map(|q| q.sd * q.sd + (q.mean - mean).powi(2))
+            .sum::<f64>()
+            / m;
+        out.push(ParamSummary {
+            name: p.name.clone(),
+            mean,
+            sd: var.sqrt(),
+            quantiles: [f64::NAN; 5],
+            ess: same.iter().map(|q| q.ess).sum(),
+            truth: p.truth,
+        });
+    }
+    Ok(out)
+}
+
 /// One algorithm's final posteriors against the reference, per parameter, over its runs
 /// (several filter seeds on the reference's data set).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

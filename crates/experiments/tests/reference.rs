@@ -6,7 +6,7 @@ mod common;
 
 use core_filters::rng::stream;
 use experiments::pipeline::{chain_spec, Algorithm, FilterSettings};
-use experiments::reference::{compare, FilterLikelihood, ParamSummary, ThetaMap};
+use experiments::reference::{compare, pool_chains, FilterLikelihood, ParamSummary, ThetaMap};
 use models::dataset::{generate, DatasetConfig};
 
 /// `log mean exp` of independent log-likelihood estimates (an estimate of log p(y | θ) whose
@@ -89,4 +89,25 @@ fn comparison_against_the_reference_on_constructed_records() {
     assert!((c[0].mean_shift_in_ref_sd - 2.0).abs() < 1e-9);
     assert!((c[0].spread_in_ref_sd - 2f64.sqrt()).abs() < 1e-9);
     assert!((c[0].sd_ratio - 4.0).abs() < 1e-9);
+}
+
+/// Two chains pooled as an equal mixture: means 1 and 3 with s.d. 1 give mean 2 and variance
+/// 1 + 1 = 2.
+#[test]
+fn chains_pool_as_an_equal_mixture() {
+    let chain = |mean: f64| {
+        vec![ParamSummary {
+            name: "k1".into(),
+            mean,
+            sd: 1.0,
+            quantiles: [0.0; 5],
+            ess: 10.0,
+            truth: None,
+        }]
+    };
+    let p = pool_chains(&[chain(1.0), chain(3.0)]).unwrap();
+    assert_eq!(p[0].mean, 2.0);
+    assert!((p[0].sd - 2f64.sqrt()).abs() < 1e-12);
+    assert_eq!(p[0].ess, 20.0);
+    assert!(pool_chains(&[]).is_err());
 }

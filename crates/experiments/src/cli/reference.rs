@@ -221,9 +221,10 @@ pub fn run(args: Args) -> Result<()> {
 /// Arguments of `sysid compare-reference`.
 #[derive(Debug, clap::Args)]
 pub struct CompareArgs {
-    /// The reference posterior written by `sysid reference`.
-    #[arg(long)]
-    pub reference: PathBuf,
+    /// The reference posterior written by `sysid reference`; several chains on the same data are
+    /// pooled as an equal-weight mixture (give it once per chain).
+    #[arg(long, required = true)]
+    pub reference: Vec<PathBuf>,
     /// Run records of online filters on the same data set.
     #[arg(required = true)]
     pub records: Vec<PathBuf>,
@@ -234,16 +235,21 @@ pub struct CompareArgs {
 
 /// `sysid compare-reference`: the online filters' final posteriors against the reference.
 pub fn compare(args: CompareArgs) -> Result<()> {
-    let text = std::fs::read_to_string(&args.reference)
-        .with_context(|| format!("reading {}", args.reference.display()))?;
-    let reference: ReferenceRecord = serde_json::from_str(&text)
-        .with_context(|| format!("parsing {}", args.reference.display()))?;
+    let mut chains = Vec::new();
+    for path in &args.reference {
+        let text =
+            std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+        let r: ReferenceRecord =
+            serde_json::from_str(&text).with_context(|| format!("parsing {}", path.display()))?;
+        chains.push(r.params);
+    }
+    let pooled = crate::reference::pool_chains(&chains)?;
     let mut records = Vec::new();
     for p in &args.records {
         let r: crate::record::RunRecord = crate::sweep::read_record(p)?;
         records.push(r);
     }
-    let md = crate::reference::compare_markdown(&reference.params, &records);
+    let md = crate::reference::compare_markdown(&pooled, &records);
     print!("{md}");
     if let Some(out) = &args.out {
         std::fs::write(out, &md).with_context(|| format!("writing {}", out.display()))?;
