@@ -375,12 +375,14 @@ fn printed_defaults_and_the_field_example_parse() {
     assert!(o.status.success(), "{}", stderr(&o));
     let text = String::from_utf8(o.stdout).unwrap();
     let parsed: FilterSettings = toml::from_str(&text).unwrap();
-    assert_eq!(parsed, FilterSettings::default());
+    // The printed file is what `sysid filter` runs without a config.
+    assert_eq!(parsed, FilterSettings::recommended());
     // Every key of the settings is documented (as a key or a commented example).
     for key in [
         "particles",
         "resampling",
         "ess_threshold",
+        "pool",
         "storvik_update",
         "noise_fraction",
         "discretisation",

@@ -144,21 +144,29 @@ pub fn parse_fix(s: &str) -> Result<BTreeMap<String, f64>> {
     Ok(out)
 }
 
-/// Every key of a filter config (`--config`) with its default value and meaning, as a TOML file
-/// that parses back to the defaults.
+/// Every key of a filter config (`--config`) with the value `sysid filter` uses without a config
+/// ([`FilterSettings::recommended`]) and its meaning, as a TOML file that parses back to those
+/// settings: `--print-config > f.toml` then `--config f.toml` runs exactly what no config runs.
 pub fn commented_defaults() -> String {
-    let d = FilterSettings::default();
+    let d = FilterSettings::recommended();
+    let paper = FilterSettings::default();
     let q = |v: &dyn erased::Show| v.show();
     format!(
         r#"# Filter settings of `sysid filter --config FILE.toml` (and the [filter] table of a study).
-# Every key is optional; shown here with its default. Command-line options override the file.
+# Shown with the values `sysid filter` uses without --config (the recommended settings, whose
+# interval coverage is measured in docs/calibration.md). A key absent from a file takes the
+# paper's value instead (ess_threshold absent, pool = 1, discretisation = "{paper_disc}").
+# Command-line options override the file.
 
 # Number of particles Np (SPEC §3).
 particles = {particles}
 # Resampling scheme: "systematic", "stratified", "multinomial" or "residual".
 resampling = {resampling}
 # Resample only when ESS < ess_threshold × particles, in (0, 1]; absent: every step (SPEC §3).
-# ess_threshold = 0.5
+ess_threshold = {ess}
+# Independent filters pooled into one run (the particles split between them); θ_val is their
+# mean and its Monte-Carlo s.e. is reported (docs/calibration.md). 1: one filter (the paper's).
+pool = {pool}
 # Storvik's step (iii): "linearised" (the paper's) or "exact".
 storvik_update = {storvik}
 # Noise fraction nf: R and Q are set from nf × RMS of the signals (SPEC §3).
@@ -202,6 +210,11 @@ marginal_prior = {{ kind = "moment_matched" }}
 # c = [{{ kind = "log_normal", median = 0.4, log_sd = 0.5 }}, ...]
 # elements = [{{ storey = 0, beta_gamma = {{ kind = "triangle", beta_max = 5.0 }}, n = {{ kind = "uniform", lo = 1.0, hi = 5.0 }} }}]
 "#,
+        paper_disc = paper.discretisation.name(),
+        ess = q(&d
+            .ess_threshold
+            .expect("the recommended settings resample on the ESS")),
+        pool = d.pool,
         particles = d.particles,
         resampling = q(&d.resampling),
         storvik = q(&d.storvik_update),
