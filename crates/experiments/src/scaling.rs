@@ -200,16 +200,13 @@ pub fn cell(
         .copied()
         .filter(|r| !r.is_failure())
         .collect();
-    let (k_mean, k_sd, _) = mean_sd(
-        &ok.iter()
-            .filter_map(|r| group_error(r, 'k'))
-            .collect::<Vec<_>>(),
-    );
-    let (c_mean, c_sd, _) = mean_sd(
-        &ok.iter()
-            .filter_map(|r| group_error(r, 'c'))
-            .collect::<Vec<_>>(),
-    );
+    // A run-to-run s.d. needs two runs: NaN (written "–") with one.
+    let spread = |v: Vec<f64>| match mean_sd(&v) {
+        (m, s, n) if n >= 2 => (m, s),
+        (m, _, _) => (m, f64::NAN),
+    };
+    let (k_mean, k_sd) = spread(ok.iter().filter_map(|r| group_error(r, 'k')).collect());
+    let (c_mean, c_sd) = spread(ok.iter().filter_map(|r| group_error(r, 'c')).collect());
     let k_worst = (1..=storeys)
         .map(|j| {
             let name = format!("k{j}");
