@@ -4,7 +4,7 @@
 //!   (the libraries it builds are the ones `cargo test --workspace --release` links) and runs `sysid reproduce` from the workspace root into `results/paper/` (or
 //!   `results/paper-quick/`). Every run is computed unless `--resume` is given; then records whose
 //!   fingerprint matches are reused.
-//! - `reproduce-scaling [--quick] [--resume] [--threads N] [--shard i/n]`: builds `sysid` in
+//! - `reproduce-scaling [--quick] [--resume] [--report-only] [--threads N] [--shard i/n]`: builds `sysid` in
 //!   release and runs `sysid scaling` (`experiments/scaling.toml`) into `results/scaling/` (or
 //!   `results/scaling-quick/`); sharded and resumed like `reproduce-paper`.
 //! - `regression [--threads N] [--resume]`: builds `sysid` in release and runs `sysid regression`
@@ -67,6 +67,9 @@ enum Task {
         /// computed.
         #[arg(long)]
         resume: bool,
+        /// Compute nothing: write the report from the records already there.
+        #[arg(long)]
+        report_only: bool,
     },
     /// Identification-accuracy regression check (experiments/regression.toml).
     Regression {
@@ -183,6 +186,7 @@ fn main() -> Result<()> {
             threads,
             shard,
             resume,
+            report_only,
         } => {
             let started = std::time::Instant::now();
             let sysid = build_sysid(&root)?;
@@ -210,6 +214,9 @@ fn main() -> Result<()> {
             }
             if resume {
                 cmd.arg("--resume");
+            }
+            if report_only {
+                cmd.arg("--report-only");
             }
             run(&mut cmd)?;
             eprintln!(

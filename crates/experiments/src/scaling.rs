@@ -31,7 +31,7 @@ use crate::record::RunRecord;
 use crate::study::{Job, Study};
 use crate::sweep::lock::DirLock;
 use crate::sweep::progress::clock;
-use crate::sweep::{run_sweep, write_bytes_atomic, Shard, SweepOptions};
+use crate::sweep::{read_record, record_path, run_sweep, write_bytes_atomic, Shard, SweepOptions};
 
 mod figures;
 mod report;
@@ -47,6 +47,9 @@ pub struct Options {
     pub shard: Shard,
     pub progress: bool,
     pub resume: bool,
+    /// Compute nothing: write the report from the records already in `out/records` whose
+    /// fingerprint matches their job (the runs without one are reported as not run).
+    pub report_only: bool,
 }
 
 /// Sampled and marginalised dimensions of one algorithm on one chain (SPEC §5, §9;
@@ -197,16 +200,13 @@ pub fn cell(
         .copied()
         .filter(|r| !r.is_failure())
         .collect();
-    let (k_mean, k_sd, _) = mean_sd(
-        &ok.iter()
-            .filter_map(|r| group_error(r, 'k'))
-            .collect::<Vec<_>>(),
-    );
-    let (c_mean, c_sd, _) = mean_sd(
-        &ok.iter()
-            .filter_map(|r| group_error(r, 'c'))
-            .collect::<Vec<_>>(),
-    );
+    // A run-to-run s.d. needs two runs: NaN (written "–") with one.
+    let spread = |v: Vec<f64>| match mean_sd(&v) {
+        (m, s, n) if n >= 2 => (m, s),
+        (m, _, _) => (m, f64::NAN),
+    };
+    let (k_mean, k_sd) = spread(ok.iter().filter_map(|r| group_error(r, 'k')).collect());
+    let (c_mean, c_sd) = spread(ok.iter().filter_map(|r| group_error(r, 'c')).collect());
     let k_worst = (1..=storeys)
         .map(|j| {
             let name = format!("k{j}");
@@ -319,6 +319,21 @@ pub fn run(opts: &Options) -> Result<Vec<Cell>> {
         resume: opts.resume,
     };
     let records_dir = opts.out.join("records");
+    if opts.report_only {
+        let (jobs, records) = existing(&study, &jobs, &records_dir)?;
+        let cpu: Vec<Option<f64>> = jobs
+            .iter()
+            .map(|j| read_cpu(&records_dir, &study.record_id(j)))
+            .collect();
+        let cells = cells(&study, &jobs, &records, &cpu)?;
+        write_outputs(opts, &study, &cells, f64::NAN)?;
+        eprintln!(
+            "wrote {} from {} existing records",
+            opts.out.join("REPORT.md").display(),
+            records.len()
+        );
+        return Ok(cells);
+    }
     let outcome = run_sweep(
         &jobs,
         |j| study.record_id(j),
@@ -366,6 +381,37 @@ pub fn run(opts: &Options) -> Result<Vec<Cell>> {
         clock(start.elapsed())
     );
     Ok(cells)
+}
+
+/// The jobs whose record exists, reads back and carries the job's fingerprint, with their
+/// records.
+fn existing(study: &Study, jobs: &[Job], dir: &Path) -> Result<(Vec<Job>, Vec<RunRecord>)> {
+    let mut kept = (Vec::new(), Vec::new());
+    for job in jobs {
+        let path = record_path(dir, &study.record_id(job));
+        if !path.exists() {
+            continue;
+        }
+        let record: RunRecord = match read_record(&path) {
+            Ok(r) => r,
+            Err(e) => {
+                eprintln!("{e:#}: left out of the report");
+                continue;
+            }
+        };
+        if record.fingerprint.as_ref().map(|f| f.sha256.as_str())
+            == Some(study.job_fingerprint(job)?.as_str())
+        {
+            kept.0.push(job.clone());
+            kept.1.push(record);
+        } else {
+            eprintln!(
+                "{}: computed from other inputs, left out of the report",
+                path.display()
+            );
+        }
+    }
+    Ok(kept)
 }
 
 /// One cell per structure and algorithm, in the study's order, from the records of `jobs`.

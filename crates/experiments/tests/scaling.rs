@@ -181,6 +181,7 @@ fn small_study_end_to_end_and_resumed() {
         shard: Shard::default(),
         progress: false,
         resume: false,
+        report_only: false,
     };
     let cells = scaling::run(&opts).unwrap();
     // n2: 3 algorithms, n4: 2, n4-sparse: 3 (not run by this build).
@@ -215,7 +216,7 @@ fn small_study_end_to_end_and_resumed() {
     // Resumed: every record is reused, the cells are the same but for the timings.
     let again = scaling::run(&Options {
         resume: true,
-        ..opts
+        ..opts.clone()
     })
     .unwrap();
     for (a, b) in cells.iter().zip(&again) {
@@ -224,5 +225,25 @@ fn small_study_end_to_end_and_resumed() {
             (b.runs, b.failed, b.k_error_mean.to_bits())
         );
     }
+    // Report only: a removed record is a run not run, nothing is computed.
+    let gone = out.join("records/n2-mln-rbpf-np30-systematic-run001.json");
+    std::fs::remove_file(&gone).unwrap();
+    let partial = scaling::run(&Options {
+        report_only: true,
+        resume: false,
+        ..opts.clone()
+    })
+    .unwrap();
+    assert!(!gone.exists());
+    let mln = partial
+        .iter()
+        .find(|c| c.structure == "n2" && c.algorithm == "mln-rbpf")
+        .unwrap();
+    assert_eq!((mln.runs, mln.runs_planned), (1, 2));
+    let report = std::fs::read_to_string(out.join("REPORT.md")).unwrap();
+    assert!(
+        report.contains("`n2` MLN-RBPF: 1 of 2 planned runs"),
+        "{report}"
+    );
     std::fs::remove_dir_all(&dir).unwrap();
 }

@@ -29,6 +29,10 @@ pub struct Args {
     /// it, every run is computed.
     #[arg(long)]
     pub resume: bool,
+    /// Compute nothing: write the report from the records already in the output directory
+    /// whose fingerprint matches (e.g. after stopping a sweep that does not fit the time).
+    #[arg(long, conflicts_with_all = ["resume", "shard"])]
+    pub report_only: bool,
 }
 
 /// Runs `sysid scaling`.
@@ -41,6 +45,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         shard: args.shard,
         progress: true,
         resume: args.resume,
+        report_only: args.report_only,
     })?;
     Ok(())
 }
