@@ -77,27 +77,10 @@ pub struct Structure {
 }
 
 impl Structure {
-    /// Whether this build can generate the structure's data: the data configuration places
-    /// the Bouc–Wen element at storey 1 and measures every storey; other layouts need the
-    /// `hysteretic` and `sensors` fields of the data configuration.
+    /// Why this build cannot generate the structure's data, if it cannot. Every structure of
+    /// the axis is supported (the data configuration takes hysteretic storeys and a sensor
+    /// layout); kept so that a future structure field that a build lacks is named, not ignored.
     pub fn unsupported(&self) -> Option<String> {
-        let every: Vec<usize> = (1..=self.storeys).collect();
-        if self.hysteretic.as_ref().is_some_and(|h| h != &[1]) {
-            return Some(format!(
-                "structure `{}`: hysteretic storeys {:?} need a data configuration with \
-                 hysteretic storeys, which this build does not have",
-                self.label,
-                self.hysteretic.as_deref().unwrap_or_default()
-            ));
-        }
-        if self.sensors.as_ref().is_some_and(|s| s != &every) {
-            return Some(format!(
-                "structure `{}`: sensors {:?} need a data configuration with a sensor layout, \
-                 which this build does not have",
-                self.label,
-                self.sensors.as_deref().unwrap_or_default()
-            ));
-        }
         None
     }
 
@@ -357,6 +340,8 @@ impl Study {
                 bail!("{why}");
             }
             c.storeys = Some(st.storeys);
+            c.hysteretic = st.hysteretic.clone();
+            c.sensors = st.sensors.clone();
             if st.duration.is_some() {
                 c.duration = st.duration;
             }

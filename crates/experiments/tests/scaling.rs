@@ -85,12 +85,10 @@ fn structure_axis_jobs_ids_and_configs() {
         study.structure_config(Some(0), 1).unwrap().duration,
         Some(1.0)
     );
-    // A sparse layout needs the data configuration's sensor layout: named, not silently ignored.
-    let err = study.structure_config(Some(2), 0).unwrap_err().to_string();
-    assert!(
-        err.contains("n4-sparse") && err.contains("sensors"),
-        "{err}"
-    );
+    // A sparse layout reaches the data configuration (the filters then see only those sensors).
+    let sparse = study.structure_config(Some(2), 0).unwrap();
+    assert_eq!(sparse.sensors, Some(vec![3, 4]));
+    assert_eq!(sparse.storeys, Some(4));
     // The quick form caps every structure's runs and duration.
     let q = study.quick();
     assert!(q.sweep.structures.iter().all(|s| s.runs == Some(1)));
