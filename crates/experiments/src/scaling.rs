@@ -14,8 +14,8 @@
 //! with other work the wall time of a run grows with the load while its CPU time does not, so
 //! the cost figure and fits use CPU time when every run of a cell has it.
 //!
-//! Structures this build cannot generate (hysteresis above storey 1, sparse sensors) are listed
-//! in the report as not run; so are runs a sweep has not computed yet.
+//! Runs a sweep has not computed yet are listed in the report as not run (as would a structure a
+//! build could not generate: [`crate::study::Structure::unsupported`]).
 
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
