@@ -34,4 +34,5 @@ pub mod scaled_prior;
 pub mod scaling;
 pub mod study;
 pub mod sweep;
+pub mod user_study;
 pub mod verdict;

@@ -22,8 +22,16 @@ use crate::record::{Fingerprint, RunRecord};
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct DataSection {
-    /// Preset name (`paper-3dof`, `paper-3dof-harmonic`, `shear-chain`).
+    /// Preset name (`paper-3dof`, `paper-3dof-harmonic`, `shear-chain`): every run generates its
+    /// own data set from `(master_seed, run)`. Empty when `dir` is given.
+    #[serde(default)]
     pub preset: String,
+    /// A data-set directory (a user's record, `measured.csv` with or without `dataset.json`;
+    /// relative paths are taken from the directory of the study file) instead of a preset: every
+    /// run filters the same data with its own filter streams, so the runs measure the
+    /// Monte-Carlo spread of one identification on that record.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub dir: Option<std::path::PathBuf>,
     pub storeys: Option<usize>,
     /// Amplitude scale (default: the preset's).
     pub scale: Option<f64>,
@@ -189,8 +197,14 @@ impl Study {
     pub fn load(path: &Path) -> Result<Self> {
         let text = std::fs::read_to_string(path)
             .with_context(|| format!("reading study {}", path.display()))?;
-        let s: Study =
+        let mut s: Study =
             toml::from_str(&text).with_context(|| format!("parsing study {}", path.display()))?;
+        if let Some(dir) = &s.data.dir {
+            if dir.is_relative() {
+                let base = path.parent().unwrap_or_else(|| Path::new("."));
+                s.data.dir = Some(base.join(dir));
+            }
+        }
         s.check()
             .with_context(|| format!("study {}", path.display()))?;
         Ok(s)
@@ -221,7 +235,35 @@ impl Study {
         if let Some(f) = self.data.decimate {
             crate::decimate::check_factor(f).context("field `data.decimate`")?;
         }
-        models::dataset::check_config(&self.dataset_config(0)?).context("table `data`")?;
+        match (&self.data.dir, self.data.preset.is_empty()) {
+            (Some(_), false) => {
+                bail!("table `data`: give either `preset` or `dir`, not both")
+            }
+            (None, true) => bail!(
+                "table `data`: give `preset` (a simulated structure) or `dir` (a data-set directory)"
+            ),
+            (Some(dir), true) => {
+                if self.data.storeys.is_some()
+                    || self.data.scale.is_some()
+                    || self.data.duration.is_some()
+                {
+                    bail!(
+                        "table `data`: `storeys`, `scale` and `duration` describe generated data; \
+                         with `dir` the data set is {} as it is",
+                        dir.display()
+                    );
+                }
+                if !self.sweep.structures.is_empty() {
+                    bail!("a study on a data directory has no structure axis (`sweep.structures`)");
+                }
+                models::dataset::load_dir(dir)
+                    .with_context(|| format!("table `data`: field `dir` ({})", dir.display()))?;
+            }
+            (None, false) => {
+                models::dataset::check_config(&self.dataset_config(0)?)
+                    .context("table `data`")?;
+            }
+        }
         let mut labels = std::collections::BTreeSet::new();
         for (i, st) in self.sweep.structures.iter().enumerate() {
             st.check(&self.sweep)?;
@@ -375,11 +417,30 @@ impl Study {
 
     /// The data set of run `run` as the filters see it (decimated when the study says so), with
     /// its true structure.
-    pub fn data(&self, structure: Option<usize>, run: u64) -> Result<(LoadedDataset, ShearChain)> {
+    pub fn data(
+        &self,
+        structure: Option<usize>,
+        run: u64,
+    ) -> Result<(LoadedDataset, Option<ShearChain>)> {
+        let factor = self.data.decimate.unwrap_or(1);
+        if let Some(dir) = &self.data.dir {
+            let loaded = models::dataset::load_dir(dir)
+                .with_context(|| format!("loading data set {}", dir.display()))?;
+            let chain = match &loaded.meta {
+                Some(meta) => Some(
+                    meta.true_chain()
+                        .with_context(|| format!("the structure of {}", dir.display()))?,
+                ),
+                None => None,
+            };
+            let loaded =
+                crate::decimate::decimate(&loaded, factor).context("field `data.decimate`")?;
+            return Ok((loaded, chain));
+        }
         let data = generate(&self.structure_config(structure, run)?)?;
-        let loaded = crate::decimate::decimate(&data.to_loaded(), self.data.decimate.unwrap_or(1))
+        let loaded = crate::decimate::decimate(&data.to_loaded(), factor)
             .context("field `data.decimate`")?;
-        Ok((loaded, data.chain))
+        Ok((loaded, Some(data.chain)))
     }
 
     /// The fingerprint (SHA-256, hex) the record of `job` carries when computed by this build:
@@ -403,7 +464,7 @@ impl Study {
         let (loaded, chain) = self.data(job.structure, job.run)?;
         let input = RunInput {
             data: &loaded,
-            chain: Some(&chain),
+            chain: chain.as_ref(),
             experiment: &self.name,
             seed: self.sweep.master_seed,
             run: job.run,

@@ -40,6 +40,9 @@ enum Command {
     Merge(cli::merge::Args),
     /// Reference posterior of θ for one (short) data set by particle marginal Metropolis–Hastings.
     Reference(cli::reference::Args),
+    /// Run a study file, e.g. N filter seeds × algorithms on a data directory of your own.
+    #[command(allow_negative_numbers = true)]
+    Study(cli::study::Args),
     /// Compare online filters' final posteriors (run records) with a reference posterior.
     CompareReference(cli::reference::CompareArgs),
     /// Draw the figures of one run record (convergence, ESS, hysteresis loop, residuals).
@@ -56,6 +59,7 @@ fn main() -> anyhow::Result<()> {
         Command::Filter(args) => cli::filter::run(args),
         Command::Table1(args) => cli::table1::run(args),
         Command::Reference(args) => cli::reference::run(args),
+        Command::Study(args) => cli::study::run(args),
         Command::CompareReference(args) => cli::reference::compare(args),
         Command::Reproduce(args) => cli::reproduce::run(args),
         Command::Merge(args) => cli::merge::run(args),

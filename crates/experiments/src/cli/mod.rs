@@ -8,4 +8,5 @@ pub mod regression;
 pub mod reproduce;
 pub mod scaling;
 pub mod simulate;
+pub mod study;
 pub mod table1;

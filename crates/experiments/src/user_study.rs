@@ -1,0 +1,138 @@
+//! A study on a user's own record (`[data] dir = ...` in a study file; `sysid study`): N filter
+//! seeds × algorithms on the same data, aggregated into what a user needs to trust one run —
+//! the mean of θ_val over the runs, its run-to-run spread (the Monte-Carlo error of one run) and
+//! the posterior s.d. a run reports beside it. With a known truth (`dataset.json`) the relative
+//! error is added.
+
+use std::collections::BTreeMap;
+use std::fmt::Write as _;
+
+use serde::Serialize;
+
+use crate::record::RunRecord;
+
+/// One algorithm's statistics of one parameter over the runs of a study.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct ParamSpread {
+    pub algorithm: String,
+    pub param: String,
+    /// Completed runs (failed runs are left out and counted in [`AlgorithmSpread::failed`]).
+    pub runs: usize,
+    /// Mean of θ_val over the runs.
+    pub mean: f64,
+    /// s.d. of θ_val over the runs: the Monte-Carlo spread of one run's answer (NaN below 2 runs).
+    pub spread: f64,
+    /// Mean over the runs of the posterior s.d. a run reports.
+    pub posterior_sd: f64,
+    /// `posterior_sd / spread`: below 1, a single run's interval is narrower than the scatter of
+    /// its own answer.
+    pub sd_over_spread: f64,
+    pub truth: Option<f64>,
+}
+
+/// One algorithm's runs.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct AlgorithmSpread {
+    pub algorithm: String,
+    pub runs: usize,
+    pub failed: usize,
+    /// Runs whose record carries at least one warning (`checks`).
+    pub with_warnings: usize,
+    pub params: Vec<ParamSpread>,
+}
+
+fn mean_sd(x: &[f64]) -> (f64, f64) {
+    let n = x.len() as f64;
+    if x.is_empty() {
+        return (f64::NAN, f64::NAN);
+    }
+    let m = x.iter().sum::<f64>() / n;
+    let sd = if x.len() > 1 {
+        (x.iter().map(|v| (v - m).powi(2)).sum::<f64>() / (n - 1.0)).sqrt()
+    } else {
+        f64::NAN
+    };
+    (m, sd)
+}
+
+/// The statistics per algorithm (in name order) and parameter.
+pub fn spreads(records: &[RunRecord]) -> Vec<AlgorithmSpread> {
+    let mut by: BTreeMap<&str, Vec<&RunRecord>> = BTreeMap::new();
+    for r in records {
+        by.entry(r.algorithm.as_str()).or_default().push(r);
+    }
+    by.into_iter()
+        .map(|(alg, rs)| {
+            let ok: Vec<&&RunRecord> = rs.iter().filter(|r| !r.is_failure()).collect();
+            let names = rs
+                .first()
+                .map(|r| r.param_names.clone())
+                .unwrap_or_default();
+            let params = names
+                .iter()
+                .enumerate()
+                .map(|(j, name)| {
+                    let vals: Vec<f64> = ok
+                        .iter()
+                        .filter_map(|r| r.theta_val.get(j).copied())
+                        .collect();
+                    let sds: Vec<f64> = ok
+                        .iter()
+                        .filter_map(|r| r.theta_sd_final.get(j).copied())
+                        .collect();
+                    let (mean, spread) = mean_sd(&vals);
+                    let posterior_sd = mean_sd(&sds).0;
+                    ParamSpread {
+                        algorithm: alg.to_string(),
+                        param: name.clone(),
+                        runs: vals.len(),
+                        mean,
+                        spread,
+                        posterior_sd,
+                        sd_over_spread: posterior_sd / spread,
+                        truth: ok
+                            .first()
+                            .and_then(|r| r.theta_true.as_ref())
+                            .and_then(|t| t.get(j).copied()),
+                    }
+                })
+                .collect();
+            AlgorithmSpread {
+                algorithm: alg.to_string(),
+                runs: rs.len(),
+                failed: rs.len() - ok.len(),
+                with_warnings: rs.iter().filter(|r| !r.warnings.is_empty()).count(),
+                params,
+            }
+        })
+        .collect()
+}
+
+/// The report of a study on a user's record.
+pub fn markdown(name: &str, description: &str, data: &str, spreads: &[AlgorithmSpread]) -> String {
+    let mut o = String::new();
+    let _ = writeln!(o, "# Study `{name}`\n\n{description}\n\nData: `{data}`. Every run filters this record with its own filter streams (seed, run), so the spread over runs is the Monte-Carlo error of one run's answer.\n");
+    let _ = writeln!(o, "| algorithm | runs (failed, with warnings) | parameter | θ_val mean over runs | run-to-run s.d. | mean posterior s.d. | posterior s.d. / spread | truth |");
+    let _ = writeln!(o, "|---|---|---|---|---|---|---|---|");
+    for a in spreads {
+        for p in &a.params {
+            let _ = writeln!(
+                o,
+                "| {} | {} ({}, {}) | {} | {:.5} | {:.5} | {:.5} | {:.2} | {} |",
+                a.algorithm,
+                a.runs,
+                a.failed,
+                a.with_warnings,
+                p.param,
+                p.mean,
+                p.spread,
+                p.posterior_sd,
+                p.sd_over_spread,
+                p.truth
+                    .map_or_else(|| "–".to_string(), |t| format!("{t:.5}"))
+            );
+        }
+    }
+    let _ = writeln!(o, "\nA posterior s.d. / spread well below 1 means a single run's interval is narrower than the scatter of its own answer: pool runs (`pool` in the filter settings) or use more particles before acting on one run.");
+    o
+}

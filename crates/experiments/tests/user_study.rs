@@ -1,0 +1,96 @@
+//! A study on a data directory (`[data] dir = ...`, `sysid study`): every run filters the same
+//! record with its own streams, and the report gives θ_val's mean, run-to-run spread and the
+//! posterior s.d. per algorithm and parameter.
+
+use std::path::PathBuf;
+use std::process::Command;
+
+use models::dataset::{generate, DatasetConfig};
+
+fn temp_dir(tag: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("sysid-user-study-{tag}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+const STUDY: &str = r#"
+name = "own-record"
+description = "three filter seeds on one record"
+
+[data]
+dir = "d"
+
+[sweep]
+algorithms = ["mpf-ekf2", "mln-rbpf"]
+runs = 3
+master_seed = 5
+particles = [40]
+
+[filter]
+trace_every = 0
+loop_every = 0
+validate = false
+"#;
+
+#[test]
+fn a_study_on_a_data_directory_runs_every_seed_on_the_same_record() {
+    let dir = temp_dir("ok");
+    let mut c = DatasetConfig::from_preset("paper-3dof", 3).unwrap();
+    c.duration = Some(1.0);
+    generate(&c).unwrap().write_dir(&dir.join("d")).unwrap();
+    std::fs::write(dir.join("study.toml"), STUDY).unwrap();
+    let out = dir.join("out");
+    let o = Command::new(env!("CARGO_BIN_EXE_sysid"))
+        .args(["study", "--config"])
+        .arg(dir.join("study.toml"))
+        .arg("--out")
+        .arg(&out)
+        .args(["--threads", "1"])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    assert_eq!(summary["runs"]["executed"], 6);
+    let algs = summary["algorithms"].as_array().unwrap();
+    assert_eq!(algs.len(), 2);
+    for a in algs {
+        assert_eq!(a["runs"], 3);
+        let k1 = &a["params"][0];
+        assert_eq!(k1["param"], "k1");
+        assert_eq!(k1["runs"], 3);
+        // Different filter streams on the same data: the answers differ, and the truth is known.
+        assert!(k1["spread"].as_f64().unwrap() > 0.0);
+        assert_eq!(k1["truth"], 8.0);
+    }
+    // One record per algorithm and seed.
+    let records: Vec<_> = std::fs::read_dir(out.join("records"))
+        .unwrap()
+        .filter_map(|e| e.ok())
+        .filter(|e| e.path().extension().is_some_and(|x| x == "json"))
+        .collect();
+    assert_eq!(records.len(), 6);
+    let report = std::fs::read_to_string(out.join("REPORT.md")).unwrap();
+    assert!(report.contains("run-to-run s.d."), "{report}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn a_study_names_its_data_once() {
+    let dir = temp_dir("bad");
+    let both = STUDY.replace("dir = \"d\"", "dir = \"d\"\npreset = \"paper-3dof\"");
+    std::fs::write(dir.join("both.toml"), both).unwrap();
+    let err = experiments::study::Study::load(&dir.join("both.toml"))
+        .unwrap_err()
+        .to_string();
+    let chain = format!("{err:#}");
+    assert!(chain.contains("both.toml"), "{chain}");
+    let e = experiments::study::Study::load(&dir.join("both.toml")).unwrap_err();
+    assert!(format!("{e:#}").contains("not both"), "{e:#}");
+    // A directory that is not a data set is refused by name.
+    std::fs::write(dir.join("missing.toml"), STUDY).unwrap();
+    let e = experiments::study::Study::load(&dir.join("missing.toml")).unwrap_err();
+    assert!(format!("{e:#}").contains("field `dir`"), "{e:#}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
