@@ -60,6 +60,8 @@ pub enum ExcitationSource {
     Csv { path: PathBuf, units: Units },
     /// A PEER NGA `.AT2` record.
     At2 { path: PathBuf },
+    /// A vendored real record by name ([`crate::ground_motions`], e.g. `loma-prieta-1989`).
+    Named { name: String },
 }
 
 impl ExcitationSource {
@@ -366,6 +368,17 @@ pub fn ground_motion(config: &DatasetConfig) -> Result<GroundMotion, DatasetErro
         }
         ExcitationSource::Csv { path, units } => readers::read_csv(path, *units)?,
         ExcitationSource::At2 { path } => readers::read_at2(path)?,
+        ExcitationSource::Named { name } => crate::ground_motions::by_name(name)
+            .ok_or_else(|| {
+                invalid(
+                    "excitation",
+                    format!(
+                        "no vendored record `{name}` (known: {})",
+                        crate::ground_motions::names().join(", ")
+                    ),
+                )
+            })?
+            .ground_motion()?,
     };
     // The resampled record covers min(record, requested duration); bound its length first.
     let span = config

@@ -39,8 +39,9 @@ pub struct Args {
     /// Output directory: a new directory, or an existing data set to replace.
     #[arg(long)]
     pub out: PathBuf,
-    /// Excitation: elcentro, kanai-tajimi, harmonic, or a path to a `.csv` (`t,acc`) or `.AT2`
-    /// record. Default: the preset's own.
+    /// Excitation: elcentro, kanai-tajimi, harmonic, a vendored real record by name
+    /// (el-centro-1940, loma-prieta-1989, … : see data/ground_motions/PROVENANCE.md), or a path to
+    /// a `.csv` (`t,acc`) or `.AT2` record. Default: the preset's own.
     #[arg(long)]
     pub excitation: Option<String>,
     /// Units of a CSV record.
@@ -79,6 +80,9 @@ fn excitation_source(arg: &str, units: UnitsArg) -> ExcitationSource {
         "harmonic" => ExcitationSource::Harmonic {
             amplitude: HARMONIC_AMPLITUDE,
             omega: HARMONIC_OMEGA,
+        },
+        name if models::ground_motions::by_name(name).is_some() => ExcitationSource::Named {
+            name: name.to_string(),
         },
         path if path.to_ascii_lowercase().ends_with(".at2") => ExcitationSource::At2 {
             path: PathBuf::from(path),
