@@ -322,9 +322,8 @@ pub fn summarise(
         .into_iter()
         .map(|i| {
             let x: Vec<f64> = thetas.iter().map(|t| t[i]).collect();
+            let (mean, sd, _) = crate::metrics::mean_sd(&x);
             let n = x.len() as f64;
-            let mean = x.iter().sum::<f64>() / n;
-            let sd = (x.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1.0)).sqrt();
             let mut sorted = x.clone();
             sorted.sort_by(f64::total_cmp);
             let q = |p: f64| sorted[((p * (n - 1.0)).round() as usize).min(sorted.len() - 1)];
@@ -436,20 +435,14 @@ pub fn compare(
             if shifts.is_empty() {
                 continue;
             }
-            let n = shifts.len() as f64;
-            let mean = shifts.iter().sum::<f64>() / n;
-            let spread = if shifts.len() > 1 {
-                (shifts.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1.0)).sqrt()
-            } else {
-                f64::NAN
-            };
+            let (mean, spread, n) = crate::metrics::mean_sd(&shifts);
             out.push(Comparison {
                 algorithm: alg.to_string(),
                 param: p.name.clone(),
-                runs: shifts.len(),
+                runs: n,
                 mean_shift_in_ref_sd: mean,
-                spread_in_ref_sd: spread,
-                sd_ratio: ratios.iter().sum::<f64>() / n,
+                spread_in_ref_sd: if n > 1 { spread } else { f64::NAN },
+                sd_ratio: crate::metrics::mean_sd(&ratios).0,
             });
         }
     }

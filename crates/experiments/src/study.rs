@@ -426,13 +426,9 @@ impl Study {
         if let Some(dir) = &self.data.dir {
             let loaded = models::dataset::load_dir(dir)
                 .with_context(|| format!("loading data set {}", dir.display()))?;
-            let chain = match &loaded.meta {
-                Some(meta) => Some(
-                    meta.true_chain()
-                        .with_context(|| format!("the structure of {}", dir.display()))?,
-                ),
-                None => None,
-            };
+            let chain = loaded
+                .true_chain()
+                .with_context(|| format!("the structure of {}", dir.display()))?;
             let loaded =
                 crate::decimate::decimate(&loaded, factor).context("field `data.decimate`")?;
             return Ok((loaded, chain));

@@ -41,18 +41,11 @@ pub struct AlgorithmSpread {
     pub params: Vec<ParamSpread>,
 }
 
-fn mean_sd(x: &[f64]) -> (f64, f64) {
-    let n = x.len() as f64;
-    if x.is_empty() {
-        return (f64::NAN, f64::NAN);
-    }
-    let m = x.iter().sum::<f64>() / n;
-    let sd = if x.len() > 1 {
-        (x.iter().map(|v| (v - m).powi(2)).sum::<f64>() / (n - 1.0)).sqrt()
-    } else {
-        f64::NAN
-    };
-    (m, sd)
+/// Mean and run-to-run s.d. ([`crate::metrics::mean_sd`]); the s.d. is undefined (NaN) below
+/// two runs rather than 0, so one run never looks free of Monte-Carlo error.
+fn mean_spread(x: &[f64]) -> (f64, f64) {
+    let (m, sd, n) = crate::metrics::mean_sd(x);
+    (m, if n > 1 { sd } else { f64::NAN })
 }
 
 /// The statistics per algorithm (in name order) and parameter.
@@ -80,8 +73,8 @@ pub fn spreads(records: &[RunRecord]) -> Vec<AlgorithmSpread> {
                         .iter()
                         .filter_map(|r| r.theta_sd_final.get(j).copied())
                         .collect();
-                    let (mean, spread) = mean_sd(&vals);
-                    let posterior_sd = mean_sd(&sds).0;
+                    let (mean, spread) = mean_spread(&vals);
+                    let posterior_sd = crate::metrics::mean_sd(&sds).0;
                     ParamSpread {
                         algorithm: alg.to_string(),
                         param: name.clone(),

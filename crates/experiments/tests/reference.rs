@@ -111,3 +111,28 @@ fn chains_pool_as_an_equal_mixture() {
     assert_eq!(p[0].ess, 20.0);
     assert!(pool_chains(&[]).is_err());
 }
+
+/// A chain that did not move, a nearly stuck one and one with few effective samples are named;
+/// a healthy chain gets no warning.
+#[test]
+fn untrustworthy_chains_are_flagged() {
+    use experiments::cli::reference::chain_warnings;
+    let p = |ess: f64| {
+        vec![ParamSummary {
+            name: "k1".into(),
+            mean: 8.0,
+            sd: 0.1,
+            quantiles: [0.0; 5],
+            ess,
+            truth: None,
+        }]
+    };
+    assert!(chain_warnings(0.2, &p(500.0), 0, 100).is_empty());
+    let stuck = chain_warnings(0.0, &p(500.0), 0, 100);
+    assert!(stuck[0].contains("did not move"), "{stuck:?}");
+    assert!(chain_warnings(0.01, &p(500.0), 0, 100)[0].contains("nearly stuck"));
+    let few = chain_warnings(0.2, &p(25.0), 3, 100);
+    assert!(few[0].starts_with("k1: chain ESS 25"), "{few:?}");
+    assert!(few[0].contains("0.020"), "{few:?}");
+    assert!(few[1].contains("3 of 100"), "{few:?}");
+}

@@ -788,6 +788,12 @@ pub struct LoadedDataset {
 }
 
 impl LoadedDataset {
+    /// The true structure with θ_true when `dataset.json` says what it is (`None` for field
+    /// data): the structure of the validation run.
+    pub fn true_chain(&self) -> Result<Option<ShearChain>, DatasetError> {
+        self.meta.as_ref().map(DatasetMeta::true_chain).transpose()
+    }
+
     pub fn len(&self) -> usize {
         self.t.len()
     }

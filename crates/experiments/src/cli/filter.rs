@@ -305,13 +305,9 @@ pub fn run(args: Args) -> Result<()> {
         );
     }
     // The true structure, for the validation run, when the data set says what it is.
-    let chain = match &data.meta {
-        Some(meta) => Some(
-            meta.true_chain()
-                .context("rebuilding the data set's structure")?,
-        ),
-        None => None,
-    };
+    let chain = data
+        .true_chain()
+        .context("rebuilding the data set's structure")?;
     let input = RunInput {
         data: &data,
         chain: chain.as_ref(),

@@ -70,6 +70,54 @@ pub struct ReferenceRecord {
     pub failed_estimates: u64,
     pub wall_s: f64,
     pub params: Vec<ParamSummary>,
+    /// Why this reference should not be trusted as it is ([`chain_warnings`]).
+    #[serde(default)]
+    pub warnings: Vec<String>,
+}
+
+/// Chain ESS below which a reference mean is flagged: its Monte-Carlo s.e. is then more than a
+/// tenth of the posterior s.d.
+pub const MIN_CHAIN_ESS: f64 = 100.0;
+
+/// Acceptance rate below which the chain is flagged as (nearly) stuck.
+pub const MIN_ACCEPTANCE: f64 = 0.02;
+
+/// The reasons a chain's summary is not a trustworthy posterior: a chain that did not move
+/// after its burn-in (one point, not a distribution), a nearly stuck one, too few effective
+/// samples, failed likelihood estimates.
+pub fn chain_warnings(
+    acceptance: f64,
+    params: &[ParamSummary],
+    failed: u64,
+    evaluations: u64,
+) -> Vec<String> {
+    let mut w = Vec::new();
+    if acceptance == 0.0 {
+        w.push(
+            "the chain did not move after the burn-in: its summary is one point, not a posterior \
+             (start it elsewhere, e.g. --start-from an online run, or use more particles)"
+                .to_string(),
+        );
+    } else if acceptance < MIN_ACCEPTANCE {
+        w.push(format!(
+            "acceptance {acceptance:.3} < {MIN_ACCEPTANCE}: the chain is nearly stuck"
+        ));
+    }
+    for p in params.iter().filter(|p| !(p.ess >= MIN_CHAIN_ESS)) {
+        w.push(format!(
+            "{}: chain ESS {:.0} < {MIN_CHAIN_ESS}: the mean carries a Monte-Carlo s.e. of about \
+             {:.3} (s.d./√ESS)",
+            p.name,
+            p.ess,
+            p.sd / p.ess.max(1.0).sqrt()
+        ));
+    }
+    if failed > 0 {
+        w.push(format!(
+            "{failed} of {evaluations} likelihood estimates failed (rejected proposals)"
+        ));
+    }
+    w
 }
 
 pub fn run(args: Args) -> Result<()> {
@@ -80,13 +128,9 @@ pub fn run(args: Args) -> Result<()> {
         .context("--particles")?;
     let data = load_dir(&args.data)
         .with_context(|| format!("loading data set {}", args.data.display()))?;
-    let chain = match &data.meta {
-        Some(meta) => Some(
-            meta.true_chain()
-                .context("rebuilding the data set's structure")?,
-        ),
-        None => None,
-    };
+    let chain = data
+        .true_chain()
+        .context("rebuilding the data set's structure")?;
     let settings = FilterSettings::default();
     let spec = chain_spec(&data, chain.as_ref(), &settings)?;
     let names = spec.prior.names();
@@ -174,6 +218,12 @@ pub fn run(args: Args) -> Result<()> {
         }
     });
     let params = summarise(&chain_out, &map, &names, truth.as_deref());
+    let warnings = chain_warnings(
+        chain_out.acceptance,
+        &params,
+        target.failures,
+        target.evaluations,
+    );
     let record = ReferenceRecord {
         data: args.data.display().to_string(),
         steps,
@@ -192,6 +242,7 @@ pub fn run(args: Args) -> Result<()> {
         failed_estimates: target.failures,
         wall_s: started.elapsed().as_secs_f64(),
         params,
+        warnings,
     };
     println!(
         "{:<8} {:>12} {:>10} {:>24} {:>8} {:>10}",
@@ -214,8 +265,19 @@ pub fn run(args: Args) -> Result<()> {
         "acceptance {:.3} (burn-in {:.3}), {} failed estimates of {}",
         record.acceptance, record.acceptance_burn_in, record.failed_estimates, record.evaluations
     );
+    for w in &record.warnings {
+        eprintln!("warning: {w}");
+    }
     crate::sweep::write_atomic(&args.out, &record)
-        .with_context(|| format!("writing {}", args.out.display()))
+        .with_context(|| format!("writing {}", args.out.display()))?;
+    if record.acceptance == 0.0 {
+        bail!(
+            "the chain did not move after the burn-in: not a reference posterior (record with its \
+             warnings written to {})",
+            args.out.display()
+        );
+    }
+    Ok(())
 }
 
 /// Arguments of `sysid compare-reference`.
@@ -241,6 +303,17 @@ pub fn compare(args: CompareArgs) -> Result<()> {
             std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
         let r: ReferenceRecord =
             serde_json::from_str(&text).with_context(|| format!("parsing {}", path.display()))?;
+        // Older records carry no warnings: recompute them from what they hold.
+        let warnings = chain_warnings(r.acceptance, &r.params, r.failed_estimates, r.evaluations);
+        if r.acceptance == 0.0 {
+            bail!(
+                "{}: the chain did not move after the burn-in; it is not a posterior to compare with",
+                path.display()
+            );
+        }
+        for w in &warnings {
+            eprintln!("warning: {}: {w}", path.display());
+        }
         chains.push(r.params);
     }
     let pooled = crate::reference::pool_chains(&chains)?;
