@@ -3,8 +3,9 @@
 //! θ = [k1..kN, c1..cN, then per hysteretic element in storey order (β, γ, n)]. Defaults:
 //! k_j ~ LogNormal(median 10, log-sd 0.3), c_j ~ LogNormal(0.4, 0.5), per element (β, γ) uniform
 //! on the triangle {0 ≤ β ≤ 5, |γ| ≤ β} and n ~ U(1, 5). Every parameter can be overridden, or
-//! fixed (a point mass) by name. The old single-element `ParameterPrior` stays for the
-//! const-generic partitions.
+//! fixed (a point mass) by name. The single-element `crate::priors::ParameterPrior` is no longer
+//! used by any filter; it remains as the oracle this prior is tested against (same moments, same
+//! draws from the same stream) and carries the Monte-Carlo tests of the scalar priors.
 
 use crate::priors::{BetaGammaPrior, Prior, PriorError};
 use crate::structure::{theta_names, BoucWenLaw};
