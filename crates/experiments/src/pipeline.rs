@@ -321,7 +321,14 @@ pub fn chain_spec(
     let mut prior = match (&s.prior, is_field_data(data, chain)) {
         (Some(p), _) => p.clone(),
         (None, true) => crate::scaled_prior::scaled_prior(data, &structure)?.prior,
-        (None, false) => ChainPrior::paper(n, &hysteretic),
+        // Simulated data: the preset's (SPEC §3's, carried to the structure's values for a
+        // preset whose storeys are not the paper's).
+        (None, false) => match (data.meta.as_ref(), chain) {
+            (Some(meta), Some(chain)) if chain.storeys() == n => {
+                models::preset::Preset::default_prior(&meta.config.preset, chain, &hysteretic)
+            }
+            _ => ChainPrior::paper(n, &hysteretic),
+        },
     };
     for (name, value) in &s.fix {
         prior

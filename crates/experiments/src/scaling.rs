@@ -35,6 +35,7 @@ use crate::sweep::{read_record, record_path, run_sweep, write_bytes_atomic, Shar
 
 mod figures;
 mod report;
+pub mod structures;
 
 /// Options of a scaling study run.
 #[derive(Debug, Clone)]
@@ -593,19 +594,21 @@ fn write_outputs(opts: &Options, study: &Study, cells: &[Cell], sweep_s: f64) ->
         .iter()
         .filter_map(|s| s.unsupported())
         .collect();
+    let values = structures::structure_values(study)?;
     write_bytes_atomic(
         &out.join("summary.json"),
         (serde_json::to_string_pretty(&serde_json::json!({
             "study": study.name,
             "quick": opts.quick,
             "sweep_wall_s": sweep_s,
+            "structures": values,
             "cells": cells,
             "cost_fits": fits,
             "not_run": unsupported,
         }))? + "\n")
             .as_bytes(),
     )?;
-    let text = report::write(study, cells, &fits, &unsupported, opts.quick);
+    let text = report::write(study, &values, cells, &fits, &unsupported, opts.quick);
     write_bytes_atomic(&out.join("REPORT.md"), text.as_bytes())
 }
 

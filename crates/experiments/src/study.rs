@@ -78,6 +78,9 @@ pub struct Structure {
     pub sensors: Option<Vec<usize>>,
     /// Duration of the data (s); absent: the data section's.
     pub duration: Option<f64>,
+    /// Amplitude scale of the excitation; absent: the data section's (or the preset's).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub scale: Option<f64>,
     /// Algorithms run on this structure (a subset of the sweep's); absent: the sweep's.
     pub algorithms: Option<Vec<Algorithm>>,
     /// Runs 0..runs on this structure (at most the sweep's); absent: the sweep's.
@@ -127,6 +130,14 @@ impl Structure {
         if let Some(d) = self.duration {
             if !(d.is_finite() && d > 0.0) {
                 bail!("{}: field `duration` must be positive, got {d}", ctx());
+            }
+        }
+        if let Some(a) = self.scale {
+            if !(a.is_finite() && a > 0.0 && a <= models::limits::MAX_ABS_SCALE) {
+                bail!(
+                    "{}: field `scale` must be a positive number, got {a}",
+                    ctx()
+                );
             }
         }
         if let Some(algs) = &self.algorithms {
@@ -386,6 +397,9 @@ impl Study {
             c.sensors = st.sensors.clone();
             if st.duration.is_some() {
                 c.duration = st.duration;
+            }
+            if let Some(a) = st.scale {
+                c.scale = a;
             }
         }
         Ok(c)

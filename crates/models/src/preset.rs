@@ -5,8 +5,13 @@
 //! - `paper-3dof-harmonic`: the same structure under `3·sin(4t)` m/s² for 31.18 s.
 //! - `shear-chain` with a storey count N: the same per-storey values for N storeys, Bouc–Wen
 //!   element at storey 1, El Centro × 3.0 ([`Preset::with_storeys`]).
+//! - `building-chain` with a storey count N: a chain with the modal periods of a real building
+//!   (T₁ from 0.32 s at 3 storeys to 3.6 s at 40), 2 % damping in its first mode, the paper's
+//!   Bouc–Wen law at storey 1 and El Centro scaled so that the element yields
+//!   ([`Preset::building`]; the choice is explained in `docs/scaling.md`).
 
 use crate::excitation::{self, GroundMotion, DEFAULT_DT, EL_CENTRO_SCALE};
+use crate::filtering::ChainPrior;
 use crate::structure::{BoucWen, ShearChain, StructureError};
 use thiserror::Error;
 
@@ -70,9 +75,32 @@ pub const BOUC_WEN_BETA: f64 = 2.0;
 pub const BOUC_WEN_GAMMA: f64 = 1.0;
 pub const BOUC_WEN_N: f64 = 2.0;
 
+/// Storey stiffness of `building-chain` over a unit mass (s⁻²).
+pub const BUILDING_K: f64 = 2000.0;
+/// First-mode damping ratio of `building-chain`.
+pub const BUILDING_ZETA1: f64 = 0.02;
+/// Amplitude scale of El Centro for `building-chain`: the record in m/s² with the model's
+/// length unit taken as 1/BUILDING_SCALE m, so that the Bouc–Wen element's saturation
+/// (β + γ)^(−1/n) = 0.577 units is a yield drift of 0.577/BUILDING_SCALE m (see
+/// `docs/scaling.md` for the measured yielding at each N).
+pub const BUILDING_SCALE: f64 = 50.0;
+
+/// Circular frequency of mode `i` (1-based) of a uniform fixed-free chain of `storeys` equal
+/// masses `m` and springs `k`: ω_i = 2√(k/m) sin((2i − 1)π / (2(2N + 1))).
+pub fn uniform_chain_omega(k: f64, m: f64, storeys: usize, i: usize) -> f64 {
+    let n = storeys as f64;
+    2.0 * (k / m).sqrt()
+        * ((2.0 * i as f64 - 1.0) * std::f64::consts::PI / (2.0 * (2.0 * n + 1.0))).sin()
+}
+
 impl Preset {
     /// Names accepted by [`Preset::from_name`].
-    pub const NAMES: [&'static str; 3] = ["paper-3dof", "paper-3dof-harmonic", "shear-chain"];
+    pub const NAMES: [&'static str; 4] = [
+        "paper-3dof",
+        "paper-3dof-harmonic",
+        "shear-chain",
+        "building-chain",
+    ];
 
     /// The paper's structure (SPEC §1) generalised to `storeys` storeys: unit masses, k = 8,
     /// c = 0.25, Bouc–Wen element (β = 2, γ = 1, n = 2) between the ground and storey 1.
@@ -126,6 +154,43 @@ impl Preset {
         })
     }
 
+    /// The `building-chain` structure of `storeys` storeys: unit masses, k = [`BUILDING_K`] per
+    /// storey (ω₁ = 2√k sin(π / (2(2N + 1))): T₁ = 0.32, 0.49, 0.94, 1.83, 3.62 s at N = 3, 5,
+    /// 10, 20, 40 — about 0.1·N s, the rule of thumb for buildings), inter-storey dampers
+    /// c = 2ζ₁k/ω₁ with ζ₁ = [`BUILDING_ZETA1`] (stiffness-proportional, so mode i has
+    /// ζ_i = ζ₁ω_i/ω₁), and the paper's Bouc–Wen element at storey 1.
+    pub fn building_chain(storeys: usize) -> Result<ShearChain, PresetError> {
+        if storeys == 0 {
+            return Err(PresetError::NoStorey { storeys });
+        }
+        let omega1 = uniform_chain_omega(BUILDING_K, 1.0, storeys, 1);
+        let c = 2.0 * BUILDING_ZETA1 * BUILDING_K / omega1;
+        Ok(ShearChain::new(
+            vec![1.0; storeys],
+            vec![BUILDING_K; storeys],
+            vec![c; storeys],
+            vec![BoucWen {
+                storey: 0,
+                beta: BOUC_WEN_BETA,
+                gamma: BOUC_WEN_GAMMA,
+                n: BOUC_WEN_N,
+            }],
+        )
+        .expect("the preset values are valid"))
+    }
+
+    /// `building-chain` of `storeys` storeys under El Centro × [`BUILDING_SCALE`].
+    pub fn building(storeys: usize) -> Result<Self, PresetError> {
+        Ok(Self {
+            name: "building-chain".to_string(),
+            chain: Self::building_chain(storeys)?,
+            excitation: DefaultExcitation::ElCentro {
+                scale: BUILDING_SCALE,
+            },
+            dt: DEFAULT_DT,
+        })
+    }
+
     fn renamed(mut self, name: &str) -> Self {
         self.name = name.to_string();
         self
@@ -138,6 +203,7 @@ impl Preset {
             "paper-3dof" => Self::paper_3dof(),
             "paper-3dof-harmonic" => Self::paper_3dof_harmonic(),
             "shear-chain" => Self::with_storeys(3)?,
+            "building-chain" => Self::building(storeys.unwrap_or(3))?,
             _ => {
                 return Err(PresetError::Unknown {
                     name: name.to_string(),
@@ -145,7 +211,11 @@ impl Preset {
             }
         };
         if let Some(n) = storeys {
-            p.chain = Self::chain(n)?;
+            p.chain = match name {
+                // Its damping depends on N (ζ₁ is fixed, ω₁ falls with N).
+                "building-chain" => Self::building_chain(n)?,
+                _ => Self::chain(n)?,
+            };
         }
         Ok(p)
     }
@@ -171,6 +241,20 @@ impl Preset {
             elements,
         )?;
         Ok(())
+    }
+
+    /// The default prior of the filters on this preset's data, for a chain with the 0-based
+    /// `hysteretic` storeys: SPEC §3's for the paper's presets (whose medians are tied to the
+    /// paper's values: 10 for k = 8, 0.4 for c = 0.25); for `building-chain` the same prior
+    /// carried to the building's values ([`ChainPrior::relative_to`]: medians 1.25 k and 1.6 c,
+    /// as SPEC §3's are to the paper's).
+    pub fn default_prior(name: &str, chain: &ShearChain, hysteretic: &[usize]) -> ChainPrior {
+        match name {
+            "building-chain" => {
+                ChainPrior::relative_to(chain.stiffness(), chain.damping(), hysteretic)
+            }
+            _ => ChainPrior::paper(chain.storeys(), hysteretic),
+        }
     }
 
     /// The preset's default excitation sampled at its `dt`.

@@ -32,6 +32,10 @@ pub struct ChainPrior {
     pub elements: Vec<ElementPrior>,
 }
 
+/// Prior median over the true value in SPEC §3: 10 / 8 for k, 0.4 / 0.25 for c.
+pub const K_PRIOR_RATIO: f64 = 1.25;
+pub const C_PRIOR_RATIO: f64 = 1.6;
+
 impl ChainPrior {
     /// SPEC §3 defaults for N storeys and hysteretic elements at the 0-based `hysteretic` storeys.
     pub fn paper(n_storeys: usize, hysteretic: &[usize]) -> Self {
@@ -59,6 +63,27 @@ impl ChainPrior {
                 })
                 .collect(),
         }
+    }
+
+    /// SPEC §3's priors carried to a structure with other storey values: each k_j and c_j prior
+    /// keeps its log-s.d. and sits where SPEC §3's sits relative to the paper's truth (median
+    /// 10 for k = 8, i.e. 1.25 k_j; 0.4 for c = 0.25, i.e. 1.6 c_j); β, γ, n as SPEC §3 (they
+    /// do not depend on the storey values). `k`, `c`: the structure's per-storey values.
+    pub fn relative_to(k: &[f64], c: &[f64], hysteretic: &[usize]) -> Self {
+        let mut p = Self::paper(k.len(), hysteretic);
+        for (prior, &kj) in p.k.iter_mut().zip(k) {
+            *prior = Prior::LogNormal {
+                median: K_PRIOR_RATIO * kj,
+                log_sd: 0.3,
+            };
+        }
+        for (prior, &cj) in p.c.iter_mut().zip(c) {
+            *prior = Prior::LogNormal {
+                median: C_PRIOR_RATIO * cj,
+                log_sd: 0.5,
+            };
+        }
+        p
     }
 
     pub fn n_storeys(&self) -> usize {
@@ -255,6 +280,38 @@ mod tests {
         p.sample_into(&mut stream(1, 0, "t"), &mut a);
         old.sample_into(&mut stream(1, 0, "t"), &mut b);
         assert_eq!(a, b, "same draws from the same stream");
+    }
+
+    #[test]
+    fn relative_prior_sits_where_the_papers_sits() {
+        // At the paper's values it is the paper's prior, to the bit.
+        assert_eq!(
+            ChainPrior::relative_to(&[8.0; 3], &[0.25; 3], &[0]),
+            ChainPrior::paper(3, &[0])
+        );
+        // Elsewhere: medians 1.25 k and 1.6 c, same log-s.d.s, same β, γ, n.
+        let p = ChainPrior::relative_to(&[2000.0, 1000.0], &[4.0, 2.0], &[1]);
+        let paper = ChainPrior::paper(2, &[1]);
+        assert_eq!(
+            p.k[1],
+            Prior::LogNormal {
+                median: 1250.0,
+                log_sd: 0.3
+            }
+        );
+        assert_eq!(
+            p.c[0],
+            Prior::LogNormal {
+                median: 6.4,
+                log_sd: 0.5
+            }
+        );
+        assert_eq!(p.elements, paper.elements);
+        // Prior mean over the truth is the paper's ratio for every storey.
+        let (mean, _) = p.moments();
+        let (pm, _) = paper.moments();
+        assert!((mean[0] / 2000.0 - pm[0] / 8.0).abs() < 1e-12);
+        assert!((mean[3] / 2.0 - pm[3] / 0.25).abs() < 1e-12);
     }
 
     #[test]
