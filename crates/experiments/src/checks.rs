@@ -85,18 +85,36 @@ fn is_stiffness_or_damping(name: &str) -> bool {
 /// The warnings of a finished run, most serious first.
 pub fn check(r: &RunRecord) -> Vec<Warning> {
     let mut out = Vec::new();
+    // A run that failed before its averaging window has no θ_val at all: one warning says so
+    // instead of one per parameter.
+    let no_estimate = r.failure.is_some() && r.theta_val.iter().all(|v| v.is_nan());
     if let Some(f) = &r.failure {
+        let window_done = (r.steps_completed + r.window).saturating_sub(r.steps_total);
         out.push(Warning {
             kind: WarningKind::Failed,
             parameter: None,
-            message: format!(
-                "the run failed after {} of {} steps: {f}; θ_val is the average of the steps before the failure",
-                r.steps_completed, r.steps_total
-            ),
+            message: if no_estimate {
+                format!(
+                    "the run failed after {} of {} steps: {f}; it failed before its averaging \
+                     window (the last {} steps), so it gives no θ_val",
+                    r.steps_completed, r.steps_total, r.window
+                )
+            } else {
+                format!(
+                    "the run failed after {} of {} steps: {f}; θ_val averages only the {} \
+                     steps of the averaging window completed before the failure",
+                    r.steps_completed,
+                    r.steps_total,
+                    window_done.min(r.window)
+                )
+            },
         });
     }
     for (j, (name, v)) in r.param_names.iter().zip(&r.theta_val).enumerate() {
         let sd = r.theta_sd_final.get(j).copied().unwrap_or(f64::NAN);
+        if no_estimate {
+            break;
+        }
         if !v.is_finite() {
             out.push(Warning {
                 kind: WarningKind::NonFinite,
@@ -169,6 +187,11 @@ pub fn summary_table(r: &RunRecord) -> String {
     let pool = pooled_filters(r);
     for (j, name) in r.param_names.iter().enumerate() {
         let v = r.theta_val.get(j).copied().unwrap_or(f64::NAN);
+        if !v.is_finite() {
+            // No estimate (a run that failed before its averaging window): no number at all.
+            let _ = writeln!(o, "{name:<name_w$}  {:>12}  {:>27}  no estimate", "–", "–");
+            continue;
+        }
         // The central 95 % interval of the last step's particle posterior; a record without it
         // (written before intervals were recorded, or a failed run) falls back to ±1.96 s.d.,
         // marked with `*`.

@@ -162,12 +162,22 @@ impl<'a> Recorder<'a> {
         }
     }
 
-    /// θ_val: mean of the posterior means over the last `window` completed steps.
+    /// θ_val: mean of the posterior means over the steps of the averaging window (the last
+    /// `window` steps of the run) that completed. NaN for every parameter when none did (a run
+    /// that failed before its window): a failed run has no θ_val rather than a zero one.
     pub fn theta_val(&self) -> Vec<f64> {
+        if self.window_n == 0 {
+            return vec![f64::NAN; self.window_sum.len()];
+        }
         self.window_sum
             .iter()
-            .map(|s| s / self.window_n.max(1) as f64)
+            .map(|s| s / self.window_n as f64)
             .collect()
+    }
+
+    /// Steps of the averaging window that completed (θ_val averages over them).
+    pub fn window_steps_completed(&self) -> usize {
+        self.window_n
     }
 }
 
