@@ -164,6 +164,34 @@ fn the_committed_study_loads() {
         }
     }
     assert_eq!(study.sweep.particles, vec![500]);
+    // Buildings with realistic periods (docs/scaling.md), identified with the symplectic
+    // discretisation (forward Euler is unstable at their stiffness and dt).
+    assert_eq!(study.data.preset, "building-chain");
+    assert_eq!(
+        study.filter.discretisation,
+        models::filtering::Discretisation::Symplectic
+    );
+    // Every structure's excitation is scaled so that its base element yields strongly: about
+    // 0.8 of saturation for the base family, at least 0.65 for every element of the others.
+    let values = scaling::structures::structure_values(&study).unwrap();
+    for (s, v) in study.sweep.structures.iter().zip(&values) {
+        assert!(s.scale.is_some(), "{}: no scale", s.label);
+        assert!(
+            (0.2..=4.0).contains(&v.t1) && (0.1 * s.storeys as f64 - v.t1).abs() < 0.2 * v.t1,
+            "{}: T1 = {}",
+            s.label,
+            v.t1
+        );
+        assert!((v.zeta1 - 0.02).abs() < 1e-9, "{}", s.label);
+        for &(storey, ratio) in &v.yielding {
+            let lo = if s.label.contains("base") { 0.75 } else { 0.65 };
+            assert!(
+                (lo..0.95).contains(&ratio),
+                "{}: storey {storey}: max|r|/saturation = {ratio}",
+                s.label
+            );
+        }
+    }
 }
 
 #[test]
