@@ -7,6 +7,8 @@
 //! - `reproduce-scaling [--quick] [--resume] [--report-only] [--threads N] [--shard i/n]`: builds `sysid` in
 //!   release and runs `sysid scaling` (`experiments/scaling.toml`) into `results/scaling/` (or
 //!   `results/scaling-quick/`); sharded and resumed like `reproduce-paper`.
+//! - `reproduce-excitations [same options]`: the same for the excitations study
+//!   (`experiments/excitations.toml`, `results/excitations/`).
 //! - `regression [--threads N] [--resume]`: builds `sysid` in release and runs `sysid regression`
 //!   on `experiments/regression.toml` (into `results/regression/`) and
 //!   `experiments/regression-symplectic.toml` (into `results/regression-symplectic/`); fails when
@@ -52,25 +54,10 @@ enum Task {
     },
     /// The scaling study (experiments/scaling.toml): records, figures and REPORT.md under
     /// results/scaling.
-    ReproduceScaling {
-        /// The study's quick form (writes results/scaling-quick).
-        #[arg(long)]
-        quick: bool,
-        /// Worker threads (0: one per core).
-        #[arg(long, default_value_t = 0)]
-        threads: usize,
-        /// Run part i of n of the sweep (then `sysid merge`, and run again with `--resume` and
-        /// without `--shard` to write the report).
-        #[arg(long)]
-        shard: Option<String>,
-        /// Reuse the existing records whose fingerprint matches; without it, every run is
-        /// computed.
-        #[arg(long)]
-        resume: bool,
-        /// Compute nothing: write the report from the records already there.
-        #[arg(long)]
-        report_only: bool,
-    },
+    ReproduceScaling(StudyArgs),
+    /// The excitations study (experiments/excitations.toml): records, figures and REPORT.md
+    /// under results/excitations.
+    ReproduceExcitations(StudyArgs),
     /// Identification-accuracy regression check (experiments/regression.toml).
     Regression {
         /// Worker threads (0: one per core).
@@ -119,6 +106,71 @@ fn run(cmd: &mut Command) -> Result<()> {
     if !status.success() {
         bail!("{cmd:?} failed with {status}");
     }
+    Ok(())
+}
+
+/// Options of a study with a structure axis (`reproduce-scaling`, `reproduce-excitations`).
+#[derive(Debug, clap::Args)]
+struct StudyArgs {
+    /// The study's quick form (writes results/<study>-quick).
+    #[arg(long)]
+    quick: bool,
+    /// Worker threads (0: one per core).
+    #[arg(long, default_value_t = 0)]
+    threads: usize,
+    /// Run part i of n of the sweep (then `sysid merge`, and run again with `--resume` and
+    /// without `--shard` to write the report).
+    #[arg(long)]
+    shard: Option<String>,
+    /// Reuse the existing records whose fingerprint matches; without it, every run is
+    /// computed.
+    #[arg(long)]
+    resume: bool,
+    /// Compute nothing: write the report from the records already there.
+    #[arg(long)]
+    report_only: bool,
+}
+
+/// Builds `sysid` and runs `sysid <study>` on `experiments/<study>.toml` into
+/// `results/<study>` (or `results/<study>-quick`).
+fn reproduce_study(root: &Path, study: &str, a: StudyArgs) -> Result<()> {
+    let started = std::time::Instant::now();
+    let sysid = build_sysid(root)?;
+    let build_s = started.elapsed().as_secs_f64();
+    let out = if a.quick {
+        format!("results/{study}-quick")
+    } else {
+        format!("results/{study}")
+    };
+    let config = format!("experiments/{study}.toml");
+    let mut cmd = Command::new(sysid);
+    cmd.current_dir(root).args([
+        study,
+        "--config",
+        &config,
+        "--out",
+        &out,
+        "--threads",
+        &a.threads.to_string(),
+    ]);
+    if a.quick {
+        cmd.arg("--quick");
+    }
+    if let Some(s) = &a.shard {
+        cmd.args(["--shard", s]);
+    }
+    if a.resume {
+        cmd.arg("--resume");
+    }
+    if a.report_only {
+        cmd.arg("--report-only");
+    }
+    run(&mut cmd)?;
+    eprintln!(
+        "reproduce-{study}: {:.0} s in all (build {build_s:.0} s, study {:.0} s)",
+        started.elapsed().as_secs_f64(),
+        started.elapsed().as_secs_f64() - build_s
+    );
     Ok(())
 }
 
@@ -181,51 +233,8 @@ fn main() -> Result<()> {
             );
             Ok(())
         }
-        Task::ReproduceScaling {
-            quick,
-            threads,
-            shard,
-            resume,
-            report_only,
-        } => {
-            let started = std::time::Instant::now();
-            let sysid = build_sysid(&root)?;
-            let build_s = started.elapsed().as_secs_f64();
-            let out = if quick {
-                "results/scaling-quick"
-            } else {
-                "results/scaling"
-            };
-            let mut cmd = Command::new(sysid);
-            cmd.current_dir(&root).args([
-                "scaling",
-                "--config",
-                "experiments/scaling.toml",
-                "--out",
-                out,
-                "--threads",
-                &threads.to_string(),
-            ]);
-            if quick {
-                cmd.arg("--quick");
-            }
-            if let Some(s) = shard {
-                cmd.args(["--shard", &s]);
-            }
-            if resume {
-                cmd.arg("--resume");
-            }
-            if report_only {
-                cmd.arg("--report-only");
-            }
-            run(&mut cmd)?;
-            eprintln!(
-                "reproduce-scaling: {:.0} s in all (build {build_s:.0} s, study {:.0} s)",
-                started.elapsed().as_secs_f64(),
-                started.elapsed().as_secs_f64() - build_s
-            );
-            Ok(())
-        }
+        Task::ReproduceScaling(a) => reproduce_study(&root, "scaling", a),
+        Task::ReproduceExcitations(a) => reproduce_study(&root, "excitations", a),
         Task::Regression { threads, resume } => {
             let sysid = build_sysid(&root)?;
             // The paper's (forward Euler) filters, then the symplectic scheme's bounds.

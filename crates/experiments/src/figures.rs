@@ -1156,3 +1156,104 @@ mod tests {
         assert_eq!(tick(-0.0001, 1.0), "0.0");
     }
 }
+
+/// One group (an algorithm) of a [`category_panels`] figure: per category, a mean and the
+/// half-width of its error bar (NaN: nothing drawn for that category).
+pub struct CategoryGroup {
+    pub label: String,
+    pub mean: Vec<f64>,
+    pub half_width: Vec<f64>,
+}
+
+/// One panel of a [`category_panels`] figure.
+pub struct CategoryPanel {
+    pub caption: String,
+    pub y_desc: String,
+    pub groups: Vec<CategoryGroup>,
+}
+
+/// Means with error bars per category (e.g. per ground motion), one marker and colour per
+/// group, side by side within a category; panels stacked vertically; the axes hold every
+/// drawn value, error bars included.
+pub fn category_panels(
+    categories: &[String],
+    panels: &[CategoryPanel],
+    path: &Path,
+    title: &str,
+) -> Result<()> {
+    if panels.is_empty() || categories.is_empty() {
+        bail!("category figure {}: nothing to draw", path.display());
+    }
+    let entries: Vec<(Swatch, String)> = panels[0]
+        .groups
+        .iter()
+        .enumerate()
+        .map(|(i, g)| (Swatch::Marker(i, colour(i)), g.label.clone()))
+        .collect();
+    let (_, legend_h) = legend_layout(&entries);
+    let height = 60 + legend_h + 320 * panels.len() as u32;
+    create_parent(path)?;
+    let root = SVGBackend::new(path, (WIDTH, height)).into_drawing_area();
+    let body = titled_root(&root, title)?;
+    let (grid, legend) = body.split_vertically(body.dim_in_pixel().1 - legend_h);
+    let areas = grid.split_evenly((panels.len(), 1));
+    let n = categories.len();
+    for (panel, area) in panels.iter().zip(&areas) {
+        let values = panel.groups.iter().flat_map(|g| {
+            g.mean
+                .iter()
+                .zip(&g.half_width)
+                .flat_map(|(m, h)| [m - h.max(0.0), m + h.max(0.0), *m])
+        });
+        let (lo, hi) = padded(finite_range(values).unwrap_or((0.0, 1.0)));
+        let mut chart = ChartBuilder::on(area)
+            .caption(panel.caption.clone(), (FONT, CAPTION_SIZE))
+            .margin(8)
+            .x_label_area_size(48)
+            .y_label_area_size(80)
+            .build_cartesian_2d(-0.5..(n as f64 - 0.5), lo..hi)?;
+        let yspan = hi - lo;
+        let names = categories.to_vec();
+        chart
+            .configure_mesh()
+            .y_desc(panel.y_desc.clone())
+            .x_labels(n)
+            .y_labels(5)
+            .x_label_formatter(&|v| {
+                let i = v.round();
+                if (v - i).abs() < 1e-6 && i >= 0.0 && (i as usize) < names.len() {
+                    names[i as usize].clone()
+                } else {
+                    String::new()
+                }
+            })
+            .y_label_formatter(&|v| tick(*v, yspan))
+            .label_style((FONT, LABEL_SIZE))
+            .axis_desc_style((FONT, DESC_SIZE))
+            .light_line_style(WHITE)
+            .draw()?;
+        let width = 0.6 / panel.groups.len().max(1) as f64;
+        for (gi, g) in panel.groups.iter().enumerate() {
+            let c = colour(gi);
+            for (ci, (m, h)) in g.mean.iter().zip(&g.half_width).enumerate() {
+                if !m.is_finite() {
+                    continue;
+                }
+                let x = ci as f64 - 0.3 + width * (gi as f64 + 0.5);
+                if h.is_finite() {
+                    chart.draw_series(LineSeries::new(
+                        vec![(x, m - h), (x, m + h)],
+                        c.stroke_width(2),
+                    ))?;
+                }
+                chart.draw_series(std::iter::once(
+                    EmptyElement::at((x, *m)) + marker(gi, (0, 0), c),
+                ))?;
+            }
+        }
+    }
+    legend_strip(&legend, &entries)?;
+    root.present()
+        .with_context(|| format!("writing {}", path.display()))?;
+    Ok(())
+}

@@ -19,6 +19,7 @@ pub mod cli;
 pub mod coverage;
 pub mod decimate;
 pub mod discretisation;
+pub mod excitations;
 pub mod field;
 pub mod figures;
 pub mod limits;

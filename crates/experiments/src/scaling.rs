@@ -301,6 +301,21 @@ pub fn load(opts: &Options) -> Result<Study> {
 /// Runs the study's sweep (the structures this build can generate), then, unless sharded,
 /// writes the cells, figures and report. Returns the cells.
 pub fn run(opts: &Options) -> Result<Vec<Cell>> {
+    run_with(opts, &|opts, study, cells, _jobs, _records, sweep_s| {
+        write_outputs(opts, study, cells, sweep_s)
+    })
+}
+
+/// What writes a structure study's outputs from its cells and records.
+/// Its arguments: the options, the study, the cells, the jobs with a record and those records
+/// (in the same order), and the sweep's wall time (NaN when nothing was computed).
+pub type Writer<'a> =
+    dyn Fn(&Options, &Study, &[Cell], &[Job], &[RunRecord], f64) -> Result<()> + 'a;
+
+/// [`run`] with another writer of the outputs: the sweep over a study's structure axis,
+/// resumable, shardable, with CPU times, shared by the studies that have one (the scaling and
+/// the excitations studies).
+pub fn run_with(opts: &Options, write: &Writer<'_>) -> Result<Vec<Cell>> {
     let start = Instant::now();
     let _lock = DirLock::acquire(&opts.out)?;
     let study = load(opts)?;
@@ -327,7 +342,7 @@ pub fn run(opts: &Options) -> Result<Vec<Cell>> {
             .map(|j| read_cpu(&records_dir, &study.record_id(j)))
             .collect();
         let cells = cells(&study, &jobs, &records, &cpu)?;
-        write_outputs(opts, &study, &cells, f64::NAN)?;
+        write(opts, &study, &cells, &jobs, &records, f64::NAN)?;
         eprintln!(
             "wrote {} from {} existing records",
             opts.out.join("REPORT.md").display(),
@@ -375,7 +390,7 @@ pub fn run(opts: &Options) -> Result<Vec<Cell>> {
         .map(|j| read_cpu(&records_dir, &study.record_id(j)))
         .collect();
     let cells = cells(&study, &jobs, &outcome.records, &cpu)?;
-    write_outputs(opts, &study, &cells, sweep_s)?;
+    write(opts, &study, &cells, &jobs, &outcome.records, sweep_s)?;
     eprintln!(
         "wrote {}; {}",
         opts.out.join("REPORT.md").display(),

@@ -81,6 +81,10 @@ pub struct Structure {
     /// Amplitude scale of the excitation; absent: the data section's (or the preset's).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub scale: Option<f64>,
+    /// A vendored real ground motion by name (`models::ground_motions`, e.g.
+    /// `loma-prieta-1989`) instead of the preset's excitation; absent: the preset's.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub excitation: Option<String>,
     /// Algorithms run on this structure (a subset of the sweep's); absent: the sweep's.
     pub algorithms: Option<Vec<Algorithm>>,
     /// Runs 0..runs on this structure (at most the sweep's); absent: the sweep's.
@@ -130,6 +134,16 @@ impl Structure {
         if let Some(d) = self.duration {
             if !(d.is_finite() && d > 0.0) {
                 bail!("{}: field `duration` must be positive, got {d}", ctx());
+            }
+        }
+        if let Some(name) = &self.excitation {
+            if models::ground_motions::by_name(name).is_none() {
+                bail!(
+                    "{}: field `excitation`: no vendored record is named `{name}`; the records \
+                     are: {}",
+                    ctx(),
+                    models::ground_motions::names().join(", ")
+                );
             }
         }
         if let Some(a) = self.scale {
@@ -400,6 +414,9 @@ impl Study {
             }
             if let Some(a) = st.scale {
                 c.scale = a;
+            }
+            if let Some(name) = &st.excitation {
+                c.excitation = models::dataset::ExcitationSource::Named { name: name.clone() };
             }
         }
         Ok(c)

@@ -35,6 +35,9 @@ enum Command {
     /// The scaling study: chains of 3 to 40 storeys, cost and accuracy per algorithm.
     #[command(allow_negative_numbers = true)]
     Scaling(cli::scaling::Args),
+    /// The excitations study: the paper's structure under other real ground motions.
+    #[command(allow_negative_numbers = true)]
+    Excitations(cli::scaling::Args),
     /// Merge the records of sharded sweeps.
     #[command(allow_negative_numbers = true)]
     Merge(cli::merge::Args),
@@ -78,6 +81,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Reproduce(args) => cli::reproduce::run(args),
         Command::Merge(args) => cli::merge::run(args),
         Command::Scaling(args) => cli::scaling::run(args),
+        Command::Excitations(args) => cli::scaling::run_excitations(args),
         Command::Regression(args) => cli::regression::run(args),
         Command::Plot(args) => cli::plot::run(args),
     }

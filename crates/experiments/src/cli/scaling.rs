@@ -1,20 +1,23 @@
-//! `sysid scaling`: run the scaling study (`experiments/scaling.toml`), draw its figures and
-//! write its report (what `cargo xtask reproduce-scaling` runs).
+//! `sysid scaling` and `sysid excitations`: run a study with a structure axis (the scaling
+//! study `experiments/scaling.toml`, the excitations study `experiments/excitations.toml`),
+//! draw its figures and write its report (what `cargo xtask reproduce-scaling` and
+//! `reproduce-excitations` run).
 
 use std::path::PathBuf;
 
 use crate::scaling::{run as run_study, Options};
 use crate::sweep::Shard;
 
-/// Arguments of `sysid scaling`.
+/// Arguments of `sysid scaling` and `sysid excitations`.
 #[derive(Debug, clap::Args)]
 pub struct Args {
-    /// The study file.
-    #[arg(long, default_value = "experiments/scaling.toml")]
-    pub config: PathBuf,
-    /// Output directory (records, cells.csv, figures, summary.json, REPORT.md).
-    #[arg(long, default_value = "results/scaling")]
-    pub out: PathBuf,
+    /// The study file [default: experiments/scaling.toml, or experiments/excitations.toml].
+    #[arg(long)]
+    pub config: Option<PathBuf>,
+    /// Output directory (records, cells.csv, figures, summary.json, REPORT.md) [default:
+    /// results/scaling, or results/excitations].
+    #[arg(long)]
+    pub out: Option<PathBuf>,
     /// The study's `[quick]` form: fewer runs and particles, a shorter record.
     #[arg(long)]
     pub quick: bool,
@@ -35,17 +38,33 @@ pub struct Args {
     pub report_only: bool,
 }
 
+impl Args {
+    fn options(self, study: &str) -> Options {
+        Options {
+            config: self
+                .config
+                .unwrap_or_else(|| PathBuf::from(format!("experiments/{study}.toml"))),
+            out: self
+                .out
+                .unwrap_or_else(|| PathBuf::from(format!("results/{study}"))),
+            quick: self.quick,
+            threads: self.threads,
+            shard: self.shard,
+            progress: true,
+            resume: self.resume,
+            report_only: self.report_only,
+        }
+    }
+}
+
 /// Runs `sysid scaling`.
 pub fn run(args: Args) -> anyhow::Result<()> {
-    run_study(&Options {
-        config: args.config,
-        out: args.out,
-        quick: args.quick,
-        threads: args.threads,
-        shard: args.shard,
-        progress: true,
-        resume: args.resume,
-        report_only: args.report_only,
-    })?;
+    run_study(&args.options("scaling"))?;
+    Ok(())
+}
+
+/// Runs `sysid excitations`.
+pub fn run_excitations(args: Args) -> anyhow::Result<()> {
+    crate::excitations::run(&args.options("excitations"))?;
     Ok(())
 }

@@ -28,6 +28,11 @@ pub struct StructureValues {
     pub scale: f64,
     /// Duration of the data (s).
     pub duration: f64,
+    /// The excitation (`el-centro` for the preset's record, else the vendored record's name).
+    pub excitation: String,
+    /// Peak of the clean ground acceleration after scaling (the model's units; m/s² when the
+    /// length unit is the metre).
+    pub pga: f64,
     /// Per Bouc–Wen element (1-based storey): max |r| / saturation in the data of run 0.
     pub yielding: Vec<(usize, f64)>,
 }
@@ -105,6 +110,11 @@ pub fn structure_values(study: &Study) -> Result<Vec<StructureValues>> {
                 c1: chain.damping()[0],
                 scale: config.scale,
                 duration: data.t.last().copied().unwrap_or(0.0),
+                excitation: st
+                    .excitation
+                    .clone()
+                    .unwrap_or_else(|| "el-centro (preset)".to_string()),
+                pga: data.ug_clean.iter().fold(0.0_f64, |m, a| m.max(a.abs())),
                 yielding,
             })
         })

@@ -1,0 +1,197 @@
+//! The excitations study: the `excitation` and `scale` fields of a structure (parsing,
+//! refusals, the data configuration they make), the committed `experiments/excitations.toml`
+//! (every record yields the paper's structure as much as the paper's El Centro), a small study
+//! end to end, and the report's verdict on constructed rows where it is known.
+
+use std::path::{Path, PathBuf};
+
+use experiments::excitations::{self, Row};
+use experiments::figures::validate_svg;
+use experiments::scaling::structures::structure_values;
+use experiments::scaling::Options;
+use experiments::study::Study;
+use experiments::sweep::Shard;
+use experiments::verdict::{Estimate, Verdict};
+use models::dataset::ExcitationSource;
+
+fn temp_dir(tag: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("sysid-excitations-{tag}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+fn workspace() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
+}
+
+const SMALL: &str = r#"
+name = "small-excitations"
+description = "excitations test"
+[data]
+preset = "paper-3dof"
+duration = 1.0
+[sweep]
+algorithms = ["mln-rbpf", "mpf-ekf2"]
+runs = 2
+master_seed = 5
+particles = [30]
+[filter]
+trace_every = 0
+loop_every = 0
+validate = false
+
+[[sweep.structures]]
+label = "control"
+storeys = 3
+
+[[sweep.structures]]
+label = "loma"
+storeys = 3
+excitation = "loma-prieta-1989"
+scale = 6.49
+"#;
+
+fn write_study(dir: &Path, text: &str) -> PathBuf {
+    let p = dir.join("study.toml");
+    std::fs::write(&p, text).unwrap();
+    p
+}
+
+#[test]
+fn excitation_field_reaches_the_data_and_bad_ones_are_named() {
+    let dir = temp_dir("field");
+    let study = Study::load(&write_study(&dir, SMALL)).unwrap();
+    let control = study.structure_config(Some(0), 0).unwrap();
+    assert_eq!(control.excitation, ExcitationSource::ElCentro);
+    assert_eq!(control.scale, 3.0);
+    let loma = study.structure_config(Some(1), 0).unwrap();
+    assert_eq!(
+        loma.excitation,
+        ExcitationSource::Named {
+            name: "loma-prieta-1989".into()
+        }
+    );
+    assert_eq!(loma.scale, 6.49);
+    // Different excitations, different fingerprints (no record is reused across them).
+    let jobs = study.jobs();
+    let fp = |i: usize| {
+        study
+            .job_fingerprint(jobs.iter().find(|j| j.structure == Some(i)).unwrap())
+            .unwrap()
+    };
+    assert_ne!(fp(0), fp(1));
+    for (bad, needle) in [
+        (
+            "excitation = \"kobe-1995\"",
+            "no vendored record is named `kobe-1995`",
+        ),
+        ("scale = -2.0", "field `scale`"),
+        ("scale = 1e9", "field `scale`"),
+    ] {
+        let text = if bad.starts_with("scale") {
+            SMALL.replace("scale = 6.49", bad)
+        } else {
+            SMALL.replace("excitation = \"loma-prieta-1989\"", bad)
+        };
+        let err = format!("{:#}", Study::load(&write_study(&dir, &text)).unwrap_err());
+        assert!(err.contains(needle) && err.contains("loma"), "{bad}: {err}");
+        if needle.contains("vendored") {
+            assert!(
+                err.contains("northridge-1994"),
+                "the list of records: {err}"
+            );
+        }
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn the_committed_study_yields_every_record_like_the_paper() {
+    let study = Study::load(&workspace().join("experiments/excitations.toml")).unwrap();
+    assert_eq!(study.data.preset, "paper-3dof");
+    assert!(study.sweep.runs >= 20);
+    let values = structure_values(&study).unwrap();
+    assert_eq!(values.len(), 5);
+    let control = values[0].yielding[0].1;
+    assert!((control - 0.654).abs() < 0.005, "paper: {control}");
+    for v in &values[1..] {
+        let r = v.yielding[0].1;
+        assert!(
+            (r - control).abs() < 0.01,
+            "{}: {r} against {control}",
+            v.label
+        );
+    }
+}
+
+#[test]
+fn small_study_end_to_end() {
+    let dir = temp_dir("e2e");
+    let out = dir.join("out");
+    let opts = Options {
+        config: write_study(&dir, SMALL),
+        out: out.clone(),
+        quick: false,
+        threads: 2,
+        shard: Shard::default(),
+        progress: false,
+        resume: false,
+        report_only: false,
+    };
+    let cells = excitations::run(&opts).unwrap();
+    assert_eq!(cells.len(), 4);
+    assert!(cells
+        .iter()
+        .all(|c| c.runs == 2 && c.k_error_mean.is_finite()));
+    validate_svg(&out.join("errors_by_excitation.svg")).unwrap();
+    let report = std::fs::read_to_string(out.join("REPORT.md")).unwrap();
+    assert!(report.contains("## Beyond the paper: other ground motions"));
+    assert!(report.contains("loma-prieta-1989"));
+    // Two runs per cell: too few for a verdict.
+    assert!(report.contains("| **not resolved** |"), "{report}");
+    assert!(!report.contains("| **holds** |") && !report.contains("| **does not hold** |"));
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    assert_eq!(summary["rows"].as_array().unwrap().len(), 4);
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+fn row(structure: &str, mean: f64, se: f64, n: usize) -> Row {
+    let e = Estimate { mean, se, n };
+    Row {
+        structure: structure.into(),
+        algorithm: "mln-rbpf".into(),
+        runs: n,
+        failed: 0,
+        k_error: e,
+        c_error: e,
+        beta_ratio: 1.0,
+        gamma_ratio: 1.0,
+        n_ratio: 1.0,
+        coverage95_kc: 0.9,
+        coverage_pairs: 6 * n,
+    }
+}
+
+#[test]
+fn verdicts_on_constructed_rows() {
+    let dir = temp_dir("verdict");
+    let text = SMALL.replace(
+        "algorithms = [\"mln-rbpf\", \"mpf-ekf2\"]",
+        "algorithms = [\"mln-rbpf\"]",
+    );
+    let study = Study::load(&write_study(&dir, &text)).unwrap();
+    let decide = |other: Row| {
+        excitations::verdicts(&study, &[row("control", 0.04, 0.002, 20), other])[0].verdict
+    };
+    // 3 points apart with s.e. 0.3 points: resolved apart.
+    assert_eq!(decide(row("loma", 0.07, 0.002, 20)), Verdict::Holds);
+    // 0.1 point apart, resolved within ±1 point: the same.
+    assert_eq!(decide(row("loma", 0.041, 0.002, 20)), Verdict::DoesNotHold);
+    // 1 point apart with s.e. 1 point: neither.
+    assert_eq!(decide(row("loma", 0.05, 0.01, 20)), Verdict::NotResolved);
+    // Far apart but only 3 runs: no verdict.
+    assert_eq!(decide(row("loma", 0.20, 0.002, 3)), Verdict::NotResolved);
+    std::fs::remove_dir_all(&dir).unwrap();
+}
