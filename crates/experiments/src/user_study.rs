@@ -126,6 +126,109 @@ pub fn markdown(name: &str, description: &str, data: &str, spreads: &[AlgorithmS
             );
         }
     }
+    let _ = writeln!(
+        o,
+        "\n![θ_val](theta_val.svg)\n\n![s.d. over spread](sd_over_spread.svg)"
+    );
     let _ = writeln!(o, "\nA posterior s.d. / spread well below 1 means a single run's interval is narrower than the scatter of its own answer: pool runs (`pool` in the filter settings) or use more particles before acting on one run.");
     o
+}
+
+/// The figures of a study on a user's record, written into `out`:
+///
+/// - `theta_val.svg`: per parameter and algorithm, the mean of θ_val over the runs with ± 2
+///   run-to-run s.d., divided by the truth when `dataset.json` knows it (the truth is then 1),
+///   otherwise by the mean over every algorithm's runs (so parameters of different scales share
+///   one axis);
+/// - `sd_over_spread.svg`: per parameter and algorithm, the mean posterior s.d. a run reports
+///   over the run-to-run s.d. of its answer (1: a run's interval is as wide as the scatter of
+///   its answer; below 1: over-confident).
+///
+/// Returns the files written.
+pub fn figures(
+    spreads: &[AlgorithmSpread],
+    out: &std::path::Path,
+) -> anyhow::Result<Vec<std::path::PathBuf>> {
+    use crate::figures::{category_panels, CategoryGroup, CategoryPanel};
+    let Some(first) = spreads.iter().find(|a| !a.params.is_empty()) else {
+        return Ok(Vec::new());
+    };
+    let params: Vec<String> = first.params.iter().map(|p| p.param.clone()).collect();
+    let with_truth = first.params.iter().all(|p| p.truth.is_some());
+    // The reference of each parameter: its truth, or the mean of the algorithms' means.
+    let reference: Vec<f64> = params
+        .iter()
+        .map(|name| {
+            let ps = spreads
+                .iter()
+                .filter_map(|a| a.params.iter().find(|p| &p.param == name));
+            if with_truth {
+                ps.filter_map(|p| p.truth).next().unwrap_or(f64::NAN)
+            } else {
+                let means: Vec<f64> = ps.map(|p| p.mean).collect();
+                crate::metrics::mean_sd(&means).0
+            }
+        })
+        .collect();
+    let group = |a: &AlgorithmSpread, value: &dyn Fn(&ParamSpread, f64) -> (f64, f64)| {
+        let (mean, half_width) = params
+            .iter()
+            .zip(&reference)
+            .map(|(name, &r)| {
+                a.params
+                    .iter()
+                    .find(|p| &p.param == name)
+                    .map_or((f64::NAN, f64::NAN), |p| value(p, r))
+            })
+            .unzip();
+        CategoryGroup {
+            label: format!("{} ({} runs)", a.algorithm, a.runs),
+            mean,
+            half_width,
+        }
+    };
+    let theta = CategoryPanel {
+        caption: if with_truth {
+            "θ_val / truth: mean over runs ± 2 run-to-run s.d.".to_string()
+        } else {
+            "θ_val / mean over all runs: mean over runs ± 2 run-to-run s.d.".to_string()
+        },
+        y_desc: if with_truth {
+            "θ_val / truth"
+        } else {
+            "θ_val / overall mean"
+        }
+        .to_string(),
+        groups: spreads
+            .iter()
+            .map(|a| group(a, &|p, r| (p.mean / r, 2.0 * p.spread / r.abs())))
+            .collect(),
+    };
+    let ratio = CategoryPanel {
+        caption: "mean posterior s.d. / run-to-run s.d. (1: honest; below 1: over-confident)"
+            .to_string(),
+        y_desc: "s.d. / spread".to_string(),
+        groups: spreads
+            .iter()
+            .map(|a| group(a, &|p, _| (p.sd_over_spread, f64::NAN)))
+            .collect(),
+    };
+    let files = [
+        (
+            out.join("theta_val.svg"),
+            theta,
+            "θ_val over the runs of the study",
+        ),
+        (
+            out.join("sd_over_spread.svg"),
+            ratio,
+            "Reported uncertainty against the Monte-Carlo scatter",
+        ),
+    ];
+    let mut written = Vec::new();
+    for (path, panel, title) in files {
+        category_panels(&params, &[panel], &path, title)?;
+        written.push(path);
+    }
+    Ok(written)
 }

@@ -73,6 +73,19 @@ fn a_study_on_a_data_directory_runs_every_seed_on_the_same_record() {
     assert_eq!(records.len(), 6);
     let report = std::fs::read_to_string(out.join("REPORT.md")).unwrap();
     assert!(report.contains("run-to-run s.d."), "{report}");
+    // The figures: valid SVGs, linked from the report, one category per parameter.
+    for f in ["theta_val.svg", "sd_over_spread.svg"] {
+        experiments::figures::validate_svg(&out.join(f)).unwrap();
+        assert!(report.contains(&format!("({f})")), "{f} not linked");
+        let svg = std::fs::read_to_string(out.join(f)).unwrap();
+        assert!(
+            svg.contains("\nk1\n") && svg.contains("\ngamma\n"),
+            "{f}: parameter labels"
+        );
+    }
+    assert!(std::fs::read_to_string(out.join("theta_val.svg"))
+        .unwrap()
+        .contains("θ_val / truth"));
     std::fs::remove_dir_all(&dir).unwrap();
 }
 

@@ -72,6 +72,7 @@ pub fn run(args: Args) -> Result<()> {
         }))? + "\n")
             .as_bytes(),
     )?;
+    crate::user_study::figures(&spreads, &args.out)?;
     let report = crate::user_study::markdown(&study.name, &study.description, &data, &spreads);
     write_bytes_atomic(&args.out.join("REPORT.md"), report.as_bytes())?;
     print!("{report}");
