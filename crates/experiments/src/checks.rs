@@ -258,12 +258,15 @@ pub fn summary_table(r: &RunRecord) -> String {
             "one filter's posterior does not include its own Monte-Carlo error"
         }
     );
+    for line in crate::residuals::describe(&r.innovation_checks) {
+        let _ = writeln!(o, "{line}");
+    }
     o
 }
 
-/// Measured against predicted accelerations and the normalised innovations of a run: the only
-/// evidence, without truth, that the model fits the data. Not written by the pipeline yet; `sysid
-/// plot` draws it when a record carries it under the key `residuals`.
+/// Measured against predicted accelerations and the normalised one-step prediction errors of a
+/// run: the only evidence, without truth, that the model fits the data. Written by
+/// [`crate::residuals::Predictor`] into the records of `sysid filter`; `sysid plot` draws it.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct Residuals {
     /// Time of each kept step (s). Keep every step for the whiteness test: a decimated sequence
@@ -273,10 +276,12 @@ pub struct Residuals {
     pub channels: Vec<String>,
     /// `measured[k][i]`: measurement of channel i at kept step k.
     pub measured: Vec<Vec<f64>>,
-    /// One-step-ahead predicted mean of the measurement, E[y_k | y_1:k−1].
+    /// One-step-ahead prediction of the measurement from the posterior means of the previous
+    /// step ([`crate::residuals`]).
     pub predicted: Vec<Vec<f64>>,
-    /// (y_k − E[y_k | y_1:k−1]) / √Var[y_k,i | y_1:k−1] per channel: independent N(0, 1) when the
-    /// model and its noise levels are right.
+    /// (y_k − ŷ_k) / √R_ii per channel: uncorrelated in time, with a variance of at least 1
+    /// (the predictive variance is at least the noise variance), when the model and its noise
+    /// levels are right.
     pub normalised_innovation: Vec<Vec<f64>>,
 }
 

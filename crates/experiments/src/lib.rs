@@ -31,6 +31,7 @@ pub mod record;
 pub mod reference;
 pub mod report;
 pub mod reproduce;
+pub mod residuals;
 pub mod scaled_prior;
 pub mod scaling;
 pub mod study;

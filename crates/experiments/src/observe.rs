@@ -127,6 +127,8 @@ pub struct Recorder<'a> {
     /// Keep a copy of the final weighted particles (for pooling several filters).
     pub keep_final: bool,
     pub final_particles: Option<FinalParticles>,
+    /// One-step-ahead prediction errors, when asked for ([`crate::residuals`]).
+    pub predictor: Option<crate::residuals::Predictor>,
 }
 
 impl<'a> Recorder<'a> {
@@ -159,6 +161,7 @@ impl<'a> Recorder<'a> {
             credible: Vec::new(),
             keep_final: false,
             final_particles: None,
+            predictor: None,
         }
     }
 
@@ -184,6 +187,9 @@ impl<'a> Recorder<'a> {
 impl Observer for Recorder<'_> {
     fn on_start(&mut self, layout: &Layout, _particles: usize) {
         self.last = Posterior::for_layout(layout);
+        if let Some(p) = &mut self.predictor {
+            p.start(layout);
+        }
     }
 
     fn on_finish(&mut self, last: &WeightedParticles<'_>) {
@@ -223,6 +229,9 @@ impl Observer for Recorder<'_> {
             if k % 64 == 0 || k == self.total_steps {
                 bar.set_position(k as u64);
             }
+        }
+        if let Some(p) = &mut self.predictor {
+            p.step(k, post);
         }
         // The last completed step's posterior (θ_sd_final; also kept when a run fails early).
         self.last.clone_from(post);

@@ -387,6 +387,8 @@ pub(crate) struct Driven {
     pub(crate) wall_s: f64,
     /// The final weights and particles, kept for pooling (`s.pool > 1`).
     pub(crate) final_particles: Option<crate::observe::FinalParticles>,
+    /// One-step-ahead prediction errors ([`crate::residuals`]), when asked for.
+    pub(crate) residuals: Option<crate::checks::Residuals>,
 }
 
 /// Runs filter `member` of a pool (0: the only filter of an unpooled run, on the stream
@@ -398,6 +400,7 @@ fn drive(
     algorithm: Algorithm,
     pc: &SmcConfig,
     member: usize,
+    predictor: Option<crate::residuals::Predictor>,
 ) -> Driven {
     let data = input.data;
     let layout = filter.layout().clone();
@@ -441,6 +444,7 @@ fn drive(
         recorder.progress = Some(bar);
     }
     recorder.keep_final = s.pool > 1;
+    recorder.predictor = predictor;
     let name = match member {
         0 => format!("{}/{}", purpose::FILTER, algorithm.name()),
         m => format!("{}/{}/pool{m}", purpose::FILTER, algorithm.name()),
@@ -462,6 +466,7 @@ fn drive(
             .as_ref()
             .map(|_| StateErrors::from_sums(&layout.state_names, &recorder.state_sums)),
         final_particles: recorder.final_particles.take(),
+        residuals: recorder.predictor.take().map(|p| p.finish()),
         trace: recorder.trace,
         summary,
         wall_s,
@@ -487,6 +492,20 @@ pub fn identify(input: &RunInput, algorithm: Algorithm, s: &FilterSettings) -> R
         },
     };
     let mut filter = build_filter(algorithm, spec.clone(), s)?;
+    // One-step-ahead prediction errors for runs that keep traces (`sysid filter`), from the
+    // first filter of a pool; sweeps (no traces) skip them and keep their records small.
+    let predictor = || -> Result<Option<crate::residuals::Predictor>> {
+        if s.trace_every == 0 {
+            return Ok(None);
+        }
+        let ys = (1..data.len()).flat_map(|k| data.y(k).to_vec()).collect();
+        let channels = data.sensors.iter().map(|j| format!("a{j}")).collect();
+        Ok(Some(crate::residuals::Predictor::new(
+            spec.clone(),
+            ys,
+            channels,
+        )?))
+    };
     let shape = filter.shape();
     crate::limits::check_particle_cloud(
         s.particles,
@@ -509,15 +528,16 @@ pub fn identify(input: &RunInput, algorithm: Algorithm, s: &FilterSettings) -> R
                     particles: each + usize::from(m < extra),
                     ..pc
                 };
-                drive(filter.as_mut(), input, s, algorithm, &member, m)
+                let p = if m == 0 { predictor()? } else { None };
+                Ok(drive(filter.as_mut(), input, s, algorithm, &member, m, p))
             })
-            .collect();
+            .collect::<Result<_>>()?;
         crate::pool::combine(&layout, members)
     } else {
         if s.pool == 0 {
             bail!("field `pool`: 0 filters (1 runs one filter)");
         }
-        drive(filter.as_mut(), input, s, algorithm, &pc, 0)
+        drive(filter.as_mut(), input, s, algorithm, &pc, 0, predictor()?)
     };
 
     let steps = data.len() - 1;
@@ -601,6 +621,12 @@ pub fn identify(input: &RunInput, algorithm: Algorithm, s: &FilterSettings) -> R
         },
         warnings: Vec::new(),
         credible: d.credible,
+        innovation_checks: d
+            .residuals
+            .as_ref()
+            .map(crate::residuals::channel_checks)
+            .unwrap_or_default(),
+        residuals: d.residuals,
     };
     // A result that is physically impossible or rests on few particles says so (issue 16).
     record.warnings = crate::checks::check(&record);

@@ -120,5 +120,6 @@ pub(crate) fn combine(layout: &Layout, members: Vec<Driven>) -> Driven {
         online: first.online,
         wall_s,
         final_particles: None,
+        residuals: first.residuals,
     }
 }

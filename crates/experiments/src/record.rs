@@ -164,6 +164,13 @@ pub struct RunRecord {
     /// written before intervals were recorded.
     #[serde(default)]
     pub credible: Vec<crate::observe::ParamIntervals>,
+    /// Whiteness check of each channel's one-step-ahead prediction errors
+    /// ([`crate::residuals`]); empty in sweep records (no traces) and older records.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub innovation_checks: Vec<crate::residuals::ChannelCheck>,
+    /// The prediction errors at every step (records of `sysid filter`), drawn by `sysid plot`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub residuals: Option<crate::checks::Residuals>,
 }
 
 impl RunRecord {

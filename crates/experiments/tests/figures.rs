@@ -118,6 +118,8 @@ fn record(algorithm: &str, run: u64, bias: f64) -> RunRecord {
         },
         warnings: Vec::new(),
         credible: Vec::new(),
+        innovation_checks: Vec::new(),
+        residuals: None,
     }
 }
 

@@ -69,6 +69,8 @@ pub fn record(algorithm: &str, run: u64, ratios: [f64; 9], nrmse: f64) -> RunRec
         },
         warnings: Vec::new(),
         credible: Vec::new(),
+        innovation_checks: Vec::new(),
+        residuals: None,
     }
 }
 

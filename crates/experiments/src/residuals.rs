@@ -1,0 +1,204 @@
+//! One-step-ahead prediction errors of a run: the evidence, without the truth, that the model
+//! fits the record (issue "a user's own records": measured against predicted accelerations,
+//! normalised prediction errors and their whiteness).
+//!
+//! At every step k ≥ 2 the [`Predictor`] takes the posterior means of the states and of θ after
+//! step k − 1, advances them one step with the filter's own equations of motion and
+//! discretisation without noise (the augmented model of SPEC §5.1, the one source of the
+//! physics) and measures: ŷ_k. The prediction error y_k − ŷ_k is divided by the measurement
+//! noise s.d. √R_ii. This is the plug-in prediction at the posterior mean, not the filter's
+//! exact predictive distribution: its variance is at least R_ii, so the normalised errors have
+//! a variance of at least 1 when the model and its noise levels are right — a variance far
+//! above 1, or errors correlated in time (Ljung–Box, [`crate::checks::whiteness`]), say that the
+//! model or its noise levels do not fit the record.
+
+use anyhow::Result;
+use core_filters::model::Layout;
+use core_filters::smc::model::StateSpace;
+use core_filters::smc::Posterior;
+use models::filtering::{AugmentedChain, ChainSpec};
+use serde::{Deserialize, Serialize};
+
+use crate::checks::{whiteness, Residuals, Whiteness};
+
+/// Lags of the whiteness check.
+pub const MAX_LAG: usize = 20;
+
+/// The one-step-ahead predictor of one run (see the module documentation).
+pub struct Predictor {
+    model: AugmentedChain,
+    /// `y_k` for k = 1..=K, row-major, `ny` per row.
+    ys: Vec<f64>,
+    ny: usize,
+    dt: f64,
+    noise_sd: Vec<f64>,
+    /// For each entry of the augmented state: where it is in the filter's posterior (state or
+    /// parameter index), filled at the first step.
+    map: Option<Vec<Source>>,
+    prev: Vec<f64>,
+    have_prev: bool,
+    next: Vec<f64>,
+    zeros: Vec<f64>,
+    yhat: Vec<f64>,
+    out: Residuals,
+}
+
+#[derive(Debug, Clone, Copy)]
+enum Source {
+    State(usize),
+    Param(usize),
+}
+
+impl Predictor {
+    /// A predictor with the run's filter specification (noise levels, discretisation, sensors)
+    /// for the measurements `ys` (`y_k` for k = 1..=K, `ny` per row) named `channels`.
+    pub fn new(spec: ChainSpec, ys: Vec<f64>, channels: Vec<String>) -> Result<Self> {
+        let ny = channels.len();
+        let noise_sd = spec.r_diag.iter().map(|r| r.sqrt()).collect();
+        let dt = spec.dt;
+        let model = AugmentedChain::new(spec)?;
+        let dim = model.dim();
+        let noise = model.noise_dim();
+        Ok(Self {
+            model,
+            ys,
+            ny,
+            dt,
+            noise_sd,
+            map: None,
+            prev: vec![0.0; dim],
+            have_prev: false,
+            next: vec![0.0; dim],
+            zeros: vec![0.0; noise],
+            yhat: vec![0.0; ny],
+            out: Residuals {
+                channels,
+                ..Residuals::default()
+            },
+        })
+    }
+
+    fn mapping(&self, layout_states: &[String], layout_params: &[String]) -> Option<Vec<Source>> {
+        let l = self.model.layout();
+        let mut map = vec![Source::State(0); self.model.dim()];
+        for (name, slot) in l.state_names.iter().zip(&l.states) {
+            let i = layout_states.iter().position(|n| n == name)?;
+            map[slot_index(*slot)] = Source::State(i);
+        }
+        for (name, slot) in l.param_names.iter().zip(&l.params) {
+            let i = layout_params.iter().position(|n| n == name)?;
+            map[slot_index(*slot)] = Source::Param(i);
+        }
+        Some(map)
+    }
+
+    /// Called at the start of a run with the filter's layout. A filter whose layout does not
+    /// name every state and parameter of the chain gets no prediction errors.
+    pub fn start(&mut self, layout: &Layout) {
+        self.map = self.mapping(&layout.state_names, &layout.param_names);
+        self.have_prev = false;
+    }
+
+    /// Called after step `k` with its posterior summary.
+    pub fn step(&mut self, k: usize, post: &Posterior) {
+        let Some(map) = &self.map else { return };
+        if self.have_prev && k >= 1 && k * self.ny <= self.ys.len() {
+            self.model
+                .propagate(k, &self.prev, &self.zeros, &mut self.next);
+            self.model.measure(k, &self.next, &mut self.yhat);
+            let y = &self.ys[(k - 1) * self.ny..k * self.ny];
+            self.out.t.push(k as f64 * self.dt);
+            self.out.measured.push(y.to_vec());
+            self.out.predicted.push(self.yhat.clone());
+            self.out.normalised_innovation.push(
+                y.iter()
+                    .zip(&self.yhat)
+                    .zip(&self.noise_sd)
+                    .map(|((a, b), s)| (a - b) / s)
+                    .collect(),
+            );
+        }
+        for (v, src) in self.prev.iter_mut().zip(map) {
+            *v = match *src {
+                Source::State(i) => post.state_mean[i],
+                Source::Param(i) => post.param_mean[i],
+            };
+        }
+        self.have_prev = true;
+    }
+
+    /// The prediction errors of the run (empty when the layout did not map).
+    pub fn finish(self) -> Residuals {
+        self.out
+    }
+}
+
+fn slot_index(slot: core_filters::model::Slot) -> usize {
+    match slot {
+        core_filters::model::Slot::Sampled(i) | core_filters::model::Slot::Marginal(i) => i,
+    }
+}
+
+/// The whiteness check of one channel's normalised prediction errors.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ChannelCheck {
+    pub channel: String,
+    pub n: usize,
+    pub mean: f64,
+    /// Variance of the normalised errors: ≥ 1 expected (module documentation).
+    pub variance: f64,
+    /// Ljung–Box Q over lags 1..=[`MAX_LAG`] and its 95 % critical value.
+    pub ljung_box: f64,
+    pub critical: f64,
+    pub white: bool,
+}
+
+/// The check of every channel (channels with too few finite values are left out).
+pub fn channel_checks(r: &Residuals) -> Vec<ChannelCheck> {
+    r.channels
+        .iter()
+        .enumerate()
+        .filter_map(|(i, name)| {
+            let x: Vec<f64> = r.normalised_innovation.iter().map(|row| row[i]).collect();
+            let w: Whiteness = whiteness(&x, MAX_LAG)?;
+            Some(ChannelCheck {
+                channel: name.clone(),
+                n: w.n,
+                mean: w.mean,
+                variance: w.variance,
+                white: w.is_white(),
+                ljung_box: w.ljung_box,
+                critical: w.critical,
+            })
+        })
+        .collect()
+}
+
+/// One line per channel for the terminal summary.
+pub fn describe(checks: &[ChannelCheck]) -> Vec<String> {
+    checks
+        .iter()
+        .map(|c| {
+            format!(
+                "{}: one-step prediction errors / noise s.d.: mean {:+.2}, variance {:.2}; {}",
+                c.channel,
+                c.mean,
+                c.variance,
+                if c.white {
+                    format!(
+                        "consistent with white noise (Ljung–Box Q = {:.1} < {:.1})",
+                        c.ljung_box, c.critical
+                    )
+                } else {
+                    format!(
+                        "correlated in time (Ljung–Box Q = {:.1}, {:.1}× its 95 % critical \
+                         value): the model, its noise levels or this run's estimates do not \
+                         fully explain the record (docs/residuals.md)",
+                        c.ljung_box,
+                        c.ljung_box / c.critical
+                    )
+                }
+            )
+        })
+        .collect()
+}

@@ -1,0 +1,148 @@
+//! One-step-ahead prediction errors (`experiments::residuals`): from the true states and θ they
+//! are the measurement noise (white, variance ≈ 1 once divided by the noise s.d.), whatever
+//! filter's layout the posterior comes in; a run of `sysid filter` records them and `sysid plot`
+//! draws their panels.
+
+use std::process::Command;
+
+use core_filters::smc::Posterior;
+use experiments::pipeline::{build_filter, chain_spec, Algorithm, FilterSettings};
+use experiments::residuals::{channel_checks, Predictor};
+use models::dataset::{generate, DatasetConfig};
+use models::filtering::Discretisation;
+
+#[test]
+fn predictions_from_the_truth_leave_only_the_noise() {
+    let mut config = DatasetConfig::from_preset("paper-3dof", 3).unwrap();
+    config.duration = Some(10.0);
+    let set = generate(&config).unwrap();
+    let data = set.to_loaded();
+    let settings = FilterSettings {
+        discretisation: Discretisation::Symplectic,
+        ..FilterSettings::default()
+    };
+    let spec = chain_spec(&data, Some(&set.chain), &settings).unwrap();
+    for algorithm in [Algorithm::MpfEkf2, Algorithm::MlnRbpf] {
+        let layout = build_filter(algorithm, spec.clone(), &settings)
+            .unwrap()
+            .layout()
+            .clone();
+        // The truth's own integrator, so that only the noise is left.
+        let mut exact = spec.clone();
+        exact.discretisation = Discretisation::Rk4;
+        let ys: Vec<f64> = (1..data.len()).flat_map(|k| data.y(k).to_vec()).collect();
+        let channels = vec!["a1".to_string(), "a2".into(), "a3".into()];
+        let mut p = Predictor::new(exact, ys, channels).unwrap();
+        p.start(&layout);
+        let truth = data.truth.as_ref().unwrap();
+        let mut post = Posterior::for_layout(&layout);
+        for (j, name) in layout.param_names.iter().enumerate() {
+            let i = set.theta_names.iter().position(|n| n == name).unwrap();
+            post.param_mean[j] = set.theta_true[i];
+        }
+        for k in 1..data.len() {
+            for (j, name) in layout.state_names.iter().enumerate() {
+                let i = truth.state_names.iter().position(|n| n == name).unwrap();
+                post.state_mean[j] = truth.states.state(k)[i];
+            }
+            p.step(k, &post);
+        }
+        let res = p.finish();
+        assert_eq!(res.t.len(), data.len() - 2, "{algorithm:?}");
+        for c in channel_checks(&res) {
+            // The prediction from the true state misses only the measurement noise and the
+            // excitation's noise, which R accounts for: variance 1 within a few s.e.
+            // (s.e. of a variance of n = 1998 normal values: √(2/n) ≈ 0.03).
+            assert!(
+                (c.variance - 1.0).abs() < 0.15,
+                "{algorithm:?} {}: variance {}",
+                c.channel,
+                c.variance
+            );
+            assert!(
+                c.mean.abs() < 0.1,
+                "{algorithm:?} {}: mean {}",
+                c.channel,
+                c.mean
+            );
+            assert!(
+                c.white,
+                "{algorithm:?} {}: Q = {} ≥ {}",
+                c.channel, c.ljung_box, c.critical
+            );
+        }
+    }
+}
+
+#[test]
+fn filter_records_prediction_errors_and_plot_draws_them() {
+    let d = std::env::temp_dir().join(format!("sysid-residuals-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    let sysid = env!("CARGO_BIN_EXE_sysid");
+    let ok = |args: &[&str]| {
+        let o = Command::new(sysid).args(args).output().unwrap();
+        assert!(
+            o.status.success(),
+            "{args:?}: {}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+        String::from_utf8_lossy(&o.stdout).into_owned() + &String::from_utf8_lossy(&o.stderr)
+    };
+    let data = d.join("data");
+    let rec = d.join("run.json");
+    let figs = d.join("figs");
+    ok(&[
+        "simulate",
+        "--preset",
+        "paper-3dof",
+        "--seed",
+        "2",
+        "--duration",
+        "6",
+        "--out",
+        data.to_str().unwrap(),
+    ]);
+    let text = ok(&[
+        "filter",
+        "--algorithm",
+        "mpf-ekf2",
+        "--data",
+        data.to_str().unwrap(),
+        "--particles",
+        "100",
+        "--seed",
+        "2",
+        "--out",
+        rec.to_str().unwrap(),
+    ]);
+    assert!(
+        text.contains("a2: one-step prediction errors / noise s.d."),
+        "{text}"
+    );
+    let r: experiments::record::RunRecord =
+        serde_json::from_str(&std::fs::read_to_string(&rec).unwrap()).unwrap();
+    assert_eq!(r.innovation_checks.len(), 3);
+    let res = r.residuals.as_ref().unwrap();
+    assert_eq!(res.t.len(), 1199);
+    assert!(r
+        .innovation_checks
+        .iter()
+        .all(|c| c.variance.is_finite() && c.n == 1199));
+    ok(&[
+        "plot",
+        rec.to_str().unwrap(),
+        "--out",
+        figs.to_str().unwrap(),
+    ]);
+    for f in [
+        "convergence.svg",
+        "ess.svg",
+        "hysteresis.svg",
+        "accelerations.svg",
+        "innovations.svg",
+        "innovation_acf.svg",
+    ] {
+        experiments::figures::validate_svg(&figs.join(f)).unwrap();
+    }
+    std::fs::remove_dir_all(&d).unwrap();
+}
