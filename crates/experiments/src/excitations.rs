@@ -25,7 +25,7 @@ use crate::scaling::structures::{structure_values, StructureValues};
 use crate::scaling::{self, Cell, Options};
 use crate::study::{Job, Study};
 use crate::sweep::write_bytes_atomic;
-use crate::verdict::{above, below, group_error, ratio, within, Estimate, Verdict};
+use crate::verdict::{bonferroni_z, group_error, ratio, Estimate, Verdict};
 
 /// Equivalence margin of the verdict: two mean stiffness errors are "the same" when their
 /// difference is resolved inside ±1 percentage point.
@@ -145,10 +145,10 @@ fn row(label: &str, a: Algorithm, recs: &[&RunRecord]) -> Row {
 }
 
 /// Per algorithm: "the mean stiffness error under some ground motion differs from the
-/// control's" — holds when some difference is resolved away from 0 (its ±2 s.e. interval
-/// excludes 0), does not hold when every difference is resolved inside ±[`SAME_MARGIN`],
-/// otherwise not resolved. Independent data sets per ground motion, so the s.e. of a difference
-/// is √(s.e.₁² + s.e.₂²).
+/// control's" — holds when some difference is resolved away from 0 (its ±z s.e. interval
+/// excludes 0, z the Bonferroni value of the comparisons), does not hold when every difference's
+/// ±z s.e. interval lies inside ±[`SAME_MARGIN`], otherwise not resolved. Independent data sets
+/// per ground motion, so the s.e. of a difference is √(s.e.₁² + s.e.₂²).
 pub fn verdicts(study: &Study, rows: &[Row]) -> Vec<AlgorithmVerdict> {
     let Some(control) = study.sweep.structures.first() else {
         return Vec::new();
@@ -161,26 +161,36 @@ pub fn verdicts(study: &Study, rows: &[Row]) -> Vec<AlgorithmVerdict> {
         else {
             continue;
         };
+        let others: Vec<&Row> = rows
+            .iter()
+            .filter(|r| r.algorithm == a.name() && r.structure != control.label)
+            .collect();
+        // Several ground motions are compared with the control at once: each difference is
+        // judged at the Bonferroni z of the family (2.50 for four), so that the statement
+        // "some differ" has a 5 % chance of a false alarm when none does.
+        let z = bonferroni_z(others.len());
         let mut differences = Vec::new();
         let mut parts = Vec::new();
         let mut any_differs = false;
-        for r in rows
-            .iter()
-            .filter(|r| r.algorithm == a.name() && r.structure != control.label)
-        {
+        for r in others {
             let d = Estimate {
                 mean: r.k_error.mean - base.k_error.mean,
                 se: (r.k_error.se.powi(2) + base.k_error.se.powi(2)).sqrt(),
                 n: r.k_error.n.min(base.k_error.n),
             };
-            if d.n < MIN_RUNS {
+            let (lo, hi) = (d.mean - z * d.se, d.mean + z * d.se);
+            if d.n < MIN_RUNS || !(lo.is_finite() && hi.is_finite()) {
                 // Too few runs for a standard error to decide anything.
                 parts.push(Verdict::NotResolved);
             } else {
-                if above(&d, 0.0) == Verdict::Holds || below(&d, 0.0) == Verdict::Holds {
+                if lo > 0.0 || hi < 0.0 {
                     any_differs = true;
                 }
-                parts.push(within(&d, -SAME_MARGIN, SAME_MARGIN));
+                parts.push(if lo >= -SAME_MARGIN && hi <= SAME_MARGIN {
+                    Verdict::Holds
+                } else {
+                    Verdict::NotResolved
+                });
             }
             differences.push((r.structure.clone(), d));
         }
@@ -401,10 +411,13 @@ pub fn report(
         "**The verdict.** Statement, per algorithm: *the mean stiffness error under some ground \
          motion differs from the one under the paper's El Centro*. Test: for each ground motion \
          the difference of the mean errors with its standard error √(s.e.₁² + s.e.₂²) \
-         (independent data sets); **holds** when some difference's ±2 s.e. interval excludes 0, \
-         **does not hold** when every difference's ±2 s.e. interval lies within ±{:.0} \
+         (independent data sets), judged at the Bonferroni z = {:.2} of the {} comparisons \
+         (family-wise 5 %); **holds** when some difference's ±z s.e. interval excludes 0, \
+         **does not hold** when every difference's ±z s.e. interval lies within ±{:.0} \
          percentage point, otherwise **not resolved** (a difference counts only with at least {} \
          completed runs on both sides).\n",
+        bonferroni_z(study.sweep.structures.len().saturating_sub(1)),
+        study.sweep.structures.len().saturating_sub(1),
         100.0 * SAME_MARGIN,
         MIN_RUNS
     );

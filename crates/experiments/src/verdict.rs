@@ -93,6 +93,30 @@ impl Estimate {
     }
 }
 
+/// Φ⁻¹(p), the standard normal quantile, by bisection on Φ(z) = erfc(−z/√2)/2 (to 1e-12).
+pub fn normal_quantile(p: f64) -> f64 {
+    let cdf = |z: f64| 0.5 * libm::erfc(-z / std::f64::consts::SQRT_2);
+    let (mut lo, mut hi) = (-40.0_f64, 40.0_f64);
+    for _ in 0..200 {
+        let mid = 0.5 * (lo + hi);
+        if cdf(mid) < p {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+        if hi - lo < 1e-12 {
+            break;
+        }
+    }
+    0.5 * (lo + hi)
+}
+
+/// The two-sided critical z of `m` simultaneous comparisons at a family-wise level of 5 %
+/// (Bonferroni): Φ⁻¹(1 − 0.025/m); 1.96 for one comparison, 2.50 for four.
+pub fn bonferroni_z(m: usize) -> f64 {
+    normal_quantile(1.0 - 0.025 / m.max(1) as f64)
+}
+
 /// "The estimate is above `t`" (see the module documentation).
 pub fn above(e: &Estimate, t: f64) -> Verdict {
     match e.interval() {
@@ -626,6 +650,14 @@ pub fn paper_findings(fig4: &[RunRecord], fig7: &[RunRecord]) -> Vec<Finding> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn normal_quantiles() {
+        // Tables: Φ⁻¹(0.975) = 1.959964, Φ⁻¹(0.99375) = 2.497705.
+        assert!((normal_quantile(0.975) - 1.959_964).abs() < 1e-5);
+        assert!((bonferroni_z(4) - 2.497_705).abs() < 1e-5);
+        assert!((normal_quantile(0.5)).abs() < 1e-9);
+    }
 
     fn est(mean: f64, se: f64) -> Estimate {
         Estimate { mean, se, n: 50 }
