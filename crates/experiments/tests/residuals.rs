@@ -146,3 +146,65 @@ fn filter_records_prediction_errors_and_plot_draws_them() {
     }
     std::fs::remove_dir_all(&d).unwrap();
 }
+
+#[test]
+fn field_data_in_one_command_prints_and_plots() {
+    // The newcomer's case: only `measured.csv` of a 3-storey building, one command.
+    let d = std::env::temp_dir().join(format!("sysid-field-one-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    let sysid = env!("CARGO_BIN_EXE_sysid");
+    let data = d.join("data");
+    let field = d.join("field");
+    let o = Command::new(sysid)
+        .args(["simulate", "--preset", "paper-3dof", "--seed", "4", "--out"])
+        .arg(&data)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    std::fs::create_dir_all(&field).unwrap();
+    std::fs::copy(data.join("measured.csv"), field.join("measured.csv")).unwrap();
+    let figs = d.join("figs");
+    let o = Command::new(sysid)
+        .args([
+            "filter",
+            "--algorithm",
+            "mpf-ekf2",
+            "--particles",
+            "200",
+            "--seed",
+            "4",
+        ])
+        .args(["--storeys", "3", "--hysteretic", "1", "--masses", "1,1,1"])
+        .args(["--measurement", "relative", "--data"])
+        .arg(&field)
+        .arg("--out")
+        .arg(d.join("run.json"))
+        .arg("--plot")
+        .arg(&figs)
+        .output()
+        .unwrap();
+    let out = String::from_utf8_lossy(&o.stdout).into_owned() + &String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{out}");
+    assert!(out.contains("prior scaled from the data"), "{out}");
+    // A sensible identification: every k within 15 % of the truth (8).
+    let r: experiments::record::RunRecord =
+        serde_json::from_str(&std::fs::read_to_string(d.join("run.json")).unwrap()).unwrap();
+    for (name, v) in r.param_names.iter().zip(&r.theta_val) {
+        if name.starts_with('k') {
+            assert!((v / 8.0 - 1.0).abs() < 0.15, "{name} = {v}\n{out}");
+        }
+    }
+    for f in [
+        "convergence.svg",
+        "ess.svg",
+        "accelerations.svg",
+        "innovations.svg",
+        "innovation_acf.svg",
+    ] {
+        experiments::figures::validate_svg(&figs.join(f)).unwrap();
+    }
+    // No truth, no validation run: the loop is skipped with a note, not drawn.
+    assert!(!figs.join("hysteresis.svg").exists());
+    assert!(out.contains("note:"), "{out}");
+    std::fs::remove_dir_all(&d).unwrap();
+}

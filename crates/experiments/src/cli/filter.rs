@@ -38,6 +38,9 @@ pub struct Args {
     /// Where to write the run record (JSON).
     #[arg(long, required_unless_present = "print_config")]
     pub out: Option<PathBuf>,
+    /// Also draw the run's figures into this directory (as `sysid plot RECORD --out DIR`).
+    #[arg(long)]
+    pub plot: Option<PathBuf>,
     /// Print every key of a `--config` file with its default and meaning, and exit.
     #[arg(long)]
     pub print_config: bool,
@@ -358,7 +361,16 @@ pub fn run(args: Args) -> Result<()> {
             list(&spec["q_r"]),
         );
     }
-    finish(record, &out)
+    let outcome = finish(record, &out);
+    // The figures of a failed or implausible run are drawn too: they show what went wrong.
+    if let Some(dir) = &args.plot {
+        let drawn = crate::cli::plot::plot(&out, dir)?;
+        for note in &drawn.skipped {
+            eprintln!("note: {note}");
+        }
+        eprintln!("{} figures in {}", drawn.written.len(), dir.display());
+    }
+    outcome
 }
 
 /// Attaches the plausibility warnings (`checks::check`) to a finished run, writes its record,
