@@ -226,3 +226,39 @@ pub fn report(
     }
     Ok(())
 }
+
+/// Pooled coverage of the stiffnesses and dampings: over the completed runs with a known truth,
+/// the fraction of (run, k_j or c_j) pairs whose central interval at `level` contains the true
+/// value, and the number of pairs (runs without recorded intervals count no pair).
+pub fn stiffness_damping_coverage(records: &[&RunRecord], level: f64) -> (f64, usize) {
+    let (mut covered, mut pairs) = (0usize, 0usize);
+    for r in records.iter().filter(|r| !r.is_failure()) {
+        let Some(truth) = &r.theta_true else { continue };
+        for (j, name) in r.param_names.iter().enumerate() {
+            let storey_param = name.len() > 1
+                && (name.starts_with('k') || name.starts_with('c'))
+                && name[1..].chars().all(|c| c.is_ascii_digit());
+            if !storey_param {
+                continue;
+            }
+            let Some(ci) = r
+                .credible
+                .iter()
+                .find(|p| &p.parameter == name)
+                .and_then(|p| p.at(level))
+            else {
+                continue;
+            };
+            pairs += 1;
+            if ci.lo <= truth[j] && truth[j] <= ci.hi {
+                covered += 1;
+            }
+        }
+    }
+    let fraction = if pairs > 0 {
+        covered as f64 / pairs as f64
+    } else {
+        f64::NAN
+    };
+    (fraction, pairs)
+}

@@ -102,27 +102,7 @@ fn row(label: &str, a: Algorithm, recs: &[&RunRecord]) -> Row {
             .collect();
         mean_sd(&v).0
     };
-    let (mut covered, mut pairs) = (0usize, 0usize);
-    for r in &done {
-        let Some(truth) = &r.theta_true else { continue };
-        for (j, name) in r.param_names.iter().enumerate() {
-            if !(name.starts_with('k') || name.starts_with('c')) {
-                continue;
-            }
-            let Some(ci) = r
-                .credible
-                .iter()
-                .find(|p| &p.parameter == name)
-                .and_then(|p| p.at(0.95))
-            else {
-                continue;
-            };
-            pairs += 1;
-            if ci.lo <= truth[j] && truth[j] <= ci.hi {
-                covered += 1;
-            }
-        }
-    }
+    let (coverage95_kc, coverage_pairs) = crate::coverage::stiffness_damping_coverage(&done, 0.95);
     let errors =
         |prefix: char| -> Vec<f64> { done.iter().map(|r| group_error(r, prefix)).collect() };
     Row {
@@ -135,12 +115,8 @@ fn row(label: &str, a: Algorithm, recs: &[&RunRecord]) -> Row {
         beta_ratio: mean_ratio("beta"),
         gamma_ratio: mean_ratio("gamma"),
         n_ratio: mean_ratio("n"),
-        coverage95_kc: if pairs > 0 {
-            covered as f64 / pairs as f64
-        } else {
-            f64::NAN
-        },
-        coverage_pairs: pairs,
+        coverage95_kc,
+        coverage_pairs,
     }
 }
 

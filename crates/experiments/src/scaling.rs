@@ -111,6 +111,10 @@ pub struct Cell {
     pub state_nrmse: f64,
     /// Mean over runs of the mean ESS, as a fraction of the particles.
     pub ess_fraction: f64,
+    /// Fraction of (completed run, k_j or c_j) pairs whose central 95 % interval holds the
+    /// truth, and the number of pairs ([`crate::coverage::stiffness_damping_coverage`]).
+    pub coverage95_kc: f64,
+    pub coverage_pairs: usize,
     /// Median over runs of the wall time per particle-step (µs) and the mean wall time per run.
     pub us_per_particle_step: f64,
     pub wall_s_mean: f64,
@@ -227,7 +231,10 @@ pub fn cell(
     let avg = |f: &dyn Fn(&RunRecord) -> Option<f64>| {
         mean_sd(&ok.iter().filter_map(|r| f(r)).collect::<Vec<_>>()).0
     };
+    let (coverage95_kc, coverage_pairs) = crate::coverage::stiffness_damping_coverage(&ok, 0.95);
     Cell {
+        coverage95_kc,
+        coverage_pairs,
         structure: structure.to_string(),
         storeys,
         hysteretic: hysteretic.to_vec(),
@@ -486,7 +493,7 @@ pub fn cells(
 pub const CSV_HEADER: &str = "structure,storeys,hysteretic,sensors,steps,algorithm,\
 sampled_dim,marginalised_dim,particles,runs_planned,runs,failed,k_error_mean,k_error_sd,\
 k_error_worst,c_error_mean,c_error_sd,state_nrmse,ess_fraction,us_per_particle_step,wall_s_mean,\
-cpu_us_per_particle_step";
+cpu_us_per_particle_step,coverage95_kc,coverage_pairs";
 
 /// `cells.csv`: one line per cell (lists joined by `;`).
 pub fn csv(cells: &[Cell]) -> String {
@@ -500,7 +507,7 @@ pub fn csv(cells: &[Cell]) -> String {
     for c in cells {
         let _ = writeln!(
             out,
-            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
+            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
             c.structure,
             c.storeys,
             join(&c.hysteretic),
@@ -522,7 +529,9 @@ pub fn csv(cells: &[Cell]) -> String {
             c.ess_fraction,
             c.us_per_particle_step,
             c.wall_s_mean,
-            c.cpu_us_per_particle_step
+            c.cpu_us_per_particle_step,
+            c.coverage95_kc,
+            c.coverage_pairs
         );
     }
     out

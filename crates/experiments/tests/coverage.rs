@@ -135,3 +135,20 @@ fn records_without_intervals_still_load() {
     assert!(r.credible.is_empty());
     assert_eq!(run_posterior(&r, 0), Err(Missing::NoInterval));
 }
+
+#[test]
+fn pooled_stiffness_and_damping_coverage() {
+    // 10 runs × 6 storey parameters; k1's truth leaves the 95 % interval from run 8 on, every
+    // other parameter is covered: 60 pairs, 58 covered. A failed run counts no pair.
+    let mut records: Vec<RunRecord> = (0..10).map(run).collect();
+    let mut failed = run(11);
+    failed.failure = Some("all weights zero".into());
+    records.push(failed);
+    let refs: Vec<&RunRecord> = records.iter().collect();
+    let (fraction, pairs) = experiments::coverage::stiffness_damping_coverage(&refs, 0.95);
+    assert_eq!(pairs, 60);
+    assert!((fraction - 58.0 / 60.0).abs() < 1e-12, "{fraction}");
+    // At 50 %: k1 covered for runs 0–2 only.
+    let (f50, _) = experiments::coverage::stiffness_damping_coverage(&refs, 0.5);
+    assert!((f50 - 53.0 / 60.0).abs() < 1e-12, "{f50}");
+}

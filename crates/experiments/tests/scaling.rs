@@ -219,6 +219,9 @@ fn small_study_end_to_end_and_resumed() {
     let mpf = n2.iter().find(|c| c.algorithm == "mpf-ekf2").unwrap();
     assert_eq!((mpf.sampled_dim, mpf.marginalised_dim), (3, 9));
     assert!(mpf.us_per_particle_step > 0.0 && mpf.k_error_mean.is_finite());
+    // Coverage of the 95 % intervals of k and c: two runs × 4 storey parameters.
+    assert_eq!(mpf.coverage_pairs, 8);
+    assert!((0.0..=1.0).contains(&mpf.coverage95_kc));
     // The sparse layout runs (two sensors, so the filters see two channels).
     assert!(cells
         .iter()

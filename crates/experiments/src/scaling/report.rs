@@ -189,7 +189,8 @@ pub fn write(
         o,
         "Per cell: stiffness error = mean over runs of the storey-averaged |k̂ − k| / k \
          (± run-to-run s.d.), the worst storey's mean error, the same for damping, the mean \
-         online-state NRMSE, the mean ESS as a fraction of the particles, and the verdict: \
+         online-state NRMSE, the mean ESS as a fraction of the particles, the fraction of (run, k or c) pairs whose 95 % \
+         interval holds the truth, and the verdict: \
          *holds* (no failed run, k error ≤ {}), *collapses* (half the runs failed or k error > \
          {}), otherwise *degrades*.\n",
         pct(HOLD_K_ERROR),
@@ -275,16 +276,16 @@ fn structures_table(o: &mut String, values: &[super::structures::StructureValues
 fn accuracy_table(o: &mut String, cells: &[Cell]) {
     let _ = writeln!(
         o,
-        "| structure | N | hyst. | sensors | algorithm | k error | worst k | c error | state NRMSE | ESS | runs (failed) | verdict |"
+        "| structure | N | hyst. | sensors | algorithm | k error | worst k | c error | state NRMSE | ESS | 95 % coverage (k, c) | runs (failed) | verdict |"
     );
     let _ = writeln!(
         o,
-        "|---|---:|---|---:|---|---:|---:|---:|---:|---:|---:|---|"
+        "|---|---:|---|---:|---|---:|---:|---:|---:|---:|---:|---:|---|"
     );
     for c in cells.iter().filter(|c| c.runs > 0) {
         let _ = writeln!(
             o,
-            "| `{}` | {} | {:?} | {} | {} | {} ± {} | {} | {} ± {} | {} | {} | {} ({}) | {} |",
+            "| `{}` | {} | {:?} | {} | {} | {} ± {} | {} | {} ± {} | {} | {} | {} | {} ({}) | {} |",
             c.structure,
             c.storeys,
             c.hysteretic,
@@ -297,6 +298,11 @@ fn accuracy_table(o: &mut String, cells: &[Cell]) {
             pct(c.c_error_sd),
             num(c.state_nrmse, 3),
             num(c.ess_fraction, 2),
+            if c.coverage_pairs > 0 {
+                format!("{:.2} of {}", c.coverage95_kc, c.coverage_pairs)
+            } else {
+                "–".to_string()
+            },
             c.runs,
             c.failed,
             verdict(c)
