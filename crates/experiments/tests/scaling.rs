@@ -236,6 +236,7 @@ fn small_study_end_to_end_and_resumed() {
     let report = std::fs::read_to_string(out.join("REPORT.md")).unwrap();
     assert!(report.contains("## Beyond the paper: larger structures"));
     assert!(report.contains("does no longer scale with the dimension of the problem"));
+    assert!(!report.contains("**Incomplete"), "complete study");
     // Every structure of the axis is generated: nothing is listed as not run.
     assert!(
         !report.contains("which this build does not have"),
@@ -274,6 +275,11 @@ fn small_study_end_to_end_and_resumed() {
     let report = std::fs::read_to_string(out.join("REPORT.md")).unwrap();
     assert!(
         report.contains("`n2` MLN-RBPF: 1 of 2 planned runs"),
+        "{report}"
+    );
+    // n2: 3 × 2, n4: 2 × 1, n4-sparse: 3 × 2 planned; one record removed.
+    assert!(
+        report.contains("**Incomplete: 13 of the 14 planned runs have a record.**"),
         "{report}"
     );
     std::fs::remove_dir_all(&dir).unwrap();

@@ -98,6 +98,20 @@ pub fn write(
         study.filter.discretisation.name(),
         study.data.preset,
     );
+    let (done, planned): (usize, usize) = cells
+        .iter()
+        .filter(|c| c.steps > 0)
+        .fold((0, 0), |(d, p), c| {
+            (d + c.runs.min(c.runs_planned), p + c.runs_planned)
+        });
+    if done < planned {
+        let _ = writeln!(
+            o,
+            "**Incomplete: {done} of the {planned} planned runs have a record.** Every number \
+             below is provisional and the cells with fewer runs than planned are listed under \
+             \"Not run\"; `sysid scaling --resume` computes the rest.\n"
+        );
+    }
     structures_table(&mut o, values);
 
     let _ = writeln!(o, "## Beyond the paper: larger structures\n");
