@@ -180,6 +180,9 @@ pub struct RunInput<'a> {
     pub run: u64,
     /// Show a progress bar on stderr (when it is a terminal).
     pub progress: bool,
+    /// Record the one-step prediction errors at every step ([`crate::residuals`]; `sysid
+    /// filter` does, sweeps do not: their records stay small).
+    pub residuals: bool,
 }
 
 /// Root mean square of a signal.
@@ -492,10 +495,10 @@ pub fn identify(input: &RunInput, algorithm: Algorithm, s: &FilterSettings) -> R
         },
     };
     let mut filter = build_filter(algorithm, spec.clone(), s)?;
-    // One-step-ahead prediction errors for runs that keep traces (`sysid filter`), from the
-    // first filter of a pool; sweeps (no traces) skip them and keep their records small.
+    // One-step-ahead prediction errors when asked for (`sysid filter`), from the first filter
+    // of a pool.
     let predictor = || -> Result<Option<crate::residuals::Predictor>> {
-        if s.trace_every == 0 {
+        if !input.residuals {
             return Ok(None);
         }
         let ys = (1..data.len()).flat_map(|k| data.y(k).to_vec()).collect();

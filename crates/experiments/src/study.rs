@@ -496,6 +496,7 @@ impl Study {
             seed: self.sweep.master_seed,
             run: job.run,
             progress: false,
+            residuals: false,
         };
         identify(&input, job.algorithm, &self.settings(job))
     }

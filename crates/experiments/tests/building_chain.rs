@@ -59,6 +59,7 @@ fn symplectic_identifies_a_stiff_building_where_euler_biases_damping() {
         seed: 11,
         run: 0,
         progress: false,
+        residuals: false,
     };
     let run = |d: Discretisation| {
         let s = FilterSettings {

@@ -106,6 +106,7 @@ fn a_stiff_building_is_identified_with_data_scaled_priors() {
         seed: 3,
         run: 0,
         progress: false,
+        residuals: false,
     };
     let r = identify(&input, Algorithm::MpfEkf2, &settings).unwrap();
     assert!(r.failure.is_none(), "{:?}", r.failure);

@@ -19,6 +19,7 @@ fn two_pooled_filters_average_and_measure_their_spread() {
         seed: 3,
         run: 0,
         progress: false,
+        residuals: false,
     };
     let single = FilterSettings {
         particles: 40,

@@ -159,6 +159,7 @@ fn a_true_value_of_zero_gives_a_readable_relative_error() {
         seed: 5,
         run: 0,
         progress: false,
+        residuals: false,
     };
     let record = identify(&input, Algorithm::MpfEkf2, &settings).unwrap();
     let e = record.rel_error.as_ref().unwrap()[7];

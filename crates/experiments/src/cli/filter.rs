@@ -318,6 +318,7 @@ pub fn run(args: Args) -> Result<()> {
         seed: args.seed,
         run: args.run,
         progress: true,
+        residuals: true,
     };
     if let Some(p) = crate::pipeline::prior_from_data(&data, chain.as_ref(), &settings)? {
         eprintln!("{}", p.describe());
