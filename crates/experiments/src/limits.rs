@@ -20,6 +20,7 @@ use crate::pipeline::FilterSettings;
 /// - `window` (θ_val averaging, SPEC eq. 26) in `1..=MAX_SAMPLES`: 0 has no mean;
 /// - `noise_fraction` in `[MIN_FILTER_NOISE_FRACTION, MAX_FILTER_NOISE_FRACTION]`;
 /// - `ess_threshold` in `(0, 1]`;
+/// - `substeps` in `1..=MAX_SUBSTEPS`;
 /// - `structure.masses`: at most `MAX_STOREYS`, each finite and positive;
 /// - `fix`: finite values.
 pub fn check_filter_settings(s: &FilterSettings) -> Result<()> {
@@ -31,6 +32,7 @@ pub fn check_filter_settings(s: &FilterSettings) -> Result<()> {
             bail!("field `ess_threshold`: {t} is not in (0, 1]");
         }
     }
+    check_count(s.substeps, 1, models::filtering::MAX_SUBSTEPS).context("field `substeps`")?;
     if let Some(m) = &s.structure.masses {
         check_count(m.len(), 1, MAX_STOREYS).context("field `masses`: number of storeys")?;
         if let Some((i, v)) = m
@@ -108,6 +110,11 @@ mod tests {
         assert!(err(&s).contains("`noise_fraction`"));
         s.noise_fraction = 1e308;
         assert!(err(&s).contains("`noise_fraction`"));
+        let mut s = ok.clone();
+        s.substeps = 0;
+        assert!(err(&s).contains("`substeps`"), "{}", err(&s));
+        s.substeps = 65;
+        assert!(err(&s).contains("`substeps`"));
         let mut s = ok.clone();
         s.ess_threshold = Some(0.0);
         assert!(err(&s).contains("`ess_threshold`"));

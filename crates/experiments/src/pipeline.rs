@@ -105,6 +105,11 @@ pub struct FilterSettings {
     pub noise_fraction: f64,
     /// Discretisation of the equations of motion inside the filters (SPEC §3: forward Euler).
     pub discretisation: Discretisation,
+    /// Transitions inside the filter per sample interval (1: one, SPEC §3); MPF-EKF2 and
+    /// bootstrap PF only ([`models::filtering::ChainSpec::substeps`]). Absent from a record's
+    /// settings when 1.
+    #[serde(skip_serializing_if = "is_one")]
+    pub substeps: usize,
     /// The building of field data (`[structure]`: storeys, hysteretic storeys, masses,
     /// measurement kind); data with `dataset.json` carry their own (`field::resolve`).
     #[serde(skip_serializing_if = "StructureSettings::is_empty")]
@@ -143,6 +148,7 @@ impl Default for FilterSettings {
             marginal_prior: MarginalPrior::MomentMatched,
             noise_fraction: 0.1,
             discretisation: Discretisation::Euler,
+            substeps: 1,
             structure: StructureSettings::default(),
             window: 80,
             trace_every: 10,
@@ -319,6 +325,7 @@ pub fn chain_spec(
     )?;
     spec.marginal_prior = s.marginal_prior;
     spec.discretisation = s.discretisation;
+    spec.substeps = s.substeps;
     // Default priors: SPEC §3's for simulated data (the paper's scale); for field data scaled
     // from the measured response (`scaled_prior`).
     let mut prior = match (&s.prior, is_field_data(data, chain)) {
@@ -578,6 +585,9 @@ pub fn identify(input: &RunInput, algorithm: Algorithm, s: &FilterSettings) -> R
             "discretisation": spec.discretisation,
         },
     });
+    if spec.substeps != 1 {
+        config["spec"]["substeps"] = spec.substeps.into();
+    }
     if let Some(p) = scaled {
         config["prior_from_data"] = serde_json::to_value(p).expect("serialisable");
     }

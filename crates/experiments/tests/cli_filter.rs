@@ -170,3 +170,66 @@ fn bad_input_is_a_clear_error_not_a_panic() {
     let msg = String::from_utf8_lossy(&o.stderr);
     assert!(msg.contains("k9") && !msg.contains("panicked"), "{msg}");
 }
+
+/// `--substeps M`: the MPF-EKF2 and the bootstrap PF run with M transitions per sample and say so
+/// in the record (settings and spec); the MLN-RBPF and Storvik refuse it by name, and an
+/// out-of-range count is refused naming the field.
+#[test]
+fn substeps_run_where_offered_and_are_refused_by_name_elsewhere() {
+    let dir = temp_dir("substeps");
+    let data = dir.join("d");
+    simulate(&data);
+    let filter = |alg: &str, m: &str, out: &std::path::Path| {
+        sysid()
+            .args([
+                "filter",
+                "--algorithm",
+                alg,
+                "--particles",
+                "40",
+                "--seed",
+                "3",
+            ])
+            .args(["--substeps", m, "--data"])
+            .arg(&data)
+            .arg("--out")
+            .arg(out)
+            .output()
+            .unwrap()
+    };
+    for alg in ["mpf-ekf2", "bootstrap"] {
+        let out = dir.join(format!("{alg}.json"));
+        let o = filter(alg, "3", &out);
+        assert!(
+            o.status.success(),
+            "{alg}: {}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+        let r = record_without_timing(&out);
+        assert_eq!(r["config"]["filter"]["substeps"], 3, "{alg}");
+        assert_eq!(r["config"]["spec"]["substeps"], 3, "{alg}");
+        assert!(r["failure"].is_null(), "{alg}");
+        // One transition per sample leaves the key out of the record (fingerprints unchanged).
+        let one = dir.join(format!("{alg}-1.json"));
+        assert!(filter(alg, "1", &one).status.success());
+        let r1 = record_without_timing(&one);
+        assert!(r1["config"]["filter"].get("substeps").is_none(), "{alg}");
+        assert_ne!(
+            r1["theta_val"], r["theta_val"],
+            "{alg}: substeps changed nothing"
+        );
+    }
+    for alg in ["mln-rbpf", "storvik"] {
+        let o = filter(alg, "2", &dir.join("refused.json"));
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(!o.status.success(), "{alg}");
+        assert!(
+            err.contains("substeps") && err.contains("MLN-RBPF/Storvik"),
+            "{alg}: {err}"
+        );
+        assert!(!err.contains("panicked"), "{err}");
+    }
+    let o = filter("mpf-ekf2", "0", &dir.join("zero.json"));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && err.contains("`substeps`"), "{err}");
+}

@@ -30,6 +30,8 @@ fn filter_settings_out_of_range_are_named() {
         ("particles = 0\n", "`particles`"),
         ("particles = 100000000000\n", "`particles`"),
         ("ess_threshold = 2.0\n", "`ess_threshold`"),
+        ("substeps = 0\n", "`substeps`"),
+        ("substeps = 1000\n", "`substeps`"),
         ("masses = [1.0, 0.0, 1.0]\n", "`masses`"),
     ] {
         let (p, msg) = load_err(&dir, text);

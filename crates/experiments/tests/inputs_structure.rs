@@ -386,6 +386,7 @@ fn printed_defaults_and_the_field_example_parse() {
         "storvik_update",
         "noise_fraction",
         "discretisation",
+        "substeps",
         "window",
         "trace_every",
         "validate",

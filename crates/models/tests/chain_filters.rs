@@ -358,13 +358,24 @@ fn mln_rbpf_gaussian_is_the_kalman_filter_of_z_given_its_path() {
 
 /// Without hysteresis and with every stiffness and damping fixed, the chain is linear-Gaussian in
 /// its states: the MPF-EKF2 (nothing sampled; all states marginalised) is the Kalman filter of
-/// the states, built here from the equations of motion (forward Euler, SPEC §3), on a 10-storey
-/// chain with four sensors.
+/// the states, built here from the equations of motion (SPEC §3), on a 10-storey chain with four
+/// sensors — for forward and semi-implicit Euler, with one transition per sample and with three
+/// (`substeps`: the Kalman filter predicts three times with dt/3, ü_g interpolated linearly and a
+/// third of the process-noise variance, then updates once).
 #[test]
 fn mpf_ekf2_is_the_kalman_filter_of_a_linear_chain() {
+    for disc in [Discretisation::Euler, Discretisation::Symplectic] {
+        for substeps in [1, 3] {
+            mpf_ekf2_against_kalman(disc, substeps);
+        }
+    }
+}
+
+fn mpf_ekf2_against_kalman(disc: Discretisation, substeps: usize) {
     let n = 10;
     let sensors = [1, 4, 8, 10];
-    let (mut spec, y) = chain_data(n, &[], &sensors, 0.5, Discretisation::Euler);
+    let (mut spec, y) = chain_data(n, &[], &sensors, 0.5, disc);
+    spec.substeps = substeps;
     for j in 1..=n {
         spec.prior.fix(&format!("k{j}"), 8.0).unwrap();
         spec.prior.fix(&format!("c{j}"), 0.25).unwrap();
@@ -380,8 +391,10 @@ fn mpf_ekf2_is_the_kalman_filter_of_a_linear_chain() {
         &mut steps,
     );
     assert!(s.failure.is_none());
-    // x_k = A x_{k−1} + b ü_g(k−1) + w, y_k = C x_k + d ü_g(k) + η, x = [x1..xN, v1..vN].
-    let dt = spec.dt;
+    // x_k = A x_{k−1} + b ü_g(k−1) + w, y_k = C x_k + d ü_g(k) + η, x = [x1..xN, v1..vN], on the
+    // grid of step h = dt/M.
+    let m_sub = substeps as f64;
+    let h = spec.dt / m_sub;
     let mut kmat = DMatrix::<f64>::zeros(n, n);
     let mut cmat = DMatrix::<f64>::zeros(n, n);
     for j in 0..n {
@@ -398,30 +411,59 @@ fn mpf_ekf2_is_the_kalman_filter_of_a_linear_chain() {
     let mut acc = DMatrix::<f64>::zeros(n, 2 * n);
     acc.view_mut((0, 0), (n, n)).copy_from(&(-&kmat));
     acc.view_mut((0, n), (n, n)).copy_from(&(-&cmat));
-    let mut a = DMatrix::<f64>::identity(2 * n, 2 * n);
+    // Velocity rows: v' = v + h (acc·x − ü_g) + w_v.
+    let mut vrows = acc.clone() * h;
     for j in 0..n {
-        a[(j, n + j)] += dt;
+        vrows[(j, n + j)] += 1.0;
     }
-    let a_low = a.view((n, 0), (n, 2 * n)).clone_owned() + dt * &acc;
-    a.view_mut((n, 0), (n, 2 * n)).copy_from(&a_low);
-    let c = DMatrix::from_fn(4, 2 * n, |i, jj| acc[(sensors[i] - 1, jj)]);
-    let q = DMatrix::from_diagonal(&DVector::from_fn(2 * n, |i, _| {
-        if i < n {
-            spec.q_disp * spec.q_disp
-        } else {
-            spec.q_vel * spec.q_vel
+    let mut a = DMatrix::<f64>::identity(2 * n, 2 * n);
+    a.view_mut((n, 0), (n, 2 * n)).copy_from(&vrows);
+    // Ground input of one step, per unit ü_g.
+    let mut b = DVector::<f64>::zeros(2 * n);
+    let (qd, qv) = (spec.q_disp.powi(2) / m_sub, spec.q_vel.powi(2) / m_sub);
+    let mut q = DMatrix::<f64>::zeros(2 * n, 2 * n);
+    for j in 0..n {
+        b[n + j] = -h;
+        q[(j, j)] = qd;
+        q[(n + j, n + j)] = qv;
+    }
+    match disc {
+        Discretisation::Euler => {
+            for j in 0..n {
+                a[(j, n + j)] += h;
+            }
         }
-    }));
+        _ => {
+            // x' = x + h v' (the new velocity, its noise included).
+            let mut xr = DMatrix::<f64>::identity(n, 2 * n);
+            xr += &vrows * h;
+            a.view_mut((0, 0), (n, 2 * n)).copy_from(&xr);
+            for j in 0..n {
+                b[j] = -h * h;
+                q[(j, j)] = qd + h * h * qv;
+                q[(j, n + j)] = h * qv;
+                q[(n + j, j)] = h * qv;
+            }
+        }
+    }
+    let fine = |kf: usize| {
+        let (k0, s) = (kf / substeps, kf % substeps);
+        if s == 0 {
+            spec.ug[k0]
+        } else {
+            spec.ug[k0] + (spec.ug[k0 + 1] - spec.ug[k0]) * s as f64 / m_sub
+        }
+    };
+    let c = DMatrix::from_fn(4, 2 * n, |i, jj| acc[(sensors[i] - 1, jj)]);
     let r = DMatrix::from_diagonal(&DVector::from_vec(spec.r_diag.clone()));
     let mut m = DVector::<f64>::zeros(2 * n);
     let mut p = DMatrix::<f64>::zeros(2 * n, 2 * n);
     for (kk, (post, info)) in steps.0.iter().enumerate() {
         let k = kk + 1;
-        m = &a * &m;
-        for j in 0..n {
-            m[n + j] -= dt * spec.ug[k - 1];
+        for kf in (k - 1) * substeps + 1..=k * substeps {
+            m = &a * &m + &b * fine(kf - 1);
+            p = &a * &p * a.transpose() + &q;
         }
-        p = &a * &p * a.transpose() + &q;
         let yhat = &c * &m - DVector::from_element(4, spec.ug[k]);
         let resid = DVector::from_iterator(4, (0..4).map(|j| y[kk * 4 + j])) - yhat;
         let s_cov = &c * &p * c.transpose() + &r;
@@ -432,19 +474,22 @@ fn mpf_ekf2_is_the_kalman_filter_of_a_linear_chain() {
         let ll = -0.5 * (resid.transpose() * chol.solve(&resid))[0]
             - 0.5 * s_cov.determinant().ln()
             - 2.0 * (2.0 * std::f64::consts::PI).ln();
+        let ctx = format!("{disc:?}, substeps {substeps}, k={k}");
         assert!(
             (info.loglik_increment - ll).abs() < 1e-7 * ll.abs().max(1.0),
-            "k={k}: {} vs {ll}",
+            "{ctx}: {} vs {ll}",
             info.loglik_increment
         );
         for j in 0..2 * n {
             assert!(
                 (post.state_mean[j] - m[j]).abs() < 1e-7 * (1.0 + m[j].abs()),
-                "k={k} state {j}"
+                "{ctx} state {j}: {} vs {}",
+                post.state_mean[j],
+                m[j]
             );
             assert!(
                 (post.state_sd[j] - p[(j, j)].max(0.0).sqrt()).abs() < 1e-7,
-                "k={k} sd {j}"
+                "{ctx} sd {j}"
             );
         }
     }

@@ -344,3 +344,107 @@ fn marginal_priors_follow_spec_section_3_for_every_partition() {
         );
     }
 }
+
+/// `substeps = M`: one transition of the augmented chain is M steps of the same chain on a grid
+/// M times finer (`dt/M`, ü_g linear between samples, process-noise s.d. over √M), each with its
+/// own slice of the draws, and the measurement at sample k is the fine chain's at index kM — for
+/// every scheme. The other partitions refuse what they do not support, naming the field.
+#[test]
+fn substeps_are_the_same_chain_on_a_finer_grid() {
+    let (dt, m, steps) = (0.01, 4usize, 30usize);
+    let ug: Vec<f64> = (0..=steps).map(|k| ground(k as f64 * dt)).collect();
+    let fine_ug: Vec<f64> = (0..=steps * m)
+        .map(|kf| {
+            let (k, s) = (kf / m, kf % m);
+            match s {
+                0 => ug[k],
+                _ => ug[k] + (ug[k + 1] - ug[k]) * (s as f64 / m as f64),
+            }
+        })
+        .collect();
+    let theta = [8.0, 9.0, 7.0, 0.25, 0.3, 0.2, 2.0, 1.0, 2.0];
+    for disc in [
+        Discretisation::Euler,
+        Discretisation::Symplectic,
+        Discretisation::Rk4,
+    ] {
+        let mut coarse = chain_spec(vec![1.0, 1.2, 0.8], vec![0], ug.clone(), dt, disc);
+        coarse.substeps = m;
+        let mut fine = chain_spec(
+            vec![1.0, 1.2, 0.8],
+            vec![0],
+            fine_ug.clone(),
+            dt / m as f64,
+            disc,
+        );
+        let root = (m as f64).sqrt();
+        fine.q_disp = coarse.q_disp / root;
+        fine.q_vel = coarse.q_vel / root;
+        fine.q_r = coarse.q_r.iter().map(|q| q / root).collect();
+        let (c, f) = (
+            AugmentedChain::new(coarse).unwrap(),
+            AugmentedChain::new(fine).unwrap(),
+        );
+        let d = f.noise_dim();
+        assert_eq!(c.noise_dim(), m * d, "{disc:?}");
+        let mut rng = stream(3, 0, "substeps");
+        let mut x = vec![0.0; d];
+        x.extend_from_slice(&theta);
+        let mut xf = x.clone();
+        let (mut out, mut tmp) = (x.clone(), x.clone());
+        let (mut yc, mut yf) = (vec![0.0; 3], vec![0.0; 3]);
+        for k in 1..=steps {
+            let xi: Vec<f64> = (0..m * d)
+                .map(|_| {
+                    rand_distr::Distribution::<f64>::sample(&rand_distr::StandardNormal, &mut rng)
+                })
+                .collect();
+            c.propagate(k, &x, &xi, &mut out);
+            std::mem::swap(&mut x, &mut out);
+            for s in 0..m {
+                f.propagate((k - 1) * m + s + 1, &xf, &xi[s * d..(s + 1) * d], &mut tmp);
+                std::mem::swap(&mut xf, &mut tmp);
+            }
+            c.measure(k, &x, &mut yc);
+            f.measure(k * m, &xf, &mut yf);
+            for (i, (a, b)) in x.iter().zip(&xf).chain(yc.iter().zip(&yf)).enumerate() {
+                assert!(
+                    (a - b).abs() <= 1e-12 * (1.0 + b.abs()),
+                    "{disc:?} k={k} entry {i}: {a} vs {b}"
+                );
+            }
+        }
+        assert!(
+            x[..d].iter().any(|v| v.abs() > 1e-3),
+            "{disc:?}: the chain moved"
+        );
+    }
+    // The MLN-RBPF/Storvik partition has one transition per sample; out-of-range counts are
+    // refused by every partition.
+    let mut spec = chain_spec(
+        vec![1.0; 3],
+        vec![0],
+        ug.clone(),
+        dt,
+        Discretisation::Symplectic,
+    );
+    spec.substeps = 2;
+    assert!(MpfChain::new(spec.clone()).is_ok());
+    let e = MlnChain::new(spec.clone()).unwrap_err();
+    assert!(matches!(e, SpecError::SubstepsUnsupported { .. }), "{e}");
+    assert!(e.to_string().contains("substeps"), "{e}");
+    for bad in [0, models::filtering::MAX_SUBSTEPS + 1] {
+        spec.substeps = bad;
+        let e = AugmentedChain::new(spec.clone()).unwrap_err();
+        assert!(
+            matches!(
+                e,
+                SpecError::Invalid {
+                    field: "substeps",
+                    ..
+                }
+            ),
+            "{bad}: {e}"
+        );
+    }
+}

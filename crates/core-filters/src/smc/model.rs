@@ -199,4 +199,10 @@ pub trait ConditionallyQuadratic: Send + Sync {
     fn measurement_cov(&self) -> Vec<f64>;
     /// Where θ and the physical states live.
     fn layout(&self) -> Layout;
+    /// Transitions per measurement interval, `M`: one filter step advances through `M`
+    /// transitions (indices `(k−1)M+1 ..= kM` of the model's time grid) and then weights with
+    /// `y_k` at index `kM`. 1 for a model on the measurement grid.
+    fn substeps(&self) -> usize {
+        1
+    }
 }

@@ -20,6 +20,10 @@
 //!
 //! Entries of `xⁿ` in no stage (the Bouc–Wen exponents) are static and copied.
 //!
+//! A model with `M = substeps() > 1` transitions per measurement (a time grid `M` times finer
+//! than the data) gets (a)–(c) `M` times, each with its own draws, before (d)+(e) — the same
+//! filter on a grid whose intermediate points have no measurement.
+//!
 //! Failure policy: a particle whose Gaussian computations fail even after the documented repair
 //! gets a NaN log-weight (mapped to −∞ and counted by the weight routine); the run fails only if
 //! every particle fails.
@@ -59,6 +63,9 @@ pub struct MpfStep<M> {
     y_pattern: Sparse<f64>,
     y_hess: SecondOrder,
     r: Vec<f64>,
+    /// Transitions per measurement ([`ConditionallyQuadratic::substeps`]).
+    substeps: usize,
+    /// Standard normal draws of one transition (the batch layer supplies `substeps` times as many).
     draws: usize,
 }
 
@@ -87,6 +94,8 @@ pub struct MpfScratch<T> {
     s_add: Vec<T>,
     resid: Vec<T>,
     y_factor: Factor<T>,
+    /// `xⁿ` after the previous sub-step (sub-steps after the first).
+    xn_sub: Vec<T>,
 }
 
 /// Writes the additive covariance `Q (diagonal) + cov2 at the Hessian outputs` (`q × q`).
@@ -151,7 +160,10 @@ impl<M: ConditionallyQuadratic> MpfStep<M> {
         y_pattern.finish();
         let r = model.measurement_cov();
         assert_eq!(r.len(), ny * ny, "R is ny × ny");
+        let substeps = model.substeps();
+        assert!(substeps >= 1, "at least one transition per measurement");
         Self {
+            substeps,
             marginal_hess: SecondOrder::new(model.marginal_hessians(), nbl, nbl),
             y_hess: SecondOrder::new(model.observation_hessians(), nbl, ny),
             q_bl: model.marginal_noise().clone(),
@@ -199,6 +211,74 @@ impl<M: ConditionallyQuadratic> MpfStep<M> {
         additive_cov(&mut ss.s_add, q, &plan.q, &plan.hess, &ss.cov2);
         ss.factor.compute(p, &ss.jac, &ss.s_add);
         (mean, ss.factor.cov.clone())
+    }
+
+    /// SPEC §5.4 (a)–(c) for the transition to index `k` of the model's grid: every sampled stage
+    /// drawn from its EKF2 proposal (using `xi[*next_draw..]`) with the update of `x^bl` by the
+    /// draw, then the EKF2 propagate of `x^bl`.
+    #[allow(clippy::too_many_arguments)]
+    #[inline]
+    fn transition<T: Real>(
+        &self,
+        k: usize,
+        xn_prev: &[T],
+        xn: &mut [T],
+        m: &mut [T],
+        cov: &mut [T],
+        xi: &[T],
+        next_draw: &mut usize,
+        s: &mut MpfScratch<T>,
+        health: &mut Health,
+    ) -> T::Mask {
+        let nbl = self.dims.nbl;
+        let mut ok = T::all_true();
+        for (st, plan) in self.stages.iter().enumerate() {
+            let ss = &mut s.stages[st];
+            let q = plan.rows.len();
+            // (a) the EKF2 moments of ψ: mean ψ(m) + ½tr(𝓗ⁱP), covariance J P Jᵀ + cov2 + Qₙ.
+            ss.jac.start();
+            self.model
+                .sampled_dynamics(st, k, xn_prev, xn, m, &mut ss.value, &mut ss.jac);
+            ss.jac.finish();
+            ss.pred.copy_from_slice(&ss.value);
+            if !plan.hess.is_empty() {
+                plan.hess.terms(cov, nbl, &mut ss.mean2, &mut ss.cov2);
+                for g in 0..plan.hess.len() {
+                    ss.pred[plan.hess.output(g)] += ss.mean2[g];
+                }
+            }
+            let q_diag: &mut [T] = &mut ss.drawn;
+            for (d, v) in q_diag.iter_mut().zip(&plan.q) {
+                *d = T::splat(*v);
+            }
+            additive_cov(&mut ss.s_add, q, q_diag, &plan.hess, &ss.cov2);
+            ok = ok & factorise(&mut ss.factor, cov, &ss.jac, &ss.s_add, health);
+            // (a) the draw and (b) the update of x^bl_{k−1} with it (whitened innovation ξ).
+            let xi_s = &xi[*next_draw..*next_draw + q];
+            *next_draw += q;
+            ok = ok
+                & ss.factor
+                    .condition_on_draw(m, cov, &ss.pred, xi_s, &mut ss.drawn);
+            for (i, &row) in plan.rows.iter().enumerate() {
+                xn[row] = ss.drawn[i];
+            }
+        }
+        // (c) propagate x^bl through φ_bl(xⁿ_{k−1}, xⁿ_k, ·) at the updated mean.
+        s.d.start();
+        self.model
+            .marginal_dynamics(k, xn_prev, xn, m, &mut s.phi, &mut s.d);
+        s.d.finish();
+        ekf2_propagate_near_identity(
+            m,
+            cov,
+            nbl,
+            &s.phi,
+            &s.d,
+            &self.marginal_hess,
+            &self.q_bl,
+            &mut s.propagate,
+        );
+        ok
     }
 }
 
@@ -252,6 +332,7 @@ impl<M: ConditionallyQuadratic> ParticleStep for MpfStep<M> {
             s_add: vec![z; ny * ny],
             resid: vec![z; ny],
             y_factor: Factor::new(nbl, ny),
+            xn_sub: vec![z; self.dims.nn],
         }
     }
 
@@ -263,7 +344,7 @@ impl<M: ConditionallyQuadratic> ParticleStep for MpfStep<M> {
     }
 
     fn draws(&self) -> usize {
-        self.draws
+        self.draws * self.substeps
     }
 
     /// SPEC §5.4 (a)–(e) for one particle (or a pack).
@@ -281,53 +362,23 @@ impl<M: ConditionallyQuadratic> ParticleStep for MpfStep<M> {
         let nbl = self.dims.nbl;
         let mut ok = T::all_true();
         let mut next_draw = 0;
-        for (st, plan) in self.stages.iter().enumerate() {
-            let ss = &mut s.stages[st];
-            let q = plan.rows.len();
-            // (a) the EKF2 moments of ψ: mean ψ(m) + ½tr(𝓗ⁱP), covariance J P Jᵀ + cov2 + Qₙ.
-            ss.jac.start();
-            self.model
-                .sampled_dynamics(st, k, xn_prev, xn, m, &mut ss.value, &mut ss.jac);
-            ss.jac.finish();
-            ss.pred.copy_from_slice(&ss.value);
-            if !plan.hess.is_empty() {
-                plan.hess.terms(cov, nbl, &mut ss.mean2, &mut ss.cov2);
-                for g in 0..plan.hess.len() {
-                    ss.pred[plan.hess.output(g)] += ss.mean2[g];
-                }
+        // (a)–(c) once per transition of the model's grid between y_{k−1} and y_k (grid indices
+        // (k−1)M+1 ..= kM, M = substeps); the first starts at the ancestor's xⁿ.
+        let last = k * self.substeps;
+        let first = last + 1 - self.substeps;
+        ok = ok & self.transition(first, xn_prev, xn, m, cov, xi, &mut next_draw, s, health);
+        if self.substeps > 1 {
+            // Moved out of the scratch while the scratch is lent (no allocation).
+            let mut xn_sub = std::mem::take(&mut s.xn_sub);
+            for kf in first + 1..=last {
+                xn_sub.copy_from_slice(xn);
+                ok = ok & self.transition(kf, &xn_sub, xn, m, cov, xi, &mut next_draw, s, health);
             }
-            let q_diag: &mut [T] = &mut ss.drawn;
-            for (d, v) in q_diag.iter_mut().zip(&plan.q) {
-                *d = T::splat(*v);
-            }
-            additive_cov(&mut ss.s_add, q, q_diag, &plan.hess, &ss.cov2);
-            ok = ok & factorise(&mut ss.factor, cov, &ss.jac, &ss.s_add, health);
-            // (a) the draw and (b) the update of x^bl_{k−1} with it (whitened innovation ξ).
-            let xi_s = &xi[next_draw..next_draw + q];
-            next_draw += q;
-            ok = ok
-                & ss.factor
-                    .condition_on_draw(m, cov, &ss.pred, xi_s, &mut ss.drawn);
-            for (i, &row) in plan.rows.iter().enumerate() {
-                xn[row] = ss.drawn[i];
-            }
+            s.xn_sub = xn_sub;
         }
-        // (c) propagate x^bl through φ_bl(xⁿ_{k−1}, xⁿ_k, ·) at the updated mean.
-        s.d.start();
-        self.model
-            .marginal_dynamics(k, xn_prev, xn, m, &mut s.phi, &mut s.d);
-        s.d.finish();
-        ekf2_propagate_near_identity(
-            m,
-            cov,
-            nbl,
-            &s.phi,
-            &s.d,
-            &self.marginal_hess,
-            &self.q_bl,
-            &mut s.propagate,
-        );
-        // (d)+(e) the EKF2 update with y_k; its innovation log-density is the weight factor.
+        // (d)+(e) the EKF2 update with y_k at grid index kM; its innovation log-density is the
+        // weight factor.
+        let k = last;
         s.jy.start();
         self.model.observation(k, xn, m, &mut s.h, &mut s.jy);
         s.jy.finish();
@@ -357,7 +408,7 @@ impl<M: ConditionallyQuadratic> ParticleStep for MpfStep<M> {
         }
         ok = ok & factorise(&mut s.y_factor, cov, &s.jy, &s.s_add, health);
         let (loglik, upd) = s.y_factor.update(m, cov, &s.resid);
-        debug_assert_eq!(next_draw, self.draws);
+        debug_assert_eq!(next_draw, self.draws * self.substeps);
         (loglik, ok & upd)
     }
 }

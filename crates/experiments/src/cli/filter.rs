@@ -58,6 +58,10 @@ pub struct Args {
     /// symplectic (semi-implicit Euler: velocities first), or rk4 (bootstrap PF only).
     #[arg(long)]
     pub discretisation: Option<models::filtering::Discretisation>,
+    /// Transitions inside the filter per sample interval (MPF-EKF2 and bootstrap PF): for a
+    /// stiff building whose ω·dt is large at the data's rate (docs/scaling.md). Default 1.
+    #[arg(long)]
+    pub substeps: Option<usize>,
     /// TOML file with filter settings (priors, noise fraction, masses, …) over the SPEC's (the
     /// paper's) defaults; command-line options override it. Without it: the recommended
     /// settings of docs/calibration.md.
@@ -176,6 +180,9 @@ storvik_update = {storvik}
 noise_fraction = {nf}
 # Discretisation inside the filters: "euler" (the paper's), "symplectic", "rk4" (bootstrap only).
 discretisation = {disc}
+# Transitions inside the filter per sample interval (dt/substeps each, ü_g interpolated), for a
+# stiff building sampled coarsely (docs/scaling.md); MPF-EKF2 and bootstrap PF only.
+substeps = {substeps}
 # θ_val averages the posterior mean over the last `window` steps (SPEC eq. 26).
 window = {window}
 # Keep one trace step in `trace_every` in the record (0: no trace).
@@ -223,6 +230,7 @@ marginal_prior = {{ kind = "moment_matched" }}
         storvik = q(&d.storvik_update),
         nf = q(&d.noise_fraction),
         disc = q(&d.discretisation),
+        substeps = d.substeps,
         window = d.window,
         trace = d.trace_every,
         validate = d.validate,
@@ -276,6 +284,9 @@ pub fn run(args: Args) -> Result<()> {
     }
     if let Some(d) = args.discretisation {
         settings.discretisation = d;
+    }
+    if let Some(m) = args.substeps {
+        settings.substeps = m;
     }
     if let Some(u) = args.storvik_update {
         settings.storvik_update = u;

@@ -9,6 +9,10 @@
 //!   `r' = r + dt ṙ(δv', r) + q_r ξ` with the new velocities (noise included).
 //! - RK4: one classical RK4 step of the continuous equations (`ü_g` linear inside the step, as
 //!   `crate::integrate::simulate_rk4`), then the same additive noise.
+//!
+//! With `substeps = M > 1` ([`ChainSpec::substeps`]) one transition between two samples is `M`
+//! of these steps with `dt/M` on the interpolated `ü_g`, each with its own draws
+//! (`noise_dim = M (2N + E)`), and the measurement at sample k reads the grid at `kM`.
 
 use super::{ChainCore, ChainSpec, Discretisation, SpecError, NLIN, NNONLIN};
 use crate::structure::{ChainTopology, ChainView, HysteresisLaw};
@@ -21,8 +25,13 @@ use std::cell::RefCell;
 #[derive(Debug, Clone)]
 pub struct AugmentedChain {
     core: ChainCore,
-    /// Process-noise s.d. of the 2N + E dynamic entries.
+    /// Process-noise s.d. of the 2N + E dynamic entries (per filter step).
     noise_sd: Vec<f64>,
+}
+
+thread_local! {
+    /// The state between sub-steps (`substeps > 1`), grown once per thread.
+    static SUBSTEP_SCRATCH: RefCell<Vec<f64>> = const { RefCell::new(Vec::new()) };
 }
 
 /// The dynamic part `s = [x, v, r]` and θ of an augmented state.
@@ -65,9 +74,9 @@ impl AugmentedChain {
     pub fn new(spec: ChainSpec) -> Result<Self, SpecError> {
         let core = ChainCore::new(spec)?;
         let (n, ne) = (core.n, core.ne);
-        let mut noise_sd = vec![core.spec.q_disp; n];
-        noise_sd.extend(std::iter::repeat_n(core.spec.q_vel, n));
-        noise_sd.extend_from_slice(&core.spec.q_r);
+        let mut noise_sd = vec![core.q_disp; n];
+        noise_sd.extend(std::iter::repeat_n(core.q_vel, n));
+        noise_sd.extend_from_slice(&core.q_r);
         debug_assert_eq!(noise_sd.len(), 2 * n + ne);
         Ok(Self { core, noise_sd })
     }
@@ -146,7 +155,7 @@ impl AugmentedChain {
         let dt = self.core.dt;
         let d = self.dyn_dim();
         let (s, th) = x.split_at(d);
-        let (u0, u1) = (self.core.spec.ug[k - 1], self.core.spec.ug[k]);
+        let (u0, u1) = (self.core.ug[k - 1], self.core.ug[k]);
         let um = 0.5 * (u0 + u1);
         RK4_SCRATCH.with(|cell| {
             let mut buf = cell.borrow_mut();
@@ -180,6 +189,19 @@ impl AugmentedChain {
     }
 }
 
+impl AugmentedChain {
+    /// One step of the filter's grid to index `k` (θ copied).
+    fn step(&self, k: usize, x: &[f64], xi: &[f64], out: &mut [f64]) {
+        let d = self.dyn_dim();
+        match self.core.spec.discretisation {
+            Discretisation::Euler => self.propagate_euler(k, x, xi, out),
+            Discretisation::Symplectic => self.propagate_symplectic(k, x, xi, out),
+            Discretisation::Rk4 => self.propagate_rk4(k, x, xi, out),
+        }
+        out[d..].copy_from_slice(&x[d..]);
+    }
+}
+
 impl StateSpace for AugmentedChain {
     fn dim(&self) -> usize {
         self.dyn_dim() + self.core.theta_mean.len()
@@ -190,7 +212,7 @@ impl StateSpace for AugmentedChain {
     }
 
     fn noise_dim(&self) -> usize {
-        self.dyn_dim()
+        self.dyn_dim() * self.core.substeps
     }
 
     /// Zero states, θ drawn from its prior (SPEC §3).
@@ -203,16 +225,28 @@ impl StateSpace for AugmentedChain {
     /// The transition to step k with ü_g,meas(k−1) (and ü_g,meas(k) inside an RK4 step); θ copied.
     fn propagate(&self, k: usize, x: &[f64], xi: &[f64], out: &mut [f64]) {
         let d = self.dyn_dim();
-        match self.core.spec.discretisation {
-            Discretisation::Euler => self.propagate_euler(k, x, xi, out),
-            Discretisation::Symplectic => self.propagate_symplectic(k, x, xi, out),
-            Discretisation::Rk4 => self.propagate_rk4(k, x, xi, out),
+        let m = self.core.substeps;
+        if m == 1 {
+            self.step(k, x, xi, out);
+        } else {
+            // Grid indices (k−1)M+1 ..= kM, draws d at a time.
+            SUBSTEP_SCRATCH.with(|cell| {
+                let mut buf = cell.borrow_mut();
+                buf.resize(x.len(), 0.0);
+                buf.copy_from_slice(x);
+                for s in 0..m {
+                    let kf = (k - 1) * m + s + 1;
+                    self.step(kf, &buf, &xi[s * d..(s + 1) * d], out);
+                    buf.copy_from_slice(out);
+                }
+            });
         }
         out[d..].copy_from_slice(&x[d..]);
     }
 
     /// Accelerations at the sensor storeys with ü_g,meas(k) (relative or absolute, SPEC §2).
     fn measure(&self, k: usize, x: &[f64], out: &mut [f64]) {
+        let k = k * self.core.substeps;
         let d = self.dyn_dim();
         let (s, th) = x.split_at(d);
         let view = View {

@@ -64,6 +64,11 @@ impl<T: Real> ChainView<T> for View<'_, T> {
 impl MlnChain {
     /// Validates the spec; Euler and symplectic only (RK4 is not linear in z given `u`).
     pub fn new(spec: ChainSpec) -> Result<Self, SpecError> {
+        if spec.substeps != 1 {
+            return Err(SpecError::SubstepsUnsupported {
+                partition: "MLN-RBPF/Storvik",
+            });
+        }
         let core = ChainCore::new(spec)?;
         let (n, ne) = (core.n, core.ne);
         let symplectic = match core.spec.discretisation {

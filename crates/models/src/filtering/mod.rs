@@ -43,7 +43,7 @@ pub use discretisation::Discretisation;
 pub use mln::MlnChain;
 pub use mpf::MpfChain;
 pub use prior::{ChainPrior, ElementPrior, MarginalPrior};
-pub use spec::{ChainSpec, RmsLevels, SpecError};
+pub use spec::{ChainSpec, RmsLevels, SpecError, MAX_SUBSTEPS};
 
 use crate::structure::{state_names, theta_names, BoucWenLaw, ChainTopology, HysteresisLaw};
 use core_filters::rng::StreamRng;
@@ -57,6 +57,21 @@ pub(crate) const NNONLIN: usize = 1;
 const _: () = assert!(<Law as HysteresisLaw>::LINEAR.len() == NLIN);
 const _: () = assert!(<Law as HysteresisLaw>::NONLINEAR.len() == NNONLIN);
 
+/// `ug` on a grid `m` times finer, linear between samples (`ug` itself when `m` is 1).
+fn fine_grid(ug: &[f64], m: usize) -> Vec<f64> {
+    if m == 1 {
+        return ug.to_vec();
+    }
+    let mut out = Vec::with_capacity((ug.len() - 1) * m + 1);
+    for w in ug.windows(2) {
+        for s in 0..m {
+            out.push(w[0] + (w[1] - w[0]) * (s as f64 / m as f64));
+        }
+    }
+    out.extend(ug.last());
+    out
+}
+
 /// What every partition shares: the validated spec, the force kernel and precomputed constants.
 #[derive(Debug, Clone)]
 pub(crate) struct ChainCore {
@@ -67,7 +82,17 @@ pub(crate) struct ChainCore {
     pub n: usize,
     /// Hysteretic elements E.
     pub ne: usize,
+    /// The filter's time step: `spec.dt / substeps`.
     pub dt: f64,
+    /// Transitions per measurement interval ([`ChainSpec::substeps`]).
+    pub substeps: usize,
+    /// `ü_g,meas` on the filter's grid (`spec.ug` itself when `substeps` is 1; otherwise
+    /// interpolated linearly, `K·substeps + 1` samples): index `k·substeps` is sample `k`.
+    pub ug: Vec<f64>,
+    /// Process-noise s.d. per filter step (the spec's over `√substeps`).
+    pub q_disp: f64,
+    pub q_vel: f64,
+    pub q_r: Vec<f64>,
     /// `1/m_j`.
     pub inv_mass: Vec<f64>,
     /// 0-based measured storeys.
@@ -87,10 +112,17 @@ impl ChainCore {
             }
         })?;
         let (theta_mean, theta_var) = spec.prior.moments();
+        let m = spec.substeps;
+        let noise = 1.0 / (m as f64).sqrt();
         Ok(Self {
             n: spec.n_storeys(),
             ne: spec.hysteretic.len(),
-            dt: spec.dt,
+            dt: spec.dt / m as f64,
+            substeps: m,
+            ug: fine_grid(&spec.ug, m),
+            q_disp: spec.q_disp * noise,
+            q_vel: spec.q_vel * noise,
+            q_r: spec.q_r.iter().map(|q| q * noise).collect(),
             inv_mass: spec.masses.iter().map(|m| 1.0 / m).collect(),
             sensors: spec.sensors.storeys().to_vec(),
             theta_mean,
@@ -101,18 +133,19 @@ impl ChainCore {
         })
     }
 
-    /// Ground term of the transition to step k: `−ü_g,meas(k−1)`.
+    /// Ground term of the transition to filter step k: `−ü_g,meas(k−1)` (filter steps: the
+    /// samples when `substeps` is 1, the sub-steps otherwise).
     #[inline]
     #[track_caller]
     pub fn transition_ground(&self, k: usize) -> f64 {
         assert!(k >= 1, "the transition to step k needs k >= 1");
-        -self.spec.ug[k - 1]
+        -self.ug[k - 1]
     }
 
-    /// Ground term of the measurement at step k (relative: `−ü_g,meas(k)`, absolute: 0).
+    /// Ground term of the measurement at filter step k (relative: `−ü_g,meas(k)`, absolute: 0).
     #[inline]
     pub fn measurement_ground(&self, k: usize) -> f64 {
-        self.spec.sensors.ground(self.spec.ug[k])
+        self.spec.sensors.ground(self.ug[k])
     }
 
     /// `R` (column-major, diagonal).

@@ -151,7 +151,7 @@ impl MpfChain {
             marginal_noise: SymEntries::new(),
         };
         let dt = me.core.dt;
-        let (q_vel, q_disp) = (me.core.spec.q_vel, me.core.spec.q_disp);
+        let (q_vel, q_disp) = (me.core.q_vel, me.core.q_disp);
         // Sampled stages, their noise and Hessians (velocity rows: dt·∂²a_j; r rows affine).
         let mut vel_hessians = SparseHessians::new();
         for (i, &j) in me.sampled_vel.iter().enumerate() {
@@ -161,12 +161,12 @@ impl MpfChain {
         if ne > 0 {
             if symplectic {
                 me.stages = vec![(0..nvs).collect(), r_entries];
-                me.stage_noise = vec![vec![q_vel; nvs], me.core.spec.q_r.clone()];
+                me.stage_noise = vec![vec![q_vel; nvs], me.core.q_r.clone()];
                 me.stage_hessians = vec![vel_hessians, SparseHessians::new()];
             } else {
                 me.stages = vec![(0..nvs + ne).collect()];
                 let mut q = vec![q_vel; nvs];
-                q.extend_from_slice(&me.core.spec.q_r);
+                q.extend_from_slice(&me.core.q_r);
                 me.stage_noise = vec![q];
                 me.stage_hessians = vec![vel_hessians];
             }
@@ -504,6 +504,11 @@ impl ConditionallyQuadratic for MpfChain {
 
     fn measurement_cov(&self) -> Vec<f64> {
         self.core.measurement_cov()
+    }
+
+    /// [`ChainSpec::substeps`]: the model's grid is `dt/substeps`.
+    fn substeps(&self) -> usize {
+        self.core.substeps
     }
 
     fn layout(&self) -> Layout {

@@ -25,6 +25,12 @@ pub enum SpecError {
         partition: &'static str,
         discretisation: Discretisation,
     },
+    #[error(
+        "invalid chain spec: substeps: the {partition} filter runs one transition per sample \
+         (substeps = 1); sub-stepping is offered by the MPF-EKF2 and the bootstrap PF, whose \
+         steps advance through the sub-steps between two measurements"
+    )]
+    SubstepsUnsupported { partition: &'static str },
 }
 
 fn invalid(field: &'static str, reason: impl Into<String>) -> SpecError {
@@ -64,6 +70,26 @@ pub struct ChainSpec {
     pub marginal_prior: MarginalPrior,
     #[serde(default)]
     pub discretisation: Discretisation,
+    /// Transitions inside the filter per measurement interval (1: one per sample, SPEC §3).
+    /// With `M > 1` the filter advances the discretised equations `M` times with `dt/M`
+    /// between two measurements — `ü_g` interpolated linearly between its samples, each
+    /// sub-step's process-noise variance `1/M` of the per-sample value so that the noise added
+    /// over one sample interval is unchanged — and weights once with the measurement
+    /// (`docs/scaling.md`: a stiff building at 200 Hz has ω·dt up to 0.45, where one step per
+    /// sample misidentifies it).
+    #[serde(default = "one", skip_serializing_if = "is_one")]
+    pub substeps: usize,
+}
+
+/// Largest accepted [`ChainSpec::substeps`].
+pub const MAX_SUBSTEPS: usize = 64;
+
+fn one() -> usize {
+    1
+}
+
+fn is_one(v: &usize) -> bool {
+    *v == 1
 }
 
 /// RMS values of the clean simulated signals from which [`ChainSpec::from_rms`] sets the noise
@@ -142,6 +168,7 @@ impl ChainSpec {
             ug,
             marginal_prior: MarginalPrior::MomentMatched,
             discretisation: Discretisation::Euler,
+            substeps: 1,
         };
         spec.validate()?;
         Ok(spec)
@@ -213,6 +240,12 @@ impl ChainSpec {
         }
         if !(self.dt.is_finite() && self.dt > 0.0) {
             return Err(invalid("dt", format!("{} is not positive", self.dt)));
+        }
+        if !(1..=MAX_SUBSTEPS).contains(&self.substeps) {
+            return Err(invalid(
+                "substeps",
+                format!("{} is not within 1..={MAX_SUBSTEPS}", self.substeps),
+            ));
         }
         if self.ug.len() < 2 {
             return Err(invalid(
