@@ -191,6 +191,7 @@ impl AugmentedChain {
 
 impl AugmentedChain {
     /// One step of the filter's grid to index `k` (θ copied).
+    #[inline]
     fn step(&self, k: usize, x: &[f64], xi: &[f64], out: &mut [f64]) {
         let d = self.dyn_dim();
         match self.core.spec.discretisation {
@@ -224,11 +225,11 @@ impl StateSpace for AugmentedChain {
 
     /// The transition to step k with ü_g,meas(k−1) (and ü_g,meas(k) inside an RK4 step); θ copied.
     fn propagate(&self, k: usize, x: &[f64], xi: &[f64], out: &mut [f64]) {
-        let d = self.dyn_dim();
         let m = self.core.substeps;
         if m == 1 {
             self.step(k, x, xi, out);
         } else {
+            let d = self.dyn_dim();
             // Grid indices (k−1)M+1 ..= kM, draws d at a time.
             SUBSTEP_SCRATCH.with(|cell| {
                 let mut buf = cell.borrow_mut();
@@ -241,7 +242,6 @@ impl StateSpace for AugmentedChain {
                 }
             });
         }
-        out[d..].copy_from_slice(&x[d..]);
     }
 
     /// Accelerations at the sensor storeys with ü_g,meas(k) (relative or absolute, SPEC §2).
