@@ -187,9 +187,7 @@ impl AugmentedChain {
             }
         });
     }
-}
 
-impl AugmentedChain {
     /// One step of the filter's grid to index `k` (θ copied).
     #[inline]
     fn step(&self, k: usize, x: &[f64], xi: &[f64], out: &mut [f64]) {
@@ -236,9 +234,11 @@ impl StateSpace for AugmentedChain {
                 buf.resize(x.len(), 0.0);
                 buf.copy_from_slice(x);
                 for s in 0..m {
+                    if s > 0 {
+                        buf.copy_from_slice(out);
+                    }
                     let kf = (k - 1) * m + s + 1;
                     self.step(kf, &buf, &xi[s * d..(s + 1) * d], out);
-                    buf.copy_from_slice(out);
                 }
             });
         }

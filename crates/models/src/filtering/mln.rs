@@ -64,12 +64,12 @@ impl<T: Real> ChainView<T> for View<'_, T> {
 impl MlnChain {
     /// Validates the spec; Euler and symplectic only (RK4 is not linear in z given `u`).
     pub fn new(spec: ChainSpec) -> Result<Self, SpecError> {
-        if spec.substeps != 1 {
+        let core = ChainCore::new(spec)?;
+        if core.substeps != 1 {
             return Err(SpecError::SubstepsUnsupported {
                 partition: "MLN-RBPF/Storvik",
             });
         }
-        let core = ChainCore::new(spec)?;
         let (n, ne) = (core.n, core.ne);
         let symplectic = match core.spec.discretisation {
             Discretisation::Euler => false,
@@ -101,9 +101,9 @@ impl MlnChain {
                 linked: v_rows.chain(r_rows).collect(),
             }]
         };
-        let mut noise_sd = vec![core.spec.q_disp; n];
-        noise_sd.extend(std::iter::repeat_n(core.spec.q_vel, n));
-        noise_sd.extend_from_slice(&core.spec.q_r);
+        let mut noise_sd = vec![core.q_disp; n];
+        noise_sd.extend(std::iter::repeat_n(core.q_vel, n));
+        noise_sd.extend_from_slice(&core.q_r);
         noise_sd.extend(std::iter::repeat_n(0.0, ne));
         Ok(Self {
             core,

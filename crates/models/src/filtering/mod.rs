@@ -57,19 +57,19 @@ pub(crate) const NNONLIN: usize = 1;
 const _: () = assert!(<Law as HysteresisLaw>::LINEAR.len() == NLIN);
 const _: () = assert!(<Law as HysteresisLaw>::NONLINEAR.len() == NNONLIN);
 
-/// `ug` on a grid `m` times finer, linear between samples (`ug` itself when `m` is 1).
-fn fine_grid(ug: &[f64], m: usize) -> Vec<f64> {
+/// `ug` on a grid `m` times finer, linear between samples (`ug` itself when `m` is 1), by the
+/// one resampler of ground motions.
+fn fine_grid(ug: &[f64], dt: f64, m: usize) -> Vec<f64> {
     if m == 1 {
         return ug.to_vec();
     }
-    let mut out = Vec::with_capacity((ug.len() - 1) * m + 1);
-    for w in ug.windows(2) {
-        for s in 0..m {
-            out.push(w[0] + (w[1] - w[0]) * (s as f64 / m as f64));
-        }
-    }
-    out.extend(ug.last());
-    out
+    let motion = crate::excitation::GroundMotion {
+        dt,
+        acc: ug.to_vec(),
+    };
+    let fine = motion.resample_linear(dt / m as f64).acc;
+    assert_eq!(fine.len(), (ug.len() - 1) * m + 1, "m samples per interval");
+    fine
 }
 
 /// What every partition shares: the validated spec, the force kernel and precomputed constants.
@@ -119,7 +119,7 @@ impl ChainCore {
             ne: spec.hysteretic.len(),
             dt: spec.dt / m as f64,
             substeps: m,
-            ug: fine_grid(&spec.ug, m),
+            ug: fine_grid(&spec.ug, spec.dt, m),
             q_disp: spec.q_disp * noise,
             q_vel: spec.q_vel * noise,
             q_r: spec.q_r.iter().map(|q| q * noise).collect(),
