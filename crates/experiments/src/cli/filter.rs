@@ -58,8 +58,9 @@ pub struct Args {
     /// symplectic (semi-implicit Euler: velocities first), or rk4 (bootstrap PF only).
     #[arg(long)]
     pub discretisation: Option<models::filtering::Discretisation>,
-    /// Transitions inside the filter per sample interval (MPF-EKF2 and bootstrap PF): for a
-    /// stiff building whose ω·dt is large at the data's rate (docs/scaling.md). Default 1.
+    /// Transitions inside the filter per sample interval (MPF-EKF2 and bootstrap PF), for data
+    /// sampled coarsely relative to the structure's highest modes; measured effect in
+    /// docs/scaling.md. Default 1.
     #[arg(long)]
     pub substeps: Option<usize>,
     /// TOML file with filter settings (priors, noise fraction, masses, …) over the SPEC's (the
@@ -180,8 +181,9 @@ storvik_update = {storvik}
 noise_fraction = {nf}
 # Discretisation inside the filters: "euler" (the paper's), "symplectic", "rk4" (bootstrap only).
 discretisation = {disc}
-# Transitions inside the filter per sample interval (dt/substeps each, ü_g interpolated), for a
-# stiff building sampled coarsely (docs/scaling.md); MPF-EKF2 and bootstrap PF only.
+# Transitions inside the filter per sample interval (dt/substeps each, ü_g interpolated), for
+# data sampled coarsely relative to the structure's highest modes (measured effect:
+# docs/scaling.md); MPF-EKF2 and bootstrap PF only.
 substeps = {substeps}
 # θ_val averages the posterior mean over the last `window` steps (SPEC eq. 26).
 window = {window}
