@@ -14,6 +14,8 @@
 //!   `experiments/regression-symplectic.toml` (into `results/regression-symplectic/`); fails when
 //!   a bound is breached.
 //!   Every run is computed unless `--resume` is given.
+//! - `docs`: regenerates the README's headline table (from the paper's Fig. 7 records) and
+//!   `docs/cli.md` (from `sysid`'s own help); tests fail when either has drifted.
 //! - `bench [--full]`: runs the criterion benchmarks of `core-filters` (short measurement times
 //!   unless `--full`), then appends one dated line per benchmark to `results/perf/history.csv`
 //!   and prints the change against the previous line of the same benchmark.
@@ -55,6 +57,9 @@ enum Task {
     /// The scaling study (experiments/scaling.toml): records, figures and REPORT.md under
     /// results/scaling.
     ReproduceScaling(StudyArgs),
+    /// Regenerate the generated documentation: the README's headline table (from the records in
+    /// results/paper/records/fig7) and docs/cli.md (from sysid's own help).
+    Docs,
     /// The excitations study (experiments/excitations.toml): records, figures and REPORT.md
     /// under results/excitations.
     ReproduceExcitations(StudyArgs),
@@ -265,7 +270,35 @@ fn main() -> Result<()> {
             Ok(())
         }
         Task::Bench { full } => bench(&root, full),
+        Task::Docs => docs(&root),
     }
+}
+
+/// Writes the generated parts of the documentation (tests compare them with their sources).
+fn docs(root: &Path) -> Result<()> {
+    let sysid = build_sysid(root)?;
+    let cli = experiments::cli_reference::render(&sysid)?;
+    write_if_changed(&root.join("docs/cli.md"), &cli)?;
+    let table = experiments::headline::from_dir(&root.join("results/paper/records/fig7"))?;
+    let readme_path = root.join("README.md");
+    let readme = fs::read_to_string(&readme_path)
+        .with_context(|| format!("reading {}", readme_path.display()))?;
+    write_if_changed(
+        &readme_path,
+        &experiments::headline::splice(&readme, &table)?,
+    )?;
+    Ok(())
+}
+
+/// Writes `text` to `path` unless it already holds it (says which).
+fn write_if_changed(path: &Path, text: &str) -> Result<()> {
+    if fs::read_to_string(path).is_ok_and(|old| old == text) {
+        eprintln!("{}: up to date", path.display());
+        return Ok(());
+    }
+    fs::write(path, text).with_context(|| format!("writing {}", path.display()))?;
+    eprintln!("{}: written", path.display());
+    Ok(())
 }
 
 /// Runs the benchmarks, then records the medians of those this run measured.

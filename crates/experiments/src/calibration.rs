@@ -517,24 +517,9 @@ pub fn markdown(sweep: &SweepCalibration) -> String {
 // ---------------------------------------------------------------------------------------------
 
 // Fonts, sizes and palette of every figure of the project.
-use crate::figures::{colour, CAPTION_SIZE, DESC_SIZE, FONT, LABEL_SIZE, TITLE_SIZE, WIDTH};
+use crate::figures::{marker, style, CAPTION_SIZE, DESC_SIZE, FONT, LABEL_SIZE, TITLE_SIZE, WIDTH};
 
 const LEGEND_ROW: i32 = 34;
-
-/// Marker of algorithm `i` at pixel (x, y): circle, triangle, square, diamond.
-fn marker<DB: DrawingBackend>(
-    i: usize,
-    (x, y): (i32, i32),
-    c: RGBColor,
-) -> DynElement<'static, DB, (i32, i32)> {
-    let style = c.filled();
-    match i % 4 {
-        0 => Circle::new((x, y), 6, style).into_dyn(),
-        1 => TriangleMarker::new((x, y), 8, style).into_dyn(),
-        2 => Rectangle::new([(x - 5, y - 5), (x + 5, y + 5)], style).into_dyn(),
-        _ => Polygon::new(vec![(x, y - 7), (x + 7, y), (x, y + 7), (x - 7, y)], style).into_dyn(),
-    }
-}
 
 /// Panels as close to square as possible (9 → 3×3, 2 → 1×2).
 fn grid_dims(n: usize) -> (usize, usize) {
@@ -624,7 +609,8 @@ pub fn coverage_figure(sweep: &SweepCalibration, path: &Path, title: &str) -> Re
         ))?;
         for (i, p) in per_alg.iter().enumerate() {
             let Some(p) = p else { continue };
-            let c = colour(i);
+            let st = style::for_label(sweep.algorithms[i].algorithm.as_str(), i);
+            let c = st.colour;
             let points: Vec<(f64, f64, f64)> = p
                 .coverage
                 .iter()
@@ -641,7 +627,7 @@ pub fn coverage_figure(sweep: &SweepCalibration, path: &Path, title: &str) -> Re
                     c.stroke_width(2),
                 )))?;
                 let px = chart.backend_coord(&(x, y));
-                root.draw(&marker(i, px, c))?;
+                root.draw(&marker(st, px))?;
             }
         }
     }
@@ -689,12 +675,13 @@ pub fn coverage_figure(sweep: &SweepCalibration, path: &Path, title: &str) -> Re
         let y = 8 + (k / 2) as i32 * LEGEND_ROW + LEGEND_ROW / 2;
         match alg {
             Some(i) => {
-                let c = colour(*i);
+                let st = style::for_label(sweep.algorithms[*i].algorithm.as_str(), *i);
+                let c = st.colour;
                 legend.draw(&PathElement::new(
                     vec![(x, y), (x + 40, y)],
                     c.stroke_width(2),
                 ))?;
-                legend.draw(&marker(*i, (x + 20, y), c))?;
+                legend.draw(&marker(st, (x + 20, y)))?;
             }
             None if k == entries.len() - 2 => {
                 for dx in [0, 16, 32] {

@@ -23,8 +23,11 @@ use plotters::coord::Shift;
 use plotters::prelude::*;
 use plotters::style::text_anchor::{HPos, Pos, VPos};
 
+pub mod style;
+
 use crate::metrics::mean_sd;
 use crate::record::RunRecord;
+use style::SeriesStyle;
 
 /// Font family of all text (the SVG backend writes `<text>` elements; the viewer lays them out).
 pub(crate) const FONT: &str = "sans-serif";
@@ -166,8 +169,8 @@ enum Swatch {
     Dashed(RGBColor),
     Band(RGBColor),
     Bar(RGBColor),
-    /// The marker of algorithm `i` (see [`marker`]).
-    Marker(usize, RGBColor),
+    /// A cross with the marker and line style of a series (see [`marker`]).
+    Marker(SeriesStyle),
 }
 
 /// Height of one legend row (px).
@@ -192,19 +195,49 @@ fn legend_layout(entries: &[(Swatch, String)]) -> (usize, u32) {
     (cols, rows * LEGEND_ROW + 16)
 }
 
-/// A marker of algorithm `i` centred at pixel `(x, y)`: circle, triangle, square, diamond.
-fn marker<DB: DrawingBackend>(
-    i: usize,
+/// The marker of a series centred at pixel `(x, y)`: circle, triangle, square, diamond; filled
+/// for solid series (forward Euler or no scheme), hollow for dashed ones.
+pub(crate) fn marker<DB: DrawingBackend>(
+    st: SeriesStyle,
     (x, y): (i32, i32),
-    c: RGBColor,
 ) -> DynElement<'static, DB, (i32, i32)> {
-    let style = c.filled();
-    match i % 4 {
+    let style = if st.dashed {
+        st.colour.stroke_width(3)
+    } else {
+        st.colour.filled()
+    };
+    match st.marker % 4 {
         0 => Circle::new((x, y), 7, style).into_dyn(),
         1 => TriangleMarker::new((x, y), 9, style).into_dyn(),
         2 => Rectangle::new([(x - 6, y - 6), (x + 6, y + 6)], style).into_dyn(),
         _ => Polygon::new(vec![(x, y - 8), (x + 8, y), (x, y + 8), (x - 8, y)], style).into_dyn(),
     }
+}
+
+/// A line between two pixels, whole for a solid series, in dashes for a dashed one.
+fn arm_segments(
+    ((x0, y0), (x1, y1)): ((i32, i32), (i32, i32)),
+    dashed: bool,
+) -> Vec<Vec<(i32, i32)>> {
+    if !dashed {
+        return vec![vec![(x0, y0), (x1, y1)]];
+    }
+    let len = (((x1 - x0) as f64).hypot((y1 - y0) as f64)).max(1.0);
+    let (dash, gap) = (6.0, 4.0);
+    let mut out = Vec::new();
+    let mut s = 0.0;
+    while s < len {
+        let e = (s + dash).min(len);
+        let at = |t: f64| {
+            (
+                x0 + ((x1 - x0) as f64 * t / len).round() as i32,
+                y0 + ((y1 - y0) as f64 * t / len).round() as i32,
+            )
+        };
+        out.push(vec![at(s), at(e)]);
+        s = e + gap;
+    }
+    out
 }
 
 /// Draws legend entries in the grid given by [`legend_layout`].
@@ -244,16 +277,14 @@ fn legend_strip(
                 [(x + 8, y - 9), (x + 32, y + 9)],
                 c.mix(0.85).filled(),
             ))?,
-            Swatch::Marker(k, c) => {
-                area.draw(&PathElement::new(
-                    vec![(x + 20, y - 12), (x + 20, y + 12)],
-                    c.stroke_width(3),
-                ))?;
-                area.draw(&PathElement::new(
-                    vec![(x + 10, y), (x + 30, y)],
-                    c.stroke_width(3),
-                ))?;
-                area.draw(&marker(*k, (x + 20, y), *c))?;
+            Swatch::Marker(st) => {
+                for seg in arm_segments(((x + 20, y - 12), (x + 20, y + 12)), st.dashed) {
+                    area.draw(&PathElement::new(seg, st.colour.stroke_width(3)))?;
+                }
+                for seg in arm_segments(((x + 10, y), (x + 30, y)), st.dashed) {
+                    area.draw(&PathElement::new(seg, st.colour.stroke_width(3)))?;
+                }
+                area.draw(&marker(*st, (x + 20, y)))?;
             }
         }
         area.draw(&Text::new(label.clone(), (x + 48, y), text.clone()))?;
@@ -345,7 +376,12 @@ pub fn convergence(runs: &[(&str, &RunRecord)], path: &Path, title: &str) -> Res
     let mut entries: Vec<(Swatch, String)> = runs
         .iter()
         .enumerate()
-        .map(|(i, (label, _))| (Swatch::Line(colour(i)), label.to_string()))
+        .map(|(i, (label, _))| {
+            (
+                Swatch::Line(style::for_label(label, i).colour),
+                label.to_string(),
+            )
+        })
         .collect();
     entries.push((Swatch::Band(colour(6)), "mean ± 2 s.d.".to_string()));
     if (0..names.len()).any(|j| truth(j).is_some()) {
@@ -412,7 +448,7 @@ pub fn convergence(runs: &[(&str, &RunRecord)], path: &Path, title: &str) -> Res
                 let outline: Vec<(f64, f64)> = upper.chain(lower).collect();
                 chart.draw_series(std::iter::once(Polygon::new(
                     outline,
-                    colour(i).mix(0.18).filled(),
+                    style::for_label(runs[i].0, i).colour.mix(0.18).filled(),
                 )))?;
             }
         }
@@ -423,7 +459,10 @@ pub fn convergence(runs: &[(&str, &RunRecord)], path: &Path, title: &str) -> Res
                 let points: Vec<(f64, f64)> = seg
                     .map(|k| (tr.t[k], clamp(at(&tr.param_mean, k, j))))
                     .collect();
-                chart.draw_series(LineSeries::new(points, colour(i).stroke_width(2)))?;
+                chart.draw_series(LineSeries::new(
+                    points,
+                    style::for_label(runs[i].0, i).colour.stroke_width(2),
+                ))?;
             }
         }
         if let Some(t) = truth_j.filter(|t| *t >= lo && *t <= hi) {
@@ -454,7 +493,7 @@ pub fn hysteresis(run: &RunRecord, path: &Path, title: &str) -> Result<()> {
         loop_val.map(|l| {
             (
                 l,
-                colour(0),
+                style::for_label(&run.algorithm, 0).colour,
                 format!("validation loop ({}, θ_val)", run.algorithm),
             )
         }),
@@ -636,7 +675,7 @@ pub fn crosses(groups: &[(&str, Vec<&RunRecord>)], path: &Path, title: &str) -> 
                 text.push_str(&format!(", {} without truth skipped", s.no_truth));
             }
             text.push_str("): mean ± 1 s.d. over runs");
-            (Swatch::Marker(i, colour(i)), text)
+            (Swatch::Marker(style::for_label(label, i)), text)
         })
         .collect();
     entries.push((Swatch::Dashed(BLACK), "truth".to_string()));
@@ -699,7 +738,8 @@ pub fn crosses(groups: &[(&str, Vec<&RunRecord>)], path: &Path, title: &str) -> 
             BLACK.stroke_width(2),
         ))?;
         for (i, s) in summaries.iter().enumerate() {
-            let c = colour(i);
+            let st = style::for_label(groups[i].0, i);
+            let c = st.colour;
             let arm = 0.35 * width;
             for (x0, &j) in idx.iter().enumerate() {
                 let (m, sd) = (s.mean[j], s.sd[j]);
@@ -708,16 +748,18 @@ pub fn crosses(groups: &[(&str, Vec<&RunRecord>)], path: &Path, title: &str) -> 
                 }
                 let x = x0 as f64 + offset(i);
                 let sd = if sd.is_finite() { sd } else { 0.0 };
-                chart.draw_series(std::iter::once(PathElement::new(
-                    vec![(x, m - sd), (x, m + sd)],
-                    c.stroke_width(3),
-                )))?;
-                chart.draw_series(std::iter::once(PathElement::new(
-                    vec![(x - arm, m), (x + arm, m)],
-                    c.stroke_width(3),
-                )))?;
-                let (px, py) = chart.backend_coord(&(x, m));
-                root.draw(&marker(i, (px, py), c))?;
+                // The arms in pixels, so that a dashed (non-Euler) series is dashed on screen.
+                let px = |p: (f64, f64)| chart.backend_coord(&p);
+                let arms = [
+                    (px((x, m - sd)), px((x, m + sd))),
+                    (px((x - arm, m)), px((x + arm, m))),
+                ];
+                for a in arms {
+                    for seg in arm_segments(a, st.dashed) {
+                        root.draw(&PathElement::new(seg, c.stroke_width(3)))?;
+                    }
+                }
+                root.draw(&marker(st, px((x, m))))?;
             }
         }
     }
@@ -846,7 +888,7 @@ pub fn state_errors(groups: &[(&str, Vec<&RunRecord>)], path: &Path, title: &str
                 text.push_str(&format!(", {} skipped", skipped[i]));
             }
             text.push(')');
-            (Swatch::Bar(colour(i)), text)
+            (Swatch::Bar(style::for_label(label, i).colour), text)
         })
         .collect();
     entries.push((
@@ -878,7 +920,7 @@ pub fn state_errors(groups: &[(&str, Vec<&RunRecord>)], path: &Path, title: &str
     category_labels(&root, &chart, &names, 0.0)?;
 
     for (i, per_state) in values.iter().enumerate() {
-        let c = colour(i);
+        let c = style::for_label(groups[i].0, i).colour;
         let half = 0.4 * width;
         for (j, v) in per_state.iter().enumerate() {
             let mut sorted = v.clone();
@@ -1188,7 +1230,12 @@ pub fn category_panels(
         .groups
         .iter()
         .enumerate()
-        .map(|(i, g)| (Swatch::Marker(i, colour(i)), g.label.clone()))
+        .map(|(i, g)| {
+            (
+                Swatch::Marker(style::for_label(&g.label, i)),
+                g.label.clone(),
+            )
+        })
         .collect();
     let (_, legend_h) = legend_layout(&entries);
     let height = 60 + legend_h + 320 * panels.len() as u32;
@@ -1234,7 +1281,8 @@ pub fn category_panels(
             .draw()?;
         let width = 0.6 / panel.groups.len().max(1) as f64;
         for (gi, g) in panel.groups.iter().enumerate() {
-            let c = colour(gi);
+            let st = style::for_label(&g.label, gi);
+            let c = st.colour;
             for (ci, (m, h)) in g.mean.iter().zip(&g.half_width).enumerate() {
                 if !m.is_finite() {
                     continue;
@@ -1247,7 +1295,7 @@ pub fn category_panels(
                     ))?;
                 }
                 chart.draw_series(std::iter::once(
-                    EmptyElement::at((x, *m)) + marker(gi, (0, 0), c),
+                    EmptyElement::at((x, *m)) + marker(st, (0, 0)),
                 ))?;
             }
         }

@@ -16,12 +16,14 @@
 pub mod calibration;
 pub mod checks;
 pub mod cli;
+pub mod cli_reference;
 pub mod coverage;
 pub mod decimate;
 pub mod discretisation;
 pub mod excitations;
 pub mod field;
 pub mod figures;
+pub mod headline;
 pub mod limits;
 pub mod metrics;
 pub mod observe;

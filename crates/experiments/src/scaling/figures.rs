@@ -8,19 +8,11 @@ use anyhow::{bail, Context, Result};
 use plotters::prelude::*;
 
 use super::{is_reference, Cell, CostFit};
-use crate::figures::{colour, CAPTION_SIZE, DESC_SIZE, FONT, LABEL_SIZE, TITLE_SIZE, WIDTH};
+use crate::figures::{style, CAPTION_SIZE, DESC_SIZE, FONT, LABEL_SIZE, TITLE_SIZE, WIDTH};
 use crate::pipeline::Algorithm;
 
 fn label_of(name: &str) -> &'static str {
     name.parse::<Algorithm>().map_or("?", |a| a.label())
-}
-
-/// Index of an algorithm in `Algorithm::ALL` (a fixed colour per algorithm).
-fn index_of(name: &str) -> usize {
-    Algorithm::ALL
-        .iter()
-        .position(|a| a.name() == name)
-        .unwrap_or(0)
 }
 
 /// The decades spanning `[lo, hi]` (positive), one decade of margin where the data touch.
@@ -77,7 +69,7 @@ pub fn cost(fits: &[CostFit], path: &Path) -> Result<()> {
         .label_style((FONT, LABEL_SIZE))
         .draw()?;
     for f in fits {
-        let c = colour(index_of(&f.algorithm));
+        let c = style::for_label(&f.algorithm, 0).colour;
         let label = match f.slope {
             Some(s) => format!("{}: slope {s:.2}", label_of(&f.algorithm)),
             None => format!("{} (one size: no slope)", label_of(&f.algorithm)),
@@ -201,7 +193,7 @@ pub fn accuracy(cells: &[Cell], path: &Path) -> Result<()> {
                 continue;
             }
             pts.sort_by(|p, q| p.0.total_cmp(&q.0));
-            let c = colour(index_of(a.name()));
+            let c = style::algorithm_colour(a);
             chart
                 .draw_series(LineSeries::new(
                     pts.iter().map(|p| (p.0, p.1)),
