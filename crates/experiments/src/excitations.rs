@@ -220,12 +220,16 @@ fn write_outputs(
     let verdicts = verdicts(study, &rows);
     write_bytes_atomic(&out.join("cells.csv"), scaling::csv(cells).as_bytes())?;
     figure(study, &rows, &out.join("errors_by_excitation.svg"))?;
+    crate::reproduce::write_last_run(
+        out,
+        opts.threads,
+        serde_json::json!({ "sweep_wall_s": sweep_s }),
+    )?;
     write_bytes_atomic(
         &out.join("summary.json"),
         (serde_json::to_string_pretty(&serde_json::json!({
             "study": study.name,
             "quick": opts.quick,
-            "sweep_wall_s": sweep_s,
             "structures": values,
             "rows": rows,
             "verdicts": verdicts,

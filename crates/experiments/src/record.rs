@@ -283,6 +283,9 @@ impl SweepRecord for RunRecord {
     fn check(&self) -> Result<(), String> {
         RunRecord::check(self)
     }
+    fn same_result(&self, other: &Self) -> bool {
+        self.deterministic_json() == other.deterministic_json()
+    }
 }
 
 /// [`SignalError`] with the record's number encoding (its type lives with the metrics).

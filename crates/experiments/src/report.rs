@@ -12,16 +12,6 @@ use crate::reproduce::{row, AlgorithmStats, Options, PAPER_EQ31};
 use crate::study::Study;
 use crate::verdict::{paper_findings, Verdict};
 
-fn command_output(cmd: &str, args: &[&str]) -> String {
-    std::process::Command::new(cmd)
-        .args(args)
-        .output()
-        .ok()
-        .filter(|o| o.status.success())
-        .map(|o| String::from_utf8_lossy(&o.stdout).trim().to_string())
-        .unwrap_or_else(|| "unknown".into())
-}
-
 fn stats<'a>(
     summary: &'a BTreeMap<&str, Vec<AlgorithmStats>>,
     study: &str,
@@ -66,29 +56,14 @@ fn theta_table(out: &mut String, runs: &[(&str, &RunRecord)]) {
     }
 }
 
-/// Wall times of the invocation that wrote the report.
-pub struct Timings {
-    pub sweep_s: f64,
-    pub total_s: f64,
-    /// Runs executed by this invocation (the others were loaded from existing records).
-    pub executed: usize,
-    pub total_jobs: usize,
-}
-
 /// Builds the report text.
 pub fn write_report(
     opts: &Options,
     studies: &BTreeMap<&str, Study>,
     records: &BTreeMap<&str, Vec<RunRecord>>,
     summary: &BTreeMap<&str, Vec<AlgorithmStats>>,
-    timings: Timings,
+    total_jobs: usize,
 ) -> Result<String> {
-    let Timings {
-        sweep_s,
-        total_s,
-        executed,
-        total_jobs,
-    } = timings;
     let mut o = String::new();
     let first = |study: &str, alg: Algorithm| {
         records[study]
@@ -105,19 +80,15 @@ pub fn write_report(
         let _ = writeln!(o, "> **Quick mode**: fewer runs and particles than the paper; the statistics below are indicative only.\n");
     }
     let _ = writeln!(o, "## Provenance\n");
+    let _ = writeln!(
+        o,
+        "What the invocation that last wrote this directory did (its git revision, \
+         threads, runs executed and wall times) is in `last-run.json` beside this report, which \
+         is not committed: a reproduction that agrees with the committed records leaves every \
+         committed file as it was.\n"
+    );
     row(&mut o, &["item".into(), "value".into()]);
     row(&mut o, &["---".into(), "---".into()]);
-    row(
-        &mut o,
-        &[
-            "git revision".into(),
-            format!("`{}`", command_output("git", &["rev-parse", "HEAD"])),
-        ],
-    );
-    row(
-        &mut o,
-        &["rustc".into(), command_output("rustc", &["--version"])],
-    );
     row(
         &mut o,
         &["toolkit".into(), env!("CARGO_PKG_VERSION").into()],
@@ -125,33 +96,15 @@ pub fn write_report(
     row(
         &mut o,
         &[
-            "threads".into(),
-            format!(
-                "{}",
-                if opts.threads == 0 {
-                    rayon::current_num_threads()
-                } else {
-                    opts.threads
-                }
-            ),
+            "numerics version".into(),
+            crate::record::NUMERICS_VERSION.to_string(),
         ],
     );
     row(
         &mut o,
         &[
-            "runs executed by this invocation".into(),
-            format!("{executed} of {total_jobs} (the others were loaded from existing records)"),
-        ],
-    );
-    row(
-        &mut o,
-        &["wall time, sweeps (s)".into(), format!("{sweep_s:.1}")],
-    );
-    row(
-        &mut o,
-        &[
-            "wall time, total incl. figures (s)".into(),
-            format!("{total_s:.1}"),
+            "runs".into(),
+            format!("{total_jobs} (every record's fingerprint names its inputs)"),
         ],
     );
     for (name, s) in studies {

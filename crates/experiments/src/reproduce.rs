@@ -283,27 +283,24 @@ pub fn reproduce(opts: &Options) -> Result<Done> {
         &summary_path,
         (serde_json::to_string_pretty(&serde_json::json!({
             "quick": opts.quick,
-            "wall_s": { "sweeps": sweep_s, "total": total_s },
-            "runs": { "executed": executed, "reused": done.reused, "total": total_jobs },
             "studies": summary,
             "coverage": coverage,
         }))? + "\n")
             .as_bytes(),
     )?;
-    let report = crate::report::write_report(
-        opts,
-        &studies,
-        &records,
-        &summary,
-        crate::report::Timings {
-            sweep_s,
-            total_s,
-            executed,
-            total_jobs,
-        },
-    )?;
+    let report = crate::report::write_report(opts, &studies, &records, &summary, total_jobs)?;
     let path = opts.out.join("REPORT.md");
     write_bytes_atomic(&path, report.as_bytes())?;
+    // What this invocation did, beside the committed results but not among them: timings and
+    // counts change from run to run even when every record agrees.
+    write_last_run(
+        &opts.out,
+        opts.threads,
+        serde_json::json!({
+            "wall_s": { "sweeps": sweep_s, "total": total_s },
+            "runs": { "executed": executed, "reused": done.reused, "failed": done.failed, "total": total_jobs },
+        }),
+    )?;
     eprintln!(
         "wrote {}; {total_jobs} runs: {executed} executed ({} failed), {} reused; {}",
         path.display(),
@@ -427,4 +424,39 @@ pub fn figure_files(out: &Path) -> Vec<PathBuf> {
     .iter()
     .map(|n| out.join(format!("{n}.svg")))
     .collect()
+}
+
+/// The file, beside a study's results, that holds what the invocation that last wrote them did
+/// (timings, runs executed, revision); it is not committed.
+pub const LAST_RUN: &str = "last-run.json";
+
+/// Writes [`LAST_RUN`] into `out`: the toolkit's version, the git revision, the threads and the
+/// study's own `facts` (wall times, runs executed).
+pub fn write_last_run(out: &Path, threads: usize, facts: serde_json::Value) -> Result<()> {
+    let threads = if threads == 0 {
+        rayon::current_num_threads()
+    } else {
+        threads
+    };
+    let value = serde_json::json!({
+        "toolkit": env!("CARGO_PKG_VERSION"),
+        "git_revision": git_revision(),
+        "threads": threads,
+        "facts": facts,
+    });
+    write_bytes_atomic(
+        &out.join(LAST_RUN),
+        (serde_json::to_string_pretty(&value)? + "\n").as_bytes(),
+    )
+}
+
+/// The git revision of the working tree, when the tool runs inside one ("unknown" otherwise).
+fn git_revision() -> String {
+    std::process::Command::new("git")
+        .args(["rev-parse", "HEAD"])
+        .output()
+        .ok()
+        .filter(|o| o.status.success())
+        .map(|o| String::from_utf8_lossy(&o.stdout).trim().to_string())
+        .unwrap_or_else(|| "unknown".into())
 }

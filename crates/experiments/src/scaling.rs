@@ -619,12 +619,16 @@ fn write_outputs(opts: &Options, study: &Study, cells: &[Cell], sweep_s: f64) ->
         .filter_map(|s| s.unsupported())
         .collect();
     let values = structures::structure_values(study)?;
+    crate::reproduce::write_last_run(
+        out,
+        opts.threads,
+        serde_json::json!({ "sweep_wall_s": sweep_s }),
+    )?;
     write_bytes_atomic(
         &out.join("summary.json"),
         (serde_json::to_string_pretty(&serde_json::json!({
             "study": study.name,
             "quick": opts.quick,
-            "sweep_wall_s": sweep_s,
             "structures": values,
             "cells": cells,
             "cost_fits": fits,

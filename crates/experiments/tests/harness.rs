@@ -187,6 +187,23 @@ fn sweeps_are_thread_count_invariant_resumable_and_shardable() {
     assert_eq!((again.copied, again.present), (0, 6));
 }
 
+/// Every file under `dir` (recursively) with its bytes.
+fn dir_bytes(dir: &Path) -> std::collections::BTreeMap<std::path::PathBuf, Vec<u8>> {
+    let mut out = std::collections::BTreeMap::new();
+    let mut stack = vec![dir.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        for e in std::fs::read_dir(&d).unwrap() {
+            let p = e.unwrap().path();
+            if p.is_dir() {
+                stack.push(p);
+            } else if !p.ends_with(".sysid.lock") {
+                out.insert(p.clone(), std::fs::read(&p).unwrap());
+            }
+        }
+    }
+    out
+}
+
 fn quick(experiments: &Path, out: &Path, resume: bool) -> Done {
     reproduce(&Options {
         experiments: experiments.to_path_buf(),
@@ -232,11 +249,31 @@ fn quick_reproduction_draws_every_figure_and_the_report() {
     assert!(summary["studies"]["fig7"]
         .as_array()
         .is_some_and(|a| a.len() == 4));
-    assert_eq!(summary["runs"]["executed"], 46);
+    let last_run: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("last-run.json")).unwrap()).unwrap();
+    assert_eq!(last_run["facts"]["runs"]["executed"], 46);
 
     // The same configs with --resume: everything is reused.
     let same = quick(&experiments, &out, true);
     assert_eq!((same.executed, same.reused), (0, 46));
+
+    // Recomputing every run (no --resume) agrees with the records, so every file but
+    // last-run.json stays byte for byte as it was: a reproduction that agrees leaves the
+    // committed results unchanged (run-to-run timings live in last-run.json only).
+    let before = dir_bytes(&out);
+    let again = quick(&experiments, &out, false);
+    assert_eq!((again.executed, again.reused), (46, 0));
+    let after = dir_bytes(&out);
+    assert_eq!(
+        before.keys().collect::<Vec<_>>(),
+        after.keys().collect::<Vec<_>>()
+    );
+    for (path, bytes) in &before {
+        if path.ends_with("last-run.json") {
+            continue;
+        }
+        assert!(after[path] == *bytes, "{} changed", path.display());
+    }
 
     // Changed configs (fig7's master seed, fig4's quick duration) with --resume: the records of
     // those studies are computed again, the others reused.
