@@ -117,7 +117,7 @@ fn run(cmd: &mut Command) -> Result<()> {
 /// Options of a study with a structure axis (`reproduce-scaling`, `reproduce-excitations`).
 #[derive(Debug, clap::Args)]
 struct StudyArgs {
-    /// The study's quick form (writes results/<study>-quick).
+    /// The study's quick form (writes `results/<study>-quick`).
     #[arg(long)]
     quick: bool,
     /// Worker threads (0: one per core).

@@ -11,7 +11,7 @@
 //! - [`limits`]: the limits on every size and value that comes from a user;
 //! - [`dataset`]: truth and noisy measurements from named random streams; [`description`]: a
 //!   building as a user describes it (storeys, masses, hysteretic storeys, sensors);
-//! - [`priors`] and [`partition`]: the priors of SPEC §3 and the three filter partitions
+//! - [`priors`] and [`filtering`]: the priors of SPEC §3 and the three filter partitions
 //!   (augmented state, MLN-RBPF/Storvik, MPF-EKF2) implementing the `core-filters` traits.
 
 pub mod dataset;

@@ -153,7 +153,7 @@ impl Prior {
 ///   density of T is constant.
 ///
 /// Fixing both gives [`BetaGammaPrior::Fixed`]. β and γ are uncorrelated in every variant
-/// (in T, E[βγ] = E[β·E[γ|β]] = 0).
+/// (in T, E\[βγ\] = E\[β·E\[γ|β\]\] = 0).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
 pub enum BetaGammaPrior {
@@ -227,7 +227,7 @@ impl BetaGammaPrior {
     /// `(mean β, mean γ, var β, var γ)`; the covariance is zero in every variant.
     ///
     /// Triangle (SPEC §3): β has density 2β/β_max², so E β = 2β_max/3, E β² = β_max²/2,
-    /// var β = β_max²/18; γ | β ~ U(−β, β) gives E γ = 0, var γ = E[β²]/3 = β_max²/6.
+    /// var β = β_max²/18; γ | β ~ U(−β, β) gives E γ = 0, var γ = E\[β²\]/3 = β_max²/6.
     pub fn moments(&self) -> (f64, f64, f64, f64) {
         match *self {
             BetaGammaPrior::Triangle { beta_max } => (

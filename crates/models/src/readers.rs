@@ -1,7 +1,7 @@
 //! Readers of user ground-motion records (SPEC §2): CSV `t,acc` and PEER NGA `.AT2`.
 //!
 //! Every error names the file, the 1-based line number and the field, and no input makes a
-//! reader panic or allocate beyond the [`limits`](crate::limits): the file size, the number of
+//! reader panic or allocate beyond the [`crate::limits`]: the file size, the number of
 //! samples (and an AT2 header's `NPTS`) are checked before anything is allocated from them, the
 //! time step must lie in `[MIN_DT, MAX_DT]` and every value within `±MAX_ABS_VALUE`. A UTF-8
 //! byte-order mark at the start of a file is skipped. Records are returned as a

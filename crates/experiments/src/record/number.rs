@@ -4,7 +4,7 @@
 //! and `"-inf"`. Reading accepts exactly these forms and rejects `null` with a message, so a
 //! record written by this tool is always readable by it and never silently loses a value.
 //!
-//! Used field by field through `#[serde(with = "…")]` (modules [`scalar`], [`vec`], [`opt_vec`],
+//! Used field by field through `#[serde(with = "…")]` (modules [`scalar`], [`vec`](mod@vec), [`opt_vec`],
 //! [`vec_vec`]).
 
 use std::fmt;

@@ -12,7 +12,7 @@
 //! - [`mpf::MpfChain`]: MPF-EKF2 (`ConditionallyQuadratic`, SPEC §5.4, §6).
 //!
 //! θ = [k1..kN, c1..cN, then per hysteretic element in storey order β, γ, n]; states
-//! x1..xN, v1..vN, r<s> (names from [`crate::structure::theta_names`] and
+//! x1..xN, v1..vN, `r<s>` (names from [`crate::structure::theta_names`] and
 //! [`crate::structure::state_names`]). The transition to step k uses `ug[k−1]`, the measurement
 //! at k uses `ug[k]` (SPEC §3).
 //!

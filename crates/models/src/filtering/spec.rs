@@ -108,7 +108,7 @@ pub struct RmsLevels {
 impl ChainSpec {
     /// SPEC §3 settings from RMS values, generalised: R_ii = (nf·RMS a_i)² + (nf·RMS ü_g)² for
     /// relative data, (nf·RMS a_i)² for absolute data (the excitation error does not enter an
-    /// absolute measurement); q_vel = dt·nf·RMS ü_g; q_r[e] = dt·0.05·RMS δv_e (the paper's σ_r,
+    /// absolute measurement); q_vel = dt·nf·RMS ü_g; q_r\[e\] = dt·0.05·RMS δv_e (the paper's σ_r,
     /// independent of nf); q_disp = 1e−6. Prior [`ChainPrior::paper`], moment-matched marginal
     /// prior, forward Euler. `noise_fraction` is 0.1 in the paper.
     pub fn from_rms(
