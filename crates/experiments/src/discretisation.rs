@@ -14,10 +14,11 @@ use anyhow::Result;
 use models::filtering::Discretisation;
 
 use crate::figures;
+use crate::markdown::row;
 use crate::metrics::mean_sd;
 use crate::pipeline::Algorithm;
 use crate::record::RunRecord;
-use crate::reproduce::{algorithm_stats, row, AlgorithmStats, PAPER_EQ31};
+use crate::stats::{algorithm_stats, AlgorithmStats, PAPER_EQ31};
 use crate::study::{Job, Study};
 use crate::verdict::{
     above, below, group_error, online_nrmse, paired_difference, per_run, ratio, validation_nrmse,

@@ -220,7 +220,7 @@ fn write_outputs(
     let verdicts = verdicts(study, &rows);
     write_bytes_atomic(&out.join("cells.csv"), scaling::csv(cells).as_bytes())?;
     figure(study, &rows, &out.join("errors_by_excitation.svg"))?;
-    crate::reproduce::write_last_run(
+    crate::sweep::last_run::write(
         out,
         opts.threads,
         serde_json::json!({ "sweep_wall_s": sweep_s }),

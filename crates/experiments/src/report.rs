@@ -6,9 +6,10 @@ use std::fmt::Write as _;
 
 use anyhow::Result;
 
+use crate::markdown::row;
 use crate::pipeline::Algorithm;
 use crate::record::RunRecord;
-use crate::reproduce::{row, AlgorithmStats, Options, PAPER_EQ31};
+use crate::stats::{AlgorithmStats, PAPER_EQ31};
 use crate::study::Study;
 use crate::verdict::{paper_findings, Verdict};
 
@@ -56,9 +57,17 @@ fn theta_table(out: &mut String, runs: &[(&str, &RunRecord)]) {
     }
 }
 
+/// Where the report goes and in which form.
+pub struct Target<'a> {
+    /// The reproduction's output directory (the report reads `table1/table1.md` there).
+    pub out: &'a std::path::Path,
+    /// The quick form (few runs): said at the top of the report.
+    pub quick: bool,
+}
+
 /// Builds the report text.
 pub fn write_report(
-    opts: &Options,
+    opts: &Target<'_>,
     studies: &BTreeMap<&str, Study>,
     records: &BTreeMap<&str, Vec<RunRecord>>,
     summary: &BTreeMap<&str, Vec<AlgorithmStats>>,
@@ -253,7 +262,7 @@ pub fn write_report(
         }
         let _ = writeln!(o);
     }
-    crate::coverage::report(&mut o, &crate::reproduce::STUDIES, studies, records)?;
+    crate::coverage::report(&mut o, &crate::stats::STUDIES, studies, records)?;
 
     // Fig. 8
     let _ = writeln!(o, "## Fig. 8 — one MPF-EKF2 run\n");

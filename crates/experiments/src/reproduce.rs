@@ -7,15 +7,12 @@
 //! whole reproduction ([`crate::sweep::lock`]).
 
 use std::collections::BTreeMap;
-use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::{Context, Result};
-use serde::Serialize;
 
 use crate::figures;
-use crate::metrics::mean_sd;
 use crate::pipeline::Algorithm;
 use crate::record::RunRecord;
 use crate::study::Study;
@@ -23,13 +20,7 @@ use crate::sweep::lock::DirLock;
 use crate::sweep::progress::clock;
 use crate::sweep::{run_sweep, write_bytes_atomic, Shard, SweepOptions};
 
-/// The studies of the reproduction, in the order they run.
-pub const STUDIES: [&str; 5] = ["fig4", "fig5", "fig6", "fig8", "fig7"];
-
-/// The paper's θ_val for its Fig. 8 run (eq. 31).
-pub const PAPER_EQ31: [f64; 9] = [
-    7.973, 7.912, 7.943, 0.277, 0.342, 0.278, 3.418, 0.960, 2.488,
-];
+pub use crate::stats::{algorithm_stats, AlgorithmStats, ParamStats, PAPER_EQ31, STUDIES};
 
 /// Options of a reproduction.
 #[derive(Debug, Clone)]
@@ -56,96 +47,6 @@ pub struct Done {
     pub reused: usize,
     /// Computed runs that failed.
     pub failed: usize,
-}
-
-/// Per algorithm and parameter: statistics of θ_val over the runs of a study.
-#[derive(Debug, Clone, Serialize)]
-pub struct ParamStats {
-    pub name: String,
-    pub truth: f64,
-    /// Mean and s.d. over runs of θ_val / θ_true.
-    pub ratio_mean: f64,
-    pub ratio_sd: f64,
-    /// Mean over runs of the relative error |θ_val − θ_true| / θ_true.
-    pub rel_error_mean: f64,
-}
-
-/// Per algorithm: statistics over the runs of a study.
-#[derive(Debug, Clone, Serialize)]
-pub struct AlgorithmStats {
-    pub algorithm: String,
-    pub runs: usize,
-    pub failed: usize,
-    pub params: Vec<ParamStats>,
-    pub online_nrmse_mean: f64,
-    pub validation_nrmse_mean: f64,
-    pub distinct_sampled_mean: BTreeMap<String, f64>,
-    pub ess_mean: f64,
-    pub loglik_mean: f64,
-    pub wall_s_mean: f64,
-    pub particle_steps_per_s_mean: f64,
-}
-
-/// Statistics of one algorithm's records.
-pub fn algorithm_stats(algorithm: &str, records: &[&RunRecord]) -> AlgorithmStats {
-    let ok: Vec<&&RunRecord> = records.iter().filter(|r| !r.is_failure()).collect();
-    let names = records
-        .first()
-        .map(|r| r.param_names.clone())
-        .unwrap_or_default();
-    let params = names
-        .iter()
-        .enumerate()
-        .map(|(j, name)| {
-            let truth = ok
-                .first()
-                .and_then(|r| r.theta_true.as_ref())
-                .map_or(f64::NAN, |t| t[j]);
-            let ratios: Vec<f64> = ok.iter().map(|r| r.theta_val[j] / truth).collect();
-            let errs: Vec<f64> = ok
-                .iter()
-                .filter_map(|r| r.rel_error.as_ref().map(|e| e[j]))
-                .collect();
-            let (ratio_mean, ratio_sd, _) = mean_sd(&ratios);
-            ParamStats {
-                name: name.clone(),
-                truth,
-                ratio_mean,
-                ratio_sd,
-                rel_error_mean: mean_sd(&errs).0,
-            }
-        })
-        .collect();
-    let avg = |f: &dyn Fn(&RunRecord) -> Option<f64>| {
-        mean_sd(&ok.iter().filter_map(|r| f(r)).collect::<Vec<_>>()).0
-    };
-    let mut distinct: BTreeMap<String, Vec<f64>> = BTreeMap::new();
-    for r in &ok {
-        for (k, v) in &r.distinct_sampled {
-            distinct.entry(k.clone()).or_default().push(*v as f64);
-        }
-    }
-    AlgorithmStats {
-        algorithm: algorithm.to_string(),
-        runs: records.len(),
-        failed: records.len() - ok.len(),
-        params,
-        online_nrmse_mean: avg(&|r| r.online_states.as_ref().map(|s| s.mean_nrmse())),
-        validation_nrmse_mean: avg(&|r| {
-            r.validation
-                .as_ref()
-                .filter(|v| v.error.is_none())
-                .map(|v| v.states.mean_nrmse())
-        }),
-        distinct_sampled_mean: distinct
-            .into_iter()
-            .map(|(k, v)| (k, mean_sd(&v).0))
-            .collect(),
-        ess_mean: avg(&|r| Some(r.ess_mean)),
-        loglik_mean: avg(&|r| Some(r.loglik)),
-        wall_s_mean: avg(&|r| Some(r.timing.wall_s)),
-        particle_steps_per_s_mean: avg(&|r| Some(r.timing.particle_steps_per_s)),
-    }
 }
 
 /// Records of a study grouped by algorithm, in the study's algorithm order.
@@ -244,9 +145,7 @@ pub fn reproduce(opts: &Options) -> Result<Done> {
     }
     let sweep_s = start.elapsed().as_secs_f64();
 
-    crate::cli::table1::run(crate::cli::table1::Args {
-        out: opts.out.join("table1"),
-    })?;
+    crate::table1::write(&opts.out.join("table1"))?;
     draw(opts, &studies, &records)?;
     crate::discretisation::draw(&opts.out, &records)?;
     let mut summary: BTreeMap<&str, Vec<AlgorithmStats>> = STUDIES
@@ -288,12 +187,21 @@ pub fn reproduce(opts: &Options) -> Result<Done> {
         }))? + "\n")
             .as_bytes(),
     )?;
-    let report = crate::report::write_report(opts, &studies, &records, &summary, total_jobs)?;
+    let report = crate::report::write_report(
+        &crate::report::Target {
+            out: &opts.out,
+            quick: opts.quick,
+        },
+        &studies,
+        &records,
+        &summary,
+        total_jobs,
+    )?;
     let path = opts.out.join("REPORT.md");
     write_bytes_atomic(&path, report.as_bytes())?;
     // What this invocation did, beside the committed results but not among them: timings and
     // counts change from run to run even when every record agrees.
-    write_last_run(
+    crate::sweep::last_run::write(
         &opts.out,
         opts.threads,
         serde_json::json!({
@@ -403,11 +311,6 @@ fn draw(
     Ok(())
 }
 
-/// Writes a Markdown table row.
-pub(crate) fn row(out: &mut String, cells: &[String]) {
-    let _ = writeln!(out, "| {} |", cells.join(" | "));
-}
-
 /// The figure files a full reproduction draws.
 pub fn figure_files(out: &Path) -> Vec<PathBuf> {
     [
@@ -424,39 +327,4 @@ pub fn figure_files(out: &Path) -> Vec<PathBuf> {
     .iter()
     .map(|n| out.join(format!("{n}.svg")))
     .collect()
-}
-
-/// The file, beside a study's results, that holds what the invocation that last wrote them did
-/// (timings, runs executed, revision); it is not committed.
-pub const LAST_RUN: &str = "last-run.json";
-
-/// Writes [`LAST_RUN`] into `out`: the toolkit's version, the git revision, the threads and the
-/// study's own `facts` (wall times, runs executed).
-pub fn write_last_run(out: &Path, threads: usize, facts: serde_json::Value) -> Result<()> {
-    let threads = if threads == 0 {
-        rayon::current_num_threads()
-    } else {
-        threads
-    };
-    let value = serde_json::json!({
-        "toolkit": env!("CARGO_PKG_VERSION"),
-        "git_revision": git_revision(),
-        "threads": threads,
-        "facts": facts,
-    });
-    write_bytes_atomic(
-        &out.join(LAST_RUN),
-        (serde_json::to_string_pretty(&value)? + "\n").as_bytes(),
-    )
-}
-
-/// The git revision of the working tree, when the tool runs inside one ("unknown" otherwise).
-fn git_revision() -> String {
-    std::process::Command::new("git")
-        .args(["rev-parse", "HEAD"])
-        .output()
-        .ok()
-        .filter(|o| o.status.success())
-        .map(|o| String::from_utf8_lossy(&o.stdout).trim().to_string())
-        .unwrap_or_else(|| "unknown".into())
 }

@@ -619,7 +619,7 @@ fn write_outputs(opts: &Options, study: &Study, cells: &[Cell], sweep_s: f64) ->
         .filter_map(|s| s.unsupported())
         .collect();
     let values = structures::structure_values(study)?;
-    crate::reproduce::write_last_run(
+    crate::sweep::last_run::write(
         out,
         opts.threads,
         serde_json::json!({ "sweep_wall_s": sweep_s }),

@@ -15,6 +15,7 @@
 //!   [`merge`] gathers the shard directories into one, checking every record.
 //! - [`lock::DirLock`] keeps a second writer out of an output directory.
 
+pub mod last_run;
 pub mod lock;
 mod merge;
 pub mod progress;

@@ -351,7 +351,7 @@ pub fn ground_motion(config: &DatasetConfig) -> Result<GroundMotion, DatasetErro
             .map_err(|e| invalid("duration", e.to_string()))
     };
     let raw = match &config.excitation {
-        ExcitationSource::ElCentro => excitation::el_centro(),
+        ExcitationSource::ElCentro => crate::ground_motions::el_centro(),
         ExcitationSource::KanaiTajimi { params } => {
             synthetic_len()?;
             check_kanai_tajimi(params)?;

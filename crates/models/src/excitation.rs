@@ -4,7 +4,6 @@
 
 use rand::Rng;
 use rand_distr::{Distribution, StandardNormal};
-use std::path::Path;
 
 /// Standard gravity used to convert records in g (SPEC §2).
 pub const G: f64 = 9.81;
@@ -14,8 +13,6 @@ pub const DEFAULT_DT: f64 = 0.005;
 
 /// Amplitude scale of El Centro in the paper preset (SPEC §2).
 pub const EL_CENTRO_SCALE: f64 = 3.0;
-
-const EL_CENTRO_CSV: &str = include_str!("../../../data/ground_motions/elcentro_1940_ns.csv");
 
 /// A uniformly sampled ground acceleration, `acc[k]` at `t = k·dt`, in m/s².
 #[derive(Debug, Clone, PartialEq)]
@@ -107,25 +104,6 @@ pub fn rms(x: &[f64]) -> f64 {
         return 0.0;
     }
     (x.iter().map(|v| v * v).sum::<f64>() / x.len() as f64).sqrt()
-}
-
-/// The vendored El Centro 1940 N-S record (data/ground_motions/elcentro_1940_ns.csv, in g,
-/// dt = 0.02 s, 1560 samples), in m/s².
-pub fn el_centro() -> GroundMotion {
-    crate::readers::parse_csv(
-        Path::new("data/ground_motions/elcentro_1940_ns.csv"),
-        EL_CENTRO_CSV,
-        crate::readers::Units::G,
-    )
-    .expect("the vendored El Centro record is valid (tested)")
-}
-
-/// SPEC §2 default excitation: El Centro × 3.0 interpolated to dt = 0.005 s (6237 samples,
-/// 31.18 s).
-pub fn paper_default() -> GroundMotion {
-    el_centro()
-        .scaled(EL_CENTRO_SCALE)
-        .resample_linear(DEFAULT_DT)
 }
 
 /// `a·sin(ω t)` sampled at `k·dt` for `t ≤ duration` (SPEC §2 harmonic input). The
@@ -229,24 +207,6 @@ pub fn kanai_tajimi<R: Rng + ?Sized>(
 mod tests {
     use super::*;
     use core_filters::rng::{purpose, stream};
-
-    #[test]
-    fn el_centro_default_has_6237_samples() {
-        let raw = el_centro();
-        assert_eq!(raw.len(), 1560);
-        assert!((raw.dt - 0.02).abs() < 1e-12);
-        // Provenance: peak −0.31882 g at t = 2.04 s.
-        assert!((raw.pga() - 0.31882 * G).abs() < 1e-12);
-        assert!((raw.acc[102] + 0.31882 * G).abs() < 1e-12);
-        let d = paper_default();
-        assert_eq!(d.len(), 6237);
-        assert_eq!(d.dt, 0.005);
-        assert!((d.duration() - 31.18).abs() < 1e-9);
-        // Every 4th sample is an original sample, scaled by 3; in between is the linear midpoint.
-        assert!((d.acc[408] - 3.0 * raw.acc[102]).abs() < 1e-12);
-        assert!((d.acc[2] - 1.5 * (raw.acc[0] + raw.acc[1])).abs() < 1e-12);
-        assert!((d.pga() - 3.0 * 0.31882 * G).abs() < 1e-9);
-    }
 
     #[test]
     fn truncate_scale_harmonic() {

@@ -10,8 +10,29 @@
 
 use std::path::Path;
 
-use crate::excitation::GroundMotion;
-use crate::readers::{parse_at2, ReadError};
+use crate::excitation::{GroundMotion, DEFAULT_DT, EL_CENTRO_SCALE};
+use crate::readers::{parse_at2, parse_csv, ReadError, Units};
+
+const EL_CENTRO_CSV: &str = include_str!("../../../data/ground_motions/elcentro_1940_ns.csv");
+
+/// The vendored El Centro 1940 N-S record (data/ground_motions/elcentro_1940_ns.csv, in g,
+/// dt = 0.02 s, 1560 samples), in m/s².
+pub fn el_centro() -> GroundMotion {
+    parse_csv(
+        Path::new("data/ground_motions/elcentro_1940_ns.csv"),
+        EL_CENTRO_CSV,
+        Units::G,
+    )
+    .expect("the vendored El Centro record is valid (tested)")
+}
+
+/// SPEC §2 default excitation: El Centro × 3.0 interpolated to dt = 0.005 s (6237 samples,
+/// 31.18 s).
+pub fn paper_default() -> GroundMotion {
+    el_centro()
+        .scaled(EL_CENTRO_SCALE)
+        .resample_linear(DEFAULT_DT)
+}
 
 /// A vendored record: where it comes from and its text.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -113,6 +134,25 @@ pub fn names() -> Vec<&'static str> {
 mod tests {
     use super::*;
     use crate::excitation::G;
+
+    #[test]
+    fn el_centro_default_has_6237_samples() {
+        let raw = el_centro();
+        assert_eq!(raw.len(), 1560);
+        assert!((raw.dt - 0.02).abs() < 1e-12);
+        // Provenance: peak −0.31882 g at t = 2.04 s.
+        assert!((raw.pga() - 0.31882 * G).abs() < 1e-12);
+        assert!((raw.acc[102] + 0.31882 * G).abs() < 1e-12);
+        let d = paper_default();
+        assert_eq!(d.len(), 6237);
+        assert_eq!(d.dt, 0.005);
+        assert!((d.duration() - 31.18).abs() < 1e-9);
+        // Every 4th sample is an original sample, scaled by 3; in between is the linear midpoint.
+        assert!((d.acc[408] - 3.0 * raw.acc[102]).abs() < 1e-12);
+        assert!((d.acc[2] - 1.5 * (raw.acc[0] + raw.acc[1])).abs() < 1e-12);
+        assert!((d.pga() - 3.0 * 0.31882 * G).abs() < 1e-9);
+    }
+
 
     /// (name, NPTS, DT [s], peak [g] signed, time of the peak [s]) as documented in
     /// `data/ground_motions/PROVENANCE.md` (read off the files independently of this parser).

@@ -37,9 +37,9 @@ impl DefaultExcitation {
     /// The excitation sampled at `dt`.
     pub fn ground_motion(&self, dt: f64) -> GroundMotion {
         match *self {
-            DefaultExcitation::ElCentro { scale } => {
-                excitation::el_centro().scaled(scale).resample_linear(dt)
-            }
+            DefaultExcitation::ElCentro { scale } => crate::ground_motions::el_centro()
+                .scaled(scale)
+                .resample_linear(dt),
             DefaultExcitation::Harmonic {
                 amplitude,
                 omega,

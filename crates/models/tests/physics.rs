@@ -83,7 +83,7 @@ fn rk4_is_fourth_order() {
 #[test]
 fn rk4_agrees_with_adaptive_dormand_prince_on_the_paper_preset() {
     let ch = paper();
-    let ug = excitation::paper_default();
+    let ug = models::ground_motions::paper_default();
     let rk = simulate_rk4(&ch, &ug.acc, ug.dt);
     let tight = Tolerance {
         rtol: 1e-10,
@@ -181,7 +181,7 @@ fn linear_limit_matches_the_exact_solution() {
             n: 1.0,
         };
         let ch = ShearChain::new(masses, k, c, vec![bw]).unwrap();
-        let ug = excitation::paper_default();
+        let ug = models::ground_motions::paper_default();
         let rk = simulate_rk4(&ch, &ug.acc, ug.dt);
         let exact = exact_linear(&ch, &ug.acc, ug.dt);
         let n = storeys;
@@ -212,7 +212,9 @@ fn hysteretic_variable_stays_below_saturation() {
     let ch = paper();
     let sat = ch.saturation(0).unwrap();
     let max_r = |scale: f64| {
-        let ug = excitation::el_centro().scaled(scale).resample_linear(0.005);
+        let ug = models::ground_motions::el_centro()
+            .scaled(scale)
+            .resample_linear(0.005);
         let tr = simulate_rk4(&ch, &ug.acc, 0.005);
         tr.component(6).iter().fold(0.0_f64, |m, r| m.max(r.abs()))
     };
@@ -259,7 +261,7 @@ fn work_energy_balance_and_hysteretic_dissipation() {
     // viscous dissipation + hysteretic work = input work. The hysteretic work splits into the
     // recoverable ½ k r² and a dissipation k|r|^{n+1}(β|δv| + γ δv sign r) ≥ 0 for β ≥ |γ|.
     let ch = paper();
-    let ug = excitation::paper_default();
+    let ug = models::ground_motions::paper_default();
     let sys = EnergyAugmented(&ch);
     let tr = simulate_rk4(&sys, &ug.acc, ug.dt);
     let n = ch.storeys();
