@@ -166,6 +166,26 @@ impl<T: Real> Sparse<T> {
     }
 }
 
+impl Sparse<f64> {
+    /// The non-zero entries of a dense column-major `nrows × ncols` matrix, column by column
+    /// (the small dense matrices of the Kalman steps of [`crate::kalman`]). A NaN is kept: it is
+    /// not zero.
+    pub fn nonzeros_of(a: &[f64], nrows: usize, ncols: usize) -> Self {
+        let mut s = Self::recording(nrows, ncols);
+        s.start();
+        for c in 0..ncols {
+            for r in 0..nrows {
+                let v = a[r + c * nrows];
+                if v != 0.0 {
+                    s.add(r, c, v);
+                }
+            }
+        }
+        s.finish();
+        s
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
