@@ -252,7 +252,8 @@ impl BetaGammaPrior {
         }
     }
 
-    fn fix_beta(self, value: f64) -> Self {
+    /// β fixed at `value`; γ keeps its (conditional) prior or its fixed value.
+    pub(crate) fn fix_beta(self, value: f64) -> Self {
         match self {
             BetaGammaPrior::Triangle { .. } | BetaGammaPrior::FixedBeta { .. } => {
                 BetaGammaPrior::FixedBeta { beta: value }
@@ -263,7 +264,8 @@ impl BetaGammaPrior {
         }
     }
 
-    fn fix_gamma(self, value: f64) -> Self {
+    /// γ fixed at `value`; β keeps its (conditional) prior or its fixed value.
+    pub(crate) fn fix_gamma(self, value: f64) -> Self {
         match self {
             BetaGammaPrior::Triangle { beta_max } | BetaGammaPrior::FixedGamma { beta_max, .. } => {
                 BetaGammaPrior::FixedGamma {

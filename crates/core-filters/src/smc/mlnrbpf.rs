@@ -129,17 +129,13 @@ impl<M: ConditionallyLinear> MlnStep<M> {
             .enumerate()
             .map(|(s, plan)| {
                 let mut F = Sparse::recording(plan.stage.linked.len(), dims.nz);
-                F.start();
-                model.transition(s, 1, &zeros, &zeros, &mut f, &mut F);
-                F.finish();
+                F.evaluate(|j| model.transition(s, 1, &zeros, &zeros, &mut f, j));
                 F
             })
             .collect();
         let mut h_pattern = Sparse::recording(dims.ny, dims.nz);
         let mut h = vec![0.0; dims.ny];
-        h_pattern.start();
-        model.observation(1, &zeros, &mut h, &mut h_pattern);
-        h_pattern.finish();
+        h_pattern.evaluate(|j| model.observation(1, &zeros, &mut h, j));
         let r = model.measurement_cov();
         assert_eq!(r.len(), dims.ny * dims.ny, "R is ny × ny");
         Self {
@@ -172,6 +168,16 @@ impl<M: ConditionallyLinear> ParticleStep for MlnStep<M> {
     fn initialise(&self, rng: &mut StreamRng, u: &mut [f64], mu: &mut [f64], cov: &mut [f64]) {
         self.model.sample_initial(rng, u);
         self.model.marginal_prior(rng, mu, cov);
+    }
+
+    fn broken_pattern<T: Real>(s: &MlnScratch<T>) -> Option<&'static str> {
+        if s.F.iter().any(Sparse::pattern_broken) {
+            Some("transition matrix F")
+        } else if s.H.pattern_broken() {
+            Some("measurement matrix H")
+        } else {
+            None
+        }
     }
 
     fn scratch<T: Real>(&self) -> MlnScratch<T> {
@@ -227,9 +233,7 @@ impl<M: ConditionallyLinear> ParticleStep for MlnStep<M> {
         let mut next_draw = 0;
         for (st, plan) in self.stages.iter().enumerate() {
             let F = &mut s.F[st];
-            F.start();
-            self.model.transition(st, k, u_prev, u, &mut s.f, F);
-            F.finish();
+            F.evaluate(|j| self.model.transition(st, k, u_prev, u, &mut s.f, j));
             // Rows that do not depend on z: f plus their own noise (or copied exactly).
             for &(pos, row, sd) in &plan.noisy_unlinked {
                 u[row] = s.f[pos] + T::splat(sd) * xi[next_draw];
@@ -259,9 +263,7 @@ impl<M: ConditionallyLinear> ParticleStep for MlnStep<M> {
         }
         debug_assert_eq!(next_draw, self.draws);
         // (c)+(d): y_k = h(u_k) + H(u_k) z + η: weight and update in one.
-        s.H.start();
-        self.model.observation(k, u, &mut s.h, &mut s.H);
-        s.H.finish();
+        s.H.evaluate(|j| self.model.observation(k, u, &mut s.h, j));
         for (j, r) in s.resid.iter_mut().enumerate() {
             *r = T::splat(y[j]) - s.h[j];
         }

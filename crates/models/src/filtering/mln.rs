@@ -263,7 +263,6 @@ impl ConditionallyLinear for MlnChain {
         let dt = T::splat(self.core.dt);
         let ground = T::splat(self.core.transition_ground(k));
         let hyst = &self.core.spec.hysteretic;
-        F.start();
         match (self.symplectic, stage) {
             (false, 0) => {
                 for j in 0..n {
@@ -299,24 +298,20 @@ impl ConditionallyLinear for MlnChain {
             }
             _ => panic!("no stage {stage}"),
         }
-        F.finish();
     }
 
     /// `h(u_k)` = the ground term with ü_g,meas(k); `H(u_k)` = `∂a_s/∂z` per sensor storey s.
     fn observation<T: Real>(&self, k: usize, u: &[T], h: &mut [T], H: &mut Sparse<T>) {
         let ground = T::splat(self.core.measurement_ground(k));
-        H.start();
         for (i, &s) in self.core.sensors.iter().enumerate() {
             h[i] = ground;
             self.write_acceleration_row(H, i, s, u, T::splat(1.0));
         }
-        H.finish();
     }
 
     /// `∂/∂u [H(u) z + h]`: row i = `(−∂F_s/∂u + ∂F_{s+1}/∂u)/m_s` at z; the n columns are zero.
     fn observation_jacobian_u<T: Real>(&self, _k: usize, _u: &[T], z: &[T], J: &mut Sparse<T>) {
         let n = self.core.n;
-        J.start();
         for (i, &s) in self.core.sensors.iter().enumerate() {
             let inv = T::splat(self.core.inv_mass[s]);
             self.write_force_gradient_u(J, i, s, z, -inv);
@@ -324,7 +319,6 @@ impl ConditionallyLinear for MlnChain {
                 self.write_force_gradient_u(J, i, s + 1, z, inv);
             }
         }
-        J.finish();
     }
 
     /// `∂u_k/∂z` along the sampled path at z. Euler: the linked rows of F. Symplectic: v rows
@@ -340,7 +334,6 @@ impl ConditionallyLinear for MlnChain {
         let n = self.core.n;
         let dt = T::splat(self.core.dt);
         let hyst = &self.core.spec.hysteretic;
-        S.start();
         if self.symplectic {
             for j in 0..n {
                 self.write_acceleration_row(S, n + j, j, u_prev, dt);
@@ -375,7 +368,6 @@ impl ConditionallyLinear for MlnChain {
                 S.add(2 * n + e, b + 1, dt * g[2]);
             }
         }
-        S.finish();
     }
 
     fn measurement_cov(&self) -> Vec<f64> {

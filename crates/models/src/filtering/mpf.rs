@@ -388,7 +388,6 @@ impl ConditionallyQuadratic for MpfChain {
         };
         let nvs = self.nvs();
         let hyst = &self.core.spec.hysteretic;
-        jac.start();
         let velocities = |value: &mut [T], jac: &mut Sparse<T>| {
             for (i, &j) in self.sampled_vel.iter().enumerate() {
                 value[i] = xn_prev[i] + dt * self.core.topo.acceleration(&p, j, ground);
@@ -417,7 +416,6 @@ impl ConditionallyQuadratic for MpfChain {
             }
             _ => panic!("no stage {stage}"),
         }
-        jac.finish();
     }
 
     fn sampled_hessians(&self, stage: usize) -> &SparseHessians {
@@ -447,7 +445,6 @@ impl ConditionallyQuadratic for MpfChain {
             p: self,
         };
         value.copy_from_slice(m);
-        d.start();
         for (i, &j) in self.marginal_vel.iter().enumerate() {
             let vi = n + i;
             value[vi] = m[vi] + dt * self.core.topo.acceleration(&p, j, ground);
@@ -468,7 +465,6 @@ impl ConditionallyQuadratic for MpfChain {
                 }
             }
         }
-        d.finish();
     }
 
     fn marginal_hessians(&self) -> &SparseHessians {
@@ -490,12 +486,10 @@ impl ConditionallyQuadratic for MpfChain {
     ) {
         let ground = T::splat(self.core.measurement_ground(k));
         let p = View { xn, m, p: self };
-        jac.start();
         for (i, &s) in self.core.sensors.iter().enumerate() {
             value[i] = self.core.topo.acceleration(&p, s, ground);
             self.write_acceleration_gradient(jac, i, s, &p, T::splat(1.0));
         }
-        jac.finish();
     }
 
     fn observation_hessians(&self) -> &SparseHessians {

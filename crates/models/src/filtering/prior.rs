@@ -144,8 +144,8 @@ impl ChainPrior {
         })?;
         self.set(i, |slot| match slot {
             Slot::Scalar(p) => *p = Prior::Fixed { value },
-            Slot::Beta(bg) => *bg = fix_beta(*bg, value),
-            Slot::Gamma(bg) => *bg = fix_gamma(*bg, value),
+            Slot::Beta(bg) => *bg = bg.fix_beta(value),
+            Slot::Gamma(bg) => *bg = bg.fix_gamma(value),
         })
     }
 
@@ -234,33 +234,6 @@ enum Slot<'a> {
     Scalar(&'a mut Prior),
     Beta(&'a mut BetaGammaPrior),
     Gamma(&'a mut BetaGammaPrior),
-}
-
-/// β fixed; γ keeps its conditional prior (uniform on (−β, β)) unless already fixed.
-fn fix_beta(bg: BetaGammaPrior, value: f64) -> BetaGammaPrior {
-    match bg {
-        BetaGammaPrior::Triangle { .. } | BetaGammaPrior::FixedBeta { .. } => {
-            BetaGammaPrior::FixedBeta { beta: value }
-        }
-        BetaGammaPrior::FixedGamma { gamma, .. } | BetaGammaPrior::Fixed { gamma, .. } => {
-            BetaGammaPrior::Fixed { beta: value, gamma }
-        }
-    }
-}
-
-/// γ fixed; β keeps its conditional prior (uniform on (|γ|, β_max)) unless already fixed.
-fn fix_gamma(bg: BetaGammaPrior, value: f64) -> BetaGammaPrior {
-    match bg {
-        BetaGammaPrior::Triangle { beta_max } | BetaGammaPrior::FixedGamma { beta_max, .. } => {
-            BetaGammaPrior::FixedGamma {
-                gamma: value,
-                beta_max,
-            }
-        }
-        BetaGammaPrior::FixedBeta { beta } | BetaGammaPrior::Fixed { beta, .. } => {
-            BetaGammaPrior::Fixed { beta, gamma: value }
-        }
-    }
 }
 
 #[cfg(test)]
