@@ -33,7 +33,7 @@ use crate::real::Real;
 use crate::rng::StreamRng;
 
 use super::batch::{Marginalized, ParticleStep, Slots};
-use super::model::{ConditionallyLinear, LinearDims, Stage};
+use super::model::{linear_patterns, ConditionallyLinear, LinearDims, Stage};
 use super::store::Shape;
 
 /// How Storvik's step (iii) treats the measurement `y_k` (SPEC §5.3).
@@ -125,21 +125,8 @@ impl<M: ConditionallyLinear> StorvikStep<M> {
                     .iter()
                     .map(|r| st.linked.iter().position(|l| l == r))
                     .collect();
-                let linked_pos = st
-                    .linked
-                    .iter()
-                    .map(|l| {
-                        st.rows
-                            .iter()
-                            .position(|r| r == l)
-                            .expect("a linked row is one of the stage's rows")
-                    })
-                    .collect();
-                let l = st.linked.len();
-                let mut q_l = vec![0.0; l * l];
-                for (i, &r) in st.linked.iter().enumerate() {
-                    q_l[i + i * l] = sd[r] * sd[r];
-                }
+                let linked_pos = st.linked_positions();
+                let q_l = st.linked_noise_cov(&sd);
                 let row_sd: Vec<f64> = st.rows.iter().map(|&r| sd[r]).collect();
                 draws += row_sd.iter().filter(|s| **s != 0.0).count();
                 StagePlan {
@@ -153,19 +140,7 @@ impl<M: ConditionallyLinear> StorvikStep<M> {
             .collect();
         let zu = vec![0.0; nu];
         let zz = vec![0.0; nz];
-        let mut f = vec![0.0; nu];
-        let f_patterns = stages
-            .iter()
-            .enumerate()
-            .map(|(s, plan)| {
-                let mut F = Sparse::recording(plan.stage.linked.len(), nz);
-                F.evaluate(|j| model.transition(s, 1, &zu, &zu, &mut f, j));
-                F
-            })
-            .collect();
-        let mut h = vec![0.0; ny];
-        let mut h_pattern = Sparse::recording(ny, nz);
-        h_pattern.evaluate(|j| model.observation(1, &zu, &mut h, j));
+        let (f_patterns, h_pattern, r) = linear_patterns(&model);
         let mut ju_pattern = Sparse::recording(ny, nu);
         ju_pattern.evaluate(|j| model.observation_jacobian_u(1, &zu, &zz, j));
         let mut s_pattern = Sparse::recording(nu, nz);
@@ -174,8 +149,6 @@ impl<M: ConditionallyLinear> StorvikStep<M> {
         for e in 0..s_pattern.nnz() {
             s_rows[s_pattern.entry(e).0].push(e);
         }
-        let r = model.measurement_cov();
-        assert_eq!(r.len(), ny * ny, "R is ny × ny");
         let mut setup = Health::default();
         let noise = FactoredNoise::new(&r, ny, "measurement covariance R", &mut setup);
         Self {
