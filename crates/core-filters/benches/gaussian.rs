@@ -1,43 +1,42 @@
-//! Gaussian filter step costs (SPEC §4): one KF update (8 states, 3 measurements) and one
-//! MPF-EKF2 particle's Gaussian work (SPEC §5.4 (b), (c), (e)) at 13 marginalised states with the
-//! sparse Hessians of SPEC §6. Inputs are seeded; set-up is outside the timed closure.
+//! Cost of one MPF-EKF2 particle's Gaussian work (SPEC §5.4 (b), (c), (e)) at 13 marginalised
+//! states with the sparse Hessians of SPEC §6, on the kernels the particle filters run
+//! ([`core_filters::linalg`]): the pseudo-measurement factorisation and conditioning on a draw,
+//! the near-identity EKF2 propagate, and the measurement update. Inputs are seeded; set-up is
+//! outside the timed closure.
 
-use core_filters::kalman::{ekf2_propagate, ekf2_update, kf_update, second_order_terms};
+use core_filters::linalg::gauss::{factorise, Factor};
+use core_filters::linalg::{
+    ekf2_propagate_near_identity, PropagateScratch, SecondOrder, Sparse, SymEntries,
+};
 use core_filters::model::SparseHessians;
 use core_filters::rng::stream;
 use core_filters::Health;
 use criterion::{black_box, criterion_group, criterion_main, BatchSize, Criterion};
-use nalgebra::{SMatrix, SVector};
 use rand::Rng;
 use rand_distr::StandardNormal;
 
-fn random<const R: usize, const C: usize, G: Rng>(rng: &mut G, scale: f64) -> SMatrix<f64, R, C> {
-    SMatrix::from_fn(|_, _| scale * rng.sample::<f64, _>(StandardNormal))
+fn random<G: Rng>(rng: &mut G, len: usize, scale: f64) -> Vec<f64> {
+    (0..len)
+        .map(|_| scale * rng.sample::<f64, _>(StandardNormal))
+        .collect()
 }
 
-fn spd<const N: usize, G: Rng>(rng: &mut G) -> SMatrix<f64, N, N> {
-    let a: SMatrix<f64, N, N> = random(rng, 1.0);
-    a * a.transpose() + SMatrix::identity()
+/// `A Aᵀ + I` (`n × n`, column-major).
+fn spd<G: Rng>(rng: &mut G, n: usize, scale: f64) -> Vec<f64> {
+    let a = random(rng, n * n, 1.0);
+    let mut p = vec![0.0; n * n];
+    for i in 0..n {
+        for j in 0..n {
+            let v: f64 = (0..n).map(|k| a[i + k * n] * a[j + k * n]).sum();
+            p[i + j * n] = scale * (v + if i == j { 1.0 } else { 0.0 });
+        }
+    }
+    p
 }
 
-fn kf_update_8x3(c: &mut Criterion) {
-    let mut rng = stream(1, 0, "bench/kf");
-    let m: SVector<f64, 8> = random(&mut rng, 1.0);
-    let p: SMatrix<f64, 8, 8> = spd(&mut rng);
-    let h: SMatrix<f64, 3, 8> = random(&mut rng, 1.0);
-    let h_off: SVector<f64, 3> = random(&mut rng, 1.0);
-    let r: SMatrix<f64, 3, 3> = spd(&mut rng);
-    let y: SVector<f64, 3> = random(&mut rng, 1.0);
-    c.bench_function("kf_update 8 states 3 measurements", |b| {
-        b.iter_batched(
-            || (m, p, Health::default()),
-            |(mut m, mut p, mut health)| {
-                let inn = kf_update(&mut m, &mut p, &y, &h, &h_off, &r, 1, &mut health).unwrap();
-                black_box((m, p, inn))
-            },
-            BatchSize::SmallInput,
-        )
-    });
+/// A dense `rows × cols` Jacobian as entries.
+fn dense_jacobian<G: Rng>(rng: &mut G, rows: usize, cols: usize, scale: f64) -> Sparse<f64> {
+    Sparse::nonzeros_of(&random(rng, rows * cols, scale), rows, cols)
 }
 
 /// The constant Hessians of SPEC §6 (the paper's chain partitioned for the MPF-EKF2; x^bl index
@@ -79,92 +78,82 @@ fn spec6_hessians(dt: f64) -> (SparseHessians, SparseHessians, SparseHessians) {
 }
 
 fn ekf2_mpf_step(c: &mut Criterion) {
+    const N: usize = 13;
     let dt = 0.005;
     let (sampled, marginal, obs) = spec6_hessians(dt);
+    let (sampled, marginal, obs) = (
+        SecondOrder::new(&sampled, N, 2),
+        SecondOrder::new(&marginal, N, N),
+        SecondOrder::new(&obs, N, 3),
+    );
     let mut rng = stream(2, 0, "bench/ekf2");
-    let m: SVector<f64, 13> = random(&mut rng, 1.0);
-    let p: SMatrix<f64, 13, 13> = spd(&mut rng) * 0.1;
-    // Pseudo-measurement (ẋ1, r1): value, Jacobian, noise Qₙ.
-    let xn: SVector<f64, 2> = random(&mut rng, 1.0);
-    let psi_n: SVector<f64, 2> = random(&mut rng, 1.0);
-    let jac_n: SMatrix<f64, 2, 13> = random(&mut rng, dt);
-    let q_n = SMatrix::<f64, 2, 2>::from_diagonal(&SVector::<f64, 2>::new(1e-4, 1e-6));
-    // Marginal transition: Euler map, Jacobian I + O(dt).
-    let phi: SVector<f64, 13> = random(&mut rng, 1.0);
-    let jac_phi = SMatrix::<f64, 13, 13>::identity() + random::<13, 13, _>(&mut rng, dt);
-    let mut q_bl = SMatrix::<f64, 13, 13>::zeros();
-    for i in 0..5 {
-        q_bl[(i, i)] = 1e-8;
-    }
+    let m = random(&mut rng, N, 1.0);
+    let p = spd(&mut rng, N, 0.1);
+    // Pseudo-measurement (ẋ1, r1): prediction, Jacobian, noise Qₙ, draw ξ.
+    let psi_n = random(&mut rng, 2, 1.0);
+    let jac_n = dense_jacobian(&mut rng, 2, N, dt);
+    let q_n = [1e-4, 0.0, 0.0, 1e-6];
+    let xi = random(&mut rng, 2, 1.0);
+    // Marginal transition: Euler map, Jacobian I + D with D = O(dt).
+    let phi = random(&mut rng, N, 1.0);
+    let d = dense_jacobian(&mut rng, N, N, dt);
+    let q_bl = SymEntries::diagonal(&[1e-8, 1e-8, 1e-8, 1e-8, 1e-8]);
     // Measurement of three accelerations.
-    let y: SVector<f64, 3> = random(&mut rng, 1.0);
-    let psi_y: SVector<f64, 3> = random(&mut rng, 1.0);
-    let jac_y: SMatrix<f64, 3, 13> = random(&mut rng, 1.0);
-    let r: SMatrix<f64, 3, 3> = SMatrix::from_diagonal(&SVector::<f64, 3>::new(0.1, 0.2, 0.3));
+    let y_res = random(&mut rng, 3, 1.0);
+    let jac_y = dense_jacobian(&mut rng, 3, N, 1.0);
+    let r = [0.1, 0.0, 0.0, 0.0, 0.2, 0.0, 0.0, 0.0, 0.3];
 
+    let mut scratch = PropagateScratch::new(N, &marginal);
+    let mut pseudo = Factor::<f64>::new(N, 2);
+    let mut update = Factor::<f64>::new(N, 3);
+    let (mut s_n, mut s_y) = (vec![0.0; 4], vec![0.0; 9]);
+    let (mut mean2, mut cov2) = (vec![0.0; 3], vec![0.0; 9]);
+    let mut drawn = vec![0.0; 2];
     c.bench_function(
         "ekf2 13 states: pseudo-update 2 + propagate + update 3",
         |b| {
             b.iter_batched(
-                || (m, p, Health::default()),
+                || (m.clone(), p.clone(), Health::default()),
                 |(mut m, mut p, mut health)| {
-                    let a = ekf2_update(
+                    // (b) proposal = pseudo-measurement: L = J P Jᵀ + ½ tr(…) + Qₙ.
+                    sampled.terms(&p, N, &mut mean2[..1], &mut cov2[..1]);
+                    s_n.copy_from_slice(&q_n);
+                    s_n[0] += cov2[0];
+                    factorise(&mut pseudo, &p, &jac_n, &s_n, &mut health);
+                    pseudo.condition_on_draw(&mut m, &mut p, &psi_n, &xi, &mut drawn);
+                    // (c) propagate.
+                    ekf2_propagate_near_identity(
                         &mut m,
                         &mut p,
-                        &xn,
-                        &psi_n,
-                        &jac_n,
-                        &sampled,
-                        &q_n,
-                        1,
-                        &mut health,
-                    )
-                    .unwrap();
-                    ekf2_propagate(&mut m, &mut p, &phi, &jac_phi, &marginal, &q_bl);
-                    let e =
-                        ekf2_update(&mut m, &mut p, &y, &psi_y, &jac_y, &obs, &r, 1, &mut health)
-                            .unwrap();
-                    black_box((m, p, a.loglik, e.loglik))
+                        N,
+                        &phi,
+                        &d,
+                        &marginal,
+                        &q_bl,
+                        &mut scratch,
+                    );
+                    // (e) measurement update.
+                    obs.terms(&p, N, &mut mean2, &mut cov2);
+                    s_y.copy_from_slice(&r);
+                    for (s, v) in s_y.iter_mut().zip(&cov2) {
+                        *s += v;
+                    }
+                    factorise(&mut update, &p, &jac_y, &s_y, &mut health);
+                    let (loglik, _) = update.update(&mut m, &mut p, &y_res);
+                    black_box((m, p, loglik))
                 },
                 BatchSize::SmallInput,
             )
         },
     );
 
-    c.bench_function("ekf2_propagate 13 states", |b| {
-        b.iter_batched(
-            || (m, p),
-            |(mut m, mut p)| {
-                ekf2_propagate(&mut m, &mut p, &phi, &jac_phi, &marginal, &q_bl);
-                black_box((m, p))
-            },
-            BatchSize::SmallInput,
-        )
-    });
-
-    c.bench_function("ekf2_update 13 states 3 measurements", |b| {
-        b.iter_batched(
-            || (m, p, Health::default()),
-            |(mut m, mut p, mut health)| {
-                let e = ekf2_update(&mut m, &mut p, &y, &psi_y, &jac_y, &obs, &r, 1, &mut health)
-                    .unwrap();
-                black_box((m, p, e.loglik))
-            },
-            BatchSize::SmallInput,
-        )
-    });
-
-    c.bench_function("second_order_terms 13 states, 5 outputs of phi_bl", |b| {
-        b.iter_batched(
-            || (SVector::<f64, 13>::zeros(), SMatrix::<f64, 13, 13>::zeros()),
-            |(mut mean, mut cov)| {
-                second_order_terms(&marginal, &p, &mut mean, &mut cov);
-                black_box((mean, cov))
-            },
-            BatchSize::SmallInput,
-        )
+    c.bench_function("second_order terms 13 states, 2 outputs of phi_bl", |b| {
+        b.iter(|| {
+            marginal.terms(black_box(&p), N, &mut mean2[..2], &mut cov2[..4]);
+            black_box((&mean2, &cov2));
+        })
     });
 }
 
-criterion_group!(benches, kf_update_8x3, ekf2_mpf_step);
+criterion_group!(benches, ekf2_mpf_step);
 criterion_main!(benches);

@@ -15,6 +15,10 @@ pub enum FilterError {
     /// A non-finite value (NaN or infinity) appeared where a finite one is required.
     #[error("step {step}: non-finite value in {which}")]
     NonFinite { step: usize, which: &'static str },
+    /// A model wrote a Jacobian with another sparsity pattern than the one it declared at
+    /// set-up (`linalg::Sparse`): the step's numbers would be wrong, so the run ends.
+    #[error("step {step}: the model's {which} left its declared sparsity pattern")]
+    JacobianPattern { step: usize, which: &'static str },
 }
 
 impl FilterError {
@@ -24,6 +28,7 @@ impl FilterError {
             FilterError::NotPositiveDefinite { .. } => "not_positive_definite",
             FilterError::AllWeightsZero { .. } => "all_weights_zero",
             FilterError::NonFinite { .. } => "non_finite",
+            FilterError::JacobianPattern { .. } => "jacobian_pattern",
         }
     }
 
@@ -32,7 +37,8 @@ impl FilterError {
         match self {
             FilterError::NotPositiveDefinite { step, .. }
             | FilterError::AllWeightsZero { step }
-            | FilterError::NonFinite { step, .. } => *step,
+            | FilterError::NonFinite { step, .. }
+            | FilterError::JacobianPattern { step, .. } => *step,
         }
     }
 }

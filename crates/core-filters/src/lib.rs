@@ -8,12 +8,19 @@
 //! with the input at `k-1`; the measurement `y_k` is evaluated with the input at `k`.
 //!
 //! Layers (kept apart on purpose):
-//! - [`model`]: capability traits a model implements (what laws it states);
-//! - [`kalman`]: Gaussian filter steps (KF, EKF, EKF2, UKF) on fixed-size storage;
+//! - [`model`]: what every model and filter shares (slots, layout, sparse Hessians);
+//! - [`linalg`]: the one Gaussian algebra (Cholesky with its documented repair, the measurement
+//!   update, EKF2 Hessian terms), on run-time dimensions, for one particle or a SIMD pack;
+//! - [`kalman`]: Gaussian filter steps (KF, EKF, EKF2, UKF) as thin functions on [`linalg`],
+//!   for Table I and the exactness tests;
 //! - [`weights`] and [`resampling`]: the one log-domain weight routine and the resampling
 //!   schemes over one inverse-CDF kernel, shared by every particle filter;
-//! - [`particle`]: particle filters (bootstrap, MLN-RBPF, Storvik, MPF-EKF2), the
-//!   [`particle::ParticleFilter`] trait, the generic runner and its observers;
+//! - [`smc`]: the capability traits a model implements ([`smc::model`]), particle filters
+//!   (bootstrap, MLN-RBPF, Storvik, MPF-EKF2), the [`smc::Filter`] adapter trait, the generic
+//!   runner and its observers;
+//! - [`credible`] and [`pmmh`]: credible intervals and the reference posterior by particle
+//!   marginal Metropolis–Hastings;
+//! - [`real`]: one particle (`f64`) or a pack of particles in SIMD lanes behind one type;
 //! - [`rng`]: reproducible random streams derived from (master seed, run, purpose);
 //! - [`health`] and [`error`]: counted repairs and typed failures.
 

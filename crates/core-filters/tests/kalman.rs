@@ -4,9 +4,10 @@
 //! behaviour on ill-conditioned, indefinite and non-finite input.
 
 use core_filters::kalman::{
-    cholesky_repaired, ekf2_moments, ekf2_propagate, ekf2_update, gaussian_update, kalman_filter,
-    kf_propagate, kf_update, second_order_terms, table1, table1_rows, LinearGaussian, UtParams,
+    ekf2_moments, ekf2_propagate, ekf2_update, gaussian_update, kalman_filter, kf_propagate,
+    kf_update, second_order_terms, table1, table1_rows, LinearGaussian, UtParams,
 };
+use core_filters::linalg::gauss::cholesky_repaired;
 use core_filters::model::SparseHessians;
 use core_filters::rng::stream;
 use core_filters::{FilterError, Health};
@@ -400,9 +401,7 @@ fn second_order_terms_equal_dense_traces() {
             hess.push(out, a, b, normal(&mut rng));
         }
         let p: SMatrix<f64, N, N> = random_spd(&mut rng, 0.1);
-        let mut mean = SVector::<f64, NO>::zeros();
-        let mut cov = SMatrix::<f64, NO, NO>::zeros();
-        second_order_terms(&hess, &p, &mut mean, &mut cov);
+        let (mean, cov): (SVector<f64, NO>, SMatrix<f64, NO, NO>) = second_order_terms(&hess, &p);
         // The same entries grouped by output (the order models use) give the same terms.
         let mut by_output = hess.entries().to_vec();
         by_output.sort_by_key(|e| e.output);
@@ -410,9 +409,8 @@ fn second_order_terms_equal_dense_traces() {
         for e in &by_output {
             sorted.push(e.output, e.a, e.b, e.value);
         }
-        let mut mean_s = SVector::<f64, NO>::zeros();
-        let mut cov_s = SMatrix::<f64, NO, NO>::zeros();
-        second_order_terms(&sorted, &p, &mut mean_s, &mut cov_s);
+        let (mean_s, cov_s): (SVector<f64, NO>, SMatrix<f64, NO, NO>) =
+            second_order_terms(&sorted, &p);
         assert!((mean_s - mean).abs().max() < 1e-12 * (1.0 + mean.abs().max()));
         assert!((cov_s - cov).abs().max() < 1e-12 * (1.0 + cov.abs().max()));
         let pd = DMatrix::from_fn(N, N, |i, j| p[(i, j)]);
@@ -474,7 +472,8 @@ fn slightly_indefinite_covariance_is_repaired_clearly_indefinite_is_an_error() {
         * SMatrix::<f64, 2, 2>::from_diagonal(&SVector::<f64, 2>::new(2.0, -1e-10))
         * rot.transpose();
     let mut health = Health::default();
-    let l = cholesky_repaired(&slightly, 3, "test covariance", &mut health).unwrap();
+    let l = cholesky_repaired(slightly.as_slice(), 2, 3, "test covariance", &mut health).unwrap();
+    let l = SMatrix::<f64, 2, 2>::from_column_slice(&l);
     assert_eq!(health.jitter_added, 1);
     assert!((l * l.transpose() - slightly).abs().max() < 1e-7);
 

@@ -368,3 +368,44 @@ fn nan_measurement_ends_the_run_with_a_typed_error() {
         Some(core_filters::error::FilterError::AllWeightsZero { step: 7 })
     );
 }
+
+/// A model that writes its Jacobian with another sparsity pattern than the one it declared
+/// (here: `H` as two entries from step 6 on) ends the run with a typed error at that step, in
+/// release builds too, for one particle at a time and for packs: never a step computed with
+/// entries at the wrong places.
+#[test]
+fn a_jacobian_off_its_declared_pattern_ends_the_run_with_a_typed_error() {
+    let mut model = Linked::example();
+    let ys = model.simulate(1.3, 10, &mut stream(5, 0, "data"));
+    model.pattern_changes_at = 6;
+    for lanes in [false, true] {
+        let mut filters: Vec<Box<dyn Filter>> = vec![
+            Box::new(MlnRbpf::with_lanes(model.clone(), lanes)),
+            Box::new(Storvik::with_lanes(
+                model.clone(),
+                StorvikUpdate::Linearised,
+                lanes,
+            )),
+        ];
+        for f in filters.iter_mut() {
+            let s = run(
+                f.as_mut(),
+                &config(20),
+                &ys,
+                1,
+                &mut stream(1, 0, "f"),
+                &mut NoObserver,
+            );
+            assert_eq!(s.steps_completed, 5, "{} lanes {lanes}", f.name());
+            assert_eq!(
+                s.failure,
+                Some(core_filters::error::FilterError::JacobianPattern {
+                    step: 6,
+                    which: "measurement matrix H"
+                }),
+                "{} lanes {lanes}",
+                f.name()
+            );
+        }
+    }
+}

@@ -3,8 +3,10 @@
 //! - [`Prior`]: one scalar parameter (lognormal, uniform or a point mass);
 //! - [`BetaGammaPrior`]: the joint prior of the Bouc–Wen shape parameters (β, γ), uniform on the
 //!   triangle {0 ≤ β ≤ β_max, |γ| ≤ β} of SPEC §3, or a conditional/fixed version of it;
-//! - [`ParameterPrior`]: the whole θ, with the paper's defaults, sampling, and the
-//!   moment-matched Gaussian used as the prior of the marginalised blocks (SPEC §3).
+//!
+//! The whole θ of a chain, with the paper's defaults, sampling and moment matching, is
+//! [`crate::filtering::prior::ChainPrior`]; its Monte-Carlo tests live here with the scalar
+//! priors they check.
 //!
 //! The TOML/JSON form is readable: `{ kind = "log_normal", median = 10.0, log_sd = 0.3 }`.
 
@@ -250,7 +252,8 @@ impl BetaGammaPrior {
         }
     }
 
-    fn fix_beta(self, value: f64) -> Self {
+    /// β fixed at `value`; γ keeps its (conditional) prior or its fixed value.
+    pub(crate) fn fix_beta(self, value: f64) -> Self {
         match self {
             BetaGammaPrior::Triangle { .. } | BetaGammaPrior::FixedBeta { .. } => {
                 BetaGammaPrior::FixedBeta { beta: value }
@@ -261,7 +264,8 @@ impl BetaGammaPrior {
         }
     }
 
-    fn fix_gamma(self, value: f64) -> Self {
+    /// γ fixed at `value`; β keeps its (conditional) prior or its fixed value.
+    pub(crate) fn fix_gamma(self, value: f64) -> Self {
         match self {
             BetaGammaPrior::Triangle { beta_max } | BetaGammaPrior::FixedGamma { beta_max, .. } => {
                 BetaGammaPrior::FixedGamma {
@@ -276,172 +280,33 @@ impl BetaGammaPrior {
     }
 }
 
-/// Prior of the whole θ = [k1..kN, c1..cN, β, γ, n] (SPEC §3), independent across groups.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct ParameterPrior {
-    /// Stiffnesses k1..kN.
-    pub k: Vec<Prior>,
-    /// Damping coefficients c1..cN.
-    pub c: Vec<Prior>,
-    /// Bouc–Wen shape parameters.
-    pub beta_gamma: BetaGammaPrior,
-    /// Bouc–Wen exponent.
-    pub n: Prior,
-}
-
-impl ParameterPrior {
-    /// SPEC §3 defaults: k_j ~ LogNormal(ln 10, 0.3²), c_j ~ LogNormal(ln 0.4, 0.5²),
-    /// (β, γ) uniform on the triangle with β_max = 5, n ~ U(1, 5).
-    pub fn paper(n_storeys: usize) -> Self {
-        Self {
-            k: vec![
-                Prior::LogNormal {
-                    median: 10.0,
-                    log_sd: 0.3
-                };
-                n_storeys
-            ],
-            c: vec![
-                Prior::LogNormal {
-                    median: 0.4,
-                    log_sd: 0.5
-                };
-                n_storeys
-            ],
-            beta_gamma: BetaGammaPrior::Triangle { beta_max: 5.0 },
-            n: Prior::Uniform { lo: 1.0, hi: 5.0 },
-        }
-    }
-
-    /// Number of storeys N (the length of `k`).
-    pub fn n_storeys(&self) -> usize {
-        self.k.len()
-    }
-
-    /// Number of parameters, 2N + 3.
-    pub fn len(&self) -> usize {
-        2 * self.n_storeys() + 3
-    }
-
-    /// Always false (θ holds at least β, γ, n); present for API symmetry with `len`.
-    pub fn is_empty(&self) -> bool {
-        false
-    }
-
-    /// Checks every hyper-parameter; k, c and n must have non-negative support.
-    pub fn validate(&self) -> Result<(), PriorError> {
-        let n = self.n_storeys();
-        if self.c.len() != n {
-            return Err(PriorError::WrongLength {
-                which: "c",
-                expected: n,
-                got: self.c.len(),
-            });
-        }
-        for (j, p) in self.k.iter().enumerate() {
-            p.validate(&format!("k{}", j + 1), true)?;
-        }
-        for (j, p) in self.c.iter().enumerate() {
-            p.validate(&format!("c{}", j + 1), true)?;
-        }
-        self.beta_gamma.validate()?;
-        self.n.validate("n", true)
-    }
-
-    /// Makes parameter `name` (as in [`parameter_names`]) a point mass at `value`.
-    ///
-    /// Fixing `beta` or `gamma` alone keeps the other one's conditional prior on the triangle
-    /// (see [`BetaGammaPrior`]); fixing both gives a point mass for both. The result is
-    /// validated; on error the prior is left unchanged.
-    pub fn fix(&mut self, name: &str, value: f64) -> Result<(), PriorError> {
-        let mut next = self.clone();
-        match name {
-            "beta" => next.beta_gamma = next.beta_gamma.fix_beta(value),
-            "gamma" => next.beta_gamma = next.beta_gamma.fix_gamma(value),
-            "n" => next.n = Prior::Fixed { value },
-            _ => {
-                let unknown = || PriorError::UnknownParameter {
-                    name: name.to_string(),
-                };
-                let first = name.chars().next().map_or(0, char::len_utf8);
-                let (group, index) = name.split_at(first);
-                let j: usize = index.parse().map_err(|_| unknown())?;
-                let slot = match group {
-                    "k" => next.k.get_mut(j.wrapping_sub(1)),
-                    "c" => next.c.get_mut(j.wrapping_sub(1)),
-                    _ => None,
-                }
-                .ok_or_else(unknown)?;
-                // Reject non-canonical spellings such as "k01" or "k+1".
-                if format!("{group}{j}") != name {
-                    return Err(unknown());
-                }
-                *slot = Prior::Fixed { value };
-            }
-        }
-        next.validate()?;
-        *self = next;
-        Ok(())
-    }
-
-    /// Writes one draw of θ into `out` (length 2N+3) without allocating.
-    pub fn sample_into<G: Rng + ?Sized>(&self, rng: &mut G, out: &mut [f64]) {
-        let n = self.n_storeys();
-        assert_eq!(out.len(), self.len(), "θ buffer has the wrong length");
-        for (o, p) in out[..n].iter_mut().zip(&self.k) {
-            *o = p.sample(rng);
-        }
-        for (o, p) in out[n..2 * n].iter_mut().zip(&self.c) {
-            *o = p.sample(rng);
-        }
-        let (beta, gamma) = self.beta_gamma.sample(rng);
-        out[2 * n] = beta;
-        out[2 * n + 1] = gamma;
-        out[2 * n + 2] = self.n.sample(rng);
-    }
-
-    /// One draw of θ.
-    pub fn sample<G: Rng + ?Sized>(&self, rng: &mut G) -> Vec<f64> {
-        let mut out = vec![0.0; self.len()];
-        self.sample_into(rng, &mut out);
-        out
-    }
-
-    /// Means and variances of θ (SPEC §3 moment matching); θ's components are uncorrelated.
-    pub fn moments(&self) -> (Vec<f64>, Vec<f64>) {
-        let mut mean = Vec::with_capacity(self.len());
-        let mut var = Vec::with_capacity(self.len());
-        for p in self.k.iter().chain(&self.c) {
-            let (m, v) = p.moments();
-            mean.push(m);
-            var.push(v);
-        }
-        let (mb, mg, vb, vg) = self.beta_gamma.moments();
-        mean.extend([mb, mg]);
-        var.extend([vb, vg]);
-        let (m, v) = self.n.moments();
-        mean.push(m);
-        var.push(v);
-        (mean, var)
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::filtering::prior::ChainPrior;
     use core_filters::rng::stream;
+
+    /// SPEC §3's θ for `n` storeys with the one Bouc–Wen element at storey 1.
+    fn paper(n: usize) -> ChainPrior {
+        ChainPrior::paper(n, &[0])
+    }
+
+    fn sample<G: Rng + ?Sized>(prior: &ChainPrior, rng: &mut G) -> Vec<f64> {
+        let mut out = vec![0.0; prior.len()];
+        prior.sample_into(rng, &mut out);
+        out
+    }
 
     /// Monte-Carlo check of mean, variance and the β–γ covariance of a prior.
     ///
     /// Tolerances are 5 Monte-Carlo standard errors: for the mean √(var/M); for the variance
     /// √((μ4 − σ⁴)/M) with μ4 estimated from the same sample; for the covariance √(E[(βγ)²]/M).
     /// With ~40 checks at 5 s.e. a false failure has probability < 1e-4 (and the seed is fixed).
-    fn check_moments_by_monte_carlo(prior: &ParameterPrior, draws: usize, seed: u64) {
+    fn check_moments_by_monte_carlo(prior: &ChainPrior, draws: usize, seed: u64) {
         let d = prior.len();
         let (mean, var) = prior.moments();
         let mut rng = stream(seed, 0, "priors-test");
-        let samples: Vec<Vec<f64>> = (0..draws).map(|_| prior.sample(&mut rng)).collect();
+        let samples: Vec<Vec<f64>> = (0..draws).map(|_| sample(prior, &mut rng)).collect();
         let m = draws as f64;
         for i in 0..d {
             let mc_mean = samples.iter().map(|s| s[i]).sum::<f64>() / m;
@@ -489,7 +354,7 @@ mod tests {
 
     #[test]
     fn paper_moments_match_spec_numbers() {
-        let prior = ParameterPrior::paper(3);
+        let prior = paper(3);
         prior.validate().unwrap();
         let (mean, var) = prior.moments();
         // SPEC §3: k: 10.46 ± 3.21; c: 0.453 ± 0.242; β: 10/3, 25/18; γ: 0, 25/6; n: 3, 16/12.
@@ -513,40 +378,40 @@ mod tests {
 
     #[test]
     fn paper_moments_match_monte_carlo() {
-        check_moments_by_monte_carlo(&ParameterPrior::paper(3), 200_000, 11);
+        check_moments_by_monte_carlo(&paper(3), 200_000, 11);
     }
 
     #[test]
     fn conditional_triangle_moments_match_monte_carlo() {
-        let mut p = ParameterPrior::paper(2);
+        let mut p = paper(2);
         p.fix("gamma", -1.5).unwrap();
         assert_eq!(
-            p.beta_gamma,
+            p.elements[0].beta_gamma,
             BetaGammaPrior::FixedGamma {
                 gamma: -1.5,
                 beta_max: 5.0
             }
         );
         check_moments_by_monte_carlo(&p, 100_000, 12);
-        let mut q = ParameterPrior::paper(2);
+        let mut q = paper(2);
         q.fix("beta", 2.0).unwrap();
         check_moments_by_monte_carlo(&q, 100_000, 13);
         // Conditional samples stay in the triangle.
         let mut rng = stream(5, 0, "priors-test");
         for _ in 0..1000 {
-            let s = p.sample(&mut rng);
+            let s = sample(&p, &mut rng);
             assert!(s[4] >= 1.5 && s[4] <= 5.0 && s[5] == -1.5);
-            let s = q.sample(&mut rng);
+            let s = sample(&q, &mut rng);
             assert!(s[4] == 2.0 && s[5].abs() <= 2.0);
         }
     }
 
     #[test]
     fn triangle_samples_stay_in_triangle() {
-        let prior = ParameterPrior::paper(3);
+        let prior = paper(3);
         let mut rng = stream(3, 0, "priors-test");
         for _ in 0..10_000 {
-            let s = prior.sample(&mut rng);
+            let s = sample(&prior, &mut rng);
             assert!((0.0..=5.0).contains(&s[6]) && s[7].abs() <= s[6]);
             assert!((1.0..5.0).contains(&s[8]));
             assert!(s[..6].iter().all(|&v| v > 0.0));
@@ -555,14 +420,14 @@ mod tests {
 
     #[test]
     fn fix_makes_point_masses_and_rejects_unknown_names() {
-        let mut p = ParameterPrior::paper(3);
+        let mut p = paper(3);
         p.fix("k2", 8.0).unwrap();
         p.fix("c3", 0.25).unwrap();
         p.fix("n", 2.0).unwrap();
         p.fix("beta", 2.0).unwrap();
         p.fix("gamma", 1.0).unwrap();
         assert_eq!(
-            p.beta_gamma,
+            p.elements[0].beta_gamma,
             BetaGammaPrior::Fixed {
                 beta: 2.0,
                 gamma: 1.0
@@ -574,7 +439,7 @@ mod tests {
         assert_eq!((mean[6], mean[7], mean[8]), (2.0, 1.0, 2.0));
         assert_eq!((var[6], var[7], var[8]), (0.0, 0.0, 0.0));
         let mut rng = stream(4, 0, "priors-test");
-        let s = p.sample(&mut rng);
+        let s = sample(&p, &mut rng);
         assert_eq!((s[1], s[5], s[6], s[7], s[8]), (8.0, 0.25, 2.0, 1.0, 2.0));
 
         let before = p.clone();
@@ -596,7 +461,7 @@ mod tests {
             Err(PriorError::NonFinite { .. })
         ));
         assert_eq!(p, before, "a rejected fix leaves the prior unchanged");
-        let mut t = ParameterPrior::paper(1);
+        let mut t = paper(1);
         assert!(matches!(
             t.fix("gamma", 6.0),
             Err(PriorError::GammaOutsideTriangle { .. })
@@ -605,7 +470,7 @@ mod tests {
 
     #[test]
     fn validation_rejects_bad_hyper_parameters() {
-        let mut p = ParameterPrior::paper(2);
+        let mut p = paper(2);
         p.k[0] = Prior::LogNormal {
             median: 0.0,
             log_sd: 0.3,
@@ -633,8 +498,8 @@ mod tests {
         p.validate().unwrap();
         p.c.pop();
         assert!(matches!(p.validate(), Err(PriorError::WrongLength { .. })));
-        let mut q = ParameterPrior::paper(2);
-        q.beta_gamma = BetaGammaPrior::Triangle { beta_max: 0.0 };
+        let mut q = paper(2);
+        q.elements[0].beta_gamma = BetaGammaPrior::Triangle { beta_max: 0.0 };
         assert!(matches!(
             q.validate(),
             Err(PriorError::NonPositiveBetaMax { .. })
@@ -643,11 +508,11 @@ mod tests {
 
     #[test]
     fn serde_form_is_readable_and_round_trips() {
-        let p = ParameterPrior::paper(2);
+        let p = paper(2);
         let json = serde_json::to_string(&p).unwrap();
         assert!(json.contains(r#""kind":"log_normal""#), "{json}");
         assert!(json.contains(r#""kind":"triangle""#), "{json}");
-        let back: ParameterPrior = serde_json::from_str(&json).unwrap();
+        let back: ChainPrior = serde_json::from_str(&json).unwrap();
         assert_eq!(back, p);
         let one: Prior = serde_json::from_str(r#"{"kind":"fixed","value":2.0}"#).unwrap();
         assert_eq!(one, Prior::Fixed { value: 2.0 });

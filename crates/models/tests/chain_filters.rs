@@ -302,9 +302,7 @@ fn mln_rbpf_gaussian_is_the_kalman_filter_of_z_given_its_path() {
             for (st, stage) in model.stages().iter().enumerate() {
                 let mut fv = vec![0.0; dims.nu];
                 let mut fm = core_filters::linalg::Sparse::<f64>::recording(stage.linked.len(), nz);
-                fm.start();
-                model.transition(st, k, &u_prev, u_k, &mut fv, &mut fm);
-                fm.finish();
+                fm.evaluate(|j| model.transition(st, k, &u_prev, u_k, &mut fv, j));
                 let fd = DMatrix::from_vec(stage.linked.len(), nz, fm.to_dense());
                 let resid = DVector::from_iterator(
                     stage.linked.len(),
@@ -321,9 +319,7 @@ fn mln_rbpf_gaussian_is_the_kalman_filter_of_z_given_its_path() {
             }
             let mut h = vec![0.0; 4];
             let mut hm = core_filters::linalg::Sparse::<f64>::recording(4, nz);
-            hm.start();
-            model.observation(k, u_k, &mut h, &mut hm);
-            hm.finish();
+            hm.evaluate(|j| model.observation(k, u_k, &mut h, j));
             let hd = DMatrix::from_vec(4, nz, hm.to_dense());
             let resid = DVector::from_iterator(4, (0..4).map(|j| y[kk * 4 + j] - h[j])) - &hd * &m;
             let ll = update(&mut m, &mut p, &hd, &resid, &r);

@@ -7,11 +7,34 @@
 
 use nalgebra::{SMatrix, SVector};
 
-use super::kf::{gaussian_update, sandwich, symmetrise, Innovation};
-use super::second_order::second_order_terms;
+use super::kf::{gaussian_update, sandwich_plus, Innovation};
 use crate::error::FilterError;
 use crate::health::Health;
+use crate::linalg::SecondOrder;
 use crate::model::SparseHessians;
+
+/// The EKF2 terms `½ tr(𝓗ⁱ P)` (a vector over the `NO` outputs) and `½ tr(𝓗ⁱ P 𝓗^{i'} P)`
+/// (`NO × NO`) by [`SecondOrder`], which computes them for the outputs that have Hessian entries
+/// only; the others are zero.
+#[track_caller]
+pub fn second_order_terms<const N: usize, const NO: usize>(
+    hess: &SparseHessians,
+    p: &SMatrix<f64, N, N>,
+) -> (SVector<f64, NO>, SMatrix<f64, NO, NO>) {
+    let so = SecondOrder::new(hess, N, NO);
+    let k = so.len();
+    let (mut mean_k, mut cov_k) = (vec![0.0; k], vec![0.0; k * k]);
+    so.terms(p.as_slice(), N, &mut mean_k, &mut cov_k);
+    let mut mean = SVector::<f64, NO>::zeros();
+    let mut cov = SMatrix::<f64, NO, NO>::zeros();
+    for g in 0..k {
+        mean[so.output(g)] = mean_k[g];
+        for h in 0..k {
+            cov[(so.output(g), so.output(h))] = cov_k[g + h * k];
+        }
+    }
+    (mean, cov)
+}
 
 /// EKF2 propagate, SPEC §4 (EKF1 when `hess` is empty):
 /// `m ← φ(m) + ½ Σ_i e_i tr(𝓗ⁱ P)`, `P ← J P Jᵀ + ½ Σ_{i,i'} e_i e_{i'}ᵀ tr(𝓗ⁱ P 𝓗^{i'} P) + Q`.
@@ -26,17 +49,13 @@ pub fn ekf2_propagate<const N: usize>(
     hess: &SparseHessians,
     q: &SMatrix<f64, N, N>,
 ) {
-    let mut new_p = sandwich(jac, p) + q;
-    if hess.is_empty() {
-        *m = *value;
-    } else {
-        let mut mean2 = SVector::<f64, N>::zeros();
-        let mut cov2 = SMatrix::<f64, N, N>::zeros();
-        second_order_terms(hess, p, &mut mean2, &mut cov2);
-        *m = value + mean2;
+    let mut new_p = sandwich_plus(jac, p, q);
+    *m = *value;
+    if !hess.is_empty() {
+        let (mean2, cov2) = second_order_terms(hess, p);
+        *m += mean2;
         new_p += cov2;
     }
-    symmetrise(&mut new_p);
     *p = new_p;
 }
 
@@ -52,16 +71,13 @@ pub fn ekf2_moments<const N: usize, const NY: usize>(
     hess: &SparseHessians,
     s_add: &SMatrix<f64, NY, NY>,
 ) -> (SVector<f64, NY>, SMatrix<f64, NY, NY>) {
-    let mut cov = sandwich(jac, p) + s_add;
+    let mut cov = sandwich_plus(jac, p, s_add);
     let mut mean = *value;
     if !hess.is_empty() {
-        let mut mean2 = SVector::<f64, NY>::zeros();
-        let mut cov2 = SMatrix::<f64, NY, NY>::zeros();
-        second_order_terms(hess, p, &mut mean2, &mut cov2);
+        let (mean2, cov2) = second_order_terms(hess, p);
         mean += mean2;
         cov += cov2;
     }
-    symmetrise(&mut cov);
     (mean, cov)
 }
 
@@ -83,9 +99,7 @@ pub fn ekf2_update<const N: usize, const NY: usize>(
     if hess.is_empty() {
         return gaussian_update(m, p, y, value, jac, r, step, health);
     }
-    let mut mean2 = SVector::<f64, NY>::zeros();
-    let mut cov2 = SMatrix::<f64, NY, NY>::zeros();
-    second_order_terms(hess, p, &mut mean2, &mut cov2);
+    let (mean2, cov2) = second_order_terms(hess, p);
     let y_hat = value + mean2;
     let s_add = cov2 + r;
     gaussian_update(m, p, y, &y_hat, jac, &s_add, step, health)

@@ -11,12 +11,26 @@
 use nalgebra::{SMatrix, SVector};
 use serde::{Deserialize, Serialize};
 
-use super::kf::{cholesky_repaired, solve_lower_in_place, symmetrise, Innovation};
+use super::kf::Innovation;
 use crate::error::FilterError;
 use crate::health::Health;
+use crate::linalg::gauss::{cholesky_repaired, solve_lower, whitened_loglik};
 
-/// `ln(2π)`.
-const LN_2PI: f64 = 1.837_877_066_409_345_5;
+/// Lower Cholesky factor of `a` by [`cholesky_repaired`] (repairs counted, failures typed).
+fn factor<const N: usize>(
+    a: &SMatrix<f64, N, N>,
+    step: usize,
+    which: &'static str,
+    health: &mut Health,
+) -> Result<SMatrix<f64, N, N>, FilterError> {
+    let l = cholesky_repaired(a.as_slice(), N, step, which, health)?;
+    Ok(SMatrix::from_column_slice(&l))
+}
+
+/// `(a + aᵀ)/2`: round-off only, not counted.
+fn symmetrised<const N: usize>(a: SMatrix<f64, N, N>) -> SMatrix<f64, N, N> {
+    (a + a.transpose()) * 0.5
+}
 
 /// Parameters of the scaled unscented transform.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -76,7 +90,7 @@ where
         spread2 > 0.0 && spread2.is_finite(),
         "unscented transform needs α²(N + κ) > 0, got {spread2}"
     );
-    let chol = cholesky_repaired(p, step, "unscented transform covariance", health)?;
+    let chol = factor(p, step, "unscented transform covariance", health)?;
     let scale = spread2.sqrt();
     let w = 0.5 / spread2;
     let y0 = f(m);
@@ -96,10 +110,9 @@ where
         let s = chol.column(j) * scale;
         cross += s * (e_plus[j] - e_minus[j]).transpose() * w;
     }
-    symmetrise(&mut cov);
     let out = UtMoments {
         mean: y0 + e_bar,
-        cov,
+        cov: symmetrised(cov),
         cross,
     };
     if out
@@ -161,15 +174,16 @@ where
             which: "innovation",
         });
     }
-    let chol = cholesky_repaired(&(ut.cov + r), step, "innovation covariance", health)?;
+    let chol = factor(&(ut.cov + r), step, "innovation covariance", health)?;
     // W = C⁻¹ C_xyᵀ, so K L Kᵀ = Wᵀ W and K r = Wᵀ C⁻¹ r.
     let mut wm = ut.cross.transpose();
-    solve_lower_in_place(&chol, &mut wm);
+    for column in wm.as_mut_slice().chunks_exact_mut(NY) {
+        solve_lower(chol.as_slice(), NY, column);
+    }
     let mut e = residual;
-    solve_lower_in_place(&chol, &mut e);
+    solve_lower(chol.as_slice(), NY, e.as_mut_slice());
     let new_m = *m + wm.tr_mul(&e);
-    let mut new_p = *p - wm.tr_mul(&wm);
-    symmetrise(&mut new_p);
+    let new_p = symmetrised(*p - wm.tr_mul(&wm));
     if new_m.iter().chain(new_p.iter()).any(|v| !v.is_finite()) {
         return Err(FilterError::NonFinite {
             step,
@@ -178,11 +192,10 @@ where
     }
     *m = new_m;
     *p = new_p;
-    let log_det_half: f64 = (0..NY).map(|j| chol[(j, j)].ln()).sum();
     Ok(Innovation {
         residual,
         chol,
-        loglik: -0.5 * e.norm_squared() - log_det_half - 0.5 * (NY as f64) * LN_2PI,
+        loglik: whitened_loglik(e.as_slice(), chol.as_slice(), NY),
     })
 }
 

@@ -21,10 +21,10 @@
 //! for large `n` (see [`Real::downdate_lower`]).
 //!
 //! Numerical policy (SPEC §4): the generic functions here compute the *straight path* and report,
-//! per lane, whether it was valid (a pivot clearly positive, every result finite). The scalar
-//! wrapper [`Factor::compute_repaired`] adds the documented repair (bounded diagonal jitter,
-//! counted in [`Health`]) and typed errors; a pack lane whose straight path fails is redone by
-//! that scalar code.
+//! per lane, whether it was valid (a pivot clearly positive, every result finite). For one
+//! particle [`factorise`] adds the documented repair ([`jittered_cholesky`]: bounded diagonal
+//! jitter, counted in [`Health`]); a pack lane whose straight path fails is redone by that scalar
+//! code. [`cholesky_repaired`] is the same repair with typed errors for one-off factorisations.
 
 #![allow(clippy::needless_range_loop)]
 // index loops spell out the order of operations
@@ -371,10 +371,11 @@ impl<T: Real> Factor<T> {
 }
 
 /// [`Factor::compute`], and for one particle (`T::LANES == 1`) whose straight path failed the
-/// documented repair of [`Factor::compute_repaired`] (counted in `health`). A pack returns its
+/// documented repair of [`jittered_cholesky`] (counted in `health`). A pack returns its
 /// straight-path mask: the batch layer redoes a failing lane as one particle. Returns the lanes
 /// that have a factor; a particle without one gets weight zero from its filter (a per-particle
-/// failure is counted, not returned as an error: it does not end the run).
+/// failure is counted, not returned as an error: it does not end the run). A non-finite `L` is
+/// not repaired and not counted: the caller sees the failed lane and the non-finite entries.
 #[inline]
 pub fn factorise<T: Real>(
     factor: &mut Factor<T>,
@@ -384,109 +385,83 @@ pub fn factorise<T: Real>(
     health: &mut Health,
 ) -> T::Mask {
     let ok = factor.compute(p, j, s_add);
-    if T::LANES > 1 || T::mask_lane(ok, 0) {
+    if T::LANES > 1 || T::mask_lane(ok, 0) || !all_finite(&factor.cov) {
         return ok;
     }
-    let q = factor.q;
-    let a = &factor.cov;
-    let mut finite = zero::<T>();
-    for v in &a[..q * q] {
-        finite += *v - *v;
+    if jittered_cholesky(
+        &factor.cov,
+        factor.q,
+        &mut factor.jittered,
+        &mut factor.chol,
+        health,
+    ) {
+        T::all_true()
+    } else {
+        ok
     }
-    if !T::mask_lane(finite.eq(zero()), 0) {
-        return ok;
+}
+
+/// Whether every entry of lane 0 is finite (`v − v` is `+0` for a finite `v`, NaN otherwise).
+#[inline]
+fn all_finite<T: Real>(a: &[T]) -> bool {
+    let mut check = zero::<T>();
+    for v in a {
+        check += *v - *v;
     }
+    T::mask_lane(check.eq(zero()), 0)
+}
+
+/// The documented repair (SPEC §4) of a finite symmetric `a` (`q × q`) whose plain
+/// factorisation failed, for one particle (lane 0):
+///
+/// 1. the diagonal of `a` is scaled by `1 + τ`, τ = 1e-12, 1e-10, 1e-8, 1e-6 in turn (a
+///    non-positive diagonal entry receives `τ` times the largest diagonal entry instead) and the
+///    factorisation with the relative pivot test is tried again;
+/// 2. success increments `health.jitter_added` (once per factorisation that needed it) and
+///    leaves the factor in `l`; if even τ = 1e-6 fails, `health.cholesky_failures` is
+///    incremented and `false` returned.
+///
+/// `jittered` is `q × q` scratch. This is the only jitter loop of the crate: the particle
+/// filters ([`factorise`]) and the one-off factorisations ([`cholesky_repaired`]) both use it.
+pub fn jittered_cholesky<T: Real>(
+    a: &[T],
+    q: usize,
+    jittered: &mut [T],
+    l: &mut [T],
+    health: &mut Health,
+) -> bool {
     let mut max_diag = zero::<T>();
     for j in 0..q {
         let d = a[j + j * q];
         max_diag = T::select(d.gt(max_diag), d, max_diag);
     }
-    let jit = &mut factor.jittered;
-    jit[..q * q].copy_from_slice(&a[..q * q]);
+    jittered[..q * q].copy_from_slice(&a[..q * q]);
     for tau in JITTER_STEPS {
         for j in 0..q {
             let d = a[j + j * q];
-            jit[j + j * q] = T::select(
+            jittered[j + j * q] = T::select(
                 d.gt(zero()),
                 d * T::splat(1.0 + tau),
                 d + T::splat(tau) * max_diag,
             );
         }
-        let fixed = cholesky(jit, q, &mut factor.chol);
-        if T::mask_lane(fixed, 0) {
+        if T::mask_lane(cholesky(jittered, q, l), 0) {
             health.jitter_added += 1;
-            return fixed;
+            return true;
         }
     }
     health.cholesky_failures += 1;
-    ok
-}
-
-impl Factor<f64> {
-    /// [`Factor::compute`] with the documented repair (SPEC §4) for one particle:
-    ///
-    /// 1. a non-finite entry of `L` → `Err(NonFinite { step, which })`;
-    /// 2. Cholesky with the relative pivot test;
-    /// 3. on failure the diagonal of `L` is scaled by `1 + τ`, τ = 1e-12, 1e-10, 1e-8, 1e-6 in
-    ///    turn (`health.jitter_added` once per factorisation that needed it); a non-positive
-    ///    diagonal entry receives `τ` times the largest diagonal entry instead;
-    /// 4. if even τ = 1e-6 fails, `health.cholesky_failures` is incremented and
-    ///    `Err(NotPositiveDefinite { step, which })` is returned.
-    ///
-    /// `L` is exactly symmetric by construction, so no symmetrisation is needed here.
-    pub fn compute_repaired(
-        &mut self,
-        p: &[f64],
-        j: &Sparse<f64>,
-        s_add: &[f64],
-        step: usize,
-        which: &'static str,
-        health: &mut Health,
-    ) -> Result<(), FilterError> {
-        if self.compute(p, j, s_add) {
-            return Ok(());
-        }
-        factor_with_jitter(&self.cov, self.q, &mut self.chol, step, which, health)
-    }
-}
-
-/// Steps 1, 3 and 4 of [`Factor::compute_repaired`] for a symmetric `a` (`q × q`) whose plain
-/// factorisation failed.
-pub fn factor_with_jitter(
-    a: &[f64],
-    q: usize,
-    l: &mut [f64],
-    step: usize,
-    which: &'static str,
-    health: &mut Health,
-) -> Result<(), FilterError> {
-    if a[..q * q].iter().any(|v| !v.is_finite()) {
-        return Err(FilterError::NonFinite { step, which });
-    }
-    let max_diag = (0..q).map(|j| a[j + j * q]).fold(0.0_f64, f64::max);
-    let mut jittered = a[..q * q].to_vec();
-    for tau in JITTER_STEPS {
-        for j in 0..q {
-            let d = a[j + j * q];
-            jittered[j + j * q] = if d > 0.0 {
-                d * (1.0 + tau)
-            } else {
-                d + tau * max_diag
-            };
-        }
-        if cholesky(&jittered, q, l) {
-            health.jitter_added += 1;
-            return Ok(());
-        }
-    }
-    health.cholesky_failures += 1;
-    Err(FilterError::NotPositiveDefinite { step, which })
+    false
 }
 
 /// Lower Cholesky factor of a symmetric `a` with the documented repair, for one-off uses (the
-/// constant `R`, tests): counts an asymmetry beyond round-off in `health.symmetrised`
-/// (`|a_ij − a_ji| > 1e-9 sqrt(a_ii a_jj)`), factorises `(A + Aᵀ)/2`, then as
-/// [`Factor::compute_repaired`].
+/// constant `R`, the unscented transform, tests):
+///
+/// 1. a non-finite entry → `Err(NonFinite { step, which })`;
+/// 2. an asymmetry beyond round-off (`|a_ij − a_ji| > 1e-9 sqrt(a_ii a_jj)`) is counted in
+///    `health.symmetrised` and `(A + Aᵀ)/2` is factorised;
+/// 3. Cholesky with the relative pivot test, then the repair of [`jittered_cholesky`];
+/// 4. if that fails too, `Err(NotPositiveDefinite { step, which })`.
 pub fn cholesky_repaired(
     a: &[f64],
     q: usize,
@@ -515,11 +490,10 @@ pub fn cholesky_repaired(
         health.symmetrised += 1;
     }
     let mut l = vec![0.0; q * q];
-    if cholesky(&s, q, &mut l) {
+    if cholesky(&s, q, &mut l) || jittered_cholesky(&s, q, &mut vec![0.0; q * q], &mut l, health) {
         return Ok(l);
     }
-    factor_with_jitter(&s, q, &mut l, step, which, health)?;
-    Ok(l)
+    Err(FilterError::NotPositiveDefinite { step, which })
 }
 
 /// A constant Gaussian noise `N(0, R)` factorised once (the measurement noise of the bootstrap
@@ -588,5 +562,200 @@ impl FactoredNoise {
     /// The lower factor of `R`.
     pub fn chol(&self) -> &[f64] {
         &self.chol
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::{DMatrix, DVector};
+
+    /// Column-major 3 × 3 SPD matrix used below.
+    const A: [f64; 9] = [4.0, 2.0, 0.6, 2.0, 5.0, 1.5, 0.6, 1.5, 3.0];
+
+    fn dense(a: &[f64], q: usize) -> DMatrix<f64> {
+        DMatrix::from_column_slice(q, q, a)
+    }
+
+    #[test]
+    fn cholesky_of_spd_matrix_reconstructs_it_without_repair() {
+        let mut h = Health::default();
+        let l = cholesky_repaired(&A, 3, 0, "a", &mut h).unwrap();
+        let l = dense(&l, 3);
+        assert!((&l * l.transpose() - dense(&A, 3)).abs().max() < 1e-14);
+        assert_eq!(l[(0, 1)], 0.0);
+        assert_eq!(h, Health::default());
+    }
+
+    #[test]
+    fn asymmetry_beyond_round_off_is_counted() {
+        let a = [2.0, 0.5 + 1e-3, 0.5, 1.0];
+        let mut h = Health::default();
+        let l = dense(&cholesky_repaired(&a, 2, 3, "a", &mut h).unwrap(), 2);
+        assert_eq!(h.symmetrised, 1);
+        assert!(((&l * l.transpose())[(1, 0)] - (0.5 + 0.5e-3)).abs() < 1e-14);
+        // Round-off asymmetry is not counted.
+        let b = [2.0, 0.5 * (1.0 + f64::EPSILON), 0.5, 1.0];
+        let mut h = Health::default();
+        cholesky_repaired(&b, 2, 3, "b", &mut h).unwrap();
+        assert_eq!(h.symmetrised, 0);
+    }
+
+    #[test]
+    fn negative_definite_matrix_is_a_typed_error() {
+        let a = [1.0, 0.0, 0.0, -1.0];
+        let mut h = Health::default();
+        let err = cholesky_repaired(&a, 2, 7, "a", &mut h).unwrap_err();
+        assert_eq!(
+            err,
+            FilterError::NotPositiveDefinite {
+                step: 7,
+                which: "a"
+            }
+        );
+        assert_eq!(h.cholesky_failures, 1);
+        let a = [1.0, f64::NAN, f64::NAN, 1.0];
+        let err = cholesky_repaired(&a, 2, 8, "a", &mut h).unwrap_err();
+        assert_eq!(
+            err,
+            FilterError::NonFinite {
+                step: 8,
+                which: "a"
+            }
+        );
+    }
+
+    /// One particle: a factorisation that fails only by round-off is repaired and counted; a
+    /// clearly indefinite one is counted as a failure and its lane reported.
+    #[test]
+    fn factorise_repairs_one_particle_and_counts() {
+        let p = [1.0, 1.0, 1.0, 1.0];
+        let j = Sparse::nonzeros_of(&[1.0, 0.0, 0.0, 1.0], 2, 2);
+        let mut f = Factor::<f64>::new(2, 2);
+        let mut h = Health::default();
+        assert!(factorise(
+            &mut f,
+            &p,
+            &j,
+            &[1e-300, 0.0, 0.0, 1e-300],
+            &mut h
+        ));
+        assert_eq!((h.jitter_added, h.cholesky_failures), (1, 0));
+        assert!(!factorise(&mut f, &p, &j, &[0.0, 0.0, 0.0, -0.5], &mut h));
+        assert_eq!((h.jitter_added, h.cholesky_failures), (1, 1));
+        // A non-finite L is neither repaired nor counted.
+        assert!(!factorise(
+            &mut f,
+            &p,
+            &j,
+            &[f64::NAN, 0.0, 0.0, 1.0],
+            &mut h
+        ));
+        assert_eq!((h.jitter_added, h.cholesky_failures), (1, 1));
+    }
+
+    #[test]
+    fn triangular_solve_and_product_invert_each_other() {
+        let mut h = Health::default();
+        let l = cholesky_repaired(&A, 3, 0, "a", &mut h).unwrap();
+        let b = [1.0, -2.0, 0.5];
+        let mut x = b;
+        solve_lower(&l, 3, &mut x);
+        assert!(
+            (dense(&l, 3) * DVector::from_column_slice(&x) - DVector::from_column_slice(&b))
+                .abs()
+                .max()
+                < 1e-14
+        );
+        let mut back = [0.0; 3];
+        lower_mul(&l, 3, &x, &mut back);
+        assert!(back.iter().zip(&b).all(|(u, v)| (u - v).abs() < 1e-14));
+    }
+
+    #[test]
+    fn log_det_half_survives_underflow_of_the_pivot_product() {
+        let mut l = [0.0; 9];
+        l[0] = 1e-120;
+        l[4] = 1e-120;
+        l[8] = 3.0;
+        let expected = 2.0 * (1e-120_f64).ln() + 3.0_f64.ln();
+        assert!((log_det_half(&l, 3) - expected).abs() < 1e-12 * expected.abs());
+        let l = [2.0, 0.3, -0.1, 0.0, 0.5, 0.2, 0.0, 0.0, 4.0];
+        assert!((log_det_half(&l, 3) - (4.0_f64).ln()).abs() < 1e-15);
+    }
+
+    #[test]
+    fn factored_noise_density_equals_the_textbook_one() {
+        let mut h = Health::default();
+        let res = [0.3, -1.2, 2.5];
+        let r = dense(&A, 3);
+        let rv = DVector::from_column_slice(&res);
+        let textbook = -0.5 * (rv.transpose() * r.clone().try_inverse().unwrap() * &rv)[0]
+            - 0.5 * r.determinant().ln()
+            - 1.5 * LN_2PI;
+        let noise = FactoredNoise::new(&A, 3, "R", &mut h).unwrap();
+        assert!((noise.log_density(&res, &mut [0.0; 3]) - textbook).abs() < 1e-12);
+        // Diagonal R: no solve, the same density.
+        let d = [4.0, 0.0, 0.0, 0.0, 5.0, 0.0, 0.0, 0.0, 3.0];
+        let noise = FactoredNoise::new(&d, 3, "R", &mut h).unwrap();
+        let direct: f64 = res
+            .iter()
+            .zip([4.0_f64, 5.0, 3.0])
+            .map(|(e, v)| -0.5 * e * e / v - 0.5 * v.ln() - 0.5 * LN_2PI)
+            .sum();
+        assert!((noise.log_density(&res, &mut [0.0; 3]) - direct).abs() < 1e-12);
+        let e = [0.7 / 2.0];
+        let expected = -0.5 * (0.7_f64 / 2.0).powi(2) - 2.0_f64.ln() - 0.5 * LN_2PI;
+        assert!((whitened_loglik(&e, &[2.0], 1) - expected).abs() < 1e-15);
+    }
+
+    /// A pseudo-measurement drawn as `ŷ + C ξ` updated through its whitened innovation `ξ` gives
+    /// the same moments as the ordinary update with that measurement, and both equal the
+    /// textbook gain `K = P Jᵀ L⁻¹`.
+    #[test]
+    fn conditioning_on_a_draw_equals_the_ordinary_update_with_that_measurement() {
+        let m0 = [1.0, -2.0, 0.5];
+        // J = [[0.3, 0, −1.7], [0, 2.1, 0.4]] column-major, S = [[0.5, 0.1], [0.1, 0.7]].
+        let jd = [0.3, 0.0, 0.0, 2.1, -1.7, 0.4];
+        let j = Sparse::nonzeros_of(&jd, 2, 3);
+        let s = [0.5, 0.1, 0.1, 0.7];
+        let mut y_hat = [0.0; 2];
+        j.mul_add(&m0, &mut y_hat);
+        let xi = [0.8, -1.3];
+        let mut f = Factor::<f64>::new(3, 2);
+        assert!(f.compute(&A, &j, &s));
+        let (mut m1, mut p1) = (m0, A);
+        let mut y = [0.0; 2];
+        assert!(f.condition_on_draw(&mut m1, &mut p1, &y_hat, &xi, &mut y));
+        let l = dense(&f.cov, 2);
+        let c = dense(&f.chol, 2);
+        let drawn = DVector::from_column_slice(&y_hat) + &c * DVector::from_column_slice(&xi);
+        assert!((DVector::from_column_slice(&y) - &drawn).abs().max() < 1e-13);
+        let mut g = Factor::<f64>::new(3, 2);
+        assert!(g.compute(&A, &j, &s));
+        let (mut m2, mut p2) = (m0, A);
+        let residual = [y[0] - y_hat[0], y[1] - y_hat[1]];
+        let (_, ok) = g.update(&mut m2, &mut p2, &residual);
+        assert!(ok);
+        assert!(m1.iter().zip(&m2).all(|(a, b)| (a - b).abs() < 1e-13));
+        assert!(p1.iter().zip(&p2).all(|(a, b)| (a - b).abs() < 1e-13));
+        assert_eq!(dense(&p1, 3), dense(&p1, 3).transpose());
+        let (jm, pm) = (DMatrix::from_column_slice(2, 3, &jd), dense(&A, 3));
+        let k = &pm * jm.transpose() * l.clone().try_inverse().unwrap();
+        let r = DVector::from_column_slice(&residual);
+        let m_ref = DVector::from_column_slice(&m0) + &k * &r;
+        let p_ref = &pm - &k * &l * k.transpose();
+        assert!((DVector::from_column_slice(&m1) - m_ref).abs().max() < 1e-12);
+        assert!((dense(&p1, 3) - p_ref).abs().max() < 1e-12);
+    }
+
+    #[test]
+    fn all_finite_detects_every_kind_of_non_finite_entry() {
+        let mut a = [1.0, -2.0, 0.0, f64::MAX, -f64::MAX, 1e-310, 3.0, 4.0, 5.0];
+        assert!(all_finite(&a));
+        for bad in [f64::NAN, f64::INFINITY, f64::NEG_INFINITY, -f64::NAN] {
+            a[7] = bad;
+            assert!(!all_finite(&a), "{bad} not detected");
+        }
     }
 }

@@ -64,6 +64,10 @@ pub trait ParticleStep: Sync + Send {
     }
     /// The step's scratch for one number type (allocated once).
     type Scratch<T: Real>: Send;
+    /// The first Jacobian of `scratch` that its model wrote off the sparsity pattern it declared
+    /// at set-up ([`crate::linalg::Sparse::pattern_broken`]), if any: the step's numbers are then
+    /// wrong and the run ends with [`FilterError::JacobianPattern`].
+    fn broken_pattern<T: Real>(scratch: &Self::Scratch<T>) -> Option<&'static str>;
     /// Allocates the scratch.
     fn scratch<T: Real>(&self) -> Self::Scratch<T>;
     /// Sizes of a particle's blocks.
@@ -127,6 +131,11 @@ impl<S: ParticleStep> Batch<S> {
     /// Whether particles go through the step four at a time.
     pub fn uses_lanes(&self) -> bool {
         self.lanes
+    }
+
+    /// [`ParticleStep::broken_pattern`] of the one-particle and the pack scratch.
+    fn broken_pattern(&self) -> Option<&'static str> {
+        S::broken_pattern(&self.scalar).or_else(|| S::broken_pattern(&self.packed))
     }
 
     /// One step of every particle (the contract of [`super::Filter::step`]).
@@ -344,7 +353,11 @@ impl<S: ParticleStep> Filter for Marginalized<S> {
             rng,
             &mut self.health,
         );
-        Ok(())
+        // Checked once per step: the flags are sticky, so a single wrong write is not missed.
+        match self.batch.broken_pattern() {
+            Some(which) => Err(FilterError::JacobianPattern { step: k, which }),
+            None => Ok(()),
+        }
     }
 
     fn health(&self) -> Health {

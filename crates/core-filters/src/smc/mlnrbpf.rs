@@ -32,7 +32,7 @@ use crate::real::Real;
 use crate::rng::StreamRng;
 
 use super::batch::{Marginalized, ParticleStep, Slots};
-use super::model::{ConditionallyLinear, LinearDims, Stage};
+use super::model::{linear_patterns, ConditionallyLinear, LinearDims, Stage};
 use super::store::Shape;
 
 /// The per-particle step of the MLN-RBPF (SPEC §5.2) and what it needs from the model, read once.
@@ -85,16 +85,7 @@ impl<M: ConditionallyLinear> MlnStep<M> {
         let mut stages = Vec::new();
         let mut draws = 0;
         for st in model.stages() {
-            let linked_pos: Vec<usize> = st
-                .linked
-                .iter()
-                .map(|l| {
-                    st.rows
-                        .iter()
-                        .position(|r| r == l)
-                        .expect("a linked row is one of the stage's rows")
-                })
-                .collect();
+            let linked_pos = st.linked_positions();
             let mut noisy_unlinked = Vec::new();
             let mut quiet_unlinked = Vec::new();
             for (p, &r) in st.rows.iter().enumerate() {
@@ -107,41 +98,16 @@ impl<M: ConditionallyLinear> MlnStep<M> {
                     quiet_unlinked.push((p, r));
                 }
             }
-            let l = st.linked.len();
-            let mut q_l = vec![0.0; l * l];
-            for (i, &r) in st.linked.iter().enumerate() {
-                q_l[i + i * l] = sd[r] * sd[r];
-            }
-            draws += l + noisy_unlinked.len();
+            draws += st.linked.len() + noisy_unlinked.len();
             stages.push(StagePlan {
                 stage: st.clone(),
                 linked_pos,
                 noisy_unlinked,
                 quiet_unlinked,
-                q_l,
+                q_l: st.linked_noise_cov(&sd),
             });
         }
-        // Record the patterns with one evaluation at u = 0 (values are irrelevant).
-        let zeros = vec![0.0; dims.nu];
-        let mut f = vec![0.0; dims.nu];
-        let f_patterns = stages
-            .iter()
-            .enumerate()
-            .map(|(s, plan)| {
-                let mut F = Sparse::recording(plan.stage.linked.len(), dims.nz);
-                F.start();
-                model.transition(s, 1, &zeros, &zeros, &mut f, &mut F);
-                F.finish();
-                F
-            })
-            .collect();
-        let mut h_pattern = Sparse::recording(dims.ny, dims.nz);
-        let mut h = vec![0.0; dims.ny];
-        h_pattern.start();
-        model.observation(1, &zeros, &mut h, &mut h_pattern);
-        h_pattern.finish();
-        let r = model.measurement_cov();
-        assert_eq!(r.len(), dims.ny * dims.ny, "R is ny × ny");
+        let (f_patterns, h_pattern, r) = linear_patterns(&model);
         Self {
             model,
             dims,
@@ -172,6 +138,16 @@ impl<M: ConditionallyLinear> ParticleStep for MlnStep<M> {
     fn initialise(&self, rng: &mut StreamRng, u: &mut [f64], mu: &mut [f64], cov: &mut [f64]) {
         self.model.sample_initial(rng, u);
         self.model.marginal_prior(rng, mu, cov);
+    }
+
+    fn broken_pattern<T: Real>(s: &MlnScratch<T>) -> Option<&'static str> {
+        if s.F.iter().any(Sparse::pattern_broken) {
+            Some("transition matrix F")
+        } else if s.H.pattern_broken() {
+            Some("measurement matrix H")
+        } else {
+            None
+        }
     }
 
     fn scratch<T: Real>(&self) -> MlnScratch<T> {
@@ -227,9 +203,7 @@ impl<M: ConditionallyLinear> ParticleStep for MlnStep<M> {
         let mut next_draw = 0;
         for (st, plan) in self.stages.iter().enumerate() {
             let F = &mut s.F[st];
-            F.start();
-            self.model.transition(st, k, u_prev, u, &mut s.f, F);
-            F.finish();
+            F.evaluate(|j| self.model.transition(st, k, u_prev, u, &mut s.f, j));
             // Rows that do not depend on z: f plus their own noise (or copied exactly).
             for &(pos, row, sd) in &plan.noisy_unlinked {
                 u[row] = s.f[pos] + T::splat(sd) * xi[next_draw];
@@ -259,9 +233,7 @@ impl<M: ConditionallyLinear> ParticleStep for MlnStep<M> {
         }
         debug_assert_eq!(next_draw, self.draws);
         // (c)+(d): y_k = h(u_k) + H(u_k) z + η: weight and update in one.
-        s.H.start();
-        self.model.observation(k, u, &mut s.h, &mut s.H);
-        s.H.finish();
+        s.H.evaluate(|j| self.model.observation(k, u, &mut s.h, j));
         for (j, r) in s.resid.iter_mut().enumerate() {
             *r = T::splat(y[j]) - s.h[j];
         }

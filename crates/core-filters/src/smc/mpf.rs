@@ -136,9 +136,7 @@ impl<M: ConditionallyQuadratic> MpfStep<M> {
                 );
                 let mut jac = Sparse::recording(rows.len(), nbl);
                 let mut value = vec![0.0; rows.len()];
-                jac.start();
-                model.sampled_dynamics(s, 1, &zn, &zn, &zbl, &mut value, &mut jac);
-                jac.finish();
+                jac.evaluate(|j| model.sampled_dynamics(s, 1, &zn, &zn, &zbl, &mut value, j));
                 draws += rows.len();
                 StagePlan {
                     rows: rows.clone(),
@@ -150,14 +148,10 @@ impl<M: ConditionallyQuadratic> MpfStep<M> {
             .collect();
         let mut d_pattern = Sparse::recording(nbl, nbl);
         let mut phi = vec![0.0; nbl];
-        d_pattern.start();
-        model.marginal_dynamics(1, &zn, &zn, &zbl, &mut phi, &mut d_pattern);
-        d_pattern.finish();
+        d_pattern.evaluate(|j| model.marginal_dynamics(1, &zn, &zn, &zbl, &mut phi, j));
         let mut y_pattern = Sparse::recording(ny, nbl);
         let mut h = vec![0.0; ny];
-        y_pattern.start();
-        model.observation(1, &zn, &zbl, &mut h, &mut y_pattern);
-        y_pattern.finish();
+        y_pattern.evaluate(|j| model.observation(1, &zn, &zbl, &mut h, j));
         let r = model.measurement_cov();
         assert_eq!(r.len(), ny * ny, "R is ny × ny");
         let substeps = model.substeps();
@@ -197,10 +191,10 @@ impl<M: ConditionallyQuadratic> MpfStep<M> {
         let q = plan.rows.len();
         let mut s = self.scratch::<f64>();
         let ss = &mut s.stages[stage];
-        ss.jac.start();
-        self.model
-            .sampled_dynamics(stage, k, xn_prev, xn_prev, m, &mut ss.value, &mut ss.jac);
-        ss.jac.finish();
+        ss.jac.evaluate(|j| {
+            self.model
+                .sampled_dynamics(stage, k, xn_prev, xn_prev, m, &mut ss.value, j)
+        });
         let mut mean = ss.value.clone();
         if !plan.hess.is_empty() {
             plan.hess.terms(p, nbl, &mut ss.mean2, &mut ss.cov2);
@@ -236,10 +230,10 @@ impl<M: ConditionallyQuadratic> MpfStep<M> {
             let ss = &mut s.stages[st];
             let q = plan.rows.len();
             // (a) the EKF2 moments of ψ: mean ψ(m) + ½tr(𝓗ⁱP), covariance J P Jᵀ + cov2 + Qₙ.
-            ss.jac.start();
-            self.model
-                .sampled_dynamics(st, k, xn_prev, xn, m, &mut ss.value, &mut ss.jac);
-            ss.jac.finish();
+            ss.jac.evaluate(|j| {
+                self.model
+                    .sampled_dynamics(st, k, xn_prev, xn, m, &mut ss.value, j)
+            });
             ss.pred.copy_from_slice(&ss.value);
             if !plan.hess.is_empty() {
                 plan.hess.terms(cov, nbl, &mut ss.mean2, &mut ss.cov2);
@@ -264,10 +258,10 @@ impl<M: ConditionallyQuadratic> MpfStep<M> {
             }
         }
         // (c) propagate x^bl through φ_bl(xⁿ_{k−1}, xⁿ_k, ·) at the updated mean.
-        s.d.start();
-        self.model
-            .marginal_dynamics(k, xn_prev, xn, m, &mut s.phi, &mut s.d);
-        s.d.finish();
+        s.d.evaluate(|j| {
+            self.model
+                .marginal_dynamics(k, xn_prev, xn, m, &mut s.phi, j)
+        });
         ekf2_propagate_near_identity(
             m,
             cov,
@@ -296,6 +290,18 @@ impl<M: ConditionallyQuadratic> ParticleStep for MpfStep<M> {
     fn initialise(&self, rng: &mut StreamRng, xn: &mut [f64], m: &mut [f64], p: &mut [f64]) {
         self.model.sample_initial(rng, xn);
         self.model.marginal_prior(rng, m, p);
+    }
+
+    fn broken_pattern<T: Real>(s: &MpfScratch<T>) -> Option<&'static str> {
+        if s.stages.iter().any(|ss| ss.jac.pattern_broken()) {
+            Some("sampled dynamics Jacobian")
+        } else if s.d.pattern_broken() {
+            Some("marginal dynamics Jacobian")
+        } else if s.jy.pattern_broken() {
+            Some("measurement Jacobian")
+        } else {
+            None
+        }
     }
 
     fn scratch<T: Real>(&self) -> MpfScratch<T> {
@@ -379,9 +385,7 @@ impl<M: ConditionallyQuadratic> ParticleStep for MpfStep<M> {
         // (d)+(e) the EKF2 update with y_k at grid index kM; its innovation log-density is the
         // weight factor.
         let k = last;
-        s.jy.start();
-        self.model.observation(k, xn, m, &mut s.h, &mut s.jy);
-        s.jy.finish();
+        s.jy.evaluate(|j| self.model.observation(k, xn, m, &mut s.h, j));
         let ny = self.dims.ny;
         for j in 0..ny {
             s.resid[j] = T::splat(y[j]) - s.h[j];

@@ -33,7 +33,7 @@ use crate::real::Real;
 use crate::rng::StreamRng;
 
 use super::batch::{Marginalized, ParticleStep, Slots};
-use super::model::{ConditionallyLinear, LinearDims, Stage};
+use super::model::{linear_patterns, ConditionallyLinear, LinearDims, Stage};
 use super::store::Shape;
 
 /// How Storvik's step (iii) treats the measurement `y_k` (SPEC §5.3).
@@ -125,21 +125,8 @@ impl<M: ConditionallyLinear> StorvikStep<M> {
                     .iter()
                     .map(|r| st.linked.iter().position(|l| l == r))
                     .collect();
-                let linked_pos = st
-                    .linked
-                    .iter()
-                    .map(|l| {
-                        st.rows
-                            .iter()
-                            .position(|r| r == l)
-                            .expect("a linked row is one of the stage's rows")
-                    })
-                    .collect();
-                let l = st.linked.len();
-                let mut q_l = vec![0.0; l * l];
-                for (i, &r) in st.linked.iter().enumerate() {
-                    q_l[i + i * l] = sd[r] * sd[r];
-                }
+                let linked_pos = st.linked_positions();
+                let q_l = st.linked_noise_cov(&sd);
                 let row_sd: Vec<f64> = st.rows.iter().map(|&r| sd[r]).collect();
                 draws += row_sd.iter().filter(|s| **s != 0.0).count();
                 StagePlan {
@@ -153,37 +140,15 @@ impl<M: ConditionallyLinear> StorvikStep<M> {
             .collect();
         let zu = vec![0.0; nu];
         let zz = vec![0.0; nz];
-        let mut f = vec![0.0; nu];
-        let f_patterns = stages
-            .iter()
-            .enumerate()
-            .map(|(s, plan)| {
-                let mut F = Sparse::recording(plan.stage.linked.len(), nz);
-                F.start();
-                model.transition(s, 1, &zu, &zu, &mut f, &mut F);
-                F.finish();
-                F
-            })
-            .collect();
-        let mut h = vec![0.0; ny];
-        let mut h_pattern = Sparse::recording(ny, nz);
-        h_pattern.start();
-        model.observation(1, &zu, &mut h, &mut h_pattern);
-        h_pattern.finish();
+        let (f_patterns, h_pattern, r) = linear_patterns(&model);
         let mut ju_pattern = Sparse::recording(ny, nu);
-        ju_pattern.start();
-        model.observation_jacobian_u(1, &zu, &zz, &mut ju_pattern);
-        ju_pattern.finish();
+        ju_pattern.evaluate(|j| model.observation_jacobian_u(1, &zu, &zz, j));
         let mut s_pattern = Sparse::recording(nu, nz);
-        s_pattern.start();
-        model.transition_sensitivity(1, &zu, &zu, &zz, &mut s_pattern);
-        s_pattern.finish();
+        s_pattern.evaluate(|j| model.transition_sensitivity(1, &zu, &zu, &zz, j));
         let mut s_rows = vec![Vec::new(); nu];
         for e in 0..s_pattern.nnz() {
             s_rows[s_pattern.entry(e).0].push(e);
         }
-        let r = model.measurement_cov();
-        assert_eq!(r.len(), ny * ny, "R is ny × ny");
         let mut setup = Health::default();
         let noise = FactoredNoise::new(&r, ny, "measurement covariance R", &mut setup);
         Self {
@@ -234,6 +199,20 @@ impl<M: ConditionallyLinear> ParticleStep for StorvikStep<M> {
                 Err(FilterError::NonFinite { step: k, which })
             }
             Err(e) => Err(e.clone()),
+        }
+    }
+
+    fn broken_pattern<T: Real>(s: &StorvikScratch<T>) -> Option<&'static str> {
+        if s.F.iter().any(Sparse::pattern_broken) {
+            Some("transition matrix F")
+        } else if s.H.pattern_broken() {
+            Some("measurement matrix H")
+        } else if s.Ju.pattern_broken() {
+            Some("measurement Jacobian J_u")
+        } else if s.S.pattern_broken() {
+            Some("transition sensitivity S")
+        } else {
+            None
         }
     }
 
@@ -309,9 +288,7 @@ impl<M: ConditionallyLinear> ParticleStep for StorvikStep<M> {
         // (ii) u_k ~ N(f + F z0, Q_u), stage by stage.
         for (st, plan) in self.stages.iter().enumerate() {
             let (F, f) = (&mut s.F[st], &mut s.f[st]);
-            F.start();
-            self.model.transition(st, k, u_prev, u, f, F);
-            F.finish();
+            F.evaluate(|j| self.model.transition(st, k, u_prev, u, f, j));
             let l = plan.stage.linked.len();
             s.fz[..l].fill(T::splat(0.0));
             F.mul_add(&s.z0, &mut s.fz[..l]);
@@ -328,9 +305,7 @@ impl<M: ConditionallyLinear> ParticleStep for StorvikStep<M> {
             }
         }
         // Weight N(y_k; H(u_k) z0 + h(u_k), R).
-        s.H.start();
-        self.model.observation(k, u, &mut s.h, &mut s.H);
-        s.H.finish();
+        s.H.evaluate(|j| self.model.observation(k, u, &mut s.h, j));
         s.yhat.copy_from_slice(&s.h);
         s.H.mul_add(&s.z0, &mut s.yhat);
         for j in 0..ny {
@@ -370,13 +345,8 @@ impl<M: ConditionallyLinear> ParticleStep for StorvikStep<M> {
             }
             StorvikUpdate::Linearised => {
                 // G = H(u_k) + J_u ∂u_k/∂z at z0, dense (ny × nz, column-major values).
-                s.Ju.start();
-                self.model.observation_jacobian_u(k, u, &s.z0, &mut s.Ju);
-                s.Ju.finish();
-                s.S.start();
-                self.model
-                    .transition_sensitivity(k, u_prev, u, &s.z0, &mut s.S);
-                s.S.finish();
+                s.Ju.evaluate(|j| self.model.observation_jacobian_u(k, u, &s.z0, j));
+                s.S.evaluate(|j| self.model.transition_sensitivity(k, u_prev, u, &s.z0, j));
                 let g = s.G.values_mut();
                 g.fill(T::splat(0.0));
                 for e in 0..s.H.nnz() {

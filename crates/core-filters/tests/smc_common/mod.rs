@@ -34,6 +34,9 @@ pub struct Linked {
     pub u0_sd: f64,
     pub z_mean: f64,
     pub z_sd: f64,
+    /// From this step on, `H` is written as two half entries instead of one: the same matrix
+    /// with another sparsity pattern than the declared one (a model bug the filters must report).
+    pub pattern_changes_at: usize,
     stages: Vec<Stage>,
     sd: Vec<f64>,
 }
@@ -51,6 +54,7 @@ impl Linked {
             u0_sd: 0.5,
             z_mean: 1.0,
             z_sd: 0.5,
+            pattern_changes_at: usize::MAX,
             stages: vec![Stage {
                 rows: vec![0],
                 linked: vec![0],
@@ -172,9 +176,14 @@ impl ConditionallyLinear for Linked {
         f[0] = T::splat(self.a) * u_prev[0];
         F.add(0, 0, T::splat(self.b));
     }
-    fn observation<T: Real>(&self, _k: usize, u: &[T], h: &mut [T], H: &mut Sparse<T>) {
+    fn observation<T: Real>(&self, k: usize, u: &[T], h: &mut [T], H: &mut Sparse<T>) {
         h[0] = T::splat(self.c) * u[0];
-        H.add(0, 0, T::splat(self.d));
+        if k < self.pattern_changes_at {
+            H.add(0, 0, T::splat(self.d));
+        } else {
+            H.add(0, 0, T::splat(0.5 * self.d));
+            H.add(0, 0, T::splat(0.5 * self.d));
+        }
     }
     fn observation_jacobian_u<T: Real>(&self, _k: usize, _u: &[T], _z: &[T], J: &mut Sparse<T>) {
         J.add(0, 0, T::splat(self.c));

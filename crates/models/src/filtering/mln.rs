@@ -14,7 +14,7 @@
 //!
 //! The n rows are set by no stage (copied).
 
-use super::{ChainCore, ChainSpec, Discretisation, SpecError, NLIN};
+use super::{ChainCore, ChainSpec, Discretisation, ForceVariables, SpecError, NLIN, NNONLIN};
 use crate::structure::{ChainTopology, ChainView, HysteresisLaw};
 use core_filters::linalg::Sparse;
 use core_filters::model::{Layout, Slot};
@@ -29,6 +29,10 @@ pub struct MlnChain {
     stages: Vec<Stage>,
     noise_sd: Vec<f64>,
     symplectic: bool,
+    /// z (θ without the n's) as the variables of the force gradients: k and c.
+    theta_vars: ForceVariables,
+    /// u as the variables of the force gradients: displacements, velocities, r.
+    state_vars: ForceVariables,
 }
 
 /// `u` (and optionally `z`) as a chain point.
@@ -105,11 +109,25 @@ impl MlnChain {
         noise_sd.extend(std::iter::repeat_n(core.q_vel, n));
         noise_sd.extend_from_slice(&core.q_r);
         noise_sd.extend(std::iter::repeat_n(0.0, ne));
+        let theta_vars = ForceVariables {
+            theta: Some((0, n)),
+            displacements: false,
+            hysteretic: None,
+            velocities: vec![None; n],
+        };
+        let state_vars = ForceVariables {
+            theta: None,
+            displacements: true,
+            hysteretic: Some(2 * n),
+            velocities: (n..2 * n).map(Some).collect(),
+        };
         Ok(Self {
             core,
             stages,
             noise_sd,
             symplectic,
+            theta_vars,
+            state_vars,
         })
     }
 
@@ -129,8 +147,7 @@ impl MlnChain {
         2 * self.core.n + self.core.ne + e
     }
 
-    /// Writes `scale · ∂a_j/∂z` at `u` into row `row`: `a_j = ground + (F_{j+1} − F_j)/m_j`
-    /// with `∂F_j/∂k_j = d_j`, `∂F_j/∂c_j = δv_j`. Fixed pattern: 2 entries, 4 below the top.
+    /// Writes `scale · ∂a_j/∂z` at `u` into row `row` (`∂F_j/∂k_j = d_j`, `∂F_j/∂c_j = δv_j`).
     #[inline]
     fn write_acceleration_row<T: Real>(
         &self,
@@ -140,44 +157,13 @@ impl MlnChain {
         u: &[T],
         scale: T,
     ) {
-        let n = self.core.n;
-        let view = View { u, z: &[], n };
-        let s = scale * T::splat(self.core.inv_mass[j]);
-        let (d, dv) = self.core.topo.element_coordinates(&view, j);
-        out.add(row, j, -(s * d));
-        out.add(row, n + j, -(s * dv));
-        if j + 1 < n {
-            let (d, dv) = self.core.topo.element_coordinates(&view, j + 1);
-            out.add(row, j + 1, s * d);
-            out.add(row, n + j + 1, s * dv);
-        }
-    }
-
-    /// Writes `scale · ∂F_j/∂u` at `(u, z)` into row `row`.
-    #[inline]
-    fn write_force_gradient_u<T: Real>(
-        &self,
-        out: &mut Sparse<T>,
-        row: usize,
-        j: usize,
-        z: &[T],
-        scale: T,
-    ) {
-        let n = self.core.n;
-        let (k, c) = (scale * z[j], scale * z[n + j]);
-        match self.core.topo.element_at(j) {
-            Some(e) => out.add(row, 2 * n + e, k),
-            None => {
-                out.add(row, j, k);
-                if j > 0 {
-                    out.add(row, j - 1, -k);
-                }
-            }
-        }
-        out.add(row, n + j, c);
-        if j > 0 {
-            out.add(row, n + j - 1, -c);
-        }
+        let view = View {
+            u,
+            z: &[],
+            n: self.core.n,
+        };
+        self.core
+            .write_acceleration_gradient(out, row, j, &view, &self.theta_vars, scale);
     }
 
     /// Drift velocity of the element at storey `j` from the velocities in `u`.
@@ -239,7 +225,8 @@ impl ConditionallyLinear for MlnChain {
         cov.fill(0.0);
         let mut i = 0;
         for t in 0..m.len() {
-            let is_n = t >= 2 * n && (t - 2 * n) % 3 == 2;
+            // Per element θ holds its linear parameters, then its nonlinear ones (n).
+            let is_n = t >= 2 * n && (t - 2 * n) % (NLIN + NNONLIN) >= NLIN;
             if !is_n {
                 mean[i] = m[t];
                 cov[i + i * nz] = v[t];
@@ -263,7 +250,6 @@ impl ConditionallyLinear for MlnChain {
         let dt = T::splat(self.core.dt);
         let ground = T::splat(self.core.transition_ground(k));
         let hyst = &self.core.spec.hysteretic;
-        F.start();
         match (self.symplectic, stage) {
             (false, 0) => {
                 for j in 0..n {
@@ -299,32 +285,25 @@ impl ConditionallyLinear for MlnChain {
             }
             _ => panic!("no stage {stage}"),
         }
-        F.finish();
     }
 
     /// `h(u_k)` = the ground term with ü_g,meas(k); `H(u_k)` = `∂a_s/∂z` per sensor storey s.
     fn observation<T: Real>(&self, k: usize, u: &[T], h: &mut [T], H: &mut Sparse<T>) {
         let ground = T::splat(self.core.measurement_ground(k));
-        H.start();
         for (i, &s) in self.core.sensors.iter().enumerate() {
             h[i] = ground;
             self.write_acceleration_row(H, i, s, u, T::splat(1.0));
         }
-        H.finish();
     }
 
     /// `∂/∂u [H(u) z + h]`: row i = `(−∂F_s/∂u + ∂F_{s+1}/∂u)/m_s` at z; the n columns are zero.
     fn observation_jacobian_u<T: Real>(&self, _k: usize, _u: &[T], z: &[T], J: &mut Sparse<T>) {
         let n = self.core.n;
-        J.start();
+        let view = View { u: &[], z, n };
         for (i, &s) in self.core.sensors.iter().enumerate() {
-            let inv = T::splat(self.core.inv_mass[s]);
-            self.write_force_gradient_u(J, i, s, z, -inv);
-            if s + 1 < n {
-                self.write_force_gradient_u(J, i, s + 1, z, inv);
-            }
+            self.core
+                .write_acceleration_gradient(J, i, s, &view, &self.state_vars, T::splat(1.0));
         }
-        J.finish();
     }
 
     /// `∂u_k/∂z` along the sampled path at z. Euler: the linked rows of F. Symplectic: v rows
@@ -340,7 +319,6 @@ impl ConditionallyLinear for MlnChain {
         let n = self.core.n;
         let dt = T::splat(self.core.dt);
         let hyst = &self.core.spec.hysteretic;
-        S.start();
         if self.symplectic {
             for j in 0..n {
                 self.write_acceleration_row(S, n + j, j, u_prev, dt);
@@ -375,7 +353,6 @@ impl ConditionallyLinear for MlnChain {
                 S.add(2 * n + e, b + 1, dt * g[2]);
             }
         }
-        S.finish();
     }
 
     fn measurement_cov(&self) -> Vec<f64> {

@@ -45,7 +45,11 @@ pub use mpf::MpfChain;
 pub use prior::{ChainPrior, ElementPrior, MarginalPrior};
 pub use spec::{ChainSpec, RmsLevels, SpecError, MAX_SUBSTEPS};
 
-use crate::structure::{state_names, theta_names, BoucWenLaw, ChainTopology, HysteresisLaw};
+use crate::structure::{
+    state_names, theta_names, BoucWenLaw, ChainTopology, ChainView, HysteresisLaw,
+};
+use core_filters::linalg::Sparse;
+use core_filters::real::Real;
 use core_filters::rng::StreamRng;
 
 /// The hysteresis law of the partitions' elements.
@@ -70,6 +74,22 @@ fn fine_grid(ug: &[f64], dt: f64, m: usize) -> Vec<f64> {
     let fine = motion.resample_linear(dt / m as f64).acc;
     assert_eq!(fine.len(), (ug.len() - 1) * m + 1, "m samples per interval");
     fine
+}
+
+/// The variables a gradient of the storey forces is taken with respect to, by their columns.
+/// `F_j = k_j d_j + c_j δv_j`, with `d_j = x_j − x_{j−1}` (or `r_e` for the hysteretic element
+/// `e` at storey `j`) and `δv_j = v_j − v_{j−1}`.
+#[derive(Debug, Clone)]
+pub(crate) struct ForceVariables {
+    /// Columns of `k_1` and `c_1` when θ's stiffnesses and dampings are variables (`k_j` at
+    /// `k + j`, `c_j` at `c + j`).
+    pub theta: Option<(usize, usize)>,
+    /// Whether the displacements are variables (`x_j` at column `j`).
+    pub displacements: bool,
+    /// Column of `r_1` when the hysteretic variables are (`r_e` at `r + e`).
+    pub hysteretic: Option<usize>,
+    /// Column of each storey's velocity where it is a variable.
+    pub velocities: Vec<Option<usize>>,
 }
 
 /// What every partition shares: the validated spec, the force kernel and precomputed constants.
@@ -156,6 +176,66 @@ impl ChainCore {
             r[i + i * m] = *v;
         }
         r
+    }
+
+    /// Writes `s · ∂F_j/∂w` at the point `p` into row `row`, `w` the variables `vars`: the one
+    /// force gradient of the partitions. The entries come in a fixed order (θ, deformation,
+    /// velocities) that depends on `j` and `vars` only, so the pattern is the same at every call;
+    /// a quantity that is not needed is not read (`p` may lack θ or the states).
+    #[inline]
+    pub fn write_force_gradient<T: Real>(
+        &self,
+        out: &mut Sparse<T>,
+        row: usize,
+        j: usize,
+        p: &impl ChainView<T>,
+        vars: &ForceVariables,
+        s: T,
+    ) {
+        if let Some((k0, c0)) = vars.theta {
+            let (d, dv) = self.topo.element_coordinates(p, j);
+            out.add(row, k0 + j, s * d);
+            out.add(row, c0 + j, s * dv);
+        }
+        match (self.topo.element_at(j), vars.hysteretic) {
+            (Some(e), Some(r0)) => out.add(row, r0 + e, s * p.k(j)),
+            (None, _) if vars.displacements => {
+                let k = s * p.k(j);
+                out.add(row, j, k);
+                if j > 0 {
+                    out.add(row, j - 1, -k);
+                }
+            }
+            _ => {}
+        }
+        let below = if j > 0 { vars.velocities[j - 1] } else { None };
+        if vars.velocities[j].is_some() || below.is_some() {
+            let c = s * p.c(j);
+            if let Some(i) = vars.velocities[j] {
+                out.add(row, i, c);
+            }
+            if let Some(i) = below {
+                out.add(row, i, -c);
+            }
+        }
+    }
+
+    /// Writes `scale · ∂a_j/∂w` (`a_j = ground + (F_{j+1} − F_j)/m_j`) into row `row`.
+    #[inline]
+    pub fn write_acceleration_gradient<T: Real>(
+        &self,
+        out: &mut Sparse<T>,
+        row: usize,
+        j: usize,
+        p: &impl ChainView<T>,
+        vars: &ForceVariables,
+        scale: T,
+    ) {
+        let s = scale * T::splat(self.inv_mass[j]);
+        self.write_force_gradient(out, row, j, p, vars, -s);
+        if j + 1 < self.n {
+            self.write_force_gradient(out, row, j + 1, p, vars, s);
+        }
     }
 
     /// Index of the first θ entry of element `e` (β_e) in θ.

@@ -25,7 +25,7 @@
 //! A chain without hysteretic element samples nothing: xⁿ is empty and there are no sampled
 //! stages, so the MPF-EKF2 reduces to an EKF2 (exact here: a KF with bilinear terms) on x^bl.
 
-use super::{ChainCore, ChainSpec, Discretisation, SpecError, NLIN};
+use super::{ChainCore, ChainSpec, Discretisation, ForceVariables, SpecError, NLIN};
 use crate::structure::{ChainTopology, ChainView, HysteresisLaw};
 use core_filters::linalg::{Sparse, SymEntries};
 use core_filters::model::{Layout, Slot, SparseHessians};
@@ -58,6 +58,8 @@ pub struct MpfChain {
     c0: usize,
     /// Offset of (β_0, γ_0) in x^bl.
     b0: usize,
+    /// x^bl as the variables of the force gradients.
+    force_vars: ForceVariables,
     stages: Vec<Vec<usize>>,
     stage_noise: Vec<Vec<f64>>,
     stage_hessians: Vec<SparseHessians>,
@@ -134,6 +136,18 @@ impl MpfChain {
         let nvm = marginal_vel.len();
         let nvs = sampled_vel.len();
         let (k0, c0, b0) = (n + nvm, 2 * n + nvm, 3 * n + nvm);
+        let force_vars = ForceVariables {
+            theta: Some((k0, c0)),
+            displacements: true,
+            hysteretic: None,
+            velocities: vel
+                .iter()
+                .map(|v| match v {
+                    Vel::Marginal(i) => Some(*i),
+                    Vel::Sampled(_) => None,
+                })
+                .collect(),
+        };
         let mut me = Self {
             core,
             symplectic,
@@ -143,6 +157,7 @@ impl MpfChain {
             k0,
             c0,
             b0,
+            force_vars,
             stages: Vec::new(),
             stage_noise: Vec::new(),
             stage_hessians: Vec::new(),
@@ -252,37 +267,6 @@ impl MpfChain {
         }
     }
 
-    /// Writes `scale · ∂F_j/∂x^bl` at the point into row `row` (fixed pattern per j).
-    #[inline]
-    fn write_force_gradient<T: Real>(
-        &self,
-        out: &mut Sparse<T>,
-        row: usize,
-        j: usize,
-        p: &View<'_, T>,
-        s: T,
-    ) {
-        let (d, dv) = self.core.topo.element_coordinates(p, j);
-        out.add(row, self.k0 + j, s * d);
-        out.add(row, self.c0 + j, s * dv);
-        if self.core.topo.element_at(j).is_none() {
-            let k = s * p.k(j);
-            out.add(row, j, k);
-            if j > 0 {
-                out.add(row, j - 1, -k);
-            }
-        }
-        let c = s * p.c(j);
-        if let Vel::Marginal(i) = self.vel[j] {
-            out.add(row, i, c);
-        }
-        if j > 0 {
-            if let Vel::Marginal(i) = self.vel[j - 1] {
-                out.add(row, i, -c);
-            }
-        }
-    }
-
     /// Writes `scale · ∂a_j/∂x^bl` at the point into row `row`.
     #[inline]
     fn write_acceleration_gradient<T: Real>(
@@ -293,11 +277,8 @@ impl MpfChain {
         p: &View<'_, T>,
         scale: T,
     ) {
-        let s = scale * T::splat(self.core.inv_mass[j]);
-        self.write_force_gradient(out, row, j, p, -s);
-        if j + 1 < self.core.n {
-            self.write_force_gradient(out, row, j + 1, p, s);
-        }
+        self.core
+            .write_acceleration_gradient(out, row, j, p, &self.force_vars, scale);
     }
 
     /// Returns `r_e + dt (g₀ + β g₁ + γ g₂)` at drift velocity `dv` and writes its row of the
@@ -388,7 +369,6 @@ impl ConditionallyQuadratic for MpfChain {
         };
         let nvs = self.nvs();
         let hyst = &self.core.spec.hysteretic;
-        jac.start();
         let velocities = |value: &mut [T], jac: &mut Sparse<T>| {
             for (i, &j) in self.sampled_vel.iter().enumerate() {
                 value[i] = xn_prev[i] + dt * self.core.topo.acceleration(&p, j, ground);
@@ -417,7 +397,6 @@ impl ConditionallyQuadratic for MpfChain {
             }
             _ => panic!("no stage {stage}"),
         }
-        jac.finish();
     }
 
     fn sampled_hessians(&self, stage: usize) -> &SparseHessians {
@@ -447,7 +426,6 @@ impl ConditionallyQuadratic for MpfChain {
             p: self,
         };
         value.copy_from_slice(m);
-        d.start();
         for (i, &j) in self.marginal_vel.iter().enumerate() {
             let vi = n + i;
             value[vi] = m[vi] + dt * self.core.topo.acceleration(&p, j, ground);
@@ -468,7 +446,6 @@ impl ConditionallyQuadratic for MpfChain {
                 }
             }
         }
-        d.finish();
     }
 
     fn marginal_hessians(&self) -> &SparseHessians {
@@ -490,12 +467,10 @@ impl ConditionallyQuadratic for MpfChain {
     ) {
         let ground = T::splat(self.core.measurement_ground(k));
         let p = View { xn, m, p: self };
-        jac.start();
         for (i, &s) in self.core.sensors.iter().enumerate() {
             value[i] = self.core.topo.acceleration(&p, s, ground);
             self.write_acceleration_gradient(jac, i, s, &p, T::splat(1.0));
         }
-        jac.finish();
     }
 
     fn observation_hessians(&self) -> &SparseHessians {
