@@ -266,6 +266,7 @@ where
         }
         Ok(out)
     };
+    crate::limits::check_count(opts.threads, 0, crate::limits::MAX_THREADS).context("--threads")?;
     let mut out = if opts.threads > 0 {
         rayon::ThreadPoolBuilder::new()
             .num_threads(opts.threads)

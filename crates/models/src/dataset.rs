@@ -999,6 +999,26 @@ pub fn load_dir(dir: &Path) -> Result<LoadedDataset, DatasetError> {
     };
     let tbytes = read_bytes(&tpath)?;
     if let Some(files) = &digests {
+        // Every file it lists is checked: a name other than the two data files is one this
+        // reader would never open, so it is refused rather than passed over.
+        if let Some(name) = files
+            .keys()
+            .find(|n| ![MEASURED, TRUTH].contains(&n.as_str()))
+        {
+            let path = dir.join(name);
+            return Err(DatasetError::Checksum {
+                message: format!(
+                    "listed in {} (`files`), but a data set holds only {MEASURED} and {TRUTH}{}",
+                    jpath.display(),
+                    if path.exists() {
+                        ""
+                    } else {
+                        "; it is missing too"
+                    }
+                ),
+                file: path,
+            });
+        }
         for (name, content, path) in [
             (MEASURED, Some(&mbytes), &mpath),
             (TRUTH, tbytes.as_ref(), &tpath),

@@ -146,7 +146,9 @@ pub fn parse_fix(s: &str) -> Result<BTreeMap<String, f64>> {
         if !v.is_finite() {
             bail!("--fix: value of {name} is not finite");
         }
-        out.insert(name.trim().to_string(), v);
+        if out.insert(name.trim().to_string(), v).is_some() {
+            bail!("--fix: {} is given twice", name.trim());
+        }
     }
     Ok(out)
 }
