@@ -25,6 +25,7 @@ pub mod figures;
 pub mod limits;
 pub mod metrics;
 pub mod observe;
+pub mod pace;
 pub mod pipeline;
 mod pool;
 pub mod record;

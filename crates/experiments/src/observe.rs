@@ -161,6 +161,8 @@ pub struct Recorder<'a> {
     pub state_sums: Vec<ErrorSums>,
     /// Optional progress bar advanced every 64 steps (terminal runs of `sysid filter`).
     pub progress: Option<indicatif::ProgressBar>,
+    /// Reports of the pace of a long run where no bar is drawn ([`crate::pace`]).
+    pub pace: Option<crate::pace::Pace>,
     /// Distinct values of each sampled parameter at the end of a completed run (degeneracy).
     pub distinct: Vec<(String, usize)>,
     /// Central credible intervals of θ at the end of a completed run ([`ParamIntervals`]).
@@ -198,6 +200,7 @@ impl<'a> Recorder<'a> {
             truth,
             state_sums: vec![ErrorSums::default(); n_states],
             progress: None,
+            pace: None,
             distinct: Vec::new(),
             credible: Vec::new(),
             keep_final: false,
@@ -270,6 +273,9 @@ impl Observer for Recorder<'_> {
             if k % 64 == 0 || k == self.total_steps {
                 bar.set_position(k as u64);
             }
+        }
+        if let Some(p) = &mut self.pace {
+            p.step(k);
         }
         if let Some(p) = &mut self.predictor {
             p.step(k, post);
