@@ -271,17 +271,21 @@ pub fn summary_table(r: &RunRecord) -> String {
 pub struct Residuals {
     /// Time of each kept step (s). Keep every step for the whiteness test: a decimated sequence
     /// tests lags that are multiples of the decimation only.
+    #[serde(with = "crate::record::number::vec")]
     pub t: Vec<f64>,
     /// Measured channels, e.g. `a1`, `a2`, `a3`.
     pub channels: Vec<String>,
     /// `measured[k][i]`: measurement of channel i at kept step k.
+    #[serde(with = "crate::record::number::vec_vec")]
     pub measured: Vec<Vec<f64>>,
     /// One-step-ahead prediction of the measurement from the posterior means of the previous
     /// step ([`crate::residuals`]).
+    #[serde(with = "crate::record::number::vec_vec")]
     pub predicted: Vec<Vec<f64>>,
     /// (y_k − ŷ_k) / √R_ii per channel: uncorrelated in time, with a variance of at least 1
     /// (the predictive variance is at least the noise variance), when the model and its noise
     /// levels are right.
+    #[serde(with = "crate::record::number::vec_vec")]
     pub normalised_innovation: Vec<Vec<f64>>,
 }
 

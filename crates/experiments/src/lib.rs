@@ -28,6 +28,7 @@ pub mod limits;
 mod markdown;
 pub mod metrics;
 pub mod observe;
+pub mod pace;
 pub mod pipeline;
 mod pool;
 pub mod record;

@@ -48,6 +48,7 @@ pub struct ParamIntervals {
     pub parameter: String,
     pub shape: PosteriorShape,
     /// One interval per level, in the order of [`STANDARD_LEVELS`] (empty when `error` is set).
+    #[serde(with = "intervals_repr")]
     pub intervals: Vec<CredibleInterval>,
     /// Why the intervals could not be computed (a non-finite particle value, …).
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -55,8 +56,48 @@ pub struct ParamIntervals {
     /// Monte-Carlo standard error of θ_val, from the spread of the θ_vals of independent
     /// filters pooled into this run (s.d. over filters / √filters); absent for a single filter,
     /// whose posterior does not know its own Monte-Carlo error.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[serde(
+        default,
+        skip_serializing_if = "Option::is_none",
+        with = "crate::record::number::opt_scalar"
+    )]
     pub mc_se: Option<f64>,
+}
+
+/// [`CredibleInterval`] with the record's number encoding (its type lives with the filters,
+/// which write no records).
+mod intervals_repr {
+    use super::*;
+    use crate::record::number::scalar;
+    use serde::{Deserializer, Serializer};
+
+    #[derive(Serialize, Deserialize)]
+    struct Repr {
+        #[serde(with = "scalar")]
+        level: f64,
+        #[serde(with = "scalar")]
+        lo: f64,
+        #[serde(with = "scalar")]
+        hi: f64,
+    }
+
+    pub fn serialize<S: Serializer>(x: &[CredibleInterval], s: S) -> Result<S::Ok, S::Error> {
+        s.collect_seq(x.iter().map(|c| Repr {
+            level: c.level,
+            lo: c.lo,
+            hi: c.hi,
+        }))
+    }
+    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<Vec<CredibleInterval>, D::Error> {
+        Ok(Vec::<Repr>::deserialize(d)?
+            .into_iter()
+            .map(|r| CredibleInterval {
+                level: r.level,
+                lo: r.lo,
+                hi: r.hi,
+            })
+            .collect())
+    }
 }
 
 impl ParamIntervals {
@@ -120,6 +161,8 @@ pub struct Recorder<'a> {
     pub state_sums: Vec<ErrorSums>,
     /// Optional progress bar advanced every 64 steps (terminal runs of `sysid filter`).
     pub progress: Option<indicatif::ProgressBar>,
+    /// Reports of the pace of a long run where no bar is drawn ([`crate::pace`]).
+    pub pace: Option<crate::pace::Pace>,
     /// Distinct values of each sampled parameter at the end of a completed run (degeneracy).
     pub distinct: Vec<(String, usize)>,
     /// Central credible intervals of θ at the end of a completed run ([`ParamIntervals`]).
@@ -157,6 +200,7 @@ impl<'a> Recorder<'a> {
             truth,
             state_sums: vec![ErrorSums::default(); n_states],
             progress: None,
+            pace: None,
             distinct: Vec::new(),
             credible: Vec::new(),
             keep_final: false,
@@ -229,6 +273,9 @@ impl Observer for Recorder<'_> {
             if k % 64 == 0 || k == self.total_steps {
                 bar.set_position(k as u64);
             }
+        }
+        if let Some(p) = &mut self.pace {
+            p.step(k);
         }
         if let Some(p) = &mut self.predictor {
             p.step(k, post);

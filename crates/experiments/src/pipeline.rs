@@ -411,6 +411,7 @@ fn drive(
     pc: &SmcConfig,
     member: usize,
     predictor: Option<crate::residuals::Predictor>,
+    started: Instant,
 ) -> Driven {
     let data = input.data;
     let layout = filter.layout().clone();
@@ -452,6 +453,15 @@ fn drive(
         );
         bar.set_prefix(algorithm.name());
         recorder.progress = Some(bar);
+    } else if input.progress {
+        let pooled = s.pool.max(1);
+        recorder.pace = Some(crate::pace::Pace::new(
+            algorithm.name(),
+            steps * pooled,
+            steps as f64 * data.dt,
+            started,
+            member * steps,
+        ));
     }
     recorder.keep_final = s.pool > 1;
     recorder.predictor = predictor;
@@ -516,6 +526,8 @@ pub fn identify(input: &RunInput, algorithm: Algorithm, s: &FilterSettings) -> R
             channels,
         )?))
     };
+    // The pace of a long run is timed over all its pooled filters ([`crate::pace`]).
+    let started = Instant::now();
     let shape = filter.shape();
     crate::limits::check_particle_cloud(
         s.particles,
@@ -539,7 +551,16 @@ pub fn identify(input: &RunInput, algorithm: Algorithm, s: &FilterSettings) -> R
                     ..pc
                 };
                 let p = if m == 0 { predictor()? } else { None };
-                Ok(drive(filter.as_mut(), input, s, algorithm, &member, m, p))
+                Ok(drive(
+                    filter.as_mut(),
+                    input,
+                    s,
+                    algorithm,
+                    &member,
+                    m,
+                    p,
+                    started,
+                ))
             })
             .collect::<Result<_>>()?;
         crate::pool::combine(&layout, members)
@@ -547,7 +568,16 @@ pub fn identify(input: &RunInput, algorithm: Algorithm, s: &FilterSettings) -> R
         if s.pool == 0 {
             bail!("field `pool`: 0 filters (1 runs one filter)");
         }
-        drive(filter.as_mut(), input, s, algorithm, &pc, 0, predictor()?)
+        drive(
+            filter.as_mut(),
+            input,
+            s,
+            algorithm,
+            &pc,
+            0,
+            predictor()?,
+            started,
+        )
     };
 
     let steps = data.len() - 1;

@@ -17,6 +17,7 @@
 
 pub mod fingerprint;
 pub mod number;
+pub mod read;
 
 use std::collections::BTreeMap;
 
@@ -238,6 +239,19 @@ impl RunRecord {
                     .cloned()
                     .unwrap_or(serde_json::Value::Null),
             )?;
+            // The record's own copies of filter settings are those the fingerprint covers (an
+            // edited `particles` under an unchanged fingerprint is refused).
+            let setting = |key: &str, value: usize| -> Result<(), String> {
+                match inputs.get("filter").and_then(|f| f.get(key)) {
+                    Some(v) if v.as_u64() == Some(value as u64) => Ok(()),
+                    other => Err(format!(
+                        "`{key}` {value} disagrees with the fingerprint's filter `{key}` ({})",
+                        other.unwrap_or(&serde_json::Value::Null)
+                    )),
+                }
+            };
+            setting("particles", self.particles)?;
+            setting("window", self.window)?;
         }
         let n = self.param_names.len();
         let sized = |what: &str, len: usize| -> Result<(), String> {
@@ -257,6 +271,7 @@ impl RunRecord {
         if let Some(e) = &self.rel_error {
             sized("rel_error", e.len())?;
         }
+        self.check_lengths()?;
         if self.steps_completed > self.steps_total {
             return Err(format!(
                 "steps_completed {} exceeds steps_total {}",
@@ -273,6 +288,83 @@ impl RunRecord {
     }
 }
 
+impl RunRecord {
+    /// The per-step and per-channel blocks have the sizes their readers index by: one trace row
+    /// per kept time with one entry per parameter, one residual row per kept time with one entry
+    /// per channel, intervals of known parameters.
+    fn check_lengths(&self) -> Result<(), String> {
+        let n = self.param_names.len();
+        let tr = &self.trace;
+        let kept = tr.t.len();
+        for (what, len) in [
+            ("trace.param_mean", tr.param_mean.len()),
+            ("trace.param_sd", tr.param_sd.len()),
+            ("trace.ess", tr.ess.len()),
+        ] {
+            if len != kept {
+                return Err(format!("{what} has {len} rows for {kept} times in trace.t"));
+            }
+        }
+        for (what, rows) in [
+            ("trace.param_mean", &tr.param_mean),
+            ("trace.param_sd", &tr.param_sd),
+        ] {
+            if let Some((k, row)) = rows.iter().enumerate().find(|(_, r)| r.len() != n) {
+                return Err(format!(
+                    "{what} row {k} has {} entries for {n} parameters",
+                    row.len()
+                ));
+            }
+        }
+        if let Some(r) = &self.residuals {
+            let (kept, ny) = (r.t.len(), r.channels.len());
+            for (what, rows) in [
+                ("residuals.measured", &r.measured),
+                ("residuals.predicted", &r.predicted),
+                ("residuals.normalised_innovation", &r.normalised_innovation),
+            ] {
+                if rows.len() != kept {
+                    return Err(format!(
+                        "{what} has {} rows for {kept} times in residuals.t",
+                        rows.len()
+                    ));
+                }
+                if let Some((k, row)) = rows.iter().enumerate().find(|(_, x)| x.len() != ny) {
+                    return Err(format!(
+                        "{what} row {k} has {} entries for {ny} channels",
+                        row.len()
+                    ));
+                }
+            }
+        }
+        if let Some(p) = self
+            .credible
+            .iter()
+            .find(|p| !self.param_names.contains(&p.parameter))
+        {
+            return Err(format!(
+                "credible intervals of `{}`, which is not a parameter of the record",
+                p.parameter
+            ));
+        }
+        if let Some(v) = &self.validation {
+            for (what, l) in [
+                ("validation.loop_validation", &v.loop_validation),
+                ("validation.loop_true", &v.loop_true),
+            ] {
+                if let Some(l) = l.as_ref().filter(|l| l.x.len() != l.force.len()) {
+                    return Err(format!(
+                        "{what} has {} drifts for {} forces",
+                        l.x.len(),
+                        l.force.len()
+                    ));
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
 impl SweepRecord for RunRecord {
     fn failed(&self) -> bool {
         self.is_failure()
@@ -280,11 +372,15 @@ impl SweepRecord for RunRecord {
     fn fingerprint(&self) -> Option<&str> {
         self.fingerprint.as_ref().map(|f| f.sha256.as_str())
     }
-    fn check(&self) -> Result<(), String> {
-        RunRecord::check(self)
-    }
     fn same_result(&self, other: &Self) -> bool {
         self.deterministic_json() == other.deterministic_json()
+    }
+}
+
+impl read::Checked for RunRecord {
+    const KIND: &'static str = "run record";
+    fn check(&self) -> Result<(), String> {
+        RunRecord::check(self)
     }
 }
 

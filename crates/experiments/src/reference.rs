@@ -301,12 +301,17 @@ impl Target for FilterLikelihood {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct ParamSummary {
     pub name: String,
+    #[serde(with = "crate::record::number::scalar")]
     pub mean: f64,
+    #[serde(with = "crate::record::number::scalar")]
     pub sd: f64,
     /// 2.5, 25, 50, 75 and 97.5% quantiles.
+    #[serde(with = "crate::record::number::array")]
     pub quantiles: [f64; 5],
     /// Effective sample size of the chain for this parameter.
+    #[serde(with = "crate::record::number::scalar")]
     pub ess: f64,
+    #[serde(with = "crate::record::number::opt_scalar")]
     pub truth: Option<f64>,
 }
 

@@ -144,11 +144,15 @@ fn slot_index(slot: core_filters::model::Slot) -> usize {
 pub struct ChannelCheck {
     pub channel: String,
     pub n: usize,
+    #[serde(with = "crate::record::number::scalar")]
     pub mean: f64,
     /// Variance of the normalised errors: ≥ 1 expected (module documentation).
+    #[serde(with = "crate::record::number::scalar")]
     pub variance: f64,
     /// Ljung–Box Q over lags 1..=[`MAX_LAG`] and its 95 % critical value.
+    #[serde(with = "crate::record::number::scalar")]
     pub ljung_box: f64,
+    #[serde(with = "crate::record::number::scalar")]
     pub critical: f64,
     pub white: bool,
 }

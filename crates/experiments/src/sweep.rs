@@ -29,20 +29,18 @@ use std::time::Instant;
 
 use anyhow::{Context, Result};
 use rayon::prelude::*;
-use serde::{de::DeserializeOwned, Serialize};
+use serde::Serialize;
 
 use progress::{clock, Progress};
 
 /// A record a sweep can reuse: it says whether its run failed, what determined it, and checks
 /// itself after it is read.
-pub trait SweepRecord: Serialize + DeserializeOwned + Send {
+pub trait SweepRecord: Serialize + crate::record::read::Checked + Send {
     /// Whether the run failed (for the progress count).
     fn failed(&self) -> bool;
     /// The fingerprint of everything that determined the record (`None`: written by a tool that
     /// did not record one).
     fn fingerprint(&self) -> Option<&str>;
-    /// Checks a record just read (schema, fingerprint, consistency).
-    fn check(&self) -> Result<(), String>;
     /// Whether `other` holds the same result, wall-clock timings aside. A sweep keeps the
     /// file of a record it computed again with the same result, so that a reproduction that
     /// agrees leaves the committed records byte for byte as they were.
@@ -272,6 +270,7 @@ where
         }
         Ok(out)
     };
+    crate::limits::check_count(opts.threads, 0, crate::limits::MAX_THREADS).context("--threads")?;
     let mut out = if opts.threads > 0 {
         rayon::ThreadPoolBuilder::new()
             .num_threads(opts.threads)
@@ -336,27 +335,11 @@ pub fn record_path(dir: &Path, id: &str) -> PathBuf {
     dir.join(format!("{id}.json"))
 }
 
-/// Reads one record and checks it; errors name the file and say what is wrong (a record cut
-/// short, a value that is not a number, a fingerprint that does not match, …).
+/// Reads one record and checks it ([`crate::record::read::read`], the one reader of records);
+/// errors name the file and say what is wrong (a record cut short, a value that is not a number,
+/// a fingerprint that does not match, …).
 pub fn read_record<R: SweepRecord>(path: &Path) -> Result<R> {
-    let text = fs::read(path).with_context(|| format!("reading {}", path.display()))?;
-    parse_record(&text).with_context(|| format!("record {}", path.display()))
-}
-
-/// Parses and checks the text of one record.
-pub fn parse_record<R: SweepRecord>(text: &[u8]) -> Result<R> {
-    let record: R = serde_json::from_slice(text).map_err(|e| {
-        let what = if e.is_eof() {
-            "is cut short (an interrupted write?)"
-        } else {
-            "is not a valid run record"
-        };
-        anyhow::anyhow!("{what}: {e}")
-    })?;
-    record
-        .check()
-        .map_err(|e| anyhow::anyhow!("fails its checks: {e}"))?;
-    Ok(record)
+    Ok(crate::record::read::read(path)?)
 }
 
 /// Writes `value` as pretty JSON to `path` atomically (see [`write_bytes_atomic`]).

@@ -57,6 +57,20 @@ pub const MAX_PARTICLES: usize = 10_000_000;
 /// (2·10⁸, 1.6 GB).
 pub const MAX_PARTICLE_CELLS: usize = 200_000_000;
 
+/// Most kept iterations, and most burn-in iterations, of a reference chain (`sysid reference`,
+/// 10⁶ each): every iteration runs one particle filter over the record (about 1.4 ms for the
+/// paper's 3-storey record with 200 particles, so 10⁶ iterations are half an hour), and the kept
+/// samples are held in memory (10⁶ × the free parameters).
+pub const MAX_CHAIN_ITERATIONS: usize = 1_000_000;
+
+/// Most repeated likelihood estimates at a chain's start point (`sysid reference --probe`):
+/// they only measure the estimator's s.d., for which 20 suffice.
+pub const MAX_PROBES: usize = 10_000;
+
+/// Most worker threads of a sweep (`--threads`): far beyond the cores of any machine the runs
+/// share; a larger count only asks the system for threads it cannot give.
+pub const MAX_THREADS: usize = 1024;
+
 /// Largest input file the readers accept (2 GiB): a table of [`MAX_CELLS`] numbers, each
 /// printed in at most 24 characters plus a separator, is 1.25 GB, so every data set
 /// `simulate` can write loads back.
@@ -216,6 +230,19 @@ pub fn check_window(window: usize) -> Result<usize, LimitError> {
     check_count(window, 1, MAX_SAMPLES)
 }
 
+/// The lengths of a reference chain: `iterations` in `1..=MAX_CHAIN_ITERATIONS`, `burn_in` in
+/// `0..=MAX_CHAIN_ITERATIONS`, `probe` in `0..=MAX_PROBES`; the error names the flag.
+pub fn check_chain(
+    iterations: usize,
+    burn_in: usize,
+    probe: usize,
+) -> Result<(), (&'static str, LimitError)> {
+    check_count(iterations, 1, MAX_CHAIN_ITERATIONS).map_err(|e| ("--iterations", e))?;
+    check_count(burn_in, 0, MAX_CHAIN_ITERATIONS).map_err(|e| ("--burn-in", e))?;
+    check_count(probe, 0, MAX_PROBES).map_err(|e| ("--probe", e))?;
+    Ok(())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -245,6 +272,14 @@ mod tests {
         assert!(check_window(0).is_err());
         assert_eq!(check_window(80), Ok(80));
         assert!(check_window(usize::MAX).is_err());
+        assert_eq!(check_chain(5000, 1000, 20), Ok(()));
+        assert_eq!(check_chain(usize::MAX, 0, 0).unwrap_err().0, "--iterations");
+        assert_eq!(check_chain(0, 0, 0).unwrap_err().0, "--iterations");
+        assert_eq!(check_chain(1, usize::MAX, 0).unwrap_err().0, "--burn-in");
+        assert_eq!(
+            check_chain(1, 0, 1_000_000_000_000).unwrap_err().0,
+            "--probe"
+        );
         assert!(check_table(MAX_SAMPLES, 5).is_ok());
         assert!(check_table(MAX_SAMPLES, 6).is_err());
         assert!(check_table(usize::MAX, usize::MAX).is_err());

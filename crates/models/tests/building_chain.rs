@@ -108,3 +108,67 @@ fn rk4_at_the_data_step_matches_half_the_step() {
         assert!(rel < 1e-3, "N = {n}: {rel}");
     }
 }
+
+/// Tall `building-chain`s: their overdamped top modes decay faster than one RK4 step per sample
+/// can follow (130 storeys diverged at dt = 0.005 s). The data are integrated with the sub-steps
+/// [`rk4_substeps`] gives; chains up to 121 storeys keep one step (their data are unchanged) and
+/// the integration agrees with adaptive Dormand–Prince across the documented range.
+#[test]
+fn tall_building_chains_are_integrated_stably_to_200_storeys() {
+    use models::excitation;
+    use models::integrate::{
+        fastest_damping_rate, rk4_substeps, simulate_adaptive, simulate_rk4_substeps, Tolerance,
+    };
+    let dt = 0.005;
+    for n in [3, 5, 10, 20, 40, 80, 120, 121] {
+        assert_eq!(
+            rk4_substeps(&Preset::building_chain(n).unwrap(), dt),
+            1,
+            "{n}"
+        );
+    }
+    let ug: Vec<f64> = excitation::paper_default()
+        .acc
+        .iter()
+        .take(401)
+        .map(|a| a * 50.0 / 3.0)
+        .collect();
+    for (n, expected_substeps) in [(130, 2), (200, 2)] {
+        let chain = Preset::building_chain(n).unwrap();
+        let m = rk4_substeps(&chain, dt);
+        assert_eq!(m, expected_substeps, "{n} storeys");
+        assert!(fastest_damping_rate(&chain) * dt / m as f64 <= 2.78);
+        // One step per sample diverges (the failure this guards against) …
+        let single = simulate_rk4(&chain, &ug, dt);
+        assert!(
+            single
+                .as_flat()
+                .iter()
+                .any(|v| !v.is_finite() || v.abs() > 1e6),
+            "{n} storeys: one RK4 step per sample did not diverge"
+        );
+        // … the sub-stepped integration stays bounded and agrees with Dormand–Prince.
+        let rk = simulate_rk4_substeps(&chain, &ug, dt, m);
+        let tol = Tolerance {
+            rtol: 1e-8,
+            atol: 1e-11,
+        };
+        let dp = simulate_adaptive(&chain, &ug, dt, tol).unwrap();
+        let scale = dp.as_flat().iter().fold(0.0f64, |a, v| a.max(v.abs()));
+        let err = rk
+            .as_flat()
+            .iter()
+            .zip(dp.as_flat())
+            .fold(0.0f64, |a, (x, y)| a.max((x - y).abs()));
+        assert!(
+            err <= 1e-3 * scale,
+            "{n} storeys: RK4 × {m} differs from Dormand–Prince by {err:e} (scale {scale:e})"
+        );
+    }
+    // One sub-step is simulate_rk4 itself, bit for bit.
+    let paper = Preset::building_chain(3).unwrap();
+    assert_eq!(
+        simulate_rk4_substeps(&paper, &ug, dt, 1),
+        simulate_rk4(&paper, &ug, dt)
+    );
+}

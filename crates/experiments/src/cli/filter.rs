@@ -14,7 +14,6 @@ use crate::cli::simulate::parse_storeys;
 use crate::field::{self, StructureSettings};
 use crate::pipeline::{identify, Algorithm, FilterSettings, RunInput};
 use crate::record::RunRecord;
-use crate::sweep::write_atomic;
 
 /// Arguments of `sysid filter`.
 #[derive(Debug, clap::Args)]
@@ -147,7 +146,9 @@ pub fn parse_fix(s: &str) -> Result<BTreeMap<String, f64>> {
         if !v.is_finite() {
             bail!("--fix: value of {name} is not finite");
         }
-        out.insert(name.trim().to_string(), v);
+        if out.insert(name.trim().to_string(), v).is_some() {
+            bail!("--fix: {} is given twice", name.trim());
+        }
     }
     Ok(out)
 }
@@ -393,7 +394,9 @@ pub fn run(args: Args) -> Result<()> {
 /// The record is written in every case.
 pub fn finish(mut record: RunRecord, out: &Path) -> Result<()> {
     record.warnings = checks::check(&record);
-    write_atomic(out, &record)?;
+    // Written, then read back by the reader every command uses: a record `plot` or
+    // `compare-reference` would refuse is an error here, not a success.
+    crate::record::read::write(out, &record)?;
     eprintln!(
         "{}: {} of {} steps, loglik {:.2}, {:.2} s ({:.2} M particle-steps/s); record {}",
         record.algorithm,

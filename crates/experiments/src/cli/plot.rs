@@ -56,23 +56,12 @@ pub fn run(args: Args) -> Result<()> {
     Ok(())
 }
 
-/// Reads a record and draws its figures into `out`.
+/// Reads a record (through [`crate::record::read::read`], with every reader's checks) and draws
+/// its figures into `out`.
 pub fn plot(record_path: &Path, out: &Path) -> Result<Plotted> {
-    let text = std::fs::read_to_string(record_path)
-        .with_context(|| format!("reading run record {}", record_path.display()))?;
-    let value: serde_json::Value = serde_json::from_str(&text)
-        .with_context(|| format!("{}: not JSON", record_path.display()))?;
-    let record: RunRecord = serde_json::from_value(value.clone())
-        .with_context(|| format!("{}: not a run record", record_path.display()))?;
-    let residuals: Option<Residuals> = match value.get("residuals") {
-        None | Some(serde_json::Value::Null) => None,
-        Some(v) => Some(
-            serde_json::from_value(v.clone())
-                .with_context(|| format!("{}: field `residuals`", record_path.display()))?,
-        ),
-    };
+    let record: RunRecord = crate::record::read::read(record_path)?;
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
-    draw(&record, residuals.as_ref(), out)
+    draw(&record, record.residuals.as_ref(), out)
 }
 
 /// Draws every figure the record has data for.

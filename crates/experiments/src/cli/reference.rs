@@ -21,7 +21,7 @@ pub struct Args {
     pub data: PathBuf,
     /// Likelihood estimator: mpf-ekf2 (exact Rao–Blackwellised filter when θ is fixed) or
     /// bootstrap.
-    #[arg(long, default_value = "mpf-ekf2")]
+    #[arg(long, default_value = "mpf-ekf2", value_parser = parse_estimator)]
     pub estimator: Algorithm,
     /// Particles of the likelihood estimator.
     #[arg(long, default_value_t = 200)]
@@ -44,6 +44,11 @@ pub struct Args {
     pub start_from: Option<PathBuf>,
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
+    /// TOML file of filter settings (as `sysid filter --config`): its `[structure]` table gives
+    /// the building of field data (no dataset.json); its priors, fixed values and noise
+    /// fraction define the posterior.
+    #[arg(long)]
+    pub config: Option<PathBuf>,
     /// Output file (JSON).
     #[arg(long)]
     pub out: PathBuf,
@@ -54,25 +59,62 @@ pub struct Args {
 pub struct ReferenceRecord {
     pub data: String,
     pub steps: usize,
+    #[serde(with = "crate::record::number::scalar")]
     pub dt: f64,
     pub estimator: String,
     pub particles: usize,
     pub iterations: usize,
     pub burn_in: usize,
     pub seed: u64,
+    #[serde(with = "crate::record::number::vec")]
     pub start: Vec<f64>,
     /// Mean and s.d. of `probe` likelihood estimates at the start point.
+    #[serde(with = "crate::record::number::scalar")]
     pub loglik_at_start_mean: f64,
+    #[serde(with = "crate::record::number::scalar")]
     pub loglik_at_start_sd: f64,
+    #[serde(with = "crate::record::number::scalar")]
     pub acceptance: f64,
+    #[serde(with = "crate::record::number::scalar")]
     pub acceptance_burn_in: f64,
     pub evaluations: u64,
     pub failed_estimates: u64,
+    #[serde(with = "crate::record::number::scalar")]
     pub wall_s: f64,
     pub params: Vec<ParamSummary>,
     /// Why this reference should not be trusted as it is ([`chain_warnings`]).
     #[serde(default)]
     pub warnings: Vec<String>,
+}
+
+impl crate::record::read::Checked for ReferenceRecord {
+    const KIND: &'static str = "reference record";
+    /// One summary per free parameter with distinct names, quantiles in order where they are
+    /// numbers, and counts that agree (failed estimates within the evaluations).
+    fn check(&self) -> Result<(), String> {
+        if self.iterations == 0 {
+            return Err("`iterations` is 0: a chain of no kept iteration is no posterior".into());
+        }
+        if self.failed_estimates > self.evaluations {
+            return Err(format!(
+                "`failed_estimates` {} exceeds `evaluations` {}",
+                self.failed_estimates, self.evaluations
+            ));
+        }
+        let mut names: Vec<&str> = self.params.iter().map(|p| p.name.as_str()).collect();
+        names.sort_unstable();
+        if let Some(w) = names.windows(2).find(|w| w[0] == w[1]) {
+            return Err(format!("parameter `{}` is summarised twice", w[0]));
+        }
+        if let Some(p) = self
+            .params
+            .iter()
+            .find(|p| p.quantiles.windows(2).any(|q| q[0] > q[1]))
+        {
+            return Err(format!("the quantiles of `{}` are not in order", p.name));
+        }
+        Ok(())
+    }
 }
 
 /// Chain ESS below which a reference mean is flagged: its Monte-Carlo s.e. is then more than a
@@ -120,18 +162,49 @@ pub fn chain_warnings(
     w
 }
 
-pub fn run(args: Args) -> Result<()> {
-    if args.iterations == 0 || args.particles == 0 {
-        bail!("--iterations and --particles must be at least 1");
+/// The estimators `--estimator` takes. With θ fixed, the Storvik filter and the MLN-RBPF have no
+/// static parameter left to sample or marginalise: they would be a bootstrap filter under another
+/// name, so they are refused rather than run.
+fn parse_estimator(s: &str) -> Result<Algorithm, String> {
+    match s.parse::<Algorithm>()? {
+        a @ (Algorithm::MpfEkf2 | Algorithm::Bootstrap) => Ok(a),
+        a => Err(format!(
+            "`{}` is not a likelihood estimator of `sysid reference` (with θ fixed it has no \
+             parameter to sample); use mpf-ekf2 or bootstrap",
+            a.name()
+        )),
     }
+}
+
+pub fn run(args: Args) -> Result<()> {
     crate::limits::check_count(args.particles, 1, crate::limits::MAX_PARTICLES)
         .context("--particles")?;
+    crate::limits::check_chain(args.iterations, args.burn_in, args.probe)
+        .map_err(|(flag, e)| anyhow::anyhow!("{flag}: {e}"))?;
     let data = load_dir(&args.data)
         .with_context(|| format!("loading data set {}", args.data.display()))?;
     let chain = data
         .true_chain()
         .context("rebuilding the data set's structure")?;
-    let settings = FilterSettings::default();
+    let mut settings = match &args.config {
+        Some(path) => crate::limits::load_filter_settings(path)?,
+        None => FilterSettings::default(),
+    };
+    let config_name = args
+        .config
+        .as_ref()
+        .map_or_else(|| "--config".to_string(), |p| p.display().to_string());
+    let table_name = |key: &str| format!("[structure] `{key}` in {config_name}");
+    let measured = args.data.join(models::dataset::MEASURED);
+    if data.meta.is_some() {
+        // Simulated data carry their structure: a stated key must agree with it.
+        crate::field::resolve(&data, None, &settings.structure, &measured, &table_name)?;
+        settings.structure = crate::field::StructureSettings::default();
+    } else {
+        crate::field::resolve(&data, None, &settings.structure, &measured, &table_name).context(
+            "field data: give the building with --config FILE and its [structure] table",
+        )?;
+    }
     let spec = chain_spec(&data, chain.as_ref(), &settings)?;
     let names = spec.prior.names();
     let map = ThetaMap::new(&spec.prior)?;
@@ -268,7 +341,7 @@ pub fn run(args: Args) -> Result<()> {
     for w in &record.warnings {
         eprintln!("warning: {w}");
     }
-    crate::sweep::write_atomic(&args.out, &record)
+    crate::record::read::write(&args.out, &record)
         .with_context(|| format!("writing {}", args.out.display()))?;
     if record.acceptance == 0.0 {
         bail!(
@@ -299,10 +372,7 @@ pub struct CompareArgs {
 pub fn compare(args: CompareArgs) -> Result<()> {
     let mut chains = Vec::new();
     for path in &args.reference {
-        let text =
-            std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
-        let r: ReferenceRecord =
-            serde_json::from_str(&text).with_context(|| format!("parsing {}", path.display()))?;
+        let r: ReferenceRecord = crate::record::read::read(path)?;
         // Older records carry no warnings: recompute them from what they hold.
         let warnings = chain_warnings(r.acceptance, &r.params, r.failed_estimates, r.evaluations);
         if r.acceptance == 0.0 {

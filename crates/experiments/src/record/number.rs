@@ -4,8 +4,10 @@
 //! and `"-inf"`. Reading accepts exactly these forms and rejects `null` with a message, so a
 //! record written by this tool is always readable by it and never silently loses a value.
 //!
-//! Used field by field through `#[serde(with = "…")]` (modules [`scalar`], [`vec`](mod@vec), [`opt_vec`],
-//! [`vec_vec`]).
+//! Used field by field through `#[serde(with = "…")]` (modules [`scalar`], [`opt_scalar`],
+//! [`vec`](mod@vec), [`opt_vec`], [`vec_vec`], [`array`]) on every `f64` of every record type (run
+//! records with their residuals, checks and intervals, reference records); the property test
+//! `record_numbers.rs` writes non-finite values into each of them and reads them back.
 
 use std::fmt;
 
@@ -83,6 +85,36 @@ pub mod scalar {
     }
     pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<f64, D::Error> {
         Num::deserialize(d).map(|n| n.0)
+    }
+}
+
+/// `Option<f64>` fields (`null` is the absent value, never a number).
+pub mod opt_scalar {
+    use super::*;
+
+    pub fn serialize<S: Serializer>(x: &Option<f64>, s: S) -> Result<S::Ok, S::Error> {
+        x.map(Num).serialize(s)
+    }
+    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<Option<f64>, D::Error> {
+        Ok(Option::<Num>::deserialize(d)?.map(|n| n.0))
+    }
+}
+
+/// `[f64; N]` fields; another length is refused.
+pub mod array {
+    use super::*;
+
+    pub fn serialize<S: Serializer, const N: usize>(x: &[f64; N], s: S) -> Result<S::Ok, S::Error> {
+        s.collect_seq(x.iter().map(|v| Num(*v)))
+    }
+    pub fn deserialize<'de, D: Deserializer<'de>, const N: usize>(
+        d: D,
+    ) -> Result<[f64; N], D::Error> {
+        let v = Vec::<Num>::deserialize(d)?;
+        let len = v.len();
+        let v: Vec<f64> = v.into_iter().map(|n| n.0).collect();
+        v.try_into()
+            .map_err(|_| de::Error::invalid_length(len, &format!("{N} numbers").as_str()))
     }
 }
 

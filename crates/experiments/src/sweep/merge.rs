@@ -13,9 +13,8 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
 
-use super::{
-    clean_stale_temporaries, parse_record, same_but_timing, write_bytes_atomic, SweepRecord,
-};
+use super::{clean_stale_temporaries, same_but_timing, write_bytes_atomic, SweepRecord};
+use crate::record::read::{parse, read_bytes};
 
 /// What a merge did.
 #[derive(Debug, Clone, Default, PartialEq)]
@@ -52,16 +51,18 @@ pub fn merge<R: SweepRecord>(pairs: &[(PathBuf, PathBuf)]) -> Result<MergeReport
         let mut names: Vec<PathBuf> = fs::read_dir(src_dir)
             .with_context(|| format!("reading {}", src_dir.display()))?
             .filter_map(|e| e.ok().map(|e| e.path()))
-            .filter(|p| p.extension().is_some_and(|x| x == "json") && p.is_file())
+            .filter(|p| p.extension().is_some_and(|x| x == "json"))
             .collect();
         names.sort();
         for src in names {
             let dst = dst_dir.join(src.file_name().expect("a file name"));
-            let bytes = fs::read(&src).with_context(|| format!("reading {}", src.display()))?;
-            let record: R = match parse_record(&bytes) {
+            // A directory named `x.json` is reported by the reader, not skipped.
+            let record: Result<(R, Vec<u8>), _> =
+                read_bytes(&src).and_then(|b| Ok((parse(&b, &src)?, b)));
+            let (record, bytes) = match record {
                 Ok(r) => r,
                 Err(e) => {
-                    problems.push(format!("{}: {e:#}", src.display()));
+                    problems.push(format!("{e:#}"));
                     continue;
                 }
             };
@@ -100,8 +101,18 @@ pub fn merge<R: SweepRecord>(pairs: &[(PathBuf, PathBuf)]) -> Result<MergeReport
         if !p.dst.exists() {
             continue;
         }
-        let old = fs::read(&p.dst).with_context(|| format!("reading {}", p.dst.display()))?;
-        match parse_record::<R>(&old) {
+        let old = match read_bytes(&p.dst) {
+            Ok(b) => b,
+            Err(e @ crate::record::read::ReadError::TooLarge { .. }) => {
+                p.replaces = Some(format!("unreadable: {e}"));
+                continue;
+            }
+            Err(e) => {
+                problems.push(e.to_string());
+                continue;
+            }
+        };
+        match parse::<R>(&old, &p.dst) {
             Err(e) => p.replaces = Some(format!("unreadable: {e:#}")),
             Ok(r) if r.fingerprint() != p.fingerprint.as_deref() => {
                 p.replaces = Some(match r.fingerprint() {

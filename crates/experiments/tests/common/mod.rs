@@ -7,7 +7,7 @@ use std::collections::BTreeMap;
 use core_filters::Health;
 use experiments::metrics::{SignalError, StateErrors};
 use experiments::observe::Trace;
-use experiments::record::{Loop, RunRecord, Timing, Validation, Versions};
+use experiments::record::{Fingerprint, Loop, RunRecord, Timing, Validation, Versions};
 
 pub const NAMES: [&str; 9] = ["k1", "k2", "k3", "c1", "c2", "c3", "beta", "gamma", "n"];
 pub const THETA_TRUE: [f64; 9] = [8.0, 8.0, 8.0, 0.25, 0.25, 0.25, 2.0, 1.0, 2.0];
@@ -30,7 +30,7 @@ pub fn record(algorithm: &str, run: u64, ratios: [f64; 9], nrmse: f64) -> RunRec
             7
         ],
     };
-    RunRecord {
+    sealed(RunRecord {
         experiment: "constructed".into(),
         algorithm: algorithm.into(),
         seed: 1,
@@ -71,7 +71,24 @@ pub fn record(algorithm: &str, run: u64, ratios: [f64; 9], nrmse: f64) -> RunRec
         credible: Vec::new(),
         innovation_checks: Vec::new(),
         residuals: None,
-    }
+    })
+}
+
+/// `r` with filter settings in its config and the fingerprint of its own algorithm, seed, run
+/// and settings, so that it passes the checks of the record reader (call it again after changing
+/// any of them).
+pub fn sealed(mut r: RunRecord) -> RunRecord {
+    let filter = serde_json::json!({ "particles": r.particles, "window": r.window });
+    r.config = serde_json::json!({ "filter": filter });
+    r.fingerprint = Some(Fingerprint::new(serde_json::json!({
+        "algorithm": r.algorithm,
+        "seed": r.seed,
+        "run": r.run,
+        "numerics": r.versions.numerics,
+        "filter": filter,
+        "data": { "sha256": "constructed", "meta": null },
+    })));
+    r
 }
 
 /// A deterministic, zero-mean perturbation in [−0.5, 0.5) for run `run` and stream `s`.

@@ -1,0 +1,144 @@
+//! The one reader of records. Every command that reads a record — a resumed sweep, `merge`,
+//! `plot`, `compare-reference`, `reference --start-from` — goes through [`read`] (or
+//! [`read_bytes`] and [`parse`] when it also needs the bytes), so the same checks hold
+//! everywhere:
+//!
+//! - the file is at most [`MAX_FILE_BYTES`] long, checked before anything is read (and the read
+//!   itself stops there, should the file grow meanwhile);
+//! - it is a regular file (a directory named `x.json` is an error, not a silent skip);
+//! - the text is complete JSON of the record type, every number a JSON number or one of the
+//!   strings `"NaN"`, `"inf"`, `"-inf"` ([`super::number`]);
+//! - the record passes its own checks ([`Checked::check`]: schema, lengths, fingerprint).
+
+use std::fs::File;
+use std::io::Read;
+use std::path::{Path, PathBuf};
+
+use serde::de::DeserializeOwned;
+use thiserror::Error;
+
+use crate::limits::MAX_FILE_BYTES;
+
+/// A record type that checks itself once read (schema, sizes, fingerprint).
+pub trait Checked: DeserializeOwned {
+    /// What the record is, for messages ("run record", "reference record").
+    const KIND: &'static str;
+    /// The checks of a record just parsed; the error says what is wrong.
+    fn check(&self) -> Result<(), String>;
+}
+
+/// Why a record could not be read; every variant names the file.
+#[derive(Debug, Error)]
+pub enum ReadError {
+    #[error("reading {}: {source}", path.display())]
+    Io {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error("{} is not a file (a record is a file)", path.display())]
+    NotAFile { path: PathBuf },
+    #[error(
+        "{}: {bytes} bytes, more than the {max} bytes a record may have; not read",
+        path.display(),
+        max = MAX_FILE_BYTES
+    )]
+    TooLarge { path: PathBuf, bytes: u64 },
+    #[error("{kind} {} is cut short (an interrupted write?): {source}", path.display())]
+    CutShort {
+        kind: &'static str,
+        path: PathBuf,
+        #[source]
+        source: serde_json::Error,
+    },
+    #[error("{kind} {} is not a valid {kind}: {source}", path.display())]
+    Invalid {
+        kind: &'static str,
+        path: PathBuf,
+        #[source]
+        source: serde_json::Error,
+    },
+    #[error("{kind} {} fails its checks: {reason}", path.display())]
+    Check {
+        kind: &'static str,
+        path: PathBuf,
+        reason: String,
+    },
+}
+
+/// The bytes of the record at `path`, refused beyond [`MAX_FILE_BYTES`] before reading.
+pub fn read_bytes(path: &Path) -> Result<Vec<u8>, ReadError> {
+    let io = |source| ReadError::Io {
+        path: path.to_path_buf(),
+        source,
+    };
+    let meta = std::fs::metadata(path).map_err(io)?;
+    if !meta.is_file() {
+        return Err(ReadError::NotAFile {
+            path: path.to_path_buf(),
+        });
+    }
+    if meta.len() > MAX_FILE_BYTES {
+        return Err(ReadError::TooLarge {
+            path: path.to_path_buf(),
+            bytes: meta.len(),
+        });
+    }
+    let mut bytes = Vec::with_capacity(meta.len() as usize);
+    File::open(path)
+        .map_err(io)?
+        .take(MAX_FILE_BYTES + 1)
+        .read_to_end(&mut bytes)
+        .map_err(io)?;
+    if bytes.len() as u64 > MAX_FILE_BYTES {
+        return Err(ReadError::TooLarge {
+            path: path.to_path_buf(),
+            bytes: bytes.len() as u64,
+        });
+    }
+    Ok(bytes)
+}
+
+/// Parses and checks the bytes of one record; `path` names it in errors.
+pub fn parse<R: Checked>(bytes: &[u8], path: &Path) -> Result<R, ReadError> {
+    let record: R = serde_json::from_slice(bytes).map_err(|source| {
+        let path = path.to_path_buf();
+        if source.is_eof() {
+            ReadError::CutShort {
+                kind: R::KIND,
+                path,
+                source,
+            }
+        } else {
+            ReadError::Invalid {
+                kind: R::KIND,
+                path,
+                source,
+            }
+        }
+    })?;
+    record.check().map_err(|reason| ReadError::Check {
+        kind: R::KIND,
+        path: path.to_path_buf(),
+        reason,
+    })?;
+    Ok(record)
+}
+
+/// Reads, parses and checks the record at `path`.
+pub fn read<R: Checked>(path: &Path) -> Result<R, ReadError> {
+    parse(&read_bytes(path)?, path)
+}
+
+/// Writes `record` atomically to `path` ([`crate::sweep::write_bytes_atomic`]) and reads the
+/// written text back through [`parse`]: a record that would not read back is written (it holds
+/// the run's results) but reported as an error, so no command reports success on a record its
+/// own readers refuse.
+pub fn write<R: Checked + serde::Serialize>(path: &Path, record: &R) -> anyhow::Result<()> {
+    use anyhow::Context;
+    let text = serde_json::to_string_pretty(record).context("serialising a record")? + "\n";
+    crate::sweep::write_bytes_atomic(path, text.as_bytes())?;
+    parse::<R>(text.as_bytes(), path)
+        .map(|_| ())
+        .context("the record was written but does not read back")
+}
