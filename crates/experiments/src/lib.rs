@@ -37,4 +37,5 @@ pub mod scaling;
 pub mod study;
 pub mod sweep;
 pub mod user_study;
+pub mod validation;
 pub mod verdict;

@@ -39,7 +39,8 @@ pub struct Modes {
     pub modes: Vec<Mode>,
     /// Over-damped modes (pairs of real eigenvalues, ζ ≥ 1: no resonance).
     pub overdamped: usize,
-    /// Rigid-body or unstable eigenvalues (Re λ ≥ 0; none for positive k and c).
+    /// Eigenvalues with Re λ > 0 (a growing motion; none for positive k and c), counted in
+    /// `modes` too when oscillatory (with a negative ζ).
     pub not_decaying: usize,
 }
 
@@ -48,14 +49,21 @@ pub struct Modes {
 pub enum ModalError {
     #[error("the eigenvalue solver did not converge for the {dim}×{dim} state matrix")]
     NoConvergence { dim: usize },
-    #[error("non-finite entry in the linearised matrices (check k, c and the masses)")]
+    #[error(
+        "non-finite entry or wrong sizes in the linearised matrices (check k, c and the masses)"
+    )]
     NonFinite,
 }
 
 /// `M`, `C`, `K` of the linearised chain (see the module documentation).
 pub fn linearised_matrices(chain: &ShearChain) -> (DMatrix<f64>, DMatrix<f64>, DMatrix<f64>) {
-    let n = chain.storeys();
-    let m = DMatrix::from_diagonal(&nalgebra::DVector::from_column_slice(chain.masses()));
+    matrices(chain.masses(), chain.stiffness(), chain.damping())
+}
+
+/// `M`, `C`, `K` of a chain with storey masses `m`, element stiffnesses `k` and dampings `c`.
+fn matrices(m: &[f64], k: &[f64], c: &[f64]) -> (DMatrix<f64>, DMatrix<f64>, DMatrix<f64>) {
+    let n = m.len();
+    let mm = DMatrix::from_diagonal(&nalgebra::DVector::from_column_slice(m));
     let assemble = |coef: &[f64]| {
         let mut a = DMatrix::<f64>::zeros(n, n);
         for j in 0..n {
@@ -68,13 +76,23 @@ pub fn linearised_matrices(chain: &ShearChain) -> (DMatrix<f64>, DMatrix<f64>, D
         }
         a
     };
-    (m, assemble(chain.damping()), assemble(chain.stiffness()))
+    (mm, assemble(c), assemble(k))
 }
 
 /// The modes of the linearised chain (initial tangent stiffness of every Bouc–Wen element).
 pub fn modes(chain: &ShearChain) -> Result<Modes, ModalError> {
-    let (m, c, k) = linearised_matrices(chain);
-    let n = chain.storeys();
+    modes_of(chain.masses(), chain.stiffness(), chain.damping())
+}
+
+/// The modes of the chain with masses `m`, stiffnesses `k` and dampings `c` (one per storey),
+/// without the checks of [`ShearChain::new`]: an identified θ with a negative damping still has
+/// modes, and one that grows shows a negative ζ and is counted in `not_decaying`.
+pub fn modes_of(m: &[f64], k: &[f64], c: &[f64]) -> Result<Modes, ModalError> {
+    let n = m.len();
+    if n == 0 || k.len() != n || c.len() != n || m.iter().any(|v| !(*v > 0.0)) {
+        return Err(ModalError::NonFinite);
+    }
+    let (m, c, k) = matrices(m, k, c);
     let mut a = DMatrix::<f64>::zeros(2 * n, 2 * n);
     for i in 0..n {
         a[(i, n + i)] = 1.0;
@@ -98,18 +116,17 @@ pub fn modes(chain: &ShearChain) -> Result<Modes, ModalError> {
         let tiny = 1e-12 * w;
         if l.re > tiny || w == 0.0 {
             not_decaying += 1;
-            continue;
         }
         // A conjugate pair is counted once (its member with Im > 0); a real eigenvalue (to the
-        // solver's precision) belongs to an over-damped mode.
+        // solver's precision) belongs to an over-damped (or, positive, a diverging) mode.
         if l.im.abs() <= tiny {
-            real += 1;
+            real += usize::from(l.re < 0.0);
         } else if l.im > 0.0 {
-            let zeta = (-l.re / w).max(0.0);
+            let zeta = -l.re / w;
             modes.push(Mode {
                 frequency_hz: w / std::f64::consts::TAU,
                 damped_hz: l.im / std::f64::consts::TAU,
-                damping_ratio: zeta,
+                damping_ratio: if zeta.abs() <= 1e-12 { 0.0 } else { zeta },
             });
         }
     }
@@ -184,5 +201,10 @@ mod tests {
         let got = modes(&chain(1, 1.0, 4.0, false)).unwrap();
         assert!(got.modes.is_empty());
         assert_eq!(got.overdamped, 1);
+        // A negative damping: the mode grows, ζ < 0, and it is counted as not decaying.
+        let grow = modes_of(&[1.0], &[4.0], &[-0.4]).unwrap();
+        assert_eq!(grow.not_decaying, 2);
+        assert!((grow.modes[0].damping_ratio + 0.1).abs() < 1e-12);
+        assert!(modes_of(&[1.0, 0.0], &[1.0, 1.0], &[0.0, 0.0]).is_err());
     }
 }
