@@ -384,10 +384,23 @@ pub fn posterior_of(r: &RunRecord) -> Result<QuantileDraw, String> {
     QuantileDraw::new(&r.param_names, &r.credible)
 }
 
-/// Checks that a record's θ_val can be simulated: a completed run with finite values.
+/// Checks that a record's θ_val can be simulated: a completed run with finite values and no
+/// physically impossible parameter (a stiffness or damping ≤ 0, `checks::check`).
 pub fn check_identified(r: &RunRecord) -> Result<()> {
     if let Some(f) = &r.failure {
         bail!("the run failed ({f}): it identified no θ to validate");
+    }
+    let impossible: Vec<&str> = r
+        .warnings
+        .iter()
+        .filter(|w| w.kind.is_fatal())
+        .filter_map(|w| w.parameter.as_deref())
+        .collect();
+    if !impossible.is_empty() {
+        bail!(
+            "θ_val is physically impossible ({} ≤ 0): no building to simulate",
+            impossible.join(", ")
+        );
     }
     if let Some((name, v)) = r
         .param_names
@@ -403,7 +416,14 @@ pub fn check_identified(r: &RunRecord) -> Result<()> {
 /// Attaches the free run and the modal comparison to the record of a field-data run on
 /// `data` with building `d` (nothing when the run failed: the record says why).
 pub fn attach(r: &mut RunRecord, data: &LoadedDataset, d: &StructureDescription) {
-    if check_identified(r).is_err() {
+    r.warnings = crate::checks::check(r);
+    if let Err(e) = check_identified(r) {
+        // The modes of an impossible θ are still shown (a negative damping can leave every
+        // mode decaying); the free run is not.
+        r.modal = Some(ModalComparison {
+            errors: vec![format!("free run: {e}")],
+            ..modal(d, data, &r.theta_val)
+        });
         return;
     }
     let posterior = posterior_of(r);
