@@ -269,3 +269,40 @@ fn bad_inputs_are_refused_with_a_reason() {
     let e = spectral::welch_h1(&zero, &[zero.clone()], 0.01).unwrap_err();
     assert!(e.to_string().contains("zero"), "{e}");
 }
+
+#[test]
+fn modes_pair_with_the_nearest_peak_and_never_with_a_far_one() {
+    use models::modal::Mode;
+    use spectral::Peak;
+    let mode = |f: f64| Mode {
+        frequency_hz: f,
+        damped_hz: f,
+        damping_ratio: 0.01,
+    };
+    let peak = |f: f64| Peak {
+        frequency_hz: f,
+        magnitude: 1.0,
+    };
+    // A spurious peak at 46 Hz and a missing one near 16 Hz; a mode below two bins.
+    let modes = [mode(0.05), mode(3.7), mode(11.0), mode(15.5)];
+    let peaks = [peak(3.68), peak(11.13), peak(46.0)];
+    let p = validation::pair(&modes, &peaks, 0.06);
+    let got: Vec<Option<f64>> = p.iter().map(|q| q.measured_hz).collect();
+    assert_eq!(got, [None, Some(3.68), Some(11.13), None]);
+    assert!((p[1].difference_percent.unwrap() - 100.0 * (3.7 - 3.68) / 3.68).abs() < 1e-12);
+    let text = validation::summary(
+        None,
+        Some(&validation::ModalComparison {
+            modes: modes.to_vec(),
+            peaks: peaks.to_vec(),
+            pairs: p,
+            resolution_hz: 0.06,
+            ..Default::default()
+        }),
+    );
+    assert!(
+        text.contains("below resolution") && text.contains("no peak near"),
+        "{text}"
+    );
+    assert!(text.contains("without a model mode: 46.000 Hz"), "{text}");
+}

@@ -273,8 +273,8 @@ pub fn free_run(
 }
 
 /// The modes of building `d` with θ (linearised at rest) beside the peaks of the measured
-/// transfer functions of `data`, paired mode by mode (k-th lowest mode with the k-th lowest
-/// peak). A part that cannot be computed is named in `errors`.
+/// transfer functions of `data`, paired mode by mode ([`pair`]). A part that cannot be computed
+/// is named in `errors`.
 pub fn modal(d: &StructureDescription, data: &LoadedDataset, theta: &[f64]) -> ModalComparison {
     let mut out = ModalComparison {
         linearisation: "every Bouc–Wen element at its initial tangent stiffness k_j (r = drift \
@@ -334,12 +334,45 @@ pub fn modal(d: &StructureDescription, data: &LoadedDataset, theta: &[f64]) -> M
         }
         Err(e) => out.errors.push(format!("transfer functions: {e}")),
     }
-    out.pairs = out
-        .modes
+    out.pairs = pair(&out.modes, &out.peaks, out.resolution_hz);
+    out
+}
+
+/// Largest frequency ratio between a model mode and the measured peak it is paired with.
+pub const PAIR_RATIO: f64 = 1.5;
+
+/// Pairs each model mode with a measured peak: repeatedly the closest remaining (mode, peak)
+/// pair in log-frequency, as long as their ratio is below [`PAIR_RATIO`]; a mode left without
+/// a peak (none near it, or it lies below two frequency bins where no peak can be resolved)
+/// shows none, and a peak left without a mode is listed apart. Modes keep their order (1 = the
+/// lowest).
+pub fn pair(modes: &[Mode], peaks: &[Peak], resolution_hz: f64) -> Vec<ModePair> {
+    let mut candidates: Vec<(f64, usize, usize)> = Vec::new();
+    for (i, m) in modes.iter().enumerate() {
+        if !(m.frequency_hz >= 2.0 * resolution_hz) {
+            continue;
+        }
+        for (j, p) in peaks.iter().enumerate() {
+            let d = (m.frequency_hz / p.frequency_hz).ln().abs();
+            if d < PAIR_RATIO.ln() {
+                candidates.push((d, i, j));
+            }
+        }
+    }
+    candidates.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let mut peak_of = vec![None; modes.len()];
+    let mut used = vec![false; peaks.len()];
+    for (_, i, j) in candidates {
+        if peak_of[i].is_none() && !used[j] {
+            peak_of[i] = Some(j);
+            used[j] = true;
+        }
+    }
+    modes
         .iter()
         .enumerate()
         .map(|(i, m)| {
-            let p = out.peaks.get(i).map(|p| p.frequency_hz);
+            let p = peak_of[i].map(|j| peaks[j].frequency_hz);
             ModePair {
                 mode: i + 1,
                 model_hz: m.frequency_hz,
@@ -348,8 +381,7 @@ pub fn modal(d: &StructureDescription, data: &LoadedDataset, theta: &[f64]) -> M
                 difference_percent: p.map(|p| 100.0 * (m.frequency_hz - p) / p),
             }
         })
-        .collect();
-    out
+        .collect()
 }
 
 /// The building a record was identified on, from its `config.spec` (masses, 0-based
@@ -510,8 +542,14 @@ pub fn summary(free: Option<&FreeRun>, modal: Option<&ModalComparison>) -> Strin
                 p.mode,
                 p.model_hz,
                 p.damping_ratio,
-                p.measured_hz
-                    .map_or("no peak".to_string(), |f| format!("{f:.3}")),
+                p.measured_hz.map_or(
+                    if p.model_hz < 2.0 * m.resolution_hz {
+                        "below resolution".to_string()
+                    } else {
+                        "no peak near".to_string()
+                    },
+                    |f| format!("{f:.3}")
+                ),
                 p.difference_percent
                     .map_or("–".to_string(), |d| format!("{d:+.1} %")),
             );
@@ -533,7 +571,11 @@ pub fn summary(free: Option<&FreeRun>, modal: Option<&ModalComparison>) -> Strin
         let unpaired: Vec<String> = m
             .peaks
             .iter()
-            .skip(m.pairs.len())
+            .filter(|p| {
+                !m.pairs
+                    .iter()
+                    .any(|q| q.measured_hz == Some(p.frequency_hz))
+            })
             .map(|p| format!("{:.3}", p.frequency_hz))
             .collect();
         if !unpaired.is_empty() {
