@@ -92,9 +92,9 @@ fn the_fit_on_data_with_known_noise_is_the_value_the_noise_level_predicts() {
         let rms = ((0..k).map(|i| data.y(i)[c].powi(2)).sum::<f64>() / k as f64).sqrt();
         *s = 0.1 * rms;
     }
-    for i in 0..k {
-        for c in 0..m {
-            data.y_meas[i * m + c] += sigma[c] * normal(&mut rng);
+    for row in data.y_meas.chunks_exact_mut(m) {
+        for (v, s) in row.iter_mut().zip(&sigma) {
+            *v += s * normal(&mut rng);
         }
     }
     let f = validation::free_run(&d, &data, &theta, None, 0).unwrap();
@@ -266,7 +266,7 @@ fn bad_inputs_are_refused_with_a_reason() {
     let e = spectral::welch_h1(&data.ug_meas[..50], &[], data.dt).unwrap_err();
     assert!(e.to_string().contains("too short"), "{e}");
     let zero = vec![0.0; 1000];
-    let e = spectral::welch_h1(&zero, &[zero.clone()], 0.01).unwrap_err();
+    let e = spectral::welch_h1(&zero, std::slice::from_ref(&zero), 0.01).unwrap_err();
     assert!(e.to_string().contains("zero"), "{e}");
 }
 

@@ -89,7 +89,7 @@ pub fn modes(chain: &ShearChain) -> Result<Modes, ModalError> {
 /// modes, and one that grows shows a negative ζ and is counted in `not_decaying`.
 pub fn modes_of(m: &[f64], k: &[f64], c: &[f64]) -> Result<Modes, ModalError> {
     let n = m.len();
-    if n == 0 || k.len() != n || c.len() != n || m.iter().any(|v| !(*v > 0.0)) {
+    if n == 0 || k.len() != n || c.len() != n || m.iter().any(|v| v.is_nan() || *v <= 0.0) {
         return Err(ModalError::NonFinite);
     }
     let (m, c, k) = matrices(m, k, c);

@@ -33,6 +33,9 @@ use free_run::{
 };
 use spectral::Peak;
 
+/// One draw of the band: its fit per channel and its kept series, or why it is invalid.
+type DrawResult = Result<(Vec<f64>, Vec<Vec<f64>>), String>;
+
 /// Purpose of the band's random stream.
 pub const BAND_PURPOSE: &str = "validation-band";
 /// Draws of θ for the band.
@@ -193,7 +196,7 @@ pub fn free_run(
             let mut rng = core_filters::rng::stream(seed, run, BAND_PURPOSE);
             let thetas: Vec<Vec<f64>> = (0..draws).map(|_| q.draw(&mut rng)).collect();
             // Each draw: its fit per channel and its kept series (or why it is invalid).
-            let results: Vec<Result<(Vec<f64>, Vec<Vec<f64>>), String>> = thetas
+            let results: Vec<DrawResult> = thetas
                 .par_iter()
                 .map(|th| {
                     let c = chain_of(d, th).map_err(|e| e.to_string())?;
@@ -349,7 +352,7 @@ pub const PAIR_RATIO: f64 = 1.5;
 pub fn pair(modes: &[Mode], peaks: &[Peak], resolution_hz: f64) -> Vec<ModePair> {
     let mut candidates: Vec<(f64, usize, usize)> = Vec::new();
     for (i, m) in modes.iter().enumerate() {
-        if !(m.frequency_hz >= 2.0 * resolution_hz) {
+        if m.frequency_hz.is_nan() || m.frequency_hz < 2.0 * resolution_hz {
             continue;
         }
         for (j, p) in peaks.iter().enumerate() {
