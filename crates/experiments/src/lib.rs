@@ -43,4 +43,5 @@ pub mod study;
 pub mod sweep;
 pub mod table1;
 pub mod user_study;
+pub mod validation;
 pub mod verdict;

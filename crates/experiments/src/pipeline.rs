@@ -670,6 +670,8 @@ pub fn identify(input: &RunInput, algorithm: Algorithm, s: &FilterSettings) -> R
             .map(crate::residuals::channel_checks)
             .unwrap_or_default(),
         residuals: d.residuals,
+        free_run: None,
+        modal: None,
     };
     // A result that is physically impossible or rests on few particles says so (issue 16).
     record.warnings = crate::checks::check(&record);

@@ -172,6 +172,14 @@ pub struct RunRecord {
     /// The prediction errors at every step (records of `sysid filter`), drawn by `sysid plot`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub residuals: Option<crate::checks::Residuals>,
+    /// Free run of the identified model on the measured record: fit and NRMSE per channel, a
+    /// band from posterior draws ([`crate::validation`]); field-data runs of `sysid filter`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub free_run: Option<crate::validation::FreeRun>,
+    /// Modes of the identified linearised model beside the peaks of the measured transfer
+    /// functions ([`crate::validation`]); field-data runs of `sysid filter`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub modal: Option<crate::validation::ModalComparison>,
 }
 
 impl RunRecord {

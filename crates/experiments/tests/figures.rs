@@ -120,6 +120,8 @@ fn record(algorithm: &str, run: u64, bias: f64) -> RunRecord {
         credible: Vec::new(),
         innovation_checks: Vec::new(),
         residuals: None,
+        free_run: None,
+        modal: None,
     }
 }
 

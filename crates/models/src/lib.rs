@@ -21,6 +21,7 @@ pub mod filtering;
 pub mod ground_motions;
 pub mod integrate;
 pub mod limits;
+pub mod modal;
 pub mod preset;
 pub mod priors;
 pub mod readers;

@@ -50,6 +50,9 @@ enum Command {
     CompareReference(cli::reference::CompareArgs),
     /// Draw the figures of one run record (convergence, ESS, hysteresis loop, residuals).
     Plot(cli::plot::Args),
+    /// Cross-validation: the model identified in a run record predicts another record of the
+    /// same building (free run, fit per channel, modes beside the measured peaks).
+    Validate(cli::validate::Args),
     /// Compute Table I (moments of z = xᵀx by linearisation, EKF2 and the unscented transform).
     #[command(allow_negative_numbers = true)]
     Table1(cli::table1::Args),
@@ -84,5 +87,6 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Excitations(args) => cli::scaling::run_excitations(args),
         Command::Regression(args) => cli::regression::run(args),
         Command::Plot(args) => cli::plot::run(args),
+        Command::Validate(args) => cli::validate::run(args),
     }
 }

@@ -337,7 +337,12 @@ pub fn run(args: Args) -> Result<()> {
     if let Some(p) = crate::pipeline::prior_from_data(&data, chain.as_ref(), &settings)? {
         eprintln!("{}", p.describe());
     }
-    let record = identify(&input, algorithm, &settings)?;
+    let mut record = identify(&input, algorithm, &settings)?;
+    if data.meta.is_none() {
+        // Field data: validation without the truth (free run, modes; docs/validation.md).
+        let d = field::resolve_for_run(&data, chain.as_ref(), &settings.structure)?;
+        crate::validation::attach(&mut record, &data, &d);
+    }
     if data.meta.is_none() {
         // Field data: the noise levels were chosen from the measured signals (SPEC §3); say which.
         let spec = &record.config["spec"];
@@ -408,6 +413,10 @@ pub fn finish(mut record: RunRecord, out: &Path) -> Result<()> {
         out.display()
     );
     print!("{}", checks::summary_table(&record));
+    print!(
+        "{}",
+        crate::validation::summary(record.free_run.as_ref(), record.modal.as_ref())
+    );
     for w in &record.warnings {
         eprintln!("warning: {}", w.message);
     }

@@ -10,3 +10,4 @@ pub mod scaling;
 pub mod simulate;
 pub mod study;
 pub mod table1;
+pub mod validate;

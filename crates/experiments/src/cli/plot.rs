@@ -124,6 +124,8 @@ pub fn draw(r: &RunRecord, residuals: Option<&Residuals>, out: &Path) -> Result<
         ),
         Some(res) => draw_residuals(res, &who, out, &mut p)?,
     }
+    let (free, modal) = (r.free_run.as_ref(), r.modal.as_ref());
+    crate::validation::figures::draw(free, modal, out, &who, &mut p.written, &mut p.skipped)?;
     Ok(p)
 }
 

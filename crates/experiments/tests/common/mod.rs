@@ -71,6 +71,8 @@ pub fn record(algorithm: &str, run: u64, ratios: [f64; 9], nrmse: f64) -> RunRec
         credible: Vec::new(),
         innovation_checks: Vec::new(),
         residuals: None,
+        free_run: None,
+        modal: None,
     })
 }
 

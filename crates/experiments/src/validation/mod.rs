@@ -1,0 +1,596 @@
+//! Validation without the truth (docs/validation.md): what an identified model predicts of a
+//! record it is given only the ground motion of.
+//!
+//! - **Free run** ([`free_run`]): the identified building (θ_val) simulated from rest under the
+//!   measured ground motion with the toolkit's own simulator, compared with every measured
+//!   channel (fit %, NRMSE), with a band from θ drawn from the run's recorded posterior on the
+//!   stream (seed, run, `validation-band`).
+//! - **Modes** ([`modal`]): natural frequencies and damping ratios of the identified model
+//!   linearised at rest ([`models::modal`]) beside the peaks of the measured floor/ground transfer
+//!   functions ([`spectral`]), paired mode by mode.
+//!
+//! `sysid filter` attaches both to the record of every field-data run ([`attach`]); `sysid
+//! validate` applies them to another record of the same building (cross-validation).
+
+pub mod figures;
+pub mod free_run;
+pub mod spectral;
+
+use std::fmt::Write as _;
+
+use anyhow::{bail, Context, Result};
+use models::dataset::LoadedDataset;
+use models::description::StructureDescription;
+use models::modal::Mode;
+use models::sensors::{MeasurementKind, SensorLayout};
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+
+use crate::record::{number, RunRecord};
+use free_run::{
+    chain_of, fit_percent, nrmse, percentile_sorted, simulate_channels, FreeRunError, Integrator,
+    QuantileDraw, FREE_RUN_INTEGRATOR,
+};
+use spectral::Peak;
+
+/// One draw of the band: its fit per channel and its kept series, or why it is invalid.
+type DrawResult = Result<(Vec<f64>, Vec<Vec<f64>>), String>;
+
+/// Purpose of the band's random stream.
+pub const BAND_PURPOSE: &str = "validation-band";
+/// Draws of θ for the band.
+pub const BAND_DRAWS: usize = 100;
+/// At most this many time points of each series are kept in a record.
+pub const MAX_POINTS: usize = 5000;
+
+/// The spread of the fit over the band's draws: 2.5 %, 50 % and 97.5 % percentiles.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ChannelFit {
+    pub channel: String,
+    /// Fit of the free run at θ_val, in %.
+    #[serde(with = "number::scalar")]
+    pub fit_percent: f64,
+    /// NRMSE of the free run at θ_val (RMSE / RMS of the measured channel).
+    #[serde(with = "number::scalar")]
+    pub nrmse: f64,
+    /// Fit of the band's draws: 2.5, 50 and 97.5 % percentiles (absent without a band).
+    #[serde(
+        default,
+        with = "number::opt_vec",
+        skip_serializing_if = "Option::is_none"
+    )]
+    pub fit_draws: Option<Vec<f64>>,
+}
+
+/// How the band was made.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct BandInfo {
+    pub method: String,
+    pub purpose: String,
+    pub draws: usize,
+    /// Draws that were valid structures and integrated; the others are left out (first reason).
+    pub valid: usize,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub invalid_reason: Option<String>,
+}
+
+/// The free run of an identified model on one record.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct FreeRun {
+    /// What was simulated and how.
+    pub method: String,
+    pub integrator: Integrator,
+    pub measurement: MeasurementKind,
+    pub channels: Vec<ChannelFit>,
+    /// The band, or why there is none.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub band: Option<BandInfo>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub band_error: Option<String>,
+    /// The series below keep one sample in `every`.
+    pub every: usize,
+    #[serde(with = "number::vec")]
+    pub t: Vec<f64>,
+    /// Per channel: measured, simulated at θ_val, and the pointwise 2.5 % and 97.5 % percentiles
+    /// of the band's draws (empty without a band).
+    #[serde(with = "number::vec_vec")]
+    pub measured: Vec<Vec<f64>>,
+    #[serde(with = "number::vec_vec")]
+    pub simulated: Vec<Vec<f64>>,
+    #[serde(default, with = "number::vec_vec")]
+    pub band_lo: Vec<Vec<f64>>,
+    #[serde(default, with = "number::vec_vec")]
+    pub band_hi: Vec<Vec<f64>>,
+}
+
+/// A model mode beside the measured peak it is paired with.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ModePair {
+    /// 1-based mode number.
+    pub mode: usize,
+    pub model_hz: f64,
+    pub damping_ratio: f64,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub measured_hz: Option<f64>,
+    /// 100·(model − measured)/measured.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub difference_percent: Option<f64>,
+}
+
+/// Modes of the identified linearised model and the measured transfer functions.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct ModalComparison {
+    pub linearisation: String,
+    pub modes: Vec<Mode>,
+    pub overdamped: usize,
+    pub method: String,
+    pub segment: usize,
+    pub segments: usize,
+    #[serde(with = "number::scalar")]
+    pub resolution_hz: f64,
+    /// Bins of the ground motion's band (see [`spectral`]), and |H1| per channel on them.
+    #[serde(with = "number::vec")]
+    pub frequency_hz: Vec<f64>,
+    pub channels: Vec<String>,
+    #[serde(with = "number::vec_vec")]
+    pub magnitude: Vec<Vec<f64>>,
+    pub peaks: Vec<Peak>,
+    pub pairs: Vec<ModePair>,
+    /// Why a part is missing (the model's modes, or the transfer functions).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub errors: Vec<String>,
+}
+
+/// The measured channels of a record, channel-major, and the 1-based storey of each.
+fn measured_channels(data: &LoadedDataset) -> Vec<Vec<f64>> {
+    (0..data.channels)
+        .map(|c| (0..data.len()).map(|k| data.y(k)[c]).collect())
+        .collect()
+}
+
+/// The free run of building `d` with θ on record `data` (its measured ü_g and channels; the
+/// channels' storeys from its header, their kind from `d`), with a band of `draws` θ from
+/// `posterior` on the stream (seed, run, [`BAND_PURPOSE`]) when given.
+pub fn free_run(
+    d: &StructureDescription,
+    data: &LoadedDataset,
+    theta: &[f64],
+    posterior: Option<(&QuantileDraw, u64, u64)>,
+    draws: usize,
+) -> Result<FreeRun, FreeRunError> {
+    let chain = chain_of(d, theta)?;
+    let sensors = &data.sensors;
+    let kind = d.measurement;
+    let sim = |c: &models::structure::ShearChain| {
+        simulate_channels(
+            c,
+            &data.ug_meas,
+            data.dt,
+            sensors,
+            kind,
+            FREE_RUN_INTEGRATOR,
+        )
+    };
+    let simulated = sim(&chain)?;
+    let measured = measured_channels(data);
+    let names: Vec<String> = sensors.iter().map(|s| format!("a{s}")).collect();
+    let k = data.len();
+    let every = k.div_ceil(MAX_POINTS).max(1);
+    let keep = |v: &[f64]| -> Vec<f64> { v.iter().step_by(every).copied().collect() };
+    let mut channels: Vec<ChannelFit> = names
+        .iter()
+        .enumerate()
+        .map(|(c, name)| ChannelFit {
+            channel: name.clone(),
+            fit_percent: fit_percent(&measured[c], &simulated[c]),
+            nrmse: nrmse(&measured[c], &simulated[c]),
+            fit_draws: None,
+        })
+        .collect();
+    let (mut band, mut band_error) = (None, None);
+    let (mut band_lo, mut band_hi) = (Vec::new(), Vec::new());
+    match posterior {
+        None => band_error = Some("no posterior to draw from".into()),
+        Some((q, seed, run)) => {
+            let mut rng = core_filters::rng::stream(seed, run, BAND_PURPOSE);
+            let thetas: Vec<Vec<f64>> = (0..draws).map(|_| q.draw(&mut rng)).collect();
+            // Each draw: its fit per channel and its kept series (or why it is invalid).
+            let results: Vec<DrawResult> = thetas
+                .par_iter()
+                .map(|th| {
+                    let c = chain_of(d, th).map_err(|e| e.to_string())?;
+                    let y = sim(&c).map_err(|e| e.to_string())?;
+                    let fits = (0..y.len())
+                        .map(|i| fit_percent(&measured[i], &y[i]))
+                        .collect();
+                    Ok((fits, y.iter().map(|v| keep(v)).collect()))
+                })
+                .collect();
+            let invalid_reason = results.iter().find_map(|r| r.as_ref().err().cloned());
+            let ok: Vec<&(Vec<f64>, Vec<Vec<f64>>)> = results.iter().flatten().collect();
+            if ok.len() < 2 {
+                band_error = Some(format!(
+                    "{} of {draws} draws were valid{}",
+                    ok.len(),
+                    invalid_reason
+                        .as_ref()
+                        .map_or(String::new(), |r| format!(" ({r})"))
+                ));
+            } else {
+                for (c, ch) in channels.iter_mut().enumerate() {
+                    let mut f: Vec<f64> = ok.iter().map(|(fits, _)| fits[c]).collect();
+                    f.sort_by(f64::total_cmp);
+                    ch.fit_draws = Some(
+                        [0.025, 0.5, 0.975]
+                            .iter()
+                            .map(|&p| percentile_sorted(&f, p))
+                            .collect(),
+                    );
+                    let points = ok[0].1[c].len();
+                    let (mut lo, mut hi) = (Vec::with_capacity(points), Vec::with_capacity(points));
+                    let mut col = Vec::with_capacity(ok.len());
+                    for i in 0..points {
+                        col.clear();
+                        col.extend(ok.iter().map(|(_, s)| s[c][i]));
+                        col.sort_by(f64::total_cmp);
+                        lo.push(percentile_sorted(&col, 0.025));
+                        hi.push(percentile_sorted(&col, 0.975));
+                    }
+                    band_lo.push(lo);
+                    band_hi.push(hi);
+                }
+                band = Some(BandInfo {
+                    method: "θ drawn from the record's credible intervals (quantile function \
+                             interpolated through its 2.5/5/25/75/95/97.5 % points, so draws stay \
+                             inside the 95 % intervals), parameters drawn independently (the \
+                             record keeps no correlations); pointwise 2.5–97.5 % of the draws"
+                        .into(),
+                    purpose: BAND_PURPOSE.into(),
+                    draws,
+                    valid: ok.len(),
+                    invalid_reason,
+                });
+            }
+        }
+    }
+    Ok(FreeRun {
+        method: format!(
+            "the identified model (posterior mean θ_val) simulated from rest under the measured \
+             ground acceleration, {} accelerations compared with each measured channel; fit = \
+             100·(1 − ‖y − ŷ‖/‖y − ȳ‖), NRMSE = RMSE/RMS(y)",
+            kind
+        ),
+        integrator: FREE_RUN_INTEGRATOR,
+        measurement: kind,
+        channels,
+        band,
+        band_error,
+        every,
+        t: keep(&data.t),
+        measured: measured.iter().map(|v| keep(v)).collect(),
+        simulated: simulated.iter().map(|v| keep(v)).collect(),
+        band_lo,
+        band_hi,
+    })
+}
+
+/// The modes of building `d` with θ (linearised at rest) beside the peaks of the measured
+/// transfer functions of `data`, paired mode by mode ([`pair`]). A part that cannot be computed
+/// is named in `errors`.
+pub fn modal(d: &StructureDescription, data: &LoadedDataset, theta: &[f64]) -> ModalComparison {
+    let mut out = ModalComparison {
+        linearisation: "every Bouc–Wen element at its initial tangent stiffness k_j (r = drift \
+                        to first order at rest); modes from the eigenvalues of the state matrix \
+                        [[0, I], [−M⁻¹K, −M⁻¹C]]"
+            .into(),
+        method: format!(
+            "Welch H1 = P_xy/P_xx of each floor's absolute acceleration against the measured \
+             ground acceleration (Hann, 50 % overlap); peaks: the N largest local maxima of the \
+             summed |H1| where the ground motion is within {:.0} dB of its strongest frequency \
+             (up to half the Nyquist frequency) and a floor's coherence with it is at least {}",
+            -10.0 * spectral::BAND_FRACTION.log10(),
+            spectral::MIN_COHERENCE
+        ),
+        ..Default::default()
+    };
+    // From θ's k and c directly: an impossible θ (a negative damping) still has modes.
+    let n = d.storeys;
+    let linear = if theta.len() >= 2 * n {
+        models::modal::modes_of(&d.masses, &theta[..n], &theta[n..2 * n]).map_err(|e| e.to_string())
+    } else {
+        Err(format!("θ has {} entries for {n} storeys", theta.len()))
+    };
+    match linear {
+        Ok(m) => {
+            out.modes = m.modes;
+            out.overdamped = m.overdamped;
+        }
+        Err(e) => out.errors.push(format!("model modes: {e}")),
+    }
+    let measured = measured_channels(data);
+    let absolute: Vec<Vec<f64>> = measured
+        .iter()
+        .map(|y| match d.measurement {
+            MeasurementKind::Absolute => y.clone(),
+            MeasurementKind::Relative => y.iter().zip(&data.ug_meas).map(|(a, u)| a + u).collect(),
+        })
+        .collect();
+    match spectral::welch_h1(&data.ug_meas, &absolute, data.dt) {
+        Ok(t) => {
+            out.peaks = spectral::peaks(&t, d.storeys);
+            let band = spectral::in_band(&t);
+            let (first, last) = (
+                band.iter().position(|b| *b).unwrap_or(0),
+                band.iter().rposition(|b| *b).unwrap_or(0),
+            );
+            out.segment = t.segment;
+            out.segments = t.segments;
+            out.resolution_hz = t.resolution_hz;
+            out.frequency_hz = t.frequency_hz[first..=last].to_vec();
+            out.magnitude = t
+                .magnitude
+                .iter()
+                .map(|m| m[first..=last].to_vec())
+                .collect();
+            out.channels = data.sensors.iter().map(|s| format!("a{s}")).collect();
+        }
+        Err(e) => out.errors.push(format!("transfer functions: {e}")),
+    }
+    out.pairs = pair(&out.modes, &out.peaks, out.resolution_hz);
+    out
+}
+
+/// Largest frequency ratio between a model mode and the measured peak it is paired with.
+pub const PAIR_RATIO: f64 = 1.5;
+
+/// Pairs each model mode with a measured peak: repeatedly the closest remaining (mode, peak)
+/// pair in log-frequency, as long as their ratio is below [`PAIR_RATIO`]; a mode left without
+/// a peak (none near it, or it lies below two frequency bins where no peak can be resolved)
+/// shows none, and a peak left without a mode is listed apart. Modes keep their order (1 = the
+/// lowest).
+pub fn pair(modes: &[Mode], peaks: &[Peak], resolution_hz: f64) -> Vec<ModePair> {
+    let mut candidates: Vec<(f64, usize, usize)> = Vec::new();
+    for (i, m) in modes.iter().enumerate() {
+        if m.frequency_hz.is_nan() || m.frequency_hz < 2.0 * resolution_hz {
+            continue;
+        }
+        for (j, p) in peaks.iter().enumerate() {
+            let d = (m.frequency_hz / p.frequency_hz).ln().abs();
+            if d < PAIR_RATIO.ln() {
+                candidates.push((d, i, j));
+            }
+        }
+    }
+    candidates.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let mut peak_of = vec![None; modes.len()];
+    let mut used = vec![false; peaks.len()];
+    for (_, i, j) in candidates {
+        if peak_of[i].is_none() && !used[j] {
+            peak_of[i] = Some(j);
+            used[j] = true;
+        }
+    }
+    modes
+        .iter()
+        .enumerate()
+        .map(|(i, m)| {
+            let p = peak_of[i].map(|j| peaks[j].frequency_hz);
+            ModePair {
+                mode: i + 1,
+                model_hz: m.frequency_hz,
+                damping_ratio: m.damping_ratio,
+                measured_hz: p,
+                difference_percent: p.map(|p| 100.0 * (m.frequency_hz - p) / p),
+            }
+        })
+        .collect()
+}
+
+/// The building a record was identified on, from its `config.spec` (masses, 0-based
+/// hysteretic storeys, sensor layout).
+pub fn description_of(r: &RunRecord) -> Result<StructureDescription> {
+    let spec = r
+        .config
+        .get("spec")
+        .context("the record has no `config.spec` (the structure its filter used)")?;
+    let masses: Vec<f64> = serde_json::from_value(spec.get("masses").cloned().unwrap_or_default())
+        .context("field `config.spec.masses`")?;
+    let hysteretic: Vec<usize> =
+        serde_json::from_value(spec.get("hysteretic").cloned().unwrap_or_default())
+            .context("field `config.spec.hysteretic`")?;
+    let sensors: SensorLayout =
+        serde_json::from_value(spec.get("sensors").cloned().unwrap_or_default())
+            .context("field `config.spec.sensors`")?;
+    let d = StructureDescription {
+        storeys: masses.len(),
+        masses,
+        hysteretic: hysteretic.iter().map(|s| s + 1).collect(),
+        sensors: sensors.one_based(),
+        measurement: sensors.kind(),
+    };
+    d.validate()
+        .context("the record's structure (`config.spec`)")?;
+    Ok(d)
+}
+
+/// The band's θ distribution for a record, or why there is none.
+pub fn posterior_of(r: &RunRecord) -> Result<QuantileDraw, String> {
+    QuantileDraw::new(&r.param_names, &r.credible)
+}
+
+/// Checks that a record's θ_val can be simulated: a completed run with finite values and no
+/// physically impossible parameter (a stiffness or damping ≤ 0, `checks::check`).
+pub fn check_identified(r: &RunRecord) -> Result<()> {
+    if let Some(f) = &r.failure {
+        bail!("the run failed ({f}): it identified no θ to validate");
+    }
+    let impossible: Vec<&str> = r
+        .warnings
+        .iter()
+        .filter(|w| w.kind.is_fatal())
+        .filter_map(|w| w.parameter.as_deref())
+        .collect();
+    if !impossible.is_empty() {
+        bail!(
+            "θ_val is physically impossible ({} ≤ 0): no building to simulate",
+            impossible.join(", ")
+        );
+    }
+    if let Some((name, v)) = r
+        .param_names
+        .iter()
+        .zip(&r.theta_val)
+        .find(|(_, v)| !v.is_finite())
+    {
+        bail!("θ_val of {name} is {v}: no model to simulate");
+    }
+    Ok(())
+}
+
+/// Attaches the free run and the modal comparison to the record of a field-data run on
+/// `data` with building `d` (nothing when the run failed: the record says why).
+pub fn attach(r: &mut RunRecord, data: &LoadedDataset, d: &StructureDescription) {
+    r.warnings = crate::checks::check(r);
+    if let Err(e) = check_identified(r) {
+        // The modes of an impossible θ are still shown (a negative damping can leave every
+        // mode decaying); the free run is not.
+        r.modal = Some(ModalComparison {
+            errors: vec![format!("free run: {e}")],
+            ..modal(d, data, &r.theta_val)
+        });
+        return;
+    }
+    let posterior = posterior_of(r);
+    let q = posterior.as_ref().ok().map(|q| (q, r.seed, r.run));
+    match free_run(d, data, &r.theta_val, q, BAND_DRAWS) {
+        Ok(mut f) => {
+            if let Err(e) = &posterior {
+                f.band_error = Some(e.clone());
+            }
+            r.free_run = Some(f);
+        }
+        Err(e) => {
+            r.modal = Some(ModalComparison {
+                errors: vec![format!("free run: θ_val: {e}")],
+                ..modal(d, data, &r.theta_val)
+            });
+            return;
+        }
+    }
+    r.modal = Some(modal(d, data, &r.theta_val));
+}
+
+/// The terminal table of a free run and a modal comparison (empty when neither is present).
+pub fn summary(free: Option<&FreeRun>, modal: Option<&ModalComparison>) -> String {
+    let mut o = String::new();
+    if let Some(f) = free {
+        let _ = writeln!(
+            o,
+            "free run of the identified model (θ_val, from rest, driven by the measured ground \
+             motion) against the measured {} accelerations:",
+            f.measurement
+        );
+        let _ = writeln!(
+            o,
+            "{:<8}  {:>8}  {:>7}  fit of {} posterior draws (2.5 / 50 / 97.5 %)",
+            "channel",
+            "fit %",
+            "NRMSE",
+            f.band.as_ref().map_or(0, |b| b.valid)
+        );
+        for c in &f.channels {
+            let draws = match &c.fit_draws {
+                Some(p) if p.len() == 3 => format!("{:.1} / {:.1} / {:.1}", p[0], p[1], p[2]),
+                _ => "–".into(),
+            };
+            let _ = writeln!(
+                o,
+                "{:<8}  {:>8.1}  {:>7.3}  {draws}",
+                c.channel, c.fit_percent, c.nrmse
+            );
+        }
+        match (&f.band, &f.band_error) {
+            (Some(b), _) => {
+                let _ = writeln!(
+                    o,
+                    "band: {} of {} draws valid; θ drawn inside each parameter's 95 % interval, \
+                     parameters independently (the record keeps no correlations) — \
+                     docs/validation.md",
+                    b.valid, b.draws
+                );
+            }
+            (None, Some(e)) => {
+                let _ = writeln!(o, "no band: {e}");
+            }
+            (None, None) => {}
+        }
+    }
+    if let Some(m) = modal {
+        let _ = writeln!(
+            o,
+            "modes of the identified model linearised at rest (Bouc–Wen at its initial tangent) \
+             beside the peaks of the measured transfer functions (Welch H1, resolution {:.3} Hz):",
+            m.resolution_hz
+        );
+        let _ = writeln!(
+            o,
+            "{:<5}  {:>12}  {:>8}  {:>16}  {:>10}",
+            "mode", "model [Hz]", "ζ", "measured [Hz]", "difference"
+        );
+        for p in &m.pairs {
+            let _ = writeln!(
+                o,
+                "{:<5}  {:>12.3}  {:>8.4}  {:>16}  {:>10}",
+                p.mode,
+                p.model_hz,
+                p.damping_ratio,
+                p.measured_hz.map_or(
+                    if p.model_hz < 2.0 * m.resolution_hz {
+                        "below resolution".to_string()
+                    } else {
+                        "no peak near".to_string()
+                    },
+                    |f| format!("{f:.3}")
+                ),
+                p.difference_percent
+                    .map_or("–".to_string(), |d| format!("{d:+.1} %")),
+            );
+        }
+        if m.pairs.iter().any(|p| p.damping_ratio < 0.0) {
+            let _ = writeln!(
+                o,
+                "a negative ζ: that mode of the identified model grows (a negative damping): \
+                 not a physical model"
+            );
+        }
+        if m.overdamped > 0 {
+            let _ = writeln!(
+                o,
+                "{} over-damped mode(s) of the model (no resonance)",
+                m.overdamped
+            );
+        }
+        let unpaired: Vec<String> = m
+            .peaks
+            .iter()
+            .filter(|p| {
+                !m.pairs
+                    .iter()
+                    .any(|q| q.measured_hz == Some(p.frequency_hz))
+            })
+            .map(|p| format!("{:.3}", p.frequency_hz))
+            .collect();
+        if !unpaired.is_empty() {
+            let _ = writeln!(
+                o,
+                "measured peaks without a model mode: {} Hz",
+                unpaired.join(", ")
+            );
+        }
+        for e in &m.errors {
+            let _ = writeln!(o, "not computed: {e}");
+        }
+    }
+    o
+}

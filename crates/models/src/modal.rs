@@ -1,0 +1,210 @@
+//! Modes of the linearised shear chain: natural frequencies and damping ratios from M, C, K.
+//!
+//! **Linearisation.** A linear element carries `f_j = k_j d_j + c_j δv_j`. A Bouc–Wen element
+//! carries `f_j = k_j r_j + c_j δv_j` with `ṙ_j = δv_j − β|δv_j||r_j|^(n−1) r_j − γ δv_j |r_j|^n`;
+//! at the rest state (`r_j = 0`, where every record starts) both nonlinear terms and their first
+//! derivatives in `d_j` vanish for `n > 1` (for `n = 1` they are of second order in the motion's
+//! amplitude), so `r_j = d_j` to first order and the element's **initial tangent stiffness** is
+//! `k_j`. The linearised chain is therefore the chain with every element linear, `K` and `C`
+//! assembled from `k_j`, `c_j` (element `j` links storey `j − 1`, or the ground, to storey `j`)
+//! and `M = diag(m)`. This is the small-amplitude model: a yielding element is softer.
+//!
+//! **Modes.** The eigenvalues λ of the first-order matrix `A = [[0, I], [−M⁻¹K, −M⁻¹C]]` (real
+//! Schur form, `nalgebra`) come in conjugate pairs for under-damped modes:
+//! `λ = −ζω ± iω√(1 − ζ²)`, so ω = |λ| (natural circular frequency), ζ = −Re λ / |λ| and the
+//! damped frequency is Im λ. Real eigenvalues belong to over-damped modes (ζ ≥ 1), which have no
+//! resonance peak; they are counted, not listed. Non-proportional damping is handled exactly
+//! (no modal-damping assumption).
+
+use nalgebra::DMatrix;
+use thiserror::Error;
+
+use crate::structure::ShearChain;
+
+/// One under-damped mode of the linearised chain.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Mode {
+    /// Natural (undamped) frequency ω/2π in Hz.
+    pub frequency_hz: f64,
+    /// Damped frequency ω√(1 − ζ²)/2π in Hz (where the resonance of a light mode sits).
+    pub damped_hz: f64,
+    /// Damping ratio ζ.
+    pub damping_ratio: f64,
+}
+
+/// The modes of a linearised chain.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Modes {
+    /// Under-damped modes by increasing natural frequency.
+    pub modes: Vec<Mode>,
+    /// Over-damped modes (pairs of real eigenvalues, ζ ≥ 1: no resonance).
+    pub overdamped: usize,
+    /// Eigenvalues with Re λ > 0 (a growing motion; none for positive k and c), counted in
+    /// `modes` too when oscillatory (with a negative ζ).
+    pub not_decaying: usize,
+}
+
+/// Failures of the modal analysis.
+#[derive(Debug, Clone, PartialEq, Error)]
+pub enum ModalError {
+    #[error("the eigenvalue solver did not converge for the {dim}×{dim} state matrix")]
+    NoConvergence { dim: usize },
+    #[error(
+        "non-finite entry or wrong sizes in the linearised matrices (check k, c and the masses)"
+    )]
+    NonFinite,
+}
+
+/// `M`, `C`, `K` of the linearised chain (see the module documentation).
+pub fn linearised_matrices(chain: &ShearChain) -> (DMatrix<f64>, DMatrix<f64>, DMatrix<f64>) {
+    matrices(chain.masses(), chain.stiffness(), chain.damping())
+}
+
+/// `M`, `C`, `K` of a chain with storey masses `m`, element stiffnesses `k` and dampings `c`.
+fn matrices(m: &[f64], k: &[f64], c: &[f64]) -> (DMatrix<f64>, DMatrix<f64>, DMatrix<f64>) {
+    let n = m.len();
+    let mm = DMatrix::from_diagonal(&nalgebra::DVector::from_column_slice(m));
+    let assemble = |coef: &[f64]| {
+        let mut a = DMatrix::<f64>::zeros(n, n);
+        for j in 0..n {
+            a[(j, j)] += coef[j];
+            if j > 0 {
+                a[(j - 1, j - 1)] += coef[j];
+                a[(j - 1, j)] -= coef[j];
+                a[(j, j - 1)] -= coef[j];
+            }
+        }
+        a
+    };
+    (mm, assemble(c), assemble(k))
+}
+
+/// The modes of the linearised chain (initial tangent stiffness of every Bouc–Wen element).
+pub fn modes(chain: &ShearChain) -> Result<Modes, ModalError> {
+    modes_of(chain.masses(), chain.stiffness(), chain.damping())
+}
+
+/// The modes of the chain with masses `m`, stiffnesses `k` and dampings `c` (one per storey),
+/// without the checks of [`ShearChain::new`]: an identified θ with a negative damping still has
+/// modes, and one that grows shows a negative ζ and is counted in `not_decaying`.
+pub fn modes_of(m: &[f64], k: &[f64], c: &[f64]) -> Result<Modes, ModalError> {
+    let n = m.len();
+    if n == 0 || k.len() != n || c.len() != n || m.iter().any(|v| v.is_nan() || *v <= 0.0) {
+        return Err(ModalError::NonFinite);
+    }
+    let (m, c, k) = matrices(m, k, c);
+    let mut a = DMatrix::<f64>::zeros(2 * n, 2 * n);
+    for i in 0..n {
+        a[(i, n + i)] = 1.0;
+        let inv = 1.0 / m[(i, i)];
+        for j in 0..n {
+            a[(n + i, j)] = -k[(i, j)] * inv;
+            a[(n + i, n + j)] = -c[(i, j)] * inv;
+        }
+    }
+    if a.iter().any(|v| !v.is_finite()) {
+        return Err(ModalError::NonFinite);
+    }
+    let schur = nalgebra::linalg::Schur::try_new(a, f64::EPSILON, 10_000)
+        .ok_or(ModalError::NoConvergence { dim: 2 * n })?;
+    let eig = schur.complex_eigenvalues();
+    let mut modes = Vec::new();
+    let (mut real, mut not_decaying) = (0usize, 0usize);
+    for l in eig.iter() {
+        // Relative precision of the eigenvalues: an undamped mode's Re λ is 0 up to round-off.
+        let w = l.norm();
+        let tiny = 1e-12 * w;
+        if l.re > tiny || w == 0.0 {
+            not_decaying += 1;
+        }
+        // A conjugate pair is counted once (its member with Im > 0); a real eigenvalue (to the
+        // solver's precision) belongs to an over-damped (or, positive, a diverging) mode.
+        if l.im.abs() <= tiny {
+            real += usize::from(l.re < 0.0);
+        } else if l.im > 0.0 {
+            let zeta = -l.re / w;
+            modes.push(Mode {
+                frequency_hz: w / std::f64::consts::TAU,
+                damped_hz: l.im / std::f64::consts::TAU,
+                damping_ratio: if zeta.abs() <= 1e-12 { 0.0 } else { zeta },
+            });
+        }
+    }
+    modes.sort_by(|x, y| x.frequency_hz.total_cmp(&y.frequency_hz));
+    Ok(Modes {
+        modes,
+        overdamped: real / 2,
+        not_decaying,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::structure::BoucWen;
+
+    fn chain(n: usize, k: f64, c: f64, bw: bool) -> ShearChain {
+        let elements = if bw {
+            vec![BoucWen {
+                storey: 0,
+                beta: 2.0,
+                gamma: 1.0,
+                n: 2.0,
+            }]
+        } else {
+            vec![]
+        };
+        ShearChain::new(vec![1.0; n], vec![k; n], vec![c; n], elements).unwrap()
+    }
+
+    #[test]
+    fn an_undamped_uniform_chain_has_the_closed_form_frequencies() {
+        // Unit masses, equal k: ω_r² = 4k sin²((2r − 1)π / (2(2N + 1))), r = 1..N.
+        for n in [1, 3, 10] {
+            let k = 8.0;
+            let got = modes(&chain(n, k, 0.0, false)).unwrap();
+            assert_eq!(got.modes.len(), n);
+            for (r, mode) in got.modes.iter().enumerate() {
+                let angle = (2 * r + 1) as f64 * std::f64::consts::PI / (2.0 * (2 * n + 1) as f64);
+                let w = 2.0 * k.sqrt() * angle.sin();
+                assert!(
+                    (mode.frequency_hz * std::f64::consts::TAU / w - 1.0).abs() < 1e-10,
+                    "N = {n}, mode {r}: {} vs {w}",
+                    mode.frequency_hz * std::f64::consts::TAU
+                );
+                assert!(mode.damping_ratio.abs() < 1e-10);
+            }
+        }
+    }
+
+    #[test]
+    fn stiffness_proportional_damping_gives_the_rayleigh_ratios() {
+        // C = b K (equal c = b k per storey): ζ_r = b ω_r / 2, exactly, for every mode.
+        let (k, b) = (200.0, 0.004);
+        let got = modes(&chain(5, k, b * k, true)).unwrap();
+        assert_eq!(got.modes.len(), 5);
+        assert_eq!((got.overdamped, got.not_decaying), (0, 0));
+        for (r, mode) in got.modes.iter().enumerate() {
+            let angle = (2 * r + 1) as f64 * std::f64::consts::PI / 22.0;
+            let w = 2.0 * k.sqrt() * angle.sin();
+            let w_got = mode.frequency_hz * std::f64::consts::TAU;
+            assert!((w_got / w - 1.0).abs() < 1e-10, "{w_got} vs {w}");
+            assert!((mode.damping_ratio / (b * w / 2.0) - 1.0).abs() < 1e-9);
+            let wd = w * (1.0 - (b * w / 2.0).powi(2)).sqrt();
+            assert!((mode.damped_hz * std::f64::consts::TAU / wd - 1.0).abs() < 1e-9);
+        }
+    }
+
+    #[test]
+    fn a_heavily_damped_oscillator_is_counted_as_overdamped() {
+        // One storey, ζ = c / (2√(km)) = 2.
+        let got = modes(&chain(1, 1.0, 4.0, false)).unwrap();
+        assert!(got.modes.is_empty());
+        assert_eq!(got.overdamped, 1);
+        // A negative damping: the mode grows, ζ < 0, and it is counted as not decaying.
+        let grow = modes_of(&[1.0], &[4.0], &[-0.4]).unwrap();
+        assert_eq!(grow.not_decaying, 2);
+        assert!((grow.modes[0].damping_ratio + 0.1).abs() < 1e-12);
+        assert!(modes_of(&[1.0, 0.0], &[1.0, 1.0], &[0.0, 0.0]).is_err());
+    }
+}
