@@ -46,10 +46,6 @@ fn nums(n: usize) -> impl Strategy<Value = Vec<f64>> {
     proptest::collection::vec(num(), n)
 }
 
-fn rows(k: usize, n: usize) -> impl Strategy<Value = Vec<Vec<f64>>> {
-    proptest::collection::vec(nums(n), k)
-}
-
 const P: usize = 9;
 const STATES: usize = 7;
 const KEPT: usize = 6;
