@@ -15,6 +15,10 @@ pub enum FilterError {
     /// A non-finite value (NaN or infinity) appeared where a finite one is required.
     #[error("step {step}: non-finite value in {which}")]
     NonFinite { step: usize, which: &'static str },
+    /// The run was stopped before step `step` at its caller's request ([`crate::smc::Observer::
+    /// should_stop`]: an interruption by the user), not by a numerical failure.
+    #[error("step {step}: interrupted")]
+    Interrupted { step: usize },
 }
 
 impl FilterError {
@@ -24,6 +28,7 @@ impl FilterError {
             FilterError::NotPositiveDefinite { .. } => "not_positive_definite",
             FilterError::AllWeightsZero { .. } => "all_weights_zero",
             FilterError::NonFinite { .. } => "non_finite",
+            FilterError::Interrupted { .. } => "interrupted",
         }
     }
 
@@ -32,7 +37,8 @@ impl FilterError {
         match self {
             FilterError::NotPositiveDefinite { step, .. }
             | FilterError::AllWeightsZero { step }
-            | FilterError::NonFinite { step, .. } => *step,
+            | FilterError::NonFinite { step, .. }
+            | FilterError::Interrupted { step } => *step,
         }
     }
 }
