@@ -197,8 +197,17 @@ impl PyDataset {
     }
     /// Writes the data set as a directory (`measured.csv`, and `truth.csv` and `dataset.json`
     /// for simulated data) that `sysid filter --data` reads; written under a temporary name and
-    /// swapped into place, as `sysid simulate` does.
+    /// swapped into place, as `sysid simulate` does. A simulated data set loaded from a
+    /// directory is refused (copy the directory).
     fn write(&self, py: Python<'_>, dir: PathBuf) -> PyResult<()> {
+        if self.generated.is_none() && self.loaded.meta.is_some() {
+            // Writing only its measurements would turn it into field data.
+            return Err(SysidError::new_err(format!(
+                "this data set was loaded with its truth and dataset.json from the directory of {}: \
+                 copy that directory (write() writes simulated data sets and field data)",
+                self.measured.display()
+            )));
+        }
         py.allow_threads(|| match &self.generated {
             Some(ds) => ds
                 .write_dir(&dir)

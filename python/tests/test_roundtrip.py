@@ -2,6 +2,7 @@
 for bit; the result carries every output of a run as arrays of the documented shapes."""
 
 import numpy as np
+import pytest
 
 import sysid_mpf as sm
 
@@ -53,6 +54,10 @@ def test_simulated_data_round_trips_and_carries_its_truth(tmp_path):
     for name in ("t", "ug", "acc", "ug_clean", "states", "theta_true"):
         assert np.array_equal(bits(getattr(back, name)), bits(getattr(d, name))), name
     assert back.dt == d.dt and back.building == d.building
+    # Writing its measurements alone would make it field data: refused by name.
+    with pytest.raises(sm.SysidError, match="copy that directory"):
+        back.write(tmp_path / "again")
+    assert not (tmp_path / "again").exists()
 
 
 def test_record_round_trips_and_has_every_output(tmp_path):
