@@ -19,6 +19,10 @@ pub enum FilterError {
     /// set-up (`linalg::Sparse`): the step's numbers would be wrong, so the run ends.
     #[error("step {step}: the model's {which} left its declared sparsity pattern")]
     JacobianPattern { step: usize, which: &'static str },
+    /// The run was stopped before step `step` at its caller's request ([`crate::smc::Observer::
+    /// should_stop`]: an interruption by the user), not by a numerical failure.
+    #[error("step {step}: interrupted")]
+    Interrupted { step: usize },
 }
 
 impl FilterError {
@@ -29,6 +33,7 @@ impl FilterError {
             FilterError::AllWeightsZero { .. } => "all_weights_zero",
             FilterError::NonFinite { .. } => "non_finite",
             FilterError::JacobianPattern { .. } => "jacobian_pattern",
+            FilterError::Interrupted { .. } => "interrupted",
         }
     }
 
@@ -38,7 +43,8 @@ impl FilterError {
             FilterError::NotPositiveDefinite { step, .. }
             | FilterError::AllWeightsZero { step }
             | FilterError::NonFinite { step, .. }
-            | FilterError::JacobianPattern { step, .. } => *step,
+            | FilterError::JacobianPattern { step, .. }
+            | FilterError::Interrupted { step } => *step,
         }
     }
 }

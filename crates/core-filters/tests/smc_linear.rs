@@ -409,3 +409,51 @@ fn a_jacobian_off_its_declared_pattern_ends_the_run_with_a_typed_error() {
         }
     }
 }
+/// An observer that asks the run to stop before step `at` (a user's interruption).
+struct StopAt {
+    at: usize,
+    steps: usize,
+}
+impl Observer for StopAt {
+    fn on_step(&mut self, _info: &StepInfo, _p: &Posterior) {
+        self.steps += 1;
+    }
+    fn should_stop(&mut self, k: usize) -> bool {
+        k >= self.at
+    }
+}
+
+/// An observer's stop request ends the run before the requested step with the typed
+/// `Interrupted` failure; the completed steps and their log-likelihood are those of an
+/// uninterrupted run over the same steps.
+#[test]
+fn a_stop_request_ends_the_run_before_its_step() {
+    let model = Linked::example();
+    let ys = model.simulate(1.3, 10, &mut stream(5, 0, "data"));
+    let mut pf = BootstrapPf::new(model.clone());
+    let mut stop = StopAt { at: 7, steps: 0 };
+    let s = run(
+        &mut pf,
+        &config(20),
+        &ys,
+        1,
+        &mut stream(1, 0, "f"),
+        &mut stop,
+    );
+    assert_eq!(s.steps_completed, 6);
+    assert_eq!(stop.steps, 6);
+    assert_eq!(
+        s.failure,
+        Some(core_filters::error::FilterError::Interrupted { step: 7 })
+    );
+    let mut pf = BootstrapPf::new(model);
+    let first6 = run(
+        &mut pf,
+        &config(20),
+        &ys[..6],
+        1,
+        &mut stream(1, 0, "f"),
+        &mut NoObserver,
+    );
+    assert_eq!(first6.loglik.to_bits(), s.loglik.to_bits());
+}

@@ -172,6 +172,8 @@ pub struct Recorder<'a> {
     pub final_particles: Option<FinalParticles>,
     /// One-step-ahead prediction errors, when asked for ([`crate::residuals`]).
     pub predictor: Option<crate::residuals::Predictor>,
+    /// Asked before every step whether to stop the run (a user's interruption); `None`: never.
+    pub stop: Option<&'a dyn Fn() -> bool>,
 }
 
 impl<'a> Recorder<'a> {
@@ -206,6 +208,7 @@ impl<'a> Recorder<'a> {
             keep_final: false,
             final_particles: None,
             predictor: None,
+            stop: None,
         }
     }
 
@@ -229,6 +232,10 @@ impl<'a> Recorder<'a> {
 }
 
 impl Observer for Recorder<'_> {
+    fn should_stop(&mut self, _k: usize) -> bool {
+        self.stop.is_some_and(|stop| stop())
+    }
+
     fn on_start(&mut self, layout: &Layout, _particles: usize) {
         self.last = Posterior::for_layout(layout);
         if let Some(p) = &mut self.predictor {

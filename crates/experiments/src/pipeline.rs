@@ -401,8 +401,19 @@ pub(crate) struct Driven {
     pub(crate) residuals: Option<crate::checks::Residuals>,
 }
 
+/// A run stopped at its caller's request ([`identify_stoppable`]): no record is made of it.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("interrupted before step {step} of {steps}")]
+pub struct Interrupted {
+    /// The step that was not run (1-based).
+    pub step: usize,
+    /// The steps of the run.
+    pub steps: usize,
+}
+
 /// Runs filter `member` of a pool (0: the only filter of an unpooled run, on the stream
 /// `filter/<algorithm>`; member m > 0 on `filter/<algorithm>/pool<m>`).
+#[allow(clippy::too_many_arguments)]
 fn drive(
     filter: &mut dyn Filter,
     input: &RunInput,
@@ -412,6 +423,7 @@ fn drive(
     member: usize,
     predictor: Option<crate::residuals::Predictor>,
     started: Instant,
+    stop: &dyn Fn() -> bool,
 ) -> Driven {
     let data = input.data;
     let layout = filter.layout().clone();
@@ -465,6 +477,7 @@ fn drive(
     }
     recorder.keep_final = s.pool > 1;
     recorder.predictor = predictor;
+    recorder.stop = Some(stop);
     let name = match member {
         0 => format!("{}/{}", purpose::FILTER, algorithm.name()),
         m => format!("{}/{}/pool{m}", purpose::FILTER, algorithm.name()),
@@ -495,6 +508,19 @@ fn drive(
 
 /// Runs one algorithm on one data set and returns its record.
 pub fn identify(input: &RunInput, algorithm: Algorithm, s: &FilterSettings) -> Result<RunRecord> {
+    identify_stoppable(input, algorithm, s, &|| false)
+}
+
+/// [`identify`], asking `stop` before every filter step whether to stop (an interactive caller's
+/// Ctrl-C): when it answers `true` the run ends and the error is [`Interrupted`] (downcast it
+/// from the `anyhow::Error`); nothing else differs, so a run that is not stopped returns the
+/// record [`identify`] returns.
+pub fn identify_stoppable(
+    input: &RunInput,
+    algorithm: Algorithm,
+    s: &FilterSettings,
+    stop: &dyn Fn() -> bool,
+) -> Result<RunRecord> {
     let data = input.data;
     if data.len() < 2 {
         bail!(
@@ -551,16 +577,20 @@ pub fn identify(input: &RunInput, algorithm: Algorithm, s: &FilterSettings) -> R
                     ..pc
                 };
                 let p = if m == 0 { predictor()? } else { None };
-                Ok(drive(
-                    filter.as_mut(),
-                    input,
-                    s,
-                    algorithm,
-                    &member,
-                    m,
-                    p,
-                    started,
-                ))
+                interrupted(
+                    drive(
+                        filter.as_mut(),
+                        input,
+                        s,
+                        algorithm,
+                        &member,
+                        m,
+                        p,
+                        started,
+                        stop,
+                    ),
+                    data.len() - 1,
+                )
             })
             .collect::<Result<_>>()?;
         crate::pool::combine(&layout, members)
@@ -568,16 +598,20 @@ pub fn identify(input: &RunInput, algorithm: Algorithm, s: &FilterSettings) -> R
         if s.pool == 0 {
             bail!("field `pool`: 0 filters (1 runs one filter)");
         }
-        drive(
-            filter.as_mut(),
-            input,
-            s,
-            algorithm,
-            &pc,
-            0,
-            predictor()?,
-            started,
-        )
+        interrupted(
+            drive(
+                filter.as_mut(),
+                input,
+                s,
+                algorithm,
+                &pc,
+                0,
+                predictor()?,
+                started,
+                stop,
+            ),
+            data.len() - 1,
+        )?
     };
 
     let steps = data.len() - 1;
@@ -676,6 +710,14 @@ pub fn identify(input: &RunInput, algorithm: Algorithm, s: &FilterSettings) -> R
     // A result that is physically impossible or rests on few particles says so (issue 16).
     record.warnings = crate::checks::check(&record);
     Ok(record)
+}
+
+/// A driven filter, or [`Interrupted`] when it was stopped.
+fn interrupted(d: Driven, steps: usize) -> Result<Driven> {
+    if let Some(core_filters::error::FilterError::Interrupted { step }) = d.summary.failure {
+        return Err(Interrupted { step, steps }.into());
+    }
+    Ok(d)
 }
 
 /// The validation run (SPEC §7): θ_val, zero initial conditions, clean excitation, adaptive

@@ -133,7 +133,9 @@ fn measured_transfer_peaks_sit_at_the_modes_of_a_known_linear_building() {
             .unwrap();
     let dt = 0.005;
     // SPEC §2's El Centro × 3 at 5 ms, scaled to × 50.
-    let ug = models::ground_motions::paper_default().scaled(50.0 / 3.0).acc;
+    let ug = models::ground_motions::paper_default()
+        .scaled(50.0 / 3.0)
+        .acc;
     let truth = models::integrate::simulate_rk4(&chain, &ug, dt);
     let k = ug.len();
     let mut rng = core_filters::rng::stream(5, 0, "test-noise");

@@ -809,6 +809,32 @@ impl LoadedDataset {
     pub fn y(&self, k: usize) -> &[f64] {
         &self.y_meas[k * self.channels..(k + 1) * self.channels]
     }
+
+    /// Writes the measured data alone (`measured.csv`: `t,ug,a<s>...`, numbers that parse back
+    /// to the same bits) as the directory `dir`, a field-data set that [`load_dir`] reads.
+    /// Written under a temporary name and swapped into place like [`Dataset::write_dir`].
+    pub fn write_measured_dir(&self, dir: &Path) -> Result<(), DatasetError> {
+        let mut s = String::from("t,ug");
+        for storey in &self.sensors {
+            write!(s, ",a{storey}").unwrap();
+        }
+        s.push('\n');
+        for k in 0..self.len() {
+            write!(s, "{},{}", Num(self.t[k]), Num(self.ug_meas[k])).unwrap();
+            for &a in self.y(k) {
+                write!(s, ",{}", Num(a)).unwrap();
+            }
+            s.push('\n');
+        }
+        let staging = replace::stage(dir)?;
+        match write_file(&staging, MEASURED, s.as_bytes()) {
+            Ok(()) => staging.commit(),
+            Err(e) => {
+                staging.abandon();
+                Err(e)
+            }
+        }
+    }
 }
 
 /// A parsed numeric table: column names from the header and row-major values, with the line

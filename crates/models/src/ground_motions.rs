@@ -153,7 +153,6 @@ mod tests {
         assert!((d.pga() - 3.0 * 0.31882 * G).abs() < 1e-9);
     }
 
-
     /// (name, NPTS, DT [s], peak [g] signed, time of the peak [s]) as documented in
     /// `data/ground_motions/PROVENANCE.md` (read off the files independently of this parser).
     const DOCUMENTED: [(&str, usize, f64, f64, f64); 8] = [

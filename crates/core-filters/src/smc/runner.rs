@@ -195,6 +195,12 @@ pub trait Observer {
     /// Called once at the end of a run that completed every step, with the weighted particles of
     /// the last step (for credible intervals and degeneracy counts).
     fn on_finish(&mut self, _last: &WeightedParticles<'_>) {}
+    /// Whether the run should stop before step `k` (an interruption by the user, e.g. Ctrl-C in
+    /// an interactive session). Asked once per step, before the step; `true` ends the run with
+    /// [`FilterError::Interrupted`] and the steps before `k` completed.
+    fn should_stop(&mut self, _k: usize) -> bool {
+        false
+    }
 }
 
 /// An observer that records nothing.
@@ -294,6 +300,10 @@ pub fn run(
     let mut pending = false;
     for (idx, y) in ys.chunks_exact(ny).enumerate() {
         let k = idx + 1;
+        if observer.should_stop(k) {
+            failure = Some(FilterError::Interrupted { step: k });
+            break;
+        }
         if y.iter().any(|v| !v.is_finite()) {
             failure = Some(FilterError::NonFinite {
                 step: k,

@@ -134,9 +134,11 @@ fn check_flags(args: &Args) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// Runs `sysid simulate`.
-pub fn run(args: Args) -> anyhow::Result<()> {
-    check_flags(&args)?;
+/// The data-set configuration the flags of `sysid simulate` describe (everything but `--out`),
+/// checked against the limits; errors name the flag. The Python package's `simulate` uses it
+/// too, so that both accept and refuse the same settings with the same messages.
+pub fn dataset_config(args: &Args) -> anyhow::Result<DatasetConfig> {
+    check_flags(args)?;
     let mut config = DatasetConfig::from_preset(&args.preset, args.seed)?;
     config.run = args.run;
     config.storeys = args.storeys;
@@ -175,6 +177,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         limits::samples_for_duration(d, config.dt)
             .with_context(|| format!("--duration at dt = {} s", config.dt))?;
     }
+    Ok(config)
+}
+
+/// Runs `sysid simulate`.
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let config = dataset_config(&args)?;
     let ds = dataset::generate(&config)?;
     ds.write_dir(&args.out)
         .with_context(|| format!("writing the data set to {}", args.out.display()))?;
