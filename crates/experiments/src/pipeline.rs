@@ -401,7 +401,15 @@ pub(crate) struct Driven {
     pub(crate) residuals: Option<crate::checks::Residuals>,
 }
 
-/// Runs filter `member` of a pool (0: the only filter of an unpooled run, on the stream
+/// Which filter of a pool [`drive`] runs, and when the whole run started (its pace is timed
+/// over all the pool's filters, [`crate::pace`]).
+#[derive(Clone, Copy)]
+struct Member {
+    index: usize,
+    started: Instant,
+}
+
+/// Runs filter `member.index` of a pool (0: the only filter of an unpooled run, on the stream
 /// `filter/<algorithm>`; member m > 0 on `filter/<algorithm>/pool<m>`).
 fn drive(
     filter: &mut dyn Filter,
@@ -409,10 +417,13 @@ fn drive(
     s: &FilterSettings,
     algorithm: Algorithm,
     pc: &SmcConfig,
-    member: usize,
+    member: Member,
     predictor: Option<crate::residuals::Predictor>,
-    started: Instant,
 ) -> Driven {
+    let Member {
+        index: member,
+        started,
+    } = member;
     let data = input.data;
     let layout = filter.layout().clone();
     // Truth rows in the filter's state order, when the truth is known.
@@ -551,16 +562,8 @@ pub fn identify(input: &RunInput, algorithm: Algorithm, s: &FilterSettings) -> R
                     ..pc
                 };
                 let p = if m == 0 { predictor()? } else { None };
-                Ok(drive(
-                    filter.as_mut(),
-                    input,
-                    s,
-                    algorithm,
-                    &member,
-                    m,
-                    p,
-                    started,
-                ))
+                let who = Member { index: m, started };
+                Ok(drive(filter.as_mut(), input, s, algorithm, &member, who, p))
             })
             .collect::<Result<_>>()?;
         crate::pool::combine(&layout, members)
@@ -568,16 +571,8 @@ pub fn identify(input: &RunInput, algorithm: Algorithm, s: &FilterSettings) -> R
         if s.pool == 0 {
             bail!("field `pool`: 0 filters (1 runs one filter)");
         }
-        drive(
-            filter.as_mut(),
-            input,
-            s,
-            algorithm,
-            &pc,
-            0,
-            predictor()?,
-            started,
-        )
+        let who = Member { index: 0, started };
+        drive(filter.as_mut(), input, s, algorithm, &pc, who, predictor()?)
     };
 
     let steps = data.len() - 1;
