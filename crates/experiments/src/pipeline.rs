@@ -411,20 +411,31 @@ pub struct Interrupted {
     pub steps: usize,
 }
 
-/// Runs filter `member` of a pool (0: the only filter of an unpooled run, on the stream
+/// Which filter of a pool [`drive`] runs, when the whole run started (its pace is timed over
+/// all the pool's filters, [`crate::pace`]) and whether its caller asks it to stop.
+#[derive(Clone, Copy)]
+struct Member<'a> {
+    index: usize,
+    started: Instant,
+    stop: &'a dyn Fn() -> bool,
+}
+
+/// Runs filter `member.index` of a pool (0: the only filter of an unpooled run, on the stream
 /// `filter/<algorithm>`; member m > 0 on `filter/<algorithm>/pool<m>`).
-#[allow(clippy::too_many_arguments)]
 fn drive(
     filter: &mut dyn Filter,
     input: &RunInput,
     s: &FilterSettings,
     algorithm: Algorithm,
     pc: &SmcConfig,
-    member: usize,
+    member: Member<'_>,
     predictor: Option<crate::residuals::Predictor>,
-    started: Instant,
-    stop: &dyn Fn() -> bool,
 ) -> Driven {
+    let Member {
+        index: member,
+        started,
+        stop,
+    } = member;
     let data = input.data;
     let layout = filter.layout().clone();
     // Truth rows in the filter's state order, when the truth is known.
@@ -577,18 +588,13 @@ pub fn identify_stoppable(
                     ..pc
                 };
                 let p = if m == 0 { predictor()? } else { None };
+                let who = Member {
+                    index: m,
+                    started,
+                    stop,
+                };
                 interrupted(
-                    drive(
-                        filter.as_mut(),
-                        input,
-                        s,
-                        algorithm,
-                        &member,
-                        m,
-                        p,
-                        started,
-                        stop,
-                    ),
+                    drive(filter.as_mut(), input, s, algorithm, &member, who, p),
                     data.len() - 1,
                 )
             })
@@ -598,18 +604,13 @@ pub fn identify_stoppable(
         if s.pool == 0 {
             bail!("field `pool`: 0 filters (1 runs one filter)");
         }
+        let who = Member {
+            index: 0,
+            started,
+            stop,
+        };
         interrupted(
-            drive(
-                filter.as_mut(),
-                input,
-                s,
-                algorithm,
-                &pc,
-                0,
-                predictor()?,
-                started,
-                stop,
-            ),
+            drive(filter.as_mut(), input, s, algorithm, &pc, who, predictor()?),
             data.len() - 1,
         )?
     };

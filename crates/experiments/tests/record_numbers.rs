@@ -247,7 +247,7 @@ fn records_with_non_finite_numbers_in_every_field_read_back_through_every_reader
             let back: RunRecord = read(&path).map_err(|e| TestCaseError::fail(format!("{e:#}")))?;
             prop_assert_eq!(text(&back), text(&r));
             // `sysid plot`: read and draw (every 8th case: drawing is the slow part).
-            if case % 8 == 0 {
+            if case.is_multiple_of(8) {
                 experiments::cli::plot::plot(&path, &dir.join(format!("figs{case}")))
                     .map_err(|e| TestCaseError::fail(format!("plot: {e:#}")))?;
             }
