@@ -256,6 +256,7 @@ fn to_grid(
     if same_rate && (shift - shift.round()).abs() <= 0.05 && jitter_ok {
         let s = shift.round() as i64;
         let mut values = c.values.clone();
+        let mut before = String::new();
         let first_index = if s >= 0 {
             s as usize
         } else {
@@ -268,6 +269,11 @@ fn to_grid(
                 ));
             }
             values.drain(..drop);
+            before = format!(
+                "; its {drop} sample{} before the ground's first {} not used",
+                if drop == 1 { "" } else { "s" },
+                if drop == 1 { "is" } else { "are" }
+            );
             0
         };
         if s != 0 {
@@ -275,7 +281,7 @@ fn to_grid(
                 channel: c.name(),
                 action: format!(
                     "its clock starts {} {} the ground's: matched by time stamp, shifted by {} \
-                     sample{} against row numbers",
+                     sample{} against row numbers{before}",
                     ms(start_offset.abs()),
                     if s > 0 { "after" } else { "before" },
                     s.abs(),

@@ -257,14 +257,9 @@ impl ChannelMap {
         };
         let raw: MapFile = toml::from_str(text).map_err(|e| {
             let line = e.span().map_or(1, |s| line_of(text, s.start));
-            // toml names an unknown or missing key in its message; say which table it is in.
+            // toml names the offending key or value in backquotes.
             let msg = e.message().trim().to_string();
-            let key = msg
-                .split('`')
-                .nth(1)
-                .filter(|_| msg.contains("field"))
-                .unwrap_or("map")
-                .to_string();
+            let key = msg.split('`').nth(1).unwrap_or("map").to_string();
             err(line, &key, msg)
         })?;
         let dir = path.parent().unwrap_or(Path::new("")).to_path_buf();

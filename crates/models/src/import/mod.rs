@@ -147,7 +147,13 @@ fn read_channel(c: &Channel) -> Result<(Recorded, Source), ImportError> {
             (times, r.acc, lines, Some(as_))
         }
     };
+    // The limit on data values applies in SI units, after the map's units, scale and sign.
     let f = c.factor();
+    let field = c.spec.column.as_deref().unwrap_or("accel");
+    for (v, &line) in values.iter().zip(&lines) {
+        crate::limits::check_value(v * f)
+            .map_err(|e| crate::readers::limit_error(&c.path, line, field, e))?;
+    }
     let d = digest_of(&c.path)?;
     let samples = values.len();
     let rec = Recorded {

@@ -92,9 +92,8 @@ pub fn parse_sensor_csv(
         .and_then(|s| s.chars().next())
         .unwrap_or(',');
     let split = |l: &str| -> Vec<String> { l.split(sep).map(|f| f.trim().to_string()).collect() };
-    let names_both = |names: &[String]| {
-        names.contains(&columns.time) && names.contains(&columns.column)
-    };
+    let names_both =
+        |names: &[String]| names.contains(&columns.time) && names.contains(&columns.column);
     // The 0-based index of the line of column names.
     let header = match columns.header_lines {
         Some(h) => {
