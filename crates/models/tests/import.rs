@@ -282,6 +282,47 @@ fn clock_offsets_shift_or_resample_by_time_stamp() {
 }
 
 #[test]
+fn an_offset_under_the_clock_tolerance_pairs_rows_and_is_logged() {
+    let dir = scratch("tolerance");
+    let g = clock(0, 50);
+    sensor_file(
+        &dir,
+        "g.csv",
+        &g,
+        &g.iter().map(|&t| signal(t)).collect::<Vec<_>>(),
+    );
+    let s: Vec<i64> = g.iter().map(|t| t + 100).collect();
+    sensor_file(
+        &dir,
+        "s.csv",
+        &s,
+        &g.iter().map(|&t| signal(t)).collect::<Vec<_>>(),
+    );
+    let d = run(
+        &dir,
+        &map("drop_leading_zeros = false", "g.csv", &["s.csv"]),
+    )
+    .unwrap();
+    let log = actions(&d.record);
+    assert!(
+        log.contains("its clock starts 0.100 ms after the ground's, within clock_tolerance = 0.05"),
+        "{log}"
+    );
+    assert_eq!(storey(&d, 0), d.ug);
+    // With no tolerance the same file is resampled.
+    let d = run(
+        &dir,
+        &map(
+            "drop_leading_zeros = false\nclock_tolerance = 0",
+            "g.csv",
+            &["s.csv"],
+        ),
+    )
+    .unwrap();
+    assert!(actions(&d.record).contains("resampled onto the ground's samples"));
+}
+
+#[test]
 fn clocks_that_do_not_overlap_are_refused_unless_the_starts_are_declared_simultaneous() {
     let dir = scratch("disagree");
     let g = clock(848_402_848, 100);
@@ -546,6 +587,10 @@ fn malformed_channel_maps_are_refused_naming_the_key() {
         (
             good.replace("[options]\n", "[options]\nmax_gap = -1\n"),
             "options.max_gap",
+        ),
+        (
+            good.replace("[options]\n", "[options]\nclock_tolerance = 1\n"),
+            "options.clock_tolerance",
         ),
         (
             good.replace("[options]\n", "[options]\nalign = \"rows\"\n"),

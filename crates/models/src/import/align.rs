@@ -247,13 +247,15 @@ fn to_grid(
     let step = (last - first) / (c.times.len() - 1) as f64;
     let shift = start_offset / dt;
     let same_rate = (step - dt).abs() <= 1e-4 * dt;
-    // Whole samples apart and ticking together: a shift moves no value between samples.
+    // Whole samples apart (within `clock_tolerance` of a sample) and ticking together: a
+    // shift moves no value between samples.
+    let tol = opts.clock_tolerance;
     let jitter_ok = c
         .times
         .iter()
         .enumerate()
-        .all(|(i, &t)| (t - (first + i as f64 * dt)).abs() <= 0.05 * dt);
-    if same_rate && (shift - shift.round()).abs() <= 0.05 && jitter_ok {
+        .all(|(i, &t)| (t - (first + i as f64 * dt)).abs() <= tol * dt);
+    if same_rate && (shift - shift.round()).abs() <= tol && jitter_ok {
         let s = shift.round() as i64;
         let mut values = c.values.clone();
         let mut before = String::new();
@@ -276,6 +278,21 @@ fn to_grid(
             );
             0
         };
+        if s == 0 && start_offset != 0.0 {
+            log.push(Repair {
+                channel: c.name(),
+                action: format!(
+                    "its clock starts {} {} the ground's, within clock_tolerance = {tol} of a \
+                     sample: rows paired by time stamp without interpolation",
+                    ms(start_offset.abs()),
+                    if start_offset > 0.0 {
+                        "after"
+                    } else {
+                        "before"
+                    },
+                ),
+            });
+        }
         if s != 0 {
             log.push(Repair {
                 channel: c.name(),

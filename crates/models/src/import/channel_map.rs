@@ -10,6 +10,7 @@
 //! max_gap = 0.05             # s: a gap in the time stamps up to this long is interpolated, longer is refused
 //! align = "timestamps"       # or "start": the files' first rows are simultaneous (clocks not shared)
 //! max_clock_offset = 1.0     # s: channels whose clocks start further apart than this are refused
+//! clock_tolerance = 0.05     # samples: clocks closer than this to whole samples apart are shifted, not resampled
 //! measurement = "absolute"   # what the accelerometers record
 //!
 //! [ground]
@@ -98,6 +99,9 @@ fn default_max_gap() -> f64 {
 fn default_max_clock_offset() -> f64 {
     1.0
 }
+fn default_clock_tolerance() -> f64 {
+    0.05
+}
 fn default_align() -> Align {
     Align::Timestamps
 }
@@ -127,6 +131,10 @@ pub struct Options {
     pub align: Align,
     #[serde(default = "default_max_clock_offset")]
     pub max_clock_offset: f64,
+    /// Fraction of a sample within which two clocks count as whole samples apart (rows are
+    /// then paired without interpolation).
+    #[serde(default = "default_clock_tolerance")]
+    pub clock_tolerance: f64,
     #[serde(default = "default_measurement")]
     pub measurement: MeasurementKind,
 }
@@ -274,6 +282,8 @@ impl ChannelMap {
                 };
                 check("max_gap", o.max_gap, 3600.0)?;
                 check("max_clock_offset", o.max_clock_offset, limits::MAX_ABS_TIME)?;
+                limits::check_range(o.clock_tolerance, 0.0, 0.5)
+                    .map_err(|e| err(line, "options.clock_tolerance", format!("{e} (samples)")))?;
                 o
             }
             None => Options::default(),
