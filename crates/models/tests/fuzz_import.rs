@@ -113,7 +113,7 @@ fn check_import(dir: &Path, map: &Path) -> Result<(), TestCaseError> {
     match import(&m) {
         Ok(d) => {
             let k = d.ug.len();
-            prop_assert!(k >= 2 && k <= limits::MAX_SAMPLES);
+            prop_assert!((2..=limits::MAX_SAMPLES).contains(&k));
             prop_assert!(limits::check_dt(d.dt).is_ok(), "dt {}", d.dt);
             prop_assert_eq!(d.y.len(), k * d.sensors().len());
             bounded(&d.ug)?;

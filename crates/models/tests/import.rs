@@ -427,13 +427,8 @@ fn zero_rows_units_sign_scale_gravity_and_drift() {
         d.record.warnings
     );
     let y = storey(&d, 0);
-    for k in 0..d.ug.len() {
-        assert!(
-            (y[k] - d.ug[k]).abs() < 1e-9,
-            "row {k}: {} {}",
-            y[k],
-            d.ug[k]
-        );
+    for (k, (a, u)) in y.iter().zip(&d.ug).enumerate() {
+        assert!((a - u).abs() < 1e-9, "row {k}: {a} {u}");
     }
     // g and mm/s² with a scale; a linear drift removed by detrend.
     let sa: Vec<f64> = g.iter().map(|&t| signal(t) / 9.81).collect();
@@ -448,8 +443,8 @@ fn zero_rows_units_sign_scale_gravity_and_drift() {
     let d = run(&dir, &m.replace("units = \"m/s2\"", "units = \"mm/s2\"")).unwrap();
     let y = storey(&d, 0);
     // ground in mm/s² (so ×1e-3), storey in g ×2: y = 2·signal, ug = 1e-3·signal.
-    for k in 2..d.ug.len() {
-        assert!((y[k] - 2000.0 * d.ug[k]).abs() < 1e-9, "row {k}");
+    for (k, (a, u)) in y.iter().zip(&d.ug).enumerate().skip(2) {
+        assert!((a - 2000.0 * u).abs() < 1e-9, "row {k}");
     }
     let drift: Vec<f64> = g
         .iter()
@@ -491,8 +486,8 @@ fn zero_rows_units_sign_scale_gravity_and_drift() {
         "{log}"
     );
     let y = storey(&d, 0);
-    for k in 0..d.ug.len() {
-        assert!((y[k] - d.ug[k]).abs() < 1e-9, "row {k}");
+    for (k, (a, u)) in y.iter().zip(&d.ug).enumerate() {
+        assert!((a - u).abs() < 1e-9, "row {k}");
     }
 }
 
