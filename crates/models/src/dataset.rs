@@ -666,19 +666,12 @@ impl Dataset {
 
     /// The text of `measured.csv`.
     fn measured_csv(&self) -> String {
-        let mut s = String::from("t,ug");
-        for name in self.sensors.channel_names() {
-            write!(s, ",{name}").unwrap();
-        }
-        s.push('\n');
-        for k in 0..self.len() {
-            write!(s, "{},{}", Num(self.t[k]), Num(self.ug_meas[k])).unwrap();
-            for &a in self.y(k) {
-                write!(s, ",{}", Num(a)).unwrap();
-            }
-            s.push('\n');
-        }
-        s
+        measured_csv_text(
+            &self.t,
+            &self.ug_meas,
+            &self.y_meas,
+            &self.sensors.channel_names(),
+        )
     }
 
     /// The text of `truth.csv`.
@@ -728,6 +721,42 @@ impl Dataset {
         };
         let json = serde_json::to_string_pretty(&meta).expect("meta is serialisable");
         write_file(staging, META, json.as_bytes())
+    }
+}
+
+/// The text of `measured.csv`: header `t,ug,<names>`, then one row per sample; `y` is
+/// row-major `t.len() × names.len()`. The one writer of the format, for simulated and imported
+/// data alike.
+pub(crate) fn measured_csv_text(t: &[f64], ug: &[f64], y: &[f64], names: &[String]) -> String {
+    let m = names.len();
+    let mut s = String::from("t,ug");
+    for name in names {
+        write!(s, ",{name}").unwrap();
+    }
+    s.push('\n');
+    for k in 0..t.len() {
+        write!(s, "{},{}", Num(t[k]), Num(ug[k])).unwrap();
+        for &a in &y[k * m..(k + 1) * m] {
+            write!(s, ",{}", Num(a)).unwrap();
+        }
+        s.push('\n');
+    }
+    s
+}
+
+/// Writes `files` (name, content) as the directory `dir` with the same staging as
+/// [`Dataset::write_dir`]: an interruption leaves the previous directory or the new one.
+pub(crate) fn write_staged(dir: &Path, files: &[(&str, &[u8])]) -> Result<(), DatasetError> {
+    let staging = replace::stage(dir)?;
+    let written = files
+        .iter()
+        .try_for_each(|(name, bytes)| write_file(&staging, name, bytes));
+    match written {
+        Ok(()) => staging.commit(),
+        Err(e) => {
+            staging.abandon();
+            Err(e)
+        }
     }
 }
 

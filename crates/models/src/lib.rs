@@ -8,6 +8,8 @@
 //! - [`integrate`]: classical RK4 (truth) and adaptive Dormand–Prince 5(4) (validation);
 //! - [`excitation`] and [`readers`]: ground motions (El Centro, Kanai–Tajimi, harmonic, user
 //!   records in CSV and PEER `.AT2`); [`ground_motions`]: vendored PEER NGA records by name;
+//! - [`import`]: real recordings (sensor CSV exports, CSMIP V2 records) and a channel map
+//!   into a field-data set, with every repair logged;
 //! - [`limits`]: the limits on every size and value that comes from a user;
 //! - [`dataset`]: truth and noisy measurements from named random streams; [`description`]: a
 //!   building as a user describes it (storeys, masses, hysteretic storeys, sensors);
@@ -19,6 +21,7 @@ pub mod description;
 pub mod excitation;
 pub mod filtering;
 pub mod ground_motions;
+pub mod import;
 pub mod integrate;
 pub mod limits;
 pub mod modal;

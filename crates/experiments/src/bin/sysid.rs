@@ -23,6 +23,9 @@ enum Command {
     /// Simulate a structure under an excitation and write a noisy data set.
     #[command(allow_negative_numbers = true)]
     Simulate(cli::simulate::Args),
+    /// Build a data set from real recordings (sensor CSV exports, CSMIP V2) and a channel map.
+    #[command(allow_negative_numbers = true)]
+    Import(cli::import::Args),
     /// Run one identification filter on a data set and write a run record.
     #[command(allow_negative_numbers = true)]
     Filter(cli::filter::Args),
@@ -77,6 +80,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
         Command::Simulate(args) => cli::simulate::run(args),
         Command::Filter(args) => cli::filter::run(args),
+        Command::Import(args) => cli::import::run(args),
         Command::Table1(args) => cli::table1::run(args),
         Command::Reference(args) => cli::reference::run(args),
         Command::Study(args) => cli::study::run(args),

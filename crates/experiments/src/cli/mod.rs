@@ -1,6 +1,7 @@
 //! Subcommands of `sysid`, one module each. Each module exposes `Args` (clap) and `run`.
 
 pub mod filter;
+pub mod import;
 pub mod merge;
 pub mod plot;
 pub mod reference;

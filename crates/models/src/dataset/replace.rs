@@ -22,11 +22,12 @@
 //! files: `--out .` or a directory with other files in it is refused, never deleted.
 
 use super::{DatasetError, MEASURED, META, TRUTH};
+use crate::import::IMPORT;
 use std::ffi::OsString;
 use std::path::{Path, PathBuf};
 
-/// The files a data-set directory may hold.
-pub const DATASET_FILES: [&str; 3] = [MEASURED, TRUTH, META];
+/// The files a data-set directory may hold (`import.json`: the record of `sysid import`).
+pub const DATASET_FILES: [&str; 4] = [MEASURED, TRUTH, META, IMPORT];
 
 /// A temporary directory that will replace `target`.
 pub(crate) struct Staging {

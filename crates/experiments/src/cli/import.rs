@@ -1,0 +1,81 @@
+//! `sysid import`: build a field-data set from real per-channel recordings and a channel map
+//! (`docs/import.md`).
+//!
+//! The library does the work ([`models::import`]); this command prints what it did — every
+//! repair and warning, also recorded in `import.json` — and the `sysid filter` command that
+//! runs on the result, naming what the recordings cannot say (storeys, masses, hysteretic
+//! storeys).
+
+use anyhow::Context;
+use models::import::{self, channel_map::ChannelMap};
+use std::path::PathBuf;
+
+/// Arguments of `sysid import`.
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    /// The channel map (TOML): which file and column is the ground and which each storey,
+    /// units, scale, sign and the repairs allowed. See docs/import.md.
+    #[arg(long)]
+    pub map: PathBuf,
+    /// Output directory: a new directory, or an existing data set to replace.
+    #[arg(long)]
+    pub out: PathBuf,
+}
+
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let map = ChannelMap::load(&args.map)?;
+    let imported = import::import(&map)?;
+    let record = imported
+        .write_dir(&args.out)
+        .with_context(|| format!("writing the data set {}", args.out.display()))?;
+    println!(
+        "imported {} samples at dt = {} s ({:.3} Hz), {:.3} s; ground and storey{} {}",
+        record.samples,
+        record.dt,
+        1.0 / record.dt,
+        (record.samples - 1) as f64 * record.dt,
+        if record.sensors.len() == 1 { "" } else { "s" },
+        record
+            .sensors
+            .iter()
+            .map(|s| s.to_string())
+            .collect::<Vec<_>>()
+            .join(", ")
+    );
+    for c in &record.channels {
+        println!(
+            "  {:<9} {} ({} samples read{})",
+            c.channel,
+            c.file.display(),
+            c.samples,
+            c.recorded_as
+                .as_ref()
+                .map_or(String::new(), |r| format!(", {r}"))
+        );
+    }
+    if record.repairs.is_empty() {
+        println!("repairs: none");
+    } else {
+        println!("repairs:");
+        for r in &record.repairs {
+            println!("  {}: {}", r.channel, r.action);
+        }
+    }
+    for w in &record.warnings {
+        println!("warning: {w}");
+    }
+    let out = args.out.display();
+    println!(
+        "wrote {out}/measured.csv and {out}/import.json (the sources, their SHA-256 and every \
+         repair)"
+    );
+    println!(
+        "{}; e.g. with unit masses (k and c per unit mass):\n  sysid filter --algorithm \
+         mpf-ekf2 --data {out} --storeys {} --hysteretic none --masses 1 --measurement {} \
+         --out run.json",
+        record.not_recorded,
+        record.sensors.iter().max().copied().unwrap_or(1),
+        record.measurement
+    );
+    Ok(())
+}

@@ -1,0 +1,818 @@
+//! `models::import`: the readers of real recordings, the channel map and the alignment, on
+//! excerpts of the real files (`tests/fixtures/import/`), on hand-made files with each thing a
+//! real record brings (clock offsets, gaps, zero rows, units, swapped and missing channels,
+//! different lengths), and on the vendored data sets of `data/real/`.
+
+use models::dataset::load_dir;
+use models::import::channel_map::ChannelMap;
+use models::import::csmip::parse_v2;
+use models::import::{import, ImportRecord, Imported};
+use std::path::{Path, PathBuf};
+
+fn root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
+}
+
+fn fixture(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/fixtures/import")
+        .join(name)
+}
+
+fn scratch(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("import-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+/// Writes a map into `dir` and imports it.
+fn run(dir: &Path, map: &str) -> Result<Imported, String> {
+    let path = dir.join("channels.toml");
+    std::fs::write(&path, map).unwrap();
+    let map = ChannelMap::load(&path).map_err(|e| e.to_string())?;
+    import(&map).map_err(|e| e.to_string())
+}
+
+/// A sensor export in the Xsens form: header lines, `PacketCounter,SampleTimeFine,Acc_X`.
+fn sensor_file(dir: &Path, name: &str, times_us: &[i64], acc: &[f64]) {
+    let mut s = String::from(
+        "sep=,\nDeviceTag:,test\nFirmwareVersion:,1\nAppVersion:,1\nStartTime: ,x\n(c)\n\n\
+         PacketCounter,SampleTimeFine,Acc_X\n",
+    );
+    for (k, (t, a)) in times_us.iter().zip(acc).enumerate() {
+        s.push_str(&format!("{k},{t},{a}\n"));
+    }
+    std::fs::write(dir.join(name), s).unwrap();
+}
+
+fn channel(table: &str, storey: Option<usize>, file: &str, units: &str) -> String {
+    let s = storey.map_or(String::new(), |s| format!("storey = {s}\n"));
+    format!(
+        "[{table}]\n{s}file = \"{file}\"\nformat = \"sensor-csv\"\ntime = \"SampleTimeFine\"\n\
+         time_units = \"us\"\ncolumn = \"Acc_X\"\nunits = \"{units}\"\n"
+    )
+}
+
+/// A map of a ground file and storey files (1, 2, …) in m/s², with `options`.
+fn map(options: &str, ground: &str, storeys: &[&str]) -> String {
+    let mut m = format!(
+        "[options]\n{options}\n{}",
+        channel("ground", None, ground, "m/s2")
+    );
+    for (i, f) in storeys.iter().enumerate() {
+        m.push_str(&channel("[storey]", Some(i + 1), f, "m/s2"));
+    }
+    m
+}
+
+const STEP: i64 = 8333;
+
+fn clock(start: i64, n: usize) -> Vec<i64> {
+    (0..n as i64).map(|k| start + k * STEP).collect()
+}
+
+/// A signal that is a known function of the time stamp (µs), so that a value matched to the
+/// wrong time is seen.
+fn signal(t_us: i64) -> f64 {
+    let t = t_us as f64 * 1e-6;
+    (2.0 * t).sin() + 0.1 * t
+}
+
+fn storey(d: &Imported, j: usize) -> Vec<f64> {
+    let m = d.sensors().len();
+    d.y.iter().skip(j).step_by(m).copied().collect()
+}
+
+fn actions(r: &ImportRecord) -> String {
+    r.repairs
+        .iter()
+        .map(|r| format!("{}: {}", r.channel, r.action))
+        .collect::<Vec<_>>()
+        .join("\n")
+}
+
+#[test]
+fn real_sensor_excerpts_are_matched_by_time_stamp_not_row() {
+    let dir = scratch("excerpt");
+    let m = format!(
+        "{}{}",
+        channel(
+            "ground",
+            None,
+            &fixture("xsens-sine-1.0-ground.csv").display().to_string(),
+            "m/s2"
+        ),
+        channel(
+            "[storey]",
+            Some(2),
+            &fixture("xsens-sine-1.0-floor-2.csv").display().to_string(),
+            "m/s2"
+        )
+    );
+    let d = run(&dir, &m).unwrap();
+    let log = actions(&d.record);
+    assert!(
+        log.contains("dropped 1 leading row of zeros (line 9)"),
+        "{log}"
+    );
+    assert!(
+        log.contains("its clock starts 8.333 ms before the ground's")
+            && log.contains("shifted by 1 sample"),
+        "{log}"
+    );
+    assert_eq!(d.sensors(), &[2]);
+    // Floor 2's row of time stamp 699815012 µs (the ground's second row, its third) is where
+    // the ground's first kept sample is: both exports as text.
+    let text = std::fs::read_to_string(fixture("xsens-sine-1.0-floor-2.csv")).unwrap();
+    let acc_at = |stamp: &str| -> f64 {
+        let row = text
+            .lines()
+            .find(|l| l.split(',').nth(1) == Some(stamp))
+            .unwrap();
+        row.split(',').nth(5).unwrap().parse().unwrap()
+    };
+    let raw: Vec<f64> = ["699815012", "699823345"]
+        .iter()
+        .map(|s| acc_at(s))
+        .collect();
+    let y = storey(&d, 0);
+    // The mean is removed, so compare differences.
+    assert!(
+        ((y[1] - y[0]) - (raw[1] - raw[0])).abs() < 1e-12,
+        "{y:?} {raw:?}"
+    );
+    // The floor's file has one sample before the ground's first and ends one earlier: 38
+    // samples in common after the zero rows.
+    assert_eq!(d.ug.len(), 38);
+    assert!((d.record.t0_ground_clock - 699.815012).abs() < 1e-9);
+}
+
+#[test]
+fn real_v2_excerpts_read_by_column() {
+    let text = std::fs::read_to_string(fixture("CHAN007-excerpt.V2")).unwrap();
+    let r = parse_v2(Path::new("CHAN007-excerpt.V2"), &text).unwrap();
+    assert_eq!(r.acc.len(), 80);
+    assert_eq!(r.dt, 0.01);
+    assert_eq!(r.orientation, 900);
+    assert_eq!((r.channel.as_str(), r.direction.as_str()), ("7", "Tran"));
+    assert!((r.acc[0] + 0.00018 * 0.01).abs() < 1e-15);
+    // Values that touch (no blank between them) are read by column.
+    let touching = text.replacen("   -.00018    .00003", "-123.45678-987.65432", 1);
+    let r = parse_v2(Path::new("x.V2"), &touching).unwrap();
+    assert_eq!(&r.acc[..2], &[-1.2345678, -9.8765432]);
+    // The older layout is refused by name.
+    let old: String = text
+        .lines()
+        .enumerate()
+        .map(|(i, l)| {
+            if i == 15 {
+                "    80 points of accel data".to_string()
+            } else {
+                l.to_string()
+            }
+        })
+        .collect::<Vec<_>>()
+        .join("\n");
+    let e = parse_v2(Path::new("old.V2"), &old).unwrap_err().to_string();
+    assert!(
+        e.starts_with("old.V2:16:") && e.contains("older CSMIP layout"),
+        "{e}"
+    );
+    // A block shorter than its count.
+    let cut: String = text.lines().take(50).collect::<Vec<_>>().join("\n");
+    let e = parse_v2(Path::new("cut.V2"), &cut).unwrap_err().to_string();
+    assert!(e.contains("cut.V2:46") && e.contains("80 points"), "{e}");
+}
+
+#[test]
+fn v2_channels_are_imported_and_their_direction_checked() {
+    let dir = scratch("v2");
+    let f3 = fixture("CHAN003-excerpt.V2").display().to_string();
+    let f7 = fixture("CHAN007-excerpt.V2").display().to_string();
+    let m = format!(
+        "[ground]\nfile = \"{f3}\"\nformat = \"csmip-v2\"\ndirection = \"tran\"\n\
+         [[storey]]\nstorey = 1\nfile = \"{f7}\"\nformat = \"csmip-v2\"\ndirection = \"tran\"\n"
+    );
+    let d = run(&dir, &m).unwrap();
+    assert_eq!(d.ug.len(), 80);
+    assert_eq!(d.dt, 0.01);
+    let wrong = m.replacen("direction = \"tran\"", "direction = \"long\"", 1);
+    let e = run(&dir, &wrong).unwrap_err();
+    assert!(
+        e.contains("CHAN003-excerpt.V2") && e.contains("direction") && e.contains("swapped"),
+        "{e}"
+    );
+    let with_column = m.replacen(
+        "format = \"csmip-v2\"\n",
+        "format = \"csmip-v2\"\ncolumn = \"x\"\n",
+        1,
+    );
+    let e = run(&dir, &with_column).unwrap_err();
+    assert!(e.contains("ground.column"), "{e}");
+}
+
+#[test]
+fn clock_offsets_shift_or_resample_by_time_stamp() {
+    let dir = scratch("clocks");
+    let g = clock(1_000_000, 200);
+    sensor_file(
+        &dir,
+        "g.csv",
+        &g,
+        &g.iter().map(|&t| signal(t)).collect::<Vec<_>>(),
+    );
+    // Storey 1: same clock, starts 3 samples later and ends 5 later. Storey 2: a clock 0.4
+    // samples off and 100 ppm fast (resampled).
+    let s1 = clock(1_000_000 + 3 * STEP, 202);
+    sensor_file(
+        &dir,
+        "s1.csv",
+        &s1,
+        &s1.iter().map(|&t| signal(t)).collect::<Vec<_>>(),
+    );
+    let s2: Vec<i64> = (0..200)
+        .map(|k| 1_000_000 + 3333 + (k as f64 * STEP as f64 * (1.0 + 1e-4)) as i64)
+        .collect();
+    sensor_file(
+        &dir,
+        "s2.csv",
+        &s2,
+        &s2.iter().map(|&t| 3.0 * signal(t)).collect::<Vec<_>>(),
+    );
+    let d = run(
+        &dir,
+        &map(
+            "remove_mean = false\ndrop_leading_zeros = false",
+            "g.csv",
+            &["s1.csv", "s2.csv"],
+        ),
+    )
+    .unwrap();
+    let log = actions(&d.record);
+    assert!(
+        log.contains("s1.csv): its clock starts 24.999 ms after the ground's"),
+        "{log}"
+    );
+    assert!(log.contains("shifted by 3 samples"), "{log}");
+    assert!(
+        log.contains("s2.csv): resampled onto the ground's samples"),
+        "{log}"
+    );
+    assert!(
+        log.contains("trimmed to the span all channels share"),
+        "{log}"
+    );
+    // Every kept row pairs samples of one time: storey 1 equals the ground's signal, storey 2
+    // three times it up to linear interpolation of a slow signal.
+    let (y1, y2) = (storey(&d, 0), storey(&d, 1));
+    let t0 = (d.record.t0_ground_clock * 1e6).round() as i64;
+    for k in 0..d.ug.len() {
+        let t = t0 + k as i64 * STEP;
+        assert!((d.ug[k] - signal(t)).abs() < 1e-9, "row {k}");
+        assert!((y1[k] - signal(t)).abs() < 1e-9, "row {k}");
+        assert!(
+            (y2[k] - 3.0 * signal(t)).abs() < 1e-3,
+            "row {k}: {} {}",
+            y2[k],
+            3.0 * signal(t)
+        );
+    }
+    assert_eq!(d.ug.len(), 197);
+}
+
+#[test]
+fn an_offset_under_the_clock_tolerance_pairs_rows_and_is_logged() {
+    let dir = scratch("tolerance");
+    let g = clock(0, 50);
+    sensor_file(
+        &dir,
+        "g.csv",
+        &g,
+        &g.iter().map(|&t| signal(t)).collect::<Vec<_>>(),
+    );
+    let s: Vec<i64> = g.iter().map(|t| t + 100).collect();
+    sensor_file(
+        &dir,
+        "s.csv",
+        &s,
+        &g.iter().map(|&t| signal(t)).collect::<Vec<_>>(),
+    );
+    let d = run(
+        &dir,
+        &map("drop_leading_zeros = false", "g.csv", &["s.csv"]),
+    )
+    .unwrap();
+    let log = actions(&d.record);
+    assert!(
+        log.contains("its clock starts 0.100 ms after the ground's, within clock_tolerance = 0.05"),
+        "{log}"
+    );
+    assert_eq!(storey(&d, 0), d.ug);
+    // With no tolerance the same file is resampled.
+    let d = run(
+        &dir,
+        &map(
+            "drop_leading_zeros = false\nclock_tolerance = 0",
+            "g.csv",
+            &["s.csv"],
+        ),
+    )
+    .unwrap();
+    assert!(actions(&d.record).contains("resampled onto the ground's samples"));
+}
+
+#[test]
+fn clocks_that_do_not_overlap_are_refused_unless_the_starts_are_declared_simultaneous() {
+    let dir = scratch("disagree");
+    let g = clock(848_402_848, 100);
+    let s = clock(1_045_181_031, 120);
+    sensor_file(&dir, "g.csv", &g, &vec![0.5; 100]);
+    sensor_file(&dir, "s.csv", &s, &vec![0.25; 120]);
+    let e = run(&dir, &map("", "g.csv", &["s.csv"])).unwrap_err();
+    assert!(
+        e.contains("s.csv:9: storey 1:")
+            && e.contains("clocks disagree")
+            && e.contains("do not overlap"),
+        "{e}"
+    );
+    let d = run(&dir, &map("align = \"start\"", "g.csv", &["s.csv"])).unwrap();
+    let log = actions(&d.record);
+    assert!(log.contains("an assumption, not a measurement"), "{log}");
+    assert!(log.contains("20 at the end"), "{log}");
+    assert_eq!(d.ug.len(), 100);
+}
+
+#[test]
+fn gaps_short_ones_interpolated_long_ones_refused_with_the_line() {
+    let dir = scratch("gaps");
+    let g = clock(0, 100);
+    sensor_file(
+        &dir,
+        "g.csv",
+        &g,
+        &g.iter().map(|&t| signal(t)).collect::<Vec<_>>(),
+    );
+    // Two samples missing after row 40 (17 ms): filled.
+    let mut s: Vec<i64> = clock(0, 100);
+    s.drain(41..43);
+    let lin = |t: i64| 1.0 + t as f64 * 1e-6;
+    sensor_file(
+        &dir,
+        "s.csv",
+        &s,
+        &s.iter().map(|&t| lin(t)).collect::<Vec<_>>(),
+    );
+    let d = run(
+        &dir,
+        &map(
+            "remove_mean = false\ndrop_leading_zeros = false",
+            "g.csv",
+            &["s.csv"],
+        ),
+    )
+    .unwrap();
+    let log = actions(&d.record);
+    assert!(
+        log.contains("filled a gap of 16.666 ms (2 samples) before line 50"),
+        "{log}"
+    );
+    let y = storey(&d, 0);
+    assert_eq!(y.len(), 100);
+    for (k, v) in y.iter().enumerate() {
+        assert!((v - lin(k as i64 * STEP)).abs() < 1e-12, "row {k}");
+    }
+    // Twenty samples missing: refused, naming the file and the line after the gap.
+    let mut s = clock(0, 100);
+    s.drain(41..61);
+    sensor_file(&dir, "s.csv", &s, &vec![1.0; s.len()]);
+    let e = run(&dir, &map("", "g.csv", &["s.csv"])).unwrap_err();
+    assert!(
+        e.contains("s.csv:50: storey 1: a gap of 166.660 ms (20 samples missing)")
+            && e.contains("max_gap"),
+        "{e}"
+    );
+}
+
+#[test]
+fn zero_rows_units_sign_scale_gravity_and_drift() {
+    let dir = scratch("units");
+    let g = clock(0, 60);
+    let mut ga: Vec<f64> = g.iter().map(|&t| signal(t)).collect();
+    ga[0] = 0.0;
+    ga[1] = 0.0;
+    sensor_file(&dir, "g.csv", &g, &ga);
+    // The same signal in cm/s² (×100), sign flipped, on an axis with gravity (+981 cm/s²).
+    let sa: Vec<f64> = g.iter().map(|&t| -100.0 * signal(t) + 981.0).collect();
+    sensor_file(&dir, "s.csv", &g, &sa);
+    let m = map("", "g.csv", &[]).to_string()
+        + &channel("[storey]", Some(1), "s.csv", "cm/s2").replace("\nunits", "\nsign = -1\nunits");
+    let d = run(&dir, &m).unwrap();
+    let log = actions(&d.record);
+    assert!(
+        log.contains("g.csv): dropped 2 leading rows of zeros (line 9–10)"),
+        "{log}"
+    );
+    assert!(
+        log.contains("its clock starts 16.666 ms before the ground's")
+            && log.contains("its 2 samples before the ground's first are not used"),
+        "{log}"
+    );
+    assert!(
+        d.record
+            .warnings
+            .iter()
+            .any(|w| w.contains("carries gravity")),
+        "{:?}",
+        d.record.warnings
+    );
+    let y = storey(&d, 0);
+    for (k, (a, u)) in y.iter().zip(&d.ug).enumerate() {
+        assert!((a - u).abs() < 1e-9, "row {k}: {a} {u}");
+    }
+    // g and mm/s² with a scale; a linear drift removed by detrend.
+    let sa: Vec<f64> = g.iter().map(|&t| signal(t) / 9.81).collect();
+    sensor_file(&dir, "s.csv", &g, &sa);
+    let m = map(
+        "drop_leading_zeros = false\nremove_mean = false",
+        "g.csv",
+        &[],
+    )
+    .to_string()
+        + &channel("[storey]", Some(1), "s.csv", "g").replace("\nunits", "\nscale = 2.0\nunits");
+    let d = run(&dir, &m.replace("units = \"m/s2\"", "units = \"mm/s2\"")).unwrap();
+    let y = storey(&d, 0);
+    // ground in mm/s² (so ×1e-3), storey in g ×2: y = 2·signal, ug = 1e-3·signal.
+    for (k, (a, u)) in y.iter().zip(&d.ug).enumerate().skip(2) {
+        assert!((a - 2000.0 * u).abs() < 1e-9, "row {k}");
+    }
+    let drift: Vec<f64> = g
+        .iter()
+        .map(|&t| signal(t) + 0.5 + 3e-6 * t as f64)
+        .collect();
+    sensor_file(&dir, "s.csv", &g, &drift);
+    sensor_file(
+        &dir,
+        "g.csv",
+        &g,
+        &g.iter().map(|&t| signal(t)).collect::<Vec<_>>(),
+    );
+    let d = run(
+        &dir,
+        &map(
+            "detrend = true\ndrop_leading_zeros = false",
+            "g.csv",
+            &["s.csv"],
+        ),
+    )
+    .unwrap();
+    let log = actions(&d.record);
+    // The storey's slope is the ground's plus the drift's 3e-6 per µs × 8333 µs.
+    let slope = |who: &str| -> f64 {
+        let r =
+            d.record.repairs.iter().find(|r| {
+                r.channel.starts_with(who) && r.action.starts_with("removed a linear drift")
+            });
+        r.unwrap()
+            .action
+            .split_whitespace()
+            .nth(5)
+            .unwrap()
+            .parse()
+            .unwrap()
+    };
+    assert!(
+        (slope("storey 1") - slope("ground") - 0.025).abs() < 1e-5,
+        "{log}"
+    );
+    let y = storey(&d, 0);
+    for (k, (a, u)) in y.iter().zip(&d.ug).enumerate() {
+        assert!((a - u).abs() < 1e-9, "row {k}");
+    }
+}
+
+#[test]
+fn swapped_columns_missing_channels_and_bad_values() {
+    let dir = scratch("columns");
+    let g = clock(0, 50);
+    sensor_file(
+        &dir,
+        "g.csv",
+        &g,
+        &g.iter().map(|&t| signal(t)).collect::<Vec<_>>(),
+    );
+    // The same data with the columns in another order reads the same: columns go by name.
+    let mut s = String::from("Acc_X,PacketCounter,SampleTimeFine\n");
+    for (k, &t) in g.iter().enumerate() {
+        s.push_str(&format!("{},{k},{t}\n", signal(t)));
+    }
+    std::fs::write(dir.join("s.csv"), s).unwrap();
+    let d = run(&dir, &map("", "g.csv", &["s.csv"])).unwrap();
+    assert_eq!(storey(&d, 0), d.ug);
+    // A missing column, a missing file, a value beyond the limits.
+    let e = run(
+        &dir,
+        &map("", "g.csv", &["s.csv"]).replacen("Acc_X", "Acc_Q", 2),
+    )
+    .unwrap_err();
+    assert!(
+        e.contains("g.csv:1: field `Acc_Q`") && e.contains("no line among the first 100"),
+        "{e}"
+    );
+    let e = run(&dir, &map("", "g.csv", &["nowhere.csv"])).unwrap_err();
+    assert!(e.contains("nowhere.csv: cannot read"), "{e}");
+    std::fs::write(dir.join("s.csv"), "SampleTimeFine,Acc_X\n0,1\n8333,NaN\n").unwrap();
+    let e = run(&dir, &map("", "g.csv", &["s.csv"])).unwrap_err();
+    assert!(
+        e.contains("s.csv:3: field `Acc_X`: non-finite value `NaN`"),
+        "{e}"
+    );
+    std::fs::write(dir.join("s.csv"), "SampleTimeFine,Acc_X\n0,1\n8333,1e13\n").unwrap();
+    let e = run(&dir, &map("", "g.csv", &["s.csv"])).unwrap_err();
+    assert!(
+        e.contains("s.csv:3: field `Acc_X`") && e.contains("exceeds the maximum"),
+        "{e}"
+    );
+    // A scale that takes a valid value beyond the limit after conversion.
+    std::fs::write(
+        dir.join("s.csv"),
+        "SampleTimeFine,Acc_X\n0,1e11\n8333,1\n16666,1\n",
+    )
+    .unwrap();
+    let m = map("", "g.csv", &[]).to_string()
+        + &channel("[storey]", Some(1), "s.csv", "g").replace("\nunits", "\nscale = 1000\nunits");
+    let e = run(&dir, &m).unwrap_err();
+    assert!(
+        e.contains("s.csv:2: field `Acc_X`: 9.81e14 exceeds the maximum 1e12"),
+        "{e}"
+    );
+}
+
+#[test]
+fn malformed_channel_maps_are_refused_naming_the_key() {
+    let dir = scratch("maps");
+    let good = map("", "g.csv", &["s.csv"]);
+    let cases: Vec<(String, &str)> = vec![
+        (
+            good.replace("column = \"Acc_X\"", "colum = \"Acc_X\""),
+            "colum",
+        ),
+        (
+            good.replacen("units = \"m/s2\"", "units = \"furlongs\"", 1),
+            "furlongs",
+        ),
+        (
+            good.replacen("time_units = \"us\"\n", "", 1),
+            "ground.time_units",
+        ),
+        (
+            good.replacen("units = \"m/s2\"", "units = \"m/s2\"\nsign = 2", 1),
+            "ground.sign",
+        ),
+        (
+            good.replacen("units = \"m/s2\"", "units = \"m/s2\"\nscale = 0", 1),
+            "ground.scale",
+        ),
+        (
+            good.replacen("units = \"m/s2\"", "units = \"m/s2\"\nscale = 1e9", 1),
+            "ground.scale",
+        ),
+        (good.replace("storey = 1", "storey = 0"), "storey.storey"),
+        (good.replace("storey = 1\n", ""), "storey.storey"),
+        (
+            good.replace("[options]\n", "[options]\nmax_gap = -1\n"),
+            "options.max_gap",
+        ),
+        (
+            good.replace("[options]\n", "[options]\nclock_tolerance = 1\n"),
+            "options.clock_tolerance",
+        ),
+        (
+            good.replace("[options]\n", "[options]\nalign = \"rows\"\n"),
+            "rows",
+        ),
+        (good.replace("sensor-csv", "excel"), "excel"),
+        (good.replace("s.csv", "g.csv"), "file"),
+        (
+            good.replacen("[ground]\n", "[ground]\nstorey = 1\n", 1),
+            "ground.storey",
+        ),
+        (map("", "g.csv", &[]), "storey"),
+        (
+            map("", "g.csv", &["a.csv", "b.csv"]).replace("storey = 2", "storey = 1"),
+            "storey.storey",
+        ),
+        (
+            good.replace("format = \"sensor-csv\"", "format = \"csmip-v2\""),
+            "ground.time",
+        ),
+        ("[ground\nfile = 1".to_string(), "map"),
+        (
+            good.replace("file = \"g.csv\"", "file = \"\""),
+            "ground.file",
+        ),
+        (
+            good.replacen(
+                "units = \"m/s2\"",
+                "units = \"m/s2\"\nheader_lines = 1000",
+                1,
+            ),
+            "ground.header_lines",
+        ),
+    ];
+    for (text, key) in cases {
+        let path = dir.join("channels.toml");
+        std::fs::write(&path, &text).unwrap();
+        let e = ChannelMap::load(&path).unwrap_err().to_string();
+        assert!(
+            e.starts_with(&format!("{}:", path.display())) && e.contains(key),
+            "expected the key `{key}` named:\n{e}\n--- map:\n{text}"
+        );
+    }
+}
+
+#[test]
+fn the_written_set_loads_and_records_every_source_and_repair() {
+    let dir = scratch("write");
+    let m = format!(
+        "{}{}",
+        channel(
+            "ground",
+            None,
+            &fixture("xsens-northridge-ground.csv").display().to_string(),
+            "m/s2"
+        ),
+        channel(
+            "[storey]",
+            Some(3),
+            &fixture("xsens-northridge-floor-3.csv")
+                .display()
+                .to_string(),
+            "m/s2"
+        )
+    );
+    let d = run(&dir, &m).unwrap();
+    let out = dir.join("set");
+    let rec = d.write_dir(&out).unwrap();
+    let loaded = load_dir(&out).unwrap();
+    assert_eq!(loaded.sensors, vec![3]);
+    assert_eq!(loaded.ug_meas, d.ug);
+    assert_eq!(loaded.y_meas, d.y);
+    assert!(
+        loaded.meta.is_none(),
+        "field data: the structure is stated to the filter"
+    );
+    let json: ImportRecord =
+        serde_json::from_slice(&std::fs::read(out.join("import.json")).unwrap()).unwrap();
+    assert_eq!(json, rec);
+    assert_eq!(json.channels.len(), 2);
+    assert_eq!(json.channels[1].sha256.len(), 64);
+    let csv = std::fs::read(out.join("measured.csv")).unwrap();
+    assert_eq!(
+        json.files["measured.csv"],
+        models::dataset::FileDigest::of(&csv)
+    );
+    // Written again over itself (a data set), but never over a directory with other files.
+    d.write_dir(&out).unwrap();
+    std::fs::write(dir.join("notes.txt"), "mine").unwrap();
+    let e = d.write_dir(&dir).unwrap_err().to_string();
+    assert!(
+        e.contains("notes.txt") || e.contains("not a data-set file"),
+        "{e}"
+    );
+    assert_eq!(
+        std::fs::read_to_string(dir.join("notes.txt")).unwrap(),
+        "mine"
+    );
+}
+
+/// |H1| of the Welch estimate (Hann segments of `nper`, half overlap) at the bins 1..bins,
+/// by a direct DFT: an independent check of what the data set holds.
+fn welch_h1(u: &[f64], y: &[f64], nper: usize, bins: usize) -> Vec<f64> {
+    use std::f64::consts::PI;
+    let hann: Vec<f64> = (0..nper)
+        .map(|i| 0.5 - 0.5 * (2.0 * PI * i as f64 / nper as f64).cos())
+        .collect();
+    let dft = |x: &[f64], k: usize| -> (f64, f64) {
+        let m = x.iter().sum::<f64>() / x.len() as f64;
+        x.iter().enumerate().fold((0.0, 0.0), |(re, im), (i, v)| {
+            let a = 2.0 * PI * (k * i) as f64 / nper as f64;
+            (
+                re + (v - m) * hann[i] * a.cos(),
+                im - (v - m) * hann[i] * a.sin(),
+            )
+        })
+    };
+    (1..bins.min(nper / 2))
+        .map(|k| {
+            let (mut sxx, mut re, mut im) = (0.0, 0.0, 0.0);
+            let mut s = 0;
+            while s + nper <= u.len() {
+                let (xr, xi) = dft(&u[s..s + nper], k);
+                let (yr, yi) = dft(&y[s..s + nper], k);
+                sxx += xr * xr + xi * xi;
+                re += xr * yr + xi * yi;
+                im += xr * yi - xi * yr;
+                s += nper / 2;
+            }
+            (re * re + im * im).sqrt() / sxx
+        })
+        .collect()
+}
+
+fn sd(x: &[f64]) -> f64 {
+    let m = x.iter().sum::<f64>() / x.len() as f64;
+    (x.iter().map(|v| (v - m) * (v - m)).sum::<f64>() / x.len() as f64).sqrt()
+}
+
+#[test]
+fn the_vendored_frame_northridge_has_the_frames_modes_and_levels() {
+    let map = ChannelMap::load(&root().join("experiments/real/frame-northridge.toml")).unwrap();
+    let d = import(&map).unwrap();
+    assert_eq!(d.sensors(), &[1, 2, 3]);
+    assert_eq!(d.ug.len(), 12116);
+    assert!(d.record.warnings.is_empty(), "{:?}", d.record.warnings);
+    let sds: Vec<f64> = std::iter::once(sd(&d.ug))
+        .chain((0..3).map(|j| sd(&storey(&d, j))))
+        .collect();
+    eprintln!("s.d. table and floors 1–3: {sds:.3?} m/s2");
+    for (got, want) in sds.iter().zip([0.57, 2.21, 3.49, 4.34]) {
+        assert!((got - want).abs() < 0.01, "{sds:?}");
+    }
+    // Transfer functions floor/table: the three modes on every floor (bins of 120/2048 Hz).
+    let nper = 2048;
+    let df = 1.0 / (nper as f64 * d.dt);
+    for j in 0..3 {
+        let h = welch_h1(&d.ug, &storey(&d, j), nper, (20.0 / df) as usize);
+        let peak_in = |lo: f64, hi: f64| -> f64 {
+            let (a, b) = ((lo / df) as usize, (hi / df) as usize);
+            let k = (a..b)
+                .max_by(|&p, &q| h[p - 1].total_cmp(&h[q - 1]))
+                .unwrap();
+            k as f64 * df
+        };
+        let peaks = [peak_in(2.0, 6.0), peak_in(9.0, 13.0), peak_in(15.5, 18.0)];
+        eprintln!("floor {}: peaks {peaks:.2?} Hz", j + 1);
+        for (got, want) in peaks.iter().zip([3.68, 11.14, 16.64]) {
+            assert!((got - want).abs() < 0.1, "floor {}: {peaks:?}", j + 1);
+        }
+        // Each is a local maximum well above the floor of the spectrum between the modes.
+        let between = h[(7.5 / df) as usize - 1];
+        assert!(h[(peaks[0] / df).round() as usize - 1] > 5.0 * between);
+    }
+}
+
+#[test]
+fn the_vendored_bonus_event_refuses_row_matching_and_flags_its_swapped_files() {
+    let path = root().join("experiments/real/frame-bonus-event.toml");
+    let text = std::fs::read_to_string(&path).unwrap();
+    // The shipped map (first rows simultaneous, floor files exchanged): no warning.
+    let d = import(&ChannelMap::parse(&path, &text).unwrap()).unwrap();
+    assert!(d.record.warnings.is_empty(), "{:?}", d.record.warnings);
+    assert_eq!(d.ug.len(), 2708);
+    // By time stamp, the clocks do not overlap: refused.
+    let by_time = text.replace("align = \"start\"", "align = \"timestamps\"");
+    let e = import(&ChannelMap::parse(&path, &by_time).unwrap())
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("clocks disagree"), "{e}");
+    // The files as named: the first mode's shape is reversed between floors 1 and 2.
+    let as_named = text
+        .replace("bonus-event/floor-1.csv", "@@")
+        .replace("bonus-event/floor-2.csv", "bonus-event/floor-1.csv")
+        .replace("@@", "bonus-event/floor-2.csv");
+    let d = import(&ChannelMap::parse(&path, &as_named).unwrap()).unwrap();
+    assert!(
+        d.record
+            .warnings
+            .iter()
+            .any(|w| w.contains("storey 2") && w.contains("swapped")),
+        "{:?}",
+        d.record.warnings
+    );
+}
+
+#[test]
+fn the_vendored_overpass_pairs_have_the_recorded_peaks() {
+    // Peak transverse accelerations of the record (cm/s²): ground 17: 138, ground 20: 125,
+    // bent top 7: 251, deck 9: 194, deck 4: 164.
+    for (name, ground_peak, structure_peak) in [
+        ("bent", None, 2.51),
+        ("east", Some(1.38), 1.94),
+        ("west", Some(1.25), 1.64),
+    ] {
+        let path = root().join(format!("experiments/real/overpass-{name}.toml"));
+        let d = import(&ChannelMap::load(&path).unwrap()).unwrap();
+        assert_eq!((d.ug.len(), d.dt), (8511, 0.01));
+        let peak = |x: &[f64]| x.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
+        let y = storey(&d, 0);
+        assert!(
+            (peak(&y) - structure_peak).abs() < 0.01,
+            "{name}: {}",
+            peak(&y)
+        );
+        if let Some(g) = ground_peak {
+            assert!((peak(&d.ug) - g).abs() < 0.01, "{name}: {}", peak(&d.ug));
+        }
+    }
+}
