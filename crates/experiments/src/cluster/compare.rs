@@ -1,0 +1,177 @@
+//! Two output directories of the same study compared with the timings set aside: the check that
+//! a study run on a cluster gives what the same study gives on one machine.
+//!
+//! Compared: every record (`records/**/*.json`) as JSON without its `timing` object; the report
+//! (`REPORT.md`) without the lines that describe the invocation (threads, runs executed by it,
+//! wall times) and without its "Performance" section; `summary.json` without the keys that hold
+//! times or invocation counts; every other file byte for byte, except the files that hold only
+//! measured costs (`*.cpu`, the scaling study's `cells.csv` and cost figure). Files under
+//! `cluster/` (the submission's own) are not compared.
+
+use std::collections::BTreeSet;
+use std::path::{Path, PathBuf};
+
+use super::ClusterError;
+use crate::sweep::same_but_timing;
+
+/// Files that hold measured costs only, by name.
+const COST_FILES: [&str; 2] = ["cells.csv", "cost_vs_dimension.svg"];
+
+/// Keys of `summary.json` (at any depth) that hold times, rates or counts of one invocation.
+const TIMING_KEYS: [&str; 6] = [
+    "wall_s",
+    "wall_s_mean",
+    "particle_steps_per_s_mean",
+    "us_per_particle_step",
+    "cpu_s",
+    "runs",
+];
+
+/// Report lines that describe the invocation, by their first cell.
+const INVOCATION_ROWS: [&str; 4] = [
+    "| threads |",
+    "| runs executed by this invocation |",
+    "| wall time, sweeps (s) |",
+    "| wall time, total incl. figures (s) |",
+];
+
+fn files(root: &Path) -> Result<BTreeSet<PathBuf>, ClusterError> {
+    let mut out = BTreeSet::new();
+    let mut stack = vec![root.to_path_buf()];
+    while let Some(dir) = stack.pop() {
+        let entries = std::fs::read_dir(&dir).map_err(|e| ClusterError::file(&dir, e))?;
+        for e in entries {
+            let e = e.map_err(|e| ClusterError::file(&dir, e))?;
+            let p = e.path();
+            let rel = p.strip_prefix(root).expect("under root").to_path_buf();
+            let name = e.file_name().to_string_lossy().into_owned();
+            if rel == Path::new("cluster") || name.starts_with('.') {
+                continue;
+            }
+            if p.is_dir() {
+                stack.push(p);
+            } else if !name.ends_with(".cpu") && !COST_FILES.contains(&name.as_str()) {
+                out.insert(rel);
+            }
+        }
+    }
+    Ok(out)
+}
+
+/// The report without its invocation rows and its "Performance" section.
+fn report_without_timings(text: &str) -> String {
+    let mut out = String::new();
+    let mut skipping = false;
+    for line in text.lines() {
+        if line.starts_with("## ") {
+            skipping = line.starts_with("## Performance");
+        }
+        if skipping || INVOCATION_ROWS.iter().any(|r| line.starts_with(r)) {
+            continue;
+        }
+        out.push_str(line);
+        out.push('\n');
+    }
+    out
+}
+
+fn strip_keys(v: &mut serde_json::Value) {
+    match v {
+        serde_json::Value::Object(m) => {
+            for k in TIMING_KEYS {
+                m.remove(k);
+            }
+            m.values_mut().for_each(strip_keys);
+        }
+        serde_json::Value::Array(a) => a.iter_mut().for_each(strip_keys),
+        _ => {}
+    }
+}
+
+fn same_file(rel: &Path, a: &[u8], b: &[u8]) -> bool {
+    let name = rel.file_name().map(|n| n.to_string_lossy().into_owned());
+    if rel.starts_with("records") && rel.extension().is_some_and(|x| x == "json") {
+        return same_but_timing(a, b);
+    }
+    match name.as_deref() {
+        Some("REPORT.md") => {
+            report_without_timings(&String::from_utf8_lossy(a))
+                == report_without_timings(&String::from_utf8_lossy(b))
+        }
+        Some("summary.json") => {
+            let parse = |x: &[u8]| {
+                serde_json::from_slice::<serde_json::Value>(x)
+                    .ok()
+                    .map(|mut v| {
+                        strip_keys(&mut v);
+                        v
+                    })
+            };
+            matches!((parse(a), parse(b)), (Some(x), Some(y)) if x == y)
+        }
+        _ => a == b,
+    }
+}
+
+/// The differences between two output directories, timings aside (empty: the same result).
+pub fn compare(a: &Path, b: &Path) -> Result<Vec<String>, ClusterError> {
+    let (fa, fb) = (files(a)?, files(b)?);
+    let mut diffs = Vec::new();
+    for rel in fa.symmetric_difference(&fb) {
+        let (has, lacks) = if fa.contains(rel) { (a, b) } else { (b, a) };
+        diffs.push(format!(
+            "{} is in {} but not in {}",
+            rel.display(),
+            has.display(),
+            lacks.display()
+        ));
+    }
+    for rel in fa.intersection(&fb) {
+        let read = |root: &Path| {
+            let p = root.join(rel);
+            std::fs::read(&p).map_err(|e| ClusterError::file(&p, e))
+        };
+        if !same_file(rel, &read(a)?, &read(b)?) {
+            diffs.push(format!("{} differs", rel.display()));
+        }
+    }
+    Ok(diffs)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_report_is_compared_without_its_invocation_and_performance() {
+        let a = "# R\n| threads | 2 |\n| seed | 1 |\n## Performance\n| x | 0.1 |\n## Next\nok\n";
+        let b = "# R\n| threads | 8 |\n| seed | 1 |\n## Performance\n| x | 0.3 |\n## Next\nok\n";
+        assert!(same_file(
+            Path::new("REPORT.md"),
+            a.as_bytes(),
+            b.as_bytes()
+        ));
+        let c = b.replace("| seed | 1 |", "| seed | 2 |");
+        assert!(!same_file(
+            Path::new("REPORT.md"),
+            a.as_bytes(),
+            c.as_bytes()
+        ));
+        let c = b.replace("ok", "not ok");
+        assert!(!same_file(
+            Path::new("REPORT.md"),
+            a.as_bytes(),
+            c.as_bytes()
+        ));
+    }
+
+    #[test]
+    fn the_summary_is_compared_without_times() {
+        let a = br#"{"wall_s": 1.0, "s": [{"wall_s_mean": 2, "ratio": 1.5}]}"#;
+        let b = br#"{"wall_s": 9.0, "s": [{"wall_s_mean": 3, "ratio": 1.5}]}"#;
+        let c = br#"{"wall_s": 9.0, "s": [{"wall_s_mean": 3, "ratio": 1.6}]}"#;
+        let p = Path::new("summary.json");
+        assert!(same_file(p, a, b));
+        assert!(!same_file(p, a, c));
+    }
+}
