@@ -149,8 +149,11 @@ impl Plan {
         self.parts().join(format!("shard-{i}"))
     }
 
-    /// A name for the jobs: `sysid-<kind>-<study file stem>`.
+    /// A name for the jobs: `sysid-paper`, or `sysid-<study file stem>`.
     pub fn job_name(&self) -> String {
+        if self.kind == Kind::Paper {
+            return "sysid-paper".into();
+        }
         let stem = self
             .config
             .file_stem()
@@ -166,7 +169,7 @@ impl Plan {
                 }
             })
             .collect();
-        format!("sysid-{}-{clean}", self.kind.name())
+        format!("sysid-{clean}")
     }
 
     /// Checks the settings that do not need the study loaded.

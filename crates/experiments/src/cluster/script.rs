@@ -50,9 +50,11 @@ pub fn shard_script(plan: &Plan) -> String {
         .collect();
     format!(
         "#!/bin/bash
-# One shard of the {kind} study {config} per array task, written by `sysid cluster submit`.
-# Submitted as `sbatch --array=0-{last} {script}`; `sysid cluster resubmit` submits it again
-# with the list of the shards that have no complete set of records.
+# One shard per array task of this study (`sysid {kind}`):
+#   {config}
+# written by `sysid cluster submit`, which submitted it with `sbatch --array=0-{last}`;
+# `sysid cluster resubmit` submits it again with the shards that have no complete set of
+# records.
 #SBATCH --job-name={name}
 #SBATCH --output={logs}/shard-%a.log
 #SBATCH --open-mode=append
@@ -69,10 +71,9 @@ rm -f \"$part/.sysid.lock\"
 echo \"shard $task/{tasks} on $(hostname) (job ${{SLURM_JOB_ID:-?}}, restart ${{SLURM_RESTART_COUNT:-0}}) at $(date -u +%Y-%m-%dT%H:%M:%SZ)\"
 exec {sysid} {args}
 ",
-        kind = plan.kind.name(),
+        kind = plan.kind.subcommand(),
         config = plan.config.display(),
         last = plan.tasks - 1,
-        script = plan.shard_script().display(),
         name = plan.job_name(),
         logs = plan.logs().display(),
         cpus = plan.cpus_per_task,
@@ -90,16 +91,17 @@ exec {sysid} {args}
 pub fn finish_script(plan: &Plan) -> String {
     format!(
         "#!/bin/bash
-# Merges the shards of the {kind} study {config}, checks that every run has its record and
-# writes the report; written by `sysid cluster submit`, submitted with
-# `--dependency=afterany:<array job>`.
+# Merges the shards of this study (`sysid {kind}`):
+#   {config}
+# checks that every run has its record and writes the report; written by `sysid cluster
+# submit`, submitted with `--dependency=afterany:<array job>`.
 #SBATCH --job-name={name}-finish
 #SBATCH --output={logs}/finish-%j.log
 #SBATCH --cpus-per-task=1
 {common}set -euo pipefail
 exec {sysid} cluster finish --out {out}
 ",
-        kind = plan.kind.name(),
+        kind = plan.kind.subcommand(),
         config = plan.config.display(),
         name = plan.job_name(),
         logs = plan.logs().display(),
