@@ -57,12 +57,12 @@ fn files(root: &Path) -> Result<BTreeSet<PathBuf>, ClusterError> {
             if rel == Path::new("cluster") || name.starts_with('.') {
                 continue;
             }
+            let costs_only = name.ends_with(".cpu")
+                || COST_FILES.contains(&name.as_str())
+                || (structure_study && rel == Path::new("REPORT.md"));
             if p.is_dir() {
                 stack.push(p);
-            } else if !name.ends_with(".cpu")
-                && !COST_FILES.contains(&name.as_str())
-                && !(structure_study && rel == Path::new("REPORT.md"))
-            {
+            } else if !costs_only {
                 out.insert(rel);
             }
         }
