@@ -232,6 +232,7 @@ pub fn status(plan: &Plan, query: bool) -> Result<Status, ClusterError> {
         let jobs: Vec<String> = submissions
             .iter()
             .flat_map(|s| [s.array_job.clone(), s.finish_job.clone()])
+            .filter(|j| !j.is_empty())
             .collect();
         match scheduler::squeue(&jobs) {
             Ok(q) => (q, None),

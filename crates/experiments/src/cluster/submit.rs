@@ -129,7 +129,7 @@ pub fn submit(plan: &Plan, dry_run: bool) -> Result<(Submitted, usize, [String; 
     let array_job = scheduler::sbatch(&plan.shard_script(), &a_args)?;
     let f_args = finish_args(std::slice::from_ref(&array_job));
     commands[1] = shown(&plan.finish_script(), &f_args);
-    let finish_job = scheduler::sbatch(&plan.finish_script(), &f_args)?;
+    let finish_job = submit_finish(plan, &array_job, &all, &f_args)?;
     let submission = Submission {
         array_job,
         finish_job,
@@ -198,7 +198,7 @@ pub fn resubmit(plan: &Plan, dry_run: bool) -> Result<Option<Submitted>, Cluster
     let f_args = finish_args(&after);
     let last = commands.len() - 1;
     commands[last] = shown(&plan.finish_script(), &f_args);
-    let finish_job = scheduler::sbatch(&plan.finish_script(), &f_args)?;
+    let finish_job = submit_finish(plan, &array_job, &failed, &f_args)?;
     let submission = Submission {
         array_job,
         finish_job,
@@ -210,6 +210,36 @@ pub fn resubmit(plan: &Plan, dry_run: bool) -> Result<Option<Submitted>, Cluster
         commands,
         submission: Some(submission),
     }))
+}
+
+/// Submits the finish job after an array that is already submitted. Should that fail, the
+/// array is recorded all the same (without a finish job), so that `status` sees its tasks and
+/// `resubmit` does not submit them twice; the error says how to finish by hand.
+fn submit_finish(
+    plan: &Plan,
+    array_job: &str,
+    shards: &[usize],
+    args: &[String],
+) -> Result<String, ClusterError> {
+    scheduler::sbatch(&plan.finish_script(), args).or_else(|e| {
+        scheduler::record_submission(
+            plan,
+            Submission {
+                array_job: array_job.to_string(),
+                finish_job: String::new(),
+                shards: shards.to_vec(),
+                submitted: utc_now(),
+            },
+        )?;
+        Err(ClusterError::Scheduler {
+            command: "sbatch finish.sh".into(),
+            message: format!(
+                "{e}; array job {array_job} is submitted: once it has ended, run `sysid cluster \
+                 finish --out {}`",
+                plan.out.display()
+            ),
+        })
+    })
 }
 
 /// What `finish` did.
