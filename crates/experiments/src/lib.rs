@@ -11,12 +11,14 @@
 //! - [`scaling`]: the scaling study (chains of 3 to 40 storeys), its figures and report;
 //! - [`verdict`]: the paper's statements decided by stated tests on the records (REPORT.md);
 //! - [`checks`]: plausibility warnings on a finished run record;
+//! - [`cluster`]: any study as a Slurm job array (submit, status, resubmit, finish);
 //! - [`calibration`] and [`coverage`]: coverage of credible intervals over a sweep with known truth.
 
 pub mod calibration;
 pub mod checks;
 pub mod cli;
 pub mod cli_reference;
+pub mod cluster;
 pub mod coverage;
 pub mod decimate;
 pub mod discretisation;

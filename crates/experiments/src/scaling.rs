@@ -305,6 +305,19 @@ pub fn load(opts: &Options) -> Result<Study> {
     Ok(if opts.quick { study.quick() } else { study })
 }
 
+/// The jobs of a structure study's sweep, in sweep order (the order `--shard i/n` deals them
+/// out in): every job of a structure this build can generate.
+pub fn sweep_jobs(study: &Study) -> Vec<Job> {
+    study
+        .jobs()
+        .into_iter()
+        .filter(|j| {
+            j.structure
+                .is_none_or(|i| study.sweep.structures[i].unsupported().is_none())
+        })
+        .collect()
+}
+
 /// Runs the study's sweep (the structures this build can generate), then, unless sharded,
 /// writes the cells, figures and report. Returns the cells.
 pub fn run(opts: &Options) -> Result<Vec<Cell>> {
@@ -326,14 +339,7 @@ pub fn run_with(opts: &Options, write: &Writer<'_>) -> Result<Vec<Cell>> {
     let start = Instant::now();
     let _lock = DirLock::acquire(&opts.out)?;
     let study = load(opts)?;
-    let jobs: Vec<Job> = study
-        .jobs()
-        .into_iter()
-        .filter(|j| {
-            j.structure
-                .is_none_or(|i| study.sweep.structures[i].unsupported().is_none())
-        })
-        .collect();
+    let jobs = sweep_jobs(&study);
     let sweep = SweepOptions {
         threads: opts.threads,
         shard: opts.shard,

@@ -41,6 +41,8 @@ enum Command {
     /// The excitations study: the paper's structure under other real ground motions.
     #[command(allow_negative_numbers = true)]
     Excitations(cli::scaling::Args),
+    /// Run a study as a Slurm job array: submit, status, resubmit, finish, compare.
+    Cluster(cli::cluster::Args),
     /// Merge the records of sharded sweeps.
     #[command(allow_negative_numbers = true)]
     Merge(cli::merge::Args),
@@ -87,6 +89,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         Command::CompareReference(args) => cli::reference::compare(args),
         Command::Reproduce(args) => cli::reproduce::run(args),
         Command::Merge(args) => cli::merge::run(args),
+        Command::Cluster(args) => cli::cluster::run(args),
         Command::Scaling(args) => cli::scaling::run(args),
         Command::Excitations(args) => cli::scaling::run_excitations(args),
         Command::Regression(args) => cli::regression::run(args),

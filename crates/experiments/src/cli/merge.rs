@@ -16,7 +16,8 @@ use crate::sweep::{merge, study_pairs};
 /// Arguments of `sysid merge`.
 #[derive(Debug, clap::Args)]
 pub struct Args {
-    /// Output directories of the shards (each holding `records/<study>/`).
+    /// Output directories of the shards (each holding `records/<study>/`, or its records in
+    /// `records/` for `scaling`, `excitations` and `study`).
     #[arg(required = true)]
     pub parts: Vec<PathBuf>,
     /// Directory to merge into (its `records/<study>/` receive the records).

@@ -1,5 +1,6 @@
 //! Subcommands of `sysid`, one module each. Each module exposes `Args` (clap) and `run`.
 
+pub mod cluster;
 pub mod filter;
 pub mod import;
 pub mod merge;

@@ -30,6 +30,11 @@ pub struct Args {
     /// The study's `[quick]` form.
     #[arg(long)]
     pub quick: bool,
+    /// Run only part i of n of the sweep (e.g. one task of a Slurm job array, see `sysid
+    /// cluster`); merge the shards' records with `sysid merge`, then run without `--shard` and
+    /// with `--resume` to write the report.
+    #[arg(long, default_value = "0/1")]
+    pub shard: Shard,
 }
 
 pub fn run(args: Args) -> Result<()> {
@@ -43,7 +48,7 @@ pub fn run(args: Args) -> Result<()> {
     let _lock = DirLock::acquire(&args.out)?;
     let sweep = SweepOptions {
         threads: args.threads,
-        shard: Shard::default(),
+        shard: args.shard,
         progress: true,
         label: study.name.clone(),
         resume: args.resume,
@@ -56,6 +61,16 @@ pub fn run(args: Args) -> Result<()> {
         &sweep,
         |job| study.run_job(job),
     )?;
+    if args.shard != Shard::default() {
+        eprintln!(
+            "shard {}/{}: {}; merge the shards' records (`sysid merge`) and run `sysid study \
+             --resume` to write the report",
+            args.shard.index,
+            args.shard.count,
+            outcome.summary()
+        );
+        return Ok(());
+    }
     let spreads = crate::user_study::spreads(&outcome.records);
     let data = match &study.data.dir {
         Some(d) => d.display().to_string(),

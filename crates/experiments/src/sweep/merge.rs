@@ -6,6 +6,10 @@
 //! with the list of files and reasons. Then each record is copied byte for byte with an atomic write (temporary
 //! file and rename in the destination), so a merge killed at any point leaves only complete
 //! records, and running it again finishes the job.
+//!
+//! A record's sidecar files (`<id>.cpu`: the CPU seconds of a structure study's run, see
+//! [`crate::scaling`]) travel with it: copied after the record, and copied into a destination
+//! that holds the record but not the sidecar (a merge killed between the two writes).
 
 use std::collections::BTreeMap;
 use std::fs;
@@ -28,6 +32,9 @@ pub struct MergeReport {
     /// Stale temporary files removed from the destinations.
     pub cleaned: usize,
 }
+
+/// Extensions of the files written beside a record `<id>.json` that belong to it.
+const SIDECARS: [&str; 1] = ["cpu"];
 
 struct Planned {
     src: PathBuf,
@@ -149,17 +156,40 @@ pub fn merge<R: SweepRecord>(pairs: &[(PathBuf, PathBuf)]) -> Result<MergeReport
         report.cleaned += clean_stale_temporaries(d)?;
     }
     for p in plan.into_values() {
-        match p.replaces {
+        let present = match p.replaces {
             Some(why) if why.is_empty() => {
                 report.present += 1;
-                continue;
+                true
             }
-            Some(why) => report.replaced.push((p.dst.clone(), why)),
-            None => report.copied += 1,
+            Some(why) => {
+                report.replaced.push((p.dst.clone(), why));
+                false
+            }
+            None => {
+                report.copied += 1;
+                false
+            }
+        };
+        if !present {
+            write_bytes_atomic(&p.dst, &p.bytes)?;
         }
-        write_bytes_atomic(&p.dst, &p.bytes)?;
+        copy_sidecars(&p.src, &p.dst, present)?;
     }
     Ok(report)
+}
+
+/// Copies the sidecars of record `src` beside record `dst` (atomically); with `only_missing`,
+/// only those `dst` lacks.
+fn copy_sidecars(src: &Path, dst: &Path, only_missing: bool) -> Result<()> {
+    for ext in SIDECARS {
+        let (from, to) = (src.with_extension(ext), dst.with_extension(ext));
+        if !from.is_file() || (only_missing && to.exists()) {
+            continue;
+        }
+        let bytes = fs::read(&from).with_context(|| format!("reading {}", from.display()))?;
+        write_bytes_atomic(&to, &bytes)?;
+    }
+    Ok(())
 }
 
 /// The first 12 hex digits of a fingerprint, for messages.
@@ -167,22 +197,27 @@ fn short(f: &str) -> &str {
     &f[..f.len().min(12)]
 }
 
-/// The study directories of a shard's output (`PART/records/<study>/`) paired with their
-/// destination under `into`.
+/// The record directories of a shard's output paired with their destination under `into`:
+/// `PART/records/<study>/` of a reproduction (one directory per study), and `PART/records/`
+/// itself when it holds records (a structure study or a study file writes its records there).
 pub fn study_pairs(parts: &[PathBuf], into: &Path) -> Result<Vec<(PathBuf, PathBuf)>> {
     let mut pairs = Vec::new();
     for part in parts {
         let records = part.join("records");
         let studies = fs::read_dir(&records).with_context(|| {
             format!(
-                "reading {} (a part is the output directory of `sysid reproduce --shard`)",
+                "reading {} (a part is the output directory of a sharded sweep, `--shard i/n`)",
                 records.display()
             )
         })?;
-        let mut dirs: Vec<PathBuf> = studies
-            .filter_map(|e| e.ok().map(|e| e.path()))
-            .filter(|p| p.is_dir())
-            .collect();
+        let entries: Vec<PathBuf> = studies.filter_map(|e| e.ok().map(|e| e.path())).collect();
+        if entries
+            .iter()
+            .any(|p| p.is_file() && p.extension().is_some_and(|x| x == "json"))
+        {
+            pairs.push((records.clone(), into.join("records")));
+        }
+        let mut dirs: Vec<PathBuf> = entries.into_iter().filter(|p| p.is_dir()).collect();
         dirs.sort();
         for dir in dirs {
             let name = dir.file_name().expect("a directory name").to_owned();
