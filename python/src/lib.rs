@@ -9,7 +9,7 @@
 //! look for a pending Ctrl-C every 50 ms; one stops the run with `KeyboardInterrupt`.
 
 use std::cell::Cell;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::str::FromStr;
 use std::sync::Mutex;
 use std::time::{Duration, Instant};
@@ -762,17 +762,17 @@ impl PyRecord {
 /// Reads and checks a run record written by `sysid filter`, a sweep or `Record.write`.
 #[pyfunction]
 fn read_record(path: PathBuf) -> PyResult<PyRecord> {
-    experiments::sweep::read_record::<RunRecord>(&path)
+    experiments::record::read::read::<RunRecord>(&path)
         .map(|r| PyRecord { r })
-        .map_err(err)
+        .map_err(py_err)
 }
 
 /// Parses and checks the JSON text of a run record.
 #[pyfunction]
 fn parse_record(text: &str) -> PyResult<PyRecord> {
-    experiments::sweep::parse_record::<RunRecord>(text.as_bytes())
+    experiments::record::read::parse::<RunRecord>(text.as_bytes(), Path::new("<text>"))
         .map(|r| PyRecord { r })
-        .map_err(err)
+        .map_err(py_err)
 }
 
 /// Table I of the paper by computation: moments of z = xᵀx, x ~ N(0, I), by the exact χ²

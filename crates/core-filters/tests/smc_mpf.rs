@@ -95,7 +95,7 @@ impl Decoupled {
             g_off: Vector3::new(0.1, 0.0, 0.0),
             h: SMatrix::<f64, 2, 3>::new(1.0, 0.0, 0.5, 0.0, 1.0, -1.0),
             h_off: Vector2::new(0.2, -0.1),
-            q_bl: SymEntries::diagonal(&q_bl_sd.map(|s| s * s).as_slice().to_vec()),
+            q_bl: SymEntries::diagonal(q_bl_sd.map(|s| s * s).as_slice()),
             q_bl_sd,
             r: Matrix2::new(0.2, 0.05, 0.05, 0.3),
             m0: Vector3::new(0.5, -0.2, 1.0),
@@ -596,10 +596,13 @@ impl ConditionallyQuadratic for Bilinear {
     }
 }
 
+/// One measurement's quadratic map: a constant, a linear part and sparse Hessian entries.
+type QuadraticTerm = (f64, Vector3<f64>, Vec<(usize, usize, f64)>);
+
 /// Exact mean and covariance of `f_i(x) = c_i + l_iᵀx + Σ q x_a x_b`, `x ~ N(μ, P)`, plus
 /// diagonal noise, by Isserlis' theorem.
 fn exact_quadratic_moments(
-    terms: &[(f64, Vector3<f64>, Vec<(usize, usize, f64)>); 2],
+    terms: &[QuadraticTerm; 2],
     mu: &Vector3<f64>,
     p: &Matrix3<f64>,
     noise_var: &[f64],

@@ -35,7 +35,7 @@ fn help(sysid: &Path, args: &[&str]) -> Result<String> {
             String::from_utf8_lossy(&out.stderr)
         );
     }
-    Ok(String::from_utf8(out.stdout).context("help text is not UTF-8")?)
+    String::from_utf8(out.stdout).context("help text is not UTF-8")
 }
 
 /// The whole reference as Markdown: `sysid --help`, then every subcommand's help in the order

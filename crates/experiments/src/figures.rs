@@ -1148,57 +1148,6 @@ pub fn validate_svg(path: &Path) -> Result<()> {
     Ok(())
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn units_of_the_paper_parameters() {
-        assert_eq!(param_unit("k1"), "[1/s²]");
-        assert_eq!(param_unit("c3"), "[1/s]");
-        assert_eq!(param_unit("beta"), "[1/m^n]");
-        assert_eq!(param_unit("gamma2"), "[1/m^n]");
-        assert_eq!(param_unit("n"), "[-]");
-        assert_eq!(param_unit("cx"), "[-]");
-    }
-
-    #[test]
-    fn grids_are_near_square() {
-        assert_eq!(grid_dims(9), (3, 3));
-        assert_eq!(grid_dims(1), (1, 1));
-        assert_eq!(grid_dims(2), (1, 2));
-        assert_eq!(grid_dims(5), (2, 3));
-        assert_eq!(grid_dims(12), (3, 4));
-    }
-
-    #[test]
-    fn segments_split_at_gaps() {
-        let v = [1.0, f64::NAN, 2.0, 3.0, f64::INFINITY, 4.0];
-        assert_eq!(
-            segments(v.len(), |k| v[k].is_finite()),
-            vec![0..1, 2..4, 5..6]
-        );
-        assert!(segments(0, |_| true).is_empty());
-    }
-
-    #[test]
-    fn ranges_are_never_degenerate() {
-        assert_eq!(finite_range([f64::NAN, f64::INFINITY]), None);
-        let (lo, hi) = padded((2.0, 2.0));
-        assert!(lo < 2.0 && hi > 2.0);
-        let (lo, hi) = padded((0.0, 0.0));
-        assert!(lo < 0.0 && hi > 0.0);
-        assert_eq!(padded((0.0, 10.0)), (-0.5, 10.5));
-    }
-
-    #[test]
-    fn ticks_follow_the_span() {
-        assert_eq!(tick(8.0, 10.0), "8");
-        assert_eq!(tick(0.25, 0.5), "0.25");
-        assert_eq!(tick(-0.0001, 1.0), "0.0");
-    }
-}
-
 /// One group (an algorithm) of a [`category_panels`] figure: per category, a mean and the
 /// half-width of its error bar (NaN: nothing drawn for that category).
 pub struct CategoryGroup {
@@ -1304,4 +1253,55 @@ pub fn category_panels(
     root.present()
         .with_context(|| format!("writing {}", path.display()))?;
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn units_of_the_paper_parameters() {
+        assert_eq!(param_unit("k1"), "[1/s²]");
+        assert_eq!(param_unit("c3"), "[1/s]");
+        assert_eq!(param_unit("beta"), "[1/m^n]");
+        assert_eq!(param_unit("gamma2"), "[1/m^n]");
+        assert_eq!(param_unit("n"), "[-]");
+        assert_eq!(param_unit("cx"), "[-]");
+    }
+
+    #[test]
+    fn grids_are_near_square() {
+        assert_eq!(grid_dims(9), (3, 3));
+        assert_eq!(grid_dims(1), (1, 1));
+        assert_eq!(grid_dims(2), (1, 2));
+        assert_eq!(grid_dims(5), (2, 3));
+        assert_eq!(grid_dims(12), (3, 4));
+    }
+
+    #[test]
+    fn segments_split_at_gaps() {
+        let v = [1.0, f64::NAN, 2.0, 3.0, f64::INFINITY, 4.0];
+        assert_eq!(
+            segments(v.len(), |k| v[k].is_finite()),
+            vec![0..1, 2..4, 5..6]
+        );
+        assert!(segments(0, |_| true).is_empty());
+    }
+
+    #[test]
+    fn ranges_are_never_degenerate() {
+        assert_eq!(finite_range([f64::NAN, f64::INFINITY]), None);
+        let (lo, hi) = padded((2.0, 2.0));
+        assert!(lo < 2.0 && hi > 2.0);
+        let (lo, hi) = padded((0.0, 0.0));
+        assert!(lo < 0.0 && hi > 0.0);
+        assert_eq!(padded((0.0, 10.0)), (-0.5, 10.5));
+    }
+
+    #[test]
+    fn ticks_follow_the_span() {
+        assert_eq!(tick(8.0, 10.0), "8");
+        assert_eq!(tick(0.25, 0.5), "0.25");
+        assert_eq!(tick(-0.0001, 1.0), "0.0");
+    }
 }

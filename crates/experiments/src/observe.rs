@@ -270,14 +270,14 @@ impl Observer for Recorder<'_> {
             }
         }
         let every = self.trace.every;
-        if every > 0 && (k % every == 0 || k == self.total_steps) {
+        if every > 0 && (k.is_multiple_of(every) || k == self.total_steps) {
             self.trace.t.push(k as f64 * self.dt);
             self.trace.param_mean.push(post.param_mean.clone());
             self.trace.param_sd.push(post.param_sd.clone());
             self.trace.ess.push(info.ess);
         }
         if let Some(bar) = &self.progress {
-            if k % 64 == 0 || k == self.total_steps {
+            if k.is_multiple_of(64) || k == self.total_steps {
                 bar.set_position(k as u64);
             }
         }

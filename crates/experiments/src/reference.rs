@@ -512,7 +512,7 @@ mod tests {
         p.fix("n", 2.0).unwrap();
         let map = ThetaMap::new(&p).unwrap();
         assert_eq!(map.dim(), 7);
-        let theta = map.theta(&vec![0.0; 7]);
+        let theta = map.theta(&[0.0; 7]);
         assert_eq!(theta[0], 8.0);
         assert_eq!(theta[8], 2.0);
     }

@@ -48,7 +48,7 @@ impl Trajectory {
     #[track_caller]
     pub fn from_flat(dim: usize, dt: f64, states: Vec<f64>) -> Self {
         assert!(
-            dim > 0 && states.len() % dim == 0,
+            dim > 0 && states.len().is_multiple_of(dim),
             "buffer is not a whole number of rows"
         );
         Self { dim, dt, states }

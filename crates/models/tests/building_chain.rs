@@ -115,7 +115,6 @@ fn rk4_at_the_data_step_matches_half_the_step() {
 /// the integration agrees with adaptive Dormand–Prince across the documented range.
 #[test]
 fn tall_building_chains_are_integrated_stably_to_200_storeys() {
-    use models::excitation;
     use models::integrate::{
         fastest_damping_rate, rk4_substeps, simulate_adaptive, simulate_rk4_substeps, Tolerance,
     };
@@ -127,7 +126,7 @@ fn tall_building_chains_are_integrated_stably_to_200_storeys() {
             "{n}"
         );
     }
-    let ug: Vec<f64> = excitation::paper_default()
+    let ug: Vec<f64> = models::ground_motions::paper_default()
         .acc
         .iter()
         .take(401)

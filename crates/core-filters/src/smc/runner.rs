@@ -277,7 +277,7 @@ pub fn run(
     let np = config.particles;
     assert!(np > 0, "a particle filter needs at least one particle");
     assert!(
-        ny > 0 && ys.len() % ny == 0,
+        ny > 0 && ys.len().is_multiple_of(ny),
         "measurements are rows of {ny}"
     );
     let layout = filter.layout().clone();

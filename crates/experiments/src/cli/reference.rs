@@ -145,7 +145,10 @@ pub fn chain_warnings(
             "acceptance {acceptance:.3} < {MIN_ACCEPTANCE}: the chain is nearly stuck"
         ));
     }
-    for p in params.iter().filter(|p| !(p.ess >= MIN_CHAIN_ESS)) {
+    for p in params
+        .iter()
+        .filter(|p| p.ess.is_nan() || p.ess < MIN_CHAIN_ESS)
+    {
         w.push(format!(
             "{}: chain ESS {:.0} < {MIN_CHAIN_ESS}: the mean carries a Monte-Carlo s.e. of about \
              {:.3} (s.d./√ESS)",
