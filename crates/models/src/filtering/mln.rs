@@ -14,7 +14,7 @@
 //!
 //! The n rows are set by no stage (copied).
 
-use super::{ChainCore, ChainSpec, Discretisation, ForceVariables, SpecError, NLIN, NNONLIN};
+use super::{ChainCore, ChainSpec, Discretisation, SpecError, NLIN, NNONLIN};
 use crate::structure::{ChainTopology, ChainView, HysteresisLaw};
 use core_filters::linalg::Sparse;
 use core_filters::model::{Layout, Slot};
@@ -29,10 +29,6 @@ pub struct MlnChain {
     stages: Vec<Stage>,
     noise_sd: Vec<f64>,
     symplectic: bool,
-    /// z (θ without the n's) as the variables of the force gradients: k and c.
-    theta_vars: ForceVariables,
-    /// u as the variables of the force gradients: displacements, velocities, r.
-    state_vars: ForceVariables,
 }
 
 /// `u` (and optionally `z`) as a chain point.
@@ -109,25 +105,11 @@ impl MlnChain {
         noise_sd.extend(std::iter::repeat_n(core.q_vel, n));
         noise_sd.extend_from_slice(&core.q_r);
         noise_sd.extend(std::iter::repeat_n(0.0, ne));
-        let theta_vars = ForceVariables {
-            theta: Some((0, n)),
-            displacements: false,
-            hysteretic: None,
-            velocities: vec![None; n],
-        };
-        let state_vars = ForceVariables {
-            theta: None,
-            displacements: true,
-            hysteretic: Some(2 * n),
-            velocities: (n..2 * n).map(Some).collect(),
-        };
         Ok(Self {
             core,
             stages,
             noise_sd,
             symplectic,
-            theta_vars,
-            state_vars,
         })
     }
 
@@ -147,7 +129,8 @@ impl MlnChain {
         2 * self.core.n + self.core.ne + e
     }
 
-    /// Writes `scale · ∂a_j/∂z` at `u` into row `row` (`∂F_j/∂k_j = d_j`, `∂F_j/∂c_j = δv_j`).
+    /// Writes `scale · ∂a_j/∂z` at `u` into row `row`: `a_j = ground + (F_{j+1} − F_j)/m_j`
+    /// with `∂F_j/∂k_j = d_j`, `∂F_j/∂c_j = δv_j`. Fixed pattern: 2 entries, 4 below the top.
     #[inline]
     fn write_acceleration_row<T: Real>(
         &self,
@@ -157,13 +140,44 @@ impl MlnChain {
         u: &[T],
         scale: T,
     ) {
-        let view = View {
-            u,
-            z: &[],
-            n: self.core.n,
-        };
-        self.core
-            .write_acceleration_gradient(out, row, j, &view, &self.theta_vars, scale);
+        let n = self.core.n;
+        let view = View { u, z: &[], n };
+        let s = scale * T::splat(self.core.inv_mass[j]);
+        let (d, dv) = self.core.topo.element_coordinates(&view, j);
+        out.add(row, j, -(s * d));
+        out.add(row, n + j, -(s * dv));
+        if j + 1 < n {
+            let (d, dv) = self.core.topo.element_coordinates(&view, j + 1);
+            out.add(row, j + 1, s * d);
+            out.add(row, n + j + 1, s * dv);
+        }
+    }
+
+    /// Writes `scale · ∂F_j/∂u` at `(u, z)` into row `row`.
+    #[inline]
+    fn write_force_gradient_u<T: Real>(
+        &self,
+        out: &mut Sparse<T>,
+        row: usize,
+        j: usize,
+        z: &[T],
+        scale: T,
+    ) {
+        let n = self.core.n;
+        let (k, c) = (scale * z[j], scale * z[n + j]);
+        match self.core.topo.element_at(j) {
+            Some(e) => out.add(row, 2 * n + e, k),
+            None => {
+                out.add(row, j, k);
+                if j > 0 {
+                    out.add(row, j - 1, -k);
+                }
+            }
+        }
+        out.add(row, n + j, c);
+        if j > 0 {
+            out.add(row, n + j - 1, -c);
+        }
     }
 
     /// Drift velocity of the element at storey `j` from the velocities in `u`.
@@ -299,10 +313,12 @@ impl ConditionallyLinear for MlnChain {
     /// `∂/∂u [H(u) z + h]`: row i = `(−∂F_s/∂u + ∂F_{s+1}/∂u)/m_s` at z; the n columns are zero.
     fn observation_jacobian_u<T: Real>(&self, _k: usize, _u: &[T], z: &[T], J: &mut Sparse<T>) {
         let n = self.core.n;
-        let view = View { u: &[], z, n };
         for (i, &s) in self.core.sensors.iter().enumerate() {
-            self.core
-                .write_acceleration_gradient(J, i, s, &view, &self.state_vars, T::splat(1.0));
+            let inv = T::splat(self.core.inv_mass[s]);
+            self.write_force_gradient_u(J, i, s, z, -inv);
+            if s + 1 < n {
+                self.write_force_gradient_u(J, i, s + 1, z, inv);
+            }
         }
     }
 
