@@ -9,7 +9,7 @@
 //!   with the Hessian terms of [`crate::linalg::SecondOrder`];
 //! - [`ukf`]: the scaled unscented transform and a UKF propagate/update pair (baseline);
 //! - [`linear`]: a linear-Gaussian model and the exact [`kalman_filter`] driver;
-//! - [`table1`]: SPEC Table I by computation.
+//! - [`table1`](mod@table1): SPEC Table I by computation.
 
 pub mod ekf2;
 pub mod kf;

@@ -290,7 +290,7 @@ pub fn apply_whitened<T: Real>(
 pub struct Factor<T> {
     n: usize,
     q: usize,
-    /// `P Jᵀ` (`n × q`); after [`Factor::whiten`], `Wᵀ`.
+    /// `P Jᵀ` (`n × q`); after [`whiten_gain`], `Wᵀ`.
     pub pjt: Vec<T>,
     /// `L` (`q × q`).
     pub cov: Vec<T>,

@@ -5,7 +5,7 @@
 //! record written by this tool is always readable by it and never silently loses a value.
 //!
 //! Used field by field through `#[serde(with = "…")]` (modules [`scalar`], [`opt_scalar`],
-//! [`vec`](mod@vec), [`opt_vec`], [`vec_vec`], [`array`]) on every `f64` of every record type (run
+//! [`vec`](mod@vec), [`opt_vec`], [`vec_vec`], [`array`](mod@array)) on every `f64` of every record type (run
 //! records with their residuals, checks and intervals, reference records); the property test
 //! `record_numbers.rs` writes non-finite values into each of them and reads them back.
 

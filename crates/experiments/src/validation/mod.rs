@@ -1,7 +1,7 @@
 //! Validation without the truth (docs/validation.md): what an identified model predicts of a
 //! record it is given only the ground motion of.
 //!
-//! - **Free run** ([`free_run`]): the identified building (θ_val) simulated from rest under the
+//! - **Free run** ([`free_run`](mod@free_run)): the identified building (θ_val) simulated from rest under the
 //!   measured ground motion with the toolkit's own simulator, compared with every measured
 //!   channel (fit %, NRMSE), with a band from θ drawn from the run's recorded posterior on the
 //!   stream (seed, run, `validation-band`).

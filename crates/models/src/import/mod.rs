@@ -239,7 +239,7 @@ impl Imported {
     }
 
     /// Writes `measured.csv` and `import.json` as the directory `dir`, staged and renamed into
-    /// place as every data set is ([`dataset::write_staged`]): an interruption leaves the old
+    /// place as every data set is (`dataset::write_staged`): an interruption leaves the old
     /// directory or the new one.
     pub fn write_dir(&self, dir: &Path) -> Result<ImportRecord, DatasetError> {
         let k = self.ug.len();
