@@ -9,7 +9,15 @@ use std::fmt::Write as _;
 
 use serde::Serialize;
 
+use std::path::PathBuf;
+use std::time::Instant;
+
+use anyhow::{Context, Result};
+
 use crate::record::RunRecord;
+use crate::study::Study;
+use crate::sweep::lock::DirLock;
+use crate::sweep::{run_sweep, write_bytes_atomic, Shard, SweepOptions};
 
 /// One algorithm's statistics of one parameter over the runs of a study.
 #[derive(Debug, Clone, PartialEq, Serialize)]
@@ -231,4 +239,97 @@ pub fn figures(
         written.push(path);
     }
     Ok(written)
+}
+
+/// What `sysid study` is asked to do: the study file, where its results go, and how.
+#[derive(Debug, Clone)]
+pub struct Options {
+    /// The study file.
+    pub config: PathBuf,
+    /// Output directory (records/, summary.json, REPORT.md).
+    pub out: PathBuf,
+    /// Worker threads (0: one per core).
+    pub threads: usize,
+    /// Reuse the records whose fingerprint matches instead of recomputing them.
+    pub resume: bool,
+    /// The study's `[quick]` form.
+    pub quick: bool,
+    /// Run only this part of the sweep (then merge and run again with `resume`).
+    pub shard: Shard,
+}
+
+/// Runs a study file and writes its records, `summary.json` and `REPORT.md` (per algorithm and
+/// parameter: θ_val mean over runs, run-to-run spread, posterior s.d.); a shard writes only its
+/// records.
+pub fn run(args: &Options) -> Result<()> {
+    let start = Instant::now();
+    let mut study = Study::load(&args.config)?;
+    if args.quick {
+        study = study.quick();
+    }
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("creating {}", args.out.display()))?;
+    let _lock = DirLock::acquire(&args.out)?;
+    let sweep = SweepOptions {
+        threads: args.threads,
+        shard: args.shard,
+        progress: true,
+        label: study.name.clone(),
+        resume: args.resume,
+    };
+    let outcome = run_sweep(
+        &study.jobs(),
+        |job| study.record_id(job),
+        |job| study.job_fingerprint(job),
+        &args.out.join("records"),
+        &sweep,
+        |job| study.run_job(job),
+    )?;
+    if args.shard != Shard::default() {
+        eprintln!(
+            "shard {}/{}: {}; merge the shards' records (`sysid merge`) and run `sysid study \
+             --resume` to write the report",
+            args.shard.index,
+            args.shard.count,
+            outcome.summary()
+        );
+        return Ok(());
+    }
+    let spreads = spreads(&outcome.records);
+    let data = match &study.data.dir {
+        Some(d) => d.display().to_string(),
+        None => format!("preset {} (one data set per run)", study.data.preset),
+    };
+    write_bytes_atomic(
+        &args.out.join("summary.json"),
+        (serde_json::to_string_pretty(&serde_json::json!({
+            "study": study.name,
+            "data": data,
+            "algorithms": spreads,
+        }))? + "\n")
+            .as_bytes(),
+    )?;
+    crate::sweep::last_run::write(
+        &args.out,
+        args.threads,
+        serde_json::json!({
+            "runs": { "executed": outcome.executed, "reused": outcome.reused, "failed": outcome.failed },
+            "wall_s": start.elapsed().as_secs_f64(),
+        }),
+    )?;
+    figures(&spreads, &args.out)?;
+    let report = markdown(&study.name, &study.description, &data, &spreads);
+    write_bytes_atomic(&args.out.join("REPORT.md"), report.as_bytes())?;
+    print!("{report}");
+    eprintln!(
+        "study {}: {} runs ({} executed, {} reused, {} failed) in {:.1} s; wrote {}",
+        study.name,
+        outcome.records.len(),
+        outcome.executed,
+        outcome.reused,
+        outcome.failed,
+        start.elapsed().as_secs_f64(),
+        args.out.display()
+    );
+    Ok(())
 }

@@ -52,7 +52,9 @@ fn a_study_on_a_data_directory_runs_every_seed_on_the_same_record() {
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let summary: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
-    assert_eq!(summary["runs"]["executed"], 6);
+    let last_run: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("last-run.json")).unwrap()).unwrap();
+    assert_eq!(last_run["facts"]["runs"]["executed"], 6);
     let algs = summary["algorithms"].as_array().unwrap();
     assert_eq!(algs.len(), 2);
     for a in algs {

@@ -4,13 +4,10 @@
 //! s.d.).
 
 use std::path::PathBuf;
-use std::time::Instant;
 
-use anyhow::{Context, Result};
+use anyhow::Result;
 
-use crate::study::Study;
-use crate::sweep::lock::DirLock;
-use crate::sweep::{run_sweep, write_bytes_atomic, Shard, SweepOptions};
+use crate::sweep::Shard;
 
 /// Arguments of `sysid study`.
 #[derive(Debug, clap::Args)]
@@ -37,69 +34,14 @@ pub struct Args {
     pub shard: Shard,
 }
 
+/// Runs `sysid study`.
 pub fn run(args: Args) -> Result<()> {
-    let start = Instant::now();
-    let mut study = Study::load(&args.config)?;
-    if args.quick {
-        study = study.quick();
-    }
-    std::fs::create_dir_all(&args.out)
-        .with_context(|| format!("creating {}", args.out.display()))?;
-    let _lock = DirLock::acquire(&args.out)?;
-    let sweep = SweepOptions {
+    crate::user_study::run(&crate::user_study::Options {
+        config: args.config,
+        out: args.out,
         threads: args.threads,
-        shard: args.shard,
-        progress: true,
-        label: study.name.clone(),
         resume: args.resume,
-    };
-    let outcome = run_sweep(
-        &study.jobs(),
-        |job| study.record_id(job),
-        |job| study.job_fingerprint(job),
-        &args.out.join("records"),
-        &sweep,
-        |job| study.run_job(job),
-    )?;
-    if args.shard != Shard::default() {
-        eprintln!(
-            "shard {}/{}: {}; merge the shards' records (`sysid merge`) and run `sysid study \
-             --resume` to write the report",
-            args.shard.index,
-            args.shard.count,
-            outcome.summary()
-        );
-        return Ok(());
-    }
-    let spreads = crate::user_study::spreads(&outcome.records);
-    let data = match &study.data.dir {
-        Some(d) => d.display().to_string(),
-        None => format!("preset {} (one data set per run)", study.data.preset),
-    };
-    write_bytes_atomic(
-        &args.out.join("summary.json"),
-        (serde_json::to_string_pretty(&serde_json::json!({
-            "study": study.name,
-            "data": data,
-            "runs": { "executed": outcome.executed, "reused": outcome.reused, "failed": outcome.failed },
-            "wall_s": start.elapsed().as_secs_f64(),
-            "algorithms": spreads,
-        }))? + "\n")
-            .as_bytes(),
-    )?;
-    crate::user_study::figures(&spreads, &args.out)?;
-    let report = crate::user_study::markdown(&study.name, &study.description, &data, &spreads);
-    write_bytes_atomic(&args.out.join("REPORT.md"), report.as_bytes())?;
-    print!("{report}");
-    eprintln!(
-        "study {}: {} runs ({} executed, {} reused, {} failed) in {:.1} s; wrote {}",
-        study.name,
-        outcome.records.len(),
-        outcome.executed,
-        outcome.reused,
-        outcome.failed,
-        start.elapsed().as_secs_f64(),
-        args.out.display()
-    );
-    Ok(())
+        quick: args.quick,
+        shard: args.shard,
+    })
 }

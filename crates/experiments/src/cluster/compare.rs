@@ -6,7 +6,8 @@
 //! `cells.csv` (a structure study's cells) without its cost columns; the report (`REPORT.md`)
 //! without the lines that describe the invocation (threads, runs executed by it, wall times) and
 //! without its "Performance" section; every other file byte for byte. Not compared: the files
-//! that hold only measured costs (`*.cpu`, the cost figure), the files of the submission itself
+//! that hold only measured costs (`*.cpu`, the cost figure), what one invocation did
+//! (`last-run.json`), the files of the submission itself
 //! (`cluster/`), and the report of a structure study (a directory with `cells.csv`), whose costs
 //! are woven into its tables and sentences — its accuracy figures come from the cells and the
 //! summary, which are compared.
@@ -57,7 +58,9 @@ fn files(root: &Path) -> Result<BTreeSet<PathBuf>, ClusterError> {
             if rel == Path::new("cluster") || name.starts_with('.') {
                 continue;
             }
+            // `last-run.json` describes the invocation (wall times, runs executed, threads).
             let costs_only = name.ends_with(".cpu")
+                || name == crate::sweep::last_run::FILE
                 || COST_FILES.contains(&name.as_str())
                 || (structure_study && rel == Path::new("REPORT.md"));
             if p.is_dir() {

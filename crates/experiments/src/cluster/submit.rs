@@ -311,7 +311,7 @@ fn report(plan: &Plan) -> anyhow::Result<()> {
                 _ => crate::excitations::run(&opts)?,
             };
         }
-        super::Kind::Study => crate::cli::study::run(crate::cli::study::Args {
+        super::Kind::Study => crate::user_study::run(&crate::user_study::Options {
             config,
             out,
             threads: 1,

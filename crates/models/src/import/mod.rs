@@ -27,7 +27,7 @@ use std::path::{Path, PathBuf};
 use thiserror::Error;
 
 /// The record of an import, written beside `measured.csv`.
-pub const IMPORT: &str = "import.json";
+pub use crate::dataset::replace::IMPORT;
 
 /// Why an import could not be made.
 #[derive(Debug, Error)]
