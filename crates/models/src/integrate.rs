@@ -103,6 +103,52 @@ impl Trajectory {
     }
 }
 
+/// The four stage derivatives and the stage state of one RK4 step.
+struct Rk4Scratch {
+    k: [Vec<f64>; 4],
+    tmp: Vec<f64>,
+}
+
+impl Rk4Scratch {
+    fn new(n: usize) -> Self {
+        Self {
+            k: std::array::from_fn(|_| vec![0.0; n]),
+            tmp: vec![0.0; n],
+        }
+    }
+}
+
+/// One classical RK4 step of size `h` from `y` into `out`, `ü_g` going linearly from `ua` to `ub`
+/// over the step (its midpoint value for the two middle stages).
+fn rk4_step<S: ForcedSystem + ?Sized>(
+    sys: &S,
+    y: &[f64],
+    out: &mut [f64],
+    (ua, ub): (f64, f64),
+    h: f64,
+    s: &mut Rk4Scratch,
+) {
+    let um = 0.5 * (ua + ub);
+    let [k1, k2, k3, k4] = &mut s.k;
+    let tmp = &mut s.tmp;
+    sys.rhs(y, ua, k1);
+    for i in 0..y.len() {
+        tmp[i] = y[i] + 0.5 * h * k1[i];
+    }
+    sys.rhs(tmp, um, k2);
+    for i in 0..y.len() {
+        tmp[i] = y[i] + 0.5 * h * k2[i];
+    }
+    sys.rhs(tmp, um, k3);
+    for i in 0..y.len() {
+        tmp[i] = y[i] + h * k3[i];
+    }
+    sys.rhs(tmp, ub, k4);
+    for i in 0..y.len() {
+        out[i] = y[i] + h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
+    }
+}
+
 /// Classical RK4 at fixed step `dt` from zero initial conditions, one step per sample interval,
 /// `ü_g` linearly interpolated (SPEC §2). Returns `ug.len()` rows.
 #[track_caller]
@@ -110,33 +156,17 @@ pub fn simulate_rk4<S: ForcedSystem + ?Sized>(sys: &S, ug: &[f64], dt: f64) -> T
     assert!(dt > 0.0, "dt must be positive");
     let n = sys.dim();
     let mut states = vec![0.0; ug.len() * n];
-    let mut k1 = vec![0.0; n];
-    let mut k2 = vec![0.0; n];
-    let mut k3 = vec![0.0; n];
-    let mut k4 = vec![0.0; n];
-    let mut tmp = vec![0.0; n];
+    let mut scratch = Rk4Scratch::new(n);
     for k in 1..ug.len() {
         let (done, rest) = states.split_at_mut(k * n);
-        let y = &done[(k - 1) * n..];
-        let out = &mut rest[..n];
-        let (u0, u1) = (ug[k - 1], ug[k]);
-        let um = 0.5 * (u0 + u1);
-        sys.rhs(y, u0, &mut k1);
-        for i in 0..n {
-            tmp[i] = y[i] + 0.5 * dt * k1[i];
-        }
-        sys.rhs(&tmp, um, &mut k2);
-        for i in 0..n {
-            tmp[i] = y[i] + 0.5 * dt * k2[i];
-        }
-        sys.rhs(&tmp, um, &mut k3);
-        for i in 0..n {
-            tmp[i] = y[i] + dt * k3[i];
-        }
-        sys.rhs(&tmp, u1, &mut k4);
-        for i in 0..n {
-            out[i] = y[i] + dt / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
-        }
+        rk4_step(
+            sys,
+            &done[(k - 1) * n..],
+            &mut rest[..n],
+            (ug[k - 1], ug[k]),
+            dt,
+            &mut scratch,
+        );
     }
     Trajectory::from_flat(n, dt, states)
 }
@@ -190,36 +220,15 @@ pub fn simulate_rk4_substeps<S: ForcedSystem + ?Sized>(
     let n = sys.dim();
     let h = dt / substeps as f64;
     let mut states = vec![0.0; ug.len() * n];
-    let mut y = vec![0.0; n];
-    let (mut k1, mut k2, mut k3, mut k4, mut tmp) = (
-        vec![0.0; n],
-        vec![0.0; n],
-        vec![0.0; n],
-        vec![0.0; n],
-        vec![0.0; n],
-    );
+    let (mut y, mut next) = (vec![0.0; n], vec![0.0; n]);
+    let mut scratch = Rk4Scratch::new(n);
     for k in 1..ug.len() {
         let (u0, u1) = (ug[k - 1], ug[k]);
         let at = |j: f64| u0 + (u1 - u0) * (j / substeps as f64);
         for j in 0..substeps {
-            let (ua, ub) = (at(j as f64), at(j as f64 + 1.0));
-            let um = 0.5 * (ua + ub);
-            sys.rhs(&y, ua, &mut k1);
-            for i in 0..n {
-                tmp[i] = y[i] + 0.5 * h * k1[i];
-            }
-            sys.rhs(&tmp, um, &mut k2);
-            for i in 0..n {
-                tmp[i] = y[i] + 0.5 * h * k2[i];
-            }
-            sys.rhs(&tmp, um, &mut k3);
-            for i in 0..n {
-                tmp[i] = y[i] + h * k3[i];
-            }
-            sys.rhs(&tmp, ub, &mut k4);
-            for i in 0..n {
-                y[i] += h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
-            }
+            let u = (at(j as f64), at(j as f64 + 1.0));
+            rk4_step(sys, &y, &mut next, u, h, &mut scratch);
+            std::mem::swap(&mut y, &mut next);
         }
         states[k * n..(k + 1) * n].copy_from_slice(&y);
     }
