@@ -9,6 +9,11 @@
 //!   `results/scaling-quick/`); sharded and resumed like `reproduce-paper`.
 //! - `reproduce-excitations [same options]`: the same for the excitations study
 //!   (`experiments/excitations.toml`, `results/excitations/`).
+//! - `reproduce-real [--no-baseline] [--report-only]`: builds `sysid` in release, installs the
+//!   baseline's Python package (`experiments/real/requirements.txt`, PyPI's `mdof`) into a
+//!   virtual environment under `target/`, and runs `sysid field-study` on
+//!   `experiments/real/study.toml` into `results/real/` (REPORT.md). Without Python or network
+//!   the committed baseline numbers are used and the run says so.
 //! - `regression [--threads N] [--resume]`: builds `sysid` in release and runs `sysid regression`
 //!   on `experiments/regression.toml` (into `results/regression/`) and
 //!   `experiments/regression-symplectic.toml` (into `results/regression-symplectic/`); fails when
@@ -63,6 +68,16 @@ enum Task {
     /// The excitations study (experiments/excitations.toml): records, figures and REPORT.md
     /// under results/excitations.
     ReproduceExcitations(StudyArgs),
+    /// The real-structure case study (experiments/real/study.toml): records, figures and
+    /// REPORT.md under results/real.
+    ReproduceReal {
+        /// Do not recompute the baseline (SRIM, Python); use the committed srim.json.
+        #[arg(long)]
+        no_baseline: bool,
+        /// Compute nothing: write REPORT.md from the records already there.
+        #[arg(long)]
+        report_only: bool,
+    },
     /// Identification-accuracy regression check (experiments/regression.toml).
     Regression {
         /// Worker threads (0: one per core).
@@ -269,9 +284,70 @@ fn main() -> Result<()> {
             }
             Ok(())
         }
+        Task::ReproduceReal {
+            no_baseline,
+            report_only,
+        } => reproduce_real(&root, no_baseline, report_only),
         Task::Bench { full } => bench(&root, full),
         Task::Docs => docs(&root),
     }
+}
+
+/// The real-structure case study: `sysid field-study`, with the baseline's Python package
+/// installed into `target/real-python` when it can be.
+fn reproduce_real(root: &Path, no_baseline: bool, report_only: bool) -> Result<()> {
+    let started = std::time::Instant::now();
+    let sysid = build_sysid(root)?;
+    let build_s = started.elapsed().as_secs_f64();
+    let mut cmd = Command::new(sysid);
+    cmd.current_dir(root).args([
+        "field-study",
+        "--config",
+        "experiments/real/study.toml",
+        "--out",
+        "results/real",
+    ]);
+    if report_only {
+        cmd.arg("--report-only");
+    } else if !no_baseline {
+        match baseline_python(root) {
+            Ok(python) => {
+                cmd.arg("--python").arg(python);
+            }
+            Err(e) => eprintln!(
+                "note: the baseline (SRIM, Python package mdof) is not recomputed: {e:#}; the committed results/real/frame/srim.json is used"
+            ),
+        }
+    }
+    run(&mut cmd)?;
+    eprintln!(
+        "reproduce-real: {:.0} s in all (build {build_s:.0} s, study {:.0} s)",
+        started.elapsed().as_secs_f64(),
+        started.elapsed().as_secs_f64() - build_s
+    );
+    Ok(())
+}
+
+/// A virtual environment with the baseline's requirements (created once, under `target/`).
+fn baseline_python(root: &Path) -> Result<PathBuf> {
+    let venv = target_dir(root).join("real-python");
+    let python = venv.join("bin/python");
+    let stamp = venv.join("requirements.txt");
+    let wanted = fs::read_to_string(root.join("experiments/real/requirements.txt"))
+        .context("reading experiments/real/requirements.txt")?;
+    if python.exists() && fs::read_to_string(&stamp).is_ok_and(|t| t == wanted) {
+        return Ok(python);
+    }
+    eprintln!(
+        "installing the baseline's Python packages into {}",
+        venv.display()
+    );
+    run(Command::new("python3").arg("-m").arg("venv").arg(&venv))?;
+    run(Command::new(&python)
+        .args(["-m", "pip", "install", "--quiet", "-r"])
+        .arg(root.join("experiments/real/requirements.txt")))?;
+    fs::write(&stamp, wanted)?;
+    Ok(python)
 }
 
 /// Writes the generated parts of the documentation (tests compare them with their sources).

@@ -24,6 +24,7 @@ pub mod decimate;
 pub mod discretisation;
 pub mod excitations;
 pub mod field;
+pub mod field_study;
 pub mod figures;
 pub mod headline;
 pub mod limits;

@@ -55,6 +55,9 @@ enum Command {
     CompareReference(cli::reference::CompareArgs),
     /// Draw the figures of one run record (convergence, ESS, hysteresis loop, residuals).
     Plot(cli::plot::Args),
+    /// A study of one real structure from its recordings: import, identify model variants,
+    /// cross-validate, compare with a black-box baseline, REPORT.md.
+    FieldStudy(cli::field_study::Args),
     /// Cross-validation: the model identified in a run record predicts another record of the
     /// same building (free run, fit per channel, modes beside the measured peaks).
     Validate(cli::validate::Args),
@@ -95,5 +98,6 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Regression(args) => cli::regression::run(args),
         Command::Plot(args) => cli::plot::run(args),
         Command::Validate(args) => cli::validate::run(args),
+        Command::FieldStudy(args) => cli::field_study::run(args),
     }
 }

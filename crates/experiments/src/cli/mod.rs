@@ -1,6 +1,7 @@
 //! Subcommands of `sysid`, one module each. Each module exposes `Args` (clap) and `run`.
 
 pub mod cluster;
+pub mod field_study;
 pub mod filter;
 pub mod import;
 pub mod merge;

@@ -9,10 +9,10 @@ use std::path::{Path, PathBuf};
 use anyhow::{bail, Context, Result};
 use models::dataset::{load_dir, MEASURED, META};
 use models::description::StructureDescription;
-use serde::{Deserialize, Serialize};
 
-use crate::record::{number, RunRecord};
-use crate::validation::{self, FreeRun, ModalComparison, BAND_DRAWS};
+use crate::record::RunRecord;
+use crate::validation::cross::CrossValidation;
+use crate::validation::{self, BAND_DRAWS};
 
 /// Arguments of `sysid validate`.
 #[derive(Debug, clap::Args)]
@@ -36,26 +36,6 @@ pub struct Args {
 
 /// Most draws accepted.
 pub const MAX_DRAWS: usize = 10_000;
-
-/// The result of a cross-validation.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct CrossValidation {
-    /// The record the model was identified on, and the record it predicts.
-    pub record: String,
-    pub data: String,
-    pub algorithm: String,
-    pub seed: u64,
-    pub run: u64,
-    pub structure: StructureDescription,
-    pub param_names: Vec<String>,
-    #[serde(with = "number::vec")]
-    pub theta_val: Vec<f64>,
-    pub free_run: FreeRun,
-    pub modal: ModalComparison,
-    /// What was assumed about the other record.
-    #[serde(default, skip_serializing_if = "Vec::is_empty")]
-    pub notes: Vec<String>,
-}
 
 /// Reads and checks a run record.
 pub fn read_record(path: &Path) -> Result<RunRecord> {

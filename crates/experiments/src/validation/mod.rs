@@ -12,6 +12,7 @@
 //! `sysid filter` attaches both to the record of every field-data run ([`attach`]); `sysid
 //! validate` applies them to another record of the same building (cross-validation).
 
+pub mod cross;
 pub mod figures;
 pub mod free_run;
 pub mod spectral;

@@ -1,0 +1,51 @@
+//! `sysid field-study`: a study of one real structure from its recordings
+//! (`experiments/real/study.toml`; [`crate::field_study`]).
+
+use std::path::PathBuf;
+
+use anyhow::{Context, Result};
+
+use crate::field_study::{run as run_study, FieldStudy, RunOptions};
+
+/// Arguments of `sysid field-study`.
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    /// The study file (e.g. experiments/real/study.toml).
+    #[arg(long)]
+    pub config: PathBuf,
+    /// Output directory (one directory per part, REPORT.md).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// A Python interpreter with the package `mdof` to recompute the baseline (SRIM); without
+    /// it the study's committed baseline file is used and the report says so.
+    #[arg(long)]
+    pub python: Option<PathBuf>,
+    /// The baseline script.
+    #[arg(long, default_value = "experiments/real/srim.py")]
+    pub baseline_script: PathBuf,
+    /// Compute nothing: write REPORT.md from the records already there.
+    #[arg(long)]
+    pub report_only: bool,
+}
+
+/// Runs `sysid field-study`.
+pub fn run(args: Args) -> Result<()> {
+    let study = FieldStudy::load(&args.config)?;
+    if args.report_only {
+        let text = crate::field_study::report::render(&study, &args.out)?;
+        let path = args.out.join("REPORT.md");
+        crate::sweep::write_bytes_atomic(&path, text.as_bytes())?;
+        eprintln!("report {}", path.display());
+        return Ok(());
+    }
+    let sysid = std::env::current_exe().context("locating the sysid binary")?;
+    run_study(
+        &study,
+        &RunOptions {
+            sysid,
+            out: args.out,
+            python: args.python,
+            baseline_script: Some(args.baseline_script),
+        },
+    )
+}

@@ -1,0 +1,697 @@
+//! A study of one real structure from its recordings (`experiments/real/study.toml`,
+//! `results/real/REPORT.md`): import every record, identify model variants on the record every
+//! choice is made on, predict the records kept out of every choice (cross-validation), select a
+//! variant by its likelihood, identify the selected model on every record to see whether their
+//! intervals agree, and set the toolkit beside a black-box baseline (SRIM, by the PyPI package
+//! `mdof`).
+//!
+//! The study is a description (this module's [`FieldStudy`], a TOML file) turned into the
+//! `sysid` commands a user would type ([`plan_identify`], [`plan_validate`]); [`run`] executes them with
+//! the `sysid` binary it is given, so every number of the report comes from the same commands
+//! as a user's and from their records. The report is drawn from those records only
+//! ([`report`]).
+
+pub mod report;
+
+use std::collections::BTreeSet;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use anyhow::{bail, Context, Result};
+use serde::Deserialize;
+
+use crate::pipeline::Algorithm;
+use crate::record::RunRecord;
+
+/// The whole study: its parts (one structure each).
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct FieldStudy {
+    pub title: String,
+    pub part: Vec<Part>,
+}
+
+/// One structure and its records.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Part {
+    /// Directory name under the output (`results/real/<name>`).
+    pub name: String,
+    pub title: String,
+    /// Prose for the report: the structure, the model and what is asked of it.
+    pub about: String,
+    pub record: Vec<RecordSpec>,
+    /// Arguments of every `sysid filter` of this part (the structure, the measurement).
+    #[serde(default)]
+    pub common: Vec<String>,
+    pub variant: Vec<Variant>,
+    #[serde(default)]
+    pub selection: Option<Selection>,
+    /// Whether the part has the black-box baseline (`<out>/<part>/srim.json`, written by
+    /// `experiments/real/srim.py`).
+    #[serde(default)]
+    pub baseline: bool,
+}
+
+/// A recording of the structure, imported by `sysid import --map`.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RecordSpec {
+    pub name: String,
+    /// Channel map, relative to the study file.
+    pub map: PathBuf,
+    pub role: Role,
+}
+
+/// What a record is used for.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Role {
+    /// Every choice of the study (variants, selection, priors) is made on this record.
+    Identify,
+    /// Kept out of every choice: predicted only (cross-validation) and identified again with
+    /// the selected model to compare intervals.
+    Validate,
+}
+
+/// One model and algorithm identified on the identification record.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Variant {
+    /// File stem of its record (`records/<name>.json`).
+    pub name: String,
+    pub label: String,
+    pub algorithm: Algorithm,
+    /// Arguments of `sysid filter` after the part's `common` ones.
+    #[serde(default)]
+    pub args: Vec<String>,
+    /// Variants of one group are candidates of the [`Selection`].
+    #[serde(default)]
+    pub group: Option<String>,
+}
+
+/// Selection of a variant by the filter's log-likelihood of the identification record (a
+/// profile likelihood over what the filter does not identify itself, e.g. mass ratios); the
+/// selected variant is then identified on every other record.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Selection {
+    pub group: String,
+    /// Extra arguments for the identifications on the other records (e.g. the prior scaled from
+    /// the identification record, written out in a config file).
+    #[serde(default)]
+    pub other_args: Vec<String>,
+}
+
+impl FieldStudy {
+    /// Reads and checks a study file; paths in it are made relative to its directory.
+    pub fn load(path: &Path) -> Result<Self> {
+        let text = std::fs::read_to_string(path)
+            .with_context(|| format!("reading study {}", path.display()))?;
+        let mut s: FieldStudy = toml::from_str(&text)
+            .with_context(|| format!("{}: not a field study", path.display()))?;
+        let base = path.parent().unwrap_or(Path::new("."));
+        for p in &mut s.part {
+            for r in &mut p.record {
+                r.map = base.join(&r.map);
+            }
+            // A config file named in the arguments is relative to the study file too.
+            for args in std::iter::once(&mut p.common)
+                .chain(p.variant.iter_mut().map(|v| &mut v.args))
+                .chain(p.selection.iter_mut().map(|s| &mut s.other_args))
+            {
+                for i in 1..args.len() {
+                    if args[i - 1] == "--config" {
+                        args[i] = base.join(&args[i]).display().to_string();
+                    }
+                }
+            }
+        }
+        s.check()
+            .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+        Ok(s)
+    }
+
+    fn check(&self) -> std::result::Result<(), String> {
+        let mut parts = BTreeSet::new();
+        for p in &self.part {
+            if !is_stem(&p.name) || !parts.insert(&p.name) {
+                return Err(format!(
+                    "part `{}`: a unique name of [a-z0-9-] is needed",
+                    p.name
+                ));
+            }
+            let mut names = BTreeSet::new();
+            for r in &p.record {
+                if !is_stem(&r.name) || !names.insert(r.name.as_str()) {
+                    return Err(format!(
+                        "part `{}`, record `{}`: a unique name of [a-z0-9.-] is needed",
+                        p.name, r.name
+                    ));
+                }
+            }
+            let identify: Vec<_> = p
+                .record
+                .iter()
+                .filter(|r| r.role == Role::Identify)
+                .collect();
+            if identify.len() != 1 {
+                return Err(format!(
+                    "part `{}`: exactly one record has role = \"identify\" ({} found)",
+                    p.name,
+                    identify.len()
+                ));
+            }
+            let mut variants = BTreeSet::new();
+            for v in &p.variant {
+                if !is_stem(&v.name) || !variants.insert(v.name.as_str()) || v.name.contains("--") {
+                    return Err(format!(
+                        "part `{}`, variant `{}`: a unique name of [a-z0-9.-] (no `--`) is needed",
+                        p.name, v.name
+                    ));
+                }
+                for flag in ["--algorithm", "--data", "--out"] {
+                    if v.args.iter().chain(&p.common).any(|a| a == flag) {
+                        return Err(format!(
+                            "part `{}`, variant `{}`: {flag} is set by the study, not in args",
+                            p.name, v.name
+                        ));
+                    }
+                }
+            }
+            if let Some(s) = &p.selection {
+                if !p
+                    .variant
+                    .iter()
+                    .any(|v| v.group.as_deref() == Some(s.group.as_str()))
+                {
+                    return Err(format!(
+                        "part `{}`: selection group `{}` has no variant",
+                        p.name, s.group
+                    ));
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+fn is_stem(s: &str) -> bool {
+    !s.is_empty()
+        && s.chars()
+            .all(|c| c.is_ascii_lowercase() || c.is_ascii_digit() || c == '-' || c == '.')
+        && !s.starts_with('.')
+}
+
+impl Part {
+    /// The identification record.
+    pub fn identify_record(&self) -> &RecordSpec {
+        self.record
+            .iter()
+            .find(|r| r.role == Role::Identify)
+            .expect("checked on load")
+    }
+
+    /// The records kept out of every choice.
+    pub fn validate_records(&self) -> impl Iterator<Item = &RecordSpec> {
+        self.record.iter().filter(|r| r.role == Role::Validate)
+    }
+}
+
+/// Where a part's files go.
+#[derive(Debug, Clone)]
+pub struct PartDirs {
+    pub root: PathBuf,
+}
+
+impl PartDirs {
+    pub fn new(out: &Path, part: &Part) -> Self {
+        Self {
+            root: out.join(&part.name),
+        }
+    }
+    /// Imported data sets (regenerated from the maps; not tracked).
+    pub fn data(&self, record: &str) -> PathBuf {
+        self.root.join("data").join(record)
+    }
+    pub fn record(&self, variant: &str) -> PathBuf {
+        self.root.join("records").join(format!("{variant}.json"))
+    }
+    /// The selected model identified on `record`.
+    pub fn selected_record(&self, record: &str) -> PathBuf {
+        self.root
+            .join("records")
+            .join(format!("selected--{record}.json"))
+    }
+    pub fn validation(&self, variant: &str, record: &str) -> PathBuf {
+        self.root
+            .join("validation")
+            .join(format!("{variant}--{record}.json"))
+    }
+    pub fn figures(&self, variant: &str) -> PathBuf {
+        self.root.join("figures").join(variant)
+    }
+    /// The baseline's result.
+    pub fn baseline(&self) -> PathBuf {
+        self.root.join("srim.json")
+    }
+    pub fn log(&self, name: &str) -> PathBuf {
+        self.root.join("logs").join(format!("{name}.txt"))
+    }
+}
+
+/// One `sysid` command of the study and the file it writes.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Step {
+    pub args: Vec<String>,
+    pub writes: PathBuf,
+    /// Log of the command's output (stdout and stderr), kept beside the records.
+    pub log: PathBuf,
+    /// A step whose file is missing stops the study (an import); otherwise the report says why
+    /// the file is missing (a cross-validation of a physically impossible model is refused).
+    pub required: bool,
+}
+
+fn s(p: &Path) -> String {
+    p.display().to_string()
+}
+
+/// The imports and the identifications on the identification record (every variant).
+pub fn plan_identify(part: &Part, dirs: &PartDirs) -> Vec<Step> {
+    let mut steps: Vec<Step> = part
+        .record
+        .iter()
+        .map(|r| Step {
+            args: vec![
+                "import".into(),
+                "--map".into(),
+                s(&r.map),
+                "--out".into(),
+                s(&dirs.data(&r.name)),
+            ],
+            writes: dirs.data(&r.name).join(models::dataset::MEASURED),
+            log: dirs.log(&format!("import--{}", r.name)),
+            required: true,
+        })
+        .collect();
+    let train = part.identify_record();
+    for v in &part.variant {
+        steps.push(filter_step(
+            part,
+            dirs,
+            v.algorithm,
+            &v.args,
+            &train.name,
+            &dirs.record(&v.name),
+            Some(&dirs.figures(&v.name)),
+            &v.name,
+        ));
+    }
+    steps
+}
+
+#[allow(clippy::too_many_arguments)]
+fn filter_step(
+    part: &Part,
+    dirs: &PartDirs,
+    algorithm: Algorithm,
+    args: &[String],
+    record: &str,
+    out: &Path,
+    plot: Option<&Path>,
+    log: &str,
+) -> Step {
+    let mut a: Vec<String> = vec![
+        "filter".into(),
+        "--algorithm".into(),
+        algorithm.name().into(),
+        "--data".into(),
+        s(&dirs.data(record)),
+    ];
+    a.extend(part.common.iter().cloned());
+    a.extend(args.iter().cloned());
+    a.extend(["--out".into(), s(out)]);
+    if let Some(p) = plot {
+        a.extend(["--plot".into(), s(p)]);
+    }
+    Step {
+        args: a,
+        writes: out.to_path_buf(),
+        log: dirs.log(log),
+        required: true,
+    }
+}
+
+/// Cross-validation of every variant on every record kept out of the choices.
+pub fn plan_validate(part: &Part, dirs: &PartDirs) -> Vec<Step> {
+    let mut steps = Vec::new();
+    for v in &part.variant {
+        for r in part.validate_records() {
+            let out = dirs.validation(&v.name, &r.name);
+            steps.push(Step {
+                args: vec![
+                    "validate".into(),
+                    "--record".into(),
+                    s(&dirs.record(&v.name)),
+                    "--data".into(),
+                    s(&dirs.data(&r.name)),
+                    "--out".into(),
+                    s(&out),
+                ],
+                writes: out,
+                log: dirs.log(&format!("validate--{}--{}", v.name, r.name)),
+                required: false,
+            });
+        }
+    }
+    steps
+}
+
+/// The selected variant (largest log-likelihood among the group's completed, physically
+/// possible runs) and why; `None` when no candidate qualifies.
+pub fn select<'a>(part: &'a Part, dirs: &PartDirs) -> Result<Option<(&'a Variant, RunRecord)>> {
+    let Some(sel) = &part.selection else {
+        return Ok(None);
+    };
+    let mut best: Option<(&Variant, RunRecord)> = None;
+    for v in part
+        .variant
+        .iter()
+        .filter(|v| v.group.as_deref() == Some(sel.group.as_str()))
+    {
+        let path = dirs.record(&v.name);
+        if !path.exists() {
+            continue;
+        }
+        let r: RunRecord = crate::record::read::read(&path)?;
+        if r.failure.is_some() || crate::checks::is_fatal(&r.warnings) {
+            continue;
+        }
+        if best.as_ref().is_none_or(|(_, b)| r.loglik > b.loglik) {
+            best = Some((v, r));
+        }
+    }
+    Ok(best)
+}
+
+/// The selected variant identified on every other record.
+pub fn plan_selected(part: &Part, dirs: &PartDirs, chosen: &Variant) -> Vec<Step> {
+    let extra: Vec<String> = part
+        .selection
+        .as_ref()
+        .map(|s| s.other_args.clone())
+        .unwrap_or_default();
+    part.validate_records()
+        .map(|r| {
+            let mut args = chosen.args.clone();
+            args.extend(extra.iter().cloned());
+            let out = dirs.selected_record(&r.name);
+            filter_step(
+                part,
+                dirs,
+                chosen.algorithm,
+                &args,
+                &r.name,
+                &out,
+                None,
+                &format!("selected--{}", r.name),
+            )
+        })
+        .collect()
+}
+
+/// How a step ended.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Ended {
+    /// Exit 0.
+    Ok,
+    /// Non-zero exit, file written (a run whose answer is physically impossible writes its
+    /// record and exits 1): the report shows why.
+    Flagged,
+    /// No file (allowed for a step that is not required): the log's last error line.
+    Refused(String),
+}
+
+/// The error a log ends with (from its last line starting with `Error`, causes joined), or its
+/// last line.
+pub fn log_reason(log: &Path) -> String {
+    let text = std::fs::read_to_string(log).unwrap_or_default();
+    let lines: Vec<&str> = text.lines().collect();
+    match lines.iter().rposition(|l| l.starts_with("Error")) {
+        Some(i) => lines[i..]
+            .iter()
+            .map(|l| l.trim())
+            .filter(|l| !l.is_empty() && *l != "Caused by:")
+            .map(|l| l.trim_start_matches("Error: "))
+            .map(|l| {
+                l.trim_start_matches(|c: char| c.is_ascii_digit() || c == ':')
+                    .trim()
+            })
+            .collect::<Vec<_>>()
+            .join(": "),
+        None => lines.last().unwrap_or(&"no output").trim().to_string(),
+    }
+}
+
+/// Runs `step` with `sysid`; the command's output goes to its log. A required step that wrote
+/// nothing is an error.
+pub fn execute(sysid: &Path, step: &Step) -> Result<Ended> {
+    for p in [&step.writes, &step.log] {
+        if let Some(d) = p.parent() {
+            std::fs::create_dir_all(d).with_context(|| format!("creating {}", d.display()))?;
+        }
+    }
+    if step.writes.exists() {
+        std::fs::remove_file(&step.writes)
+            .with_context(|| format!("removing the old {}", step.writes.display()))?;
+    }
+    let log = std::fs::File::create(&step.log)
+        .with_context(|| format!("creating {}", step.log.display()))?;
+    let status = Command::new(sysid)
+        .args(&step.args)
+        .stdout(log.try_clone()?)
+        .stderr(log)
+        .status()
+        .with_context(|| format!("starting {}", sysid.display()))?;
+    if !step.writes.exists() && !step.required {
+        return Ok(Ended::Refused(log_reason(&step.log)));
+    }
+    if !step.writes.exists() {
+        bail!(
+            "`sysid {}` wrote no {} ({status}); its output is in {}",
+            step.args.join(" "),
+            step.writes.display(),
+            step.log.display()
+        );
+    }
+    Ok(if status.success() {
+        Ended::Ok
+    } else {
+        Ended::Flagged
+    })
+}
+
+/// Options of [`run`].
+#[derive(Debug, Clone)]
+pub struct RunOptions {
+    /// The `sysid` binary.
+    pub sysid: PathBuf,
+    pub out: PathBuf,
+    /// A Python interpreter with `mdof` (and numpy) to recompute the baseline; without it the
+    /// baseline file of the study is used as committed.
+    pub python: Option<PathBuf>,
+    /// The baseline script (`experiments/real/srim.py`).
+    pub baseline_script: Option<PathBuf>,
+}
+
+/// Runs every part of the study and writes `REPORT.md` into `out`.
+pub fn run(study: &FieldStudy, opts: &RunOptions) -> Result<()> {
+    let started = std::time::Instant::now();
+    let mut notes = Vec::new();
+    for part in &study.part {
+        let dirs = PartDirs::new(&opts.out, part);
+        let mut steps = plan_identify(part, &dirs);
+        steps.extend(plan_validate(part, &dirs));
+        let total = steps.len();
+        for (i, step) in steps.iter().enumerate() {
+            let t = std::time::Instant::now();
+            let ended = execute(&opts.sysid, step)?;
+            eprintln!(
+                "[{}/{total}] {}: sysid {} → {} ({:.1} s){}",
+                i + 1,
+                part.name,
+                step.args[0],
+                step.writes.display(),
+                t.elapsed().as_secs_f64(),
+                match ended {
+                    Ended::Ok => String::new(),
+                    Ended::Flagged => ": non-zero exit, see the report".into(),
+                    Ended::Refused(why) => format!(": refused: {why}"),
+                }
+            );
+        }
+        if let Some((chosen, _)) = select(part, &dirs)? {
+            eprintln!(
+                "{}: selected `{}` (largest log-likelihood of its group)",
+                part.name, chosen.name
+            );
+            for step in plan_selected(part, &dirs, chosen) {
+                execute(&opts.sysid, &step)?;
+            }
+        }
+        let baseline = dirs.baseline();
+        if let (true, Some(python), Some(script)) =
+            (part.baseline, &opts.python, &opts.baseline_script)
+        {
+            let train = dirs.data(&part.identify_record().name);
+            let mut cmd = Command::new(python);
+            cmd.arg(script).arg("--train").arg(&train).arg("--validate");
+            for r in part.validate_records() {
+                cmd.arg(dirs.data(&r.name));
+            }
+            cmd.arg("--out").arg(&baseline);
+            let status = cmd
+                .status()
+                .with_context(|| format!("starting {}", python.display()))?;
+            if !status.success() {
+                bail!("the baseline script failed ({status}): {cmd:?}");
+            }
+            notes.push(format!(
+                "{}: baseline recomputed ({})",
+                part.name,
+                baseline.display()
+            ));
+        } else if part.baseline {
+            notes.push(format!(
+                "{}: baseline as committed in {} (not recomputed: no Python with mdof given)",
+                part.name,
+                baseline.display()
+            ));
+        }
+    }
+    let text = report::render(study, &opts.out)?;
+    let path = opts.out.join("REPORT.md");
+    crate::sweep::write_bytes_atomic(&path, text.as_bytes())?;
+    for n in notes {
+        eprintln!("{n}");
+    }
+    eprintln!(
+        "field study: {:.0} s; report {}",
+        started.elapsed().as_secs_f64(),
+        path.display()
+    );
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const STUDY: &str = r#"
+title = "t"
+[[part]]
+name = "frame"
+title = "f"
+about = "a"
+common = ["--storeys", "3", "--config", "prior.toml"]
+[[part.record]]
+name = "northridge"
+map = "m1.toml"
+role = "identify"
+[[part.record]]
+name = "sine-2.0"
+map = "m2.toml"
+role = "validate"
+[[part.variant]]
+name = "mpf"
+label = "MPF-EKF2"
+algorithm = "mpf-ekf2"
+args = ["--masses", "1"]
+group = "g"
+[part.selection]
+group = "g"
+"#;
+
+    fn load(text: &str) -> Result<FieldStudy> {
+        let dir = std::env::temp_dir().join(format!("field-study-{}", std::process::id()));
+        std::fs::create_dir_all(&dir)?;
+        let path = dir.join("study.toml");
+        std::fs::write(&path, text)?;
+        FieldStudy::load(&path)
+    }
+
+    #[test]
+    fn plans_the_commands_a_user_would_type() {
+        let s = load(STUDY).unwrap();
+        let part = &s.part[0];
+        let dirs = PartDirs::new(Path::new("out"), part);
+        let steps = plan_identify(part, &dirs);
+        assert_eq!(steps.len(), 3);
+        assert_eq!(steps[0].args[0], "import");
+        assert!(steps[0].args[2].ends_with("m1.toml"));
+        let f = &steps[2].args;
+        assert_eq!(
+            &f[..5],
+            [
+                "filter",
+                "--algorithm",
+                "mpf-ekf2",
+                "--data",
+                "out/frame/data/northridge"
+            ]
+        );
+        // The config of `common` is taken from the study file's directory.
+        let c = f.iter().position(|a| a == "--config").unwrap();
+        assert!(Path::new(&f[c + 1]).is_absolute() || f[c + 1].contains("field-study-"));
+        assert!(f
+            .windows(2)
+            .any(|w| w == ["--out", "out/frame/records/mpf.json"]));
+        let v = plan_validate(part, &dirs);
+        assert_eq!(v.len(), 1);
+        assert_eq!(
+            v[0].writes,
+            Path::new("out/frame/validation/mpf--sine-2.0.json")
+        );
+        let sel = plan_selected(part, &dirs, &part.variant[0]);
+        assert_eq!(
+            sel[0].writes,
+            Path::new("out/frame/records/selected--sine-2.0.json")
+        );
+    }
+
+    #[test]
+    fn refuses_a_study_it_cannot_run() {
+        for (from, to, why) in [
+            (
+                "role = \"identify\"",
+                "role = \"validate\"",
+                "exactly one record",
+            ),
+            (
+                "args = [\"--masses\", \"1\"]",
+                "args = [\"--out\", \"x\"]",
+                "--out is set by the study",
+            ),
+            (
+                "[part.selection]\ngroup = \"g\"",
+                "[part.selection]\ngroup = \"h\"",
+                "selection group `h`",
+            ),
+            ("name = \"mpf\"", "name = \"a--b\"", "variant `a--b`"),
+            (
+                "algorithm = \"mpf-ekf2\"",
+                "algorithm = \"kalman\"",
+                "unknown variant",
+            ),
+            (
+                "title = \"f\"",
+                "title = \"f\"\ncolour = 1",
+                "unknown field",
+            ),
+        ] {
+            let e = load(&STUDY.replacen(from, to, 1)).unwrap_err();
+            let msg = format!("{e:#}");
+            assert!(msg.contains(why), "{msg}");
+        }
+    }
+}

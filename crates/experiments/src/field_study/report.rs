@@ -1,0 +1,613 @@
+//! `REPORT.md` of a field study, drawn from its records only: the variants identified on the
+//! identification record, their predictions of the records kept out of every choice, the
+//! selected model on every record and whether their intervals agree, the black-box baseline,
+//! and the goals decided by stated tests.
+
+use std::collections::BTreeMap;
+use std::fmt::Write;
+use std::path::Path;
+
+use anyhow::{Context, Result};
+use serde::Deserialize;
+
+use super::{select, FieldStudy, Part, PartDirs};
+use crate::record::RunRecord;
+use crate::validation::cross::CrossValidation;
+use crate::validation::{FreeRun, ModalComparison};
+
+/// The baseline's result (`experiments/real/srim.py`).
+#[derive(Debug, Clone, Deserialize)]
+pub struct Baseline {
+    pub method: String,
+    pub mdof_version: String,
+    pub command: String,
+    pub best_order: usize,
+    pub runs: Vec<BaselineRun>,
+}
+
+/// One model order of the baseline.
+#[derive(Debug, Clone, Deserialize)]
+pub struct BaselineRun {
+    pub order: usize,
+    /// Fit % per channel on each data set (keyed by its directory; `null`: unstable model).
+    pub fits: BTreeMap<String, Option<Vec<f64>>>,
+    pub modes: Vec<BaselineMode>,
+    pub seconds: f64,
+}
+
+#[derive(Debug, Clone, Deserialize)]
+pub struct BaselineMode {
+    pub frequency_hz: f64,
+    pub damping_ratio: f64,
+}
+
+impl BaselineRun {
+    /// Fits on the record named `record` (the last component of the data directory).
+    pub fn fits_on(&self, record: &str) -> Option<&[f64]> {
+        self.fits
+            .iter()
+            .find(|(k, _)| Path::new(k).file_name().is_some_and(|n| n == record))
+            .and_then(|(_, v)| v.as_deref())
+    }
+}
+
+impl Baseline {
+    pub fn load(path: &Path) -> Result<Self> {
+        let text =
+            std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+        serde_json::from_str(&text)
+            .with_context(|| format!("{}: not a baseline result", path.display()))
+    }
+    pub fn best(&self) -> Option<&BaselineRun> {
+        self.runs.iter().find(|r| r.order == self.best_order)
+    }
+}
+
+fn run_record(path: &Path) -> Result<Option<RunRecord>> {
+    if !path.exists() {
+        return Ok(None);
+    }
+    Ok(Some(crate::record::read::read::<RunRecord>(path)?))
+}
+
+fn cross(path: &Path) -> Result<Option<CrossValidation>> {
+    if !path.exists() {
+        return Ok(None);
+    }
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    Ok(Some(serde_json::from_str(&text).with_context(|| {
+        format!("{}: not a cross-validation result", path.display())
+    })?))
+}
+
+/// Is `name` a damping parameter (`c1`…, or the mass-proportional coefficient)?
+fn is_damping(name: &str) -> bool {
+    let mut ch = name.chars();
+    (ch.next() == Some('c') && name.len() > 1 && ch.all(|c| c.is_ascii_digit())) || name == "alpha"
+}
+
+fn is_stiffness(name: &str) -> bool {
+    let mut ch = name.chars();
+    ch.next() == Some('k') && name.len() > 1 && ch.all(|c| c.is_ascii_digit())
+}
+
+fn num(x: f64) -> String {
+    if !x.is_finite() {
+        return format!("{x}");
+    }
+    let a = x.abs();
+    if a >= 100.0 {
+        format!("{x:.0}")
+    } else if a >= 1.0 {
+        format!("{x:.2}")
+    } else {
+        format!("{x:.3}")
+    }
+}
+
+fn fits(f: &FreeRun) -> Vec<f64> {
+    f.channels.iter().map(|c| c.fit_percent).collect()
+}
+
+fn fit_cell(f: Option<&[f64]>) -> String {
+    match f {
+        Some(v) => v
+            .iter()
+            .map(|x| format!("{x:.1}"))
+            .collect::<Vec<_>>()
+            .join(" / "),
+        None => "—".into(),
+    }
+}
+
+/// 95 % interval of `name` in the record, if computed.
+fn interval(r: &RunRecord, name: &str) -> Option<(f64, f64)> {
+    r.credible
+        .iter()
+        .find(|p| p.parameter == name)
+        .and_then(|p| p.intervals.iter().find(|i| (i.level - 0.95).abs() < 1e-9))
+        .map(|i| (i.lo, i.hi))
+}
+
+/// What stands between the record and a usable identification, or "ok".
+fn outcome(r: &RunRecord) -> String {
+    if let Some(f) = &r.failure {
+        return format!(
+            "failed at step {} of {}: {f}",
+            r.steps_completed + 1,
+            r.steps_total
+        );
+    }
+    let fatal: Vec<&str> = r
+        .warnings
+        .iter()
+        .filter(|w| w.kind.is_fatal())
+        .filter_map(|w| w.parameter.as_deref())
+        .collect();
+    if !fatal.is_empty() {
+        return format!("physically impossible ({})", fatal.join(", "));
+    }
+    "ok".into()
+}
+
+fn modes_cell(m: Option<&ModalComparison>) -> String {
+    let Some(m) = m else { return "—".into() };
+    m.pairs
+        .iter()
+        .map(|p| match p.difference_percent {
+            Some(d) => format!("{:.2} ({:+.1} %)", p.model_hz, d),
+            None => format!("{:.2} (unpaired)", p.model_hz),
+        })
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
+fn damping_ratios(m: Option<&ModalComparison>) -> String {
+    let Some(m) = m else { return "—".into() };
+    m.pairs
+        .iter()
+        .map(|p| format!("{:.2}", 100.0 * p.damping_ratio))
+        .collect::<Vec<_>>()
+        .join(" / ")
+}
+
+fn whiteness(r: &RunRecord) -> String {
+    if r.innovation_checks.is_empty() {
+        return "—".into();
+    }
+    r.innovation_checks
+        .iter()
+        .map(|c| format!("{:.0}", c.ljung_box / c.critical))
+        .collect::<Vec<_>>()
+        .join(" / ")
+}
+
+/// Largest 95 % half-width relative to |θ_val| among the parameters selected by `which`.
+fn width(r: &RunRecord, which: fn(&str) -> bool) -> String {
+    let w = r
+        .param_names
+        .iter()
+        .zip(&r.theta_val)
+        .filter(|(n, _)| which(n))
+        .filter_map(|(n, &v)| interval(r, n).map(|(lo, hi)| 50.0 * (hi - lo) / v.abs()))
+        .fold(f64::NAN, f64::max);
+    if w.is_nan() {
+        "—".into()
+    } else {
+        format!("{w:.2} %")
+    }
+}
+
+fn params(r: &RunRecord, which: fn(&str) -> bool) -> String {
+    r.param_names
+        .iter()
+        .zip(&r.theta_val)
+        .filter(|(n, _)| which(n))
+        .map(|(n, &v)| format!("{n} {}", num(v)))
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
+fn others(n: &str) -> bool {
+    !is_stiffness(n) && !is_damping(n)
+}
+
+/// Every damping of the record positive (θ_val)?
+fn damping_positive(r: &RunRecord) -> bool {
+    r.param_names
+        .iter()
+        .zip(&r.theta_val)
+        .filter(|(n, _)| is_damping(n))
+        .all(|(_, &v)| v > 0.0)
+}
+
+/// Writes the report of the whole study from the records under `out`.
+pub fn render(study: &FieldStudy, out: &Path) -> Result<String> {
+    let mut s = String::new();
+    writeln!(s, "# {}\n", study.title)?;
+    writeln!(
+        s,
+        "Written by `sysid field-study` from the records under this directory (`cargo xtask \
+         reproduce-real` runs it). Every number below is read from a run record of `sysid filter`, a \
+         result of `sysid validate` or the baseline's `srim.json`; the commands are in the logs \
+         beside them. Fit = 100·(1 − ‖y − ŷ‖/‖y − ȳ‖) per measured floor, free run from rest \
+         driven by the measured ground motion (docs/validation.md). LB = Ljung–Box Q of each \
+         channel's one-step prediction errors over its 95 % critical value (1 = white). ±k, ±c: \
+         the largest 95 % half-width relative to θ_val among the stiffnesses / the dampings.\n"
+    )?;
+    for part in &study.part {
+        render_part(&mut s, part, out)?;
+    }
+    Ok(s)
+}
+
+fn render_part(s: &mut String, part: &Part, out: &Path) -> Result<()> {
+    let dirs = PartDirs::new(out, part);
+    let train = &part.identify_record().name;
+    let validate: Vec<&str> = part.validate_records().map(|r| r.name.as_str()).collect();
+    writeln!(s, "## {}\n\n{}\n", part.title, part.about.trim())?;
+    writeln!(
+        s,
+        "Every choice (variants, selection, priors) was made on `{train}`; {} kept out of every \
+         choice.\n",
+        if validate.is_empty() {
+            "no record was".to_string()
+        } else {
+            format!(
+                "{} were",
+                validate
+                    .iter()
+                    .map(|v| format!("`{v}`"))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            )
+        }
+    )?;
+    let baseline = match dirs.baseline() {
+        p if part.baseline && p.exists() => Some(Baseline::load(&p)?),
+        _ => None,
+    };
+    let best = baseline.as_ref().and_then(|b| b.best());
+
+    // Identification on the training record.
+    writeln!(s, "### Identified on `{train}`\n")?;
+    writeln!(
+        s,
+        "| variant | result | stiffness | damping | other | modes Hz (vs measured peak) | ζ % | fit % | LB | ±k | ±c | log-lik | wall s |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|"
+    )?;
+    let mut records = BTreeMap::new();
+    for v in &part.variant {
+        let Some(r) = run_record(&dirs.record(&v.name))? else {
+            writeln!(s, "| {} | no record | | | | | | | | | | | |", v.label)?;
+            continue;
+        };
+        writeln!(
+            s,
+            "| {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {:.1} | {:.1} |",
+            v.label,
+            outcome(&r),
+            params(&r, is_stiffness),
+            params(&r, is_damping),
+            params(&r, others),
+            modes_cell(r.modal.as_ref()),
+            damping_ratios(r.modal.as_ref()),
+            fit_cell(r.free_run.as_ref().map(fits).as_deref()),
+            whiteness(&r),
+            width(&r, is_stiffness),
+            width(&r, is_damping),
+            r.loglik,
+            r.timing.wall_s
+        )?;
+        records.insert(v.name.clone(), r);
+    }
+    if let Some(b) = best {
+        writeln!(
+            s,
+            "| SRIM order {} (baseline) | black box | — | — | — | {} | {} | {} | | | | | {:.1} |",
+            b.order,
+            b.modes
+                .iter()
+                .map(|m| format!("{:.2}", m.frequency_hz))
+                .collect::<Vec<_>>()
+                .join(", "),
+            b.modes
+                .iter()
+                .map(|m| format!("{:.2}", 100.0 * m.damping_ratio))
+                .collect::<Vec<_>>()
+                .join(" / "),
+            fit_cell(b.fits_on(train)),
+            b.seconds
+        )?;
+    }
+    if let Some(first) = records.values().find_map(|r| r.modal.as_ref()) {
+        let peaks: Vec<String> = first
+            .peaks
+            .iter()
+            .map(|p| format!("{:.3}", p.frequency_hz))
+            .collect();
+        writeln!(
+            s,
+            "\nMeasured transfer-function peaks of `{train}` (Welch H1, docs/validation.md): {} Hz.",
+            peaks.join(", ")
+        )?;
+    }
+    for v in &part.variant {
+        if let Some(r) = records.get(&v.name) {
+            let dir = dirs.figures(&v.name);
+            if dir.join("free_run.svg").exists() {
+                writeln!(
+                    s,
+                    "Figures of {}: [free run]({}/free_run.svg), [transfer functions]({}/transfer.svg), [prediction errors]({}/innovations.svg).",
+                    v.label,
+                    rel(&dir, out),
+                    rel(&dir, out),
+                    rel(&dir, out)
+                )?;
+            }
+            let _ = r;
+        }
+    }
+    writeln!(s)?;
+
+    // Cross-validation.
+    if !validate.is_empty() {
+        writeln!(s, "### Cross-validation: predicting the records kept out\n")?;
+        write!(s, "| identified on `{train}` |")?;
+        for v in &validate {
+            write!(s, " fit % on `{v}` |")?;
+        }
+        writeln!(s, "\n|---|{}", "---|".repeat(validate.len()))?;
+        for v in &part.variant {
+            write!(s, "| {} |", v.label)?;
+            for r in &validate {
+                let cell = match cross(&dirs.validation(&v.name, r))? {
+                    Some(cv) => fit_cell(Some(&fits(&cv.free_run))),
+                    None => format!(
+                        "not simulated: {}",
+                        super::log_reason(&dirs.log(&format!("validate--{}--{}", v.name, r)))
+                            .trim_start_matches("Error: ")
+                    ),
+                };
+                write!(s, " {cell} |")?;
+            }
+            writeln!(s)?;
+        }
+        if let Some(b) = best {
+            write!(s, "| SRIM order {} (baseline) |", b.order)?;
+            for r in &validate {
+                write!(s, " {} |", fit_cell(b.fits_on(r)))?;
+            }
+            writeln!(s)?;
+        }
+        writeln!(s)?;
+    }
+
+    if let Some(b) = &baseline {
+        writeln!(
+            s,
+            "### The baseline: {} (mdof {})\n\nTrained on `{train}`; the best order on `{train}` \
+             (largest mean fit) is the one compared above. Command: `{}`.\n",
+            b.method, b.mdof_version, b.command
+        )?;
+        write!(s, "| order | modes Hz (ζ %) |")?;
+        let names: Vec<&str> = std::iter::once(train.as_str())
+            .chain(validate.iter().copied())
+            .collect();
+        for n in &names {
+            write!(s, " fit % `{n}` |")?;
+        }
+        writeln!(s, " s |\n|---|---|{}---|", "---|".repeat(names.len()))?;
+        for r in &b.runs {
+            let modes: Vec<String> = r
+                .modes
+                .iter()
+                .map(|m| format!("{:.2} ({:.2})", m.frequency_hz, 100.0 * m.damping_ratio))
+                .collect();
+            write!(s, "| {} | {} |", r.order, modes.join(", "))?;
+            for n in &names {
+                write!(
+                    s,
+                    " {} |",
+                    r.fits_on(n)
+                        .map_or("unstable".into(), |f| fit_cell(Some(f)))
+                )?;
+            }
+            writeln!(s, " {:.1} |", r.seconds)?;
+        }
+        writeln!(s)?;
+    }
+
+    // The selected model on every record.
+    let selected = select(part, &dirs)?;
+    if let (Some(sel), None) = (&part.selection, &selected) {
+        writeln!(
+            s,
+            "### Selection\n\nNo variant of the group `{}` completed with a physically possible \
+             answer on `{train}`: nothing to select, and the goals are **not met**.\n",
+            sel.group
+        )?;
+    }
+    if let Some((chosen, r0)) = &selected {
+        writeln!(
+            s,
+            "### The selected model on every record\n\nSelected on `{train}` by the filter's \
+             log-likelihood among the group `{}`: **{}** (log-lik {:.1}). Identified again on each \
+             other record with the same settings{}.\n",
+            part.selection.as_ref().map_or("", |x| x.group.as_str()),
+            chosen.label,
+            r0.loglik,
+            part.selection
+                .as_ref()
+                .filter(|x| !x.other_args.is_empty())
+                .map_or(String::new(), |x| format!(
+                    " and `{}`",
+                    x.other_args.join(" ")
+                ))
+        )?;
+        let mut on: Vec<(String, RunRecord)> = vec![(train.clone(), r0.clone())];
+        for v in &validate {
+            if let Some(r) = run_record(&dirs.selected_record(v))? {
+                on.push((v.to_string(), r));
+            }
+        }
+        write!(s, "| parameter |")?;
+        for (n, _) in &on {
+            write!(s, " `{n}`: θ_val [95 %] |")?;
+        }
+        writeln!(s, "\n|---|{}", "---|".repeat(on.len()))?;
+        for name in &r0.param_names {
+            write!(s, "| {name} |")?;
+            for (_, r) in &on {
+                let i = r.param_names.iter().position(|n| n == name);
+                let cell = match (i, i.and_then(|_| interval(r, name))) {
+                    (Some(i), Some((lo, hi))) => {
+                        format!("{} [{}, {}]", num(r.theta_val[i]), num(lo), num(hi))
+                    }
+                    (Some(i), None) => num(r.theta_val[i]),
+                    _ => "—".into(),
+                };
+                write!(s, " {cell} |")?;
+            }
+            writeln!(s)?;
+        }
+        write!(s, "| result |")?;
+        for (_, r) in &on {
+            write!(s, " {} |", outcome(r))?;
+        }
+        writeln!(s, "\n")?;
+        agreement(s, &on)?;
+        goals(s, part, &dirs, chosen, r0, best, &validate)?;
+    }
+    Ok(())
+}
+
+fn rel(p: &Path, base: &Path) -> String {
+    p.strip_prefix(base).unwrap_or(p).display().to_string()
+}
+
+/// Whether the parameters identified on each record lie inside the other records' 95 %
+/// intervals, and by how many half-widths they miss.
+fn agreement(s: &mut String, on: &[(String, RunRecord)]) -> Result<()> {
+    if on.len() < 2 {
+        return Ok(());
+    }
+    writeln!(
+        s,
+        "**Do the intervals agree?** Test: θ_val of record A lies inside record B's 95 % interval, \
+         for every parameter and ordered pair (A, B) of completed runs; a miss is measured in B's \
+         half-widths.\n"
+    )?;
+    let (mut inside, mut total) = (0, 0);
+    let mut worst: Vec<(f64, String)> = Vec::new();
+    for (a, ra) in on {
+        for (b, rb) in on {
+            if a == b || ra.failure.is_some() || rb.failure.is_some() {
+                continue;
+            }
+            for (i, name) in ra.param_names.iter().enumerate() {
+                let Some((lo, hi)) = interval(rb, name) else {
+                    continue;
+                };
+                total += 1;
+                let x = ra.theta_val[i];
+                if (lo..=hi).contains(&x) {
+                    inside += 1;
+                } else {
+                    let half = 0.5 * (hi - lo);
+                    let miss = if x < lo { lo - x } else { x - hi } / half;
+                    worst.push((
+                        miss,
+                        format!(
+                            "{name}: `{a}` {} outside `{b}` [{}, {}] by {miss:.1} half-widths",
+                            num(x),
+                            num(lo),
+                            num(hi)
+                        ),
+                    ));
+                }
+            }
+        }
+    }
+    worst.sort_by(|x, y| y.0.total_cmp(&x.0));
+    writeln!(
+        s,
+        "Inside: {inside} of {total} (parameter, pair) cases. Verdict: **{}**.",
+        if total == 0 {
+            "not resolved (no intervals)"
+        } else if inside == total {
+            "the intervals agree"
+        } else {
+            "the intervals do not agree"
+        }
+    )?;
+    for (_, w) in worst.iter().take(6) {
+        writeln!(s, "- {w}")?;
+    }
+    writeln!(s)?;
+    Ok(())
+}
+
+/// The issue's goals, each decided by a stated test on the records.
+#[allow(clippy::too_many_arguments)]
+fn goals(
+    s: &mut String,
+    part: &Part,
+    dirs: &PartDirs,
+    chosen: &super::Variant,
+    r: &RunRecord,
+    best: Option<&BaselineRun>,
+    validate: &[&str],
+) -> Result<()> {
+    let train = &part.identify_record().name;
+    writeln!(s, "### Goals, decided on the selected model\n")?;
+    let modes_ok = r.modal.as_ref().is_some_and(|m| {
+        m.pairs.len() >= 3
+            && m.pairs
+                .iter()
+                .take(3)
+                .all(|p| p.difference_percent.is_some_and(|d| d.abs() <= 1.0))
+    });
+    let fit = r.free_run.as_ref().map(fits);
+    let vs = |mine: Option<&[f64]>, theirs: Option<&[f64]>| -> (bool, String) {
+        match (mine, theirs) {
+            (Some(m), Some(t)) => {
+                let ok = m.iter().zip(t).all(|(a, b)| a >= b);
+                (
+                    ok,
+                    format!("{} against {}", fit_cell(Some(m)), fit_cell(Some(t))),
+                )
+            }
+            (m, t) => (false, format!("{} against {}", fit_cell(m), fit_cell(t))),
+        }
+    };
+    let (fit_ok, fit_text) = vs(fit.as_deref(), best.and_then(|b| b.fits_on(train)));
+    let pos = damping_positive(r) && outcome(r) == "ok";
+    writeln!(
+        s,
+        "1. On `{train}`: every damping positive ({}), the first three modes within 1 % of the \
+         measured peaks ({}), every floor's free-run fit at least SRIM's ({fit_text}): **{}**.",
+        if pos { "yes" } else { "no" },
+        if modes_ok { "yes" } else { "no" },
+        if pos && modes_ok && fit_ok {
+            "met"
+        } else {
+            "not met"
+        }
+    )?;
+    for v in validate {
+        let cv = cross(&dirs.validation(&chosen.name, v))?;
+        let (ok, text) = vs(
+            cv.as_ref().map(|c| fits(&c.free_run)).as_deref(),
+            best.and_then(|b| b.fits_on(v)),
+        );
+        writeln!(
+            s,
+            "2. Cross-validation on `{v}`: fit of the `{train}` model against SRIM's `{train}` model: \
+             {text}: **{}**.",
+            if ok { "met" } else { "not met" }
+        )?;
+    }
+    writeln!(s)?;
+    Ok(())
+}
