@@ -16,9 +16,14 @@
 //!   Every run is computed unless `--resume` is given.
 //! - `docs`: regenerates the README's headline table (from the paper's Fig. 7 records) and
 //!   `docs/cli.md` (from `sysid`'s own help); tests fail when either has drifted.
+//! - `imports [--write-doc]`: fails when a crate has an import cycle between its top-level
+//!   modules, else prints each crate's modules in layers (leaves first); `--write-doc` writes
+//!   them into `docs/architecture.md` (a test fails when they have drifted).
 //! - `bench [--full]`: runs the criterion benchmarks of `core-filters` (short measurement times
 //!   unless `--full`), then appends one dated line per benchmark to `results/perf/history.csv`
 //!   and prints the change against the previous line of the same benchmark.
+
+mod imports;
 
 use std::fs;
 use std::path::{Path, PathBuf};
@@ -60,6 +65,13 @@ enum Task {
     /// Regenerate the generated documentation: the README's headline table (from the records in
     /// results/paper/records/fig7) and docs/cli.md (from sysid's own help).
     Docs,
+    /// Check that no crate has an import cycle between its top-level modules and print each
+    /// crate's modules in layers, leaves first.
+    Imports {
+        /// Rewrite the layers in docs/architecture.md.
+        #[arg(long)]
+        write_doc: bool,
+    },
     /// The excitations study (experiments/excitations.toml): records, figures and REPORT.md
     /// under results/excitations.
     ReproduceExcitations(StudyArgs),
@@ -271,6 +283,7 @@ fn main() -> Result<()> {
         }
         Task::Bench { full } => bench(&root, full),
         Task::Docs => docs(&root),
+        Task::Imports { write_doc } => imports::run(&root, write_doc),
     }
 }
 
