@@ -20,6 +20,7 @@ pub mod diagnostics;
 pub mod fingerprint;
 pub mod number;
 pub mod read;
+pub mod signal_errors;
 pub mod trace;
 pub mod validation;
 
@@ -28,8 +29,8 @@ use std::collections::BTreeMap;
 use core_filters::Health;
 use serde::{Deserialize, Serialize};
 
-use crate::metrics::{SignalError, StateErrors};
 use read::SweepRecord;
+use signal_errors::{SignalError, StateErrors};
 use trace::Trace;
 
 pub use fingerprint::Fingerprint;
