@@ -526,10 +526,20 @@ fn crate_dependencies(crates: &[(String, PathBuf)]) -> BTreeMap<String, Vec<Stri
 /// The generated part of `docs/architecture.md`: the crates in the order they depend on one
 /// another, and each crate's modules in layers, leaves first.
 pub fn render_doc(root: &Path) -> std::io::Result<String> {
-    let crates = workspace_crates(root);
+    let mut crates = workspace_crates(root);
     let deps = crate_dependencies(&crates);
+    // Crates in the order of their dependencies: those depending on no crate of the workspace
+    // first.
+    fn depth(deps: &BTreeMap<String, Vec<String>>, name: &str) -> usize {
+        deps[name]
+            .iter()
+            .map(|d| depth(deps, d) + 1)
+            .max()
+            .unwrap_or(0)
+    }
+    crates.sort_by_key(|(name, _)| (depth(&deps, name), name.clone()));
     let mut s = String::new();
-    s.push_str("Crates (each depends only on the crates named after it):\n\n");
+    s.push_str("Crates, each with the crates of the workspace it depends on:\n\n");
     for (name, _) in &crates {
         let d = &deps[name];
         s.push_str(&format!(
@@ -572,6 +582,40 @@ pub fn splice_doc(doc: &str, generated: &str) -> Option<String> {
     Some(format!("{}\n{}{}", &doc[..begin], generated, &doc[end..]))
 }
 
+/// The module paths (`core_filters::a::b`, `models::a`, `experiments::a`) named between
+/// backquotes in the section of `doc` that starts at the heading `## Where the SPEC lives`, with
+/// the ones that name no module of the workspace.
+pub fn missing_spec_modules(root: &Path, doc: &str) -> (Vec<String>, Vec<String>) {
+    let section = doc
+        .split("\n## ")
+        .find(|s| s.starts_with("Where the SPEC lives"))
+        .unwrap_or("");
+    let mut named = Vec::new();
+    let mut missing = Vec::new();
+    for (k, piece) in section.split('`').enumerate() {
+        let segments: Vec<&str> = piece.split("::").collect();
+        let dir = match segments[0] {
+            "core_filters" => "core-filters",
+            "models" => "models",
+            "experiments" => "experiments",
+            _ => continue,
+        };
+        if k % 2 == 0 || segments.len() < 2 {
+            continue;
+        }
+        let mut path = root.join("crates").join(dir).join("src");
+        for seg in &segments[1..] {
+            path = path.join(seg);
+        }
+        let exists = path.with_extension("rs").is_file() || path.join("mod.rs").is_file();
+        named.push(piece.to_string());
+        if !exists {
+            missing.push(piece.to_string());
+        }
+    }
+    (named, missing)
+}
+
 /// `cargo xtask imports [--write-doc]`: prints each crate's cycles (and fails when there is one)
 /// or its layers; with `--write-doc`, rewrites the generated part of `docs/architecture.md`.
 pub fn run(root: &Path, write_doc: bool) -> anyhow::Result<()> {
@@ -586,15 +630,23 @@ pub fn run(root: &Path, write_doc: bool) -> anyhow::Result<()> {
             problems.concat()
         );
     }
+    let path = root.join("docs/architecture.md");
+    let doc = fs::read_to_string(&path)?;
+    let (_, missing) = missing_spec_modules(root, &doc);
+    if !missing.is_empty() {
+        anyhow::bail!("{}: no such module: {}", path.display(), missing.join(", "));
+    }
     let generated = render_doc(root)?;
     print!("{generated}");
     if write_doc {
-        let path = root.join("docs/architecture.md");
-        let doc = fs::read_to_string(&path)?;
         let new = splice_doc(&doc, &generated)
             .ok_or_else(|| anyhow::anyhow!("{}: no {DOC_BEGIN} … {DOC_END}", path.display()))?;
-        fs::write(&path, new)?;
-        eprintln!("wrote {}", path.display());
+        if new == doc {
+            eprintln!("{}: up to date", path.display());
+        } else {
+            fs::write(&path, new)?;
+            eprintln!("{}: written", path.display());
+        }
     }
     Ok(())
 }
@@ -703,6 +755,34 @@ mod tests {
              lower layers):\n{}",
             problems.concat()
         );
+    }
+
+    /// The run record is a types-only leaf of `experiments`: it imports no other module of the
+    /// crate (the analyses import it).
+    #[test]
+    fn the_run_record_imports_no_other_module() {
+        let graph = crate_graph(&workspace_root().join("crates/experiments/src")).unwrap();
+        let imports: Vec<String> = graph.edges["record"]
+            .iter()
+            .map(|(to, places)| format!("{to} ({}:{})", places[0].file.display(), places[0].line))
+            .collect();
+        assert!(imports.is_empty(), "record imports {imports:?}");
+    }
+
+    /// Every module the SPEC table of `docs/architecture.md` names exists.
+    #[test]
+    fn the_spec_table_names_existing_modules() {
+        let root = workspace_root();
+        let doc = fs::read_to_string(root.join("docs/architecture.md")).unwrap();
+        let (named, missing) = missing_spec_modules(&root, &doc);
+        assert!(named.len() >= 20, "the SPEC table names {named:?}");
+        assert!(
+            missing.is_empty(),
+            "docs/architecture.md names no such module: {missing:?}"
+        );
+        let (_, missing) =
+            missing_spec_modules(&root, "\n## Where the SPEC lives\n`models::nowhere`\n");
+        assert_eq!(missing, vec!["models::nowhere"]);
     }
 
     /// `docs/architecture.md` shows the layers computed here.

@@ -14,8 +14,9 @@
 //!   `experiments/regression-symplectic.toml` (into `results/regression-symplectic/`); fails when
 //!   a bound is breached.
 //!   Every run is computed unless `--resume` is given.
-//! - `docs`: regenerates the README's headline table (from the paper's Fig. 7 records) and
-//!   `docs/cli.md` (from `sysid`'s own help); tests fail when either has drifted.
+//! - `docs`: regenerates the README's headline table (from the paper's Fig. 7 records),
+//!   `docs/cli.md` (from `sysid`'s own help) and the module layers of `docs/architecture.md`;
+//!   tests fail when any has drifted.
 //! - `imports [--write-doc]`: fails when a crate has an import cycle between its top-level
 //!   modules, else prints each crate's modules in layers (leaves first); `--write-doc` writes
 //!   them into `docs/architecture.md` (a test fails when they have drifted).
@@ -63,7 +64,7 @@ enum Task {
     /// results/scaling.
     ReproduceScaling(StudyArgs),
     /// Regenerate the generated documentation: the README's headline table (from the records in
-    /// results/paper/records/fig7) and docs/cli.md (from sysid's own help).
+    /// results/paper/records/fig7), docs/cli.md (from sysid's own help) and the module layers of docs/architecture.md.
     Docs,
     /// Check that no crate has an import cycle between its top-level modules and print each
     /// crate's modules in layers, leaves first.
@@ -300,7 +301,7 @@ fn docs(root: &Path) -> Result<()> {
         &readme_path,
         &experiments::headline::splice(&readme, &table)?,
     )?;
-    Ok(())
+    imports::run(root, true)
 }
 
 /// Writes `text` to `path` unless it already holds it (says which).
