@@ -113,8 +113,8 @@ fn rs_files(dir: &Path, out: &mut Vec<PathBuf>) -> std::io::Result<()> {
     Ok(())
 }
 
-/// The module path of a file relative to `src`: `a.rs` → [a], `a/mod.rs` → [a], `a/b.rs` →
-/// [a, b].
+/// The module path of a file relative to `src`: `a.rs` → `[a]`, `a/mod.rs` → `[a]`, `a/b.rs`
+/// → `[a, b]`.
 fn file_module_path(rel: &Path) -> Vec<String> {
     let mut parts: Vec<String> = rel
         .components()
