@@ -19,11 +19,17 @@
 //!   `experiments/regression-symplectic.toml` (into `results/regression-symplectic/`); fails when
 //!   a bound is breached.
 //!   Every run is computed unless `--resume` is given.
-//! - `docs`: regenerates the README's headline table (from the paper's Fig. 7 records) and
-//!   `docs/cli.md` (from `sysid`'s own help); tests fail when either has drifted.
+//! - `docs`: regenerates the README's headline table (from the paper's Fig. 7 records),
+//!   `docs/cli.md` (from `sysid`'s own help) and the module layers of `docs/architecture.md`;
+//!   tests fail when any has drifted.
+//! - `imports [--write-doc]`: fails when a crate has an import cycle between its top-level
+//!   modules, else prints each crate's modules in layers (leaves first); `--write-doc` writes
+//!   them into `docs/architecture.md` (a test fails when they have drifted).
 //! - `bench [--full]`: runs the criterion benchmarks of `core-filters` (short measurement times
 //!   unless `--full`), then appends one dated line per benchmark to `results/perf/history.csv`
 //!   and prints the change against the previous line of the same benchmark.
+
+mod imports;
 
 use std::fs;
 use std::path::{Path, PathBuf};
@@ -63,8 +69,15 @@ enum Task {
     /// results/scaling.
     ReproduceScaling(StudyArgs),
     /// Regenerate the generated documentation: the README's headline table (from the records in
-    /// results/paper/records/fig7) and docs/cli.md (from sysid's own help).
+    /// results/paper/records/fig7), docs/cli.md (from sysid's own help) and the module layers of docs/architecture.md.
     Docs,
+    /// Check that no crate has an import cycle between its top-level modules and print each
+    /// crate's modules in layers, leaves first.
+    Imports {
+        /// Rewrite the layers in docs/architecture.md.
+        #[arg(long)]
+        write_doc: bool,
+    },
     /// The excitations study (experiments/excitations.toml): records, figures and REPORT.md
     /// under results/excitations.
     ReproduceExcitations(StudyArgs),
@@ -290,6 +303,7 @@ fn main() -> Result<()> {
         } => reproduce_real(&root, no_baseline, report_only),
         Task::Bench { full } => bench(&root, full),
         Task::Docs => docs(&root),
+        Task::Imports { write_doc } => imports::run(&root, write_doc),
     }
 }
 
@@ -363,7 +377,7 @@ fn docs(root: &Path) -> Result<()> {
         &readme_path,
         &experiments::headline::splice(&readme, &table)?,
     )?;
-    Ok(())
+    imports::run(root, true)
 }
 
 /// Writes `text` to `path` unless it already holds it (says which).

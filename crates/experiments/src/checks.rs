@@ -15,8 +15,7 @@
 
 use std::fmt::Write as _;
 
-use serde::{Deserialize, Serialize};
-
+pub use crate::record::diagnostics::{Residuals, Warning, WarningKind};
 use crate::record::RunRecord;
 
 /// A sampled static parameter represented by fewer distinct particle values than this at the
@@ -40,40 +39,6 @@ pub fn pooled_filters(r: &RunRecord) -> usize {
 /// Particles of one filter of the run: the ESS is that of one filter.
 fn particles_per_filter(r: &RunRecord) -> usize {
     r.particles / pooled_filters(r)
-}
-
-/// What a warning is about.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum WarningKind {
-    /// The run ended early with a numerical failure.
-    Failed,
-    /// A stiffness or damping with posterior mean ≤ 0.
-    NonPositive,
-    /// A non-finite θ_val.
-    NonFinite,
-    /// A sampled static parameter with few distinct values at the end.
-    FewDistinct,
-    /// A tiny effective sample size.
-    TinyEss,
-}
-
-impl WarningKind {
-    /// Whether the answer is unusable: the command must not exit successfully.
-    pub fn is_fatal(self) -> bool {
-        matches!(
-            self,
-            WarningKind::Failed | WarningKind::NonPositive | WarningKind::NonFinite
-        )
-    }
-}
-
-/// One warning, with the parameter it concerns (if any) and the reason in words.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct Warning {
-    pub kind: WarningKind,
-    pub parameter: Option<String>,
-    pub message: String,
 }
 
 /// Whether `name` is a stiffness (`k1`, …) or a damping (`c1`, …) of the shear chain.
@@ -264,105 +229,6 @@ pub fn summary_table(r: &RunRecord) -> String {
     o
 }
 
-/// Measured against predicted accelerations and the normalised one-step prediction errors of a
-/// run: the only evidence, without truth, that the model fits the data. Written by
-/// [`crate::residuals::Predictor`] into the records of `sysid filter`; `sysid plot` draws it.
-#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
-pub struct Residuals {
-    /// Time of each kept step (s). Keep every step for the whiteness test: a decimated sequence
-    /// tests lags that are multiples of the decimation only.
-    #[serde(with = "crate::record::number::vec")]
-    pub t: Vec<f64>,
-    /// Measured channels, e.g. `a1`, `a2`, `a3`.
-    pub channels: Vec<String>,
-    /// `measured[k][i]`: measurement of channel i at kept step k.
-    #[serde(with = "crate::record::number::vec_vec")]
-    pub measured: Vec<Vec<f64>>,
-    /// One-step-ahead prediction of the measurement from the posterior means of the previous
-    /// step ([`crate::residuals`]).
-    #[serde(with = "crate::record::number::vec_vec")]
-    pub predicted: Vec<Vec<f64>>,
-    /// (y_k − ŷ_k) / √R_ii per channel: uncorrelated in time, with a variance of at least 1
-    /// (the predictive variance is at least the noise variance), when the model and its noise
-    /// levels are right.
-    #[serde(with = "crate::record::number::vec_vec")]
-    pub normalised_innovation: Vec<Vec<f64>>,
-}
-
-/// Whiteness check of one channel's normalised innovations.
-#[derive(Debug, Clone, PartialEq, Serialize)]
-pub struct Whiteness {
-    pub n: usize,
-    pub mean: f64,
-    pub variance: f64,
-    /// Sample autocorrelation at lags 1..=L.
-    pub autocorrelation: Vec<f64>,
-    /// 1.96/√n: the 95% band of one autocorrelation of a white sequence.
-    pub bound: f64,
-    /// Ljung–Box statistic Q = n(n+2) Σ ρ_k²/(n−k) over lags 1..=L, and its 95% critical value
-    /// (χ²_L quantile, Wilson–Hilferty approximation).
-    pub ljung_box: f64,
-    pub critical: f64,
-}
-
-impl Whiteness {
-    /// Whether the sequence passes: Q below its 95% critical value.
-    pub fn is_white(&self) -> bool {
-        self.ljung_box < self.critical
-    }
-}
-
-/// 95% quantile of χ² with `dof` degrees of freedom (Wilson–Hilferty; relative error below 1%
-/// from 3 degrees of freedom up).
-fn chi2_95(dof: usize) -> f64 {
-    let k = dof as f64;
-    let z = 1.644_853_626_951_472_2;
-    k * (1.0 - 2.0 / (9.0 * k) + z * (2.0 / (9.0 * k)).sqrt()).powi(3)
-}
-
-/// Whiteness check of a sequence (finite values only) up to `max_lag` lags (fewer when the
-/// sequence is short: at most n/4). `None` with fewer than 8 finite values.
-pub fn whiteness(x: &[f64], max_lag: usize) -> Option<Whiteness> {
-    let v: Vec<f64> = x.iter().copied().filter(|v| v.is_finite()).collect();
-    let n = v.len();
-    if n < 8 {
-        return None;
-    }
-    let lags = max_lag.min(n / 4).max(1);
-    let mean = v.iter().sum::<f64>() / n as f64;
-    let c0 = v.iter().map(|a| (a - mean).powi(2)).sum::<f64>() / n as f64;
-    let rho: Vec<f64> = (1..=lags)
-        .map(|k| {
-            let ck = (0..n - k)
-                .map(|i| (v[i] - mean) * (v[i + k] - mean))
-                .sum::<f64>()
-                / n as f64;
-            if c0 > 0.0 {
-                ck / c0
-            } else {
-                0.0
-            }
-        })
-        .collect();
-    let nf = n as f64;
-    let q = nf
-        * (nf + 2.0)
-        * rho
-            .iter()
-            .enumerate()
-            .map(|(k, r)| r * r / (nf - (k + 1) as f64))
-            .sum::<f64>();
-    Some(Whiteness {
-        n,
-        mean,
-        variance: c0 * nf / (nf - 1.0),
-        autocorrelation: rho,
-        bound: 1.96 / nf.sqrt(),
-        ljung_box: q,
-        critical: chi2_95(lags),
-    })
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -374,44 +240,6 @@ mod tests {
         assert!(!is_stiffness_or_damping("c"));
         assert!(!is_stiffness_or_damping("cx"));
         assert!(!is_stiffness_or_damping("beta"));
-    }
-
-    #[test]
-    fn chi_square_quantiles() {
-        // Tables: χ²_0.95 with 10 and 20 degrees of freedom.
-        assert!((chi2_95(10) - 18.307).abs() < 0.05, "{}", chi2_95(10));
-        assert!((chi2_95(20) - 31.410).abs() < 0.05, "{}", chi2_95(20));
-    }
-
-    #[test]
-    fn white_noise_passes_and_a_random_walk_fails() {
-        // SplitMix64 uniforms (fixed seed); sums of 12 give mean 0, variance 1, independent.
-        let mut state = 7u64;
-        let mut uniform = || {
-            state = state.wrapping_add(0x9E37_79B9_7F4A_7C15);
-            let mut z = state;
-            z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-            z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-            ((z ^ (z >> 31)) >> 11) as f64 / (1u64 << 53) as f64
-        };
-        let white: Vec<f64> = (0..2000)
-            .map(|_| (0..12).map(|_| uniform()).sum::<f64>() - 6.0)
-            .collect();
-        let w = whiteness(&white, 20).unwrap();
-        assert!(w.is_white(), "Q = {} ≥ {}", w.ljung_box, w.critical);
-        assert!(w.mean.abs() < 4.0 / 2000f64.sqrt() && (w.variance - 1.0).abs() < 0.15);
-        let mut acc = 0.0;
-        let walk: Vec<f64> = white
-            .iter()
-            .map(|e| {
-                acc = 0.9 * acc + e;
-                acc
-            })
-            .collect();
-        let w = whiteness(&walk, 20).unwrap();
-        assert!(!w.is_white());
-        assert!(w.autocorrelation[0] > 0.8);
-        assert!(whiteness(&[1.0; 5], 20).is_none());
     }
 
     #[test]

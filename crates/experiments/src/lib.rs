@@ -6,7 +6,9 @@
 //! - [`limits`]: checks of user-given filter settings against the limits of `models::limits`;
 //! - [`metrics`]: θ_val, relative errors, CV(RMSE) and NRMSE (SPEC §7);
 //! - [`observe`]: the observer that records traces and online errors during a run;
-//! - [`record`]: the run record written for every run;
+//! - [`record`]: the run record written for every run: types only, the leaf every analysis
+//!   imports;
+//! - [`settings`]: the filter settings of a run;
 //! - [`sweep`]: parallel, resumable, shardable sweeps over runs;
 //! - [`scaling`]: the scaling study (chains of 3 to 40 storeys), its figures and report;
 //! - [`verdict`]: the paper's statements decided by stated tests on the records (REPORT.md);
@@ -41,6 +43,7 @@ pub mod reproduce;
 pub mod residuals;
 pub mod scaled_prior;
 pub mod scaling;
+pub mod settings;
 pub mod stats;
 pub mod study;
 pub mod sweep;

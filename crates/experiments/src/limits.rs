@@ -12,7 +12,7 @@ use std::path::Path;
 use anyhow::{bail, Context, Result};
 pub use models::limits::*;
 
-use crate::pipeline::FilterSettings;
+use crate::settings::FilterSettings;
 
 /// Checks the user-given sizes and values of `s`; the error names the settings field.
 ///

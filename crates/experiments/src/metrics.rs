@@ -1,6 +1,6 @@
 //! Metrics of SPEC §7: θ_val, relative errors, state-estimate errors (CV(RMSE) and NRMSE).
 
-use serde::{Deserialize, Serialize};
+pub use crate::record::signal_errors::{SignalError, StateErrors};
 
 /// Relative error `|θ − θ_true| / |θ_true|` per entry (SPEC §7).
 pub fn relative_errors(theta: &[f64], truth: &[f64]) -> Vec<f64> {
@@ -39,25 +39,6 @@ impl ErrorSums {
             nrmse: rmse / (self.sum_sq_true / n).sqrt(),
         }
     }
-}
-
-/// Error of one signal (SPEC §7, eq. 27). The paper's printed CV(RMSE) divides by the plain mean
-/// of the true signal, which is ≈ 0 for an oscillation; we divide by mean(|x_true|) and also give
-/// NRMSE = RMSE / RMS(x_true).
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-pub struct SignalError {
-    pub rmse: f64,
-    /// RMSE / mean(|x_true|).
-    pub cv_rmse: f64,
-    /// RMSE / RMS(x_true).
-    pub nrmse: f64,
-}
-
-/// Errors of named state signals.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct StateErrors {
-    pub names: Vec<String>,
-    pub errors: Vec<SignalError>,
 }
 
 impl StateErrors {

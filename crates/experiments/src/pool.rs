@@ -24,9 +24,25 @@ use core_filters::Health;
 
 use core_filters::model::Layout;
 
-use crate::metrics::mean_sd;
+use crate::metrics::{mean_sd, StateErrors};
 use crate::observe::final_intervals;
-use crate::pipeline::Driven;
+
+/// What the driver of one filter returns ([`crate::pipeline`]).
+pub(crate) struct Driven {
+    pub(crate) summary: RunSummary,
+    pub(crate) distinct: Vec<(String, usize)>,
+    pub(crate) credible: Vec<crate::observe::ParamIntervals>,
+    pub(crate) param_names: Vec<String>,
+    pub(crate) theta_val: Vec<f64>,
+    pub(crate) theta_sd_final: Vec<f64>,
+    pub(crate) trace: crate::observe::Trace,
+    pub(crate) online: Option<StateErrors>,
+    pub(crate) wall_s: f64,
+    /// The final weights and particles, kept for pooling (`s.pool > 1`).
+    pub(crate) final_particles: Option<crate::observe::FinalParticles>,
+    /// One-step-ahead prediction errors ([`crate::residuals`]), when asked for.
+    pub(crate) residuals: Option<crate::checks::Residuals>,
+}
 
 /// Pools the runs of `members` (all of the same filter, in stream order) into one.
 pub(crate) fn combine(layout: &Layout, members: Vec<Driven>) -> Driven {

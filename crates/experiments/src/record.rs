@@ -15,18 +15,23 @@
 //! numbers as named strings, `fingerprint` and `versions.numerics` added. Records of schema 1
 //! are still read (they have no fingerprint, so a resumed sweep computes them again).
 
+pub mod atomic;
+pub mod diagnostics;
 pub mod fingerprint;
 pub mod number;
 pub mod read;
+pub mod signal_errors;
+pub mod trace;
+pub mod validation;
 
 use std::collections::BTreeMap;
 
 use core_filters::Health;
 use serde::{Deserialize, Serialize};
 
-use crate::metrics::{SignalError, StateErrors};
-use crate::observe::Trace;
-use crate::sweep::SweepRecord;
+use read::SweepRecord;
+use signal_errors::{SignalError, StateErrors};
+use trace::Trace;
 
 pub use fingerprint::Fingerprint;
 
@@ -159,27 +164,27 @@ pub struct RunRecord {
     /// Plausibility warnings with their reasons (`checks::check`): an impossible answer, a
     /// posterior resting on few particles, a failure. Absent in records written before checks.
     #[serde(default)]
-    pub warnings: Vec<crate::checks::Warning>,
+    pub warnings: Vec<diagnostics::Warning>,
     /// Central 50/90/95 % credible intervals of every parameter from the last step's particle
-    /// posterior ([`crate::observe::ParamIntervals`]); empty for a failed run and in records
+    /// posterior ([`trace::ParamIntervals`]); empty for a failed run and in records
     /// written before intervals were recorded.
     #[serde(default)]
-    pub credible: Vec<crate::observe::ParamIntervals>,
+    pub credible: Vec<trace::ParamIntervals>,
     /// Whiteness check of each channel's one-step-ahead prediction errors
     /// ([`crate::residuals`]); empty in sweep records (no traces) and older records.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
-    pub innovation_checks: Vec<crate::residuals::ChannelCheck>,
+    pub innovation_checks: Vec<diagnostics::ChannelCheck>,
     /// The prediction errors at every step (records of `sysid filter`), drawn by `sysid plot`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub residuals: Option<crate::checks::Residuals>,
+    pub residuals: Option<diagnostics::Residuals>,
     /// Free run of the identified model on the measured record: fit and NRMSE per channel, a
     /// band from posterior draws ([`crate::validation`]); field-data runs of `sysid filter`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub free_run: Option<crate::validation::FreeRun>,
+    pub free_run: Option<validation::FreeRun>,
     /// Modes of the identified linearised model beside the peaks of the measured transfer
     /// functions ([`crate::validation`]); field-data runs of `sysid filter`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub modal: Option<crate::validation::ModalComparison>,
+    pub modal: Option<validation::ModalComparison>,
 }
 
 impl RunRecord {

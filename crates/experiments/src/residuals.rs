@@ -9,7 +9,7 @@
 //! noise s.d. √R_ii. This is the plug-in prediction at the posterior mean, not the filter's
 //! exact predictive distribution: its variance is at least R_ii, so the normalised errors have
 //! a variance of at least 1 when the model and its noise levels are right — a variance far
-//! above 1, or errors correlated in time (Ljung–Box, [`crate::checks::whiteness`]), say that the
+//! above 1, or errors correlated in time (Ljung–Box, [`whiteness`]), say that the
 //! model or its noise levels do not fit the record.
 
 use anyhow::Result;
@@ -17,9 +17,9 @@ use core_filters::model::Layout;
 use core_filters::smc::model::StateSpace;
 use core_filters::smc::Posterior;
 use models::filtering::{AugmentedChain, ChainSpec};
-use serde::{Deserialize, Serialize};
+use serde::Serialize;
 
-use crate::checks::{whiteness, Residuals, Whiteness};
+pub use crate::record::diagnostics::{ChannelCheck, Residuals};
 
 /// Lags of the whiteness check.
 pub const MAX_LAG: usize = 20;
@@ -139,24 +139,6 @@ fn slot_index(slot: core_filters::model::Slot) -> usize {
     }
 }
 
-/// The whiteness check of one channel's normalised prediction errors.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct ChannelCheck {
-    pub channel: String,
-    pub n: usize,
-    #[serde(with = "crate::record::number::scalar")]
-    pub mean: f64,
-    /// Variance of the normalised errors: ≥ 1 expected (module documentation).
-    #[serde(with = "crate::record::number::scalar")]
-    pub variance: f64,
-    /// Ljung–Box Q over lags 1..=[`MAX_LAG`] and its 95 % critical value.
-    #[serde(with = "crate::record::number::scalar")]
-    pub ljung_box: f64,
-    #[serde(with = "crate::record::number::scalar")]
-    pub critical: f64,
-    pub white: bool,
-}
-
 /// The check of every channel (channels with too few finite values are left out).
 pub fn channel_checks(r: &Residuals) -> Vec<ChannelCheck> {
     r.channels
@@ -205,4 +187,121 @@ pub fn describe(checks: &[ChannelCheck]) -> Vec<String> {
             )
         })
         .collect()
+}
+
+/// Whiteness check of one channel's normalised innovations.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Whiteness {
+    pub n: usize,
+    pub mean: f64,
+    pub variance: f64,
+    /// Sample autocorrelation at lags 1..=L.
+    pub autocorrelation: Vec<f64>,
+    /// 1.96/√n: the 95% band of one autocorrelation of a white sequence.
+    pub bound: f64,
+    /// Ljung–Box statistic Q = n(n+2) Σ ρ_k²/(n−k) over lags 1..=L, and its 95% critical value
+    /// (χ²_L quantile, Wilson–Hilferty approximation).
+    pub ljung_box: f64,
+    pub critical: f64,
+}
+
+impl Whiteness {
+    /// Whether the sequence passes: Q below its 95% critical value.
+    pub fn is_white(&self) -> bool {
+        self.ljung_box < self.critical
+    }
+}
+
+/// 95% quantile of χ² with `dof` degrees of freedom (Wilson–Hilferty; relative error below 1%
+/// from 3 degrees of freedom up).
+fn chi2_95(dof: usize) -> f64 {
+    let k = dof as f64;
+    let z = 1.644_853_626_951_472_2;
+    k * (1.0 - 2.0 / (9.0 * k) + z * (2.0 / (9.0 * k)).sqrt()).powi(3)
+}
+
+/// Whiteness check of a sequence (finite values only) up to `max_lag` lags (fewer when the
+/// sequence is short: at most n/4). `None` with fewer than 8 finite values.
+pub fn whiteness(x: &[f64], max_lag: usize) -> Option<Whiteness> {
+    let v: Vec<f64> = x.iter().copied().filter(|v| v.is_finite()).collect();
+    let n = v.len();
+    if n < 8 {
+        return None;
+    }
+    let lags = max_lag.min(n / 4).max(1);
+    let mean = v.iter().sum::<f64>() / n as f64;
+    let c0 = v.iter().map(|a| (a - mean).powi(2)).sum::<f64>() / n as f64;
+    let rho: Vec<f64> = (1..=lags)
+        .map(|k| {
+            let ck = (0..n - k)
+                .map(|i| (v[i] - mean) * (v[i + k] - mean))
+                .sum::<f64>()
+                / n as f64;
+            if c0 > 0.0 {
+                ck / c0
+            } else {
+                0.0
+            }
+        })
+        .collect();
+    let nf = n as f64;
+    let q = nf
+        * (nf + 2.0)
+        * rho
+            .iter()
+            .enumerate()
+            .map(|(k, r)| r * r / (nf - (k + 1) as f64))
+            .sum::<f64>();
+    Some(Whiteness {
+        n,
+        mean,
+        variance: c0 * nf / (nf - 1.0),
+        autocorrelation: rho,
+        bound: 1.96 / nf.sqrt(),
+        ljung_box: q,
+        critical: chi2_95(lags),
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn chi_square_quantiles() {
+        // Tables: χ²_0.95 with 10 and 20 degrees of freedom.
+        assert!((chi2_95(10) - 18.307).abs() < 0.05, "{}", chi2_95(10));
+        assert!((chi2_95(20) - 31.410).abs() < 0.05, "{}", chi2_95(20));
+    }
+
+    #[test]
+    fn white_noise_passes_and_a_random_walk_fails() {
+        // SplitMix64 uniforms (fixed seed); sums of 12 give mean 0, variance 1, independent.
+        let mut state = 7u64;
+        let mut uniform = || {
+            state = state.wrapping_add(0x9E37_79B9_7F4A_7C15);
+            let mut z = state;
+            z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+            z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+            ((z ^ (z >> 31)) >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let white: Vec<f64> = (0..2000)
+            .map(|_| (0..12).map(|_| uniform()).sum::<f64>() - 6.0)
+            .collect();
+        let w = whiteness(&white, 20).unwrap();
+        assert!(w.is_white(), "Q = {} ≥ {}", w.ljung_box, w.critical);
+        assert!(w.mean.abs() < 4.0 / 2000f64.sqrt() && (w.variance - 1.0).abs() < 0.15);
+        let mut acc = 0.0;
+        let walk: Vec<f64> = white
+            .iter()
+            .map(|e| {
+                acc = 0.9 * acc + e;
+                acc
+            })
+            .collect();
+        let w = whiteness(&walk, 20).unwrap();
+        assert!(!w.is_white());
+        assert!(w.autocorrelation[0] > 0.8);
+        assert!(whiteness(&[1.0; 5], 20).is_none());
+    }
 }

@@ -33,19 +33,8 @@ use serde::Serialize;
 
 use progress::{clock, Progress};
 
-/// A record a sweep can reuse: it says whether its run failed, what determined it, and checks
-/// itself after it is read.
-pub trait SweepRecord: Serialize + crate::record::read::Checked + Send {
-    /// Whether the run failed (for the progress count).
-    fn failed(&self) -> bool;
-    /// The fingerprint of everything that determined the record (`None`: written by a tool that
-    /// did not record one).
-    fn fingerprint(&self) -> Option<&str>;
-    /// Whether `other` holds the same result, wall-clock timings aside. A sweep keeps the
-    /// file of a record it computed again with the same result, so that a reproduction that
-    /// agrees leaves the committed records byte for byte as they were.
-    fn same_result(&self, other: &Self) -> bool;
-}
+pub use crate::record::atomic::write_bytes_atomic;
+pub use crate::record::read::SweepRecord;
 
 /// Part `index` of `count` of a sweep (`0 ≤ index < count`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -346,22 +335,6 @@ pub fn read_record<R: SweepRecord>(path: &Path) -> Result<R> {
 pub fn write_atomic<T: Serialize>(path: &Path, value: &T) -> Result<()> {
     let text = serde_json::to_string_pretty(value).context("serialising a record")?;
     write_bytes_atomic(path, (text + "\n").as_bytes())
-}
-
-/// Writes `bytes` to `path` atomically: a temporary file `<name>.tmp<pid>` in the same
-/// directory, then a rename over `path`. An interruption leaves either the old file or the new
-/// one, never a part of either (and possibly the temporary file, removed by the next sweep or
-/// merge of the directory).
-pub fn write_bytes_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
-    let name = path
-        .file_name()
-        .with_context(|| format!("{} names no file", path.display()))?;
-    let mut tmp_name = name.to_os_string();
-    tmp_name.push(format!(".tmp{}", std::process::id()));
-    let tmp = path.with_file_name(tmp_name);
-    fs::write(&tmp, bytes).with_context(|| format!("writing {}", tmp.display()))?;
-    fs::rename(&tmp, path).with_context(|| format!("renaming into {}", path.display()))?;
-    Ok(())
 }
 
 /// Removes the temporary files `*.json.tmp<pid>` that processes which have ended left in `dir`

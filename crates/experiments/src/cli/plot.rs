@@ -14,9 +14,9 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
 
-use crate::checks::{whiteness, Residuals};
 use crate::figures::{self, Panel, Series};
 use crate::record::RunRecord;
+use crate::residuals::{whiteness, Residuals};
 
 /// Arguments of `sysid plot`.
 #[derive(Debug, clap::Args)]

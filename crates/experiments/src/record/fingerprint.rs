@@ -12,7 +12,7 @@
 //!   generation settings — preset, excitation, scale, duration, noise, master seed and run — and
 //!   the RMS values and true θ the filter's noise levels and metrics are set from);
 //!   `data.meta.config` repeats the generation settings in readable form;
-//! - `filter` is every filter setting ([`FilterSettings`]), particles and resampling included;
+//! - `filter` is every filter setting ([`FilterSettings`](crate::settings::FilterSettings)), particles and resampling included;
 //! - `numerics` is [`NUMERICS_VERSION`](super::NUMERICS_VERSION), bumped by hand whenever a code
 //!   change alters results;
 //! - canonical JSON: object keys sorted by their UTF-8 bytes, no whitespace, strings and numbers
@@ -27,8 +27,6 @@ use models::dataset::LoadedDataset;
 use serde::{Deserialize, Serialize};
 use serde_json::Value;
 use sha2::{Digest, Sha256};
-
-use crate::pipeline::FilterSettings;
 
 /// The fingerprint of one run.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -54,7 +52,7 @@ impl Fingerprint {
         algorithm: &str,
         seed: u64,
         run: u64,
-        settings: &FilterSettings,
+        settings: &(impl serde::Serialize + ?Sized),
         data: &LoadedDataset,
     ) -> Self {
         Self::new(serde_json::json!({

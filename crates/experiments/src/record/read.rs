@@ -17,7 +17,8 @@ use std::path::{Path, PathBuf};
 use serde::de::DeserializeOwned;
 use thiserror::Error;
 
-use crate::limits::MAX_FILE_BYTES;
+use models::limits::MAX_FILE_BYTES;
+use serde::Serialize;
 
 /// A record type that checks itself once read (schema, sizes, fingerprint).
 pub trait Checked: DeserializeOwned {
@@ -25,6 +26,20 @@ pub trait Checked: DeserializeOwned {
     const KIND: &'static str;
     /// The checks of a record just parsed; the error says what is wrong.
     fn check(&self) -> Result<(), String>;
+}
+
+/// A record a sweep can reuse: it says whether its run failed, what determined it, and checks
+/// itself after it is read.
+pub trait SweepRecord: Serialize + Checked + Send {
+    /// Whether the run failed (for the progress count).
+    fn failed(&self) -> bool;
+    /// The fingerprint of everything that determined the record (`None`: written by a tool that
+    /// did not record one).
+    fn fingerprint(&self) -> Option<&str>;
+    /// Whether `other` holds the same result, wall-clock timings aside. A sweep keeps the
+    /// file of a record it computed again with the same result, so that a reproduction that
+    /// agrees leaves the committed records byte for byte as they were.
+    fn same_result(&self, other: &Self) -> bool;
 }
 
 /// Why a record could not be read; every variant names the file.
@@ -130,14 +145,14 @@ pub fn read<R: Checked>(path: &Path) -> Result<R, ReadError> {
     parse(&read_bytes(path)?, path)
 }
 
-/// Writes `record` atomically to `path` ([`crate::sweep::write_bytes_atomic`]) and reads the
+/// Writes `record` atomically to `path` ([`super::atomic::write_bytes_atomic`]) and reads the
 /// written text back through [`parse`]: a record that would not read back is written (it holds
 /// the run's results) but reported as an error, so no command reports success on a record its
 /// own readers refuse.
 pub fn write<R: Checked + serde::Serialize>(path: &Path, record: &R) -> anyhow::Result<()> {
     use anyhow::Context;
     let text = serde_json::to_string_pretty(record).context("serialising a record")? + "\n";
-    crate::sweep::write_bytes_atomic(path, text.as_bytes())?;
+    super::atomic::write_bytes_atomic(path, text.as_bytes())?;
     parse::<R>(text.as_bytes(), path)
         .map(|_| ())
         .context("the record was written but does not read back")

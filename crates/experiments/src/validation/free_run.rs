@@ -14,21 +14,10 @@ use models::integrate::{simulate_adaptive, simulate_rk4, IntegrateError, Toleran
 use models::sensors::MeasurementKind;
 use models::structure::{BoucWen, ShearChain, StructureError};
 use rand::Rng;
-use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
 use crate::observe::ParamIntervals;
-
-/// How the free run integrates the equations of motion.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum Integrator {
-    /// Adaptive Dormand–Prince 5(4) ([`simulate_adaptive`], the validation integrator of SPEC §7)
-    /// with these tolerances.
-    Adaptive(Tolerance),
-    /// Classical RK4, one step per sample ([`simulate_rk4`], the data generator's scheme).
-    Rk4,
-}
+pub use crate::record::validation::Integrator;
 
 /// The free run's integrator: adaptive, tighter than the SPEC §7 validation default so that
 /// the integration error (relative ~10⁻⁸) is far below any fit difference worth reporting.

@@ -20,6 +20,8 @@
 
 use thiserror::Error;
 
+pub use crate::record::validation::Peak;
+
 /// Shortest record for a transfer function: 8 segments of 32 samples.
 pub const MIN_SAMPLES: usize = 128;
 /// Longest segment.
@@ -191,14 +193,6 @@ pub fn welch_h1(x: &[f64], ys: &[Vec<f64>], dt: f64) -> Result<TransferEstimate,
         pxx,
         coherence,
     })
-}
-
-/// A peak of the summed transfer magnitude.
-#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct Peak {
-    pub frequency_hz: f64,
-    /// Σ over channels of |H1| at the peak's bin.
-    pub magnitude: f64,
 }
 
 /// The bins where the ground motion has energy (P_xx ≥ [`BAND_FRACTION`]·max), from the second

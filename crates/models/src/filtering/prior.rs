@@ -237,6 +237,9 @@ enum Slot<'a> {
 }
 
 #[cfg(test)]
+mod priors_tests;
+
+#[cfg(test)]
 mod tests {
     use super::*;
     use core_filters::rng::stream;

@@ -1,0 +1,81 @@
+//! What the checks of a run write into its record: plausibility warnings ([`crate::checks`]),
+//! the one-step prediction errors and their whiteness per channel ([`crate::residuals`]).
+
+use serde::{Deserialize, Serialize};
+
+/// What a warning is about.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum WarningKind {
+    /// The run ended early with a numerical failure.
+    Failed,
+    /// A stiffness or damping with posterior mean ≤ 0.
+    NonPositive,
+    /// A non-finite θ_val.
+    NonFinite,
+    /// A sampled static parameter with few distinct values at the end.
+    FewDistinct,
+    /// A tiny effective sample size.
+    TinyEss,
+}
+
+impl WarningKind {
+    /// Whether the answer is unusable: the command must not exit successfully.
+    pub fn is_fatal(self) -> bool {
+        matches!(
+            self,
+            WarningKind::Failed | WarningKind::NonPositive | WarningKind::NonFinite
+        )
+    }
+}
+
+/// One warning, with the parameter it concerns (if any) and the reason in words.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Warning {
+    pub kind: WarningKind,
+    pub parameter: Option<String>,
+    pub message: String,
+}
+
+/// Measured against predicted accelerations and the normalised one-step prediction errors of a
+/// run: the only evidence, without truth, that the model fits the data. Written by
+/// [`crate::residuals::Predictor`] into the records of `sysid filter`; `sysid plot` draws it.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct Residuals {
+    /// Time of each kept step (s). Keep every step for the whiteness test: a decimated sequence
+    /// tests lags that are multiples of the decimation only.
+    #[serde(with = "crate::record::number::vec")]
+    pub t: Vec<f64>,
+    /// Measured channels, e.g. `a1`, `a2`, `a3`.
+    pub channels: Vec<String>,
+    /// `measured[k][i]`: measurement of channel i at kept step k.
+    #[serde(with = "crate::record::number::vec_vec")]
+    pub measured: Vec<Vec<f64>>,
+    /// One-step-ahead prediction of the measurement from the posterior means of the previous
+    /// step ([`crate::residuals`]).
+    #[serde(with = "crate::record::number::vec_vec")]
+    pub predicted: Vec<Vec<f64>>,
+    /// (y_k − ŷ_k) / √R_ii per channel: uncorrelated in time, with a variance of at least 1
+    /// (the predictive variance is at least the noise variance), when the model and its noise
+    /// levels are right.
+    #[serde(with = "crate::record::number::vec_vec")]
+    pub normalised_innovation: Vec<Vec<f64>>,
+}
+
+/// The whiteness check of one channel's normalised prediction errors.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ChannelCheck {
+    pub channel: String,
+    pub n: usize,
+    #[serde(with = "crate::record::number::scalar")]
+    pub mean: f64,
+    /// Variance of the normalised errors: ≥ 1 expected ([`crate::residuals`]).
+    #[serde(with = "crate::record::number::scalar")]
+    pub variance: f64,
+    /// Ljung–Box Q over lags 1..=[`MAX_LAG`](crate::residuals::MAX_LAG) and its 95 % critical value.
+    #[serde(with = "crate::record::number::scalar")]
+    pub ljung_box: f64,
+    #[serde(with = "crate::record::number::scalar")]
+    pub critical: f64,
+    pub white: bool,
+}

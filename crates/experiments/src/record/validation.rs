@@ -1,0 +1,128 @@
+//! What the validation without the truth writes into a record ([`crate::validation`]): the
+//! free run of the identified model on a record and the comparison of its modes with the
+//! measured transfer functions.
+
+use models::integrate::Tolerance;
+use models::modal::Mode;
+use models::sensors::MeasurementKind;
+use serde::{Deserialize, Serialize};
+
+use super::number;
+
+/// The spread of the fit over the band's draws: 2.5 %, 50 % and 97.5 % percentiles.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ChannelFit {
+    pub channel: String,
+    /// Fit of the free run at θ_val, in %.
+    #[serde(with = "number::scalar")]
+    pub fit_percent: f64,
+    /// NRMSE of the free run at θ_val (RMSE / RMS of the measured channel).
+    #[serde(with = "number::scalar")]
+    pub nrmse: f64,
+    /// Fit of the band's draws: 2.5, 50 and 97.5 % percentiles (absent without a band).
+    #[serde(
+        default,
+        with = "number::opt_vec",
+        skip_serializing_if = "Option::is_none"
+    )]
+    pub fit_draws: Option<Vec<f64>>,
+}
+
+/// How the band was made.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct BandInfo {
+    pub method: String,
+    pub purpose: String,
+    pub draws: usize,
+    /// Draws that were valid structures and integrated; the others are left out (first reason).
+    pub valid: usize,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub invalid_reason: Option<String>,
+}
+
+/// The free run of an identified model on one record.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct FreeRun {
+    /// What was simulated and how.
+    pub method: String,
+    pub integrator: Integrator,
+    pub measurement: MeasurementKind,
+    pub channels: Vec<ChannelFit>,
+    /// The band, or why there is none.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub band: Option<BandInfo>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub band_error: Option<String>,
+    /// The series below keep one sample in `every`.
+    pub every: usize,
+    #[serde(with = "number::vec")]
+    pub t: Vec<f64>,
+    /// Per channel: measured, simulated at θ_val, and the pointwise 2.5 % and 97.5 % percentiles
+    /// of the band's draws (empty without a band).
+    #[serde(with = "number::vec_vec")]
+    pub measured: Vec<Vec<f64>>,
+    #[serde(with = "number::vec_vec")]
+    pub simulated: Vec<Vec<f64>>,
+    #[serde(default, with = "number::vec_vec")]
+    pub band_lo: Vec<Vec<f64>>,
+    #[serde(default, with = "number::vec_vec")]
+    pub band_hi: Vec<Vec<f64>>,
+}
+
+/// A model mode beside the measured peak it is paired with.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ModePair {
+    /// 1-based mode number.
+    pub mode: usize,
+    pub model_hz: f64,
+    pub damping_ratio: f64,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub measured_hz: Option<f64>,
+    /// 100·(model − measured)/measured.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub difference_percent: Option<f64>,
+}
+
+/// Modes of the identified linearised model and the measured transfer functions.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct ModalComparison {
+    pub linearisation: String,
+    pub modes: Vec<Mode>,
+    pub overdamped: usize,
+    pub method: String,
+    pub segment: usize,
+    pub segments: usize,
+    #[serde(with = "number::scalar")]
+    pub resolution_hz: f64,
+    /// Bins of the ground motion's band (see [`crate::validation::spectral`]), and |H1| per channel on them.
+    #[serde(with = "number::vec")]
+    pub frequency_hz: Vec<f64>,
+    pub channels: Vec<String>,
+    #[serde(with = "number::vec_vec")]
+    pub magnitude: Vec<Vec<f64>>,
+    pub peaks: Vec<Peak>,
+    pub pairs: Vec<ModePair>,
+    /// Why a part is missing (the model's modes, or the transfer functions).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub errors: Vec<String>,
+}
+
+/// How the free run integrates the equations of motion.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Integrator {
+    /// Adaptive Dormand–Prince 5(4) ([`models::integrate::simulate_adaptive`], the validation integrator of SPEC §7)
+    /// with these tolerances.
+    Adaptive(Tolerance),
+    /// Classical RK4, one step per sample ([`models::integrate::simulate_rk4`], the data generator's scheme).
+    Rk4,
+}
+
+/// A peak of the summed transfer magnitude.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Peak {
+    pub frequency_hz: f64,
+    /// Σ over channels of |H1| at the peak's bin.
+    pub magnitude: f64,
+}
