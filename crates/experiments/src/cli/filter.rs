@@ -95,7 +95,7 @@ pub struct Args {
 
 fn parse_damping(s: &str) -> Result<models::structure::Damping, String> {
     s.parse()
-        .map_err(|e: models::structure::UnknownDamping| format!("--damping: {e}"))
+        .map_err(|e: models::structure::UnknownDamping| e.to_string())
 }
 
 /// The structure flags as a `[structure]` table; errors name the flag.
