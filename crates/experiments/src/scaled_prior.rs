@@ -210,7 +210,7 @@ pub fn scaled_prior(data: &LoadedDataset, d: &StructureDescription) -> Result<Sc
         k_median,
         c_median,
         damping_ratio: c_ratio,
-        alpha_median: mass_term.then(|| 2.0 * ALPHA_DAMPING_RATIO * omega1),
+        alpha_median: mass_term.then_some(2.0 * ALPHA_DAMPING_RATIO * omega1),
         prior,
     })
 }
