@@ -387,7 +387,7 @@ fn field_data(
 
 /// One identification run: `sysid filter` on this data set with these options, in memory.
 #[pyfunction]
-#[pyo3(signature = (data, algorithm, *, particles, seed, run, config, config_json, fix, resampling, ess_threshold, discretisation, substeps, storvik_update, storeys, hysteretic, masses, measurement, experiment, out))]
+#[pyo3(signature = (data, algorithm, *, particles, seed, run, config, config_json, fix, resampling, ess_threshold, discretisation, substeps, storvik_update, storeys, hysteretic, masses, measurement, experiment, out, damping=None))]
 #[allow(clippy::too_many_arguments)]
 fn identify(
     py: Python<'_>,
@@ -410,6 +410,7 @@ fn identify(
     measurement: Option<String>,
     experiment: String,
     out: Option<PathBuf>,
+    damping: Option<String>,
 ) -> PyResult<PyRecord> {
     let algorithm: Algorithm = parse("algorithm", algorithm)?;
     // The settings as `sysid filter` builds them: a config file (or its JSON form) over the
@@ -476,6 +477,10 @@ fn identify(
         measurement: measurement
             .as_deref()
             .map(|m| parse::<MeasurementKind>("measurement", m))
+            .transpose()?,
+        damping: damping
+            .as_deref()
+            .map(|d| parse::<models::structure::Damping>("damping", d))
             .transpose()?,
     };
     let d = &data.loaded;

@@ -72,6 +72,9 @@ class Building:
     masses: storey masses m1..mN, or one value for every storey.
     sensors: 1-based measured storeys, increasing (default: every storey).
     measurement: ``"absolute"`` (ẍ + ü_g, real accelerometers) or ``"relative"`` (ẍ).
+    damping: the damping form identified by :func:`identify`: ``"storey"`` (per-storey
+        dashpots, the default) or ``"storey+mass"`` (also mass-proportional damping αM; θ gains
+        ``alpha``), as ``sysid filter --damping``.
     """
 
     storeys: Optional[int] = None
@@ -79,6 +82,7 @@ class Building:
     masses: Optional[Union[float, Sequence[float]]] = None
     sensors: Optional[Sequence[int]] = None
     measurement: Optional[str] = None
+    damping: Optional[str] = None
 
     def _masses(self) -> Optional[list]:
         if self.masses is None:
@@ -260,4 +264,5 @@ def identify(
         measurement=b.measurement,
         experiment=experiment,
         out=None if out is None else os.fspath(out),
+        damping=b.damping,
     )

@@ -110,6 +110,8 @@ def test_bad_arrays_and_options_are_named():
     raises(sm.identify, ug, acc, 0.01, b, discretisation="rk2", match="^--discretisation: ")
     raises(sm.identify, ug, acc, 0.01, b, storvik_update="fast", match="^--storvik-update: ")
     raises(sm.identify, ug, acc, 0.01, sm.Building(storeys=3, measurement="sideways"), match="sideways")
+    damped = sm.Building(3, [], 1.0, None, "absolute", "rayleigh")
+    raises(sm.identify, ug, acc, 0.01, damped, match="^--damping: unknown damping form `rayleigh`")
     raises(sm.identify, ug, acc, 0.01, sm.Building(3, [1], [1.0, -2.0, 1.0], None, "absolute"), match="--masses")
     raises(sm.identify, ug, acc, 0.01, b, config={"particles": 10, "no_such_key": 1}, match="no_such_key")
     raises(sm.identify, ug[:1], acc[:1], 0.01, b, match="at least 2")
@@ -126,3 +128,11 @@ def test_corrupt_records_are_refused(tmp_path):
     raises(sm.read_record, cut, match="cut short")
     raises(sm.parse_record, text.replace('"loglik"', '"logl1k"'), match="not a valid run record")
     raises(sm.read_record, tmp_path / "absent.json", match="reading")
+
+
+def test_the_storey_mass_form_is_refused_by_name_where_unsupported():
+    rng = np.random.default_rng(4)
+    ug, acc = rng.normal(size=400), rng.normal(size=(400, 3))
+    mass = sm.Building(3, [], 1.0, None, "absolute", "storey+mass")
+    raises(sm.identify, ug, acc, 0.01, mass, algorithm="storvik", match="storey\\+mass damping form")
+    raises(sm.identify, ug, acc, 0.01, mass, algorithm="mln-rbpf", match="MLN-RBPF/Storvik")

@@ -3,7 +3,9 @@
 //! A particle filter always returns numbers; some of them are nonsense. A run record is checked
 //! for
 //! - a **physically impossible** answer: a stiffness or damping whose posterior mean is ≤ 0
-//!   (SPEC §1: k_i > 0, c_i > 0), or a non-finite θ_val;
+//!   (SPEC §1: k_i > 0, c_i > 0), or a non-finite θ_val; with the storey+mass damping form
+//!   (θ has `alpha`) a dashpot or α is impossible only when < 0, since a storey without a
+//!   dashpot is still damped by αM;
 //! - a posterior that **rests on a handful of particles**: a sampled static parameter with few
 //!   distinct particle values at the end (resampling a static, noise-free parameter at every step
 //!   leaves copies of a few values; its posterior s.d. then says nothing about the real
@@ -47,6 +49,22 @@ fn is_stiffness_or_damping(name: &str) -> bool {
     matches!(chars.next(), Some('k' | 'c')) && name.len() > 1 && chars.all(|c| c.is_ascii_digit())
 }
 
+/// Whether θ entry `name` = `v` is physically impossible: k_j ≤ 0; c_j ≤ 0 with per-storey
+/// damping only, c_j < 0 or α < 0 with the storey+mass form (`mass_form`).
+fn impossible(name: &str, v: f64, mass_form: bool) -> bool {
+    if name == models::structure::ALPHA_NAME {
+        return mass_form && v < 0.0;
+    }
+    if !is_stiffness_or_damping(name) {
+        return false;
+    }
+    if name.starts_with('k') || !mass_form {
+        v <= 0.0
+    } else {
+        v < 0.0
+    }
+}
+
 /// The warnings of a finished run, most serious first.
 pub fn check(r: &RunRecord) -> Vec<Warning> {
     let mut out = Vec::new();
@@ -75,6 +93,10 @@ pub fn check(r: &RunRecord) -> Vec<Warning> {
             },
         });
     }
+    let mass_form = r
+        .param_names
+        .iter()
+        .any(|n| n == models::structure::ALPHA_NAME);
     for (j, (name, v)) in r.param_names.iter().zip(&r.theta_val).enumerate() {
         let sd = r.theta_sd_final.get(j).copied().unwrap_or(f64::NAN);
         if no_estimate {
@@ -86,12 +108,13 @@ pub fn check(r: &RunRecord) -> Vec<Warning> {
                 parameter: Some(name.clone()),
                 message: format!("{name}: θ_val is {v}: the filter produced no usable estimate"),
             });
-        } else if is_stiffness_or_damping(name) && *v <= 0.0 {
+        } else if impossible(name, *v, mass_form) {
             out.push(Warning {
                 kind: WarningKind::NonPositive,
                 parameter: Some(name.clone()),
                 message: format!(
-                    "{name}: posterior mean {v:.4} (final s.d. {sd:.3}) is ≤ 0, physically impossible for a {}: the model or its priors do not fit these data (check the measurement kind, the priors' scale and the masses)",
+                    "{name}: posterior mean {v:.4} (final s.d. {sd:.3}) is {}, physically impossible for a {}: the model or its priors do not fit these data (check the measurement kind, the priors' scale and the masses)",
+                    if name.starts_with('k') || !mass_form { "≤ 0" } else { "< 0" },
                     if name.starts_with('k') { "stiffness" } else { "damping" }
                 ),
             });
@@ -240,6 +263,19 @@ mod tests {
         assert!(!is_stiffness_or_damping("c"));
         assert!(!is_stiffness_or_damping("cx"));
         assert!(!is_stiffness_or_damping("beta"));
+    }
+
+    #[test]
+    fn a_zero_dashpot_is_possible_only_beside_mass_damping() {
+        // Per-storey form (SPEC §1): c ≤ 0 is impossible.
+        assert!(impossible("c2", 0.0, false));
+        assert!(impossible("k1", 0.0, true));
+        // With αM a storey without a dashpot is still damped; negative values stay impossible.
+        assert!(!impossible("c2", 0.0, true));
+        assert!(impossible("c2", -1e-3, true));
+        assert!(!impossible("alpha", 0.0, true));
+        assert!(impossible("alpha", -0.1, true));
+        assert!(!impossible("beta", -0.1, true));
     }
 
     #[test]

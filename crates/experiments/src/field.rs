@@ -14,12 +14,13 @@ use anyhow::{bail, Result};
 use models::dataset::{LoadedDataset, MEASURED, META};
 use models::description::{check_masses, check_storey_list, StructureDescription};
 use models::sensors::MeasurementKind;
-use models::structure::ShearChain;
+use models::structure::{Damping, ShearChain};
 use serde::{Deserialize, Serialize};
 
 /// The `[structure]` table of a filter config, and the structure flags of `sysid filter`
-/// (`--storeys`, `--hysteretic`, `--masses`, `--measurement`): what a user states about the
-/// building of field data. Every key is optional here; [`resolve`] says which are required.
+/// (`--storeys`, `--hysteretic`, `--masses`, `--measurement`, `--damping`): what a user states
+/// about the building of field data. Every key is optional here; [`resolve`] says which are
+/// required (all but `damping`, whose default is the per-storey dashpots).
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct StructureSettings {
@@ -36,6 +37,10 @@ pub struct StructureSettings {
     /// `relative` (ẍ).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub measurement: Option<MeasurementKind>,
+    /// Damping form of the model: `storey` (per-storey dashpots c_j, the default) or
+    /// `storey+mass` (also mass-proportional damping αM; θ gains `alpha` after c1..cN).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub damping: Option<Damping>,
 }
 
 impl StructureSettings {
@@ -57,6 +62,9 @@ impl StructureSettings {
         }
         if over.measurement.is_some() {
             self.measurement = over.measurement;
+        }
+        if over.damping.is_some() {
+            self.damping = over.damping;
         }
     }
 }
@@ -119,6 +127,12 @@ pub fn check_agrees(
             )?;
         }
     }
+    // The data's true θ (compared with the estimate) has the recorded form's parameters.
+    if let Some(d) = given.damping {
+        if d != recorded.damping {
+            conflict("damping", d.to_string(), recorded.damping.to_string())?;
+        }
+    }
     Ok(())
 }
 
@@ -156,6 +170,7 @@ pub fn resolve(
         given
             .hysteretic
             .get_or_insert_with(|| c.bouc_wen().iter().map(|b| b.storey + 1).collect());
+        given.damping.get_or_insert(c.damping_form());
     }
     let mut missing = Vec::new();
     if given.storeys.is_none() {
@@ -213,6 +228,7 @@ pub fn resolve(
         hysteretic,
         sensors: data.sensors.clone(),
         measurement: given.measurement.expect("checked"),
+        damping: given.damping.unwrap_or_default(),
     };
     d.validate()
         .map_err(|e| anyhow::anyhow!("{}: {}", measured_file.display(), e))?;

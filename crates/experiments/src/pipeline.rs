@@ -232,6 +232,7 @@ pub fn chain_spec(
     spec.marginal_prior = s.marginal_prior;
     spec.discretisation = s.discretisation;
     spec.substeps = s.substeps;
+    spec.damping = structure.damping;
     // Default priors: SPEC §3's for simulated data (the paper's scale); for field data scaled
     // from the measured response (`scaled_prior`).
     let mut prior = match (&s.prior, is_field_data(data, chain)) {
@@ -246,6 +247,27 @@ pub fn chain_spec(
             _ => ChainPrior::paper(n, &hysteretic),
         },
     };
+    // The storey+mass form's α: a default prior centred from the structure's first mode
+    // (`models::filtering::prior::alpha_prior`) unless the prior states one. A given `[prior]`
+    // without `alpha` is refused by the spec's validation, naming `prior.alpha`.
+    if structure.damping.has_mass_term() && prior.alpha.is_none() && s.prior.is_none() {
+        prior.alpha = Some(match (is_field_data(data, chain), chain) {
+            (false, Some(chain)) => {
+                let w1 = models::modal::modes(chain)
+                    .ok()
+                    .and_then(|m| m.modes.first().map(|m| m.frequency_hz))
+                    .context(
+                        "the true structure has no under-damped mode to centre α's prior on",
+                    )?
+                    * std::f64::consts::TAU;
+                models::filtering::prior::alpha_prior(w1)
+            }
+            _ => crate::scaled_prior::scaled_prior(data, &structure)?
+                .prior
+                .alpha
+                .context("the scaled prior of the storey+mass form has α")?,
+        });
+    }
     for (name, value) in &s.fix {
         prior
             .fix(name, *value)
@@ -541,6 +563,9 @@ pub fn identify_stoppable(
     });
     if spec.substeps != 1 {
         config["spec"]["substeps"] = spec.substeps.into();
+    }
+    if !spec.damping.is_default() {
+        config["spec"]["damping"] = spec.damping.name().into();
     }
     if let Some(p) = scaled {
         config["prior_from_data"] = serde_json::to_value(p).expect("serialisable");

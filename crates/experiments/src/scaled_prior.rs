@@ -17,10 +17,15 @@
 //! (0.3 and 0.5) because the peak is read at the record's frequency resolution and hysteresis
 //! softens the response (the peak sits below the small-amplitude frequency). The Bouc–Wen priors
 //! stay SPEC §3's: β, γ and n do not change when a structure is scaled in time.
+//!
+//! With the storey+mass damping form the 2 % at ω₁ is shared equally: c_j's median is that of
+//! a 1 % ratio (ζ − [`ALPHA_DAMPING_RATIO`]) and α ~ LogNormal(2·1 %·ω₁, 1.0)
+//! ([`models::filtering::prior::alpha_prior`]; pure mass damping has ζ = α/(2ω)).
 
 use anyhow::{bail, Result};
 use models::dataset::LoadedDataset;
 use models::description::StructureDescription;
+use models::filtering::prior::{alpha_prior, ALPHA_DAMPING_RATIO};
 use models::filtering::ChainPrior;
 use models::priors::Prior;
 use models::sensors::MeasurementKind;
@@ -47,6 +52,9 @@ pub struct ScaledPrior {
     /// Median of every c_j: 2ζ·k/ω₁.
     pub c_median: f64,
     pub damping_ratio: f64,
+    /// Median of α (storey+mass damping form only): 2·ζ_α·ω₁.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub alpha_median: Option<f64>,
     #[serde(skip)]
     pub prior: ChainPrior,
 }
@@ -54,11 +62,19 @@ pub struct ScaledPrior {
 impl ScaledPrior {
     /// One line for the terminal.
     pub fn describe(&self) -> String {
+        let alpha = match self.alpha_median {
+            Some(a) => format!(
+                ", alpha ~ LogNormal(median {a:.4}, log-sd {}) (mass-proportional damping \
+                 giving ζ₁ = {ALPHA_DAMPING_RATIO} at ω₁ alone)",
+                models::filtering::prior::ALPHA_LOG_SD
+            ),
+            None => String::new(),
+        };
         format!(
             "prior scaled from the data: ω₁ = {:.4} rad/s ({:.3} Hz) at storey {}, so k_j ~ \
              LogNormal(median {:.4}, log-sd {K_LOG_SD}), c_j ~ LogNormal(median {:.4}, log-sd \
-             {C_LOG_SD}) (damping ratio {} at ω₁); Bouc–Wen priors as SPEC §3; a `prior` in the \
-             config overrides it",
+             {C_LOG_SD}) (damping ratio {} at ω₁){alpha}; Bouc–Wen priors as SPEC §3; a \
+             `prior` in the config overrides it",
             self.omega1,
             self.omega1 / std::f64::consts::TAU,
             self.storey,
@@ -161,7 +177,14 @@ pub fn scaled_prior(data: &LoadedDataset, d: &StructureDescription) -> Result<Sc
     }
     let lambda1 = lowest_unit_eigenvalue(&d.masses);
     let k_median = omega1 * omega1 / lambda1;
-    let c_median = 2.0 * DAMPING_RATIO * k_median / omega1;
+    let mass_term = d.damping.has_mass_term();
+    // With αM the dashpots are centred on the rest of the ratio (module documentation).
+    let c_ratio = if mass_term {
+        DAMPING_RATIO - ALPHA_DAMPING_RATIO
+    } else {
+        DAMPING_RATIO
+    };
+    let c_median = 2.0 * c_ratio * k_median / omega1;
     let hysteretic = d.hysteretic_zero_based();
     let mut prior = ChainPrior::paper(d.storeys, &hysteretic);
     prior.k = vec![
@@ -178,13 +201,16 @@ pub fn scaled_prior(data: &LoadedDataset, d: &StructureDescription) -> Result<Sc
         };
         d.storeys
     ];
+    let alpha = mass_term.then(|| alpha_prior(omega1));
+    prior.alpha = alpha;
     Ok(ScaledPrior {
         storey,
         omega1,
         lambda1,
         k_median,
         c_median,
-        damping_ratio: DAMPING_RATIO,
+        damping_ratio: c_ratio,
+        alpha_median: mass_term.then_some(2.0 * ALPHA_DAMPING_RATIO * omega1),
         prior,
     })
 }

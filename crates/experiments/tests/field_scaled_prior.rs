@@ -89,6 +89,7 @@ fn a_stiff_building_is_identified_with_data_scaled_priors() {
             hysteretic: Some(vec![1]),
             masses: Some(vec![1.0]),
             measurement: Some(MeasurementKind::Absolute),
+            damping: None,
         },
         ..FilterSettings::default()
     };

@@ -105,6 +105,7 @@ fn stated(storeys: usize, hysteretic: &[usize], masses: &[f64]) -> FilterSetting
             hysteretic: Some(hysteretic.to_vec()),
             masses: Some(masses.to_vec()),
             measurement: Some(MeasurementKind::Absolute),
+            damping: None,
         },
         ..FilterSettings::default()
     }

@@ -175,6 +175,7 @@ fn measured_transfer_peaks_sit_at_the_modes_of_a_known_linear_building() {
         hysteretic: vec![],
         sensors: vec![1, 2, 3],
         measurement: MeasurementKind::Absolute,
+        damping: Default::default(),
     };
     let theta = chain.theta();
     let m = validation::modal(&d, &data, &theta);

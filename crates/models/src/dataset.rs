@@ -103,6 +103,11 @@ pub struct DatasetConfig {
     pub measurement: MeasurementKind,
     pub seed: u64,
     pub run: u64,
+    /// Mass-proportional damping α of the true structure (the storey+mass damping form,
+    /// `crate::structure::Damping`), besides the preset's per-storey dashpots; `None`: the
+    /// preset's per-storey damping alone (nothing recorded).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub mass_damping: Option<f64>,
 }
 
 impl DatasetConfig {
@@ -136,6 +141,7 @@ impl DatasetConfig {
             measurement: MeasurementKind::Relative,
             seed,
             run: 0,
+            mass_damping: None,
         })
     }
 }
@@ -152,9 +158,19 @@ impl DatasetConfig {
     }
 
     /// The true structure this config generates (SPEC §1): the preset's values for its storey
-    /// count, Bouc–Wen elements at the hysteretic storeys.
+    /// count, Bouc–Wen elements at the hysteretic storeys, and mass-proportional damping when
+    /// [`DatasetConfig::mass_damping`] is given.
     pub fn chain(&self) -> Result<ShearChain, DatasetError> {
-        Ok(self.preset_structure()?.chain)
+        let chain = self.preset_structure()?.chain;
+        match self.mass_damping {
+            None => Ok(chain),
+            Some(a) => chain
+                .with_mass_damping(a)
+                .map_err(|e| DatasetError::InvalidConfig {
+                    field: "mass_damping",
+                    message: e.to_string(),
+                }),
+        }
     }
 
     /// The structure as `dataset.json` records it: masses, hysteretic storeys, measured storeys
@@ -168,6 +184,7 @@ impl DatasetConfig {
             hysteretic: chain.bouc_wen().iter().map(|b| b.storey + 1).collect(),
             sensors: self.sensors.clone().unwrap_or_else(|| (1..=n).collect()),
             measurement: self.measurement,
+            damping: chain.damping_form(),
         };
         d.validate().map_err(described)?;
         Ok(d)
@@ -630,6 +647,7 @@ impl Dataset {
                 hysteretic: self.chain.bouc_wen().iter().map(|b| b.storey + 1).collect(),
                 sensors: self.sensors.one_based(),
                 measurement: self.sensors.kind(),
+                damping: self.chain.damping_form(),
             }),
             bouc_wen_storeys: self.chain.bouc_wen().iter().map(|b| b.storey).collect(),
             theta_names: self.theta_names.clone(),

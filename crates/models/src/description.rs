@@ -9,6 +9,7 @@
 
 use crate::limits;
 use crate::sensors::{MeasurementKind, SensorLayout};
+use crate::structure::Damping;
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
@@ -42,6 +43,10 @@ pub struct StructureDescription {
     pub sensors: Vec<usize>,
     /// What the accelerometers measure.
     pub measurement: MeasurementKind,
+    /// The damping form of the model identified for it ([`Damping`]); the default (per-storey
+    /// dashpots) is not written.
+    #[serde(default, skip_serializing_if = "Damping::is_default")]
+    pub damping: Damping,
 }
 
 impl StructureDescription {
@@ -148,6 +153,7 @@ mod tests {
             storeys: 10,
             masses: vec![1.0; 10],
             hysteretic: vec![1, 6],
+            damping: Damping::Storey,
             sensors: vec![1, 3, 6, 10],
             measurement: MeasurementKind::Absolute,
         }

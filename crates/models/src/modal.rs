@@ -55,13 +55,25 @@ pub enum ModalError {
     NonFinite,
 }
 
-/// `M`, `C`, `K` of the linearised chain (see the module documentation).
+/// `M`, `C`, `K` of the linearised chain (see the module documentation); with mass-proportional
+/// damping `C` includes `αM`.
 pub fn linearised_matrices(chain: &ShearChain) -> (DMatrix<f64>, DMatrix<f64>, DMatrix<f64>) {
-    matrices(chain.masses(), chain.stiffness(), chain.damping())
+    matrices(
+        chain.masses(),
+        chain.stiffness(),
+        chain.damping(),
+        chain.alpha(),
+    )
 }
 
-/// `M`, `C`, `K` of a chain with storey masses `m`, element stiffnesses `k` and dampings `c`.
-fn matrices(m: &[f64], k: &[f64], c: &[f64]) -> (DMatrix<f64>, DMatrix<f64>, DMatrix<f64>) {
+/// `M`, `C`, `K` of a chain with storey masses `m`, element stiffnesses `k` and dampings `c`,
+/// plus `αM` in `C` when `alpha` is given.
+fn matrices(
+    m: &[f64],
+    k: &[f64],
+    c: &[f64],
+    alpha: Option<f64>,
+) -> (DMatrix<f64>, DMatrix<f64>, DMatrix<f64>) {
     let n = m.len();
     let mm = DMatrix::from_diagonal(&nalgebra::DVector::from_column_slice(m));
     let assemble = |coef: &[f64]| {
@@ -76,23 +88,45 @@ fn matrices(m: &[f64], k: &[f64], c: &[f64]) -> (DMatrix<f64>, DMatrix<f64>, DMa
         }
         a
     };
-    (mm, assemble(c), assemble(k))
+    let mut cc = assemble(c);
+    if let Some(a) = alpha {
+        for j in 0..n {
+            cc[(j, j)] += a * m[j];
+        }
+    }
+    (mm, cc, assemble(k))
 }
 
 /// The modes of the linearised chain (initial tangent stiffness of every Bouc–Wen element).
 pub fn modes(chain: &ShearChain) -> Result<Modes, ModalError> {
-    modes_of(chain.masses(), chain.stiffness(), chain.damping())
+    modes_of_damped(
+        chain.masses(),
+        chain.stiffness(),
+        chain.damping(),
+        chain.alpha(),
+    )
 }
 
 /// The modes of the chain with masses `m`, stiffnesses `k` and dampings `c` (one per storey),
 /// without the checks of [`ShearChain::new`]: an identified θ with a negative damping still has
 /// modes, and one that grows shows a negative ζ and is counted in `not_decaying`.
 pub fn modes_of(m: &[f64], k: &[f64], c: &[f64]) -> Result<Modes, ModalError> {
+    modes_of_damped(m, k, c, None)
+}
+
+/// [`modes_of`] with mass-proportional damping `αM` added to `C` when `alpha` is given (the
+/// [`crate::structure::Damping::StoreyMass`] form; a negative identified α is analysed as it is).
+pub fn modes_of_damped(
+    m: &[f64],
+    k: &[f64],
+    c: &[f64],
+    alpha: Option<f64>,
+) -> Result<Modes, ModalError> {
     let n = m.len();
     if n == 0 || k.len() != n || c.len() != n || m.iter().any(|v| v.is_nan() || *v <= 0.0) {
         return Err(ModalError::NonFinite);
     }
-    let (m, c, k) = matrices(m, k, c);
+    let (m, c, k) = matrices(m, k, c, alpha);
     let mut a = DMatrix::<f64>::zeros(2 * n, 2 * n);
     for i in 0..n {
         a[(i, n + i)] = 1.0;
@@ -193,6 +227,50 @@ mod tests {
             let wd = w * (1.0 - (b * w / 2.0).powi(2)).sqrt();
             assert!((mode.damped_hz * std::f64::consts::TAU / wd - 1.0).abs() < 1e-9);
         }
+    }
+
+    #[test]
+    fn mass_proportional_damping_gives_alpha_over_two_omega() {
+        // C = αM (no dashpots), unit masses, equal k: ζ_r = α/(2ω_r) with the closed-form ω_r.
+        let (k, alpha) = (200.0, 0.6);
+        let pure = chain(4, k, 0.0, false).with_mass_damping(alpha).unwrap();
+        let got = modes(&pure).unwrap();
+        assert_eq!(got.modes.len(), 4);
+        for (r, mode) in got.modes.iter().enumerate() {
+            let angle = (2 * r + 1) as f64 * std::f64::consts::PI / 18.0;
+            let w = 2.0 * k.sqrt() * angle.sin();
+            let w_got = mode.frequency_hz * std::f64::consts::TAU;
+            assert!((w_got / w - 1.0).abs() < 1e-10, "{w_got} vs {w}");
+            let zeta = alpha / (2.0 * w);
+            assert!(
+                (mode.damping_ratio / zeta - 1.0).abs() < 1e-9,
+                "mode {r}: ζ {} vs {zeta}",
+                mode.damping_ratio
+            );
+        }
+        // Rayleigh C = αM + bK (c_j = b k_j), unequal masses: ζ_r = α/(2ω_r) + bω_r/2, with
+        // ω_r from the undamped chain (proportional damping keeps its mode shapes).
+        let (m, kk, b) = (vec![1.0, 1.03, 1.41], vec![3200.0, 3400.0, 3800.0], 1.4e-4);
+        let c: Vec<f64> = kk.iter().map(|k| b * k).collect();
+        let undamped = modes_of(&m, &kk, &[0.0; 3]).unwrap();
+        let ray = ShearChain::new(m.clone(), kk.clone(), c.clone(), vec![])
+            .unwrap()
+            .with_mass_damping(0.54)
+            .unwrap();
+        let got = modes(&ray).unwrap();
+        assert_eq!(got, modes_of_damped(&m, &kk, &c, Some(0.54)).unwrap());
+        for (u, d) in undamped.modes.iter().zip(&got.modes) {
+            let w = u.frequency_hz * std::f64::consts::TAU;
+            let zeta = 0.54 / (2.0 * w) + b * w / 2.0;
+            assert!((d.frequency_hz / u.frequency_hz - 1.0).abs() < 1e-10);
+            assert!((d.damping_ratio / zeta - 1.0).abs() < 1e-9);
+        }
+        // The default form is the chain without α, to the bit.
+        let plain = chain(3, k, 0.3, false);
+        assert_eq!(
+            modes(&plain).unwrap(),
+            modes_of(&[1.0; 3], &[k; 3], &[0.3; 3]).unwrap()
+        );
     }
 
     #[test]

@@ -12,6 +12,12 @@
 //! and storey `j` obeys `m_j ẍ_j = −m_j ü_g − f_j + f_{j+1}` (`f_N = 0`). For the paper's
 //! three-storey chain with unit masses this is exactly SPEC §1.
 //!
+//! **Damping form** ([`Damping`]). `storey` (the default, SPEC §1): the per-storey dashpots
+//! above only. `storey+mass`: besides them a mass-proportional term, storey `j` gaining the
+//! force `−α m_j v_j` (`v_j` relative to the ground), so `C = αM + C_storey`; it contains
+//! Rayleigh damping (`c_j = β_R k_j`). α ≥ 0 is one more parameter, placed in θ right after
+//! `c_1..c_N` and named `alpha`.
+//!
 //! One physics source: the forces and accelerations are evaluated by one kernel,
 //! [`ChainTopology`] (over any [`ChainView`] of a point), and the hysteretic rate by one
 //! implementation of a [`HysteresisLaw`] ([`BoucWenLaw`]); the truth simulator
@@ -19,8 +25,8 @@
 //! one particle (`f64`) or a SIMD pack of particles.
 //!
 //! State layout: `[x_1..x_N, v_1..v_N, r_e for each Bouc–Wen element in order]`.
-//! Parameter vector θ: `[k_1..k_N, c_1..c_N, then (β, γ, n) per Bouc–Wen element]`, which for the
-//! paper is `[k1 k2 k3 c1 c2 c3 β γ n]`.
+//! Parameter vector θ: `[k_1..k_N, c_1..c_N, (α with mass damping), then (β, γ, n) per Bouc–Wen
+//! element]`, which for the paper is `[k1 k2 k3 c1 c2 c3 β γ n]`.
 
 use core_filters::real::Real;
 use thiserror::Error;
@@ -35,6 +41,75 @@ pub struct BoucWen {
     /// Exponent; `n ≥ 1` is required (see [`StructureError::ExponentBelowOne`]).
     pub n: f64,
 }
+
+/// The damping form of the chain (module documentation).
+#[derive(
+    Debug, Clone, Copy, PartialEq, Eq, Hash, Default, serde::Serialize, serde::Deserialize,
+)]
+pub enum Damping {
+    /// Per-storey (inter-storey) dashpots `c_j` only (SPEC §1).
+    #[default]
+    #[serde(rename = "storey")]
+    Storey,
+    /// Per-storey dashpots plus mass-proportional damping `α M` (θ gains `alpha`).
+    #[serde(rename = "storey+mass")]
+    StoreyMass,
+}
+
+impl Damping {
+    /// Every form, in the order of [`Damping::NAMES`].
+    pub const ALL: [Damping; 2] = [Damping::Storey, Damping::StoreyMass];
+    /// The names users write (`--damping`, `damping = "…"`).
+    pub const NAMES: [&'static str; 2] = ["storey", "storey+mass"];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Damping::Storey => Self::NAMES[0],
+            Damping::StoreyMass => Self::NAMES[1],
+        }
+    }
+
+    /// Whether the form has the mass-proportional term (and θ its `alpha`).
+    pub fn has_mass_term(self) -> bool {
+        self == Damping::StoreyMass
+    }
+
+    /// Number of θ entries the form adds after `c_1..c_N` (0 or 1).
+    pub fn extra_parameters(self) -> usize {
+        usize::from(self.has_mass_term())
+    }
+
+    /// Whether this is the default form (skipped when serialising, so that what records the
+    /// default form is unchanged).
+    pub fn is_default(&self) -> bool {
+        *self == Damping::Storey
+    }
+}
+
+impl std::fmt::Display for Damping {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// An unknown damping form name.
+#[derive(Debug, Clone, PartialEq, Eq, Error)]
+#[error("unknown damping form `{0}` (expected storey or storey+mass)")]
+pub struct UnknownDamping(pub String);
+
+impl std::str::FromStr for Damping {
+    type Err = UnknownDamping;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s.trim() {
+            "storey" => Ok(Damping::Storey),
+            "storey+mass" => Ok(Damping::StoreyMass),
+            other => Err(UnknownDamping(other.to_string())),
+        }
+    }
+}
+
+/// Name of the mass-proportional damping coefficient α in θ.
+pub const ALPHA_NAME: &str = "alpha";
 
 /// Impossible structure definitions.
 #[derive(Debug, Clone, PartialEq, Error)]
@@ -71,6 +146,8 @@ pub enum StructureError {
     /// below 1, so the chain requires `n ≥ 1`.
     #[error("Bouc–Wen element at storey {storey}: exponent n = {n} must be ≥ 1")]
     ExponentBelowOne { storey: usize, n: f64 },
+    #[error("mass-proportional damping alpha must be non-negative and finite, got {0}")]
+    NegativeAlpha(f64),
 }
 
 /// An N-storey shear chain (SPEC §1), validated at construction.
@@ -79,6 +156,9 @@ pub struct ShearChain {
     masses: Vec<f64>,
     k: Vec<f64>,
     c: Vec<f64>,
+    /// Mass-proportional damping coefficient α ([`Damping::StoreyMass`]); `None` for
+    /// [`Damping::Storey`].
+    alpha: Option<f64>,
     bouc_wen: Vec<BoucWen>,
     /// Masses and hysteretic elements: the force kernel shared with the filter partitions.
     topology: ChainTopology,
@@ -198,6 +278,11 @@ pub trait ChainView<T: Real> {
     fn r(&self, e: usize) -> T;
     fn k(&self, j: usize) -> T;
     fn c(&self, j: usize) -> T;
+    /// Mass-proportional damping α; read only when the topology has the mass term
+    /// ([`Damping::StoreyMass`]).
+    fn alpha(&self) -> T {
+        T::splat(0.0)
+    }
 }
 
 /// Masses and the positions of the hysteretic elements: everything the force kernel needs
@@ -211,6 +296,8 @@ pub struct ChainTopology {
     element: Vec<Option<usize>>,
     /// Storey of hysteretic element `e`.
     storeys: Vec<usize>,
+    /// The damping form: with [`Damping::StoreyMass`] storey `j` also carries `−α m_j v_j`.
+    damping: Damping,
 }
 
 impl ChainTopology {
@@ -246,7 +333,20 @@ impl ChainTopology {
             masses,
             element,
             storeys: hysteretic.to_vec(),
+            damping: Damping::Storey,
         })
+    }
+
+    /// The same topology with damping form `damping`.
+    pub fn with_damping(mut self, damping: Damping) -> Self {
+        self.damping = damping;
+        self
+    }
+
+    /// The damping form.
+    #[inline]
+    pub fn damping(&self) -> Damping {
+        self.damping
     }
 
     /// Number of storeys N.
@@ -298,8 +398,8 @@ impl ChainTopology {
         p.k(j) * d + p.c(j) * dv
     }
 
-    /// `a_j = ground + (F_{j+1} − F_j) / m_j` (`F_N = 0`): the relative acceleration for
-    /// `ground = −ü_g`.
+    /// `a_j = ground + (F_{j+1} − F_j) / m_j` (`F_N = 0`), minus `α v_j` with mass damping:
+    /// the relative acceleration for `ground = −ü_g`.
     #[inline]
     pub fn acceleration<T: Real>(&self, p: &impl ChainView<T>, j: usize, ground: T) -> T {
         let f = self.force(p, j);
@@ -308,7 +408,19 @@ impl ChainTopology {
         } else {
             T::splat(0.0)
         };
-        ground + (f_next - f) / T::splat(self.masses[j])
+        let a = ground + (f_next - f) / T::splat(self.masses[j]);
+        self.mass_damped(p, j, a)
+    }
+
+    /// `a − α v_j` with the mass term, `a` itself otherwise (bit for bit: the default form
+    /// evaluates exactly what it did before the term existed).
+    #[inline(always)]
+    fn mass_damped<T: Real>(&self, p: &impl ChainView<T>, j: usize, a: T) -> T {
+        if self.damping.has_mass_term() {
+            a - p.alpha() * p.v(j)
+        } else {
+            a
+        }
     }
 
     /// Every storey's acceleration, each element force evaluated once; `out` has length N.
@@ -322,7 +434,7 @@ impl ChainTopology {
             } else {
                 T::splat(0.0)
             };
-            *o = ground + (f_next - f) / T::splat(m);
+            *o = self.mass_damped(p, j, ground + (f_next - f) / T::splat(m));
             f = f_next;
         }
     }
@@ -333,8 +445,21 @@ impl ChainTopology {
 /// for a single element (`beta`, `gamma`, `n`: the paper's notation) or suffixed by the 1-based
 /// storey for several (`beta4`).
 pub fn theta_names<L: HysteresisLaw>(n_storeys: usize, hysteretic: &[usize]) -> Vec<String> {
+    theta_names_damped::<L>(n_storeys, hysteretic, Damping::Storey)
+}
+
+/// [`theta_names`] for damping form `damping`: with [`Damping::StoreyMass`], `alpha` follows
+/// `c1..cN`.
+pub fn theta_names_damped<L: HysteresisLaw>(
+    n_storeys: usize,
+    hysteretic: &[usize],
+    damping: Damping,
+) -> Vec<String> {
     let mut names: Vec<String> = (1..=n_storeys).map(|j| format!("k{j}")).collect();
     names.extend((1..=n_storeys).map(|j| format!("c{j}")));
+    if damping.has_mass_term() {
+        names.push(ALPHA_NAME.to_string());
+    }
     let single = hysteretic.len() == 1;
     for &j in hysteretic {
         let s = if single {
@@ -363,6 +488,7 @@ struct StateView<'a> {
     n: usize,
     k: &'a [f64],
     c: &'a [f64],
+    alpha: f64,
 }
 
 impl ChainView<f64> for StateView<'_> {
@@ -385,6 +511,10 @@ impl ChainView<f64> for StateView<'_> {
     #[inline]
     fn c(&self, j: usize) -> f64 {
         self.c[j]
+    }
+    #[inline]
+    fn alpha(&self) -> f64 {
+        self.alpha
     }
 }
 
@@ -463,9 +593,31 @@ impl ShearChain {
             masses,
             k,
             c,
+            alpha: None,
             bouc_wen,
             topology,
         })
+    }
+
+    /// The same chain with mass-proportional damping `α M` besides its per-storey dashpots
+    /// ([`Damping::StoreyMass`]); `alpha` must be non-negative and finite.
+    pub fn with_mass_damping(mut self, alpha: f64) -> Result<Self, StructureError> {
+        if !(alpha >= 0.0 && alpha.is_finite()) {
+            return Err(StructureError::NegativeAlpha(alpha));
+        }
+        self.alpha = Some(alpha);
+        self.topology = self.topology.with_damping(Damping::StoreyMass);
+        Ok(self)
+    }
+
+    /// The damping form.
+    pub fn damping_form(&self) -> Damping {
+        self.topology.damping()
+    }
+
+    /// Mass-proportional damping α (`None` for the per-storey form).
+    pub fn alpha(&self) -> Option<f64> {
+        self.alpha
     }
 
     /// Number of storeys N.
@@ -525,6 +677,7 @@ impl ShearChain {
             n,
             k: &self.k,
             c: &self.c,
+            alpha: self.alpha.unwrap_or(0.0),
         };
         self.topology.accelerations(&view, -ug, out);
     }
@@ -579,11 +732,12 @@ impl ShearChain {
         (s > 0.0).then(|| (1.0 / s).powf(1.0 / bw.n))
     }
 
-    /// Parameter vector θ: `[k_1..k_N, c_1..c_N, then (β, γ, n) per Bouc–Wen element]`.
+    /// Parameter vector θ: `[k_1..k_N, c_1..c_N, (α), then (β, γ, n) per Bouc–Wen element]`.
     pub fn theta(&self) -> Vec<f64> {
-        let mut t = Vec::with_capacity(2 * self.storeys() + 3 * self.bouc_wen.len());
+        let mut t = Vec::with_capacity(2 * self.storeys() + 1 + 3 * self.bouc_wen.len());
         t.extend_from_slice(&self.k);
         t.extend_from_slice(&self.c);
+        t.extend(self.alpha);
         for bw in &self.bouc_wen {
             t.extend_from_slice(&[bw.beta, bw.gamma, bw.n]);
         }
@@ -594,7 +748,11 @@ impl ShearChain {
     /// `gamma`, `n` when the chain has a single Bouc–Wen element (the paper's notation), or
     /// `beta<s>`, `gamma<s>`, `n<s>` (1-based storey `s`) when it has several.
     pub fn theta_names(&self) -> Vec<String> {
-        theta_names::<BoucWenLaw>(self.storeys(), self.topology.hysteretic_storeys())
+        theta_names_damped::<BoucWenLaw>(
+            self.storeys(),
+            self.topology.hysteretic_storeys(),
+            self.damping_form(),
+        )
     }
 
     /// Names of the state entries: `x1..xN`, `v1..vN`, `r<s>` per Bouc–Wen element (1-based
@@ -603,11 +761,13 @@ impl ShearChain {
         state_names(self.storeys(), self.topology.hysteretic_storeys())
     }
 
-    /// The same chain (masses and Bouc–Wen storeys) with parameters θ in the order of
-    /// [`ShearChain::theta`], validated (e.g. for the validation run with θ_val, SPEC §7).
+    /// The same chain (masses, Bouc–Wen storeys and damping form) with parameters θ in the
+    /// order of [`ShearChain::theta`], validated (e.g. for the validation run with θ_val,
+    /// SPEC §7).
     pub fn with_theta(&self, theta: &[f64]) -> Result<Self, StructureError> {
         let n = self.storeys();
-        let expected = 2 * n + 3 * self.bouc_wen.len();
+        let a = self.damping_form().extra_parameters();
+        let expected = 2 * n + a + 3 * self.bouc_wen.len();
         if theta.len() != expected {
             return Err(StructureError::WrongLength {
                 what: "theta",
@@ -621,17 +781,21 @@ impl ShearChain {
             .enumerate()
             .map(|(e, bw)| BoucWen {
                 storey: bw.storey,
-                beta: theta[2 * n + 3 * e],
-                gamma: theta[2 * n + 3 * e + 1],
-                n: theta[2 * n + 3 * e + 2],
+                beta: theta[2 * n + a + 3 * e],
+                gamma: theta[2 * n + a + 3 * e + 1],
+                n: theta[2 * n + a + 3 * e + 2],
             })
             .collect();
-        Self::new(
+        let chain = Self::new(
             self.masses.clone(),
             theta[..n].to_vec(),
             theta[n..2 * n].to_vec(),
             bouc_wen,
-        )
+        )?;
+        match self.damping_form() {
+            Damping::Storey => Ok(chain),
+            Damping::StoreyMass => chain.with_mass_damping(theta[2 * n]),
+        }
     }
 }
 
@@ -683,6 +847,63 @@ mod tests {
             assert!((e[i] - (s[i] + 0.005 * want[i])).abs() < 1e-15);
         }
         assert!((ch.restoring_force(&s, 0) - 8.0 * r1).abs() < 1e-15);
+    }
+
+    #[test]
+    fn mass_damping_adds_minus_alpha_v_to_each_storey() {
+        // Storey j gains −α m_j v_j, so a_j gains −α v_j; the rest is the per-storey chain.
+        let (m, k, c) = (
+            vec![1.0, 1.5, 0.7],
+            vec![8.0, 6.0, 5.0],
+            vec![0.25, 0.1, 0.3],
+        );
+        let plain = ShearChain::new(m.clone(), k.clone(), c.clone(), vec![]).unwrap();
+        let damped = plain.clone().with_mass_damping(0.6).unwrap();
+        let s = [0.1, -0.2, 0.35, 0.7, -0.4, 0.25];
+        let (mut d0, mut d1) = ([0.0; 6], [0.0; 6]);
+        plain.rhs(&s, 1.3, &mut d0);
+        damped.rhs(&s, 1.3, &mut d1);
+        assert_eq!(d0[..3], d1[..3]);
+        for j in 0..3 {
+            let want = d0[3 + j] - 0.6 * s[3 + j];
+            assert!((d1[3 + j] - want).abs() < 1e-14, "storey {j}");
+        }
+        assert_eq!(damped.damping_form(), Damping::StoreyMass);
+        assert_eq!(damped.theta(), [8.0, 6.0, 5.0, 0.25, 0.1, 0.3, 0.6]);
+        assert_eq!(
+            damped.theta_names(),
+            ["k1", "k2", "k3", "c1", "c2", "c3", "alpha"]
+        );
+        assert_eq!(damped.with_theta(&damped.theta()).unwrap(), damped);
+        assert!(damped.with_theta(&plain.theta()).is_err());
+        // A Bouc–Wen element's parameters follow α.
+        let bw = ShearChain::new(
+            vec![1.0; 2],
+            vec![3.0, 5.0],
+            vec![0.1, 0.2],
+            vec![BoucWen {
+                storey: 1,
+                beta: 0.5,
+                gamma: 0.5,
+                n: 1.5,
+            }],
+        )
+        .unwrap()
+        .with_mass_damping(0.0)
+        .unwrap();
+        let t = [3.0, 5.0, 0.1, 0.2, 0.4, 1.0, -0.5, 2.0];
+        let again = bw.with_theta(&t).unwrap();
+        assert_eq!(again.theta(), t);
+        assert_eq!(again.alpha(), Some(0.4));
+        assert_eq!(again.bouc_wen()[0].n, 2.0);
+        assert_eq!(
+            plain.clone().with_mass_damping(-0.1),
+            Err(StructureError::NegativeAlpha(-0.1))
+        );
+        assert!(plain.with_mass_damping(f64::NAN).is_err());
+        assert_eq!("storey+mass".parse::<Damping>(), Ok(Damping::StoreyMass));
+        assert_eq!("storey".parse::<Damping>(), Ok(Damping::Storey));
+        assert!("rayleigh".parse::<Damping>().is_err());
     }
 
     #[test]

@@ -357,21 +357,27 @@ fn mln_rbpf_gaussian_is_the_kalman_filter_of_z_given_its_path() {
 /// the states, built here from the equations of motion (SPEC §3), on a 10-storey chain with four
 /// sensors — for forward and semi-implicit Euler, with one transition per sample and with three
 /// (`substeps`: the Kalman filter predicts three times with dt/3, ü_g interpolated linearly and a
-/// third of the process-noise variance, then updates once).
+/// third of the process-noise variance, then updates once) — and with the storey+mass damping
+/// form, α fixed: `C` gains `αM` (unit masses here).
 #[test]
 fn mpf_ekf2_is_the_kalman_filter_of_a_linear_chain() {
     for disc in [Discretisation::Euler, Discretisation::Symplectic] {
         for substeps in [1, 3] {
-            mpf_ekf2_against_kalman(disc, substeps);
+            mpf_ekf2_against_kalman(disc, substeps, None);
         }
+        mpf_ekf2_against_kalman(disc, 1, Some(0.7));
     }
 }
 
-fn mpf_ekf2_against_kalman(disc: Discretisation, substeps: usize) {
+fn mpf_ekf2_against_kalman(disc: Discretisation, substeps: usize, alpha: Option<f64>) {
     let n = 10;
     let sensors = [1, 4, 8, 10];
     let (mut spec, y) = chain_data(n, &[], &sensors, 0.5, disc);
     spec.substeps = substeps;
+    if let Some(a) = alpha {
+        spec.damping = models::structure::Damping::StoreyMass;
+        spec.prior.alpha = Some(models::priors::Prior::Fixed { value: a });
+    }
     for j in 1..=n {
         spec.prior.fix(&format!("k{j}"), 8.0).unwrap();
         spec.prior.fix(&format!("c{j}"), 0.25).unwrap();
@@ -403,6 +409,7 @@ fn mpf_ekf2_against_kalman(disc: Discretisation, substeps: usize) {
                 mat[(j - 1, j)] -= v;
             }
         }
+        cmat[(j, j)] += alpha.unwrap_or(0.0);
     }
     let mut acc = DMatrix::<f64>::zeros(n, 2 * n);
     acc.view_mut((0, 0), (n, n)).copy_from(&(-&kmat));
@@ -470,7 +477,7 @@ fn mpf_ekf2_against_kalman(disc: Discretisation, substeps: usize) {
         let ll = -0.5 * (resid.transpose() * chol.solve(&resid))[0]
             - 0.5 * s_cov.determinant().ln()
             - 2.0 * (2.0 * std::f64::consts::PI).ln();
-        let ctx = format!("{disc:?}, substeps {substeps}, k={k}");
+        let ctx = format!("{disc:?}, substeps {substeps}, α {alpha:?}, k={k}");
         assert!(
             (info.loglik_increment - ll).abs() < 1e-7 * ll.abs().max(1.0),
             "{ctx}: {} vs {ll}",

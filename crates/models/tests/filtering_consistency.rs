@@ -14,6 +14,7 @@ use filtering_support::*;
 use models::filtering::{AugmentedChain, Discretisation, MlnChain, MpfChain};
 use models::integrate::simulate_rk4;
 use models::sensors::MeasurementKind;
+use models::structure::Damping;
 
 fn propagate(aug: &AugmentedChain, k: usize, x: &[f64]) -> Vec<f64> {
     let mut out = vec![0.0; x.len()];
@@ -23,7 +24,7 @@ fn propagate(aug: &AugmentedChain, k: usize, x: &[f64]) -> Vec<f64> {
 
 #[test]
 fn augmented_maps_are_the_truth_simulator_stepped_by_each_scheme() {
-    for case in cases() {
+    for case in cases().into_iter().chain(damped_cases()) {
         let mut rng = stream(21, 0, case.name);
         for _ in 0..4 {
             let p = random_point(&case, &mut rng);
@@ -138,73 +139,76 @@ fn same_lanes(p: &[Pack], s: &[Vec<f64>], what: &str) {
 
 #[test]
 fn pack_evaluation_is_the_scalar_evaluation_of_each_lane() {
-    for case in cases() {
+    // Both damping forms (the MLN partition refuses the storey+mass form).
+    for case in cases().into_iter().chain(damped_cases()) {
         for disc in [Discretisation::Euler, Discretisation::Symplectic] {
-            let mln = MlnChain::new(spec(&case, disc)).unwrap();
             let mpf = MpfChain::new(spec(&case, disc)).unwrap();
             let aug = AugmentedChain::new(spec(&case, disc)).unwrap();
             let mut rng = stream(24, 0, case.name);
             let pts: Vec<Point> = (0..4).map(|_| random_point(&case, &mut rng)).collect();
             let what = format!("{} {disc}", case.name);
             // MLN.
-            let d = mln.dims();
-            let uz: Vec<(Vec<f64>, Vec<f64>)> = pts
-                .iter()
-                .map(|p| split(&mln.layout(), p, d.nu, d.nz))
-                .collect();
-            let us: Vec<Vec<f64>> = uz.iter().map(|x| x.0.clone()).collect();
-            let zs: Vec<Vec<f64>> = uz.iter().map(|x| x.1.clone()).collect();
-            let u_new: Vec<Vec<f64>> = pts
-                .iter()
-                .zip(&us)
-                .map(|(p, u)| {
-                    let mut v = u.clone();
-                    let next = propagate(&aug, K, &p.augmented());
-                    v[..aug.noise_dim()].copy_from_slice(&next[..aug.noise_dim()]);
-                    v
-                })
-                .collect();
-            let (up, zp, unp) = (pack(&us), pack(&zs), pack(&u_new));
-            for (s, st) in mln.stages().iter().enumerate() {
-                let mut fp = vec![Pack::splat(0.0); st.rows.len()];
-                let mut big_fp = Sparse::<Pack>::recording(st.linked.len(), d.nz);
-                mln.transition(s, K, &up, &unp, &mut fp, &mut big_fp);
-                let (mut fs, mut big_fs) = (Vec::new(), Vec::new());
-                for b in 0..4 {
-                    let mut f = vec![0.0; st.rows.len()];
-                    let mut big_f = Sparse::<f64>::recording(st.linked.len(), d.nz);
-                    mln.transition(s, K, &us[b], &u_new[b], &mut f, &mut big_f);
-                    fs.push(f);
-                    big_fs.push(big_f.values().to_vec());
+            if !case.damping.has_mass_term() {
+                let mln = MlnChain::new(spec(&case, disc)).unwrap();
+                let d = mln.dims();
+                let uz: Vec<(Vec<f64>, Vec<f64>)> = pts
+                    .iter()
+                    .map(|p| split(&mln.layout(), p, d.nu, d.nz))
+                    .collect();
+                let us: Vec<Vec<f64>> = uz.iter().map(|x| x.0.clone()).collect();
+                let zs: Vec<Vec<f64>> = uz.iter().map(|x| x.1.clone()).collect();
+                let u_new: Vec<Vec<f64>> = pts
+                    .iter()
+                    .zip(&us)
+                    .map(|(p, u)| {
+                        let mut v = u.clone();
+                        let next = propagate(&aug, K, &p.augmented());
+                        v[..aug.noise_dim()].copy_from_slice(&next[..aug.noise_dim()]);
+                        v
+                    })
+                    .collect();
+                let (up, zp, unp) = (pack(&us), pack(&zs), pack(&u_new));
+                for (s, st) in mln.stages().iter().enumerate() {
+                    let mut fp = vec![Pack::splat(0.0); st.rows.len()];
+                    let mut big_fp = Sparse::<Pack>::recording(st.linked.len(), d.nz);
+                    mln.transition(s, K, &up, &unp, &mut fp, &mut big_fp);
+                    let (mut fs, mut big_fs) = (Vec::new(), Vec::new());
+                    for b in 0..4 {
+                        let mut f = vec![0.0; st.rows.len()];
+                        let mut big_f = Sparse::<f64>::recording(st.linked.len(), d.nz);
+                        mln.transition(s, K, &us[b], &u_new[b], &mut f, &mut big_f);
+                        fs.push(f);
+                        big_fs.push(big_f.values().to_vec());
+                    }
+                    same_lanes(&fp, &fs, &format!("{what}: MLN f"));
+                    same_lanes(big_fp.values(), &big_fs, &format!("{what}: MLN F"));
                 }
-                same_lanes(&fp, &fs, &format!("{what}: MLN f"));
-                same_lanes(big_fp.values(), &big_fs, &format!("{what}: MLN F"));
+                let mut sp = Sparse::<Pack>::recording(d.nu, d.nz);
+                mln.transition_sensitivity(K, &up, &unp, &zp, &mut sp);
+                let mut hp = vec![Pack::splat(0.0); d.ny];
+                let mut big_hp = Sparse::<Pack>::recording(d.ny, d.nz);
+                mln.observation(K, &up, &mut hp, &mut big_hp);
+                let mut jp = Sparse::<Pack>::recording(d.ny, d.nu);
+                mln.observation_jacobian_u(K, &up, &zp, &mut jp);
+                let (mut ss, mut hs, mut big_hs, mut js) = (vec![], vec![], vec![], vec![]);
+                for b in 0..4 {
+                    let mut s = Sparse::<f64>::recording(d.nu, d.nz);
+                    mln.transition_sensitivity(K, &us[b], &u_new[b], &zs[b], &mut s);
+                    ss.push(s.values().to_vec());
+                    let mut h = vec![0.0; d.ny];
+                    let mut big_h = Sparse::<f64>::recording(d.ny, d.nz);
+                    mln.observation(K, &us[b], &mut h, &mut big_h);
+                    hs.push(h);
+                    big_hs.push(big_h.values().to_vec());
+                    let mut j = Sparse::<f64>::recording(d.ny, d.nu);
+                    mln.observation_jacobian_u(K, &us[b], &zs[b], &mut j);
+                    js.push(j.values().to_vec());
+                }
+                same_lanes(sp.values(), &ss, &format!("{what}: MLN sensitivity"));
+                same_lanes(&hp, &hs, &format!("{what}: MLN h"));
+                same_lanes(big_hp.values(), &big_hs, &format!("{what}: MLN H"));
+                same_lanes(jp.values(), &js, &format!("{what}: MLN J_u"));
             }
-            let mut sp = Sparse::<Pack>::recording(d.nu, d.nz);
-            mln.transition_sensitivity(K, &up, &unp, &zp, &mut sp);
-            let mut hp = vec![Pack::splat(0.0); d.ny];
-            let mut big_hp = Sparse::<Pack>::recording(d.ny, d.nz);
-            mln.observation(K, &up, &mut hp, &mut big_hp);
-            let mut jp = Sparse::<Pack>::recording(d.ny, d.nu);
-            mln.observation_jacobian_u(K, &up, &zp, &mut jp);
-            let (mut ss, mut hs, mut big_hs, mut js) = (vec![], vec![], vec![], vec![]);
-            for b in 0..4 {
-                let mut s = Sparse::<f64>::recording(d.nu, d.nz);
-                mln.transition_sensitivity(K, &us[b], &u_new[b], &zs[b], &mut s);
-                ss.push(s.values().to_vec());
-                let mut h = vec![0.0; d.ny];
-                let mut big_h = Sparse::<f64>::recording(d.ny, d.nz);
-                mln.observation(K, &us[b], &mut h, &mut big_h);
-                hs.push(h);
-                big_hs.push(big_h.values().to_vec());
-                let mut j = Sparse::<f64>::recording(d.ny, d.nu);
-                mln.observation_jacobian_u(K, &us[b], &zs[b], &mut j);
-                js.push(j.values().to_vec());
-            }
-            same_lanes(sp.values(), &ss, &format!("{what}: MLN sensitivity"));
-            same_lanes(&hp, &hs, &format!("{what}: MLN h"));
-            same_lanes(big_hp.values(), &big_hs, &format!("{what}: MLN H"));
-            same_lanes(jp.values(), &js, &format!("{what}: MLN J_u"));
 
             // MPF.
             let qd = mpf.dims();
@@ -314,6 +318,7 @@ fn layouts_follow_spec_sections_5_2_and_6() {
         hysteretic: vec![0, 5],
         sensors: vec![1, 3, 6, 10],
         kind: MeasurementKind::Relative,
+        damping: Damping::Storey,
     };
     let mpf = MpfChain::new(spec(&case, Discretisation::Euler)).unwrap();
     assert_eq!((mpf.dims().nn, mpf.dims().nbl, mpf.dims().ny), (7, 41, 4));
@@ -336,6 +341,7 @@ fn layouts_follow_spec_sections_5_2_and_6() {
         hysteretic: vec![],
         sensors: vec![2, 4],
         kind: MeasurementKind::Absolute,
+        damping: Damping::Storey,
     };
     let mpf = MpfChain::new(spec(&case, Discretisation::Symplectic)).unwrap();
     assert_eq!((mpf.dims().nn, mpf.dims().nbl), (0, 16));
@@ -343,4 +349,68 @@ fn layouts_follow_spec_sections_5_2_and_6() {
     let mln = MlnChain::new(spec(&case, Discretisation::Symplectic)).unwrap();
     assert_eq!((mln.dims().nu, mln.dims().nz), (8, 8));
     assert_eq!(mln.stages()[1].linked, Vec::<usize>::new());
+}
+
+/// The storey+mass damping form: α sits right after c in θ and in x^bl (marginal, like c) for
+/// the MPF-EKF2, is one more static entry of the bootstrap PF's augmented state, and is refused
+/// by name by the MLN-RBPF/Storvik partition.
+#[test]
+fn mass_damping_layouts_and_refusal() {
+    use Slot::{Marginal as M, Sampled as S};
+    let case = damped_cases()
+        .into_iter()
+        .find(|c| c.name == "paper 3-storey")
+        .unwrap();
+    for disc in [Discretisation::Euler, Discretisation::Symplectic] {
+        let mpf = MpfChain::new(spec(&case, disc)).unwrap();
+        let l = mpf.layout();
+        assert_eq!(
+            l.param_names,
+            ["k1", "k2", "k3", "c1", "c2", "c3", "alpha", "beta", "gamma", "n"]
+        );
+        // x^bl = [x1 x2 x3 v2 v3 k1 k2 k3 c1 c2 c3 α β γ]: α at 11, β, γ after it.
+        assert_eq!(
+            l.params,
+            [
+                M(5),
+                M(6),
+                M(7),
+                M(8),
+                M(9),
+                M(10),
+                M(11),
+                M(12),
+                M(13),
+                S(2)
+            ]
+        );
+        assert_eq!((mpf.dims().nn, mpf.dims().nbl), (3, 14));
+        let aug = AugmentedChain::new(spec(&case, disc)).unwrap();
+        assert_eq!(aug.layout().param_names, l.param_names);
+        assert_eq!(aug.dim(), 7 + 10);
+        let err = MlnChain::new(spec(&case, disc)).unwrap_err();
+        assert!(
+            matches!(
+                err,
+                models::filtering::SpecError::DampingUnsupported {
+                    damping: Damping::StoreyMass,
+                    ..
+                }
+            ),
+            "{err}"
+        );
+        assert!(err.to_string().contains("damping"), "{err}");
+    }
+    // The form and α's prior must agree, named by field.
+    let mut bad = spec(&case, Discretisation::Euler);
+    bad.prior.alpha = None;
+    let err = MpfChain::new(bad).unwrap_err().to_string();
+    assert!(err.contains("prior.alpha"), "{err}");
+    let mut bad = spec(
+        &paper_case(MeasurementKind::Relative),
+        Discretisation::Euler,
+    );
+    bad.prior.alpha = Some(models::priors::Prior::Fixed { value: 0.1 });
+    let err = MpfChain::new(bad).unwrap_err().to_string();
+    assert!(err.contains("prior.alpha"), "{err}");
 }

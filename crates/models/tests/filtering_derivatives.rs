@@ -260,7 +260,9 @@ fn check_hessians(
 
 #[test]
 fn mpf_maps_jacobians_and_hessians_match_the_physics() {
-    for case in cases() {
+    // Both damping forms: with storey+mass, α × v_j is one more bilinear term (or linear in α
+    // for a sampled v_j).
+    for case in cases().into_iter().chain(damped_cases()) {
         for disc in SCHEMES {
             let mpf = MpfChain::new(spec(&case, disc)).unwrap();
             let aug = AugmentedChain::new(spec(&case, disc)).unwrap();

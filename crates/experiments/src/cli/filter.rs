@@ -86,6 +86,16 @@ pub struct Args {
     /// relative (ẍ).
     #[arg(long)]
     pub measurement: Option<MeasurementKind>,
+    /// Damping form of the model: storey (per-storey dashpots c1..cN, the default) or
+    /// storey+mass (also mass-proportional damping αM, θ gains `alpha` after c1..cN; MPF-EKF2
+    /// and bootstrap PF). Data with dataset.json must agree with the form they record.
+    #[arg(long, value_parser = parse_damping)]
+    pub damping: Option<models::structure::Damping>,
+}
+
+fn parse_damping(s: &str) -> Result<models::structure::Damping, String> {
+    s.parse()
+        .map_err(|e: models::structure::UnknownDamping| e.to_string())
 }
 
 /// The structure flags as a `[structure]` table; errors name the flag.
@@ -114,6 +124,7 @@ fn structure_flags(args: &Args) -> Result<StructureSettings> {
         },
         masses,
         measurement: args.measurement,
+        damping: args.damping,
     })
 }
 
@@ -198,8 +209,9 @@ loop_every = {loops}
 # Gaussian) or {{ kind = "per_particle", rel_sd = 0.1 }} (means drawn per particle).
 marginal_prior = {{ kind = "moment_matched" }}
 
-# Point-mass priors: parameter name = value (k1..kN, c1..cN, beta, gamma, n; with several
-# hysteretic elements beta4, gamma4, n4 for the element at storey 4).
+# Point-mass priors: parameter name = value (k1..kN, c1..cN, alpha with the storey+mass damping
+# form, beta, gamma, n; with several hysteretic elements beta4, gamma4, n4 for the element at
+# storey 4).
 [fix]
 # k1 = 8.0
 
@@ -214,6 +226,9 @@ marginal_prior = {{ kind = "moment_matched" }}
 # masses = [1.0, 1.0, 1.0]
 # What the accelerometers record: "absolute" (ẍ + ü_g, real accelerometers) or "relative" (ẍ).
 # measurement = "absolute"
+# Damping form: "storey" (per-storey dashpots c1..cN, the default) or "storey+mass" (also
+# mass-proportional damping αM: storey j gains −α m_j v_j; θ gains alpha after c1..cN).
+# damping = "storey"
 
 # Prior of θ; absent: SPEC §3's for the structure (k ~ LogNormal(10, 0.3), c ~ LogNormal(0.4,
 # 0.5), per element (β, γ) uniform on the triangle 0 ≤ β ≤ 5, |γ| ≤ β, n ~ U(1, 5)). When given,
@@ -221,6 +236,7 @@ marginal_prior = {{ kind = "moment_matched" }}
 # [prior]
 # k = [{{ kind = "log_normal", median = 10.0, log_sd = 0.3 }}, ...]
 # c = [{{ kind = "log_normal", median = 0.4, log_sd = 0.5 }}, ...]
+# alpha = {{ kind = "log_normal", median = 0.5, log_sd = 1.0 }}  (storey+mass damping only)
 # elements = [{{ storey = 0, beta_gamma = {{ kind = "triangle", beta_max = 5.0 }}, n = {{ kind = "uniform", lo = 1.0, hi = 5.0 }} }}]
 "#,
         paper_disc = paper.discretisation.name(),
@@ -317,8 +333,8 @@ pub fn run(args: Args) -> Result<()> {
         settings.structure.overlay(&flags);
         let d = field::resolve(&data, None, &settings.structure, &measured, &both_name)?;
         eprintln!(
-            "field data: {} storeys, masses {:?}, hysteretic storeys {:?}, {} accelerations at storeys {:?} (no {META})",
-            d.storeys, d.masses, d.hysteretic, d.measurement, d.sensors
+            "field data: {} storeys, masses {:?}, hysteretic storeys {:?}, {} accelerations at storeys {:?}, {} damping (no {META})",
+            d.storeys, d.masses, d.hysteretic, d.measurement, d.sensors, d.damping
         );
     }
     // The true structure, for the validation run, when the data set says what it is.

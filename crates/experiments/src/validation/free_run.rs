@@ -31,7 +31,8 @@ pub const FREE_RUN_INTEGRATOR: Integrator = Integrator::Adaptive(Tolerance {
 pub enum FreeRunError {
     #[error(
         "θ has {found} entries; a building of {storeys} storeys with {elements} Bouc–Wen \
-         element(s) has {expected} (k1..kN, c1..cN, then β, γ, n per element)"
+         element(s) has {expected} (k1..kN, c1..cN, alpha with the storey+mass damping form, \
+         then β, γ, n per element)"
     )]
     ThetaLength {
         found: usize,
@@ -49,11 +50,13 @@ pub enum FreeRunError {
     TooShort(usize),
 }
 
-/// The chain of building `d` with parameters θ = `[k1..kN, c1..cN, (β, γ, n) per element]`.
+/// The chain of building `d` with parameters θ = `[k1..kN, c1..cN, (α), (β, γ, n) per
+/// element]` (α with the storey+mass damping form of `d`).
 pub fn chain_of(d: &StructureDescription, theta: &[f64]) -> Result<ShearChain, FreeRunError> {
     let n = d.storeys;
     let h = d.hysteretic_zero_based();
-    let expected = 2 * n + 3 * h.len();
+    let a = d.damping.extra_parameters();
+    let expected = 2 * n + a + 3 * h.len();
     if theta.len() != expected {
         return Err(FreeRunError::ThetaLength {
             found: theta.len(),
@@ -67,17 +70,22 @@ pub fn chain_of(d: &StructureDescription, theta: &[f64]) -> Result<ShearChain, F
         .enumerate()
         .map(|(e, &storey)| BoucWen {
             storey,
-            beta: theta[2 * n + 3 * e],
-            gamma: theta[2 * n + 3 * e + 1],
-            n: theta[2 * n + 3 * e + 2],
+            beta: theta[2 * n + a + 3 * e],
+            gamma: theta[2 * n + a + 3 * e + 1],
+            n: theta[2 * n + a + 3 * e + 2],
         })
         .collect();
-    Ok(ShearChain::new(
+    let chain = ShearChain::new(
         d.masses.clone(),
         theta[..n].to_vec(),
         theta[n..2 * n].to_vec(),
         bw,
-    )?)
+    )?;
+    Ok(if d.damping.has_mass_term() {
+        chain.with_mass_damping(theta[2 * n])?
+    } else {
+        chain
+    })
 }
 
 /// The accelerations the channels of 1-based storeys `sensors` record (`kind`) when `chain`

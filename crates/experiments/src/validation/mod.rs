@@ -196,10 +196,13 @@ pub fn modal(d: &StructureDescription, data: &LoadedDataset, theta: &[f64]) -> M
         ),
         ..Default::default()
     };
-    // From θ's k and c directly: an impossible θ (a negative damping) still has modes.
+    // From θ's k, c (and α) directly: an impossible θ (a negative damping) still has modes.
     let n = d.storeys;
-    let linear = if theta.len() >= 2 * n {
-        models::modal::modes_of(&d.masses, &theta[..n], &theta[n..2 * n]).map_err(|e| e.to_string())
+    let na = d.damping.extra_parameters();
+    let linear = if theta.len() >= 2 * n + na {
+        let alpha = d.damping.has_mass_term().then(|| theta[2 * n]);
+        models::modal::modes_of_damped(&d.masses, &theta[..n], &theta[n..2 * n], alpha)
+            .map_err(|e| e.to_string())
     } else {
         Err(format!("θ has {} entries for {n} storeys", theta.len()))
     };
@@ -304,12 +307,17 @@ pub fn description_of(r: &RunRecord) -> Result<StructureDescription> {
     let sensors: SensorLayout =
         serde_json::from_value(spec.get("sensors").cloned().unwrap_or_default())
             .context("field `config.spec.sensors`")?;
+    let damping: models::structure::Damping = match spec.get("damping") {
+        Some(v) => serde_json::from_value(v.clone()).context("field `config.spec.damping`")?,
+        None => Default::default(),
+    };
     let d = StructureDescription {
         storeys: masses.len(),
         masses,
         hysteretic: hysteretic.iter().map(|s| s + 1).collect(),
         sensors: sensors.one_based(),
         measurement: sensors.kind(),
+        damping,
     };
     d.validate()
         .context("the record's structure (`config.spec`)")?;

@@ -1,6 +1,7 @@
 //! Augmented-state partition for the bootstrap PF (SPEC §5.1), any chain, three schemes.
 //!
-//! x = [x1..xN, v1..vN, r_e…, θ] with θ = [k, c, (β_e, γ_e, n_e)…]; θ is static (no draw).
+//! x = [x1..xN, v1..vN, r_e…, θ] with θ = [k, c, (α), (β_e, γ_e, n_e)…]; θ is static (no draw).
+//! The mass-proportional damping α (the storey+mass form) is one more static entry of θ.
 //! `noise_dim = 2N + E`: one standard normal draw per displacement, velocity and r.
 //!
 //! - Euler: `x' = x + dt v + q_disp ξ`, `v' = v + dt a(x, v, r; θ, ü_g(k−1)) + q_vel ξ`,
@@ -61,6 +62,10 @@ impl ChainView<f64> for View<'_> {
     #[inline]
     fn c(&self, j: usize) -> f64 {
         self.th[self.n + j]
+    }
+    #[inline]
+    fn alpha(&self) -> f64 {
+        self.th[2 * self.n]
     }
 }
 

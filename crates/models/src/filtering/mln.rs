@@ -13,6 +13,10 @@
 //!   affine in `(β, γ)` because the new velocities are sampled before it.
 //!
 //! The n rows are set by no stage (copied).
+//!
+//! The storey+mass damping form is refused ([`SpecError::DampingUnsupported`]): α would be one
+//! more column of z whose `−α v_j` enters the v rows and the observation's u-Jacobian, which this
+//! partition does not carry; the MPF-EKF2 and the bootstrap PF have it.
 
 use super::{ChainCore, ChainSpec, Discretisation, SpecError, NLIN, NNONLIN};
 use crate::structure::{ChainTopology, ChainView, HysteresisLaw};
@@ -68,6 +72,13 @@ impl MlnChain {
         if core.substeps != 1 {
             return Err(SpecError::SubstepsUnsupported {
                 partition: "MLN-RBPF/Storvik",
+            });
+        }
+        if core.mass_damping() {
+            return Err(SpecError::DampingUnsupported {
+                partition: "MLN-RBPF/Storvik",
+                damping: core.spec.damping,
+                reason: "α is not a column of its conditionally linear block",
             });
         }
         let (n, ne) = (core.n, core.ne);

@@ -11,7 +11,8 @@
 //! - [`mln::MlnChain`]: MLN-RBPF and Storvik (`ConditionallyLinear`, SPEC §5.2–5.3);
 //! - [`mpf::MpfChain`]: MPF-EKF2 (`ConditionallyQuadratic`, SPEC §5.4, §6).
 //!
-//! θ = [k1..kN, c1..cN, then per hysteretic element in storey order β, γ, n]; states
+//! θ = [k1..kN, c1..cN, (α with the storey+mass damping form, [`crate::structure::Damping`]),
+//! then per hysteretic element in storey order β, γ, n]; states
 //! x1..xN, v1..vN, `r<s>` (names from [`crate::structure::theta_names`] and
 //! [`crate::structure::state_names`]). The transition to step k uses `ug[k−1]`, the measurement
 //! at k uses `ug[k]` (SPEC §3).
@@ -46,7 +47,7 @@ pub use prior::{ChainPrior, ElementPrior, MarginalPrior};
 pub use spec::{ChainSpec, RmsLevels, SpecError, MAX_SUBSTEPS};
 
 use crate::structure::{
-    state_names, theta_names, BoucWenLaw, ChainTopology, ChainView, HysteresisLaw,
+    state_names, theta_names_damped, BoucWenLaw, ChainTopology, ChainView, HysteresisLaw,
 };
 use core_filters::linalg::Sparse;
 use core_filters::real::Real;
@@ -78,7 +79,8 @@ fn fine_grid(ug: &[f64], dt: f64, m: usize) -> Vec<f64> {
 
 /// The variables a gradient of the storey forces is taken with respect to, by their columns.
 /// `F_j = k_j d_j + c_j δv_j`, with `d_j = x_j − x_{j−1}` (or `r_e` for the hysteretic element
-/// `e` at storey `j`) and `δv_j = v_j − v_{j−1}`.
+/// `e` at storey `j`) and `δv_j = v_j − v_{j−1}`; with mass damping the acceleration also has
+/// `−α v_j` ([`ChainCore::write_acceleration_gradient`]).
 #[derive(Debug, Clone)]
 pub(crate) struct ForceVariables {
     /// Columns of `k_1` and `c_1` when θ's stiffnesses and dampings are variables (`k_j` at
@@ -90,6 +92,8 @@ pub(crate) struct ForceVariables {
     pub hysteretic: Option<usize>,
     /// Column of each storey's velocity where it is a variable.
     pub velocities: Vec<Option<usize>>,
+    /// Column of α when the chain has mass damping and θ is a variable.
+    pub alpha: Option<usize>,
 }
 
 /// What every partition shares: the validated spec, the force kernel and precomputed constants.
@@ -125,12 +129,12 @@ pub(crate) struct ChainCore {
 impl ChainCore {
     pub fn new(spec: ChainSpec) -> Result<Self, SpecError> {
         spec.validate()?;
-        let topo = ChainTopology::new(spec.masses.clone(), &spec.hysteretic).map_err(|e| {
-            SpecError::Invalid {
+        let topo = ChainTopology::new(spec.masses.clone(), &spec.hysteretic)
+            .map_err(|e| SpecError::Invalid {
                 field: "hysteretic",
                 reason: e.to_string(),
-            }
-        })?;
+            })?
+            .with_damping(spec.damping);
         let (theta_mean, theta_var) = spec.prior.moments();
         let m = spec.substeps;
         let noise = 1.0 / (m as f64).sqrt();
@@ -220,7 +224,8 @@ impl ChainCore {
         }
     }
 
-    /// Writes `scale · ∂a_j/∂w` (`a_j = ground + (F_{j+1} − F_j)/m_j`) into row `row`.
+    /// Writes `scale · ∂a_j/∂w` (`a_j = ground + (F_{j+1} − F_j)/m_j`, `− α v_j` with mass
+    /// damping) into row `row`.
     #[inline]
     pub fn write_acceleration_gradient<T: Real>(
         &self,
@@ -236,12 +241,32 @@ impl ChainCore {
         if j + 1 < self.n {
             self.write_force_gradient(out, row, j + 1, p, vars, s);
         }
+        if self.topo.damping().has_mass_term() {
+            if let Some(a) = vars.alpha {
+                out.add(row, a, -(scale * p.v(j)));
+            }
+            if let Some(i) = vars.velocities[j] {
+                out.add(row, i, -(scale * p.alpha()));
+            }
+        }
+    }
+
+    /// Whether the chain has the mass-proportional damping term.
+    #[inline]
+    pub fn mass_damping(&self) -> bool {
+        self.spec.damping.has_mass_term()
+    }
+
+    /// Index of α in θ (`2N`), when the chain has mass damping.
+    #[inline]
+    pub fn theta_alpha(&self) -> Option<usize> {
+        self.mass_damping().then_some(2 * self.n)
     }
 
     /// Index of the first θ entry of element `e` (β_e) in θ.
     #[inline]
     pub fn theta_element(&self, e: usize) -> usize {
-        2 * self.n + (NLIN + NNONLIN) * e
+        2 * self.n + self.spec.damping.extra_parameters() + (NLIN + NNONLIN) * e
     }
 
     /// Mean and variance of the Gaussian prior of θ for one particle (SPEC §3): moment-matched,
@@ -264,7 +289,7 @@ impl ChainCore {
     }
 
     pub fn theta_names(&self) -> Vec<String> {
-        theta_names::<Law>(self.n, &self.spec.hysteretic)
+        theta_names_damped::<Law>(self.n, &self.spec.hysteretic, self.spec.damping)
     }
 
     pub fn state_names(&self) -> Vec<String> {

@@ -6,13 +6,18 @@
 //! (static):
 //!
 //! `xⁿ = [sampled velocities by storey, r_e…, n_e…]`,
-//! `x^bl = [x1..xN, the other velocities by storey, k1..kN, c1..cN, (β_e, γ_e)…]`.
+//! `x^bl = [x1..xN, the other velocities by storey, k1..kN, c1..cN, (α), (β_e, γ_e)…]`.
 //!
 //! For the paper's chain this is SPEC §6 exactly (`xⁿ = [ẋ1, r1, n]`,
 //! `x^bl = [x1 x2 x3 ẋ2 ẋ3 k1 k2 k3 c1 c2 c3 β γ]`). Given xⁿ, an element force
 //! `F_j = k_j d_j + c_j δv_j` has at most the products `k_j·x` and `c_j·v` (bilinear), and a
 //! hysteretic rate is affine in `(β, γ)`; so every map is at most bilinear in x^bl, with constant
 //! Hessians (±dt/m_j, ±1/m_j, ±dt²/m_j), built once.
+//!
+//! With the storey+mass damping form ([`crate::structure::Damping::StoreyMass`]) α is one more
+//! entry of x^bl after c: `a_j` gains `−α v_j`, bilinear (constant Hessian entry `−scale` for
+//! α × v_j, e.g. `−dt` in a velocity row) when `v_j` is marginal, linear in α (Jacobian entry
+//! `−scale·v_j`) when `v_j` is sampled.
 //!
 //! - Euler: one sampled stage (sampled velocities, then r's), `φ_bl` = Euler map of x and the
 //!   marginal velocities; `Q_bl` diagonal.
@@ -56,6 +61,8 @@ pub struct MpfChain {
     /// Offsets of k and c in x^bl.
     k0: usize,
     c0: usize,
+    /// Offset of α in x^bl (the first entry after c; present only with mass damping).
+    a0: usize,
     /// Offset of (β_0, γ_0) in x^bl.
     b0: usize,
     /// x^bl as the variables of the force gradients.
@@ -99,6 +106,10 @@ impl<T: Real> ChainView<T> for View<'_, T> {
     fn c(&self, j: usize) -> T {
         self.m[self.p.c0 + j]
     }
+    #[inline(always)]
+    fn alpha(&self) -> T {
+        self.m[self.p.a0]
+    }
 }
 
 impl MpfChain {
@@ -135,8 +146,10 @@ impl MpfChain {
         }
         let nvm = marginal_vel.len();
         let nvs = sampled_vel.len();
-        let (k0, c0, b0) = (n + nvm, 2 * n + nvm, 3 * n + nvm);
+        let na = core.spec.damping.extra_parameters();
+        let (k0, c0, a0, b0) = (n + nvm, 2 * n + nvm, 3 * n + nvm, 3 * n + nvm + na);
         let force_vars = ForceVariables {
+            alpha: core.mass_damping().then_some(a0),
             theta: Some((k0, c0)),
             displacements: true,
             hysteretic: None,
@@ -156,6 +169,7 @@ impl MpfChain {
             marginal_vel,
             k0,
             c0,
+            a0,
             b0,
             force_vars,
             stages: Vec::new(),
@@ -258,12 +272,18 @@ impl MpfChain {
         }
     }
 
-    /// Pushes the Hessian of `scale · a_j`, `a_j = ground + (F_{j+1} − F_j)/m_j`.
+    /// Pushes the Hessian of `scale · a_j`, `a_j = ground + (F_{j+1} − F_j)/m_j` (`− α v_j`
+    /// with mass damping: `−scale` at α × v_j for a marginal v_j).
     fn push_acceleration_hessian(&self, h: &mut SparseHessians, out: usize, j: usize, scale: f64) {
         let s = scale * self.core.inv_mass[j];
         self.push_force_hessian(h, out, j, -s);
         if j + 1 < self.core.n {
             self.push_force_hessian(h, out, j + 1, s);
+        }
+        if self.core.mass_damping() {
+            if let Vel::Marginal(i) = self.vel[j] {
+                h.push(out, self.a0, i, -scale);
+            }
         }
     }
 
@@ -310,7 +330,10 @@ impl ConditionallyQuadratic for MpfChain {
         let (n, ne) = (self.core.n, self.core.ne);
         QuadraticDims {
             nn: self.nvs() + 2 * ne,
-            nbl: 3 * n + self.marginal_vel.len() + NLIN * ne,
+            nbl: 3 * n
+                + self.marginal_vel.len()
+                + self.core.spec.damping.extra_parameters()
+                + NLIN * ne,
             ny: self.core.sensors.len(),
         }
     }
@@ -327,7 +350,7 @@ impl ConditionallyQuadratic for MpfChain {
         }
     }
 
-    /// States exactly zero (variance 0); k, c, β, γ from θ's Gaussian prior (SPEC §3).
+    /// States exactly zero (variance 0); k, c, (α), β, γ from θ's Gaussian prior (SPEC §3).
     fn marginal_prior(&self, rng: &mut StreamRng, mean: &mut [f64], cov: &mut [f64]) {
         let n = self.core.n;
         let nbl = self.dims().nbl;
@@ -341,6 +364,9 @@ impl ConditionallyQuadratic for MpfChain {
         for j in 0..n {
             set(self.k0 + j, j);
             set(self.c0 + j, n + j);
+        }
+        if let Some(t) = self.core.theta_alpha() {
+            set(self.a0, t);
         }
         for e in 0..self.core.ne {
             let t = self.core.theta_element(e);
@@ -490,6 +516,9 @@ impl ConditionallyQuadratic for MpfChain {
         let (n, ne) = (self.core.n, self.core.ne);
         let mut params: Vec<Slot> = (0..n).map(|j| Slot::Marginal(self.k0 + j)).collect();
         params.extend((0..n).map(|j| Slot::Marginal(self.c0 + j)));
+        if self.core.mass_damping() {
+            params.push(Slot::Marginal(self.a0));
+        }
         for e in 0..ne {
             let b = self.beta_index(e);
             params.extend([

@@ -1,13 +1,14 @@
 //! Priors of θ for a chain with any number of hysteretic elements (SPEC §3 per parameter).
 //!
-//! θ = [k1..kN, c1..cN, then per hysteretic element in storey order (β, γ, n)]. Defaults:
+//! θ = [k1..kN, c1..cN, (α with mass-proportional damping), then per hysteretic element in
+//! storey order (β, γ, n)]. Defaults:
 //! k_j ~ LogNormal(median 10, log-sd 0.3), c_j ~ LogNormal(0.4, 0.5), per element (β, γ) uniform
 //! on the triangle {0 ≤ β ≤ 5, |γ| ≤ β} and n ~ U(1, 5). Every parameter can be overridden, or
 //! fixed (a point mass) by name. The Monte-Carlo tests of its moments and draws are in
 //! [`crate::priors`], beside the scalar priors.
 
 use crate::priors::{BetaGammaPrior, Prior, PriorError};
-use crate::structure::{theta_names, BoucWenLaw};
+use crate::structure::{theta_names_damped, BoucWenLaw, Damping};
 use rand::Rng;
 use serde::{Deserialize, Serialize};
 
@@ -27,8 +28,31 @@ pub struct ElementPrior {
 pub struct ChainPrior {
     pub k: Vec<Prior>,
     pub c: Vec<Prior>,
+    /// Prior of the mass-proportional damping α: present exactly when the chain has the
+    /// [`Damping::StoreyMass`] form (absent, nothing is written: the default form's prior is
+    /// unchanged).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub alpha: Option<Prior>,
     /// One per hysteretic element, in storey order.
     pub elements: Vec<ElementPrior>,
+}
+
+/// The damping ratio of the fundamental mode that the default prior of the mass-proportional
+/// damping α is centred on: α = 2·ζ_α·ω₁ gives the first mode ζ_α from αM alone
+/// (`ζ = α/(2ω)` for pure mass damping). Half of the 2 % assumed at ω₁ elsewhere
+/// (`experiments::scaled_prior`), the other half being left to the per-storey dashpots.
+pub const ALPHA_DAMPING_RATIO: f64 = 0.01;
+/// Log-s.d. of the default α prior: wider than c's (0.7), since how the damping is shared
+/// between αM and the dashpots is not known beforehand.
+pub const ALPHA_LOG_SD: f64 = 1.0;
+
+/// The default prior of α for a structure whose fundamental circular frequency is `omega1`
+/// (rad/s): LogNormal(median 2·[`ALPHA_DAMPING_RATIO`]·ω₁, log-s.d. [`ALPHA_LOG_SD`]).
+pub fn alpha_prior(omega1: f64) -> Prior {
+    Prior::LogNormal {
+        median: 2.0 * ALPHA_DAMPING_RATIO * omega1,
+        log_sd: ALPHA_LOG_SD,
+    }
 }
 
 /// Prior median over the true value in SPEC §3: 10 / 8 for k, 0.4 / 0.25 for c.
@@ -53,6 +77,7 @@ impl ChainPrior {
                 };
                 n_storeys
             ],
+            alpha: None,
             elements: hysteretic
                 .iter()
                 .map(|&storey| ElementPrior {
@@ -89,14 +114,35 @@ impl ChainPrior {
         self.k.len()
     }
 
+    /// The damping form θ describes: [`Damping::StoreyMass`] exactly when α has a prior.
+    pub fn damping(&self) -> Damping {
+        if self.alpha.is_some() {
+            Damping::StoreyMass
+        } else {
+            Damping::Storey
+        }
+    }
+
+    /// The same prior with mass-proportional damping whose α has prior `alpha`.
+    pub fn with_alpha(mut self, alpha: Prior) -> Self {
+        self.alpha = Some(alpha);
+        self
+    }
+
+    /// Index of the first element parameter (β_0) in θ: `2N`, or `2N + 1` with α.
+    #[inline]
+    pub fn element_offset(&self) -> usize {
+        2 * self.n_storeys() + self.damping().extra_parameters()
+    }
+
     /// 0-based storeys of the elements, in order.
     pub fn hysteretic_storeys(&self) -> Vec<usize> {
         self.elements.iter().map(|e| e.storey).collect()
     }
 
-    /// Number of parameters 2N + 3E.
+    /// Number of parameters 2N (+ 1 with α) + 3E.
     pub fn len(&self) -> usize {
-        2 * self.k.len() + 3 * self.elements.len()
+        self.element_offset() + 3 * self.elements.len()
     }
 
     /// Whether θ is empty (never: N ≥ 1 is checked by [`ChainPrior::validate`]).
@@ -106,10 +152,14 @@ impl ChainPrior {
 
     /// Names of θ in order (see [`theta_names`]).
     pub fn names(&self) -> Vec<String> {
-        theta_names::<BoucWenLaw>(self.n_storeys(), &self.hysteretic_storeys())
+        theta_names_damped::<BoucWenLaw>(
+            self.n_storeys(),
+            &self.hysteretic_storeys(),
+            self.damping(),
+        )
     }
 
-    /// Checks every hyper-parameter; k, c and n must have non-negative support.
+    /// Checks every hyper-parameter; k, c, α and n must have non-negative support.
     pub fn validate(&self) -> Result<(), PriorError> {
         let n = self.n_storeys();
         if self.c.len() != n {
@@ -126,9 +176,13 @@ impl ChainPrior {
         for (j, p) in self.c.iter().enumerate() {
             p.validate(&names[n + j], true)?;
         }
+        if let Some(p) = &self.alpha {
+            p.validate(&names[2 * n], true)?;
+        }
+        let e0 = self.element_offset();
         for (e, el) in self.elements.iter().enumerate() {
             el.beta_gamma.validate()?;
-            el.n.validate(&names[2 * n + 3 * e + 2], true)?;
+            el.n.validate(&names[e0 + 3 * e + 2], true)?;
         }
         Ok(())
     }
@@ -149,7 +203,7 @@ impl ChainPrior {
         })
     }
 
-    /// Replaces the prior of scalar parameter `name` (k, c or n; for β, γ set
+    /// Replaces the prior of scalar parameter `name` (k, c, α or n; for β, γ set
     /// [`ElementPrior::beta_gamma`]). On error the prior is unchanged.
     pub fn set_prior(&mut self, name: &str, prior: Prior) -> Result<(), PriorError> {
         let unknown = || PriorError::UnknownParameter {
@@ -174,14 +228,21 @@ impl ChainPrior {
 
     fn set(&mut self, i: usize, f: impl FnOnce(Slot<'_>)) -> Result<(), PriorError> {
         let n = self.n_storeys();
+        let e0 = self.element_offset();
         let mut next = self.clone();
         let slot = if i < n {
             Slot::Scalar(&mut next.k[i])
         } else if i < 2 * n {
             Slot::Scalar(&mut next.c[i - n])
+        } else if i < e0 {
+            Slot::Scalar(
+                next.alpha
+                    .as_mut()
+                    .expect("θ has α exactly when its prior does"),
+            )
         } else {
-            let el = &mut next.elements[(i - 2 * n) / 3];
-            match (i - 2 * n) % 3 {
+            let el = &mut next.elements[(i - e0) / 3];
+            match (i - e0) % 3 {
                 0 => Slot::Beta(&mut el.beta_gamma),
                 1 => Slot::Gamma(&mut el.beta_gamma),
                 _ => Slot::Scalar(&mut el.n),
@@ -203,11 +264,15 @@ impl ChainPrior {
         for (o, p) in out[n..2 * n].iter_mut().zip(&self.c) {
             *o = p.sample(rng);
         }
+        if let Some(p) = &self.alpha {
+            out[2 * n] = p.sample(rng);
+        }
+        let e0 = self.element_offset();
         for (e, el) in self.elements.iter().enumerate() {
             let (b, g) = el.beta_gamma.sample(rng);
-            out[2 * n + 3 * e] = b;
-            out[2 * n + 3 * e + 1] = g;
-            out[2 * n + 3 * e + 2] = el.n.sample(rng);
+            out[e0 + 3 * e] = b;
+            out[e0 + 3 * e + 1] = g;
+            out[e0 + 3 * e + 2] = el.n.sample(rng);
         }
     }
 
@@ -215,7 +280,7 @@ impl ChainPrior {
     pub fn moments(&self) -> (Vec<f64>, Vec<f64>) {
         let mut mean = Vec::with_capacity(self.len());
         let mut var = Vec::with_capacity(self.len());
-        for p in self.k.iter().chain(&self.c) {
+        for p in self.k.iter().chain(&self.c).chain(&self.alpha) {
             let (m, v) = p.moments();
             mean.push(m);
             var.push(v);
@@ -280,6 +345,38 @@ mod tests {
         let (pm, _) = paper.moments();
         assert!((mean[0] / 2000.0 - pm[0] / 8.0).abs() < 1e-12);
         assert!((mean[3] / 2.0 - pm[3] / 0.25).abs() < 1e-12);
+    }
+
+    #[test]
+    fn mass_damping_puts_alpha_after_the_dampings() {
+        let alpha = Prior::LogNormal {
+            median: 0.5,
+            log_sd: 0.7,
+        };
+        let mut p = ChainPrior::paper(3, &[0]).with_alpha(alpha);
+        assert_eq!(p.damping(), Damping::StoreyMass);
+        assert_eq!(p.len(), 10);
+        assert_eq!(
+            p.names(),
+            ["k1", "k2", "k3", "c1", "c2", "c3", "alpha", "beta", "gamma", "n"]
+        );
+        let (mean, var) = p.moments();
+        assert_eq!((mean[6], var[6]), alpha.moments());
+        assert_eq!(mean[7..], ChainPrior::paper(3, &[0]).moments().0[6..]);
+        let mut rng = stream(3, 0, "t");
+        let mut th = vec![0.0; 10];
+        p.sample_into(&mut rng, &mut th);
+        assert!(th[6] > 0.0 && (1.0..5.0).contains(&th[9]) && th[8].abs() <= th[7]);
+        p.fix("alpha", 0.3).unwrap();
+        assert_eq!(p.alpha, Some(Prior::Fixed { value: 0.3 }));
+        assert!(p.fix("alpha", -0.3).is_err(), "α must be non-negative");
+        p.fix("n", 2.0).unwrap();
+        assert_eq!(p.elements[0].n, Prior::Fixed { value: 2.0 });
+        // Without the mass term there is no α to fix.
+        assert!(matches!(
+            ChainPrior::paper(3, &[0]).fix("alpha", 0.3),
+            Err(PriorError::UnknownParameter { .. })
+        ));
     }
 
     #[test]

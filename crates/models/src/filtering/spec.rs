@@ -5,6 +5,7 @@ use super::prior::ChainPrior;
 use super::prior::MarginalPrior;
 use crate::priors::PriorError;
 use crate::sensors::{MeasurementKind, SensorError, SensorLayout};
+use crate::structure::Damping;
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
@@ -31,6 +32,15 @@ pub enum SpecError {
          steps advance through the sub-steps between two measurements"
     )]
     SubstepsUnsupported { partition: &'static str },
+    #[error(
+        "invalid chain spec: damping: the {partition} partition does not support the {damping} \
+         damping form ({reason}); use the MPF-EKF2 or the bootstrap PF"
+    )]
+    DampingUnsupported {
+        partition: &'static str,
+        damping: Damping,
+        reason: &'static str,
+    },
 }
 
 fn invalid(field: &'static str, reason: impl Into<String>) -> SpecError {
@@ -80,6 +90,11 @@ pub struct ChainSpec {
     /// threshold (`docs/scaling.md`).
     #[serde(default = "one", skip_serializing_if = "is_one")]
     pub substeps: usize,
+    /// Damping form ([`Damping`]): per-storey dashpots (the default, SPEC §1) or with the
+    /// mass-proportional term `αM` as well, whose α then has a prior in `prior.alpha` and sits in
+    /// θ after `c1..cN`.
+    #[serde(default, skip_serializing_if = "Damping::is_default")]
+    pub damping: Damping,
 }
 
 /// Largest accepted [`ChainSpec::substeps`].
@@ -170,6 +185,7 @@ impl ChainSpec {
             marginal_prior: MarginalPrior::MomentMatched,
             discretisation: Discretisation::Euler,
             substeps: 1,
+            damping: Damping::Storey,
         };
         spec.validate()?;
         Ok(spec)
@@ -292,6 +308,20 @@ impl ChainSpec {
             return Err(invalid(
                 "prior",
                 "the element priors are not at the hysteretic storeys, in order",
+            ));
+        }
+        if self.prior.damping() != self.damping {
+            return Err(invalid(
+                "prior.alpha",
+                match self.damping {
+                    Damping::StoreyMass => {
+                        "the storey+mass damping form needs a prior for alpha".to_string()
+                    }
+                    Damping::Storey => format!(
+                        "a prior for alpha is given, but the damping form is {}",
+                        self.damping
+                    ),
+                },
             ));
         }
         self.prior.validate()?;

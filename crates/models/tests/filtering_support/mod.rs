@@ -5,8 +5,9 @@
 use core_filters::model::{Layout, Slot};
 use core_filters::rng::{stream, StreamRng};
 use models::filtering::{ChainSpec, Discretisation, RmsLevels};
+use models::priors::Prior;
 use models::sensors::{MeasurementKind, SensorLayout};
-use models::structure::{BoucWen, ShearChain};
+use models::structure::{BoucWen, Damping, ShearChain};
 use rand::Rng;
 
 pub const DT: f64 = 0.005;
@@ -21,6 +22,8 @@ pub struct Case {
     pub hysteretic: Vec<usize>,
     pub sensors: Vec<usize>,
     pub kind: MeasurementKind,
+    /// Damping form (θ gains α after c with [`Damping::StoreyMass`]).
+    pub damping: Damping,
 }
 
 impl Case {
@@ -43,6 +46,7 @@ pub fn cases() -> Vec<Case> {
             hysteretic: vec![0, 3],
             sensors: vec![2, 4, 7],
             kind: MeasurementKind::Relative,
+            damping: Damping::Storey,
         },
         Case {
             name: "7-storey absolute",
@@ -50,6 +54,7 @@ pub fn cases() -> Vec<Case> {
             hysteretic: vec![0, 3],
             sensors: vec![2, 4, 7],
             kind: MeasurementKind::Absolute,
+            damping: Damping::Storey,
         },
         paper_case(MeasurementKind::Relative),
         Case {
@@ -58,8 +63,20 @@ pub fn cases() -> Vec<Case> {
             hysteretic: vec![],
             sensors: vec![2, 4],
             kind: MeasurementKind::Absolute,
+            damping: Damping::Storey,
         },
     ]
+}
+
+/// The cases of [`cases`] with mass-proportional damping as well (storey+mass form).
+pub fn damped_cases() -> Vec<Case> {
+    cases()
+        .into_iter()
+        .map(|c| Case {
+            damping: Damping::StoreyMass,
+            ..c
+        })
+        .collect()
 }
 
 pub fn paper_case(kind: MeasurementKind) -> Case {
@@ -69,6 +86,7 @@ pub fn paper_case(kind: MeasurementKind) -> Case {
         hysteretic: vec![0],
         sensors: vec![1, 2, 3],
         kind,
+        damping: Damping::Storey,
     }
 }
 
@@ -95,10 +113,17 @@ pub fn spec(case: &Case, disc: Discretisation) -> ChainSpec {
     )
     .unwrap();
     s.discretisation = disc;
+    if case.damping.has_mass_term() {
+        s.damping = case.damping;
+        s.prior.alpha = Some(Prior::LogNormal {
+            median: 0.5,
+            log_sd: 0.7,
+        });
+    }
     s
 }
 
-/// A physical point: states and θ = [k, c, (β, γ, n)…].
+/// A physical point: states and θ = [k, c, (α), (β, γ, n)…].
 #[derive(Debug, Clone)]
 pub struct Point {
     pub x: Vec<f64>,
@@ -151,6 +176,9 @@ pub fn random_point(case: &Case, rng: &mut StreamRng) -> Point {
         .collect();
     let mut theta: Vec<f64> = (0..n).map(|_| u(3.0, 15.0)).collect();
     theta.extend((0..n).map(|_| u(0.05, 1.0)));
+    if case.damping.has_mass_term() {
+        theta.push(u(0.1, 2.0));
+    }
     for _ in 0..case.ne() {
         let beta = u(0.1, 5.0);
         theta.extend([beta, u(-beta, beta), u(1.0, 5.0)]);
@@ -170,13 +198,16 @@ pub fn shear_chain(case: &Case, p: &Point) -> ShearChain {
             n: 1.0,
         })
         .collect();
-    let base = ShearChain::new(
+    let mut base = ShearChain::new(
         case.masses.clone(),
         vec![1.0; case.n()],
         vec![0.0; case.n()],
         bw,
     )
     .unwrap();
+    if case.damping.has_mass_term() {
+        base = base.with_mass_damping(0.0).unwrap();
+    }
     base.with_theta(&p.theta).unwrap()
 }
 
