@@ -444,7 +444,7 @@ fn identify(
         settings.discretisation = parse::<Discretisation>("discretisation", d)?;
     }
     if let Some(m) = substeps {
-        settings.substeps = m;
+        settings.substeps = experiments::settings::Substeps::Fixed(m);
     }
     if let Some(u) = &storvik_update {
         settings.storvik_update = match u.as_str() {

@@ -251,6 +251,10 @@ impl PartDirs {
     pub fn figures(&self, variant: &str) -> PathBuf {
         self.root.join("figures").join(variant)
     }
+    /// Settings and prior of the selected run, for the other records.
+    pub fn selected_settings(&self) -> PathBuf {
+        self.root.join("selected-settings.toml")
+    }
     /// The baseline's result.
     pub fn baseline(&self) -> PathBuf {
         self.root.join("srim.json")
@@ -394,13 +398,43 @@ pub fn select<'a>(part: &'a Part, dirs: &PartDirs) -> Result<Option<(&'a Variant
     Ok(best)
 }
 
-/// The selected variant identified on every other record.
+/// The settings of the selected run with its prior (the one scaled from the identification
+/// record) written out, so that the other records are identified from the same prior rather
+/// than one scaled from each of them (`--config` of [`plan_selected`]).
+pub fn write_selected_settings(dirs: &PartDirs, selected: &RunRecord) -> Result<PathBuf> {
+    let mut settings: crate::settings::FilterSettings =
+        serde_json::from_value(selected.config["filter"].clone())
+            .context("the selected record's filter settings")?;
+    settings.prior = Some(
+        serde_json::from_value(selected.config["spec"]["prior"].clone())
+            .context("the selected record's prior")?,
+    );
+    let text = toml::to_string(&settings).context("writing the settings as TOML")?;
+    let path = dirs.selected_settings();
+    if let Some(d) = path.parent() {
+        std::fs::create_dir_all(d)?;
+    }
+    crate::record::atomic::write_bytes_atomic(
+        &path,
+        format!(
+            "# The settings and prior of the selected run on the identification record (written by\n\
+             # sysid field-study): the other records are identified from this prior.\n{text}"
+        )
+        .as_bytes(),
+    )?;
+    Ok(path)
+}
+
+/// The selected variant identified on every other record, with the identification record's
+/// settings and prior ([`write_selected_settings`]).
 pub fn plan_selected(part: &Part, dirs: &PartDirs, chosen: &Variant) -> Vec<Step> {
-    let extra: Vec<String> = part
-        .selection
-        .as_ref()
-        .map(|s| s.other_args.clone())
-        .unwrap_or_default();
+    let mut extra: Vec<String> = vec!["--config".into(), s(&dirs.selected_settings())];
+    extra.extend(
+        part.selection
+            .as_ref()
+            .map(|s| s.other_args.clone())
+            .unwrap_or_default(),
+    );
     part.validate_records()
         .map(|r| {
             let mut args = chosen.args.clone();
@@ -571,7 +605,7 @@ pub fn run(study: &FieldStudy, opts: &RunOptions) -> Result<()> {
     }
     let text = report::render(study, &opts.out)?;
     let path = opts.out.join("REPORT.md");
-    crate::sweep::write_bytes_atomic(&path, text.as_bytes())?;
+    crate::record::atomic::write_bytes_atomic(&path, text.as_bytes())?;
     for n in notes {
         eprintln!("{n}");
     }

@@ -32,7 +32,9 @@ pub fn check_filter_settings(s: &FilterSettings) -> Result<()> {
             bail!("field `ess_threshold`: {t} is not in (0, 1]");
         }
     }
-    check_count(s.substeps, 1, models::filtering::MAX_SUBSTEPS).context("field `substeps`")?;
+    if let crate::settings::Substeps::Fixed(m) = s.substeps {
+        check_count(m, 1, models::filtering::MAX_SUBSTEPS).context("field `substeps`")?;
+    }
     if let Some(m) = &s.structure.masses {
         check_count(m.len(), 1, MAX_STOREYS).context("field `masses`: number of storeys")?;
         if let Some((i, v)) = m
@@ -111,9 +113,9 @@ mod tests {
         s.noise_fraction = 1e308;
         assert!(err(&s).contains("`noise_fraction`"));
         let mut s = ok.clone();
-        s.substeps = 0;
+        s.substeps = crate::settings::Substeps::Fixed(0);
         assert!(err(&s).contains("`substeps`"), "{}", err(&s));
-        s.substeps = 65;
+        s.substeps = crate::settings::Substeps::Fixed(65);
         assert!(err(&s).contains("`substeps`"));
         let mut s = ok.clone();
         s.ess_threshold = Some(0.0);

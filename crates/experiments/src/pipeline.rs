@@ -29,6 +29,7 @@ use crate::observe::{Recorder, TruthStates};
 use crate::pool::Driven;
 use crate::record::{Fingerprint, Loop, RunRecord, Timing, Validation, Versions};
 pub use crate::settings::FilterSettings;
+use crate::settings::Substeps;
 
 /// The identification algorithms (SPEC §5).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
@@ -231,7 +232,11 @@ pub fn chain_spec(
     )?;
     spec.marginal_prior = s.marginal_prior;
     spec.discretisation = s.discretisation;
-    spec.substeps = s.substeps;
+    spec.substeps = match s.substeps {
+        Substeps::Fixed(m) => m,
+        // Chosen per algorithm once the prior is known (`resolve_substeps`).
+        Substeps::Auto => 1,
+    };
     spec.damping = structure.damping;
     // Default priors: SPEC §3's for simulated data (the paper's scale); for field data scaled
     // from the measured response (`scaled_prior`).
@@ -299,6 +304,26 @@ pub fn prior_from_data(
 
 /// The filter of `algorithm` on the partitions of `spec` (no size table: every dimension is the
 /// structure's).
+/// Resolves `substeps = "auto"` ([`models::filtering::substeps`]) for the algorithms that
+/// sub-step (MPF-EKF2, bootstrap PF); MLN-RBPF and Storvik keep one transition per sample.
+/// Returns the choice when it was automatic.
+pub fn resolve_substeps(
+    algorithm: Algorithm,
+    spec: &mut ChainSpec,
+    s: &FilterSettings,
+) -> Option<models::filtering::substeps::AutoSubsteps> {
+    if s.substeps != Substeps::Auto {
+        return None;
+    }
+    let mut a = models::filtering::substeps::auto_substeps(spec);
+    if matches!(algorithm, Algorithm::MlnRbpf | Algorithm::Storvik) {
+        a.substeps = 1;
+        a.error_chosen = a.error_one;
+    }
+    spec.substeps = a.substeps;
+    Some(a)
+}
+
 pub fn build_filter(
     algorithm: Algorithm,
     spec: ChainSpec,
@@ -451,7 +476,22 @@ pub fn identify_stoppable(
         );
     }
     crate::limits::check_filter_settings(s)?;
-    let spec = chain_spec(data, input.chain, s)?;
+    let mut spec = chain_spec(data, input.chain, s)?;
+    let auto = resolve_substeps(algorithm, &mut spec, s);
+    if let (Some(a), true) = (auto, input.progress) {
+        if a.substeps > 1 {
+            eprintln!(
+                "sub-steps: {} per sample (auto: the prior's building has modes up to {:.2} Hz, \
+                 ω·dt = {:.2}; one step per sample would shift that mode by {:.1} %, {} by {:.2} %)",
+                a.substeps,
+                a.omega_bound / std::f64::consts::TAU,
+                a.omega_bound * spec.dt,
+                100.0 * a.error_one,
+                a.substeps,
+                100.0 * a.error_chosen
+            );
+        }
+    }
     let pc = SmcConfig {
         particles: s.particles,
         resampling: ResamplePolicy {
@@ -563,6 +603,9 @@ pub fn identify_stoppable(
     });
     if spec.substeps != 1 {
         config["spec"]["substeps"] = spec.substeps.into();
+    }
+    if let Some(a) = auto {
+        config["substeps_auto"] = serde_json::to_value(a).expect("serialisable");
     }
     if !spec.damping.is_default() {
         config["spec"]["damping"] = spec.damping.name().into();

@@ -32,11 +32,12 @@ pub struct FilterSettings {
     pub noise_fraction: f64,
     /// Discretisation of the equations of motion inside the filters (SPEC §3: forward Euler).
     pub discretisation: Discretisation,
-    /// Transitions inside the filter per sample interval (1: one, SPEC §3); MPF-EKF2 and
+    /// Transitions inside the filter per sample interval (1: one, SPEC §3; `"auto"`: chosen from
+    /// the prior's building, [`models::filtering::substeps`]); more than one for the MPF-EKF2 and
     /// bootstrap PF only ([`models::filtering::ChainSpec::substeps`]). Absent from a record's
     /// settings when 1.
-    #[serde(skip_serializing_if = "is_one")]
-    pub substeps: usize,
+    #[serde(skip_serializing_if = "Substeps::is_one")]
+    pub substeps: Substeps,
     /// The building of field data (`[structure]`: storeys, hysteretic storeys, masses,
     /// measurement kind); data with `dataset.json` carry their own (`field::resolve`).
     #[serde(skip_serializing_if = "StructureSettings::is_empty")]
@@ -59,6 +60,78 @@ pub struct FilterSettings {
     pub pool: usize,
 }
 
+/// Transitions per sample interval: a number, or chosen by the rule of
+/// [`models::filtering::substeps`] (`"auto"`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Substeps {
+    Fixed(usize),
+    Auto,
+}
+
+impl Substeps {
+    fn is_one(&self) -> bool {
+        *self == Substeps::Fixed(1)
+    }
+}
+
+impl Default for Substeps {
+    fn default() -> Self {
+        Substeps::Fixed(1)
+    }
+}
+
+impl std::fmt::Display for Substeps {
+    /// As in a TOML file: `3` or `"auto"`.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Substeps::Fixed(n) => write!(f, "{n}"),
+            Substeps::Auto => write!(f, "\"auto\""),
+        }
+    }
+}
+
+impl std::str::FromStr for Substeps {
+    type Err = String;
+    /// `auto` or a whole number (the command line's form).
+    fn from_str(s: &str) -> Result<Self, String> {
+        if s == "auto" {
+            return Ok(Substeps::Auto);
+        }
+        s.parse()
+            .map(Substeps::Fixed)
+            .map_err(|_| format!("`{s}`: give a whole number of sub-steps or `auto`"))
+    }
+}
+
+impl Serialize for Substeps {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        match self {
+            Substeps::Fixed(n) => s.serialize_u64(*n as u64),
+            Substeps::Auto => s.serialize_str("auto"),
+        }
+    }
+}
+
+impl<'de> Deserialize<'de> for Substeps {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        #[derive(Deserialize)]
+        #[serde(untagged)]
+        enum Repr {
+            Count(u64),
+            Word(String),
+        }
+        match Repr::deserialize(d)? {
+            Repr::Count(n) => Ok(Substeps::Fixed(
+                usize::try_from(n).map_err(serde::de::Error::custom)?,
+            )),
+            Repr::Word(w) if w == "auto" => Ok(Substeps::Auto),
+            Repr::Word(w) => Err(serde::de::Error::custom(format!(
+                "substeps `{w}`: give a whole number or \"auto\""
+            ))),
+        }
+    }
+}
+
 fn is_one(v: &usize) -> bool {
     *v == 1
 }
@@ -75,7 +148,7 @@ impl Default for FilterSettings {
             marginal_prior: MarginalPrior::MomentMatched,
             noise_fraction: 0.1,
             discretisation: Discretisation::Euler,
-            substeps: 1,
+            substeps: Substeps::Fixed(1),
             structure: StructureSettings::default(),
             window: 80,
             trace_every: 10,
@@ -92,12 +165,15 @@ impl FilterSettings {
     /// only when the ESS falls below half the particles (path degeneracy), pool 4 independent
     /// filters so that the posterior includes their spread and θ_val comes with its Monte-Carlo
     /// s.e., and semi-implicit Euler inside the filters (forward Euler biases the dampings,
-    /// SPEC §9). The paper's studies keep [`FilterSettings::default`].
+    /// SPEC §9), and as many transitions per sample as the prior's building needs for its
+    /// highest mode ([`Substeps::Auto`]; one on the paper's data). The paper's studies keep
+    /// [`FilterSettings::default`].
     pub fn recommended() -> Self {
         Self {
             ess_threshold: Some(0.5),
             pool: 4,
             discretisation: Discretisation::Symplectic,
+            substeps: Substeps::Auto,
             ..Self::default()
         }
     }

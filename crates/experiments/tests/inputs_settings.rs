@@ -32,6 +32,7 @@ fn filter_settings_out_of_range_are_named() {
         ("ess_threshold = 2.0\n", "`ess_threshold`"),
         ("substeps = 0\n", "`substeps`"),
         ("substeps = 1000\n", "`substeps`"),
+        ("substeps = \"many\"\n", "substeps `many`"),
         ("masses = [1.0, 0.0, 1.0]\n", "`masses`"),
     ] {
         let (p, msg) = load_err(&dir, text);
@@ -45,6 +46,9 @@ fn filter_settings_out_of_range_are_named() {
     std::fs::write(&p, "\u{feff}particles = 300\r\nwindow = 40\r\n").unwrap();
     let s = load_filter_settings(&p).unwrap();
     assert_eq!((s.particles, s.window), (300, 40));
+    std::fs::write(&p, "substeps = \"auto\"\n").unwrap();
+    let s = load_filter_settings(&p).unwrap();
+    assert_eq!(s.substeps, experiments::settings::Substeps::Auto);
     // The cloud's size once the dimension is known.
     assert!(check_particle_cloud(MAX_PARTICLES, 100).is_err());
     check_particle_cloud(500, 100).unwrap();

@@ -58,10 +58,11 @@ pub struct Args {
     #[arg(long)]
     pub discretisation: Option<models::filtering::Discretisation>,
     /// Transitions inside the filter per sample interval (MPF-EKF2 and bootstrap PF), for data
-    /// sampled coarsely relative to the structure's highest modes; measured effect in
-    /// docs/scaling.md. Default 1.
+    /// sampled coarsely relative to the structure's highest modes: a number, or `auto` (the
+    /// default without --config: enough that the highest mode of the prior's building is shifted
+    /// by at most 0.5 % by the discretisation; docs/real-frame.md, docs/scaling.md).
     #[arg(long)]
-    pub substeps: Option<usize>,
+    pub substeps: Option<crate::settings::Substeps>,
     /// TOML file with filter settings (priors, noise fraction, masses, …) over the SPEC's (the
     /// paper's) defaults; command-line options override it. Without it: the recommended
     /// settings of docs/calibration.md.
@@ -194,8 +195,9 @@ noise_fraction = {nf}
 # Discretisation inside the filters: "euler" (the paper's), "symplectic", "rk4" (bootstrap only).
 discretisation = {disc}
 # Transitions inside the filter per sample interval (dt/substeps each, ü_g interpolated), for
-# data sampled coarsely relative to the structure's highest modes (measured effect:
-# docs/scaling.md); MPF-EKF2 and bootstrap PF only.
+# data sampled coarsely relative to the structure's highest modes; "auto": enough that the
+# highest mode of the prior's building is shifted by at most 0.5 % by the discretisation (one on
+# the paper's data); more than one for MPF-EKF2 and bootstrap PF only.
 substeps = {substeps}
 # θ_val averages the posterior mean over the last `window` steps (SPEC eq. 26).
 window = {window}

@@ -433,10 +433,12 @@ fn render_part(s: &mut String, part: &Part, out: &Path) -> Result<()> {
             s,
             "### The selected model on every record\n\nSelected on `{train}` by the filter's \
              log-likelihood among the group `{}`: **{}** (log-lik {:.1}). Identified again on each \
-             other record with the same settings{}.\n",
+             other record with the same settings and the prior scaled from `{train}` \
+             (`{}/selected-settings.toml`){}.\n",
             part.selection.as_ref().map_or("", |x| x.group.as_str()),
             chosen.label,
             r0.loglik,
+            part.name,
             part.selection
                 .as_ref()
                 .filter(|x| !x.other_args.is_empty())

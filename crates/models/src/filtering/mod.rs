@@ -38,6 +38,7 @@ pub mod mln;
 pub mod mpf;
 pub mod prior;
 pub mod spec;
+pub mod substeps;
 
 pub use augmented::AugmentedChain;
 pub use discretisation::Discretisation;

@@ -1,0 +1,116 @@
+//! How many transitions per sample interval the filter needs when it is asked to choose
+//! (`substeps = "auto"`, the default of `sysid filter`).
+//!
+//! Real structures are often stiff relative to their logger's sampling rate. The filters'
+//! discretisations are stable well beyond what matters here (semi-implicit Euler up to ω·h = 2),
+//! but they shift the frequencies they can represent: an undamped mode of the semi-implicit
+//! Euler step turns by θ per step with cos θ = 1 − (ωh)²/2, so a filter that follows the
+//! measured oscillation identifies a stiffness whose continuous-time frequency is low by
+//! θ/(ωh) − 1 — 3.4 % at ωh = 0.87, the third mode of the shake-table frame at 120 Hz
+//! (`docs/real-frame.md`). The rule: the smallest number of sub-steps M for which the highest
+//! mode of the prior's building (an upper bound, Gershgorin's on M⁻¹K, from the prior's central
+//! stiffnesses) is shifted by at most [`MAX_FREQUENCY_ERROR`] — one rule for every scheme.
+
+use super::ChainSpec;
+use super::MAX_SUBSTEPS;
+use crate::priors::Prior;
+use serde::Serialize;
+
+/// Largest relative frequency shift accepted from the discretisation.
+pub const MAX_FREQUENCY_ERROR: f64 = 0.005;
+
+/// Relative frequency error θ/x − 1 of the semi-implicit Euler step for an undamped mode at
+/// x = ω·h (|x| < 2; infinite beyond, where the step is unstable).
+pub fn frequency_error(x: f64) -> f64 {
+    if x <= 0.0 {
+        return 0.0;
+    }
+    if x >= 2.0 {
+        return f64::INFINITY;
+    }
+    (1.0 - 0.5 * x * x).acos() / x - 1.0
+}
+
+/// An upper bound of the highest undamped natural frequency (rad/s) of the shear chain with
+/// storey stiffnesses `k` and masses `m`: Gershgorin's bound on the eigenvalues of M⁻¹K, whose
+/// row j holds (k_j + k_{j+1})/m_j on the diagonal and −k_j/m_j, −k_{j+1}/m_j beside it.
+pub fn highest_frequency_bound(k: &[f64], m: &[f64]) -> f64 {
+    let n = k.len();
+    (0..n)
+        .map(|j| {
+            let up = if j + 1 < n { k[j + 1] } else { 0.0 };
+            2.0 * (k[j] + up) / m[j]
+        })
+        .fold(0.0, f64::max)
+        .sqrt()
+}
+
+/// The central value of a prior: the median of a log-normal, the middle of a uniform.
+fn centre(p: &Prior) -> f64 {
+    match *p {
+        Prior::LogNormal { median, .. } => median,
+        Prior::Uniform { lo, hi } => 0.5 * (lo + hi),
+        Prior::Fixed { value } => value,
+    }
+}
+
+/// The choice and what it rests on (written into the run record).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct AutoSubsteps {
+    pub substeps: usize,
+    /// Upper bound of the highest mode of the prior's building (rad/s).
+    pub omega_bound: f64,
+    /// Its frequency error with one transition per sample, and with `substeps`.
+    pub error_one: f64,
+    pub error_chosen: f64,
+}
+
+/// The smallest M ≤ [`MAX_SUBSTEPS`] with `frequency_error(ω_bound·dt/M) ≤ MAX_FREQUENCY_ERROR`
+/// (M = `MAX_SUBSTEPS` when none is enough; the record then shows the error that remains).
+pub fn auto_substeps(spec: &ChainSpec) -> AutoSubsteps {
+    let k: Vec<f64> = spec.prior.k.iter().map(centre).collect();
+    let omega_bound = highest_frequency_bound(&k, &spec.masses);
+    let x = omega_bound * spec.dt;
+    let substeps = (1..=MAX_SUBSTEPS)
+        .find(|&m| frequency_error(x / m as f64) <= MAX_FREQUENCY_ERROR)
+        .unwrap_or(MAX_SUBSTEPS);
+    AutoSubsteps {
+        substeps,
+        omega_bound,
+        error_one: frequency_error(x),
+        error_chosen: frequency_error(x / substeps as f64),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_semi_implicit_step_turns_by_the_angle_of_its_eigenvalues() {
+        // Eigenvalues of [[1, h], [−ω²h, 1 − ω²h²]] (v then x with the new v): unit modulus,
+        // argument θ; compare with the closed form.
+        for x in [0.05f64, 0.3, 0.87, 1.5] {
+            let (a, d) = (1.0 - x * x, 1.0);
+            let tr = a + d; // trace; determinant 1
+            let theta = (0.5 * tr).acos();
+            assert!((frequency_error(x) - (theta / x - 1.0)).abs() < 1e-12);
+        }
+        assert!((frequency_error(0.867) - 0.034).abs() < 0.001);
+        assert!(frequency_error(2.5).is_infinite());
+    }
+
+    #[test]
+    fn the_bound_holds_and_is_close_for_a_uniform_chain() {
+        // Uniform chain, k = m = 1: highest mode 2 sin((2N−1)π/(2(2N+1))).
+        for n in [1usize, 3, 10, 40] {
+            let exact = 2.0
+                * ((2 * n - 1) as f64 * std::f64::consts::PI / (2.0 * (2 * n + 1) as f64)).sin();
+            let b = highest_frequency_bound(&vec![1.0; n], &vec![1.0; n]);
+            assert!(
+                b >= exact - 1e-12 && b <= 2.0 * exact,
+                "N = {n}: {b} against {exact}"
+            );
+        }
+    }
+}
