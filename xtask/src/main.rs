@@ -90,6 +90,9 @@ enum Task {
         /// Compute nothing: write REPORT.md from the records already there.
         #[arg(long)]
         report_only: bool,
+        /// Keep the files of an interrupted run instead of recomputing them.
+        #[arg(long)]
+        resume: bool,
     },
     /// Identification-accuracy regression check (experiments/regression.toml).
     Regression {
@@ -300,7 +303,8 @@ fn main() -> Result<()> {
         Task::ReproduceReal {
             no_baseline,
             report_only,
-        } => reproduce_real(&root, no_baseline, report_only),
+            resume,
+        } => reproduce_real(&root, no_baseline, report_only, resume),
         Task::Bench { full } => bench(&root, full),
         Task::Docs => docs(&root),
         Task::Imports { write_doc } => imports::run(&root, write_doc),
@@ -309,7 +313,7 @@ fn main() -> Result<()> {
 
 /// The real-structure case study: `sysid field-study`, with the baseline's Python package
 /// installed into `target/real-python` when it can be.
-fn reproduce_real(root: &Path, no_baseline: bool, report_only: bool) -> Result<()> {
+fn reproduce_real(root: &Path, no_baseline: bool, report_only: bool, resume: bool) -> Result<()> {
     let started = std::time::Instant::now();
     let sysid = build_sysid(root)?;
     let build_s = started.elapsed().as_secs_f64();
@@ -321,6 +325,9 @@ fn reproduce_real(root: &Path, no_baseline: bool, report_only: bool) -> Result<(
         "--out",
         "results/real",
     ]);
+    if resume {
+        cmd.arg("--resume");
+    }
     if report_only {
         cmd.arg("--report-only");
     } else if !no_baseline {

@@ -26,6 +26,10 @@ pub struct Args {
     /// Compute nothing: write REPORT.md from the records already there.
     #[arg(long)]
     pub report_only: bool,
+    /// Keep the records, imports and validations already written (an interrupted study)
+    /// instead of recomputing them.
+    #[arg(long)]
+    pub resume: bool,
 }
 
 /// Runs `sysid field-study`.
@@ -46,6 +50,7 @@ pub fn run(args: Args) -> Result<()> {
             out: args.out,
             python: args.python,
             baseline_script: Some(args.baseline_script),
+            resume: args.resume,
         },
     )
 }

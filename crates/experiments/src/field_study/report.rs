@@ -231,7 +231,8 @@ pub fn render(study: &FieldStudy, out: &Path) -> Result<String> {
         "Written by `sysid field-study` from the records under this directory (`cargo xtask \
          reproduce-real` runs it). Every number below is read from a run record of `sysid filter`, a \
          result of `sysid validate` or the baseline's `srim.json`; the commands are in the logs \
-         beside them. Fit = 100·(1 − ‖y − ŷ‖/‖y − ȳ‖) per measured floor, free run from rest \
+         beside them. The records, validations, logs and imported data (about 130 MB) are not \
+         committed: the study writes them again. Fit = 100·(1 − ‖y − ŷ‖/‖y − ȳ‖) per measured floor, free run from rest \
          driven by the measured ground motion (docs/validation.md). LB = Ljung–Box Q of each \
          channel's one-step prediction errors over its 95 % critical value (1 = white). ±k, ±c: \
          the largest 95 % half-width relative to θ_val among the stiffnesses / the dampings.\n"
@@ -332,22 +333,19 @@ fn render_part(s: &mut String, part: &Part, out: &Path) -> Result<()> {
             peaks.join(", ")
         )?;
     }
-    for v in &part.variant {
-        if let Some(r) = records.get(&v.name) {
-            let dir = dirs.figures(&v.name);
-            if dir.join("free_run.svg").exists() {
-                writeln!(
-                    s,
-                    "Figures of {}: [free run]({}/free_run.svg), [transfer functions]({}/transfer.svg), [prediction errors]({}/innovations.svg).",
-                    v.label,
-                    rel(&dir, out),
-                    rel(&dir, out),
-                    rel(&dir, out)
-                )?;
-            }
-            let _ = r;
+    if let Some((chosen, _)) = select(part, &dirs)? {
+        if dirs.root.join("selected-free_run.svg").exists() {
+            writeln!(
+                s,
+                "Figures of the selected model ({}): [free run against the measured floors]({}/selected-free_run.svg), [transfer functions]({}/selected-transfer.svg); every variant's figures are in `{}/figures/` after a run.",
+                chosen.label,
+                part.name,
+                part.name,
+                part.name
+            )?;
         }
     }
+
     writeln!(s)?;
 
     // Cross-validation.
@@ -363,11 +361,12 @@ fn render_part(s: &mut String, part: &Part, out: &Path) -> Result<()> {
             for r in &validate {
                 let cell = match cross(&dirs.validation(&v.name, r))? {
                     Some(cv) => fit_cell(Some(&fits(&cv.free_run))),
-                    None => format!(
-                        "not simulated: {}",
-                        super::log_reason(&dirs.log(&format!("validate--{}--{}", v.name, r)))
-                            .trim_start_matches("Error: ")
-                    ),
+                    None => {
+                        let why =
+                            super::log_reason(&dirs.log(&format!("validate--{}--{}", v.name, r)));
+                        let short = why.rsplit("caused by: ").next().unwrap_or(&why).to_string();
+                        format!("not simulated: {short}")
+                    }
                 };
                 write!(s, " {cell} |")?;
             }
@@ -429,23 +428,34 @@ fn render_part(s: &mut String, part: &Part, out: &Path) -> Result<()> {
         )?;
     }
     if let Some((chosen, r0)) = &selected {
+        let again = if validate.is_empty() {
+            String::new()
+        } else {
+            format!(
+                " Identified again on each other record with the same settings and the prior \
+                 scaled from `{train}` (`{}/selected-settings.toml`){}.",
+                part.name,
+                part.selection
+                    .as_ref()
+                    .filter(|x| !x.other_args.is_empty())
+                    .map_or(String::new(), |x| format!(
+                        " and `{}`",
+                        x.other_args.join(" ")
+                    ))
+            )
+        };
         writeln!(
             s,
-            "### The selected model on every record\n\nSelected on `{train}` by the filter's \
-             log-likelihood among the group `{}`: **{}** (log-lik {:.1}). Identified again on each \
-             other record with the same settings and the prior scaled from `{train}` \
-             (`{}/selected-settings.toml`){}.\n",
+            "### The selected model{}\n\nSelected on `{train}` by the filter's log-likelihood \
+             among the group `{}`: **{}** (log-lik {:.1}).{again}\n",
+            if validate.is_empty() {
+                ""
+            } else {
+                " on every record"
+            },
             part.selection.as_ref().map_or("", |x| x.group.as_str()),
             chosen.label,
             r0.loglik,
-            part.name,
-            part.selection
-                .as_ref()
-                .filter(|x| !x.other_args.is_empty())
-                .map_or(String::new(), |x| format!(
-                    " and `{}`",
-                    x.other_args.join(" ")
-                ))
         )?;
         let mut on: Vec<(String, RunRecord)> = vec![(train.clone(), r0.clone())];
         for v in &validate {
@@ -479,13 +489,12 @@ fn render_part(s: &mut String, part: &Part, out: &Path) -> Result<()> {
         }
         writeln!(s, "\n")?;
         agreement(s, &on)?;
-        goals(s, part, &dirs, chosen, r0, best, &validate)?;
+        // The goals compare with the baseline: only where the part has one.
+        if part.baseline {
+            goals(s, part, &dirs, chosen, r0, best, &validate)?;
+        }
     }
     Ok(())
-}
-
-fn rel(p: &Path, base: &Path) -> String {
-    p.strip_prefix(base).unwrap_or(p).display().to_string()
 }
 
 /// Whether the parameters identified on each record lie inside the other records' 95 %
@@ -563,6 +572,10 @@ fn goals(
 ) -> Result<()> {
     let train = &part.identify_record().name;
     writeln!(s, "### Goals, decided on the selected model\n")?;
+    writeln!(
+        s,
+        "What stands in the way where a goal is not met is measured in docs/real-frame.md.\n"
+    )?;
     let modes_ok = r.modal.as_ref().is_some_and(|m| {
         m.pairs.len() >= 3
             && m.pairs
@@ -587,7 +600,7 @@ fn goals(
     let pos = damping_positive(r) && outcome(r) == "ok";
     writeln!(
         s,
-        "1. On `{train}`: every damping positive ({}), the first three modes within 1 % of the \
+        "- On `{train}`: every damping positive ({}), the first three modes within 1 % of the \
          measured peaks ({}), every floor's free-run fit at least SRIM's ({fit_text}): **{}**.",
         if pos { "yes" } else { "no" },
         if modes_ok { "yes" } else { "no" },
@@ -605,7 +618,7 @@ fn goals(
         );
         writeln!(
             s,
-            "2. Cross-validation on `{v}`: fit of the `{train}` model against SRIM's `{train}` model: \
+            "- Cross-validation on `{v}`: fit of the `{train}` model against SRIM's `{train}` model: \
              {text}: **{}**.",
             if ok { "met" } else { "not met" }
         )?;
