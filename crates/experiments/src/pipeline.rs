@@ -484,8 +484,8 @@ pub fn identify_stoppable(
                 "sub-steps: {} per sample (auto: the prior's building has modes up to {:.2} Hz, \
                  ω·dt = {:.2}; one step per sample would shift that mode by {:.1} %, {} by {:.2} %)",
                 a.substeps,
-                a.omega_bound / std::f64::consts::TAU,
-                a.omega_bound * spec.dt,
+                a.omega_max / std::f64::consts::TAU,
+                a.omega_max * spec.dt,
                 100.0 * a.error_one,
                 a.substeps,
                 100.0 * a.error_chosen

@@ -67,7 +67,7 @@ fn a_stiff_record_is_sub_stepped_until_its_highest_mode_is_represented() {
     assert!(a.substeps >= 2, "{a:?}");
     assert!(a.error_one > 0.02 && a.error_chosen <= 0.005, "{a:?}");
     let fewer = models::filtering::substeps::frequency_error(
-        a.omega_bound * spec.dt / (a.substeps - 1) as f64,
+        a.omega_max * spec.dt / (a.substeps - 1) as f64,
     );
     assert!(
         fewer > 0.005,

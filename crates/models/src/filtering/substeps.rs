@@ -8,8 +8,8 @@
 //! measured oscillation identifies a stiffness whose continuous-time frequency is low by
 //! θ/(ωh) − 1 — 3.4 % at ωh = 0.87, the third mode of the shake-table frame at 120 Hz
 //! (`docs/real-frame.md`). The rule: the smallest number of sub-steps M for which the highest
-//! mode of the prior's building (an upper bound, Gershgorin's on M⁻¹K, from the prior's central
-//! stiffnesses) is shifted by at most [`MAX_FREQUENCY_ERROR`] — one rule for every scheme.
+//! undamped mode of the prior's building (the prior's central stiffnesses, the given masses) is
+//! shifted by at most [`MAX_FREQUENCY_ERROR`] — one rule for every scheme.
 
 use super::ChainSpec;
 use super::MAX_SUBSTEPS;
@@ -31,18 +31,23 @@ pub fn frequency_error(x: f64) -> f64 {
     (1.0 - 0.5 * x * x).acos() / x - 1.0
 }
 
-/// An upper bound of the highest undamped natural frequency (rad/s) of the shear chain with
-/// storey stiffnesses `k` and masses `m`: Gershgorin's bound on the eigenvalues of M⁻¹K, whose
-/// row j holds (k_j + k_{j+1})/m_j on the diagonal and −k_j/m_j, −k_{j+1}/m_j beside it.
-pub fn highest_frequency_bound(k: &[f64], m: &[f64]) -> f64 {
+/// The highest undamped natural frequency (rad/s) of the shear chain with storey stiffnesses `k`
+/// and masses `m`: the square root of the largest eigenvalue of M⁻¹K, computed as that of the
+/// symmetric M^(−1/2) K M^(−1/2) (K tridiagonal: row j holds k_j + k_{j+1} on the diagonal and
+/// −k_{j+1} beside it; the roof has no k_{N+1}).
+pub fn highest_frequency(k: &[f64], m: &[f64]) -> f64 {
     let n = k.len();
-    (0..n)
-        .map(|j| {
-            let up = if j + 1 < n { k[j + 1] } else { 0.0 };
-            2.0 * (k[j] + up) / m[j]
-        })
-        .fold(0.0, f64::max)
-        .sqrt()
+    let mut a = nalgebra::DMatrix::<f64>::zeros(n, n);
+    for j in 0..n {
+        let up = if j + 1 < n { k[j + 1] } else { 0.0 };
+        a[(j, j)] = (k[j] + up) / m[j];
+        if j + 1 < n {
+            let off = -k[j + 1] / (m[j] * m[j + 1]).sqrt();
+            a[(j, j + 1)] = off;
+            a[(j + 1, j)] = off;
+        }
+    }
+    a.symmetric_eigenvalues().max().max(0.0).sqrt()
 }
 
 /// The central value of a prior: the median of a log-normal, the middle of a uniform.
@@ -58,25 +63,25 @@ fn centre(p: &Prior) -> f64 {
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct AutoSubsteps {
     pub substeps: usize,
-    /// Upper bound of the highest mode of the prior's building (rad/s).
-    pub omega_bound: f64,
+    /// The highest undamped mode of the prior's building (rad/s).
+    pub omega_max: f64,
     /// Its frequency error with one transition per sample, and with `substeps`.
     pub error_one: f64,
     pub error_chosen: f64,
 }
 
-/// The smallest M ≤ [`MAX_SUBSTEPS`] with `frequency_error(ω_bound·dt/M) ≤ MAX_FREQUENCY_ERROR`
+/// The smallest M ≤ [`MAX_SUBSTEPS`] with `frequency_error(ω_max·dt/M) ≤ MAX_FREQUENCY_ERROR`
 /// (M = `MAX_SUBSTEPS` when none is enough; the record then shows the error that remains).
 pub fn auto_substeps(spec: &ChainSpec) -> AutoSubsteps {
     let k: Vec<f64> = spec.prior.k.iter().map(centre).collect();
-    let omega_bound = highest_frequency_bound(&k, &spec.masses);
-    let x = omega_bound * spec.dt;
+    let omega_max = highest_frequency(&k, &spec.masses);
+    let x = omega_max * spec.dt;
     let substeps = (1..=MAX_SUBSTEPS)
         .find(|&m| frequency_error(x / m as f64) <= MAX_FREQUENCY_ERROR)
         .unwrap_or(MAX_SUBSTEPS);
     AutoSubsteps {
         substeps,
-        omega_bound,
+        omega_max,
         error_one: frequency_error(x),
         error_chosen: frequency_error(x / substeps as f64),
     }
@@ -101,16 +106,18 @@ mod tests {
     }
 
     #[test]
-    fn the_bound_holds_and_is_close_for_a_uniform_chain() {
-        // Uniform chain, k = m = 1: highest mode 2 sin((2N−1)π/(2(2N+1))).
+    fn the_highest_mode_of_a_uniform_chain_is_exact() {
+        // Uniform chain, k = m = 1: highest mode 2 sin((2N−1)π/(2(2N+1))); one storey: √(k/m).
         for n in [1usize, 3, 10, 40] {
             let exact = 2.0
                 * ((2 * n - 1) as f64 * std::f64::consts::PI / (2.0 * (2 * n + 1) as f64)).sin();
-            let b = highest_frequency_bound(&vec![1.0; n], &vec![1.0; n]);
-            assert!(
-                b >= exact - 1e-12 && b <= 2.0 * exact,
-                "N = {n}: {b} against {exact}"
-            );
+            let w = highest_frequency(&vec![1.0; n], &vec![1.0; n]);
+            assert!((w - exact).abs() < 1e-10, "N = {n}: {w} against {exact}");
         }
+        assert!((highest_frequency(&[610.0], &[2.0]) - 305f64.sqrt()).abs() < 1e-10);
+        // Two storeys, hand computation: k = (2, 1), m = (1, 1): M⁻¹K = [[3, −1], [−1, 1]],
+        // eigenvalues 2 ± √2.
+        let w = highest_frequency(&[2.0, 1.0], &[1.0, 1.0]);
+        assert!((w - (2.0 + 2f64.sqrt()).sqrt()).abs() < 1e-12);
     }
 }
