@@ -198,7 +198,8 @@ validate = {validate}
 # Keep one hysteresis-loop point in `loop_every` in the record (0: no loops).
 loop_every = {loops}
 # Gaussian prior of the marginalised block: {{ kind = "moment_matched" }} (one moment-matched
-# Gaussian) or {{ kind = "per_particle", rel_sd = 0.1 }} (means drawn per particle).
+# Gaussian) or {{ kind = "per_particle", rel_sd = 0.1 }} (means drawn per particle). Without
+# --config the MPF-EKF2 takes per_particle when a storey carries no sensor (docs/scaling.md).
 marginal_prior = {{ kind = "moment_matched" }}
 
 # Point-mass priors: parameter name = value (k1..kN, c1..cN, beta, gamma, n; with several
