@@ -332,6 +332,8 @@ pub fn run(args: Args) -> Result<()> {
     // What the sensors cannot see decides the MPF-EKF2's default prior Gaussian
     // (`FilterSettings::recommended_for`; docs/scaling.md, "Sparse sensors at 20 and 40 storeys").
     if algorithm == Algorithm::MpfEkf2 {
+        // Settings first, so that their refusal names the key as it does in every other run.
+        crate::limits::check_filter_settings(&settings)?;
         let unmeasured = unmeasured_storeys(&chain_spec(&data, chain.as_ref(), &settings)?);
         let listed = || {
             let v: Vec<String> = unmeasured.iter().map(|s| s.to_string()).collect();
