@@ -83,6 +83,41 @@ impl std::str::FromStr for Algorithm {
     }
 }
 
+impl FilterSettings {
+    /// [`FilterSettings::recommended`] for `algorithm` on a building whose 1-based storeys
+    /// `unmeasured` carry no sensor ([`unmeasured_storeys`]): the MPF-EKF2 then starts every
+    /// particle from its own prior mean ([`models::filtering::MarginalPrior::PerParticle`] with s.d.
+    /// [`SPARSE_REL_SD`] × that mean) instead of one moment-matched Gaussian. Measured
+    /// (`docs/scaling.md`, "Sparse sensors at 20 and 40 storeys"): with one shared Gaussian the
+    /// MPF-EKF2 is in effect a single second-order EKF over the 4N + 1 marginalised values; where
+    /// the displacements entering a storey's bilinear force `k_j (x_j − x_{j−1})` are not measured,
+    /// that EKF drives the stiffnesses to zero or below within the first seconds, the filter's
+    /// model turns unstable and every particle's innovation covariance fails. Every storey
+    /// measured (the paper's layout and every regression record): unchanged.
+    pub fn recommended_for(algorithm: Algorithm, unmeasured: &[usize]) -> Self {
+        let mut s = Self::recommended();
+        if algorithm == Algorithm::MpfEkf2 && !unmeasured.is_empty() {
+            s.marginal_prior = models::filtering::MarginalPrior::PerParticle {
+                rel_sd: SPARSE_REL_SD,
+            };
+        }
+        s
+    }
+}
+
+/// Relative s.d. of each particle's prior Gaussian that [`FilterSettings::recommended_for`]
+/// gives the MPF-EKF2 when a storey carries no sensor (the value measured in `docs/scaling.md`).
+pub const SPARSE_REL_SD: f64 = 0.1;
+
+/// The 1-based storeys of `spec`'s building that carry no sensor, in increasing order.
+pub fn unmeasured_storeys(spec: &ChainSpec) -> Vec<usize> {
+    let measured = spec.sensors.storeys();
+    (0..spec.n_storeys())
+        .filter(|j| !measured.contains(j))
+        .map(|j| j + 1)
+        .collect()
+}
+
 /// What a run is given: the data, and when known the true structure (for the validation run).
 pub struct RunInput<'a> {
     pub data: &'a LoadedDataset,
