@@ -62,8 +62,9 @@ pub struct Args {
     pub discretisation: Option<models::filtering::Discretisation>,
     /// Transitions inside the filter per sample interval (MPF-EKF2 and bootstrap PF), for data
     /// sampled coarsely relative to the structure's highest modes: a number, or `auto` (the
-    /// default without --config: enough that the highest mode of the prior's building is shifted
-    /// by at most 0.5 % by the discretisation; docs/real-frame.md, docs/scaling.md).
+    /// default without --config: where one step per sample would shift the highest mode of the
+    /// prior's building by more than 2 %, enough sub-steps to bring that shift under 0.5 %;
+    /// docs/real-frame.md).
     #[arg(long)]
     pub substeps: Option<crate::settings::Substeps>,
     /// TOML file with filter settings (priors, noise fraction, masses, …) over the SPEC's (the
@@ -198,9 +199,9 @@ noise_fraction = {nf}
 # Discretisation inside the filters: "euler" (the paper's), "symplectic", "rk4" (bootstrap only).
 discretisation = {disc}
 # Transitions inside the filter per sample interval (dt/substeps each, ü_g interpolated), for
-# data sampled coarsely relative to the structure's highest modes; "auto": enough that the
-# highest mode of the prior's building is shifted by at most 0.5 % by the discretisation (one on
-# the paper's data); more than one for MPF-EKF2 and bootstrap PF only.
+# data sampled coarsely relative to the structure's highest modes; "auto": where one step would
+# shift the highest mode of the prior's building by more than 2 %, enough sub-steps to bring it
+# under 0.5 % (one on the paper's data); more than one for MPF-EKF2 and bootstrap PF only.
 substeps = {substeps}
 # θ_val averages the posterior mean over the last `window` steps (SPEC eq. 26).
 window = {window}
