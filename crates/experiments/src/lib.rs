@@ -38,6 +38,7 @@ pub mod pipeline;
 mod pool;
 pub mod record;
 pub mod reference;
+pub mod regression;
 pub mod report;
 pub mod reproduce;
 pub mod residuals;

@@ -8,7 +8,7 @@ use std::process::Command;
 
 use common::{hysteresis_loop, record, trace, THETA_TRUE};
 use experiments::checks::Residuals;
-use experiments::cli::plot::plot;
+use experiments::figures::run::plot;
 use experiments::figures::validate_svg;
 use experiments::record::Validation;
 
