@@ -283,7 +283,7 @@ fn simulate(
         absolute,
         noise_fraction,
     };
-    let config = dataset_config(&request).map_err(err)?;
+    let config = dataset_config(&request).map_err(py_err)?;
     let ds = py
         .allow_threads(|| models::dataset::generate(&config))
         .map_err(py_err)?;

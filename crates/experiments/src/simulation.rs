@@ -2,13 +2,43 @@
 //! package's `simulate`): a preset, an excitation, the building's storeys and sensors, checked
 //! against `models::limits` before anything is generated.
 
-use anyhow::{bail, Context};
 use models::dataset::{self, DatasetConfig, ExcitationSource, MeasurementKind};
 use models::excitation::KanaiTajimi;
-use models::limits;
-use models::preset::{HARMONIC_AMPLITUDE, HARMONIC_OMEGA};
+use models::limits::{self, LimitError};
+use models::preset::{PresetError, HARMONIC_AMPLITUDE, HARMONIC_OMEGA};
 use models::readers::Units;
 use std::path::PathBuf;
+
+/// Why a simulation request is refused; every message names the flag of `sysid simulate`.
+#[derive(Debug, thiserror::Error)]
+pub enum SimulationError {
+    /// A value outside its limits (`flag` names it, the source says why).
+    #[error("{flag}")]
+    Limit {
+        flag: String,
+        #[source]
+        source: LimitError,
+    },
+    /// An entry of a storey list that is no storey number.
+    #[error(
+        "{flag}: `{part}` is not a storey number (a comma list of storeys numbered from 1, e.g. \
+         1,4{})",
+        if *allow_none { ", or none" } else { "" }
+    )]
+    NotAStorey {
+        flag: String,
+        part: String,
+        allow_none: bool,
+    },
+    /// A duration that is not a positive number of seconds.
+    #[error("--duration: {0} is not a positive number of seconds")]
+    Duration(f64),
+    /// A storey list that does not fit the building (`--hysteretic`, `--sensors`).
+    #[error("--{flag}: {message}")]
+    StoreyList { flag: String, message: String },
+    #[error(transparent)]
+    Preset(#[from] PresetError),
+}
 
 /// What to simulate: every flag of `sysid simulate` but `--out`.
 #[derive(Debug, Clone)]
@@ -65,36 +95,39 @@ fn excitation_source(arg: &str, units: Units) -> ExcitationSource {
 
 /// Parses a comma list of 1-based storeys (`1,4`); `none` (when allowed) is the empty list.
 /// Errors name the flag.
-pub fn parse_storeys(flag: &str, s: &str, allow_none: bool) -> anyhow::Result<Vec<usize>> {
+pub fn parse_storeys(flag: &str, s: &str, allow_none: bool) -> Result<Vec<usize>, SimulationError> {
     if allow_none && s.trim() == "none" {
         return Ok(Vec::new());
     }
     s.split(',')
         .map(|part| {
             let part = part.trim();
-            part.parse::<usize>().map_err(|_| {
-                anyhow::anyhow!(
-                    "{flag}: `{part}` is not a storey number (a comma list of storeys numbered \
-                     from 1, e.g. 1,4{})",
-                    if allow_none { ", or none" } else { "" }
-                )
-            })
+            part.parse::<usize>()
+                .map_err(|_| SimulationError::NotAStorey {
+                    flag: flag.to_string(),
+                    part: part.to_string(),
+                    allow_none,
+                })
         })
         .collect()
 }
 
 /// Checks the flags a user gives against the limits; errors name the flag.
-fn check_flags(args: &SimulationRequest) -> anyhow::Result<()> {
+fn check_flags(args: &SimulationRequest) -> Result<(), SimulationError> {
+    let flag = |flag: &str| {
+        let flag = flag.to_string();
+        move |source| SimulationError::Limit { flag, source }
+    };
     if let Some(n) = args.storeys {
-        limits::check_storeys(n).context("--storeys")?;
+        limits::check_storeys(n).map_err(flag("--storeys"))?;
     }
     if let Some(s) = args.scale {
-        limits::check_scale(s).context("--scale")?;
+        limits::check_scale(s).map_err(flag("--scale"))?;
     }
-    limits::check_noise_fraction(args.noise_fraction).context("--noise-fraction")?;
+    limits::check_noise_fraction(args.noise_fraction).map_err(flag("--noise-fraction"))?;
     if let Some(d) = args.duration {
         if !(d > 0.0 && d.is_finite()) {
-            bail!("--duration: {d} is not a positive number of seconds");
+            return Err(SimulationError::Duration(d));
         }
     }
     Ok(())
@@ -103,7 +136,7 @@ fn check_flags(args: &SimulationRequest) -> anyhow::Result<()> {
 /// The data-set configuration a request describes, checked against the limits; errors name the
 /// flag of `sysid simulate`. The Python package's `simulate` uses it too, so that both accept and
 /// refuse the same settings with the same messages.
-pub fn dataset_config(args: &SimulationRequest) -> anyhow::Result<DatasetConfig> {
+pub fn dataset_config(args: &SimulationRequest) -> Result<DatasetConfig, SimulationError> {
     check_flags(args)?;
     let mut config = DatasetConfig::from_preset(&args.preset, args.seed)?;
     config.run = args.run;
@@ -119,7 +152,10 @@ pub fn dataset_config(args: &SimulationRequest) -> anyhow::Result<DatasetConfig>
         dataset::check_config(&config)
     {
         if field == "hysteretic" || field == "sensors" {
-            bail!("--{field}: {message}");
+            return Err(SimulationError::StoreyList {
+                flag: field.to_string(),
+                message,
+            });
         }
     }
     config.noise_fraction = args.noise_fraction;
@@ -140,8 +176,10 @@ pub fn dataset_config(args: &SimulationRequest) -> anyhow::Result<DatasetConfig>
         config.measurement = MeasurementKind::Absolute;
     }
     if let Some(d) = config.duration {
-        limits::samples_for_duration(d, config.dt)
-            .with_context(|| format!("--duration at dt = {} s", config.dt))?;
+        limits::samples_for_duration(d, config.dt).map_err(|source| SimulationError::Limit {
+            flag: format!("--duration at dt = {} s", config.dt),
+            source,
+        })?;
     }
     Ok(config)
 }
