@@ -23,7 +23,6 @@ use plotters::coord::Shift;
 use plotters::prelude::*;
 use plotters::style::text_anchor::{HPos, Pos, VPos};
 
-pub mod run;
 pub mod style;
 
 use crate::metrics::mean_sd;

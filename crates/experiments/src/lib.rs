@@ -14,6 +14,7 @@
 //!   record;
 //! - [`simulation`]: the data set a simulation request (`sysid simulate`) describes;
 //! - [`regression`]: the identification-accuracy regression check;
+//! - [`plot`]: the figures of one run, from its record;
 //! - [`sweep`]: parallel, resumable, shardable sweeps over runs;
 //! - [`scaling`]: the scaling study (chains of 3 to 40 storeys), its figures and report;
 //! - [`verdict`]: the paper's statements decided by stated tests on the records (REPORT.md);
@@ -41,6 +42,7 @@ pub mod metrics;
 pub mod observe;
 pub mod pace;
 pub mod pipeline;
+pub mod plot;
 mod pool;
 pub mod record;
 pub mod reference;

@@ -248,7 +248,7 @@ fn records_with_non_finite_numbers_in_every_field_read_back_through_every_reader
             prop_assert_eq!(text(&back), text(&r));
             // `sysid plot`: read and draw (every 8th case: drawing is the slow part).
             if case.is_multiple_of(8) {
-                experiments::figures::run::plot(&path, &dir.join(format!("figs{case}")))
+                experiments::plot::plot(&path, &dir.join(format!("figs{case}")))
                     .map_err(|e| TestCaseError::fail(format!("plot: {e:#}")))?;
             }
             Ok(())

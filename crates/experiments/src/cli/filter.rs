@@ -142,7 +142,7 @@ pub fn run(args: Args) -> Result<()> {
     let outcome = report(identified.record, &out);
     // The figures of a failed or implausible run are drawn too: they show what went wrong.
     if let Some(dir) = &args.plot {
-        let drawn = crate::figures::run::plot(&out, dir)?;
+        let drawn = crate::plot::plot(&out, dir)?;
         for note in &drawn.skipped {
             eprintln!("note: {note}");
         }

@@ -14,7 +14,7 @@ use std::path::PathBuf;
 
 use anyhow::Result;
 
-use crate::figures::run::plot;
+use crate::plot::plot;
 
 /// Arguments of `sysid plot`.
 #[derive(Debug, clap::Args)]
