@@ -769,6 +769,107 @@ mod tests {
         assert!(imports.is_empty(), "record imports {imports:?}");
     }
 
+    /// The command-line layer of `experiments` is its top: only `cli` itself and the binary
+    /// (`src/bin/`) name `crate::cli`/`experiments::cli`; the library's other modules, the
+    /// tests of every crate and the Python binding use the library's own modules.
+    #[test]
+    fn only_the_binary_uses_the_command_line_layer() {
+        let root = workspace_root();
+        let graph = crate_graph(&root.join("crates/experiments/src")).unwrap();
+        let mut offenders: Vec<String> = graph
+            .edges
+            .iter()
+            .filter(|(from, _)| from.as_str() != "cli")
+            .filter_map(|(from, to)| to.get("cli").map(|places| (from, places)))
+            .map(|(from, places)| {
+                format!("{from} ({}:{})", places[0].file.display(), places[0].line)
+            })
+            .collect();
+        let mut files = Vec::new();
+        if let Ok(entries) = fs::read_dir(root.join("crates")) {
+            for e in entries.flatten() {
+                let tests = e.path().join("tests");
+                if tests.is_dir() {
+                    rs_files(&tests, &mut files).unwrap();
+                }
+            }
+        }
+        rs_files(&root.join("python/src"), &mut files).unwrap();
+        rs_files(&root.join("xtask/src"), &mut files).unwrap();
+        files.sort();
+        for file in files {
+            let code = strip_comments_and_strings(&fs::read_to_string(&file).unwrap());
+            if let Some(n) = names_cli_layer(&code) {
+                offenders.push(format!("{}:{n}", file.display()));
+            }
+        }
+        assert!(
+            offenders.is_empty(),
+            "the command-line layer `experiments::cli` is used outside `cli` and the binary \
+             (move what they need into a library module): {offenders:?}"
+        );
+    }
+
+    /// The first line of `code` (comments and strings stripped) naming `experiments::cli` (a
+    /// path or a `use experiments::{…, cli, …}` group).
+    fn names_cli_layer(code: &str) -> Option<usize> {
+        let c: Vec<char> = code.chars().collect();
+        let mut line = 1;
+        for i in 0..c.len() {
+            if c[i] == '\n' {
+                line += 1;
+                continue;
+            }
+            if (i > 0 && is_ident(c[i - 1])) || read_ident(&c, i) != "experiments" {
+                continue;
+            }
+            let after = skip_ws(&c, i + "experiments".len());
+            if !(c.get(after) == Some(&':') && c.get(after + 1) == Some(&':')) {
+                continue;
+            }
+            if first_segments(&c, skip_ws(&c, after + 2))
+                .iter()
+                .any(|s| s == "cli")
+            {
+                return Some(line);
+            }
+        }
+        None
+    }
+
+    #[test]
+    fn the_command_line_layer_is_found_in_paths_and_groups() {
+        assert_eq!(
+            names_cli_layer("use experiments::cli::filter::finish;"),
+            Some(1)
+        );
+        assert_eq!(
+            names_cli_layer("\nuse experiments::{checks, cli};"),
+            Some(2)
+        );
+        assert_eq!(
+            names_cli_layer("let x = experiments :: cli::plot::plot(a, b);"),
+            Some(1)
+        );
+        assert_eq!(
+            names_cli_layer("use experiments::cli_reference::render;"),
+            None
+        );
+        assert_eq!(names_cli_layer("use my_experiments::cli::x;"), None);
+        let src = tree(
+            "cli-layer",
+            &[
+                ("lib.rs", "pub mod a; pub mod cli;"),
+                ("a.rs", "use crate::cli::filter::finish;\n"),
+                ("cli/mod.rs", "pub mod filter;\n"),
+                ("cli/filter.rs", "use crate::a;\n"),
+            ],
+        );
+        let graph = crate_graph(&src).unwrap();
+        assert!(graph.edges["a"].contains_key("cli"));
+        fs::remove_dir_all(src).unwrap();
+    }
+
     /// Every module the SPEC table of `docs/architecture.md` names exists.
     #[test]
     fn the_spec_table_names_existing_modules() {

@@ -1,7 +1,8 @@
 //! # experiments
 //!
 //! Everything with I/O: experiment configs, sweeps over runs, metrics, run records, figures,
-//! reports, and the subcommands of the `sysid` command-line tool (module [`cli`]).
+//! reports, and the subcommands of the `sysid` command-line tool (module [`cli`]: each parses its
+//! flags, calls the library and prints; nothing else uses it).
 //!
 //! - [`limits`]: checks of user-given filter settings against the limits of `models::limits`;
 //! - [`metrics`]: θ_val, relative errors, CV(RMSE) and NRMSE (SPEC §7);
@@ -9,6 +10,11 @@
 //! - [`record`]: the run record written for every run: types only, the leaf every analysis
 //!   imports;
 //! - [`settings`]: the filter settings of a run;
+//! - [`identification`]: one identification as `sysid filter` runs it, and the decision on its
+//!   record;
+//! - [`simulation`]: the data set a simulation request (`sysid simulate`) describes;
+//! - [`regression`]: the identification-accuracy regression check;
+//! - [`plot`]: the figures of one run, from its record;
 //! - [`sweep`]: parallel, resumable, shardable sweeps over runs;
 //! - [`scaling`]: the scaling study (chains of 3 to 40 storeys), its figures and report;
 //! - [`verdict`]: the paper's statements decided by stated tests on the records (REPORT.md);
@@ -29,21 +35,25 @@ pub mod field;
 pub mod field_study;
 pub mod figures;
 pub mod headline;
+pub mod identification;
 pub mod limits;
 mod markdown;
 pub mod metrics;
 pub mod observe;
 pub mod pace;
 pub mod pipeline;
+pub mod plot;
 mod pool;
 pub mod record;
 pub mod reference;
+pub mod regression;
 pub mod report;
 pub mod reproduce;
 pub mod residuals;
 pub mod scaled_prior;
 pub mod scaling;
 pub mod settings;
+pub mod simulation;
 pub mod stats;
 pub mod study;
 pub mod sweep;

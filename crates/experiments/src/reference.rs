@@ -35,6 +35,10 @@ use serde::{Deserialize, Serialize};
 
 use crate::pipeline::{build_filter, Algorithm, FilterSettings};
 
+pub mod posterior;
+mod record;
+pub use record::{chain_warnings, ReferenceRecord, MIN_ACCEPTANCE, MIN_CHAIN_ESS};
+
 fn sigmoid(x: f64) -> f64 {
     1.0 / (1.0 + (-x).exp())
 }

@@ -1,14 +1,19 @@
-//! Plausibility warnings and the exit decision of `sysid filter` (`cli::filter::finish`, the
-//! function the binary calls after a run) on constructed records.
+//! Plausibility warnings and the exit decision of `sysid filter` (`identification::finish` and
+//! `Finished::verdict`, what the binary calls after a run) on constructed records.
 
 mod common;
 
 use common::record;
 use core_filters::credible::CredibleInterval;
 use experiments::checks::{check, summary_table, WarningKind};
-use experiments::cli::filter::finish;
+use experiments::identification::{finish, Rejected};
 use experiments::observe::{ParamIntervals, PosteriorShape};
 use experiments::record::RunRecord;
+
+/// The exit decision on a finished run: its record written, then accepted or rejected.
+fn finish_run(r: RunRecord, path: &std::path::Path) -> Result<(), Rejected> {
+    finish(r, path).expect("the record is written").verdict()
+}
 
 fn out_path(test: &str) -> std::path::PathBuf {
     let d = std::env::temp_dir().join(format!("checks-test-{}-{test}", std::process::id()));
@@ -31,7 +36,7 @@ fn a_healthy_run_has_no_warnings_and_succeeds() {
     let r = healthy();
     assert!(check(&r).is_empty(), "{:?}", check(&r));
     let path = out_path("healthy");
-    finish(r, &path).expect("a healthy run exits successfully");
+    finish_run(r, &path).expect("a healthy run exits successfully");
     assert!(written(&path).warnings.is_empty());
 }
 
@@ -50,7 +55,7 @@ fn a_negative_stiffness_is_impossible_and_exits_non_zero() {
         w[0].message
     );
     let path = out_path("negative");
-    let err = finish(r, &path).expect_err("an impossible result must not exit successfully");
+    let err = finish_run(r, &path).expect_err("an impossible result must not exit successfully");
     assert!(err.to_string().contains("physically impossible"), "{err}");
     assert!(err.to_string().contains("k3"), "{err}");
     // The record is still written, with its warning.
@@ -69,7 +74,7 @@ fn a_zero_damping_and_a_nan_are_impossible() {
         kinds,
         vec![WarningKind::NonPositive, WarningKind::NonFinite]
     );
-    assert!(finish(r, &out_path("zero")).is_err());
+    assert!(finish_run(r, &out_path("zero")).is_err());
 }
 
 #[test]
@@ -95,7 +100,7 @@ fn few_distinct_values_and_tiny_ess_warn_without_failing() {
     assert!(table.contains("250 distinct values"), "{table}");
     assert!(table.contains("(TINY)"), "{table}");
     let path = out_path("few");
-    finish(r, &path).expect("unreliable but possible: warn, exit 0");
+    finish_run(r, &path).expect("unreliable but possible: warn, exit 0");
     assert_eq!(written(&path).warnings, w);
 }
 
@@ -106,7 +111,8 @@ fn a_failed_run_warns_and_exits_non_zero() {
     r.steps_completed = 411;
     let w = check(&r);
     assert_eq!(w[0].kind, WarningKind::Failed);
-    let err = finish(r, &out_path("failed")).unwrap_err();
+    let err = finish_run(r, &out_path("failed")).unwrap_err();
+    assert!(matches!(err, Rejected::Failed { step: 412, .. }), "{err:?}");
     assert!(err.to_string().contains("failed at step 412"), "{err}");
 }
 

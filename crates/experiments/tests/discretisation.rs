@@ -112,7 +112,7 @@ fn a_record_is_taken_over_only_for_the_same_job() {
 fn the_symplectic_regression_file_checks_the_symplectic_scheme() {
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("../../experiments/regression-symplectic.toml");
-    let file = experiments::cli::regression::RegressionFile::load(&path).unwrap();
+    let file = experiments::regression::RegressionFile::load(&path).unwrap();
     assert_eq!(file.study.filter.discretisation, Discretisation::Symplectic);
     assert!(file
         .study

@@ -8,8 +8,8 @@ use std::process::Command;
 
 use common::{hysteresis_loop, record, trace, THETA_TRUE};
 use experiments::checks::Residuals;
-use experiments::cli::plot::plot;
 use experiments::figures::validate_svg;
+use experiments::plot::plot;
 use experiments::record::Validation;
 
 fn dir(test: &str) -> PathBuf {

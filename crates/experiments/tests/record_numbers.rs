@@ -14,12 +14,12 @@ use std::path::{Path, PathBuf};
 
 use core_filters::credible::CredibleInterval;
 use experiments::checks::{Residuals, Warning, WarningKind};
-use experiments::cli::reference::ReferenceRecord;
 use experiments::metrics::{SignalError, StateErrors};
 use experiments::observe::{ParamIntervals, PosteriorShape, Trace};
 use experiments::record::read::{parse, read, write};
 use experiments::record::{Loop, RunRecord, Validation};
 use experiments::reference::ParamSummary;
+use experiments::reference::ReferenceRecord;
 use experiments::residuals::ChannelCheck;
 use proptest::prelude::*;
 use proptest::test_runner::{Config, RngAlgorithm, TestRng, TestRunner};
@@ -248,7 +248,7 @@ fn records_with_non_finite_numbers_in_every_field_read_back_through_every_reader
             prop_assert_eq!(text(&back), text(&r));
             // `sysid plot`: read and draw (every 8th case: drawing is the slow part).
             if case.is_multiple_of(8) {
-                experiments::cli::plot::plot(&path, &dir.join(format!("figs{case}")))
+                experiments::plot::plot(&path, &dir.join(format!("figs{case}")))
                     .map_err(|e| TestCaseError::fail(format!("plot: {e:#}")))?;
             }
             Ok(())

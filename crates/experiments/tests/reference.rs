@@ -116,7 +116,7 @@ fn chains_pool_as_an_equal_mixture() {
 /// a healthy chain gets no warning.
 #[test]
 fn untrustworthy_chains_are_flagged() {
-    use experiments::cli::reference::chain_warnings;
+    use experiments::reference::chain_warnings;
     let p = |ess: f64| {
         vec![ParamSummary {
             name: "k1".into(),

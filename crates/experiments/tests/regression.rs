@@ -4,7 +4,7 @@
 use std::collections::BTreeMap;
 use std::path::PathBuf;
 
-use experiments::cli::regression::{evaluate, format_table, RegressionFile, PAPER_PARAMS};
+use experiments::regression::{evaluate, format_table, RegressionFile, PAPER_PARAMS};
 use experiments::reproduce::{AlgorithmStats, ParamStats};
 
 fn file() -> RegressionFile {

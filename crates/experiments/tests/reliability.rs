@@ -119,8 +119,7 @@ fn reference_takes_the_structure_of_field_data_from_a_config() {
         "{}",
         stderr(&o)
     );
-    let r: experiments::cli::reference::ReferenceRecord =
-        experiments::record::read::read(&out).unwrap();
+    let r: experiments::reference::ReferenceRecord = experiments::record::read::read(&out).unwrap();
     assert_eq!(r.params.len(), 9);
 }
 
@@ -330,8 +329,8 @@ fn every_reader_makes_the_same_checks() {
 
 /// A reference posterior of the paper's nine parameters (constructed: the test is about reading).
 fn write_reference(path: &Path) {
-    use experiments::cli::reference::ReferenceRecord;
     use experiments::reference::ParamSummary;
+    use experiments::reference::ReferenceRecord;
     let names = ["k1", "k2", "k3", "c1", "c2", "c3", "beta", "gamma", "n"];
     let truth = [8.0, 8.0, 8.0, 0.25, 0.25, 0.25, 2.0, 1.0, 2.0];
     let r = ReferenceRecord {

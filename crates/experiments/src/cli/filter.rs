@@ -1,22 +1,15 @@
 //! `sysid filter`: one identification run on a data-set directory, written as a run record.
 
-use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-use anyhow::{bail, Context, Result};
+use anyhow::{bail, Result};
 use core_filters::resampling::Scheme;
 use core_filters::smc::storvik::StorvikUpdate;
-use models::dataset::{load_dir, MEASURED, META};
 use models::sensors::MeasurementKind;
 
-use crate::checks;
-use crate::cli::simulate::parse_storeys;
-use crate::field::{self, StructureSettings};
-use crate::pipeline::{
-    chain_spec, identify, unmeasured_storeys, Algorithm, FilterSettings, RunInput, SPARSE_REL_SD,
-};
+use crate::identification::{commented_defaults, finish, identify_request, FilterRequest};
+use crate::pipeline::Algorithm;
 use crate::record::RunRecord;
-use models::filtering::MarginalPrior;
 
 /// Arguments of `sysid filter`.
 #[derive(Debug, clap::Args)]
@@ -103,41 +96,6 @@ fn parse_damping(s: &str) -> Result<models::structure::Damping, String> {
         .map_err(|e: models::structure::UnknownDamping| e.to_string())
 }
 
-/// The structure flags as a `[structure]` table; errors name the flag.
-fn structure_flags(args: &Args) -> Result<StructureSettings> {
-    let masses = match &args.masses {
-        Some(m) => Some(
-            m.split(',')
-                .map(|part| {
-                    let part = part.trim();
-                    part.parse::<f64>()
-                        .ok()
-                        .filter(|v| v.is_finite() && *v > 0.0)
-                        .with_context(|| {
-                            format!("--masses: `{part}` is not a positive mass (a comma list m1,...,mN, or one value)")
-                        })
-                })
-                .collect::<Result<Vec<f64>>>()?,
-        ),
-        None => None,
-    };
-    Ok(StructureSettings {
-        storeys: args.storeys,
-        hysteretic: match &args.hysteretic {
-            Some(h) => Some(parse_storeys("--hysteretic", h, true)?),
-            None => None,
-        },
-        masses,
-        measurement: args.measurement,
-        damping: args.damping,
-    })
-}
-
-/// A flag's name for a key of the `[structure]` table.
-fn flag_name(key: &str) -> String {
-    format!("--{key}")
-}
-
 fn parse_storvik(s: &str) -> Result<StorvikUpdate, String> {
     match s {
         "linearised" | "linearized" => Ok(StorvikUpdate::Linearised),
@@ -148,292 +106,45 @@ fn parse_storvik(s: &str) -> Result<StorvikUpdate, String> {
     }
 }
 
-/// Parses `name=value,name=value`.
-pub fn parse_fix(s: &str) -> Result<BTreeMap<String, f64>> {
-    let mut out = BTreeMap::new();
-    for part in s.split(',').map(str::trim).filter(|p| !p.is_empty()) {
-        let (name, value) = part
-            .split_once('=')
-            .with_context(|| format!("--fix: `{part}` is not of the form name=value"))?;
-        let v: f64 = value
-            .trim()
-            .parse()
-            .with_context(|| format!("--fix: value `{value}` of {name} is not a number"))?;
-        if !v.is_finite() {
-            bail!("--fix: value of {name} is not finite");
-        }
-        if out.insert(name.trim().to_string(), v).is_some() {
-            bail!("--fix: {} is given twice", name.trim());
-        }
-    }
-    Ok(out)
-}
-
-/// Every key of a filter config (`--config`) with the value `sysid filter` uses without a config
-/// ([`FilterSettings::recommended`]) and its meaning, as a TOML file that parses back to those
-/// settings: `--print-config > f.toml` then `--config f.toml` runs exactly what no config runs.
-pub fn commented_defaults() -> String {
-    let d = FilterSettings::recommended();
-    let paper = FilterSettings::default();
-    let q = |v: &dyn erased::Show| v.show();
-    format!(
-        r#"# Filter settings of `sysid filter --config FILE.toml` (and the [filter] table of a study).
-# Shown with the values `sysid filter` uses without --config (the recommended settings, whose
-# interval coverage is measured in docs/calibration.md). A key absent from a file takes the
-# paper's value instead (ess_threshold absent, pool = 1, discretisation = "{paper_disc}").
-# Command-line options override the file.
-
-# Number of particles Np (SPEC §3).
-particles = {particles}
-# Resampling scheme: "systematic", "stratified", "multinomial" or "residual".
-resampling = {resampling}
-# Resample only when ESS < ess_threshold × particles, in (0, 1]; absent: every step (SPEC §3).
-ess_threshold = {ess}
-# Independent filters pooled into one run (the particles split between them); θ_val is their
-# mean and its Monte-Carlo s.e. is reported (docs/calibration.md). 1: one filter (the paper's).
-pool = {pool}
-# Storvik's step (iii): "linearised" (the paper's) or "exact".
-storvik_update = {storvik}
-# Noise fraction nf: R and Q are set from nf × RMS of the signals (SPEC §3).
-noise_fraction = {nf}
-# Discretisation inside the filters: "euler" (the paper's), "symplectic", "rk4" (bootstrap only).
-discretisation = {disc}
-# Transitions inside the filter per sample interval (dt/substeps each, ü_g interpolated), for
-# data sampled coarsely relative to the structure's highest modes; "auto": where one step would
-# shift the highest mode of the prior's building by more than 2 %, enough sub-steps to bring it
-# under 0.5 % (one on the paper's data); more than one for MPF-EKF2 and bootstrap PF only.
-substeps = {substeps}
-# θ_val averages the posterior mean over the last `window` steps (SPEC eq. 26).
-window = {window}
-# Keep one trace step in `trace_every` in the record (0: no trace).
-trace_every = {trace}
-# Run the validation integration with θ_val when the truth is known (SPEC §7).
-validate = {validate}
-# Keep one hysteresis-loop point in `loop_every` in the record (0: no loops).
-loop_every = {loops}
-# Gaussian prior of the marginalised block: {{ kind = "moment_matched" }} (one moment-matched
-# Gaussian) or {{ kind = "per_particle", rel_sd = 0.1 }} (means drawn per particle). Without
-# --config the MPF-EKF2 takes per_particle when a storey carries no sensor (docs/scaling.md).
-marginal_prior = {{ kind = "moment_matched" }}
-
-# Point-mass priors: parameter name = value (k1..kN, c1..cN, alpha with the storey+mass damping
-# form, beta, gamma, n; with several hysteretic elements beta4, gamma4, n4 for the element at
-# storey 4).
-[fix]
-# k1 = 8.0
-
-# The building of field data (no dataset.json); data sets with dataset.json carry their own and
-# a key here must agree with it. See docs/structures.md.
-[structure]
-# Number of storeys N.
-# storeys = 3
-# 1-based storeys with a Bouc–Wen element ([] for a linear building).
-# hysteretic = [1]
-# Storey masses m1..mN, or one value for every storey ([1.0]: k and c per unit mass).
-# masses = [1.0, 1.0, 1.0]
-# What the accelerometers record: "absolute" (ẍ + ü_g, real accelerometers) or "relative" (ẍ).
-# measurement = "absolute"
-# Damping form: "storey" (per-storey dashpots c1..cN, the default) or "storey+mass" (also
-# mass-proportional damping αM: storey j gains −α m_j v_j; θ gains alpha after c1..cN).
-# damping = "storey"
-
-# Prior of θ; absent: SPEC §3's for the structure (k ~ LogNormal(10, 0.3), c ~ LogNormal(0.4,
-# 0.5), per element (β, γ) uniform on the triangle 0 ≤ β ≤ 5, |γ| ≤ β, n ~ U(1, 5)). When given,
-# it has one entry per storey in k and c and one element per hysteretic storey (0-based storey):
-# [prior]
-# k = [{{ kind = "log_normal", median = 10.0, log_sd = 0.3 }}, ...]
-# c = [{{ kind = "log_normal", median = 0.4, log_sd = 0.5 }}, ...]
-# alpha = {{ kind = "log_normal", median = 0.5, log_sd = 1.0 }}  (storey+mass damping only)
-# elements = [{{ storey = 0, beta_gamma = {{ kind = "triangle", beta_max = 5.0 }}, n = {{ kind = "uniform", lo = 1.0, hi = 5.0 }} }}]
-"#,
-        paper_disc = paper.discretisation.name(),
-        ess = q(&d
-            .ess_threshold
-            .expect("the recommended settings resample on the ESS")),
-        pool = d.pool,
-        particles = d.particles,
-        resampling = q(&d.resampling),
-        storvik = q(&d.storvik_update),
-        nf = q(&d.noise_fraction),
-        disc = q(&d.discretisation),
-        substeps = d.substeps,
-        window = d.window,
-        trace = d.trace_every,
-        validate = d.validate,
-        loops = d.loop_every,
-    )
-}
-
-/// A value as TOML writes it (through serde, so the printed defaults are the real ones).
-mod erased {
-    pub trait Show {
-        fn show(&self) -> String;
-    }
-    impl<T: serde::Serialize> Show for T {
-        fn show(&self) -> String {
-            #[derive(serde::Serialize)]
-            struct W<'a, T> {
-                v: &'a T,
-            }
-            let text = toml::to_string(&W { v: self }).expect("a default serialises");
-            text.trim()
-                .strip_prefix("v = ")
-                .expect("one key")
-                .to_string()
-        }
-    }
-}
-
 /// Runs `sysid filter`.
 pub fn run(args: Args) -> Result<()> {
     if args.print_config {
         print!("{}", commented_defaults());
         return Ok(());
     }
-    let (Some(algorithm), Some(data_dir), Some(out)) =
+    let (Some(algorithm), Some(data), Some(out)) =
         (args.algorithm, args.data.clone(), args.out.clone())
     else {
         bail!("--algorithm, --data and --out are required");
     };
-    let mut settings = match &args.config {
-        Some(path) => crate::limits::load_filter_settings(path)?,
-        None => FilterSettings::recommended(),
-    };
-    if let Some(p) = args.particles {
-        settings.particles = p;
-    }
-    if let Some(r) = args.resampling {
-        settings.resampling = r;
-    }
-    if args.ess_threshold.is_some() {
-        settings.ess_threshold = args.ess_threshold;
-    }
-    if let Some(d) = args.discretisation {
-        settings.discretisation = d;
-    }
-    if let Some(m) = args.substeps {
-        settings.substeps = m;
-    }
-    if let Some(u) = args.storvik_update {
-        settings.storvik_update = u;
-    }
-    if let Some(f) = &args.fix {
-        settings.fix.extend(parse_fix(f)?);
-    }
-    let flags = structure_flags(&args)?;
-    let data =
-        load_dir(&data_dir).with_context(|| format!("loading data set {}", data_dir.display()))?;
-    let measured = data_dir.join(MEASURED);
-    let config_name = args
-        .config
-        .as_ref()
-        .map_or_else(String::new, |p| p.display().to_string());
-    let table_name = |key: &str| format!("[structure] `{key}` in {config_name}");
-    let both_name = |key: &str| format!("{} (or {})", flag_name(key), field::table_key(key));
-    if data.meta.is_some() {
-        // Simulated data carry their structure: a stated key must agree with it.
-        field::resolve(&data, None, &flags, &measured, &flag_name)?;
-        field::resolve(&data, None, &settings.structure, &measured, &table_name)?;
-        settings.structure = StructureSettings::default();
-    } else {
-        // Field data: flags over the config table; refused by name when incomplete.
-        settings.structure.overlay(&flags);
-        let d = field::resolve(&data, None, &settings.structure, &measured, &both_name)?;
-        eprintln!(
-            "field data: {} storeys, masses {:?}, hysteretic storeys {:?}, {} accelerations at storeys {:?}, {} damping (no {META})",
-            d.storeys, d.masses, d.hysteretic, d.measurement, d.sensors, d.damping
-        );
-    }
-    // The true structure, for the validation run, when the data set says what it is.
-    let chain = data
-        .true_chain()
-        .context("rebuilding the data set's structure")?;
-    // What the sensors cannot see decides the MPF-EKF2's default prior Gaussian
-    // (`FilterSettings::recommended_for`; docs/scaling.md, "Sparse sensors at 20 and 40 storeys").
-    if algorithm == Algorithm::MpfEkf2 {
-        // Settings first, so that their refusal names the key as it does in every other run.
-        crate::limits::check_filter_settings(&settings)?;
-        let unmeasured = unmeasured_storeys(&chain_spec(&data, chain.as_ref(), &settings)?);
-        let listed = || {
-            let v: Vec<String> = unmeasured.iter().map(|s| s.to_string()).collect();
-            v.join(", ")
-        };
-        if unmeasured.is_empty() {
-            // Every storey measured: the settings as given.
-        } else if args.config.is_none() {
-            settings.marginal_prior =
-                FilterSettings::recommended_for(algorithm, &unmeasured).marginal_prior;
-            eprintln!(
-                "note: storeys {} carry no sensor: the MPF-EKF2 starts every particle from its own prior mean (marginal_prior = {{ kind = \"per_particle\", rel_sd = {SPARSE_REL_SD} }}; with one shared prior Gaussian it loses its particles on such layouts, docs/scaling.md)",
-                listed()
-            );
-        } else if settings.marginal_prior == MarginalPrior::MomentMatched {
-            eprintln!(
-                "warning: storeys {} carry no sensor and the MPF-EKF2 starts from one moment-matched prior Gaussian (marginal_prior = {{ kind = \"moment_matched\" }}): on such layouts it drives unmeasured stiffnesses below zero and loses all its particles in most runs at 20 and 40 storeys (docs/scaling.md); set marginal_prior = {{ kind = \"per_particle\", rel_sd = {SPARSE_REL_SD} }}",
-                listed()
-            );
-        }
-    }
-    let input = RunInput {
-        data: &data,
-        chain: chain.as_ref(),
-        experiment: &args.experiment,
+    let request = FilterRequest {
+        algorithm,
+        data,
+        config: args.config,
+        particles: args.particles,
+        resampling: args.resampling,
+        ess_threshold: args.ess_threshold,
+        storvik_update: args.storvik_update,
+        discretisation: args.discretisation,
+        substeps: args.substeps,
+        fix: args.fix,
+        experiment: args.experiment,
         seed: args.seed,
         run: args.run,
-        progress: true,
-        residuals: true,
+        storeys: args.storeys,
+        hysteretic: args.hysteretic,
+        masses: args.masses,
+        measurement: args.measurement,
+        damping: args.damping,
     };
-    if let Some(p) = crate::pipeline::prior_from_data(&data, chain.as_ref(), &settings)? {
-        eprintln!("{}", p.describe());
+    let identified = identify_request(&request, &mut |note| eprintln!("{note}"))?;
+    if let Some(noise) = &identified.noise {
+        eprintln!("{noise}");
     }
-    let mut record = identify(&input, algorithm, &settings)?;
-    if data.meta.is_none() {
-        // Field data: validation without the truth (free run, modes; docs/validation.md).
-        let d = field::resolve_for_run(&data, chain.as_ref(), &settings.structure)?;
-        crate::validation::attach(&mut record, &data, &d);
-    }
-    if data.meta.is_none() {
-        // Field data: the noise levels were chosen from the measured signals (SPEC §3); say which.
-        let spec = &record.config["spec"];
-        let sd = |v: &serde_json::Value| -> String {
-            let items: Vec<String> = v
-                .as_array()
-                .map(|a| {
-                    a.iter()
-                        .filter_map(|x| x.as_f64())
-                        .map(|x| format!("{:.3e}", x.sqrt()))
-                        .collect()
-                })
-                .unwrap_or_default();
-            items.join(", ")
-        };
-        let num =
-            |v: &serde_json::Value| v.as_f64().map_or("?".to_string(), |x| format!("{x:.3e}"));
-        let list = |v: &serde_json::Value| -> String {
-            let items: Vec<String> = v
-                .as_array()
-                .map(|a| {
-                    a.iter()
-                        .filter_map(|x| x.as_f64())
-                        .map(|x| format!("{x:.3e}"))
-                        .collect()
-                })
-                .unwrap_or_default();
-            items.join(", ")
-        };
-        eprintln!(
-            "noise levels from the data (noise fraction {}): measurement s.d. [{}] m/s², process s.d. x {}, v {}, r [{}] (recorded under config.spec)",
-            settings.noise_fraction,
-            sd(&spec["r_diag"]),
-            num(&spec["q_disp"]),
-            num(&spec["q_vel"]),
-            list(&spec["q_r"]),
-        );
-    }
-    let outcome = finish(record, &out);
+    let outcome = report(identified.record, &out);
     // The figures of a failed or implausible run are drawn too: they show what went wrong.
     if let Some(dir) = &args.plot {
-        let drawn = crate::cli::plot::plot(&out, dir)?;
+        let drawn = crate::plot::plot(&out, dir)?;
         for note in &drawn.skipped {
             eprintln!("note: {note}");
         }
@@ -442,53 +153,16 @@ pub fn run(args: Args) -> Result<()> {
     outcome
 }
 
-/// Attaches the plausibility warnings (`checks::check`) to a finished run, writes its record,
-/// prints the summary table on stdout and the warnings on stderr, and returns an error — a
-/// non-zero exit of `sysid filter` — when the run failed or its answer is physically impossible.
-/// The record is written in every case.
-pub fn finish(mut record: RunRecord, out: &Path) -> Result<()> {
-    record.warnings = checks::check(&record);
-    // Written, then read back by the reader every command uses: a record `plot` or
-    // `compare-reference` would refuse is an error here, not a success.
-    crate::record::read::write(out, &record)?;
-    eprintln!(
-        "{}: {} of {} steps, loglik {:.2}, {:.2} s ({:.2} M particle-steps/s); record {}",
-        record.algorithm,
-        record.steps_completed,
-        record.steps_total,
-        record.loglik,
-        record.timing.wall_s,
-        record.timing.particle_steps_per_s / 1e6,
-        out.display()
-    );
-    print!("{}", checks::summary_table(&record));
-    print!(
-        "{}",
-        crate::validation::summary(record.free_run.as_ref(), record.modal.as_ref())
-    );
-    for w in &record.warnings {
+/// Finishes a run ([`finish`]: warnings attached, record written), prints the summary table on
+/// stdout and the warnings on stderr, and returns the run's rejection, if any, as the error of a
+/// non-zero exit.
+fn report(record: RunRecord, out: &Path) -> Result<()> {
+    let finished = finish(record, out)?;
+    eprintln!("{}", finished.headline());
+    print!("{}", finished.summary());
+    for w in &finished.record.warnings {
         eprintln!("warning: {}", w.message);
     }
-    if let Some(f) = &record.failure {
-        bail!(
-            "the run failed at step {} of {}: {f} (record written to {})",
-            record.steps_completed + 1,
-            record.steps_total,
-            out.display()
-        );
-    }
-    if checks::is_fatal(&record.warnings) {
-        let params: Vec<&str> = record
-            .warnings
-            .iter()
-            .filter(|w| w.kind.is_fatal())
-            .filter_map(|w| w.parameter.as_deref())
-            .collect();
-        bail!(
-            "the result is physically impossible ({}): not an identification to use (record with its warnings written to {})",
-            params.join(", "),
-            out.display()
-        );
-    }
+    finished.verdict()?;
     Ok(())
 }

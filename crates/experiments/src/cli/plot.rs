@@ -10,13 +10,11 @@
 //!
 //! A figure whose data the record lacks is skipped with a note saying what is missing.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
-use anyhow::{Context, Result};
+use anyhow::Result;
 
-use crate::figures::{self, Panel, Series};
-use crate::record::RunRecord;
-use crate::residuals::{whiteness, Residuals};
+use crate::plot::plot;
 
 /// Arguments of `sysid plot`.
 #[derive(Debug, clap::Args)]
@@ -27,16 +25,6 @@ pub struct Args {
     #[arg(long)]
     pub out: PathBuf,
 }
-
-/// What `plot` drew and what it skipped (and why).
-#[derive(Debug, Default)]
-pub struct Plotted {
-    pub written: Vec<PathBuf>,
-    pub skipped: Vec<String>,
-}
-
-/// Lags of the whiteness check.
-const MAX_LAG: usize = 20;
 
 /// Runs `sysid plot`.
 pub fn run(args: Args) -> Result<()> {
@@ -52,193 +40,6 @@ pub fn run(args: Args) -> Result<()> {
             "note: nothing drawn: {} holds none of the data above",
             args.record.display()
         );
-    }
-    Ok(())
-}
-
-/// Reads a record (through [`crate::record::read::read`], with every reader's checks) and draws
-/// its figures into `out`.
-pub fn plot(record_path: &Path, out: &Path) -> Result<Plotted> {
-    let record: RunRecord = crate::record::read::read(record_path)?;
-    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
-    draw(&record, record.residuals.as_ref(), out)
-}
-
-/// Draws every figure the record has data for.
-pub fn draw(r: &RunRecord, residuals: Option<&Residuals>, out: &Path) -> Result<Plotted> {
-    let mut p = Plotted::default();
-    let who = format!("{} (seed {}, run {})", r.algorithm, r.seed, r.run);
-
-    if r.trace.t.is_empty() {
-        p.skipped.push(
-            "convergence.svg and ess.svg: the record has no trace (run `sysid filter` with a config `trace_every` > 0)".into(),
-        );
-    } else {
-        let path = out.join("convergence.svg");
-        figures::convergence(
-            &[(r.algorithm.as_str(), r)],
-            &path,
-            &format!("{who}: posterior mean ± 2 s.d."),
-        )?;
-        p.written.push(path);
-        let path = out.join("ess.svg");
-        figures::time_series(
-            &[Panel {
-                caption: format!("effective sample size of {} particles", r.particles),
-                y_desc: "ESS [-]".into(),
-                series: vec![Series {
-                    label: "ESS".into(),
-                    t: &r.trace.t,
-                    y: &r.trace.ess,
-                    colour: Some(0),
-                }],
-                reference: vec![0.0, r.particles as f64],
-            }],
-            &path,
-            &format!("{who}: effective sample size"),
-        )?;
-        p.written.push(path);
-    }
-
-    let has_loop = r
-        .validation
-        .as_ref()
-        .is_some_and(|v| v.loop_validation.is_some());
-    if has_loop {
-        let path = out.join("hysteresis.svg");
-        figures::hysteresis(r, &path, &format!("{who}: validation hysteresis loop"))?;
-        p.written.push(path);
-    } else {
-        p.skipped.push(match &r.validation {
-            None => "hysteresis.svg: the record has no validation run (it needs a known structure: a data set with dataset.json)".into(),
-            Some(v) => match &v.error {
-                Some(e) => format!("hysteresis.svg: the validation run failed: {e}"),
-                None => "hysteresis.svg: the record keeps no loops (config `loop_every` = 0)".into(),
-            },
-        });
-    }
-
-    match residuals {
-        None => p.skipped.push(
-            "accelerations.svg, innovations.svg, innovation_acf.svg: the record has no `residuals` (measured and predicted accelerations, normalised innovations)".into(),
-        ),
-        Some(res) => draw_residuals(res, &who, out, &mut p)?,
-    }
-    let (free, modal) = (r.free_run.as_ref(), r.modal.as_ref());
-    crate::validation::figures::draw(free, modal, out, &who, &mut p.written, &mut p.skipped)?;
-    Ok(p)
-}
-
-/// Column `i` of row-major rows.
-fn column(rows: &[Vec<f64>], i: usize) -> Vec<f64> {
-    rows.iter()
-        .map(|row| row.get(i).copied().unwrap_or(f64::NAN))
-        .collect()
-}
-
-fn draw_residuals(res: &Residuals, who: &str, out: &Path, p: &mut Plotted) -> Result<()> {
-    let channels = &res.channels;
-    let measured: Vec<Vec<f64>> = (0..channels.len())
-        .map(|i| column(&res.measured, i))
-        .collect();
-    let predicted: Vec<Vec<f64>> = (0..channels.len())
-        .map(|i| column(&res.predicted, i))
-        .collect();
-    let innov: Vec<Vec<f64>> = (0..channels.len())
-        .map(|i| column(&res.normalised_innovation, i))
-        .collect();
-
-    let panels: Vec<Panel<'_>> = channels
-        .iter()
-        .enumerate()
-        .map(|(i, name)| Panel {
-            caption: name.clone(),
-            y_desc: format!("{name} [m/s²]"),
-            series: vec![
-                Series {
-                    label: "measured".into(),
-                    t: &res.t,
-                    y: &measured[i],
-                    colour: None,
-                },
-                Series {
-                    label: "predicted (one step ahead)".into(),
-                    t: &res.t,
-                    y: &predicted[i],
-                    colour: Some(1),
-                },
-            ],
-            reference: Vec::new(),
-        })
-        .collect();
-    let path = out.join("accelerations.svg");
-    figures::time_series(
-        &panels,
-        &path,
-        &format!("{who}: measured and predicted accelerations"),
-    )?;
-    p.written.push(path);
-
-    let checks: Vec<_> = innov.iter().map(|x| whiteness(x, MAX_LAG)).collect();
-    let panels: Vec<Panel<'_>> = channels
-        .iter()
-        .enumerate()
-        .map(|(i, name)| Panel {
-            caption: match &checks[i] {
-                Some(w) => format!(
-                    "{name}: mean {:.2}, variance {:.2} (white: 0, 1)",
-                    w.mean, w.variance
-                ),
-                None => format!("{name}: too few values for a whiteness check"),
-            },
-            y_desc: "normalised innovation [-]".into(),
-            series: vec![Series {
-                label: "normalised innovation".into(),
-                t: &res.t,
-                y: &innov[i],
-                colour: Some(0),
-            }],
-            reference: vec![-2.0, 2.0],
-        })
-        .collect();
-    let path = out.join("innovations.svg");
-    figures::time_series(&panels, &path, &format!("{who}: normalised innovations"))?;
-    p.written.push(path);
-
-    let acf: Vec<(String, Vec<f64>)> = channels
-        .iter()
-        .zip(&checks)
-        .filter_map(|(name, w)| {
-            w.as_ref().map(|w| {
-                (
-                    format!(
-                        "{name}: Ljung–Box Q = {:.1} vs {:.1} (95%): {}",
-                        w.ljung_box,
-                        w.critical,
-                        if w.is_white() {
-                            "consistent with white"
-                        } else {
-                            "NOT white: the model leaves structure in the residuals"
-                        }
-                    ),
-                    w.autocorrelation.clone(),
-                )
-            })
-        })
-        .collect();
-    if acf.is_empty() {
-        p.skipped
-            .push("innovation_acf.svg: too few innovations for a whiteness check".into());
-    } else {
-        let bound = checks.iter().flatten().map(|w| w.bound).fold(0.0, f64::max);
-        let path = out.join("innovation_acf.svg");
-        figures::autocorrelation(
-            &acf,
-            bound,
-            &path,
-            &format!("{who}: whiteness of the normalised innovations"),
-        )?;
-        p.written.push(path);
     }
     Ok(())
 }

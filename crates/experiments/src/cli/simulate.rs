@@ -6,13 +6,12 @@
 //! ([`models::dataset::Dataset::write_dir`]): an interrupted `simulate` leaves the previous data
 //! set or the new one, never a mix.
 
-use anyhow::{bail, Context};
-use models::dataset::{self, DatasetConfig, ExcitationSource, MeasurementKind};
-use models::excitation::KanaiTajimi;
-use models::limits;
-use models::preset::{HARMONIC_AMPLITUDE, HARMONIC_OMEGA};
+use anyhow::Context;
+use models::dataset;
 use models::readers::Units;
 use std::path::PathBuf;
+
+use crate::simulation::{dataset_config, SimulationRequest};
 
 /// Units of a CSV excitation record.
 #[derive(Debug, Clone, Copy, clap::ValueEnum)]
@@ -71,118 +70,32 @@ pub struct Args {
     pub noise_fraction: f64,
 }
 
-fn excitation_source(arg: &str, units: UnitsArg) -> ExcitationSource {
-    match arg {
-        "elcentro" | "el-centro" => ExcitationSource::ElCentro,
-        "kanai-tajimi" => ExcitationSource::KanaiTajimi {
-            params: KanaiTajimi::default(),
-        },
-        "harmonic" => ExcitationSource::Harmonic {
-            amplitude: HARMONIC_AMPLITUDE,
-            omega: HARMONIC_OMEGA,
-        },
-        name if models::ground_motions::by_name(name).is_some() => ExcitationSource::Named {
-            name: name.to_string(),
-        },
-        path if path.to_ascii_lowercase().ends_with(".at2") => ExcitationSource::At2 {
-            path: PathBuf::from(path),
-        },
-        path => ExcitationSource::Csv {
-            path: PathBuf::from(path),
-            units: match units {
+impl Args {
+    /// The simulation the flags describe (everything but `--out`).
+    pub fn request(&self) -> SimulationRequest {
+        SimulationRequest {
+            preset: self.preset.clone(),
+            seed: self.seed,
+            run: self.run,
+            excitation: self.excitation.clone(),
+            units: match self.units {
                 UnitsArg::G => Units::G,
                 UnitsArg::Ms2 => Units::MetersPerSecond2,
             },
-        },
-    }
-}
-
-/// Parses a comma list of 1-based storeys (`1,4`); `none` (when allowed) is the empty list.
-/// Errors name the flag.
-pub fn parse_storeys(flag: &str, s: &str, allow_none: bool) -> anyhow::Result<Vec<usize>> {
-    if allow_none && s.trim() == "none" {
-        return Ok(Vec::new());
-    }
-    s.split(',')
-        .map(|part| {
-            let part = part.trim();
-            part.parse::<usize>().map_err(|_| {
-                anyhow::anyhow!(
-                    "{flag}: `{part}` is not a storey number (a comma list of storeys numbered \
-                     from 1, e.g. 1,4{})",
-                    if allow_none { ", or none" } else { "" }
-                )
-            })
-        })
-        .collect()
-}
-
-/// Checks the flags a user gives against the limits; errors name the flag.
-fn check_flags(args: &Args) -> anyhow::Result<()> {
-    if let Some(n) = args.storeys {
-        limits::check_storeys(n).context("--storeys")?;
-    }
-    if let Some(s) = args.scale {
-        limits::check_scale(s).context("--scale")?;
-    }
-    limits::check_noise_fraction(args.noise_fraction).context("--noise-fraction")?;
-    if let Some(d) = args.duration {
-        if !(d > 0.0 && d.is_finite()) {
-            bail!("--duration: {d} is not a positive number of seconds");
+            scale: self.scale,
+            duration: self.duration,
+            storeys: self.storeys,
+            hysteretic: self.hysteretic.clone(),
+            sensors: self.sensors.clone(),
+            absolute: self.absolute,
+            noise_fraction: self.noise_fraction,
         }
     }
-    Ok(())
-}
-
-/// The data-set configuration the flags of `sysid simulate` describe (everything but `--out`),
-/// checked against the limits; errors name the flag. The Python package's `simulate` uses it
-/// too, so that both accept and refuse the same settings with the same messages.
-pub fn dataset_config(args: &Args) -> anyhow::Result<DatasetConfig> {
-    check_flags(args)?;
-    let mut config = DatasetConfig::from_preset(&args.preset, args.seed)?;
-    config.run = args.run;
-    config.storeys = args.storeys;
-    if let Some(h) = &args.hysteretic {
-        config.hysteretic = Some(parse_storeys("--hysteretic", h, true)?);
-    }
-    if let Some(s) = &args.sensors {
-        config.sensors = Some(parse_storeys("--sensors", s, false)?);
-    }
-    // The storey lists against the building, each error naming its flag.
-    if let Err(models::dataset::DatasetError::InvalidConfig { field, message }) =
-        dataset::check_config(&config)
-    {
-        if field == "hysteretic" || field == "sensors" {
-            bail!("--{field}: {message}");
-        }
-    }
-    config.noise_fraction = args.noise_fraction;
-    if let Some(e) = &args.excitation {
-        config.excitation = excitation_source(e, args.units);
-        config.scale = config.excitation.default_scale();
-        if !matches!(config.excitation, ExcitationSource::Harmonic { .. }) {
-            config.duration = None;
-        }
-    }
-    if let Some(s) = args.scale {
-        config.scale = s;
-    }
-    if args.duration.is_some() {
-        config.duration = args.duration;
-    }
-    if args.absolute {
-        config.measurement = MeasurementKind::Absolute;
-    }
-    if let Some(d) = config.duration {
-        limits::samples_for_duration(d, config.dt)
-            .with_context(|| format!("--duration at dt = {} s", config.dt))?;
-    }
-    Ok(config)
 }
 
 /// Runs `sysid simulate`.
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let config = dataset_config(&args)?;
+    let config = dataset_config(&args.request())?;
     let ds = dataset::generate(&config)?;
     ds.write_dir(&args.out)
         .with_context(|| format!("writing the data set to {}", args.out.display()))?;

@@ -150,7 +150,7 @@ impl ChainPrior {
         self.len() == 0
     }
 
-    /// Names of θ in order (see [`theta_names`]).
+    /// Names of θ in order (see [`theta_names_damped`]).
     pub fn names(&self) -> Vec<String> {
         theta_names_damped::<BoucWenLaw>(
             self.n_storeys(),

@@ -1,0 +1,543 @@
+//! One identification as `sysid filter` runs it: the filter settings (a config file's or the
+//! recommended ones, under the command line's overrides), the building of field data resolved
+//! from flags and the config's `[structure]` table, the run, the validation of field data, and
+//! the decision on the finished record ([`finish`]).
+//!
+//! The command line only parses its flags into a [`FilterRequest`] and prints what
+//! [`identify_request`] and [`finish`] return.
+
+use std::collections::BTreeMap;
+use std::fmt;
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, Result};
+use core_filters::resampling::Scheme;
+use core_filters::smc::storvik::StorvikUpdate;
+use models::dataset::{load_dir, LoadedDataset, MEASURED, META};
+use models::description::StructureDescription;
+use models::filtering::{ChainSpec, MarginalPrior};
+use models::sensors::MeasurementKind;
+
+use crate::checks;
+use crate::field::{self, StructureSettings};
+use crate::pipeline::{
+    chain_spec, identify, unmeasured_storeys, Algorithm, FilterSettings, RunInput, SPARSE_REL_SD,
+};
+use crate::record::RunRecord;
+use crate::simulation::parse_storeys;
+
+/// A malformed `--fix` list (`name=value,name=value`).
+#[derive(Debug, thiserror::Error)]
+pub enum FixError {
+    #[error("--fix: `{0}` is not of the form name=value")]
+    NotNameValue(String),
+    #[error("--fix: value `{value}` of {name} is not a number")]
+    NotANumber {
+        name: String,
+        value: String,
+        #[source]
+        source: std::num::ParseFloatError,
+    },
+    #[error("--fix: value of {0} is not finite")]
+    NotFinite(String),
+    #[error("--fix: {0} is given twice")]
+    Twice(String),
+}
+
+/// Parses `name=value,name=value`.
+pub fn parse_fix(s: &str) -> Result<BTreeMap<String, f64>, FixError> {
+    let mut out = BTreeMap::new();
+    for part in s.split(',').map(str::trim).filter(|p| !p.is_empty()) {
+        let (name, value) = part
+            .split_once('=')
+            .ok_or_else(|| FixError::NotNameValue(part.to_string()))?;
+        let v: f64 = value
+            .trim()
+            .parse()
+            .map_err(|source| FixError::NotANumber {
+                name: name.to_string(),
+                value: value.to_string(),
+                source,
+            })?;
+        if !v.is_finite() {
+            return Err(FixError::NotFinite(name.to_string()));
+        }
+        if out.insert(name.trim().to_string(), v).is_some() {
+            return Err(FixError::Twice(name.trim().to_string()));
+        }
+    }
+    Ok(out)
+}
+
+/// Every key of a filter config (`--config`) with the value `sysid filter` uses without a config
+/// ([`FilterSettings::recommended`]) and its meaning, as a TOML file that parses back to those
+/// settings: `--print-config > f.toml` then `--config f.toml` runs exactly what no config runs.
+pub fn commented_defaults() -> String {
+    let d = FilterSettings::recommended();
+    let paper = FilterSettings::default();
+    let q = |v: &dyn erased::Show| v.show();
+    format!(
+        r#"# Filter settings of `sysid filter --config FILE.toml` (and the [filter] table of a study).
+# Shown with the values `sysid filter` uses without --config (the recommended settings, whose
+# interval coverage is measured in docs/calibration.md). A key absent from a file takes the
+# paper's value instead (ess_threshold absent, pool = 1, discretisation = "{paper_disc}").
+# Command-line options override the file.
+
+# Number of particles Np (SPEC §3).
+particles = {particles}
+# Resampling scheme: "systematic", "stratified", "multinomial" or "residual".
+resampling = {resampling}
+# Resample only when ESS < ess_threshold × particles, in (0, 1]; absent: every step (SPEC §3).
+ess_threshold = {ess}
+# Independent filters pooled into one run (the particles split between them); θ_val is their
+# mean and its Monte-Carlo s.e. is reported (docs/calibration.md). 1: one filter (the paper's).
+pool = {pool}
+# Storvik's step (iii): "linearised" (the paper's) or "exact".
+storvik_update = {storvik}
+# Noise fraction nf: R and Q are set from nf × RMS of the signals (SPEC §3).
+noise_fraction = {nf}
+# Discretisation inside the filters: "euler" (the paper's), "symplectic", "rk4" (bootstrap only).
+discretisation = {disc}
+# Transitions inside the filter per sample interval (dt/substeps each, ü_g interpolated), for
+# data sampled coarsely relative to the structure's highest modes; "auto": where one step would
+# shift the highest mode of the prior's building by more than 2 %, enough sub-steps to bring it
+# under 0.5 % (one on the paper's data); more than one for MPF-EKF2 and bootstrap PF only.
+substeps = {substeps}
+# θ_val averages the posterior mean over the last `window` steps (SPEC eq. 26).
+window = {window}
+# Keep one trace step in `trace_every` in the record (0: no trace).
+trace_every = {trace}
+# Run the validation integration with θ_val when the truth is known (SPEC §7).
+validate = {validate}
+# Keep one hysteresis-loop point in `loop_every` in the record (0: no loops).
+loop_every = {loops}
+# Gaussian prior of the marginalised block: {{ kind = "moment_matched" }} (one moment-matched
+# Gaussian) or {{ kind = "per_particle", rel_sd = 0.1 }} (means drawn per particle). Without
+# --config the MPF-EKF2 takes per_particle when a storey carries no sensor (docs/scaling.md).
+marginal_prior = {{ kind = "moment_matched" }}
+
+# Point-mass priors: parameter name = value (k1..kN, c1..cN, alpha with the storey+mass damping
+# form, beta, gamma, n; with several hysteretic elements beta4, gamma4, n4 for the element at
+# storey 4).
+[fix]
+# k1 = 8.0
+
+# The building of field data (no dataset.json); data sets with dataset.json carry their own and
+# a key here must agree with it. See docs/structures.md.
+[structure]
+# Number of storeys N.
+# storeys = 3
+# 1-based storeys with a Bouc–Wen element ([] for a linear building).
+# hysteretic = [1]
+# Storey masses m1..mN, or one value for every storey ([1.0]: k and c per unit mass).
+# masses = [1.0, 1.0, 1.0]
+# What the accelerometers record: "absolute" (ẍ + ü_g, real accelerometers) or "relative" (ẍ).
+# measurement = "absolute"
+# Damping form: "storey" (per-storey dashpots c1..cN, the default) or "storey+mass" (also
+# mass-proportional damping αM: storey j gains −α m_j v_j; θ gains alpha after c1..cN).
+# damping = "storey"
+
+# Prior of θ; absent: SPEC §3's for the structure (k ~ LogNormal(10, 0.3), c ~ LogNormal(0.4,
+# 0.5), per element (β, γ) uniform on the triangle 0 ≤ β ≤ 5, |γ| ≤ β, n ~ U(1, 5)). When given,
+# it has one entry per storey in k and c and one element per hysteretic storey (0-based storey):
+# [prior]
+# k = [{{ kind = "log_normal", median = 10.0, log_sd = 0.3 }}, ...]
+# c = [{{ kind = "log_normal", median = 0.4, log_sd = 0.5 }}, ...]
+# alpha = {{ kind = "log_normal", median = 0.5, log_sd = 1.0 }}  (storey+mass damping only)
+# elements = [{{ storey = 0, beta_gamma = {{ kind = "triangle", beta_max = 5.0 }}, n = {{ kind = "uniform", lo = 1.0, hi = 5.0 }} }}]
+"#,
+        paper_disc = paper.discretisation.name(),
+        ess = q(&d
+            .ess_threshold
+            .expect("the recommended settings resample on the ESS")),
+        pool = d.pool,
+        particles = d.particles,
+        resampling = q(&d.resampling),
+        storvik = q(&d.storvik_update),
+        nf = q(&d.noise_fraction),
+        disc = q(&d.discretisation),
+        substeps = d.substeps,
+        window = d.window,
+        trace = d.trace_every,
+        validate = d.validate,
+        loops = d.loop_every,
+    )
+}
+
+/// A value as TOML writes it (through serde, so the printed defaults are the real ones).
+mod erased {
+    pub trait Show {
+        fn show(&self) -> String;
+    }
+    impl<T: serde::Serialize> Show for T {
+        fn show(&self) -> String {
+            #[derive(serde::Serialize)]
+            struct W<'a, T> {
+                v: &'a T,
+            }
+            let text = toml::to_string(&W { v: self }).expect("a default serialises");
+            text.trim()
+                .strip_prefix("v = ")
+                .expect("one key")
+                .to_string()
+        }
+    }
+}
+
+/// One identification as `sysid filter` asks for it: every flag but `--out`, `--plot` and
+/// `--print-config`, the lists still in their command-line form (errors name the flag).
+#[derive(Debug, Clone)]
+pub struct FilterRequest {
+    pub algorithm: Algorithm,
+    /// Data-set directory.
+    pub data: PathBuf,
+    /// TOML file of filter settings; `None`: [`FilterSettings::recommended`].
+    pub config: Option<PathBuf>,
+    pub particles: Option<usize>,
+    pub resampling: Option<Scheme>,
+    pub ess_threshold: Option<f64>,
+    pub storvik_update: Option<StorvikUpdate>,
+    pub discretisation: Option<models::filtering::Discretisation>,
+    pub substeps: Option<crate::settings::Substeps>,
+    /// Fixed parameters, `name=value,…`.
+    pub fix: Option<String>,
+    pub experiment: String,
+    pub seed: u64,
+    pub run: u64,
+    /// Field data: number of storeys.
+    pub storeys: Option<usize>,
+    /// Field data: 1-based hysteretic storeys, `1,4` or `none`.
+    pub hysteretic: Option<String>,
+    /// Field data: storey masses `m1,...,mN`, or one value.
+    pub masses: Option<String>,
+    pub measurement: Option<MeasurementKind>,
+    pub damping: Option<models::structure::Damping>,
+}
+
+/// The structure flags as a `[structure]` table; errors name the flag.
+fn structure_flags(args: &FilterRequest) -> Result<StructureSettings> {
+    let masses = match &args.masses {
+        Some(m) => Some(
+            m.split(',')
+                .map(|part| {
+                    let part = part.trim();
+                    part.parse::<f64>()
+                        .ok()
+                        .filter(|v| v.is_finite() && *v > 0.0)
+                        .with_context(|| {
+                            format!("--masses: `{part}` is not a positive mass (a comma list m1,...,mN, or one value)")
+                        })
+                })
+                .collect::<Result<Vec<f64>>>()?,
+        ),
+        None => None,
+    };
+    Ok(StructureSettings {
+        storeys: args.storeys,
+        hysteretic: match &args.hysteretic {
+            Some(h) => Some(parse_storeys("--hysteretic", h, true)?),
+            None => None,
+        },
+        masses,
+        measurement: args.measurement,
+        damping: args.damping,
+    })
+}
+
+/// A flag's name for a key of the `[structure]` table.
+fn flag_name(key: &str) -> String {
+    format!("--{key}")
+}
+
+/// What [`identify_request`] has to say before its run ends, in order.
+#[derive(Debug)]
+pub enum Note<'a> {
+    /// Field data: the building resolved from the flags and the config's `[structure]` table.
+    Field(&'a StructureDescription),
+    /// Field data: the data-scaled default prior (its [`describe`] line).
+    ///
+    /// [`describe`]: crate::scaled_prior::ScaledPrior::describe
+    Prior(String),
+    /// A layout that leaves storeys unmeasured: the MPF-EKF2's default prior Gaussian
+    /// ([`FilterSettings::recommended_for`]), or a warning when a config keeps the shared one.
+    Sparse(String),
+}
+
+impl fmt::Display for Note<'_> {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Note::Field(d) => write!(
+                f,
+                "field data: {} storeys, masses {:?}, hysteretic storeys {:?}, {} accelerations at storeys {:?}, {} damping (no {META})",
+                d.storeys, d.masses, d.hysteretic, d.measurement, d.sensors, d.damping
+            ),
+            Note::Prior(p) | Note::Sparse(p) => f.write_str(p),
+        }
+    }
+}
+
+/// The noise levels of a field-data run, chosen from the measured signals (SPEC §3): the
+/// [`ChainSpec`] the run used.
+#[derive(Debug, Clone, PartialEq)]
+pub struct NoiseLevels {
+    pub noise_fraction: f64,
+    /// Measurement noise variances, one per channel.
+    pub r_diag: Vec<f64>,
+    /// Process noise s.d. of the displacements.
+    pub q_disp: f64,
+    /// Process noise s.d. of the velocities.
+    pub q_vel: f64,
+    /// Process noise s.d. of the hysteretic variables.
+    pub q_r: Vec<f64>,
+}
+
+impl NoiseLevels {
+    fn of(spec: &ChainSpec, noise_fraction: f64) -> Self {
+        NoiseLevels {
+            noise_fraction,
+            r_diag: spec.r_diag.clone(),
+            q_disp: spec.q_disp,
+            q_vel: spec.q_vel,
+            q_r: spec.q_r.clone(),
+        }
+    }
+}
+
+impl fmt::Display for NoiseLevels {
+    /// The line `sysid filter` prints; a value that is not finite (recorded as JSON `null`) is
+    /// left out of a list and shown as `?` alone.
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let list = |v: &[f64], g: fn(f64) -> f64| -> String {
+            v.iter()
+                .filter(|x| x.is_finite())
+                .map(|&x| format!("{:.3e}", g(x)))
+                .collect::<Vec<_>>()
+                .join(", ")
+        };
+        let num = |x: f64| {
+            if x.is_finite() {
+                format!("{x:.3e}")
+            } else {
+                "?".to_string()
+            }
+        };
+        write!(
+            f,
+            "noise levels from the data (noise fraction {}): measurement s.d. [{}] m/s², process s.d. x {}, v {}, r [{}] (recorded under config.spec)",
+            self.noise_fraction,
+            list(&self.r_diag, f64::sqrt),
+            num(self.q_disp),
+            num(self.q_vel),
+            list(&self.q_r, |x| x),
+        )
+    }
+}
+
+/// A finished identification, before its record is written ([`finish`]).
+#[derive(Debug)]
+pub struct Identified {
+    pub record: RunRecord,
+    /// Field data: the noise levels the run chose from the data; `None` for simulated data.
+    pub noise: Option<NoiseLevels>,
+}
+
+/// The settings of a request: the config file's (or the recommended ones) under the request's
+/// overrides.
+fn request_settings(req: &FilterRequest) -> Result<FilterSettings> {
+    let mut settings = match &req.config {
+        Some(path) => crate::limits::load_filter_settings(path)?,
+        None => FilterSettings::recommended(),
+    };
+    if let Some(p) = req.particles {
+        settings.particles = p;
+    }
+    if let Some(r) = req.resampling {
+        settings.resampling = r;
+    }
+    if req.ess_threshold.is_some() {
+        settings.ess_threshold = req.ess_threshold;
+    }
+    if let Some(d) = req.discretisation {
+        settings.discretisation = d;
+    }
+    if let Some(m) = req.substeps {
+        settings.substeps = m;
+    }
+    if let Some(u) = req.storvik_update {
+        settings.storvik_update = u;
+    }
+    if let Some(f) = &req.fix {
+        settings.fix.extend(parse_fix(f)?);
+    }
+    Ok(settings)
+}
+
+/// Runs the identification a request asks for: settings, the building (simulated data carry
+/// theirs and a stated key must agree with it; field data take the flags over the config's
+/// `[structure]` table and are refused by name when incomplete), the run, and for field data the
+/// validation without the truth (free run, modes; docs/validation.md). `note` hears, in order,
+/// what there is to say before the run ends.
+pub fn identify_request(req: &FilterRequest, note: &mut dyn FnMut(Note)) -> Result<Identified> {
+    let mut settings = request_settings(req)?;
+    let flags = structure_flags(req)?;
+    let data: LoadedDataset =
+        load_dir(&req.data).with_context(|| format!("loading data set {}", req.data.display()))?;
+    let measured = req.data.join(MEASURED);
+    let config_name = req
+        .config
+        .as_ref()
+        .map_or_else(String::new, |p| p.display().to_string());
+    let table_name = |key: &str| format!("[structure] `{key}` in {config_name}");
+    let both_name = |key: &str| format!("{} (or {})", flag_name(key), field::table_key(key));
+    if data.meta.is_some() {
+        field::resolve(&data, None, &flags, &measured, &flag_name)?;
+        field::resolve(&data, None, &settings.structure, &measured, &table_name)?;
+        settings.structure = StructureSettings::default();
+    } else {
+        settings.structure.overlay(&flags);
+        let d = field::resolve(&data, None, &settings.structure, &measured, &both_name)?;
+        note(Note::Field(&d));
+    }
+    // The true structure, for the validation run, when the data set says what it is.
+    let chain = data
+        .true_chain()
+        .context("rebuilding the data set's structure")?;
+    // What the sensors cannot see decides the MPF-EKF2's default prior Gaussian
+    // (`FilterSettings::recommended_for`; docs/scaling.md, "Sparse sensors at 20 and 40 storeys").
+    if req.algorithm == Algorithm::MpfEkf2 {
+        // Settings first, so that their refusal names the key as it does in every other run.
+        crate::limits::check_filter_settings(&settings)?;
+        let unmeasured = unmeasured_storeys(&chain_spec(&data, chain.as_ref(), &settings)?);
+        let listed = || {
+            let v: Vec<String> = unmeasured.iter().map(|s| s.to_string()).collect();
+            v.join(", ")
+        };
+        if unmeasured.is_empty() {
+            // Every storey measured: the settings as given.
+        } else if req.config.is_none() {
+            settings.marginal_prior =
+                FilterSettings::recommended_for(req.algorithm, &unmeasured).marginal_prior;
+            note(Note::Sparse(format!(
+                "note: storeys {} carry no sensor: the MPF-EKF2 starts every particle from its own prior mean (marginal_prior = {{ kind = \"per_particle\", rel_sd = {SPARSE_REL_SD} }}; with one shared prior Gaussian it loses its particles on such layouts, docs/scaling.md)",
+                listed()
+            )));
+        } else if settings.marginal_prior == MarginalPrior::MomentMatched {
+            note(Note::Sparse(format!(
+                "warning: storeys {} carry no sensor and the MPF-EKF2 starts from one moment-matched prior Gaussian (marginal_prior = {{ kind = \"moment_matched\" }}): on such layouts it drives unmeasured stiffnesses below zero and loses all its particles in most runs at 20 and 40 storeys (docs/scaling.md); set marginal_prior = {{ kind = \"per_particle\", rel_sd = {SPARSE_REL_SD} }}",
+                listed()
+            )));
+        }
+    }
+    let input = RunInput {
+        data: &data,
+        chain: chain.as_ref(),
+        experiment: &req.experiment,
+        seed: req.seed,
+        run: req.run,
+        progress: true,
+        residuals: true,
+    };
+    if let Some(p) = crate::pipeline::prior_from_data(&data, chain.as_ref(), &settings)? {
+        note(Note::Prior(p.describe()));
+    }
+    let mut record = identify(&input, req.algorithm, &settings)?;
+    let mut noise = None;
+    if data.meta.is_none() {
+        // Field data: validation without the truth (free run, modes; docs/validation.md).
+        let d = field::resolve_for_run(&data, chain.as_ref(), &settings.structure)?;
+        crate::validation::attach(&mut record, &data, &d);
+        // The noise levels were chosen from the measured signals (SPEC §3): the spec the run
+        // used, built again from the same data and settings.
+        let spec = crate::pipeline::chain_spec(&data, chain.as_ref(), &settings)?;
+        noise = Some(NoiseLevels::of(&spec, settings.noise_fraction));
+    }
+    Ok(Identified { record, noise })
+}
+
+/// Why a finished run is not an identification to use.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum Rejected {
+    #[error("the run failed at step {step} of {total}: {failure} (record written to {})", .out.display())]
+    Failed {
+        step: usize,
+        total: usize,
+        failure: String,
+        out: PathBuf,
+    },
+    #[error("the result is physically impossible ({}): not an identification to use (record with its warnings written to {})", .parameters.join(", "), .out.display())]
+    Impossible {
+        parameters: Vec<String>,
+        out: PathBuf,
+    },
+}
+
+/// A finished run with its plausibility warnings, its record written.
+#[derive(Debug)]
+pub struct Finished {
+    pub record: RunRecord,
+    /// Where the record was written.
+    pub out: PathBuf,
+}
+
+impl Finished {
+    /// The line on the run (algorithm, steps, log-likelihood, pace, record path).
+    pub fn headline(&self) -> String {
+        let record = &self.record;
+        format!(
+            "{}: {} of {} steps, loglik {:.2}, {:.2} s ({:.2} M particle-steps/s); record {}",
+            record.algorithm,
+            record.steps_completed,
+            record.steps_total,
+            record.loglik,
+            record.timing.wall_s,
+            record.timing.particle_steps_per_s / 1e6,
+            self.out.display()
+        )
+    }
+
+    /// The summary table and the validation summary.
+    pub fn summary(&self) -> String {
+        checks::summary_table(&self.record)
+            + &crate::validation::summary(self.record.free_run.as_ref(), self.record.modal.as_ref())
+    }
+
+    /// The exit decision of `sysid filter`: an error when the run failed or its answer is
+    /// physically impossible.
+    pub fn verdict(&self) -> Result<(), Rejected> {
+        let record = &self.record;
+        if let Some(f) = &record.failure {
+            return Err(Rejected::Failed {
+                step: record.steps_completed + 1,
+                total: record.steps_total,
+                failure: f.clone(),
+                out: self.out.clone(),
+            });
+        }
+        if checks::is_fatal(&record.warnings) {
+            let parameters = record
+                .warnings
+                .iter()
+                .filter(|w| w.kind.is_fatal())
+                .filter_map(|w| w.parameter.clone())
+                .collect();
+            return Err(Rejected::Impossible {
+                parameters,
+                out: self.out.clone(),
+            });
+        }
+        Ok(())
+    }
+}
+
+/// Attaches the plausibility warnings (`checks::check`) to a finished run and writes its record
+/// (in every case, also for a run [`Finished::verdict`] rejects).
+pub fn finish(mut record: RunRecord, out: &Path) -> Result<Finished> {
+    record.warnings = checks::check(&record);
+    // Written, then read back by the reader every command uses: a record `plot` or
+    // `compare-reference` would refuse is an error here, not a success.
+    crate::record::read::write(out, &record)?;
+    Ok(Finished {
+        record,
+        out: out.to_path_buf(),
+    })
+}

@@ -1,0 +1,466 @@
+//! The identification-accuracy regression check (`sysid regression`).
+//!
+//! Runs the study of a regression file (`experiments/regression.toml`: a `[study]` table in the
+//! format of the other study configs plus a `[thresholds]` table), computes the per-algorithm
+//! statistics of θ_val over the runs (SPEC §7, eq. 26) and compares them with the bounds:
+//!
+//! - per algorithm and parameter, the mean over runs of the relative error |θ_val − θ_true|/θ_true
+//!   and the run-to-run s.d. of θ_val/θ_true (the Fig. 7 cross of SPEC §8);
+//! - per algorithm, the number of failed runs (SPEC §3: a failure is reported, never hidden);
+//! - optionally, a degeneracy bound: the mean over runs of the number of distinct values of each
+//!   sampled static parameter (SPEC §5.1: the bootstrap PF is expected to collapse).
+//!
+//! Every run draws from streams seeded by (master seed, run), so on unchanged code the measured
+//! values are reproduced exactly; the margins in the file allow a change that is statistically
+//! equivalent (other random draws, other operation order) and flag one that is not.
+
+use std::collections::BTreeMap;
+use std::fmt::Write as _;
+use std::path::Path;
+
+use anyhow::{bail, Context, Result};
+use serde::{Deserialize, Serialize};
+
+use crate::metrics::mean_sd;
+use crate::record::RunRecord;
+use crate::reproduce::{algorithm_stats, AlgorithmStats};
+use crate::study::Study;
+use crate::sweep::lock::DirLock;
+use crate::sweep::{run_sweep, Shard, SweepOptions};
+
+/// Bounds for one algorithm.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct AlgorithmThresholds {
+    /// Largest allowed number of failed runs.
+    pub max_failed: usize,
+    /// Parameter name → bound on the mean over runs of |θ_val − θ_true| / θ_true.
+    pub rel_error_mean: BTreeMap<String, f64>,
+    /// Parameter name → bound on the s.d. over runs of θ_val / θ_true.
+    pub ratio_sd: BTreeMap<String, f64>,
+    /// Bound on the mean over runs of the number of distinct values of every sampled static
+    /// parameter at the end of the run (degeneracy, SPEC §5.1, §7).
+    pub max_distinct_sampled_mean: Option<f64>,
+}
+
+/// A regression file: the study to run and the bounds its statistics must meet.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RegressionFile {
+    pub study: Study,
+    /// Algorithm name (`mln-rbpf`, …) → bounds.
+    pub thresholds: BTreeMap<String, AlgorithmThresholds>,
+}
+
+impl RegressionFile {
+    /// Parses a regression file from TOML text and checks that every algorithm of the sweep has
+    /// bounds for every parameter of `param_names`.
+    pub fn parse(text: &str, param_names: &[&str]) -> Result<Self> {
+        let file: RegressionFile = toml::from_str(text)?;
+        file.check(param_names)?;
+        Ok(file)
+    }
+
+    /// Reads and checks a regression file; errors name the file.
+    pub fn load(path: &Path) -> Result<Self> {
+        let text =
+            std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+        Self::parse(&text, &PAPER_PARAMS)
+            .with_context(|| format!("regression file {}", path.display()))
+    }
+
+    /// Every algorithm of the sweep has a bound on both statistics of every parameter, every
+    /// bound is a finite non-negative number, and no bound names an unknown parameter.
+    pub fn check(&self, param_names: &[&str]) -> Result<()> {
+        if self.study.sweep.runs < 2 {
+            bail!("a run-to-run s.d. needs at least 2 runs");
+        }
+        for a in &self.study.sweep.algorithms {
+            let Some(t) = self.thresholds.get(a.name()) else {
+                bail!("no [thresholds.{}] for an algorithm of the sweep", a.name());
+            };
+            for (what, map) in [
+                ("rel_error_mean", &t.rel_error_mean),
+                ("ratio_sd", &t.ratio_sd),
+            ] {
+                for p in param_names {
+                    if !map.contains_key(*p) {
+                        bail!("[thresholds.{}.{what}] has no bound for `{p}`", a.name());
+                    }
+                }
+                for (p, v) in map {
+                    if !param_names.contains(&p.as_str()) {
+                        bail!(
+                            "[thresholds.{}.{what}] names unknown parameter `{p}`",
+                            a.name()
+                        );
+                    }
+                    if !(v.is_finite() && *v >= 0.0) {
+                        bail!("[thresholds.{}.{what}] {p} = {v} is not a bound", a.name());
+                    }
+                }
+            }
+            if let Some(d) = t.max_distinct_sampled_mean {
+                if !(d.is_finite() && d >= 1.0) {
+                    bail!(
+                        "[thresholds.{}] max_distinct_sampled_mean = {d} is below 1",
+                        a.name()
+                    );
+                }
+            }
+        }
+        for name in self.thresholds.keys() {
+            if !self.study.sweep.algorithms.iter().any(|a| a.name() == name) {
+                bail!("[thresholds.{name}] names an algorithm that is not in the sweep");
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Parameter names of the `paper-3dof` preset (SPEC §1).
+pub const PAPER_PARAMS: [&str; 9] = ["k1", "k2", "k3", "c1", "c2", "c3", "beta", "gamma", "n"];
+
+/// One comparison of a measured statistic with its bound (`measured ≤ bound` passes; NaN fails).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Check {
+    pub algorithm: String,
+    /// `rel_error_mean`, `ratio_sd`, `failed` or `distinct_sampled_mean`.
+    pub quantity: String,
+    /// Parameter name (empty for `failed`).
+    pub parameter: String,
+    pub measured: f64,
+    pub bound: f64,
+    /// Standard error of the measured value over the runs, when defined (for recalibration).
+    pub std_error: Option<f64>,
+}
+
+impl Check {
+    /// Whether the measured value meets its bound (a NaN never does).
+    pub fn ok(&self) -> bool {
+        self.measured <= self.bound
+    }
+}
+
+/// Compares statistics with bounds. An algorithm with bounds but without statistics, or a
+/// parameter with a bound but missing from the statistics, yields a failing check (NaN).
+/// `std_errors` (algorithm → parameter → s.e. of the mean relative error) is optional context.
+pub fn evaluate(
+    thresholds: &BTreeMap<String, AlgorithmThresholds>,
+    stats: &[AlgorithmStats],
+    std_errors: &BTreeMap<String, BTreeMap<String, f64>>,
+) -> Vec<Check> {
+    let mut out = Vec::new();
+    for (alg, t) in thresholds {
+        let s = stats.iter().find(|s| &s.algorithm == alg);
+        let check = |quantity: &str, parameter: &str, measured: f64, bound: f64| Check {
+            algorithm: alg.clone(),
+            quantity: quantity.into(),
+            parameter: parameter.into(),
+            measured,
+            bound,
+            std_error: None,
+        };
+        out.push(check(
+            "failed",
+            "",
+            s.map_or(f64::NAN, |s| s.failed as f64),
+            t.max_failed as f64,
+        ));
+        // Parameters in the model's order (k1 … n), unknown names last.
+        let order = |map: &BTreeMap<String, f64>| {
+            let mut v: Vec<(String, f64)> = map.iter().map(|(k, b)| (k.clone(), *b)).collect();
+            v.sort_by_key(|(k, _)| {
+                s.and_then(|s| s.params.iter().position(|q| &q.name == k))
+                    .unwrap_or(usize::MAX)
+            });
+            v
+        };
+        for (p, bound) in order(&t.rel_error_mean) {
+            let p = &p;
+            let ps = s.and_then(|s| s.params.iter().find(|q| &q.name == p));
+            let mut c = check(
+                "rel_error_mean",
+                p,
+                ps.map_or(f64::NAN, |q| q.rel_error_mean),
+                bound,
+            );
+            c.std_error = std_errors.get(alg).and_then(|m| m.get(p)).copied();
+            out.push(c);
+        }
+        for (p, bound) in order(&t.ratio_sd) {
+            let p = &p;
+            let ps = s.and_then(|s| s.params.iter().find(|q| &q.name == p));
+            let mut c = check("ratio_sd", p, ps.map_or(f64::NAN, |q| q.ratio_sd), bound);
+            // s.e. of a sample s.d. over n Gaussian values: s.d. / √(2(n−1)).
+            c.std_error = match (ps, s) {
+                (Some(q), Some(s)) if s.runs > s.failed + 1 => {
+                    Some(q.ratio_sd / (2.0 * (s.runs - s.failed - 1) as f64).sqrt())
+                }
+                _ => None,
+            };
+            out.push(c);
+        }
+        if let Some(bound) = t.max_distinct_sampled_mean {
+            match s.map(|s| &s.distinct_sampled_mean) {
+                Some(d) if !d.is_empty() => {
+                    for (p, &v) in d {
+                        out.push(check("distinct_sampled_mean", p, v, bound));
+                    }
+                }
+                // A degeneracy bound on a filter that reports no sampled parameter is a breach:
+                // the statistic the bound is about is missing.
+                _ => out.push(check("distinct_sampled_mean", "", f64::NAN, bound)),
+            }
+        }
+    }
+    out
+}
+
+/// Algorithm → parameter → standard error over the successful runs of the mean relative error
+/// (s.d. / √n), for the table and for recalibrating the bounds.
+pub fn rel_error_std_errors(records: &[RunRecord]) -> BTreeMap<String, BTreeMap<String, f64>> {
+    let mut out: BTreeMap<String, BTreeMap<String, f64>> = BTreeMap::new();
+    let mut algs: Vec<&str> = records.iter().map(|r| r.algorithm.as_str()).collect();
+    algs.sort_unstable();
+    algs.dedup();
+    for alg in algs {
+        let ok: Vec<&RunRecord> = records
+            .iter()
+            .filter(|r| r.algorithm == alg && !r.is_failure())
+            .collect();
+        let Some(first) = ok.first() else { continue };
+        for (j, name) in first.param_names.iter().enumerate() {
+            let errs: Vec<f64> = ok
+                .iter()
+                .filter_map(|r| r.rel_error.as_ref().map(|e| e[j]))
+                .collect();
+            let (_, sd, n) = mean_sd(&errs);
+            if n > 1 {
+                out.entry(alg.to_string())
+                    .or_default()
+                    .insert(name.clone(), sd / (n as f64).sqrt());
+            }
+        }
+    }
+    out
+}
+
+/// The table printed by `sysid regression`.
+pub fn format_table(checks: &[Check]) -> String {
+    let mut s = String::new();
+    let _ = writeln!(
+        s,
+        "{:<10} {:<22} {:<6} {:>10} {:>10} {:>10}  status",
+        "algorithm", "quantity", "param", "measured", "s.e.", "bound"
+    );
+    for c in checks {
+        let se = c.std_error.map_or("-".into(), |v| format!("{v:.4}"));
+        let _ = writeln!(
+            s,
+            "{:<10} {:<22} {:<6} {:>10.4} {:>10} {:>10.4}  {}",
+            c.algorithm,
+            c.quantity,
+            c.parameter,
+            c.measured,
+            se,
+            c.bound,
+            if c.ok() { "ok" } else { "BREACH" }
+        );
+    }
+    s
+}
+
+/// How to run a regression check: where its records go and how the sweep runs.
+#[derive(Debug, Clone)]
+pub struct RegressionOptions<'a> {
+    /// Output directory: `records/` (one JSON per run) and the summary.
+    pub out: &'a Path,
+    /// Worker threads (0: one per core).
+    pub threads: usize,
+    /// Reuse the records of an earlier check whose fingerprint matches.
+    pub resume: bool,
+    /// Delete the records directory of an earlier check first.
+    pub fresh: bool,
+}
+
+/// A finished regression sweep: its records, per-algorithm statistics and checks. Holds the
+/// lock of the output directory until dropped.
+#[derive(Debug)]
+pub struct RegressionRun {
+    pub records: Vec<RunRecord>,
+    /// Runs computed by this check.
+    pub executed: usize,
+    /// Records reused (`resume`).
+    pub reused: usize,
+    pub stats: Vec<AlgorithmStats>,
+    pub checks: Vec<Check>,
+    _lock: DirLock,
+}
+
+/// The bounds a regression check breached, one line each (`algorithm quantity parameter:
+/// measured > bound`).
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("{} regression bound(s) breached:\n  {}", .0.len(), .0.join("\n  "))]
+pub struct Breaches(pub Vec<String>);
+
+/// Runs the study of `file` into `options.out` (locked for the lifetime of the result) and
+/// compares its statistics with the bounds.
+pub fn run(file: &RegressionFile, options: &RegressionOptions) -> Result<RegressionRun> {
+    let study = &file.study;
+    let lock = DirLock::acquire(options.out)?;
+    let dir = options.out.join("records");
+    if options.fresh && dir.exists() {
+        std::fs::remove_dir_all(&dir).with_context(|| format!("removing {}", dir.display()))?;
+    }
+    let jobs = study.jobs();
+    let sweep = SweepOptions {
+        threads: options.threads,
+        shard: Shard::default(),
+        progress: true,
+        label: study.name.clone(),
+        resume: options.resume,
+    };
+    let outcome = run_sweep(
+        &jobs,
+        Study::job_id,
+        |job| study.job_fingerprint(job),
+        &dir,
+        &sweep,
+        |job| {
+            study
+                .run_job(job)
+                .with_context(|| format!("{}: {}", study.name, Study::job_id(job)))
+        },
+    )?;
+    let records = outcome.records;
+    let stats: Vec<AlgorithmStats> = study
+        .sweep
+        .algorithms
+        .iter()
+        .map(|a| {
+            let recs: Vec<&RunRecord> =
+                records.iter().filter(|r| r.algorithm == a.name()).collect();
+            algorithm_stats(a.name(), &recs)
+        })
+        .collect();
+    let checks = evaluate(&file.thresholds, &stats, &rel_error_std_errors(&records));
+    Ok(RegressionRun {
+        records,
+        executed: outcome.executed,
+        reused: outcome.reused,
+        stats,
+        checks,
+        _lock: lock,
+    })
+}
+
+impl RegressionRun {
+    /// Writes the summary (`regression.json`): the regression file's path, the wall time, the run
+    /// counts, the statistics and every check with its outcome.
+    pub fn write_summary(&self, path: &Path, config: &Path, wall_s: f64) -> Result<()> {
+        std::fs::write(
+            path,
+            serde_json::to_string_pretty(&serde_json::json!({
+                "config": config,
+                "wall_s": wall_s,
+                "runs": { "executed": self.executed, "reused": self.reused, "total": self.records.len() },
+                "stats": self.stats,
+                "checks": self.checks.iter().map(|c| serde_json::json!({
+                    "check": c, "ok": c.ok()
+                })).collect::<Vec<_>>(),
+            }))? + "\n",
+        )
+        .with_context(|| format!("writing {}", path.display()))
+    }
+
+    /// Every bound met, or the breached ones.
+    pub fn verdict(&self) -> Result<(), Breaches> {
+        let breaches: Vec<String> = self
+            .checks
+            .iter()
+            .filter(|c| !c.ok())
+            .map(|c| {
+                format!(
+                    "{} {} {}: {} > {}",
+                    c.algorithm, c.quantity, c.parameter, c.measured, c.bound
+                )
+            })
+            .collect();
+        if breaches.is_empty() {
+            Ok(())
+        } else {
+            Err(Breaches(breaches))
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::reproduce::ParamStats;
+
+    fn stats(alg: &str, err: f64, sd: f64, failed: usize) -> AlgorithmStats {
+        AlgorithmStats {
+            algorithm: alg.into(),
+            runs: 8,
+            failed,
+            params: vec![ParamStats {
+                name: "k1".into(),
+                truth: 8.0,
+                ratio_mean: 1.0,
+                ratio_sd: sd,
+                rel_error_mean: err,
+            }],
+            online_nrmse_mean: 0.0,
+            validation_nrmse_mean: 0.0,
+            distinct_sampled_mean: BTreeMap::new(),
+            ess_mean: 0.0,
+            loglik_mean: 0.0,
+            wall_s_mean: 0.0,
+            particle_steps_per_s_mean: 0.0,
+        }
+    }
+
+    fn bounds() -> BTreeMap<String, AlgorithmThresholds> {
+        let t = AlgorithmThresholds {
+            max_failed: 0,
+            rel_error_mean: [("k1".to_string(), 0.05)].into(),
+            ratio_sd: [("k1".to_string(), 0.02)].into(),
+            max_distinct_sampled_mean: None,
+        };
+        [("mln-rbpf".to_string(), t)].into()
+    }
+
+    #[test]
+    fn bound_is_inclusive_and_nan_fails() {
+        let none = BTreeMap::new();
+        let at = evaluate(&bounds(), &[stats("mln-rbpf", 0.05, 0.02, 0)], &none);
+        assert_eq!(at.len(), 3);
+        assert!(at.iter().all(Check::ok));
+        let nan = evaluate(&bounds(), &[stats("mln-rbpf", f64::NAN, 0.02, 0)], &none);
+        assert_eq!(nan.iter().filter(|c| !c.ok()).count(), 1);
+    }
+
+    #[test]
+    fn missing_algorithm_is_a_breach() {
+        let c = evaluate(
+            &bounds(),
+            &[stats("storvik", 0.0, 0.0, 0)],
+            &BTreeMap::new(),
+        );
+        assert!(c.iter().all(|c| !c.ok()));
+    }
+
+    #[test]
+    fn table_marks_breaches() {
+        let c = evaluate(
+            &bounds(),
+            &[stats("mln-rbpf", 0.06, 0.01, 0)],
+            &BTreeMap::new(),
+        );
+        let t = format_table(&c);
+        assert_eq!(t.matches("BREACH").count(), 1);
+        assert_eq!(t.lines().count(), 4);
+    }
+}
