@@ -677,7 +677,10 @@ group = "g"
 "#;
 
     fn load(text: &str) -> Result<FieldStudy> {
-        let dir = std::env::temp_dir().join(format!("field-study-{}", std::process::id()));
+        // One file per call: the tests run in parallel threads of one process.
+        static CALLS: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
+        let call = CALLS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        let dir = std::env::temp_dir().join(format!("field-study-{}-{call}", std::process::id()));
         std::fs::create_dir_all(&dir)?;
         let path = dir.join("study.toml");
         std::fs::write(&path, text)?;
