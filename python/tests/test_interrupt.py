@@ -2,6 +2,7 @@
 was to write untouched, and the interpreter ready for the next run."""
 
 import _thread
+import signal
 import threading
 import time
 
@@ -18,6 +19,10 @@ def long_data():
 
 
 def test_ctrl_c_stops_a_run_and_leaves_the_record_file_intact(long_data, tmp_path):
+    # Python's own Ctrl-C handler, as in an interactive session: a runner started in the
+    # background (no job control) starts Python with SIGINT ignored, and then
+    # `interrupt_main` does nothing.
+    signal.signal(signal.SIGINT, signal.default_int_handler)
     out = tmp_path / "run.json"
     first = sm.identify(sm.simulate(duration=0.5, seed=3), particles=20, seed=1, out=out)
     before = out.read_bytes()
