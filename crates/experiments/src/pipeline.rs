@@ -514,6 +514,17 @@ pub fn identify_stoppable(
     let mut spec = chain_spec(data, input.chain, s)?;
     let auto = resolve_substeps(algorithm, &mut spec, s);
     if let (Some(a), true) = (auto, input.progress) {
+        if a.substeps == 1 && a.error_one > models::filtering::substeps::SUBSTEP_ABOVE {
+            eprintln!(
+                "warning: the prior's building has modes up to {:.2} Hz (ω·dt = {:.2}): one step \
+                 per sample shifts that mode by {:.1} %, and {} cannot sub-step; its frequencies \
+                 and stiffnesses carry that bias (MPF-EKF2 and the bootstrap PF sub-step)",
+                a.omega_max / std::f64::consts::TAU,
+                a.omega_max * spec.dt,
+                100.0 * a.error_one,
+                algorithm.label()
+            );
+        }
         if a.substeps > 1 {
             eprintln!(
                 "sub-steps: {} per sample (auto: the prior's building has modes up to {:.2} Hz, \

@@ -71,7 +71,9 @@ pub fn reference_posterior(
             "field data: give the building with --config FILE and its [structure] table",
         )?;
     }
-    let spec = chain_spec(&data, chain.as_ref(), &settings)?;
+    let mut spec = chain_spec(&data, chain.as_ref(), &settings)?;
+    // `substeps = "auto"` in a config is resolved as in `sysid filter`, not silently one.
+    crate::pipeline::resolve_substeps(args.estimator, &mut spec, &settings);
     let names = spec.prior.names();
     let map = ThetaMap::new(&spec.prior)?;
     let truth = data.meta.as_ref().map(|m| m.theta_true.clone());
