@@ -463,13 +463,6 @@ fn identify(
             .fix
             .extend(experiments::identification::parse_fix(&text.join(",")).map_err(py_err)?);
     }
-    if let Some(m) = &masses {
-        if let Some(bad) = m.iter().find(|v| !(v.is_finite() && **v > 0.0)) {
-            return Err(SysidError::new_err(format!(
-                "--masses: `{bad}` is not a positive mass (a comma list m1,...,mN, or one value)"
-            )));
-        }
-    }
     let flags = StructureSettings {
         storeys,
         hysteretic,

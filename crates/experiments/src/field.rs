@@ -11,8 +11,9 @@
 use std::path::Path;
 
 use anyhow::{bail, Result};
+use models::building::BuildingError;
 use models::dataset::{LoadedDataset, MEASURED, META};
-use models::description::{check_masses, check_storey_list, StructureDescription};
+use models::description::StructureDescription;
 use models::sensors::MeasurementKind;
 use models::structure::{Damping, ShearChain};
 use serde::{Deserialize, Serialize};
@@ -205,14 +206,16 @@ pub fn resolve(
         );
     }
     let n = given.storeys.expect("checked");
-    let field = |e: models::description::DescriptionError| {
-        anyhow::anyhow!("{}: {}", name(e.field), e.message)
+    let d = StructureDescription {
+        storeys: n,
+        masses: expand_masses(&given.masses.expect("checked"), n),
+        hysteretic: given.hysteretic.expect("checked"),
+        sensors: data.sensors.clone(),
+        measurement: given.measurement.expect("checked"),
+        damping: given.damping.unwrap_or_default(),
     };
-    models::limits::check_storeys(n).map_err(|e| anyhow::anyhow!("{}: {e}", name("storeys")))?;
-    let hysteretic = given.hysteretic.expect("checked");
-    check_storey_list("hysteretic", &hysteretic, n, true).map_err(field)?;
-    let masses = expand_masses(&given.masses.expect("checked"), n);
-    check_masses(&masses, n).map_err(field)?;
+    d.building()
+        .map_err(|e: BuildingError| anyhow::anyhow!("{}: {}", name(e.field), e.message))?;
     // The header against the stated structure: every measured storey must exist.
     if let Some(&s) = data.sensors.iter().find(|&&s| s > n) {
         bail!(
@@ -222,15 +225,7 @@ pub fn resolve(
             name("storeys")
         );
     }
-    let d = StructureDescription {
-        storeys: n,
-        masses,
-        hysteretic,
-        sensors: data.sensors.clone(),
-        measurement: given.measurement.expect("checked"),
-        damping: given.damping.unwrap_or_default(),
-    };
-    d.validate()
+    d.sensor_layout()
         .map_err(|e| anyhow::anyhow!("{}: {}", measured_file.display(), e))?;
     Ok(d)
 }

@@ -221,12 +221,9 @@ fn structure_flags(args: &FilterRequest) -> Result<StructureSettings> {
             m.split(',')
                 .map(|part| {
                     let part = part.trim();
-                    part.parse::<f64>()
-                        .ok()
-                        .filter(|v| v.is_finite() && *v > 0.0)
-                        .with_context(|| {
-                            format!("--masses: `{part}` is not a positive mass (a comma list m1,...,mN, or one value)")
-                        })
+                    part.parse::<f64>().ok().with_context(|| {
+                        format!("--masses: `{part}` is not a number (a comma list m1,...,mN, or one value)")
+                    })
                 })
                 .collect::<Result<Vec<f64>>>()?,
         ),

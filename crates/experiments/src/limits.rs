@@ -37,16 +37,7 @@ pub fn check_filter_settings(s: &FilterSettings) -> Result<()> {
     }
     if let Some(m) = &s.structure.masses {
         check_count(m.len(), 1, MAX_STOREYS).context("field `masses`: number of storeys")?;
-        if let Some((i, v)) = m
-            .iter()
-            .enumerate()
-            .find(|(_, v)| !(v.is_finite() && **v > 0.0 && **v <= MAX_ABS_VALUE))
-        {
-            bail!(
-                "field `masses`: mass {} = {v} is not a positive number",
-                i + 1
-            );
-        }
+        models::building::check_masses(m)?;
     }
     if let Some((name, v)) = s.fix.iter().find(|(_, v)| check_value(**v).is_err()) {
         bail!(
@@ -122,7 +113,7 @@ mod tests {
         assert!(err(&s).contains("`ess_threshold`"));
         let mut s = ok.clone();
         s.structure.masses = Some(vec![1.0, -1.0]);
-        assert!(err(&s).contains("mass 2"));
+        assert!(err(&s).contains("field `masses`: mass of storey 2 is -1"));
         s.structure.masses = Some(vec![1.0; MAX_STOREYS + 1]);
         assert!(err(&s).contains("`masses`"));
         let mut s = ok.clone();

@@ -20,7 +20,7 @@ use models::dataset::LoadedDataset;
 use models::filtering::{AugmentedChain, ChainPrior, ChainSpec, MlnChain, MpfChain, RmsLevels};
 use models::integrate::{simulate_adaptive, Tolerance};
 use models::sensors::MeasurementKind;
-use models::structure::ShearChain;
+use models::structure::{Damping, ShearChain};
 use serde::{Deserialize, Serialize};
 
 use crate::field::resolve_for_run;
@@ -239,7 +239,8 @@ pub fn chain_spec(
 ) -> Result<ChainSpec> {
     let structure = resolve_for_run(data, chain, &s.structure)?;
     let n = structure.storeys;
-    let hysteretic = structure.hysteretic_zero_based();
+    let building = structure.building()?;
+    let hysteretic = building.hysteretic().to_vec();
     let sensors = structure.sensor_layout()?;
     if sensors.len() != data.channels {
         bail!(
@@ -258,8 +259,7 @@ pub fn chain_spec(
     );
     let mut spec = ChainSpec::from_rms(
         data.dt,
-        structure.masses.clone(),
-        hysteretic.clone(),
+        building.clone().with_damping(Damping::Storey),
         sensors,
         data.ug_meas.clone(),
         &rms,
@@ -272,7 +272,8 @@ pub fn chain_spec(
         // Chosen per algorithm once the prior is known (`resolve_substeps`).
         Substeps::Auto => 1,
     };
-    spec.damping = structure.damping;
+    // The building's damping form, whose α gets its prior below.
+    spec.building = building;
     // Default priors: SPEC §3's for simulated data (the paper's scale); for field data scaled
     // from the measured response (`scaled_prior`).
     let mut prior = match (&s.prior, is_field_data(data, chain)) {
@@ -641,7 +642,8 @@ pub fn identify_stoppable(
         "filter": s,
         "data": data.meta.as_ref().map(|m| serde_json::to_value(&m.config).ok()),
         "spec": {
-            "dt": spec.dt, "masses": spec.masses, "hysteretic": spec.hysteretic,
+            "dt": spec.dt, "masses": spec.building.masses(),
+            "hysteretic": spec.building.hysteretic(),
             "sensors": spec.sensors, "q_disp": spec.q_disp, "q_vel": spec.q_vel,
             "q_r": spec.q_r, "r_diag": spec.r_diag, "prior": spec.prior,
             "discretisation": spec.discretisation,
@@ -653,8 +655,8 @@ pub fn identify_stoppable(
     if let Some(a) = auto {
         config["substeps_auto"] = serde_json::to_value(a).expect("serialisable");
     }
-    if !spec.damping.is_default() {
-        config["spec"]["damping"] = spec.damping.name().into();
+    if !spec.building.damping().is_default() {
+        config["spec"]["damping"] = spec.building.damping().name().into();
     }
     if let Some(p) = scaled {
         config["prior_from_data"] = serde_json::to_value(p).expect("serialisable");

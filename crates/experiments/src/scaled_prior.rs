@@ -185,8 +185,8 @@ pub fn scaled_prior(data: &LoadedDataset, d: &StructureDescription) -> Result<Sc
         DAMPING_RATIO
     };
     let c_median = 2.0 * c_ratio * k_median / omega1;
-    let hysteretic = d.hysteretic_zero_based();
-    let mut prior = ChainPrior::paper(d.storeys, &hysteretic);
+    let building = d.building()?;
+    let mut prior = ChainPrior::paper(d.storeys, building.hysteretic());
     prior.k = vec![
         Prior::LogNormal {
             median: k_median,

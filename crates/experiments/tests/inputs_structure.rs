@@ -139,8 +139,8 @@ fn field_data_structures_are_checked_against_the_header_in_the_library() {
     }
     // A complete description: one value of `masses` is every storey's mass.
     let spec = chain_spec(&data, None, &stated(6, &[1, 4], &[2.0])).unwrap();
-    assert_eq!(spec.masses, vec![2.0; 6]);
-    assert_eq!(spec.hysteretic, [0, 3]);
+    assert_eq!(spec.building.masses(), [2.0; 6]);
+    assert_eq!(spec.building.hysteretic(), [0, 3]);
     assert_eq!(spec.sensors.one_based(), [1, 3, 5]);
     assert_eq!(spec.sensors.kind(), MeasurementKind::Absolute);
 }
@@ -206,7 +206,10 @@ fn malformed_descriptions_are_refused_by_flag_in_the_binary() {
     assert_refused(&filter(&a), &["--masses", "2 masses", "5 storeys"]);
     let mut a = vec!["--storeys", "5", "--masses", "1,-1,1,1,1"];
     a.extend_from_slice(&full);
-    assert_refused(&filter(&a), &["--masses", "`-1`"]);
+    assert_refused(
+        &filter(&a),
+        &["--masses", "mass of storey 2 is -1, not positive"],
+    );
     assert_refused(
         &filter(&[
             "--storeys",

@@ -22,7 +22,8 @@
 //! characters), so a directory round-trips bit for bit. Every written value is within
 //! `±MAX_ABS_VALUE` ([`limits`]), so every data set written loads back.
 
-use crate::description::{check_storey_list, DescriptionError, StructureDescription};
+use crate::building::{Building, BuildingError, Damping};
+use crate::description::StructureDescription;
 use crate::excitation::{self, rms, GroundMotion, KanaiTajimi};
 use crate::integrate::{rk4_substeps, simulate_rk4_substeps, Trajectory};
 use crate::limits;
@@ -151,8 +152,10 @@ impl DatasetConfig {
     fn preset_structure(&self) -> Result<Preset, DatasetError> {
         let mut p = Preset::from_name(&self.preset, self.storeys)?;
         if let Some(h) = &self.hysteretic {
-            check_storey_list("hysteretic", h, p.chain.storeys(), true).map_err(described)?;
-            p.set_hysteretic(h)?;
+            let masses = p.chain.masses().to_vec();
+            let building =
+                Building::from_one_based(masses, h, Damping::Storey).map_err(described)?;
+            p.set_hysteretic(building.hysteretic())?;
         }
         Ok(p)
     }
@@ -178,21 +181,15 @@ impl DatasetConfig {
     pub fn description(&self) -> Result<StructureDescription, DatasetError> {
         let chain = self.chain()?;
         let n = chain.storeys();
-        let d = StructureDescription {
-            storeys: n,
-            masses: chain.masses().to_vec(),
-            hysteretic: chain.bouc_wen().iter().map(|b| b.storey + 1).collect(),
-            sensors: self.sensors.clone().unwrap_or_else(|| (1..=n).collect()),
-            measurement: self.measurement,
-            damping: chain.damping_form(),
-        };
-        d.validate().map_err(described)?;
+        let sensors = self.sensors.clone().unwrap_or_else(|| (1..=n).collect());
+        let d = StructureDescription::of(chain.building(), sensors, self.measurement);
+        d.sensor_layout().map_err(described)?;
         Ok(d)
     }
 }
 
-/// A description error as a config error naming the same field.
-fn described(e: DescriptionError) -> DatasetError {
+/// A building error as a config error naming the same field.
+fn described(e: BuildingError) -> DatasetError {
     DatasetError::InvalidConfig {
         field: e.field,
         message: e.message,
@@ -641,14 +638,11 @@ impl Dataset {
             dt: self.dt,
             samples: self.len(),
             storeys: self.chain.storeys(),
-            structure: Some(StructureDescription {
-                storeys: self.chain.storeys(),
-                masses: self.chain.masses().to_vec(),
-                hysteretic: self.chain.bouc_wen().iter().map(|b| b.storey + 1).collect(),
-                sensors: self.sensors.one_based(),
-                measurement: self.sensors.kind(),
-                damping: self.chain.damping_form(),
-            }),
+            structure: Some(StructureDescription::of(
+                self.chain.building(),
+                self.sensors.one_based(),
+                self.sensors.kind(),
+            )),
             bouc_wen_storeys: self.chain.bouc_wen().iter().map(|b| b.storey).collect(),
             theta_names: self.theta_names.clone(),
             theta_true: self.theta_true.clone(),

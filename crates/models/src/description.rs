@@ -5,31 +5,15 @@
 //! It is what `dataset.json` records under `structure`, and what field data must be given (flags
 //! or the `[structure]` table of a filter config): everything the filters need besides the data.
 //! Storeys are 1-based here, as users write them (`hysteretic = [1, 6]`: an element between the
-//! ground and storey 1 and one between storeys 5 and 6); code converts them to 0-based.
+//! ground and storey 1 and one between storeys 5 and 6); [`StructureDescription::building`]
+//! converts them into the 0-based [`Building`].
 
+use crate::building::{error, Building, BuildingError, Damping};
 use crate::limits;
 use crate::sensors::{MeasurementKind, SensorLayout};
-use crate::structure::Damping;
 use serde::{Deserialize, Serialize};
-use thiserror::Error;
 
-/// A malformed description; `field` is the key a user wrote (`storeys`, `masses`, `hysteretic`,
-/// `sensors`).
-#[derive(Debug, Clone, PartialEq, Eq, Error)]
-#[error("field `{field}`: {message}")]
-pub struct DescriptionError {
-    pub field: &'static str,
-    pub message: String,
-}
-
-fn error(field: &'static str, message: impl Into<String>) -> DescriptionError {
-    DescriptionError {
-        field,
-        message: message.into(),
-    }
-}
-
-/// A complete, validated building description.
+/// A building and its sensors as a user describes them (1-based storeys).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct StructureDescription {
@@ -50,24 +34,46 @@ pub struct StructureDescription {
 }
 
 impl StructureDescription {
-    /// Checks every field against the others and the [`limits`].
-    pub fn validate(&self) -> Result<(), DescriptionError> {
-        limits::check_storeys(self.storeys).map_err(|e| error("storeys", e.to_string()))?;
-        check_masses(&self.masses, self.storeys)?;
-        check_storey_list("hysteretic", &self.hysteretic, self.storeys, true)?;
-        check_storey_list("sensors", &self.sensors, self.storeys, false)?;
-        Ok(())
+    /// The description of `building` with accelerometers of kind `measurement` at the 1-based
+    /// storeys `sensors` (what `dataset.json` records).
+    pub fn of(building: &Building, sensors: Vec<usize>, measurement: MeasurementKind) -> Self {
+        Self {
+            storeys: building.storeys(),
+            masses: building.masses().to_vec(),
+            hysteretic: building.hysteretic_one_based(),
+            sensors,
+            measurement,
+            damping: building.damping(),
+        }
     }
 
-    /// 0-based storeys of the hysteretic elements (as `structure::BoucWen::storey`).
-    pub fn hysteretic_zero_based(&self) -> Vec<usize> {
-        self.hysteretic.iter().map(|s| s - 1).collect()
+    /// The building described, validated against the stated storey count.
+    pub fn building(&self) -> Result<Building, BuildingError> {
+        let n = self.storeys;
+        limits::check_storeys(n).map_err(|e| error("storeys", e.to_string()))?;
+        if self.masses.len() != n {
+            return Err(error(
+                "masses",
+                format!(
+                    "{} masses for a building of {n} storeys (one per storey, ground excluded)",
+                    self.masses.len()
+                ),
+            ));
+        }
+        Building::from_one_based(self.masses.clone(), &self.hysteretic, self.damping)
     }
 
     /// The sensor layout (validated).
-    pub fn sensor_layout(&self) -> Result<SensorLayout, DescriptionError> {
+    pub fn sensor_layout(&self) -> Result<SensorLayout, BuildingError> {
         SensorLayout::new(self.storeys, &self.sensors, self.measurement)
             .map_err(|e| error("sensors", strip_field(&e.to_string(), "sensors")))
+    }
+
+    /// Checks every field against the others and the [`limits`].
+    pub fn validate(&self) -> Result<(), BuildingError> {
+        self.building()?;
+        self.sensor_layout()?;
+        Ok(())
     }
 }
 
@@ -78,70 +84,6 @@ fn strip_field(message: &str, field: &str) -> String {
         .strip_prefix(&format!("{field}: "))
         .unwrap_or(message)
         .to_string()
-}
-
-/// Checks a list of 1-based storeys of a building of `storeys` storeys: no storey 0, none above
-/// N, none twice, increasing; empty only when `allow_empty`.
-pub fn check_storey_list(
-    field: &'static str,
-    list: &[usize],
-    storeys: usize,
-    allow_empty: bool,
-) -> Result<(), DescriptionError> {
-    if list.is_empty() && !allow_empty {
-        return Err(error(field, "at least one storey is required"));
-    }
-    for (i, &s) in list.iter().enumerate() {
-        if s == 0 {
-            return Err(error(
-                field,
-                "storey 0 does not exist (storeys are numbered from 1, the ground is not a storey)",
-            ));
-        }
-        if s > storeys {
-            return Err(error(
-                field,
-                format!("storey {s} is above the top of the building of {storeys} storeys"),
-            ));
-        }
-        if list[..i].contains(&s) {
-            return Err(error(field, format!("storey {s} is listed twice")));
-        }
-        if i > 0 && s < list[i - 1] {
-            return Err(error(
-                field,
-                format!(
-                    "storeys must be listed in increasing order ({s} after {})",
-                    list[i - 1]
-                ),
-            ));
-        }
-    }
-    Ok(())
-}
-
-/// Checks N storey masses: exactly `storeys` of them, each positive and finite.
-pub fn check_masses(masses: &[f64], storeys: usize) -> Result<(), DescriptionError> {
-    if masses.len() != storeys {
-        return Err(error(
-            "masses",
-            format!(
-                "{} masses for a building of {storeys} storeys (one per storey, ground excluded)",
-                masses.len()
-            ),
-        ));
-    }
-    if let Some(j) = masses.iter().position(|m| !(m.is_finite() && *m > 0.0)) {
-        return Err(error(
-            "masses",
-            format!("mass of storey {} is {}, not positive", j + 1, masses[j]),
-        ));
-    }
-    for &m in masses {
-        limits::check_range(m, 0.0, limits::MAX_ABS_VALUE)
-            .map_err(|e| error("masses", e.to_string()))?;
-    }
-    Ok(())
 }
 
 #[cfg(test)]
@@ -162,8 +104,13 @@ mod tests {
     #[test]
     fn a_valid_description_converts_to_zero_based_storeys() {
         let d = ten();
+        let b = d.building().unwrap();
+        assert_eq!(
+            StructureDescription::of(&b, d.sensors.clone(), d.measurement),
+            d
+        );
         d.validate().unwrap();
-        assert_eq!(d.hysteretic_zero_based(), [0, 5]);
+        assert_eq!(d.building().unwrap().hysteretic(), [0, 5]);
         let s = d.sensor_layout().unwrap();
         assert_eq!(s.storeys(), [0, 2, 5, 9]);
         assert_eq!(s.kind(), MeasurementKind::Absolute);
@@ -184,7 +131,11 @@ mod tests {
             (|d| d.sensors = vec![], "sensors", "at least one"),
             (|d| d.sensors = vec![3, 1], "sensors", "increasing"),
             (|d| d.masses = vec![1.0; 9], "masses", "9 masses"),
-            (|d| d.masses[4] = -1.0, "masses", "storey 5"),
+            (
+                |d| d.masses[4] = -1.0,
+                "masses",
+                "mass of storey 5 is -1, not positive",
+            ),
         ];
         for (edit, field, words) in cases {
             let mut d = ten();

@@ -3,6 +3,7 @@
 //! Structures, excitation, integrators, data generation and the filter partitions of the
 //! N-storey Bouc–Wen shear chain (SPEC §1–3, §5–6).
 //!
+//! - [`building`]: the validated building (masses, hysteretic storeys, damping form), 0-based;
 //! - [`structure`]: the N-storey shear chain with Bouc–Wen elements, its continuous right-hand
 //!   side, forward-Euler map, accelerations and restoring forces; presets in [`preset`];
 //! - [`integrate`]: classical RK4 (truth) and adaptive Dormand–Prince 5(4) (validation);
@@ -16,6 +17,7 @@
 //! - [`priors`] and [`filtering`]: the priors of SPEC §3 and the three filter partitions
 //!   (augmented state, MLN-RBPF/Storvik, MPF-EKF2) implementing the `core-filters` traits.
 
+pub mod building;
 pub mod dataset;
 pub mod description;
 pub mod excitation;

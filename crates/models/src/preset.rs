@@ -220,7 +220,7 @@ impl Preset {
         Ok(p)
     }
 
-    /// Moves the Bouc–Wen elements to the 1-based `storeys` (increasing; empty: a linear chain),
+    /// Moves the Bouc–Wen elements to the 0-based `storeys` (increasing; empty: a linear chain),
     /// each with the preset element's β, γ, n (SPEC §1). Masses, k and c are unchanged. The
     /// same law everywhere is the neutral choice: an element higher up sees smaller drifts and
     /// may stay nearly elastic, which `sysid simulate` shows as `max|r|/sat` per element.
@@ -228,7 +228,7 @@ impl Preset {
         let elements = storeys
             .iter()
             .map(|&s| BoucWen {
-                storey: s.wrapping_sub(1),
+                storey: s,
                 beta: BOUC_WEN_BETA,
                 gamma: BOUC_WEN_GAMMA,
                 n: BOUC_WEN_N,
@@ -293,13 +293,13 @@ mod tests {
     #[test]
     fn hysteretic_elements_move_with_the_preset_law() {
         let mut p = Preset::from_name("shear-chain", Some(10)).unwrap();
-        p.set_hysteretic(&[1, 6]).unwrap();
+        p.set_hysteretic(&[0, 5]).unwrap();
         let bw = p.chain.bouc_wen();
         assert_eq!(bw.len(), 2);
         assert_eq!((bw[0].storey, bw[1].storey), (0, 5));
         assert_eq!((bw[1].beta, bw[1].gamma, bw[1].n), (2.0, 1.0, 2.0));
         assert_eq!(p.chain.theta().len(), 2 * 10 + 6);
-        assert!(p.set_hysteretic(&[11]).is_err());
+        assert!(p.set_hysteretic(&[10]).is_err());
         p.set_hysteretic(&[]).unwrap();
         assert!(p.chain.bouc_wen().is_empty());
     }

@@ -11,6 +11,7 @@ use core_filters::smc::model::ConditionallyLinear;
 use core_filters::smc::mpf::MpfEkf2;
 use core_filters::smc::storvik::{Storvik, StorvikUpdate};
 use core_filters::smc::{run, Filter, Observer, Posterior, SmcConfig, StepInfo};
+use models::building::{Building, Damping};
 use models::filtering::{AugmentedChain, ChainSpec, Discretisation, MlnChain, MpfChain, RmsLevels};
 use models::ground_motions::el_centro;
 use models::integrate::simulate_rk4;
@@ -93,16 +94,8 @@ fn chain_data(
         ug: ug_rms,
         drift_velocity: drift,
     };
-    let mut spec = ChainSpec::from_rms(
-        dt,
-        vec![1.0; n],
-        hysteretic.to_vec(),
-        layout,
-        ug_meas,
-        &rms,
-        0.1,
-    )
-    .unwrap();
+    let building = Building::new(vec![1.0; n], hysteretic.to_vec(), Damping::Storey).unwrap();
+    let mut spec = ChainSpec::from_rms(dt, building, layout, ug_meas, &rms, 0.1).unwrap();
     spec.discretisation = discretisation;
     (spec, y)
 }
@@ -375,7 +368,7 @@ fn mpf_ekf2_against_kalman(disc: Discretisation, substeps: usize, alpha: Option<
     let (mut spec, y) = chain_data(n, &[], &sensors, 0.5, disc);
     spec.substeps = substeps;
     if let Some(a) = alpha {
-        spec.damping = models::structure::Damping::StoreyMass;
+        spec.building = spec.building.with_damping(Damping::StoreyMass);
         spec.prior.alpha = Some(models::priors::Prior::Fixed { value: a });
     }
     for j in 1..=n {

@@ -140,10 +140,10 @@ struct Linear {
 
 fn linear(data: &Data, disc: Discretisation, k: f64, c: f64) -> Linear {
     let sensors = SensorLayout::all(1, MeasurementKind::Relative).unwrap();
+    let building = models::building::Building::new(vec![M], vec![], Default::default()).unwrap();
     let mut spec = ChainSpec::from_rms(
         data.dt,
-        vec![M],
-        vec![],
+        building,
         sensors,
         data.ug_meas.clone(),
         &data.rms,

@@ -12,6 +12,7 @@ mod filtering_support;
 use core_filters::rng::stream;
 use core_filters::smc::model::StateSpace;
 use filtering_support::*;
+use models::building::{Building, Damping};
 use models::filtering::{
     AugmentedChain, ChainSpec, Discretisation, MlnChain, MpfChain, RmsLevels, SpecError,
 };
@@ -38,7 +39,8 @@ fn chain_spec(
         ug: 1.0,
         drift_velocity: vec![0.5; hysteretic.len()],
     };
-    let mut s = ChainSpec::from_rms(dt, masses, hysteretic, sensors, ug, &rms, 0.1).unwrap();
+    let building = Building::new(masses, hysteretic, Damping::Storey).unwrap();
+    let mut s = ChainSpec::from_rms(dt, building, sensors, ug, &rms, 0.1).unwrap();
     s.discretisation = disc;
     s
 }
@@ -158,10 +160,21 @@ fn malformed_specs_get_errors_naming_the_field() {
         assert_eq!(AugmentedChain::new(s.clone()).unwrap_err(), err);
         assert_eq!(MpfChain::new(s).unwrap_err(), err);
     };
-    check(&|s| s.hysteretic = vec![0, 7], "hysteretic"); // storey 8 of 7
-    check(&|s| s.hysteretic = vec![3, 0], "hysteretic");
-    check(&|s| s.masses.pop().map(drop).unwrap_or(()), "masses");
-    check(&|s| s.masses[2] = 0.0, "masses");
+    // The building is validated when built: it cannot reach a spec malformed.
+    let masses = good.building.masses().to_vec();
+    for (hysteretic, field) in [(vec![0, 7], "hysteretic"), (vec![3, 0], "hysteretic")] {
+        let err = Building::new(masses.clone(), hysteretic, Damping::Storey).unwrap_err();
+        names_field(SpecError::from(err), field);
+    }
+    let mut zero = masses.clone();
+    zero[2] = 0.0;
+    let err = Building::new(zero, vec![0, 3], Damping::Storey).unwrap_err();
+    names_field(SpecError::from(err), "masses");
+    // A building of another storey count than the sensor layout and the prior.
+    check(
+        &|s| s.building = Building::new(vec![1.0; 6], vec![0, 3], Damping::Storey).unwrap(),
+        "masses",
+    );
     check(&|s| s.q_r.pop().map(drop).unwrap_or(()), "q_r");
     check(&|s| s.r_diag.push(1.0), "r_diag");
     check(&|s| s.dt = -0.1, "dt");
@@ -218,8 +231,7 @@ fn malformed_specs_get_errors_naming_the_field() {
     };
     let err = ChainSpec::from_rms(
         DT,
-        good.masses.clone(),
-        vec![0, 3],
+        good.building.clone(),
         good.sensors.clone(),
         good.ug.clone(),
         &rms,
@@ -245,8 +257,7 @@ fn from_rms_follows_spec_section_3_for_both_measurement_kinds() {
         let sensors = SensorLayout::new(4, &[1, 3], kind).unwrap();
         let s = ChainSpec::from_rms(
             0.005,
-            vec![1.0; 4],
-            vec![2],
+            Building::new(vec![1.0; 4], vec![2], Damping::Storey).unwrap(),
             sensors,
             vec![0.0; 5],
             &rms,

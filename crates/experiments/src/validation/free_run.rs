@@ -12,7 +12,7 @@
 use models::description::StructureDescription;
 use models::integrate::{simulate_adaptive, simulate_rk4, IntegrateError, Tolerance};
 use models::sensors::MeasurementKind;
-use models::structure::{BoucWen, ShearChain, StructureError};
+use models::structure::{ShearChain, StructureError};
 use rand::Rng;
 use thiserror::Error;
 
@@ -53,39 +53,18 @@ pub enum FreeRunError {
 /// The chain of building `d` with parameters θ = `[k1..kN, c1..cN, (α), (β, γ, n) per
 /// element]` (α with the storey+mass damping form of `d`).
 pub fn chain_of(d: &StructureDescription, theta: &[f64]) -> Result<ShearChain, FreeRunError> {
-    let n = d.storeys;
-    let h = d.hysteretic_zero_based();
-    let a = d.damping.extra_parameters();
-    let expected = 2 * n + a + 3 * h.len();
+    let building = d.building().map_err(StructureError::from)?;
+    let (n, elements) = (building.storeys(), building.hysteretic().len());
+    let expected = 2 * n + building.damping().extra_parameters() + 3 * elements;
     if theta.len() != expected {
         return Err(FreeRunError::ThetaLength {
             found: theta.len(),
             expected,
             storeys: n,
-            elements: h.len(),
+            elements,
         });
     }
-    let bw = h
-        .iter()
-        .enumerate()
-        .map(|(e, &storey)| BoucWen {
-            storey,
-            beta: theta[2 * n + a + 3 * e],
-            gamma: theta[2 * n + a + 3 * e + 1],
-            n: theta[2 * n + a + 3 * e + 2],
-        })
-        .collect();
-    let chain = ShearChain::new(
-        d.masses.clone(),
-        theta[..n].to_vec(),
-        theta[n..2 * n].to_vec(),
-        bw,
-    )?;
-    Ok(if d.damping.has_mass_term() {
-        chain.with_mass_damping(theta[2 * n])?
-    } else {
-        chain
-    })
+    Ok(ShearChain::from_theta(&building, theta)?)
 }
 
 /// The accelerations the channels of 1-based storeys `sensors` record (`kind`) when `chain`

@@ -311,14 +311,9 @@ pub fn description_of(r: &RunRecord) -> Result<StructureDescription> {
         Some(v) => serde_json::from_value(v.clone()).context("field `config.spec.damping`")?,
         None => Default::default(),
     };
-    let d = StructureDescription {
-        storeys: masses.len(),
-        masses,
-        hysteretic: hysteretic.iter().map(|s| s + 1).collect(),
-        sensors: sensors.one_based(),
-        measurement: sensors.kind(),
-        damping,
-    };
+    let building = models::building::Building::new(masses, hysteretic, damping)
+        .context("the record's structure (`config.spec`)")?;
+    let d = StructureDescription::of(&building, sensors.one_based(), sensors.kind());
     d.validate()
         .context("the record's structure (`config.spec`)")?;
     Ok(d)

@@ -16,7 +16,8 @@
 //! (`noise_dim = M (2N + E)`), and the measurement at sample k reads the grid at `kM`.
 
 use super::{ChainCore, ChainSpec, Discretisation, SpecError, NLIN, NNONLIN};
-use crate::structure::{ChainTopology, ChainView, HysteresisLaw};
+use crate::building::Building;
+use crate::structure::{ChainView, HysteresisLaw};
 use core_filters::model::{Layout, Slot};
 use core_filters::rng::StreamRng;
 use core_filters::smc::model::StateSpace;
@@ -108,11 +109,12 @@ impl AugmentedChain {
         let view = View { s, th, n };
         ds[..n].copy_from_slice(&s[n..2 * n]);
         self.core
-            .topo
+            .spec
+            .building
             .accelerations(&view, ground, &mut ds[n..2 * n]);
-        for (e, &j) in self.core.spec.hysteretic.iter().enumerate() {
+        for (e, &j) in self.core.spec.building.hysteretic().iter().enumerate() {
             let (lin, phi) = self.element_params(th, e);
-            let dv = ChainTopology::drift_velocity(&view, j);
+            let dv = Building::drift_velocity(&view, j);
             ds[2 * n + e] = self.core.law.rate(dv, view.r(e), lin, phi);
         }
     }
@@ -134,7 +136,8 @@ impl AugmentedChain {
         let view = View { s, th, n };
         let ground = self.core.transition_ground(k);
         self.core
-            .topo
+            .spec
+            .building
             .accelerations(&view, ground, &mut out[n..2 * n]);
         for j in 0..n {
             out[n + j] = s[n + j] + dt * out[n + j] + self.noise_sd[n + j] * xi[n + j];
@@ -143,7 +146,7 @@ impl AugmentedChain {
             out[j] = s[j] + dt * out[n + j] + self.noise_sd[j] * xi[j];
         }
         // r with the new velocities: a view whose velocities are those of `out`.
-        for (e, &j) in self.core.spec.hysteretic.iter().enumerate() {
+        for (e, &j) in self.core.spec.building.hysteretic().iter().enumerate() {
             let (lin, phi) = self.element_params(th, e);
             let dv = if j == 0 {
                 out[n]
@@ -261,7 +264,7 @@ impl StateSpace for AugmentedChain {
         };
         let ground = self.core.measurement_ground(k);
         for (o, &j) in out.iter_mut().zip(&self.core.sensors) {
-            *o = self.core.topo.acceleration(&view, j, ground);
+            *o = self.core.spec.building.acceleration(&view, j, ground);
         }
     }
 

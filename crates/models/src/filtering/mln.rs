@@ -19,7 +19,8 @@
 //! partition does not carry; the MPF-EKF2 and the bootstrap PF have it.
 
 use super::{ChainCore, ChainSpec, Discretisation, SpecError, NLIN, NNONLIN};
-use crate::structure::{ChainTopology, ChainView, HysteresisLaw};
+use crate::building::Building;
+use crate::structure::{ChainView, HysteresisLaw};
 use core_filters::linalg::Sparse;
 use core_filters::model::{Layout, Slot};
 use core_filters::real::Real;
@@ -77,7 +78,7 @@ impl MlnChain {
         if core.mass_damping() {
             return Err(SpecError::DampingUnsupported {
                 partition: "MLN-RBPF/Storvik",
-                damping: core.spec.damping,
+                damping: core.spec.building.damping(),
                 reason: "α is not a column of its conditionally linear block",
             });
         }
@@ -154,11 +155,11 @@ impl MlnChain {
         let n = self.core.n;
         let view = View { u, z: &[], n };
         let s = scale * T::splat(self.core.inv_mass[j]);
-        let (d, dv) = self.core.topo.element_coordinates(&view, j);
+        let (d, dv) = self.core.spec.building.element_coordinates(&view, j);
         out.add(row, j, -(s * d));
         out.add(row, n + j, -(s * dv));
         if j + 1 < n {
-            let (d, dv) = self.core.topo.element_coordinates(&view, j + 1);
+            let (d, dv) = self.core.spec.building.element_coordinates(&view, j + 1);
             out.add(row, j + 1, s * d);
             out.add(row, n + j + 1, s * dv);
         }
@@ -176,7 +177,7 @@ impl MlnChain {
     ) {
         let n = self.core.n;
         let (k, c) = (scale * z[j], scale * z[n + j]);
-        match self.core.topo.element_at(j) {
+        match self.core.spec.building.element_at(j) {
             Some(e) => out.add(row, 2 * n + e, k),
             None => {
                 out.add(row, j, k);
@@ -194,7 +195,7 @@ impl MlnChain {
     /// Drift velocity of the element at storey `j` from the velocities in `u`.
     #[inline]
     fn drift_velocity<T: Real>(&self, u: &[T], j: usize) -> T {
-        ChainTopology::drift_velocity(
+        Building::drift_velocity(
             &View {
                 u,
                 z: &[],
@@ -274,7 +275,7 @@ impl ConditionallyLinear for MlnChain {
         let n = self.core.n;
         let dt = T::splat(self.core.dt);
         let ground = T::splat(self.core.transition_ground(k));
-        let hyst = &self.core.spec.hysteretic;
+        let hyst = self.core.spec.building.hysteretic();
         match (self.symplectic, stage) {
             (false, 0) => {
                 for j in 0..n {
@@ -345,7 +346,7 @@ impl ConditionallyLinear for MlnChain {
     ) {
         let n = self.core.n;
         let dt = T::splat(self.core.dt);
-        let hyst = &self.core.spec.hysteretic;
+        let hyst = self.core.spec.building.hysteretic();
         if self.symplectic {
             for j in 0..n {
                 self.write_acceleration_row(S, n + j, j, u_prev, dt);

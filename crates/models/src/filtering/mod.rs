@@ -2,9 +2,10 @@
 //! Euler and semi-implicit (symplectic) Euler, implementing the capability traits of
 //! `core_filters::smc::model`. Derivations: `docs/partitions.md`, `docs/discretisation.md`.
 //!
-//! The chain is data ([`ChainSpec`]): N storeys with masses, Bouc–Wen elements at any storeys,
-//! sensors at any storeys ([`crate::sensors`]). Every partition evaluates forces and accelerations
-//! through the one kernel [`crate::structure::ChainTopology`] and the hysteresis law through
+//! The chain is data ([`ChainSpec`]): a [`crate::building::Building`] (N storeys with masses,
+//! Bouc–Wen elements at any storeys), sensors at any storeys ([`crate::sensors`]). Every partition
+//! evaluates forces and accelerations through the building's one force kernel and the hysteresis
+//! law through
 //! [`crate::structure::HysteresisLaw`], the same code as the truth simulator.
 //!
 //! - [`augmented::AugmentedChain`]: bootstrap PF (`StateSpace`, SPEC §5.1), Euler, symplectic, RK4;
@@ -19,13 +20,15 @@
 //!
 //! ```
 //! use core_filters::smc::model::ConditionallyQuadratic;
+//! use models::building::{Building, Damping};
 //! use models::filtering::{ChainSpec, MpfChain, RmsLevels};
 //! use models::sensors::{MeasurementKind, SensorLayout};
 //!
 //! // A 7-storey chain, Bouc–Wen elements at storeys 1 and 4 (0-based 0 and 3), sensors at 2, 4, 7.
+//! let building = Building::new(vec![1.0; 7], vec![0, 3], Damping::Storey)?;
 //! let sensors = SensorLayout::new(7, &[2, 4, 7], MeasurementKind::Relative)?;
 //! let rms = RmsLevels { acc: vec![2.0; 3], ug: 3.0, drift_velocity: vec![0.5; 2] };
-//! let spec = ChainSpec::from_rms(0.005, vec![1.0; 7], vec![0, 3], sensors, vec![0.0; 11], &rms, 0.1)?;
+//! let spec = ChainSpec::from_rms(0.005, building, sensors, vec![0.0; 11], &rms, 0.1)?;
 //! let mpf = MpfChain::new(spec)?;
 //! // Sampled: v1, v3, v4 (the drift velocities of the two elements), r1, r4, n1, n4.
 //! assert_eq!(mpf.dims().nn, 7);
@@ -47,9 +50,7 @@ pub use mpf::MpfChain;
 pub use prior::{ChainPrior, ElementPrior, MarginalPrior};
 pub use spec::{ChainSpec, RmsLevels, SpecError, MAX_SUBSTEPS};
 
-use crate::structure::{
-    state_names, theta_names_damped, BoucWenLaw, ChainTopology, ChainView, HysteresisLaw,
-};
+use crate::structure::{state_names, theta_names_damped, BoucWenLaw, ChainView, HysteresisLaw};
 use core_filters::linalg::Sparse;
 use core_filters::real::Real;
 use core_filters::rng::StreamRng;
@@ -97,11 +98,11 @@ pub(crate) struct ForceVariables {
     pub alpha: Option<usize>,
 }
 
-/// What every partition shares: the validated spec, the force kernel and precomputed constants.
+/// What every partition shares: the validated spec (whose building is the force kernel) and
+/// precomputed constants.
 #[derive(Debug, Clone)]
 pub(crate) struct ChainCore {
     pub spec: ChainSpec,
-    pub topo: ChainTopology,
     pub law: Law,
     /// Storeys N.
     pub n: usize,
@@ -130,30 +131,23 @@ pub(crate) struct ChainCore {
 impl ChainCore {
     pub fn new(spec: ChainSpec) -> Result<Self, SpecError> {
         spec.validate()?;
-        let topo = ChainTopology::new(spec.masses.clone(), &spec.hysteretic)
-            .map_err(|e| SpecError::Invalid {
-                field: "hysteretic",
-                reason: e.to_string(),
-            })?
-            .with_damping(spec.damping);
         let (theta_mean, theta_var) = spec.prior.moments();
         let m = spec.substeps;
         let noise = 1.0 / (m as f64).sqrt();
         Ok(Self {
             n: spec.n_storeys(),
-            ne: spec.hysteretic.len(),
+            ne: spec.building.hysteretic().len(),
             dt: spec.dt / m as f64,
             substeps: m,
             ug: fine_grid(&spec.ug, spec.dt, m),
             q_disp: spec.q_disp * noise,
             q_vel: spec.q_vel * noise,
             q_r: spec.q_r.iter().map(|q| q * noise).collect(),
-            inv_mass: spec.masses.iter().map(|m| 1.0 / m).collect(),
+            inv_mass: spec.building.masses().iter().map(|m| 1.0 / m).collect(),
             sensors: spec.sensors.storeys().to_vec(),
             theta_mean,
             theta_var,
             law: BoucWenLaw,
-            topo,
             spec,
         })
     }
@@ -198,11 +192,11 @@ impl ChainCore {
         s: T,
     ) {
         if let Some((k0, c0)) = vars.theta {
-            let (d, dv) = self.topo.element_coordinates(p, j);
+            let (d, dv) = self.spec.building.element_coordinates(p, j);
             out.add(row, k0 + j, s * d);
             out.add(row, c0 + j, s * dv);
         }
-        match (self.topo.element_at(j), vars.hysteretic) {
+        match (self.spec.building.element_at(j), vars.hysteretic) {
             (Some(e), Some(r0)) => out.add(row, r0 + e, s * p.k(j)),
             (None, _) if vars.displacements => {
                 let k = s * p.k(j);
@@ -242,7 +236,7 @@ impl ChainCore {
         if j + 1 < self.n {
             self.write_force_gradient(out, row, j + 1, p, vars, s);
         }
-        if self.topo.damping().has_mass_term() {
+        if self.spec.building.damping().has_mass_term() {
             if let Some(a) = vars.alpha {
                 out.add(row, a, -(scale * p.v(j)));
             }
@@ -255,7 +249,7 @@ impl ChainCore {
     /// Whether the chain has the mass-proportional damping term.
     #[inline]
     pub fn mass_damping(&self) -> bool {
-        self.spec.damping.has_mass_term()
+        self.spec.building.damping().has_mass_term()
     }
 
     /// Index of α in θ (`2N`), when the chain has mass damping.
@@ -267,7 +261,7 @@ impl ChainCore {
     /// Index of the first θ entry of element `e` (β_e) in θ.
     #[inline]
     pub fn theta_element(&self, e: usize) -> usize {
-        2 * self.n + self.spec.damping.extra_parameters() + (NLIN + NNONLIN) * e
+        2 * self.n + self.spec.building.damping().extra_parameters() + (NLIN + NNONLIN) * e
     }
 
     /// Mean and variance of the Gaussian prior of θ for one particle (SPEC §3): moment-matched,
@@ -290,10 +284,11 @@ impl ChainCore {
     }
 
     pub fn theta_names(&self) -> Vec<String> {
-        theta_names_damped::<Law>(self.n, &self.spec.hysteretic, self.spec.damping)
+        let b = &self.spec.building;
+        theta_names_damped::<Law>(self.n, b.hysteretic(), b.damping())
     }
 
     pub fn state_names(&self) -> Vec<String> {
-        state_names(self.n, &self.spec.hysteretic)
+        state_names(self.n, self.spec.building.hysteretic())
     }
 }

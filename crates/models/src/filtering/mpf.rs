@@ -31,7 +31,8 @@
 //! stages, so the MPF-EKF2 reduces to an EKF2 (exact here: a KF with bilinear terms) on x^bl.
 
 use super::{ChainCore, ChainSpec, Discretisation, ForceVariables, SpecError, NLIN};
-use crate::structure::{ChainTopology, ChainView, HysteresisLaw};
+use crate::building::Building;
+use crate::structure::{ChainView, HysteresisLaw};
 use core_filters::linalg::{Sparse, SymEntries};
 use core_filters::model::{Layout, Slot, SparseHessians};
 use core_filters::real::Real;
@@ -129,7 +130,7 @@ impl MpfChain {
             }
         };
         let mut sampled = vec![false; n];
-        for &j in &core.spec.hysteretic {
+        for &j in core.spec.building.hysteretic() {
             sampled[j] = true;
             if j > 0 {
                 sampled[j - 1] = true;
@@ -146,7 +147,7 @@ impl MpfChain {
         }
         let nvm = marginal_vel.len();
         let nvs = sampled_vel.len();
-        let na = core.spec.damping.extra_parameters();
+        let na = core.spec.building.damping().extra_parameters();
         let (k0, c0, a0, b0) = (n + nvm, 2 * n + nvm, 3 * n + nvm, 3 * n + nvm + na);
         let force_vars = ForceVariables {
             alpha: core.mass_damping().then_some(a0),
@@ -256,7 +257,7 @@ impl MpfChain {
     /// Pushes the constant Hessian of `scale · F_j` w.r.t. x^bl as output `out`:
     /// `k_j × x_j`, `k_j × x_{j−1}` (linear element) and `c_j × v` for marginal velocities.
     fn push_force_hessian(&self, h: &mut SparseHessians, out: usize, j: usize, scale: f64) {
-        if self.core.topo.element_at(j).is_none() {
+        if self.core.spec.building.element_at(j).is_none() {
             h.push(out, self.k0 + j, j, scale);
             if j > 0 {
                 h.push(out, self.k0 + j, j - 1, -scale);
@@ -332,7 +333,7 @@ impl ConditionallyQuadratic for MpfChain {
             nn: self.nvs() + 2 * ne,
             nbl: 3 * n
                 + self.marginal_vel.len()
-                + self.core.spec.damping.extra_parameters()
+                + self.core.spec.building.damping().extra_parameters()
                 + NLIN * ne,
             ny: self.core.sensors.len(),
         }
@@ -394,10 +395,10 @@ impl ConditionallyQuadratic for MpfChain {
             p: self,
         };
         let nvs = self.nvs();
-        let hyst = &self.core.spec.hysteretic;
+        let hyst = self.core.spec.building.hysteretic();
         let velocities = |value: &mut [T], jac: &mut Sparse<T>| {
             for (i, &j) in self.sampled_vel.iter().enumerate() {
-                value[i] = xn_prev[i] + dt * self.core.topo.acceleration(&p, j, ground);
+                value[i] = xn_prev[i] + dt * self.core.spec.building.acceleration(&p, j, ground);
                 self.write_acceleration_gradient(jac, i, j, &p, dt);
             }
         };
@@ -405,7 +406,7 @@ impl ConditionallyQuadratic for MpfChain {
             (false, 0) => {
                 velocities(value, jac);
                 for (e, &j) in hyst.iter().enumerate() {
-                    let dv = ChainTopology::drift_velocity(&p, j);
+                    let dv = Building::drift_velocity(&p, j);
                     value[nvs + e] = self.write_r_map(e, dv, xn_prev, m, nvs + e, jac);
                 }
             }
@@ -417,7 +418,7 @@ impl ConditionallyQuadratic for MpfChain {
                     p: self,
                 };
                 for (e, &j) in hyst.iter().enumerate() {
-                    let dv = ChainTopology::drift_velocity(&q, j);
+                    let dv = Building::drift_velocity(&q, j);
                     value[e] = self.write_r_map(e, dv, xn_prev, m, e, jac);
                 }
             }
@@ -454,7 +455,7 @@ impl ConditionallyQuadratic for MpfChain {
         value.copy_from_slice(m);
         for (i, &j) in self.marginal_vel.iter().enumerate() {
             let vi = n + i;
-            value[vi] = m[vi] + dt * self.core.topo.acceleration(&p, j, ground);
+            value[vi] = m[vi] + dt * self.core.spec.building.acceleration(&p, j, ground);
             self.write_acceleration_gradient(d, vi, j, &p, dt);
         }
         for j in 0..n {
@@ -494,7 +495,7 @@ impl ConditionallyQuadratic for MpfChain {
         let ground = T::splat(self.core.measurement_ground(k));
         let p = View { xn, m, p: self };
         for (i, &s) in self.core.sensors.iter().enumerate() {
-            value[i] = self.core.topo.acceleration(&p, s, ground);
+            value[i] = self.core.spec.building.acceleration(&p, s, ground);
             self.write_acceleration_gradient(jac, i, s, &p, T::splat(1.0));
         }
     }

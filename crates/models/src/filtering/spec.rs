@@ -3,9 +3,9 @@
 use super::discretisation::Discretisation;
 use super::prior::ChainPrior;
 use super::prior::MarginalPrior;
+use crate::building::{Building, BuildingError, Damping};
 use crate::priors::PriorError;
 use crate::sensors::{MeasurementKind, SensorError, SensorLayout};
-use crate::structure::Damping;
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
@@ -14,6 +14,8 @@ use thiserror::Error;
 pub enum SpecError {
     #[error("invalid chain spec: {field}: {reason}")]
     Invalid { field: &'static str, reason: String },
+    #[error("invalid chain spec: {0}")]
+    Building(#[from] BuildingError),
     #[error("invalid chain spec: {0}")]
     Sensors(#[from] SensorError),
     #[error("invalid chain spec: prior: {0}")]
@@ -52,17 +54,16 @@ fn invalid(field: &'static str, reason: impl Into<String>) -> SpecError {
 
 /// The chain, data and filter settings of the run-time partitions.
 ///
-/// Storeys are 0-based in `hysteretic` (as `crate::structure::BoucWen::storey`); the sensor
-/// layout takes and prints them 1-based.
+/// Storeys are 0-based in the building; the sensor layout takes and prints them 1-based.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ChainSpec {
     /// Time step (s).
     pub dt: f64,
-    /// Storey masses m_1..m_N (known); N = `masses.len()`.
-    pub masses: Vec<f64>,
-    /// 0-based storeys of the hysteretic (Bouc–Wen) elements, strictly increasing.
-    pub hysteretic: Vec<usize>,
+    /// Masses (known), hysteretic storeys and damping form ([`Damping`]: per-storey dashpots,
+    /// the default of SPEC §1, or with the mass-proportional term `αM` as well, whose α then has
+    /// a prior in `prior.alpha` and sits in θ after `c1..cN`).
+    pub building: Building,
     /// Measured storeys and measurement kind.
     pub sensors: SensorLayout,
     /// Measured ground acceleration `ug[k] = ü_g,meas(t_k)`, k = 0..=K.
@@ -90,11 +91,6 @@ pub struct ChainSpec {
     /// threshold (`docs/scaling.md`).
     #[serde(default = "one", skip_serializing_if = "is_one")]
     pub substeps: usize,
-    /// Damping form ([`Damping`]): per-storey dashpots (the default, SPEC §1) or with the
-    /// mass-proportional term `αM` as well, whose α then has a prior in `prior.alpha` and sits in
-    /// θ after `c1..cN`.
-    #[serde(default, skip_serializing_if = "Damping::is_default")]
-    pub damping: Damping,
 }
 
 /// Largest accepted [`ChainSpec::substeps`].
@@ -125,11 +121,11 @@ impl ChainSpec {
     /// relative data, (nf·RMS a_i)² for absolute data (the excitation error does not enter an
     /// absolute measurement); q_vel = dt·nf·RMS ü_g; q_r\[e\] = dt·0.05·RMS δv_e (the paper's σ_r,
     /// independent of nf); q_disp = 1e−6. Prior [`ChainPrior::paper`], moment-matched marginal
-    /// prior, forward Euler. `noise_fraction` is 0.1 in the paper.
+    /// prior, forward Euler. `noise_fraction` is 0.1 in the paper. The prior has no `alpha`, so
+    /// `building` has the per-storey damping form here.
     pub fn from_rms(
         dt: f64,
-        masses: Vec<f64>,
-        hysteretic: Vec<usize>,
+        building: Building,
         sensors: SensorLayout,
         ug: Vec<f64>,
         rms: &RmsLevels,
@@ -141,6 +137,7 @@ impl ChainSpec {
                 format!("{} values for {} sensors", rms.acc.len(), sensors.len()),
             ));
         }
+        let hysteretic = building.hysteretic();
         if rms.drift_velocity.len() != hysteretic.len() {
             return Err(invalid(
                 "rms.drift_velocity",
@@ -169,7 +166,7 @@ impl ChainSpec {
         };
         let spec = Self {
             dt,
-            prior: ChainPrior::paper(masses.len(), &hysteretic),
+            prior: ChainPrior::paper(building.storeys(), hysteretic),
             q_disp: 1e-6,
             q_vel: dt * nf * rms.ug,
             q_r: rms.drift_velocity.iter().map(|v| dt * 0.05 * v).collect(),
@@ -178,14 +175,12 @@ impl ChainSpec {
                 .iter()
                 .map(|a| (nf * a).powi(2) + excitation)
                 .collect(),
-            masses,
-            hysteretic,
+            building,
             sensors,
             ug,
             marginal_prior: MarginalPrior::MomentMatched,
             discretisation: Discretisation::Euler,
             substeps: 1,
-            damping: Damping::Storey,
         };
         spec.validate()?;
         Ok(spec)
@@ -193,29 +188,12 @@ impl ChainSpec {
 
     /// Number of storeys N.
     pub fn n_storeys(&self) -> usize {
-        self.masses.len()
+        self.building.storeys()
     }
 
     /// Checks every field; the partitions' constructors call it.
     pub fn validate(&self) -> Result<(), SpecError> {
         let n = self.n_storeys();
-        if n == 0 {
-            return Err(invalid("masses", "at least one storey is required"));
-        }
-        if let Some(j) = self
-            .masses
-            .iter()
-            .position(|m| !(m.is_finite() && *m > 0.0))
-        {
-            return Err(invalid(
-                "masses",
-                format!(
-                    "mass of storey {} is {}, not positive",
-                    j + 1,
-                    self.masses[j]
-                ),
-            ));
-        }
         if self.sensors.n_storeys() != n {
             return Err(invalid(
                 "masses",
@@ -237,24 +215,6 @@ impl ChainSpec {
         }
         // Re-validate the layout itself (it may come from deserialisation of a changed file).
         SensorLayout::new(n, &self.sensors.one_based(), self.sensors.kind())?;
-        for (i, &j) in self.hysteretic.iter().enumerate() {
-            if j >= n {
-                return Err(invalid(
-                    "hysteretic",
-                    format!("storey {} is outside the chain of {n} storeys", j + 1),
-                ));
-            }
-            if i > 0 && j <= self.hysteretic[i - 1] {
-                return Err(invalid(
-                    "hysteretic",
-                    format!(
-                        "storeys must be listed once, in increasing order ({} after {})",
-                        j + 1,
-                        self.hysteretic[i - 1] + 1
-                    ),
-                ));
-            }
-        }
         if !(self.dt.is_finite() && self.dt > 0.0) {
             return Err(invalid("dt", format!("{} is not positive", self.dt)));
         }
@@ -278,13 +238,14 @@ impl ChainSpec {
                 return Err(invalid(field, format!("{v} is not a non-negative s.d.")));
             }
         }
-        if self.q_r.len() != self.hysteretic.len() {
+        let hysteretic = self.building.hysteretic();
+        if self.q_r.len() != hysteretic.len() {
             return Err(invalid(
                 "q_r",
                 format!(
                     "{} values for {} hysteretic elements",
                     self.q_r.len(),
-                    self.hysteretic.len()
+                    hysteretic.len()
                 ),
             ));
         }
@@ -304,23 +265,23 @@ impl ChainSpec {
         if let Some(r) = self.r_diag.iter().find(|r| !(r.is_finite() && **r > 0.0)) {
             return Err(invalid("r_diag", format!("variance {r} is not positive")));
         }
-        if self.prior.hysteretic_storeys() != self.hysteretic {
+        if self.prior.hysteretic_storeys() != hysteretic {
             return Err(invalid(
                 "prior",
                 "the element priors are not at the hysteretic storeys, in order",
             ));
         }
-        if self.prior.damping() != self.damping {
+        let damping = self.building.damping();
+        if self.prior.damping() != damping {
             return Err(invalid(
                 "prior.alpha",
-                match self.damping {
+                match damping {
                     Damping::StoreyMass => {
                         "the storey+mass damping form needs a prior for alpha".to_string()
                     }
-                    Damping::Storey => format!(
-                        "a prior for alpha is given, but the damping form is {}",
-                        self.damping
-                    ),
+                    Damping::Storey => {
+                        format!("a prior for alpha is given, but the damping form is {damping}")
+                    }
                 },
             ));
         }

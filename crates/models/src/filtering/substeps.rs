@@ -82,7 +82,7 @@ pub struct AutoSubsteps {
 /// `MAX_SUBSTEPS` when none is enough; the record then shows the error that remains).
 pub fn auto_substeps(spec: &ChainSpec) -> AutoSubsteps {
     let k: Vec<f64> = spec.prior.k.iter().map(centre).collect();
-    let omega_max = highest_frequency(&k, &spec.masses);
+    let omega_max = highest_frequency(&k, spec.building.masses());
     let x = omega_max * spec.dt;
     let substeps = if frequency_error(x) <= SUBSTEP_ABOVE {
         1

@@ -4,10 +4,11 @@
 
 use core_filters::model::{Layout, Slot};
 use core_filters::rng::{stream, StreamRng};
+use models::building::Building;
 use models::filtering::{ChainSpec, Discretisation, RmsLevels};
 use models::priors::Prior;
 use models::sensors::{MeasurementKind, SensorLayout};
-use models::structure::{BoucWen, Damping, ShearChain};
+use models::structure::{Damping, ShearChain};
 use rand::Rng;
 
 pub const DT: f64 = 0.005;
@@ -32,6 +33,10 @@ impl Case {
     }
     pub fn ne(&self) -> usize {
         self.hysteretic.len()
+    }
+    /// The case's building with damping form `damping`.
+    pub fn building(&self, damping: Damping) -> Building {
+        Building::new(self.masses.clone(), self.hysteretic.clone(), damping).unwrap()
     }
 }
 
@@ -102,19 +107,11 @@ pub fn spec(case: &Case, disc: Discretisation) -> ChainSpec {
         ug: 3.0,
         drift_velocity: (0..case.ne()).map(|e| 0.5 + 0.1 * e as f64).collect(),
     };
-    let mut s = ChainSpec::from_rms(
-        DT,
-        case.masses.clone(),
-        case.hysteretic.clone(),
-        sensors,
-        ug,
-        &rms,
-        0.1,
-    )
-    .unwrap();
+    let storey = case.building(Damping::Storey);
+    let mut s = ChainSpec::from_rms(DT, storey, sensors, ug, &rms, 0.1).unwrap();
     s.discretisation = disc;
     if case.damping.has_mass_term() {
-        s.damping = case.damping;
+        s.building = case.building(case.damping);
         s.prior.alpha = Some(Prior::LogNormal {
             median: 0.5,
             log_sd: 0.7,
@@ -188,27 +185,7 @@ pub fn random_point(case: &Case, rng: &mut StreamRng) -> Point {
 
 /// The truth simulator's chain at θ of `p`.
 pub fn shear_chain(case: &Case, p: &Point) -> ShearChain {
-    let bw = case
-        .hysteretic
-        .iter()
-        .map(|&storey| BoucWen {
-            storey,
-            beta: 1.0,
-            gamma: 0.0,
-            n: 1.0,
-        })
-        .collect();
-    let mut base = ShearChain::new(
-        case.masses.clone(),
-        vec![1.0; case.n()],
-        vec![0.0; case.n()],
-        bw,
-    )
-    .unwrap();
-    if case.damping.has_mass_term() {
-        base = base.with_mass_damping(0.0).unwrap();
-    }
-    base.with_theta(&p.theta).unwrap()
+    ShearChain::from_theta(&case.building(case.damping), &p.theta).unwrap()
 }
 
 /// Splits a point into a partition's (sampled, marginal) vectors through its layout; entries the
