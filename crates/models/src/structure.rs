@@ -18,8 +18,8 @@
 //! Rayleigh damping (`c_j = β_R k_j`). α ≥ 0 is one more parameter, placed in θ right after
 //! `c_1..c_N` and named `alpha`.
 //!
-//! One physics source: the forces and accelerations are evaluated by one kernel,
-//! the force kernel of a [`Building`] (over any [`ChainView`] of a point), and the hysteretic rate by one
+//! One physics source: the forces and accelerations are evaluated by one kernel, that of the
+//! [`Building`] (over any [`ChainView`] of a point), and the hysteretic rate by one
 //! implementation of a [`HysteresisLaw`] ([`BoucWenLaw`]); the truth simulator
 //! ([`ShearChain::rhs`]) and every filter partition (`crate::filtering`) use both, generic over
 //! one particle (`f64`) or a SIMD pack of particles.
