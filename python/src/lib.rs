@@ -17,7 +17,10 @@ use std::time::{Duration, Instant};
 use core_filters::resampling::Scheme;
 use core_filters::smc::storvik::StorvikUpdate;
 use experiments::field::{self, StructureSettings};
-use experiments::pipeline::{identify_stoppable, Algorithm, FilterSettings, Interrupted, RunInput};
+use experiments::pipeline::{
+    chain_spec, identify_stoppable, unmeasured_storeys, Algorithm, FilterSettings, Interrupted,
+    RunInput,
+};
 use experiments::record::RunRecord;
 use models::dataset::{Dataset, LoadedDataset, MEASURED};
 use models::filtering::Discretisation;
@@ -490,6 +493,18 @@ fn identify(
     } else if data.chain.is_none() {
         settings.structure.overlay(&flags);
         field::resolve(d, None, &settings.structure, &data.measured, &both_name).map_err(err)?;
+    }
+    // Without a config, the MPF-EKF2's default prior Gaussian as `sysid filter` chooses it: per
+    // particle where storeys carry no sensor or the building is tall
+    // (`FilterSettings::recommended_for`).
+    if config.is_none() && config_json.is_none() && algorithm == Algorithm::MpfEkf2 {
+        let spec = chain_spec(d, data.chain.as_ref(), &settings).map_err(err)?;
+        settings.marginal_prior = FilterSettings::recommended_for(
+            algorithm,
+            spec.n_storeys(),
+            &unmeasured_storeys(&spec),
+        )
+        .marginal_prior;
     }
     let input = RunInput {
         data: d,

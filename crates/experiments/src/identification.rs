@@ -21,7 +21,8 @@ use models::sensors::MeasurementKind;
 use crate::checks;
 use crate::field::{self, StructureSettings};
 use crate::pipeline::{
-    chain_spec, identify, unmeasured_storeys, Algorithm, FilterSettings, RunInput, SPARSE_REL_SD,
+    chain_spec, identify, per_particle_reason, unmeasured_storeys, Algorithm, FilterSettings,
+    RunInput, PER_PARTICLE_MIN_STOREYS, SPARSE_REL_SD,
 };
 use crate::record::RunRecord;
 use crate::simulation::parse_storeys;
@@ -255,7 +256,8 @@ pub enum Note<'a> {
     ///
     /// [`describe`]: crate::scaled_prior::ScaledPrior::describe
     Prior(String),
-    /// A layout that leaves storeys unmeasured: the MPF-EKF2's default prior Gaussian
+    /// A layout that leaves storeys unmeasured, or a building of at least
+    /// [`PER_PARTICLE_MIN_STOREYS`] storeys: the MPF-EKF2's default prior Gaussian
     /// ([`FilterSettings::recommended_for`]), or a warning when a config keeps the shared one.
     Sparse(String),
 }
@@ -399,30 +401,29 @@ pub fn identify_request(req: &FilterRequest, note: &mut dyn FnMut(Note)) -> Resu
     let chain = data
         .true_chain()
         .context("rebuilding the data set's structure")?;
-    // What the sensors cannot see decides the MPF-EKF2's default prior Gaussian
-    // (`FilterSettings::recommended_for`; docs/scaling.md, "Sparse sensors at 20 and 40 storeys").
+    // What the sensors cannot see, and the size of the building, decide the MPF-EKF2's default
+    // prior Gaussian (`FilterSettings::recommended_for`).
     if req.algorithm == Algorithm::MpfEkf2 {
         // Settings first, so that their refusal names the key as it does in every other run.
         crate::limits::check_filter_settings(&settings)?;
-        let unmeasured = unmeasured_storeys(&chain_spec(&data, chain.as_ref(), &settings)?);
-        let listed = || {
-            let v: Vec<String> = unmeasured.iter().map(|s| s.to_string()).collect();
-            v.join(", ")
-        };
-        if unmeasured.is_empty() {
-            // Every storey measured: the settings as given.
-        } else if req.config.is_none() {
-            settings.marginal_prior =
-                FilterSettings::recommended_for(req.algorithm, &unmeasured).marginal_prior;
-            note(Note::Sparse(format!(
-                "note: storeys {} carry no sensor: the MPF-EKF2 starts every particle from its own prior mean (marginal_prior = {{ kind = \"per_particle\", rel_sd = {SPARSE_REL_SD} }}; with one shared prior Gaussian it loses its particles on such layouts, docs/scaling.md)",
-                listed()
-            )));
-        } else if settings.marginal_prior == MarginalPrior::MomentMatched {
-            note(Note::Sparse(format!(
-                "warning: storeys {} carry no sensor and the MPF-EKF2 starts from one moment-matched prior Gaussian (marginal_prior = {{ kind = \"moment_matched\" }}): on such layouts it drives unmeasured stiffnesses below zero and loses all its particles in most runs at 20 and 40 storeys (docs/scaling.md); set marginal_prior = {{ kind = \"per_particle\", rel_sd = {SPARSE_REL_SD} }}",
-                listed()
-            )));
+        let spec = chain_spec(&data, chain.as_ref(), &settings)?;
+        let reason = per_particle_reason(spec.n_storeys(), &unmeasured_storeys(&spec));
+        if let Some(reason) = reason {
+            if req.config.is_none() {
+                settings.marginal_prior = FilterSettings::recommended_for(
+                    req.algorithm,
+                    spec.n_storeys(),
+                    &unmeasured_storeys(&spec),
+                )
+                .marginal_prior;
+                note(Note::Sparse(format!(
+                    "note: {reason}: the MPF-EKF2 starts every particle from its own prior mean (marginal_prior = {{ kind = \"per_particle\", rel_sd = {SPARSE_REL_SD} }}; with one shared prior Gaussian it loses its particles where storeys carry no sensor, docs/scaling.md, and is less accurate from {PER_PARTICLE_MIN_STOREYS} storeys on, docs/calibration.md)"
+                )));
+            } else if settings.marginal_prior == MarginalPrior::MomentMatched {
+                note(Note::Sparse(format!(
+                    "warning: {reason} and the MPF-EKF2 starts from one moment-matched prior Gaussian (marginal_prior = {{ kind = \"moment_matched\" }}): where storeys carry no sensor it drives their stiffnesses below zero and loses all its particles in most runs at 20 and 40 storeys (docs/scaling.md), and at 10 storeys its mean stiffness error was 16 % against 4 % (docs/calibration.md); set marginal_prior = {{ kind = \"per_particle\", rel_sd = {SPARSE_REL_SD} }}"
+                )));
+            }
         }
     }
     let input = RunInput {

@@ -8,7 +8,8 @@ use std::path::PathBuf;
 use std::process::Command;
 
 use experiments::pipeline::{
-    chain_spec, unmeasured_storeys, Algorithm, FilterSettings, SPARSE_REL_SD,
+    chain_spec, per_particle_reason, unmeasured_storeys, Algorithm, FilterSettings,
+    PER_PARTICLE_MIN_STOREYS, SPARSE_REL_SD,
 };
 use models::dataset::{generate, DatasetConfig};
 use models::filtering::MarginalPrior;
@@ -48,25 +49,44 @@ fn unmeasured_storeys_come_from_the_layout() {
 }
 
 #[test]
-fn only_the_mpf_ekf2_on_a_sparse_layout_leaves_the_recommended_settings() {
+fn only_the_mpf_ekf2_on_a_sparse_layout_or_a_tall_building_leaves_the_recommended_settings() {
     let recommended = FilterSettings::recommended();
     assert_eq!(recommended.marginal_prior, MarginalPrior::MomentMatched);
+    let per_particle = FilterSettings {
+        marginal_prior: MarginalPrior::PerParticle {
+            rel_sd: SPARSE_REL_SD,
+        },
+        ..recommended.clone()
+    };
+    let below = PER_PARTICLE_MIN_STOREYS - 1;
     for algorithm in Algorithm::ALL {
-        // Every storey measured: the recommended settings, whatever the algorithm.
-        assert_eq!(FilterSettings::recommended_for(algorithm, &[]), recommended);
-        let sparse = FilterSettings::recommended_for(algorithm, &[1, 2]);
-        if algorithm == Algorithm::MpfEkf2 {
-            let expected = FilterSettings {
-                marginal_prior: MarginalPrior::PerParticle {
-                    rel_sd: SPARSE_REL_SD,
-                },
-                ..recommended.clone()
-            };
-            assert_eq!(sparse, expected);
-        } else {
-            assert_eq!(sparse, recommended);
+        // Every storey of a building below the threshold measured: the recommended settings,
+        // whatever the algorithm.
+        assert_eq!(
+            FilterSettings::recommended_for(algorithm, below, &[]),
+            recommended
+        );
+        for (storeys, unmeasured) in [(5, &[1, 2][..]), (PER_PARTICLE_MIN_STOREYS, &[][..])] {
+            let s = FilterSettings::recommended_for(algorithm, storeys, unmeasured);
+            if algorithm == Algorithm::MpfEkf2 {
+                assert_eq!(
+                    s, per_particle,
+                    "{storeys} storeys, unmeasured {unmeasured:?}"
+                );
+            } else {
+                assert_eq!(s, recommended);
+            }
         }
     }
+    assert_eq!(per_particle_reason(below, &[]), None);
+    assert_eq!(
+        per_particle_reason(5, &[1, 2]).as_deref(),
+        Some("storeys 1, 2 carry no sensor")
+    );
+    assert_eq!(
+        per_particle_reason(12, &[]).as_deref(),
+        Some("12 storeys (at least 10)")
+    );
 }
 
 fn sysid() -> Command {
@@ -167,4 +187,63 @@ fn a_sparse_twenty_storey_run_completes_with_intervals_that_hold_the_unmeasured_
         "95 % intervals without the truth: {missed:?}"
     );
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// A building of [`PER_PARTICLE_MIN_STOREYS`] storeys with every storey measured: `sysid filter`
+/// without `--config` gives the MPF-EKF2 per-particle prior means and says why; with a config
+/// that keeps the shared Gaussian it warns and keeps it.
+#[test]
+fn a_tall_fully_measured_building_gets_per_particle_prior_means_by_default() {
+    let dir = temp_dir("tall");
+    let data = dir.join("d");
+    let st = sysid()
+        .args([
+            "simulate",
+            "--preset",
+            "building-chain",
+            "--storeys",
+            &PER_PARTICLE_MIN_STOREYS.to_string(),
+            "--duration",
+            "0.5",
+            "--seed",
+            "1",
+            "--out",
+        ])
+        .arg(&data)
+        .status()
+        .unwrap();
+    assert!(st.success());
+    let config = dir.join("shared.toml");
+    std::fs::write(&config, "marginal_prior = { kind = \"moment_matched\" }\n").unwrap();
+    for with_config in [false, true] {
+        let out = dir.join(format!("r-{with_config}.json"));
+        let mut cmd = sysid();
+        cmd.args(["filter", "--algorithm", "mpf-ekf2", "--seed", "1"])
+            .args(["--particles", "16", "--data"])
+            .arg(&data)
+            .arg("--out")
+            .arg(&out);
+        if with_config {
+            cmd.arg("--config").arg(&config);
+        }
+        let o = cmd.output().unwrap();
+        let stderr = String::from_utf8_lossy(&o.stderr);
+        assert!(o.status.success(), "{stderr}");
+        let r: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
+        let kind = &r["config"]["filter"]["marginal_prior"]["kind"];
+        if with_config {
+            assert_eq!(kind, "moment_matched");
+            assert!(
+                stderr.contains("warning: 10 storeys (at least 10) and the MPF-EKF2 starts from one moment-matched prior Gaussian"),
+                "{stderr}"
+            );
+        } else {
+            assert_eq!(kind, "per_particle");
+            assert!(
+                stderr.contains("note: 10 storeys (at least 10): the MPF-EKF2 starts every particle from its own prior mean"),
+                "{stderr}"
+            );
+        }
+    }
 }
