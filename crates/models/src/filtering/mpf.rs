@@ -30,13 +30,13 @@
 //! A chain without hysteretic element samples nothing: xⁿ is empty and there are no sampled
 //! stages, so the MPF-EKF2 reduces to an EKF2 (exact here: a KF with bilinear terms) on x^bl.
 
-use super::{ChainCore, ChainSpec, Discretisation, ForceVariables, SpecError, NLIN};
+use super::{ChainCore, ChainSpec, Discretisation, ForceColumns, SpecError, NLIN};
 use crate::structure::{ChainTopology, ChainView, HysteresisLaw};
 use core_filters::linalg::{Sparse, SymEntries};
 use core_filters::model::{Layout, Slot, SparseHessians};
 use core_filters::real::Real;
 use core_filters::rng::StreamRng;
-use core_filters::smc::model::{ConditionallyQuadratic, QuadraticDims};
+use core_filters::smc::model::{ConditionallyQuadratic, Partition, QuadraticDims};
 
 /// Where a storey's velocity lives.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -65,8 +65,6 @@ pub struct MpfChain {
     a0: usize,
     /// Offset of (β_0, γ_0) in x^bl.
     b0: usize,
-    /// x^bl as the variables of the force gradients.
-    force_vars: ForceVariables,
     stages: Vec<Vec<usize>>,
     stage_noise: Vec<Vec<f64>>,
     stage_hessians: Vec<SparseHessians>,
@@ -112,6 +110,29 @@ impl<T: Real> ChainView<T> for View<'_, T> {
     }
 }
 
+/// x^bl as the variables of the force gradients: displacements, marginal velocities, θ.
+impl ForceColumns for MpfChain {
+    #[inline(always)]
+    fn theta(&self) -> Option<(usize, usize)> {
+        Some((self.k0, self.c0))
+    }
+    #[inline(always)]
+    fn displacements(&self) -> bool {
+        true
+    }
+    #[inline(always)]
+    fn velocity(&self, j: usize) -> Option<usize> {
+        match self.vel[j] {
+            Vel::Marginal(i) => Some(i),
+            Vel::Sampled(_) => None,
+        }
+    }
+    #[inline(always)]
+    fn alpha(&self) -> Option<usize> {
+        self.core.mass_damping().then_some(self.a0)
+    }
+}
+
 impl MpfChain {
     /// Validates the spec, builds the index maps, the stages and the constant Hessians; Euler
     /// and symplectic only (RK4 is not bilinear in x^bl given xⁿ).
@@ -148,19 +169,6 @@ impl MpfChain {
         let nvs = sampled_vel.len();
         let na = core.spec.damping.extra_parameters();
         let (k0, c0, a0, b0) = (n + nvm, 2 * n + nvm, 3 * n + nvm, 3 * n + nvm + na);
-        let force_vars = ForceVariables {
-            alpha: core.mass_damping().then_some(a0),
-            theta: Some((k0, c0)),
-            displacements: true,
-            hysteretic: None,
-            velocities: vel
-                .iter()
-                .map(|v| match v {
-                    Vel::Marginal(i) => Some(*i),
-                    Vel::Sampled(_) => None,
-                })
-                .collect(),
-        };
         let mut me = Self {
             core,
             symplectic,
@@ -171,7 +179,6 @@ impl MpfChain {
             c0,
             a0,
             b0,
-            force_vars,
             stages: Vec::new(),
             stage_noise: Vec::new(),
             stage_hessians: Vec::new(),
@@ -298,7 +305,7 @@ impl MpfChain {
         scale: T,
     ) {
         self.core
-            .write_acceleration_gradient(out, row, j, p, &self.force_vars, scale);
+            .write_acceleration_gradient(out, row, j, p, self, scale);
     }
 
     /// Returns `r_e + dt (g₀ + β g₁ + γ g₂)` at drift velocity `dv` and writes its row of the
@@ -325,6 +332,49 @@ impl MpfChain {
     }
 }
 
+impl Partition for MpfChain {
+    /// Zero states, each n_e drawn from its prior (SPEC §3).
+    fn sample_initial(&self, rng: &mut StreamRng, xn: &mut [f64]) {
+        xn.fill(0.0);
+        for (e, el) in self.core.spec.prior.elements.iter().enumerate() {
+            xn[self.n_index(e)] = el.n.sample(rng);
+        }
+    }
+
+    fn measurement_cov(&self) -> Vec<f64> {
+        self.core.measurement_cov()
+    }
+
+    fn layout(&self) -> Layout {
+        let (n, ne) = (self.core.n, self.core.ne);
+        let mut params: Vec<Slot> = (0..n).map(|j| Slot::Marginal(self.k0 + j)).collect();
+        params.extend((0..n).map(|j| Slot::Marginal(self.c0 + j)));
+        if self.core.mass_damping() {
+            params.push(Slot::Marginal(self.a0));
+        }
+        for e in 0..ne {
+            let b = self.beta_index(e);
+            params.extend([
+                Slot::Marginal(b),
+                Slot::Marginal(b + 1),
+                Slot::Sampled(self.n_index(e)),
+            ]);
+        }
+        let mut states: Vec<Slot> = (0..n).map(Slot::Marginal).collect();
+        states.extend(self.vel.iter().map(|v| match *v {
+            Vel::Sampled(i) => Slot::Sampled(i),
+            Vel::Marginal(i) => Slot::Marginal(i),
+        }));
+        states.extend((0..ne).map(|e| Slot::Sampled(self.r_index(e))));
+        Layout {
+            param_names: self.core.theta_names(),
+            params,
+            state_names: self.core.state_names(),
+            states,
+        }
+    }
+}
+
 impl ConditionallyQuadratic for MpfChain {
     fn dims(&self) -> QuadraticDims {
         let (n, ne) = (self.core.n, self.core.ne);
@@ -340,14 +390,6 @@ impl ConditionallyQuadratic for MpfChain {
 
     fn sampled_stages(&self) -> &[Vec<usize>] {
         &self.stages
-    }
-
-    /// Zero states, each n_e drawn from its prior (SPEC §3).
-    fn sample_initial(&self, rng: &mut StreamRng, xn: &mut [f64]) {
-        xn.fill(0.0);
-        for (e, el) in self.core.spec.prior.elements.iter().enumerate() {
-            xn[self.n_index(e)] = el.n.sample(rng);
-        }
     }
 
     /// States exactly zero (variance 0); k, c, (α), β, γ from θ's Gaussian prior (SPEC §3).
@@ -503,41 +545,8 @@ impl ConditionallyQuadratic for MpfChain {
         &self.observation_hessians
     }
 
-    fn measurement_cov(&self) -> Vec<f64> {
-        self.core.measurement_cov()
-    }
-
     /// [`ChainSpec::substeps`]: the model's grid is `dt/substeps`.
     fn substeps(&self) -> usize {
         self.core.substeps
-    }
-
-    fn layout(&self) -> Layout {
-        let (n, ne) = (self.core.n, self.core.ne);
-        let mut params: Vec<Slot> = (0..n).map(|j| Slot::Marginal(self.k0 + j)).collect();
-        params.extend((0..n).map(|j| Slot::Marginal(self.c0 + j)));
-        if self.core.mass_damping() {
-            params.push(Slot::Marginal(self.a0));
-        }
-        for e in 0..ne {
-            let b = self.beta_index(e);
-            params.extend([
-                Slot::Marginal(b),
-                Slot::Marginal(b + 1),
-                Slot::Sampled(self.n_index(e)),
-            ]);
-        }
-        let mut states: Vec<Slot> = (0..n).map(Slot::Marginal).collect();
-        states.extend(self.vel.iter().map(|v| match *v {
-            Vel::Sampled(i) => Slot::Sampled(i),
-            Vel::Marginal(i) => Slot::Marginal(i),
-        }));
-        states.extend((0..ne).map(|e| Slot::Sampled(self.r_index(e))));
-        Layout {
-            param_names: self.core.theta_names(),
-            params,
-            state_names: self.core.state_names(),
-            states,
-        }
     }
 }
