@@ -234,12 +234,8 @@ impl Partition for MlnChain {
         let (n, ne) = (self.core.n, self.core.ne);
         let mut params: Vec<Slot> = (0..2 * n).map(Slot::Marginal).collect();
         for e in 0..ne {
-            let b = self.beta_col(e);
-            params.extend([
-                Slot::Marginal(b),
-                Slot::Marginal(b + 1),
-                Slot::Sampled(self.n_index(e)),
-            ]);
+            params.extend((0..NLIN).map(|i| Slot::Marginal(self.beta_col(e) + i)));
+            params.push(Slot::Sampled(self.n_index(e)));
         }
         Layout {
             param_names: self.core.theta_names(),
@@ -247,6 +243,14 @@ impl Partition for MlnChain {
             state_names: self.core.state_names(),
             states: (0..2 * n + ne).map(Slot::Sampled).collect(),
         }
+    }
+}
+
+/// Writes `dt · ∂ṙ/∂θ = dt [g₁ …]` (the law's linear parameters, from column `b`) into row `row`.
+#[inline(always)]
+fn write_rate_row<T: Real>(out: &mut Sparse<T>, row: usize, b: usize, dt: T, g: &[T; 1 + NLIN]) {
+    for i in 0..NLIN {
+        out.add(row, b + i, dt * g[1 + i]);
     }
 }
 
@@ -313,8 +317,7 @@ impl ConditionallyLinear for MlnChain {
                     let g = self.basis(e, self.drift_velocity(u_prev, j), u_prev);
                     f[2 * n + e] = u_prev[2 * n + e] + dt * g[0];
                     let b = self.beta_col(e);
-                    F.add(n + e, b, dt * g[1]);
-                    F.add(n + e, b + 1, dt * g[2]);
+                    write_rate_row(F, n + e, b, dt, &g);
                 }
             }
             (true, 0) => {
@@ -331,8 +334,7 @@ impl ConditionallyLinear for MlnChain {
                     let g = self.basis(e, self.drift_velocity(u_new, j), u_prev);
                     f[n + e] = u_prev[2 * n + e] + dt * g[0];
                     let b = self.beta_col(e);
-                    F.add(e, b, dt * g[1]);
-                    F.add(e, b + 1, dt * g[2]);
+                    write_rate_row(F, e, b, dt, &g);
                 }
             }
             _ => panic!("no stage {stage}"),
@@ -382,8 +384,7 @@ impl ConditionallyLinear for MlnChain {
                 let g = self.basis(e, dv, u_prev);
                 let b = self.beta_col(e);
                 let row = 2 * n + e;
-                S.add(row, b, dt * g[1]);
-                S.add(row, b + 1, dt * g[2]);
+                write_rate_row(S, row, b, dt, &g);
                 let phi = [u_prev[self.n_index(e)]];
                 let (d_dv, _) = self
                     .core
@@ -402,8 +403,7 @@ impl ConditionallyLinear for MlnChain {
             for (e, &j) in hyst.iter().enumerate() {
                 let g = self.basis(e, self.drift_velocity(u_prev, j), u_prev);
                 let b = self.beta_col(e);
-                S.add(2 * n + e, b, dt * g[1]);
-                S.add(2 * n + e, b + 1, dt * g[2]);
+                write_rate_row(S, 2 * n + e, b, dt, &g);
             }
         }
     }

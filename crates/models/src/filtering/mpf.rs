@@ -309,7 +309,7 @@ impl MpfChain {
     }
 
     /// Returns `r_e + dt (g₀ + β g₁ + γ g₂)` at drift velocity `dv` and writes its row of the
-    /// Jacobian (`dt g₁`, `dt g₂` at β_e, γ_e).
+    /// Jacobian (`dt g₁`, `dt g₂` at β_e, γ_e; generally `dt g_i` at the law's linear parameters).
     #[inline]
     fn write_r_map<T: Real>(
         &self,
@@ -326,9 +326,12 @@ impl MpfChain {
         let r = xn_prev[self.r_index(e)];
         self.core.law.basis(dv, r, &phi, &mut g);
         let b = self.beta_index(e);
-        jac.add(row, b, dt * g[1]);
-        jac.add(row, b + 1, dt * g[2]);
-        r + dt * (g[0] + m[b] * g[1] + m[b + 1] * g[2])
+        let mut rate = g[0];
+        for i in 0..NLIN {
+            jac.add(row, b + i, dt * g[1 + i]);
+            rate += m[b + i] * g[1 + i];
+        }
+        r + dt * rate
     }
 }
 
@@ -353,12 +356,8 @@ impl Partition for MpfChain {
             params.push(Slot::Marginal(self.a0));
         }
         for e in 0..ne {
-            let b = self.beta_index(e);
-            params.extend([
-                Slot::Marginal(b),
-                Slot::Marginal(b + 1),
-                Slot::Sampled(self.n_index(e)),
-            ]);
+            params.extend((0..NLIN).map(|i| Slot::Marginal(self.beta_index(e) + i)));
+            params.push(Slot::Sampled(self.n_index(e)));
         }
         let mut states: Vec<Slot> = (0..n).map(Slot::Marginal).collect();
         states.extend(self.vel.iter().map(|v| match *v {
@@ -412,8 +411,9 @@ impl ConditionallyQuadratic for MpfChain {
         }
         for e in 0..self.core.ne {
             let t = self.core.theta_element(e);
-            set(self.beta_index(e), t);
-            set(self.beta_index(e) + 1, t + 1);
+            for i in 0..NLIN {
+                set(self.beta_index(e) + i, t + i);
+            }
         }
     }
 
