@@ -6,7 +6,7 @@
 
 use core_filters::linalg::gauss::{factorise, Factor};
 use core_filters::linalg::{
-    ekf2_propagate_near_identity, PropagateScratch, SecondOrder, Sparse, SymEntries,
+    ekf2_propagate_near_identity, PropagateScratch, Propagation, SecondOrder, Sparse, SymEntries,
 };
 use core_filters::model::SparseHessians;
 use core_filters::rng::stream;
@@ -97,13 +97,16 @@ fn ekf2_mpf_step(c: &mut Criterion) {
     // Marginal transition: Euler map, Jacobian I + D with D = O(dt).
     let phi = random(&mut rng, N, 1.0);
     let d = dense_jacobian(&mut rng, N, N, dt);
-    let q_bl = SymEntries::diagonal(&[1e-8, 1e-8, 1e-8, 1e-8, 1e-8]);
+    let marginal = Propagation {
+        hess: marginal,
+        q: SymEntries::diagonal(&[1e-8, 1e-8, 1e-8, 1e-8, 1e-8]),
+    };
     // Measurement of three accelerations.
     let y_res = random(&mut rng, 3, 1.0);
     let jac_y = dense_jacobian(&mut rng, 3, N, 1.0);
     let r = [0.1, 0.0, 0.0, 0.0, 0.2, 0.0, 0.0, 0.0, 0.3];
 
-    let mut scratch = PropagateScratch::new(N, &marginal);
+    let mut scratch = PropagateScratch::new(N, &marginal.hess);
     let mut pseudo = Factor::<f64>::new(N, 2);
     let mut update = Factor::<f64>::new(N, 3);
     let (mut s_n, mut s_y) = (vec![0.0; 4], vec![0.0; 9]);
@@ -129,7 +132,6 @@ fn ekf2_mpf_step(c: &mut Criterion) {
                         &phi,
                         &d,
                         &marginal,
-                        &q_bl,
                         &mut scratch,
                     );
                     // (e) measurement update.
@@ -149,7 +151,9 @@ fn ekf2_mpf_step(c: &mut Criterion) {
 
     c.bench_function("second_order terms 13 states, 2 outputs of phi_bl", |b| {
         b.iter(|| {
-            marginal.terms(black_box(&p), N, &mut mean2[..2], &mut cov2[..4]);
+            marginal
+                .hess
+                .terms(black_box(&p), N, &mut mean2[..2], &mut cov2[..4]);
             black_box((&mean2, &cov2));
         })
     });

@@ -150,7 +150,11 @@ fn storvik_exact_intervals_cover_at_the_nominal_rate() {
 #[test]
 fn bootstrap_intervals_are_over_confident_without_rejuvenation() {
     let model = Linked::example();
-    let (got, exact) = coverage(&model, &mut BootstrapPf::new(model.clone()), "bootstrap");
+    let (got, exact) = coverage(
+        &model,
+        &mut BootstrapPf::new(model.augmented()),
+        "bootstrap",
+    );
     assert_nominal("Kalman posterior, same replicates", exact);
     let n = REPLICATES as f64;
     let q = STANDARD_LEVELS[1];

@@ -167,7 +167,7 @@ fn bootstrap_likelihood_is_unbiased() {
     let exact = kalman_filter(&model.joint_kalman(), &rows::<1>(&ys))
         .unwrap()
         .loglik;
-    let mut pf = BootstrapPf::new(model);
+    let mut pf = BootstrapPf::new(model.augmented());
     let ls: Vec<f64> = (0..300)
         .map(|r| {
             let s = run(
@@ -329,7 +329,7 @@ fn nan_measurement_ends_the_run_with_a_typed_error() {
     let mut ys = model.simulate(1.3, 10, &mut stream(5, 0, "data"));
     ys[4] = f64::NAN;
     let mut filters: Vec<Box<dyn Filter>> = vec![
-        Box::new(BootstrapPf::new(model.clone())),
+        Box::new(BootstrapPf::new(model.augmented())),
         Box::new(MlnRbpf::new(model.clone())),
         Box::new(Storvik::new(model.clone(), StorvikUpdate::Linearised)),
     ];
@@ -353,7 +353,7 @@ fn nan_measurement_ends_the_run_with_a_typed_error() {
     }
     let mut ys = model.simulate(1.3, 10, &mut stream(5, 0, "data"));
     ys[6] = 1e200;
-    let mut pf = BootstrapPf::new(model);
+    let mut pf = BootstrapPf::new(model.augmented());
     let s = run(
         &mut pf,
         &config(20),
@@ -430,7 +430,7 @@ impl Observer for StopAt {
 fn a_stop_request_ends_the_run_before_its_step() {
     let model = Linked::example();
     let ys = model.simulate(1.3, 10, &mut stream(5, 0, "data"));
-    let mut pf = BootstrapPf::new(model.clone());
+    let mut pf = BootstrapPf::new(model.augmented());
     let mut stop = StopAt { at: 7, steps: 0 };
     let s = run(
         &mut pf,
@@ -446,7 +446,7 @@ fn a_stop_request_ends_the_run_before_its_step() {
         s.failure,
         Some(core_filters::error::FilterError::Interrupted { step: 7 })
     );
-    let mut pf = BootstrapPf::new(model);
+    let mut pf = BootstrapPf::new(model.augmented());
     let first6 = run(
         &mut pf,
         &config(20),

@@ -10,7 +10,7 @@ use core_filters::model::{Layout, Slot, SparseHessians};
 use core_filters::real::Real;
 use core_filters::resampling::ResamplePolicy;
 use core_filters::rng::{stream, StreamRng};
-use core_filters::smc::model::{ConditionallyQuadratic, QuadraticDims};
+use core_filters::smc::model::{ConditionallyQuadratic, Partition, QuadraticDims};
 use core_filters::smc::mpf::MpfEkf2;
 use core_filters::smc::runner::NoObserver;
 use core_filters::smc::{run, Filter, Observer, Posterior, SmcConfig, StepInfo};
@@ -120,6 +120,26 @@ impl Decoupled {
     }
 }
 
+impl Partition for Decoupled {
+    fn sample_initial(&self, rng: &mut StreamRng, xn: &mut [f64]) {
+        xn[0] = normal(rng);
+        xn[1] = rng.random();
+    }
+
+    fn measurement_cov(&self) -> Vec<f64> {
+        self.r.as_slice().to_vec()
+    }
+
+    fn layout(&self) -> Layout {
+        Layout {
+            param_names: names(2, "theta"),
+            params: vec![Slot::Marginal(2), Slot::Sampled(1)],
+            state_names: names(3, "x"),
+            states: vec![Slot::Marginal(0), Slot::Marginal(1), Slot::Sampled(0)],
+        }
+    }
+}
+
 impl ConditionallyQuadratic for Decoupled {
     fn dims(&self) -> QuadraticDims {
         QuadraticDims {
@@ -130,10 +150,6 @@ impl ConditionallyQuadratic for Decoupled {
     }
     fn sampled_stages(&self) -> &[Vec<usize>] {
         &self.stages
-    }
-    fn sample_initial(&self, rng: &mut StreamRng, xn: &mut [f64]) {
-        xn[0] = normal(rng);
-        xn[1] = rng.random();
     }
     fn marginal_prior(&self, _rng: &mut StreamRng, mean: &mut [f64], cov: &mut [f64]) {
         mean.copy_from_slice(self.m0.as_slice());
@@ -203,17 +219,6 @@ impl ConditionallyQuadratic for Decoupled {
     }
     fn observation_hessians(&self) -> &SparseHessians {
         &self.empty
-    }
-    fn measurement_cov(&self) -> Vec<f64> {
-        self.r.as_slice().to_vec()
-    }
-    fn layout(&self) -> Layout {
-        Layout {
-            param_names: names(2, "theta"),
-            params: vec![Slot::Marginal(2), Slot::Sampled(1)],
-            state_names: names(3, "x"),
-            states: vec![Slot::Marginal(0), Slot::Marginal(1), Slot::Sampled(0)],
-        }
     }
 }
 
@@ -329,6 +334,25 @@ impl Coupled {
     }
 }
 
+impl Partition for Coupled {
+    fn sample_initial(&self, rng: &mut StreamRng, xn: &mut [f64]) {
+        xn[0] = self.xn0_sd * normal(rng);
+    }
+
+    fn measurement_cov(&self) -> Vec<f64> {
+        vec![self.r]
+    }
+
+    fn layout(&self) -> Layout {
+        Layout {
+            param_names: vec![],
+            params: vec![],
+            state_names: names(3, "x"),
+            states: vec![Slot::Sampled(0), Slot::Marginal(0), Slot::Marginal(1)],
+        }
+    }
+}
+
 impl ConditionallyQuadratic for Coupled {
     fn dims(&self) -> QuadraticDims {
         QuadraticDims {
@@ -339,9 +363,6 @@ impl ConditionallyQuadratic for Coupled {
     }
     fn sampled_stages(&self) -> &[Vec<usize>] {
         &self.stages
-    }
-    fn sample_initial(&self, rng: &mut StreamRng, xn: &mut [f64]) {
-        xn[0] = self.xn0_sd * normal(rng);
     }
     fn marginal_prior(&self, _rng: &mut StreamRng, mean: &mut [f64], cov: &mut [f64]) {
         mean.copy_from_slice(self.m0.as_slice());
@@ -408,17 +429,6 @@ impl ConditionallyQuadratic for Coupled {
     }
     fn observation_hessians(&self) -> &SparseHessians {
         &self.empty
-    }
-    fn measurement_cov(&self) -> Vec<f64> {
-        vec![self.r]
-    }
-    fn layout(&self) -> Layout {
-        Layout {
-            param_names: vec![],
-            params: vec![],
-            state_names: names(3, "x"),
-            states: vec![Slot::Sampled(0), Slot::Marginal(0), Slot::Marginal(1)],
-        }
     }
 }
 
@@ -509,6 +519,25 @@ impl Bilinear {
     }
 }
 
+impl Partition for Bilinear {
+    fn sample_initial(&self, _rng: &mut StreamRng, xn: &mut [f64]) {
+        xn.copy_from_slice(&self.xn0);
+    }
+
+    fn measurement_cov(&self) -> Vec<f64> {
+        vec![0.1]
+    }
+
+    fn layout(&self) -> Layout {
+        Layout {
+            param_names: vec!["s".into()],
+            params: vec![Slot::Sampled(2)],
+            state_names: names(2, "u"),
+            states: vec![Slot::Sampled(0), Slot::Sampled(1)],
+        }
+    }
+}
+
 impl ConditionallyQuadratic for Bilinear {
     fn dims(&self) -> QuadraticDims {
         QuadraticDims {
@@ -519,9 +548,6 @@ impl ConditionallyQuadratic for Bilinear {
     }
     fn sampled_stages(&self) -> &[Vec<usize>] {
         &self.stages
-    }
-    fn sample_initial(&self, _rng: &mut StreamRng, xn: &mut [f64]) {
-        xn.copy_from_slice(&self.xn0);
     }
     fn marginal_prior(&self, _rng: &mut StreamRng, mean: &mut [f64], cov: &mut [f64]) {
         mean.copy_from_slice(&self.m0);
@@ -582,17 +608,6 @@ impl ConditionallyQuadratic for Bilinear {
     }
     fn observation_hessians(&self) -> &SparseHessians {
         &self.empty
-    }
-    fn measurement_cov(&self) -> Vec<f64> {
-        vec![0.1]
-    }
-    fn layout(&self) -> Layout {
-        Layout {
-            param_names: vec!["s".into()],
-            params: vec![Slot::Sampled(2)],
-            state_names: names(2, "u"),
-            states: vec![Slot::Sampled(0), Slot::Sampled(1)],
-        }
     }
 }
 

@@ -129,7 +129,7 @@ fn steps_allocate_nothing() {
             }
         }
         assert_eq!(
-            allocations(&mut BootstrapPf::new(linked.clone()), &ys, 1, threshold),
+            allocations(&mut BootstrapPf::new(linked.augmented()), &ys, 1, threshold),
             0
         );
     }

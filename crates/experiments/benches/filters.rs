@@ -11,7 +11,7 @@
 use std::time::{Duration, Instant};
 
 use core_filters::rng::stream;
-use core_filters::smc::{Filter, Particles};
+use core_filters::smc::{Filter, Particles, StepInput, StepOutput};
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
 use experiments::pipeline::{build_filter, chain_spec, Algorithm, FilterSettings};
 use models::dataset::{generate, DatasetConfig, LoadedDataset};
@@ -69,16 +69,18 @@ impl Case {
             self.log_w.fill(0.0);
             let y = self.data.y(self.k);
             let start = Instant::now();
+            let input = StepInput {
+                k: self.k,
+                y,
+                src: &self.front,
+                ancestors: &self.ancestors,
+            };
+            let mut out = StepOutput {
+                dst: &mut self.back,
+                log_w: &mut self.log_w,
+            };
             self.filter
-                .step(
-                    self.k,
-                    y,
-                    &self.front,
-                    &self.ancestors,
-                    &mut self.back,
-                    &mut self.log_w,
-                    &mut self.rng,
-                )
+                .step(&input, &mut out, &mut self.rng)
                 .expect("step");
             total += start.elapsed();
             std::mem::swap(&mut self.front, &mut self.back);

@@ -14,7 +14,7 @@
 
 use anyhow::Result;
 use core_filters::model::Layout;
-use core_filters::smc::model::StateSpace;
+use core_filters::smc::model::{Partition, StateSpace};
 use core_filters::smc::Posterior;
 use models::filtering::{AugmentedChain, ChainSpec};
 use serde::Serialize;

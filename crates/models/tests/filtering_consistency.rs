@@ -9,7 +9,9 @@ use core_filters::linalg::Sparse;
 use core_filters::model::Slot;
 use core_filters::real::{Pack, Real};
 use core_filters::rng::stream;
-use core_filters::smc::model::{ConditionallyLinear, ConditionallyQuadratic, StateSpace};
+use core_filters::smc::model::{
+    ConditionallyLinear, ConditionallyQuadratic, Partition, StateSpace,
+};
 use filtering_support::*;
 use models::filtering::{AugmentedChain, Discretisation, MlnChain, MpfChain};
 use models::integrate::simulate_rk4;

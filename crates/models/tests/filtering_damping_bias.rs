@@ -31,7 +31,7 @@
 //! its prediction, and the symplectic bias must also be below 1/5 of the Euler one.
 
 use core_filters::rng::stream;
-use core_filters::smc::model::StateSpace;
+use core_filters::smc::model::{Partition, StateSpace};
 use models::filtering::{AugmentedChain, ChainSpec, Discretisation, RmsLevels};
 use models::integrate::simulate_rk4;
 use models::sensors::{MeasurementKind, SensorLayout};

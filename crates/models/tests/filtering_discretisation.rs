@@ -10,7 +10,7 @@
 mod filtering_support;
 
 use core_filters::rng::stream;
-use core_filters::smc::model::StateSpace;
+use core_filters::smc::model::{Partition, StateSpace};
 use filtering_support::*;
 use models::building::{Building, Damping};
 use models::filtering::{

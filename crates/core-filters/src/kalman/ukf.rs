@@ -130,7 +130,6 @@ where
 }
 
 /// UKF propagate: `(m, P) ← UT(φ) + (0, Q)`. On error `m` and `p` are unchanged.
-#[allow(clippy::too_many_arguments)]
 pub fn ukf_propagate<const N: usize, F>(
     m: &mut SVector<f64, N>,
     p: &mut SMatrix<f64, N, N>,

@@ -17,6 +17,6 @@ pub mod second_order;
 pub mod sparse;
 
 pub use gauss::{Factor, FactoredNoise};
-pub use propagate::{ekf2_propagate_near_identity, PropagateScratch, SymEntries};
+pub use propagate::{ekf2_propagate_near_identity, PropagateScratch, Propagation, SymEntries};
 pub use second_order::SecondOrder;
 pub use sparse::Sparse;

@@ -84,20 +84,26 @@ impl<T: Real> PropagateScratch<T> {
     }
 }
 
+/// What stays the same at every propagate of a model: `φ`'s constant Hessians and `Q`.
+#[derive(Debug, Clone)]
+pub struct Propagation {
+    pub hess: SecondOrder,
+    pub q: SymEntries,
+}
+
 /// EKF2 propagate with `J = I + D` (module docs). `value` = φ(m); `d` = `J − I` at `m` (`n × n`
 /// sparse); the Hessian terms use `P` before propagation. `p` is left exactly symmetric.
 #[inline]
-#[allow(clippy::too_many_arguments)]
 pub fn ekf2_propagate_near_identity<T: Real>(
     m: &mut [T],
     p: &mut [T],
     n: usize,
     value: &[T],
     d: &Sparse<T>,
-    hess: &SecondOrder,
-    q: &SymEntries,
+    constant: &Propagation,
     scratch: &mut PropagateScratch<T>,
 ) {
+    let Propagation { hess, q } = constant;
     let k = hess.len();
     if k > 0 {
         hess.terms(p, n, &mut scratch.mean2, &mut scratch.cov2);

@@ -26,7 +26,7 @@ use crate::model::Layout;
 use crate::real::{Pack, Real, PACK_LANES};
 use crate::rng::StreamRng;
 
-use super::runner::Filter;
+use super::runner::{Filter, StepInput, StepOutput};
 use super::store::{Particles, Shape};
 
 /// Largest marginalised dimension processed in lanes (a pack's covariance is then at most
@@ -41,6 +41,16 @@ pub struct Slots<'a, T> {
     /// The marginalised Gaussian `N(mean, cov)`: the ancestor's on entry, updated in place.
     pub mean: &'a mut [T],
     pub cov: &'a mut [T],
+}
+
+/// What one particle (or a pack) starts step `k` from: the measurement `y_k`, the ancestor's
+/// sampled block `prev` and the particle's standard normal draws `xi`.
+#[derive(Clone, Copy)]
+pub struct Ancestry<'a, T> {
+    pub k: usize,
+    pub y: &'a [f64],
+    pub prev: &'a [T],
+    pub xi: &'a [T],
 }
 
 /// A filter's per-particle step, written once for one particle or a pack of particles.
@@ -74,19 +84,14 @@ pub trait ParticleStep: Sync + Send {
     fn shape(&self) -> Shape;
     /// Standard normal draws per particle and step.
     fn draws(&self) -> usize;
-    /// Advances one particle (or a pack) from step `k − 1` to `k` with the draws `xi`: `prev` is
-    /// the ancestor's sampled block, `slots` the particle's blocks (module docs). Returns
-    /// `log p(y_k | particle)` and the lanes whose straight path was valid. With `T = f64` the
-    /// step takes the documented repairs (counted in `health`) and the mask is false only when
-    /// the particle has no result.
-    #[allow(clippy::too_many_arguments)]
+    /// Advances one particle (or a pack) from step `k − 1` to `k` ([`Ancestry`]), `slots` being
+    /// the particle's blocks (module docs). Returns `log p(y_k | particle)` and the lanes whose
+    /// straight path was valid. With `T = f64` the step takes the documented repairs (counted in
+    /// `health`) and the mask is false only when the particle has no result.
     fn advance<T: Real>(
         &self,
-        k: usize,
-        y: &[f64],
-        prev: &[T],
+        from: Ancestry<'_, T>,
         slots: Slots<'_, T>,
-        xi: &[T],
         scratch: &mut Self::Scratch<T>,
         health: &mut Health,
     ) -> (T, T::Mask);
@@ -139,20 +144,15 @@ impl<S: ParticleStep> Batch<S> {
     }
 
     /// One step of every particle (the contract of [`super::Filter::step`]).
-    #[allow(clippy::too_many_arguments)]
     pub fn step(
         &mut self,
         step: &S,
-        k: usize,
-        y: &[f64],
-        src: &Particles,
-        ancestors: &[usize],
-        dst: &mut Particles,
-        log_w: &mut [f64],
+        input: &StepInput<'_>,
+        out: &mut StepOutput<'_>,
         rng: &mut StreamRng,
         health: &mut Health,
     ) {
-        let np = log_w.len();
+        let np = out.log_w.len();
         let nd = step.draws();
         let group = if self.lanes { PACK_LANES } else { 1 };
         let mut first = 0;
@@ -162,10 +162,10 @@ impl<S: ParticleStep> Batch<S> {
                 *v = StandardNormal.sample(rng);
             }
             if self.lanes && count > 1 {
-                self.pack_group(step, k, y, src, ancestors, dst, log_w, first, count, health);
+                self.pack_group(step, input, out, first, count, health);
             } else {
                 for b in 0..count {
-                    self.one(step, k, y, src, ancestors, dst, log_w, first + b, b, health);
+                    self.one(step, input, out, first + b, b, health);
                 }
             }
             first += count;
@@ -173,59 +173,52 @@ impl<S: ParticleStep> Batch<S> {
     }
 
     /// Particle `i` through the `f64` step, with the draws of row `row` of the group.
-    #[allow(clippy::too_many_arguments)]
     fn one(
         &mut self,
         step: &S,
-        k: usize,
-        y: &[f64],
-        src: &Particles,
-        ancestors: &[usize],
-        dst: &mut Particles,
-        log_w: &mut [f64],
+        input: &StepInput<'_>,
+        out: &mut StepOutput<'_>,
         i: usize,
         row: usize,
         health: &mut Health,
     ) {
-        let a = ancestors[i];
-        dst.copy_from(i, src, a);
-        if log_w[i] == f64::NEG_INFINITY {
+        let a = input.ancestors[i];
+        out.dst.copy_from(i, input.src, a);
+        if out.log_w[i] == f64::NEG_INFINITY {
             return;
         }
         let nd = step.draws();
-        let d = dst.particle_mut(i);
+        let d = out.dst.particle_mut(i);
         let (ll, ok) = step.advance(
-            k,
-            y,
-            src.sampled(a),
+            Ancestry {
+                k: input.k,
+                y: input.y,
+                prev: input.src.sampled(a),
+                xi: &self.draws[row * nd..(row + 1) * nd],
+            },
             Slots {
                 sampled: d.sampled,
                 mean: d.mean,
                 cov: d.cov,
             },
-            &self.draws[row * nd..(row + 1) * nd],
             &mut self.scalar,
             health,
         );
-        log_w[i] += if ok { ll } else { f64::NAN };
+        out.log_w[i] += if ok { ll } else { f64::NAN };
     }
 
     /// The `count ≤ 4` particles from `first` on in lanes (lanes past `count` repeat the group's
     /// first particle and are discarded).
-    #[allow(clippy::too_many_arguments)]
     fn pack_group(
         &mut self,
         step: &S,
-        k: usize,
-        y: &[f64],
-        src: &Particles,
-        ancestors: &[usize],
-        dst: &mut Particles,
-        log_w: &mut [f64],
+        input: &StepInput<'_>,
+        out: &mut StepOutput<'_>,
         first: usize,
         count: usize,
         health: &mut Health,
     ) {
+        let StepInput { src, ancestors, .. } = *input;
         let nd = step.draws();
         let source = |b: usize| ancestors[first + if b < count { b } else { 0 }];
         gather(
@@ -242,24 +235,26 @@ impl<S: ParticleStep> Batch<S> {
             std::array::from_fn(|b| &draws[row(b) * nd..(row(b) + 1) * nd]),
         );
         let (ll, ok) = step.advance(
-            k,
-            y,
-            &self.prev,
+            Ancestry {
+                k: input.k,
+                y: input.y,
+                prev: &self.prev,
+                xi: &self.xi,
+            },
             Slots {
                 sampled: &mut self.sampled,
                 mean: &mut self.mean,
                 cov: &mut self.cov,
             },
-            &self.xi,
             &mut self.packed,
             health,
         );
         for b in 0..count {
             let i = first + b;
-            if log_w[i] == f64::NEG_INFINITY {
-                dst.copy_from(i, src, ancestors[i]);
+            if out.log_w[i] == f64::NEG_INFINITY {
+                out.dst.copy_from(i, src, ancestors[i]);
             } else if Pack::mask_lane(ok, b) {
-                let d = dst.particle_mut(i);
+                let d = out.dst.particle_mut(i);
                 for (o, v) in d.sampled.iter_mut().zip(&self.sampled) {
                     *o = v.lane(b);
                 }
@@ -269,9 +264,9 @@ impl<S: ParticleStep> Batch<S> {
                 for (o, v) in d.cov.iter_mut().zip(&self.cov) {
                     *o = v.lane(b);
                 }
-                log_w[i] += ll.lane(b);
+                out.log_w[i] += ll.lane(b);
             } else {
-                self.one(step, k, y, src, ancestors, dst, log_w, i, b, health);
+                self.one(step, input, out, i, b, health);
             }
         }
     }
@@ -333,26 +328,14 @@ impl<S: ParticleStep> Filter for Marginalized<S> {
 
     fn step(
         &mut self,
-        k: usize,
-        y: &[f64],
-        src: &Particles,
-        ancestors: &[usize],
-        dst: &mut Particles,
-        log_w: &mut [f64],
+        input: &StepInput<'_>,
+        out: &mut StepOutput<'_>,
         rng: &mut StreamRng,
     ) -> Result<(), FilterError> {
+        let k = input.k;
         self.step.check(k)?;
-        self.batch.step(
-            &self.step,
-            k,
-            y,
-            src,
-            ancestors,
-            dst,
-            log_w,
-            rng,
-            &mut self.health,
-        );
+        self.batch
+            .step(&self.step, input, out, rng, &mut self.health);
         // Checked once per step: the flags are sticky, so a single wrong write is not missed.
         match self.batch.broken_pattern() {
             Some(which) => Err(FilterError::JacobianPattern { step: k, which }),

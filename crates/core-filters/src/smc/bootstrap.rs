@@ -21,7 +21,7 @@ use crate::model::Layout;
 use crate::rng::StreamRng;
 
 use super::model::StateSpace;
-use super::runner::Filter;
+use super::runner::{Filter, StepInput, StepOutput};
 use super::store::{Particles, Shape};
 
 /// Bootstrap PF (SPEC §5.1). All buffers are allocated in [`BootstrapPf::new`].
@@ -92,14 +92,16 @@ impl<M: StateSpace> Filter for BootstrapPf<M> {
 
     fn step(
         &mut self,
-        k: usize,
-        y: &[f64],
-        src: &Particles,
-        ancestors: &[usize],
-        dst: &mut Particles,
-        log_w: &mut [f64],
+        input: &StepInput<'_>,
+        out: &mut StepOutput<'_>,
         rng: &mut StreamRng,
     ) -> Result<(), FilterError> {
+        let StepInput {
+            k,
+            y,
+            src,
+            ancestors,
+        } = *input;
         let noise = match &self.noise {
             Ok(n) => n,
             Err(FilterError::NotPositiveDefinite { which, .. }) => {
@@ -110,12 +112,12 @@ impl<M: StateSpace> Filter for BootstrapPf<M> {
             }
             Err(e) => return Err(e.clone()),
         };
-        for (i, lw) in log_w.iter_mut().enumerate() {
+        for (i, lw) in out.log_w.iter_mut().enumerate() {
             for v in self.xi.iter_mut() {
                 *v = StandardNormal.sample(rng);
             }
             let x_prev = src.sampled(ancestors[i]);
-            let x = dst.particle_mut(i).sampled;
+            let x = out.dst.particle_mut(i).sampled;
             if *lw == f64::NEG_INFINITY {
                 x.copy_from_slice(x_prev);
                 continue;

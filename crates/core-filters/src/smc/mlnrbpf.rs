@@ -31,7 +31,7 @@ use crate::model::Layout;
 use crate::real::Real;
 use crate::rng::StreamRng;
 
-use super::batch::{Marginalized, ParticleStep, Slots};
+use super::batch::{Ancestry, Marginalized, ParticleStep, Slots};
 use super::model::{linear_patterns, ConditionallyLinear, LinearDims, Stage};
 use super::store::Shape;
 
@@ -190,14 +190,17 @@ impl<M: ConditionallyLinear> ParticleStep for MlnStep<M> {
     /// SPEC §5.2 (a)–(d) for one particle (or a pack).
     fn advance<T: Real>(
         &self,
-        k: usize,
-        y: &[f64],
-        u_prev: &[T],
+        from: Ancestry<'_, T>,
         p: Slots<'_, T>,
-        xi: &[T],
         s: &mut MlnScratch<T>,
         health: &mut Health,
     ) -> (T, T::Mask) {
+        let Ancestry {
+            k,
+            y,
+            prev: u_prev,
+            xi,
+        } = from;
         let (u, mu, C) = (p.sampled, p.mean, p.cov);
         let mut ok = T::all_true();
         let mut next_draw = 0;

@@ -19,5 +19,7 @@ pub mod runner;
 pub mod store;
 pub mod storvik;
 
-pub use runner::{run, Filter, Observer, Posterior, RunSummary, SmcConfig, StepInfo};
+pub use runner::{
+    run, Filter, Observer, Posterior, RunSummary, SmcConfig, StepInfo, StepInput, StepOutput,
+};
 pub use store::{Particles, Shape};

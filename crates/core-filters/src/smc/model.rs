@@ -2,9 +2,10 @@
 //!
 //! A model only *states laws*: maps, Jacobians (by their structural non-zeros, [`Sparse`]),
 //! constant sparse Hessians, noise levels and priors. The particle filters of [`crate::smc`]
-//! consume them. The Bouc–Wen chain of the `models` crate implements all three traits through its
-//! partitions; small linear-Gaussian test models implement what they can, which is what makes the
-//! exactness tests possible.
+//! consume them. What every model provides is [`Partition`]; each capability trait extends it with
+//! what its filter needs. The Bouc–Wen chain of the `models` crate implements all three traits
+//! through its partitions; small linear-Gaussian test models implement what they can, which is
+//! what makes the exactness tests possible.
 //!
 //! Conventions shared by every trait:
 //! - The model owns its known input sequence (the measured ground acceleration).
@@ -32,26 +33,32 @@ use crate::model::{Layout, SparseHessians};
 use crate::real::Real;
 use crate::rng::StreamRng;
 
+/// What every model provides, whatever it leaves to the particles (the sampled block: all of
+/// `x` for [`StateSpace`], `u` for [`ConditionallyLinear`], `xⁿ` for [`ConditionallyQuadratic`])
+/// and whatever it marginalises. The capability traits add only what their filter needs besides.
+pub trait Partition: Send + Sync {
+    /// Draws the sampled block at step 0 from its prior.
+    fn sample_initial(&self, rng: &mut StreamRng, sampled: &mut [f64]);
+    /// Measurement noise covariance `R` (`ny × ny`).
+    fn measurement_cov(&self) -> Vec<f64>;
+    /// Where θ and the physical states live.
+    fn layout(&self) -> Layout;
+}
+
 /// A general state-space model with an augmented state (bootstrap PF, SPEC §5.1):
 /// `x_k = propagate(k, x_{k−1}, ξ_k)` with standard normal `ξ_k` (the model applies its own noise
 /// structure), `y_k ~ N(measure(k, x_k), R)`.
-pub trait StateSpace: Send + Sync {
+pub trait StateSpace: Partition {
     /// Dimension of `x`.
     fn dim(&self) -> usize;
     /// Number of measurements.
     fn ny(&self) -> usize;
     /// Number of standard normal draws per particle and step (`ξ_k`).
     fn noise_dim(&self) -> usize;
-    /// Draws `x_0` from the prior.
-    fn sample_initial(&self, rng: &mut StreamRng, x: &mut [f64]);
     /// `out = x_k` from `x = x_{k−1}` and the draws `xi` (length [`StateSpace::noise_dim`]).
     fn propagate(&self, k: usize, x: &[f64], xi: &[f64], out: &mut [f64]);
     /// `out` = mean of `y_k` given `x_k`.
     fn measure(&self, k: usize, x: &[f64], out: &mut [f64]);
-    /// `R` (`ny × ny`).
-    fn measurement_cov(&self) -> Vec<f64>;
-    /// Where θ and the physical states live.
-    fn layout(&self) -> Layout;
 }
 
 /// Dimensions of a [`ConditionallyLinear`] model.
@@ -139,14 +146,12 @@ pub fn linear_patterns<M: ConditionallyLinear>(
 ///
 /// Rows of `u` set by no stage are static and copied (e.g. the Bouc–Wen exponent `n`).
 #[allow(non_snake_case)]
-pub trait ConditionallyLinear: Send + Sync {
+pub trait ConditionallyLinear: Partition {
     fn dims(&self) -> LinearDims;
     /// The stages of the transition, in order.
     fn stages(&self) -> &[Stage];
     /// Standard deviations of the process noise of every row of `u` (zero for copied rows).
     fn process_noise_sd(&self) -> &[f64];
-    /// Draws the sampled block `u_0` from its prior.
-    fn sample_initial(&self, rng: &mut StreamRng, u: &mut [f64]);
     /// Mean and covariance (`nz × nz`) of the Gaussian prior of `z` for one particle
     /// (deterministic for the moment-matched prior, SPEC §3; a per-particle prior draws).
     fn marginal_prior(&self, rng: &mut StreamRng, mean: &mut [f64], cov: &mut [f64]);
@@ -177,10 +182,6 @@ pub trait ConditionallyLinear: Send + Sync {
         z: &[T],
         S: &mut Sparse<T>,
     );
-    /// Measurement noise covariance `R` (`ny × ny`).
-    fn measurement_cov(&self) -> Vec<f64>;
-    /// Where θ and the physical states live.
-    fn layout(&self) -> Layout;
 }
 
 /// Dimensions of a [`ConditionallyQuadratic`] model.
@@ -201,12 +202,10 @@ pub struct QuadraticDims {
 /// static and copied. Maps are returned as their value and Jacobian with respect to `x^bl` at the
 /// point `m`; their Hessians with respect to `x^bl` are constant (they depend on the structure and
 /// the time step only) and are supplied once as sparse entry lists.
-pub trait ConditionallyQuadratic: Send + Sync {
+pub trait ConditionallyQuadratic: Partition {
     fn dims(&self) -> QuadraticDims;
     /// Per stage, the indices into `xⁿ` of the dynamic entries it sets.
     fn sampled_stages(&self) -> &[Vec<usize>];
-    /// Draws `xⁿ_0` from its prior.
-    fn sample_initial(&self, rng: &mut StreamRng, xn: &mut [f64]);
     /// Mean and covariance (`nbl × nbl`) of the Gaussian prior of `x^bl` for one particle.
     fn marginal_prior(&self, rng: &mut StreamRng, mean: &mut [f64], cov: &mut [f64]);
     /// `ψ` of stage `stage` at `(xⁿ_{k−1}, xⁿ_k rows of earlier stages, x^bl = m)`: `value[i]`
@@ -251,10 +250,6 @@ pub trait ConditionallyQuadratic: Send + Sync {
     );
     /// Constant Hessians of the measurement map w.r.t. `x^bl` (outputs `0..ny`).
     fn observation_hessians(&self) -> &SparseHessians;
-    /// Measurement noise covariance `R` (`ny × ny`).
-    fn measurement_cov(&self) -> Vec<f64>;
-    /// Where θ and the physical states live.
-    fn layout(&self) -> Layout;
     /// Transitions per measurement interval, `M`: one filter step advances through `M`
     /// transitions (indices `(k−1)M+1 ..= kM` of the model's time grid) and then weights with
     /// `y_k` at index `kM`. 1 for a model on the measurement grid.

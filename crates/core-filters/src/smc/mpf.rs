@@ -33,13 +33,13 @@
 use crate::health::Health;
 use crate::linalg::gauss::factorise;
 use crate::linalg::{
-    ekf2_propagate_near_identity, Factor, PropagateScratch, SecondOrder, Sparse, SymEntries,
+    ekf2_propagate_near_identity, Factor, PropagateScratch, Propagation, SecondOrder, Sparse,
 };
 use crate::model::Layout;
 use crate::real::Real;
 use crate::rng::StreamRng;
 
-use super::batch::{Marginalized, ParticleStep, Slots};
+use super::batch::{Ancestry, Marginalized, ParticleStep, Slots};
 use super::model::{ConditionallyQuadratic, QuadraticDims};
 use super::store::Shape;
 
@@ -58,8 +58,8 @@ pub struct MpfStep<M> {
     dims: QuadraticDims,
     stages: Vec<StagePlan>,
     d_pattern: Sparse<f64>,
-    marginal_hess: SecondOrder,
-    q_bl: SymEntries,
+    /// `φ_bl`'s Hessians and `Q_bl`.
+    marginal: Propagation,
     y_pattern: Sparse<f64>,
     y_hess: SecondOrder,
     r: Vec<f64>,
@@ -158,9 +158,11 @@ impl<M: ConditionallyQuadratic> MpfStep<M> {
         assert!(substeps >= 1, "at least one transition per measurement");
         Self {
             substeps,
-            marginal_hess: SecondOrder::new(model.marginal_hessians(), nbl, nbl),
+            marginal: Propagation {
+                hess: SecondOrder::new(model.marginal_hessians(), nbl, nbl),
+                q: model.marginal_noise().clone(),
+            },
             y_hess: SecondOrder::new(model.observation_hessians(), nbl, ny),
-            q_bl: model.marginal_noise().clone(),
             model,
             dims,
             stages,
@@ -208,22 +210,19 @@ impl<M: ConditionallyQuadratic> MpfStep<M> {
     }
 
     /// SPEC §5.4 (a)–(c) for the transition to index `k` of the model's grid: every sampled stage
-    /// drawn from its EKF2 proposal (using `xi[*next_draw..]`) with the update of `x^bl` by the
-    /// draw, then the EKF2 propagate of `x^bl`.
-    #[allow(clippy::too_many_arguments)]
+    /// drawn from its EKF2 proposal (with the next of the particle's `draws`) with the update of
+    /// `x^bl` by the draw, then the EKF2 propagate of `x^bl`.
     #[inline]
     fn transition<T: Real>(
         &self,
         k: usize,
         xn_prev: &[T],
-        xn: &mut [T],
-        m: &mut [T],
-        cov: &mut [T],
-        xi: &[T],
-        next_draw: &mut usize,
+        p: &mut Slots<'_, T>,
+        draws: &mut Draws<'_, T>,
         s: &mut MpfScratch<T>,
         health: &mut Health,
     ) -> T::Mask {
+        let (xn, m, cov) = (&mut *p.sampled, &mut *p.mean, &mut *p.cov);
         let nbl = self.dims.nbl;
         let mut ok = T::all_true();
         for (st, plan) in self.stages.iter().enumerate() {
@@ -248,8 +247,7 @@ impl<M: ConditionallyQuadratic> MpfStep<M> {
             additive_cov(&mut ss.s_add, q, q_diag, &plan.hess, &ss.cov2);
             ok = ok & factorise(&mut ss.factor, cov, &ss.jac, &ss.s_add, health);
             // (a) the draw and (b) the update of x^bl_{k−1} with it (whitened innovation ξ).
-            let xi_s = &xi[*next_draw..*next_draw + q];
-            *next_draw += q;
+            let xi_s = draws.take(q);
             ok = ok
                 & ss.factor
                     .condition_on_draw(m, cov, &ss.pred, xi_s, &mut ss.drawn);
@@ -262,16 +260,7 @@ impl<M: ConditionallyQuadratic> MpfStep<M> {
             self.model
                 .marginal_dynamics(k, xn_prev, xn, m, &mut s.phi, j)
         });
-        ekf2_propagate_near_identity(
-            m,
-            cov,
-            nbl,
-            &s.phi,
-            &s.d,
-            &self.marginal_hess,
-            &self.q_bl,
-            &mut s.propagate,
-        );
+        ekf2_propagate_near_identity(m, cov, nbl, &s.phi, &s.d, &self.marginal, &mut s.propagate);
         ok
     }
 }
@@ -330,7 +319,7 @@ impl<M: ConditionallyQuadratic> ParticleStep for MpfStep<M> {
             stages,
             phi: vec![z; nbl],
             d: Sparse::with_pattern_of(&self.d_pattern),
-            propagate: PropagateScratch::new(nbl, &self.marginal_hess),
+            propagate: PropagateScratch::new(nbl, &self.marginal.hess),
             h: vec![z; ny],
             jy: Sparse::with_pattern_of(&self.y_pattern),
             mean2: vec![z; ky],
@@ -356,32 +345,36 @@ impl<M: ConditionallyQuadratic> ParticleStep for MpfStep<M> {
     /// SPEC §5.4 (a)–(e) for one particle (or a pack).
     fn advance<T: Real>(
         &self,
-        k: usize,
-        y: &[f64],
-        xn_prev: &[T],
+        from: Ancestry<'_, T>,
         p: Slots<'_, T>,
-        xi: &[T],
         s: &mut MpfScratch<T>,
         health: &mut Health,
     ) -> (T, T::Mask) {
-        let (xn, m, cov) = (p.sampled, p.mean, p.cov);
+        let Ancestry {
+            k,
+            y,
+            prev: xn_prev,
+            xi,
+        } = from;
+        let mut p = p;
         let nbl = self.dims.nbl;
         let mut ok = T::all_true();
-        let mut next_draw = 0;
+        let mut draws = Draws { xi, next: 0 };
         // (a)–(c) once per transition of the model's grid between y_{k−1} and y_k (grid indices
         // (k−1)M+1 ..= kM, M = substeps); the first starts at the ancestor's xⁿ.
         let last = k * self.substeps;
         let first = last + 1 - self.substeps;
-        ok = ok & self.transition(first, xn_prev, xn, m, cov, xi, &mut next_draw, s, health);
+        ok = ok & self.transition(first, xn_prev, &mut p, &mut draws, s, health);
         if self.substeps > 1 {
             // Moved out of the scratch while the scratch is lent (no allocation).
             let mut xn_sub = std::mem::take(&mut s.xn_sub);
             for kf in first + 1..=last {
-                xn_sub.copy_from_slice(xn);
-                ok = ok & self.transition(kf, &xn_sub, xn, m, cov, xi, &mut next_draw, s, health);
+                xn_sub.copy_from_slice(p.sampled);
+                ok = ok & self.transition(kf, &xn_sub, &mut p, &mut draws, s, health);
             }
             s.xn_sub = xn_sub;
         }
+        let (xn, m, cov) = (p.sampled, p.mean, p.cov);
         // (d)+(e) the EKF2 update with y_k at grid index kM; its innovation log-density is the
         // weight factor.
         let k = last;
@@ -412,8 +405,24 @@ impl<M: ConditionallyQuadratic> ParticleStep for MpfStep<M> {
         }
         ok = ok & factorise(&mut s.y_factor, cov, &s.jy, &s.s_add, health);
         let (loglik, upd) = s.y_factor.update(m, cov, &s.resid);
-        debug_assert_eq!(next_draw, self.draws * self.substeps);
+        debug_assert_eq!(draws.next, self.draws * self.substeps);
         (loglik, ok & upd)
+    }
+}
+
+/// A particle's standard normal draws of one step, taken in order by the transitions.
+struct Draws<'a, T> {
+    xi: &'a [T],
+    next: usize,
+}
+
+impl<'a, T> Draws<'a, T> {
+    /// The next `q` draws.
+    #[inline]
+    fn take(&mut self, q: usize) -> &'a [T] {
+        let d = &self.xi[self.next..self.next + q];
+        self.next += q;
+        d
     }
 }
 

@@ -56,23 +56,35 @@ pub trait Filter: Send {
     fn shape(&self) -> Shape;
     /// Draws every particle from the prior and resets the filter's counters.
     fn initialise(&mut self, rng: &mut StreamRng, particles: &mut Particles);
-    /// Advances every particle `i` from slot `ancestors[i]` of `src` to slot `i` of `dst` with the
-    /// measurement `y = y_k`, adding its log-likelihood increment to `log_w[i]` (NaN when a
-    /// numerical failure leaves the particle without a result). A particle whose `log_w` is −∞
-    /// is copied unchanged. Random draws are taken particle by particle, in order.
-    #[allow(clippy::too_many_arguments)]
+    /// Advances every particle `i` from slot `ancestors[i]` of `src` to slot `i` of `out.dst`
+    /// with the measurement `y = y_k` ([`StepInput`]), adding its log-likelihood increment to
+    /// `out.log_w[i]` (NaN when a numerical failure leaves the particle without a result). A
+    /// particle whose `log_w` is −∞ is copied unchanged. Random draws are taken particle by
+    /// particle, in order.
     fn step(
         &mut self,
-        k: usize,
-        y: &[f64],
-        src: &Particles,
-        ancestors: &[usize],
-        dst: &mut Particles,
-        log_w: &mut [f64],
+        input: &StepInput<'_>,
+        out: &mut StepOutput<'_>,
         rng: &mut StreamRng,
     ) -> Result<(), FilterError>;
     /// Repairs counted so far.
     fn health(&self) -> Health;
+}
+
+/// What step `k` starts from: the measurement `y_k` and the particles of step `k − 1`, particle
+/// `i` descending from `src`'s slot `ancestors[i]`.
+#[derive(Clone, Copy)]
+pub struct StepInput<'a> {
+    pub k: usize,
+    pub y: &'a [f64],
+    pub src: &'a Particles,
+    pub ancestors: &'a [usize],
+}
+
+/// What step `k` writes: the particles of step `k` and their log-weights (incremented).
+pub struct StepOutput<'a> {
+    pub dst: &'a mut Particles,
+    pub log_w: &'a mut [f64],
 }
 
 /// What one step reports.
@@ -320,7 +332,17 @@ pub fn run(
                 *a = i;
             }
         }
-        if let Err(e) = filter.step(k, y, &front, &ancestors, &mut back, &mut log_w, rng) {
+        let input = StepInput {
+            k,
+            y,
+            src: &front,
+            ancestors: &ancestors,
+        };
+        let mut out = StepOutput {
+            dst: &mut back,
+            log_w: &mut log_w,
+        };
+        if let Err(e) = filter.step(&input, &mut out, rng) {
             failure = Some(e);
             break;
         }

@@ -32,7 +32,7 @@ use crate::model::Layout;
 use crate::real::Real;
 use crate::rng::StreamRng;
 
-use super::batch::{Marginalized, ParticleStep, Slots};
+use super::batch::{Ancestry, Marginalized, ParticleStep, Slots};
 use super::model::{linear_patterns, ConditionallyLinear, LinearDims, Stage};
 use super::store::Shape;
 
@@ -264,14 +264,17 @@ impl<M: ConditionallyLinear> ParticleStep for StorvikStep<M> {
     /// SPEC §5.3 (i)–(iii) for one particle (or a pack).
     fn advance<T: Real>(
         &self,
-        k: usize,
-        y: &[f64],
-        u_prev: &[T],
+        from: Ancestry<'_, T>,
         p: Slots<'_, T>,
-        xi: &[T],
         s: &mut StorvikScratch<T>,
         health: &mut Health,
     ) -> (T, T::Mask) {
+        let Ancestry {
+            k,
+            y,
+            prev: u_prev,
+            xi,
+        } = from;
         let (u, mu, C) = (p.sampled, p.mean, p.cov);
         let LinearDims { nz, ny, .. } = self.dims;
         let noise = match &self.noise {

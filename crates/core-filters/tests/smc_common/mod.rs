@@ -2,8 +2,8 @@
 //! Kalman references (the same models as `common`, stated through the `smc::model` traits).
 //!
 //! - [`Linked`]: scalar `u` driven by a static scalar `z`, `u_k = a u_{k−1} + b z + v`,
-//!   `y_k = c u_k + d z + η`: a `StateSpace` (augmented `[u, z]`) and a `ConditionallyLinear`
-//!   model (`z` marginalised, the row of `u` linked).
+//!   `y_k = c u_k + d z + η`: a `ConditionallyLinear` model (`z` marginalised, the row of `u`
+//!   linked) and, as [`Augmented`], a `StateSpace` (augmented `[u, z]`).
 //! - [`StaticOnly`]: `u` a random walk unrelated to `z ∈ R²`, `y_k = H z + h + η` with `H`, `h`
 //!   constant and `R` full: every particle's Gaussian is the exact KF of `z`.
 #![allow(dead_code, non_snake_case)]
@@ -13,7 +13,7 @@ use core_filters::linalg::Sparse;
 use core_filters::model::{Layout, Slot};
 use core_filters::real::Real;
 use core_filters::rng::StreamRng;
-use core_filters::smc::model::{ConditionallyLinear, LinearDims, Stage, StateSpace};
+use core_filters::smc::model::{ConditionallyLinear, LinearDims, Partition, Stage, StateSpace};
 use nalgebra::{Matrix1, Matrix2, SMatrix, Vector1, Vector2};
 use rand::Rng;
 use rand_distr::{Distribution, StandardNormal};
@@ -63,6 +63,11 @@ impl Linked {
         }
     }
 
+    /// The model as one augmented state, for the bootstrap PF.
+    pub fn augmented(&self) -> Augmented {
+        Augmented(self.clone())
+    }
+
     /// The same model with `y_k = c u_k + d z + η` for another `c`.
     pub fn with_c(mut self, c: f64) -> Self {
         self.c = c;
@@ -109,7 +114,44 @@ impl Linked {
     }
 }
 
-impl StateSpace for Linked {
+/// [`Linked`] as one augmented state `x = [u, z]` (bootstrap PF).
+#[derive(Debug, Clone)]
+pub struct Augmented(pub Linked);
+
+impl Partition for Linked {
+    fn sample_initial(&self, rng: &mut StreamRng, u: &mut [f64]) {
+        u[0] = self.u0_mean + self.u0_sd * normal(rng);
+    }
+    fn measurement_cov(&self) -> Vec<f64> {
+        vec![self.r_sd * self.r_sd]
+    }
+    fn layout(&self) -> Layout {
+        Layout {
+            param_names: vec!["z".into()],
+            params: vec![Slot::Marginal(0)],
+            state_names: vec!["u".into()],
+            states: vec![Slot::Sampled(0)],
+        }
+    }
+}
+
+impl Partition for Augmented {
+    fn sample_initial(&self, rng: &mut StreamRng, x: &mut [f64]) {
+        self.0.sample_initial(rng, &mut x[..1]);
+        x[1] = self.0.z_mean + self.0.z_sd * normal(rng);
+    }
+    fn measurement_cov(&self) -> Vec<f64> {
+        self.0.measurement_cov()
+    }
+    fn layout(&self) -> Layout {
+        Layout {
+            params: vec![Slot::Sampled(1)],
+            ..self.0.layout()
+        }
+    }
+}
+
+impl StateSpace for Augmented {
     fn dim(&self) -> usize {
         2
     }
@@ -119,27 +161,13 @@ impl StateSpace for Linked {
     fn noise_dim(&self) -> usize {
         1
     }
-    fn sample_initial(&self, rng: &mut StreamRng, x: &mut [f64]) {
-        x[0] = self.u0_mean + self.u0_sd * normal(rng);
-        x[1] = self.z_mean + self.z_sd * normal(rng);
-    }
     fn propagate(&self, _k: usize, x: &[f64], xi: &[f64], out: &mut [f64]) {
-        out[0] = self.a * x[0] + self.b * x[1] + self.q_sd * xi[0];
+        let m = &self.0;
+        out[0] = m.a * x[0] + m.b * x[1] + m.q_sd * xi[0];
         out[1] = x[1];
     }
     fn measure(&self, _k: usize, x: &[f64], out: &mut [f64]) {
-        out[0] = self.c * x[0] + self.d * x[1];
-    }
-    fn measurement_cov(&self) -> Vec<f64> {
-        vec![self.r_sd * self.r_sd]
-    }
-    fn layout(&self) -> Layout {
-        Layout {
-            param_names: vec!["z".into()],
-            params: vec![Slot::Sampled(1)],
-            state_names: vec!["u".into()],
-            states: vec![Slot::Sampled(0)],
-        }
+        out[0] = self.0.c * x[0] + self.0.d * x[1];
     }
 }
 
@@ -156,9 +184,6 @@ impl ConditionallyLinear for Linked {
     }
     fn process_noise_sd(&self) -> &[f64] {
         &self.sd
-    }
-    fn sample_initial(&self, rng: &mut StreamRng, u: &mut [f64]) {
-        u[0] = self.u0_mean + self.u0_sd * normal(rng);
     }
     fn marginal_prior(&self, _rng: &mut StreamRng, mean: &mut [f64], cov: &mut [f64]) {
         mean[0] = self.z_mean;
@@ -197,17 +222,6 @@ impl ConditionallyLinear for Linked {
         S: &mut Sparse<T>,
     ) {
         S.add(0, 0, T::splat(self.b));
-    }
-    fn measurement_cov(&self) -> Vec<f64> {
-        vec![self.r_sd * self.r_sd]
-    }
-    fn layout(&self) -> Layout {
-        Layout {
-            param_names: vec!["z".into()],
-            params: vec![Slot::Marginal(0)],
-            state_names: vec!["u".into()],
-            states: vec![Slot::Sampled(0)],
-        }
     }
 }
 
@@ -264,6 +278,25 @@ impl StaticOnly {
     }
 }
 
+impl Partition for StaticOnly {
+    fn sample_initial(&self, rng: &mut StreamRng, u: &mut [f64]) {
+        u[0] = normal(rng);
+    }
+
+    fn measurement_cov(&self) -> Vec<f64> {
+        self.r.as_slice().to_vec()
+    }
+
+    fn layout(&self) -> Layout {
+        Layout {
+            param_names: vec!["z0".into(), "z1".into()],
+            params: vec![Slot::Marginal(0), Slot::Marginal(1)],
+            state_names: vec!["u".into()],
+            states: vec![Slot::Sampled(0)],
+        }
+    }
+}
+
 impl ConditionallyLinear for StaticOnly {
     fn dims(&self) -> LinearDims {
         LinearDims {
@@ -277,9 +310,6 @@ impl ConditionallyLinear for StaticOnly {
     }
     fn process_noise_sd(&self) -> &[f64] {
         &self.sd
-    }
-    fn sample_initial(&self, rng: &mut StreamRng, u: &mut [f64]) {
-        u[0] = normal(rng);
     }
     fn marginal_prior(&self, _rng: &mut StreamRng, mean: &mut [f64], cov: &mut [f64]) {
         mean.copy_from_slice(self.z_mean.as_slice());
@@ -318,17 +348,6 @@ impl ConditionallyLinear for StaticOnly {
         S: &mut Sparse<T>,
     ) {
         S.add(0, 0, T::splat(0.0));
-    }
-    fn measurement_cov(&self) -> Vec<f64> {
-        self.r.as_slice().to_vec()
-    }
-    fn layout(&self) -> Layout {
-        Layout {
-            param_names: vec!["z0".into(), "z1".into()],
-            params: vec![Slot::Marginal(0), Slot::Marginal(1)],
-            state_names: vec!["u".into()],
-            states: vec![Slot::Sampled(0)],
-        }
     }
 }
 

@@ -20,7 +20,7 @@ use crate::building::Building;
 use crate::structure::{ChainView, HysteresisLaw};
 use core_filters::model::{Layout, Slot};
 use core_filters::rng::StreamRng;
-use core_filters::smc::model::StateSpace;
+use core_filters::smc::model::{Partition, StateSpace};
 use std::cell::RefCell;
 
 /// The chain as one augmented state (SPEC §5.1).
@@ -209,6 +209,31 @@ impl AugmentedChain {
     }
 }
 
+impl Partition for AugmentedChain {
+    /// Zero states, θ drawn from its prior (SPEC §3).
+    fn sample_initial(&self, rng: &mut StreamRng, x: &mut [f64]) {
+        let d = self.dyn_dim();
+        x[..d].fill(0.0);
+        self.core.spec.prior.sample_into(rng, &mut x[d..]);
+    }
+
+    fn measurement_cov(&self) -> Vec<f64> {
+        self.core.measurement_cov()
+    }
+
+    fn layout(&self) -> Layout {
+        let d = self.dyn_dim();
+        Layout {
+            param_names: self.core.theta_names(),
+            params: (0..self.core.theta_mean.len())
+                .map(|i| Slot::Sampled(d + i))
+                .collect(),
+            state_names: self.core.state_names(),
+            states: (0..d).map(Slot::Sampled).collect(),
+        }
+    }
+}
+
 impl StateSpace for AugmentedChain {
     fn dim(&self) -> usize {
         self.dyn_dim() + self.core.theta_mean.len()
@@ -220,13 +245,6 @@ impl StateSpace for AugmentedChain {
 
     fn noise_dim(&self) -> usize {
         self.dyn_dim() * self.core.substeps
-    }
-
-    /// Zero states, θ drawn from its prior (SPEC §3).
-    fn sample_initial(&self, rng: &mut StreamRng, x: &mut [f64]) {
-        let d = self.dyn_dim();
-        x[..d].fill(0.0);
-        self.core.spec.prior.sample_into(rng, &mut x[d..]);
     }
 
     /// The transition to step k with ü_g,meas(k−1) (and ü_g,meas(k) inside an RK4 step); θ copied.
@@ -265,22 +283,6 @@ impl StateSpace for AugmentedChain {
         let ground = self.core.measurement_ground(k);
         for (o, &j) in out.iter_mut().zip(&self.core.sensors) {
             *o = self.core.spec.building.acceleration(&view, j, ground);
-        }
-    }
-
-    fn measurement_cov(&self) -> Vec<f64> {
-        self.core.measurement_cov()
-    }
-
-    fn layout(&self) -> Layout {
-        let d = self.dyn_dim();
-        Layout {
-            param_names: self.core.theta_names(),
-            params: (0..self.core.theta_mean.len())
-                .map(|i| Slot::Sampled(d + i))
-                .collect(),
-            state_names: self.core.state_names(),
-            states: (0..d).map(Slot::Sampled).collect(),
         }
     }
 }

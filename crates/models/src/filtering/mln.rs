@@ -18,14 +18,14 @@
 //! more column of z whose `−α v_j` enters the v rows and the observation's u-Jacobian, which this
 //! partition does not carry; the MPF-EKF2 and the bootstrap PF have it.
 
-use super::{ChainCore, ChainSpec, Discretisation, SpecError, NLIN, NNONLIN};
+use super::{ChainCore, ChainSpec, Discretisation, ForceColumns, SpecError, NLIN, NNONLIN};
 use crate::building::Building;
 use crate::structure::{ChainView, HysteresisLaw};
 use core_filters::linalg::Sparse;
 use core_filters::model::{Layout, Slot};
 use core_filters::real::Real;
 use core_filters::rng::StreamRng;
-use core_filters::smc::model::{ConditionallyLinear, LinearDims, Stage};
+use core_filters::smc::model::{ConditionallyLinear, LinearDims, Partition, Stage};
 
 /// The chain partitioned for MLN-RBPF / Storvik.
 #[derive(Debug, Clone)]
@@ -63,6 +63,38 @@ impl<T: Real> ChainView<T> for View<'_, T> {
     #[inline(always)]
     fn c(&self, j: usize) -> T {
         self.z[self.n + j]
+    }
+}
+
+/// z = `[k, c, …]` as the variables of a force gradient (the rows of `F` and `H`).
+struct ThetaColumns {
+    n: usize,
+}
+
+impl ForceColumns for ThetaColumns {
+    #[inline(always)]
+    fn theta(&self) -> Option<(usize, usize)> {
+        Some((0, self.n))
+    }
+}
+
+/// u = `[x, v, r, …]` as the variables of a force gradient (Storvik's `J_u`).
+struct StateColumns {
+    n: usize,
+}
+
+impl ForceColumns for StateColumns {
+    #[inline(always)]
+    fn displacements(&self) -> bool {
+        true
+    }
+    #[inline(always)]
+    fn hysteretic(&self) -> Option<usize> {
+        Some(2 * self.n)
+    }
+    #[inline(always)]
+    fn velocity(&self, j: usize) -> Option<usize> {
+        Some(self.n + j)
     }
 }
 
@@ -141,8 +173,7 @@ impl MlnChain {
         2 * self.core.n + self.core.ne + e
     }
 
-    /// Writes `scale · ∂a_j/∂z` at `u` into row `row`: `a_j = ground + (F_{j+1} − F_j)/m_j`
-    /// with `∂F_j/∂k_j = d_j`, `∂F_j/∂c_j = δv_j`. Fixed pattern: 2 entries, 4 below the top.
+    /// Writes `scale · ∂a_j/∂z` at `u` into row `row` (`∂F_j/∂k_j = d_j`, `∂F_j/∂c_j = δv_j`).
     #[inline]
     fn write_acceleration_row<T: Real>(
         &self,
@@ -152,44 +183,14 @@ impl MlnChain {
         u: &[T],
         scale: T,
     ) {
-        let n = self.core.n;
-        let view = View { u, z: &[], n };
-        let s = scale * T::splat(self.core.inv_mass[j]);
-        let (d, dv) = self.core.spec.building.element_coordinates(&view, j);
-        out.add(row, j, -(s * d));
-        out.add(row, n + j, -(s * dv));
-        if j + 1 < n {
-            let (d, dv) = self.core.spec.building.element_coordinates(&view, j + 1);
-            out.add(row, j + 1, s * d);
-            out.add(row, n + j + 1, s * dv);
-        }
-    }
-
-    /// Writes `scale · ∂F_j/∂u` at `(u, z)` into row `row`.
-    #[inline]
-    fn write_force_gradient_u<T: Real>(
-        &self,
-        out: &mut Sparse<T>,
-        row: usize,
-        j: usize,
-        z: &[T],
-        scale: T,
-    ) {
-        let n = self.core.n;
-        let (k, c) = (scale * z[j], scale * z[n + j]);
-        match self.core.spec.building.element_at(j) {
-            Some(e) => out.add(row, 2 * n + e, k),
-            None => {
-                out.add(row, j, k);
-                if j > 0 {
-                    out.add(row, j - 1, -k);
-                }
-            }
-        }
-        out.add(row, n + j, c);
-        if j > 0 {
-            out.add(row, n + j - 1, -c);
-        }
+        let view = View {
+            u,
+            z: &[],
+            n: self.core.n,
+        };
+        let vars = ThetaColumns { n: self.core.n };
+        self.core
+            .write_acceleration_gradient(out, row, j, &view, &vars, scale);
     }
 
     /// Drift velocity of the element at storey `j` from the velocities in `u`.
@@ -216,6 +217,44 @@ impl MlnChain {
     }
 }
 
+impl Partition for MlnChain {
+    /// Zero states, each n_e drawn from its prior (SPEC §3).
+    fn sample_initial(&self, rng: &mut StreamRng, u: &mut [f64]) {
+        u.fill(0.0);
+        for (e, el) in self.core.spec.prior.elements.iter().enumerate() {
+            u[self.n_index(e)] = el.n.sample(rng);
+        }
+    }
+
+    fn measurement_cov(&self) -> Vec<f64> {
+        self.core.measurement_cov()
+    }
+
+    /// k, c, β, γ marginal (z order), n_e sampled; states sampled.
+    fn layout(&self) -> Layout {
+        let (n, ne) = (self.core.n, self.core.ne);
+        let mut params: Vec<Slot> = (0..2 * n).map(Slot::Marginal).collect();
+        for e in 0..ne {
+            params.extend((0..NLIN).map(|i| Slot::Marginal(self.beta_col(e) + i)));
+            params.push(Slot::Sampled(self.n_index(e)));
+        }
+        Layout {
+            param_names: self.core.theta_names(),
+            params,
+            state_names: self.core.state_names(),
+            states: (0..2 * n + ne).map(Slot::Sampled).collect(),
+        }
+    }
+}
+
+/// Writes `dt · ∂ṙ/∂θ = dt [g₁ …]` (the law's linear parameters, from column `b`) into row `row`.
+#[inline(always)]
+fn write_rate_row<T: Real>(out: &mut Sparse<T>, row: usize, b: usize, dt: T, g: &[T; 1 + NLIN]) {
+    for i in 0..NLIN {
+        out.add(row, b + i, dt * g[1 + i]);
+    }
+}
+
 #[allow(non_snake_case)]
 impl ConditionallyLinear for MlnChain {
     fn dims(&self) -> LinearDims {
@@ -233,14 +272,6 @@ impl ConditionallyLinear for MlnChain {
 
     fn process_noise_sd(&self) -> &[f64] {
         &self.noise_sd
-    }
-
-    /// Zero states, each n_e drawn from its prior (SPEC §3).
-    fn sample_initial(&self, rng: &mut StreamRng, u: &mut [f64]) {
-        u.fill(0.0);
-        for (e, el) in self.core.spec.prior.elements.iter().enumerate() {
-            u[self.n_index(e)] = el.n.sample(rng);
-        }
     }
 
     /// θ's prior without the n's (z is θ with every n removed), diagonal.
@@ -287,8 +318,7 @@ impl ConditionallyLinear for MlnChain {
                     let g = self.basis(e, self.drift_velocity(u_prev, j), u_prev);
                     f[2 * n + e] = u_prev[2 * n + e] + dt * g[0];
                     let b = self.beta_col(e);
-                    F.add(n + e, b, dt * g[1]);
-                    F.add(n + e, b + 1, dt * g[2]);
+                    write_rate_row(F, n + e, b, dt, &g);
                 }
             }
             (true, 0) => {
@@ -305,8 +335,7 @@ impl ConditionallyLinear for MlnChain {
                     let g = self.basis(e, self.drift_velocity(u_new, j), u_prev);
                     f[n + e] = u_prev[2 * n + e] + dt * g[0];
                     let b = self.beta_col(e);
-                    F.add(e, b, dt * g[1]);
-                    F.add(e, b + 1, dt * g[2]);
+                    write_rate_row(F, e, b, dt, &g);
                 }
             }
             _ => panic!("no stage {stage}"),
@@ -322,15 +351,14 @@ impl ConditionallyLinear for MlnChain {
         }
     }
 
-    /// `∂/∂u [H(u) z + h]`: row i = `(−∂F_s/∂u + ∂F_{s+1}/∂u)/m_s` at z; the n columns are zero.
+    /// `∂/∂u [H(u) z + h]`: row i = `∂a_s/∂u` at z; the n columns are zero.
     fn observation_jacobian_u<T: Real>(&self, _k: usize, _u: &[T], z: &[T], J: &mut Sparse<T>) {
         let n = self.core.n;
+        let view = View { u: &[], z, n };
+        let vars = StateColumns { n };
         for (i, &s) in self.core.sensors.iter().enumerate() {
-            let inv = T::splat(self.core.inv_mass[s]);
-            self.write_force_gradient_u(J, i, s, z, -inv);
-            if s + 1 < n {
-                self.write_force_gradient_u(J, i, s + 1, z, inv);
-            }
+            self.core
+                .write_acceleration_gradient(J, i, s, &view, &vars, T::splat(1.0));
         }
     }
 
@@ -357,8 +385,7 @@ impl ConditionallyLinear for MlnChain {
                 let g = self.basis(e, dv, u_prev);
                 let b = self.beta_col(e);
                 let row = 2 * n + e;
-                S.add(row, b, dt * g[1]);
-                S.add(row, b + 1, dt * g[2]);
+                write_rate_row(S, row, b, dt, &g);
                 let phi = [u_prev[self.n_index(e)]];
                 let (d_dv, _) = self
                     .core
@@ -377,33 +404,8 @@ impl ConditionallyLinear for MlnChain {
             for (e, &j) in hyst.iter().enumerate() {
                 let g = self.basis(e, self.drift_velocity(u_prev, j), u_prev);
                 let b = self.beta_col(e);
-                S.add(2 * n + e, b, dt * g[1]);
-                S.add(2 * n + e, b + 1, dt * g[2]);
+                write_rate_row(S, 2 * n + e, b, dt, &g);
             }
-        }
-    }
-
-    fn measurement_cov(&self) -> Vec<f64> {
-        self.core.measurement_cov()
-    }
-
-    /// k, c, β, γ marginal (z order), n_e sampled; states sampled.
-    fn layout(&self) -> Layout {
-        let (n, ne) = (self.core.n, self.core.ne);
-        let mut params: Vec<Slot> = (0..2 * n).map(Slot::Marginal).collect();
-        for e in 0..ne {
-            let b = self.beta_col(e);
-            params.extend([
-                Slot::Marginal(b),
-                Slot::Marginal(b + 1),
-                Slot::Sampled(self.n_index(e)),
-            ]);
-        }
-        Layout {
-            param_names: self.core.theta_names(),
-            params,
-            state_names: self.core.state_names(),
-            states: (0..2 * n + ne).map(Slot::Sampled).collect(),
         }
     }
 }

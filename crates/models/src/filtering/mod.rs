@@ -79,23 +79,40 @@ fn fine_grid(ug: &[f64], dt: f64, m: usize) -> Vec<f64> {
     fine
 }
 
-/// The variables a gradient of the storey forces is taken with respect to, by their columns.
-/// `F_j = k_j d_j + c_j δv_j`, with `d_j = x_j − x_{j−1}` (or `r_e` for the hysteretic element
-/// `e` at storey `j`) and `δv_j = v_j − v_{j−1}`; with mass damping the acceleration also has
-/// `−α v_j` ([`ChainCore::write_acceleration_gradient`]).
-#[derive(Debug, Clone)]
-pub(crate) struct ForceVariables {
+/// The variables a gradient of the storey forces is taken with respect to, by their columns, as
+/// [`ChainCore::write_force_gradient`] asks for them. `F_j = k_j d_j + c_j δv_j`, with
+/// `d_j = x_j − x_{j−1}` (or `r_e` for the hysteretic element `e` at storey `j`) and
+/// `δv_j = v_j − v_{j−1}`; with mass damping the acceleration also has `−α v_j`
+/// ([`ChainCore::write_acceleration_gradient`]). A quantity is not a variable unless its method
+/// says so. A partition whose variables are fixed by construction answers with constants, so
+/// that the compiler removes the branches of the variables it does not have.
+pub(crate) trait ForceColumns {
     /// Columns of `k_1` and `c_1` when θ's stiffnesses and dampings are variables (`k_j` at
     /// `k + j`, `c_j` at `c + j`).
-    pub theta: Option<(usize, usize)>,
+    #[inline(always)]
+    fn theta(&self) -> Option<(usize, usize)> {
+        None
+    }
     /// Whether the displacements are variables (`x_j` at column `j`).
-    pub displacements: bool,
+    #[inline(always)]
+    fn displacements(&self) -> bool {
+        false
+    }
     /// Column of `r_1` when the hysteretic variables are (`r_e` at `r + e`).
-    pub hysteretic: Option<usize>,
-    /// Column of each storey's velocity where it is a variable.
-    pub velocities: Vec<Option<usize>>,
+    #[inline(always)]
+    fn hysteretic(&self) -> Option<usize> {
+        None
+    }
+    /// Column of storey `j`'s velocity when it is a variable.
+    #[inline(always)]
+    fn velocity(&self, _j: usize) -> Option<usize> {
+        None
+    }
     /// Column of α when the chain has mass damping and θ is a variable.
-    pub alpha: Option<usize>,
+    #[inline(always)]
+    fn alpha(&self) -> Option<usize> {
+        None
+    }
 }
 
 /// What every partition shares: the validated spec (whose building is the force kernel) and
@@ -188,17 +205,17 @@ impl ChainCore {
         row: usize,
         j: usize,
         p: &impl ChainView<T>,
-        vars: &ForceVariables,
+        vars: &impl ForceColumns,
         s: T,
     ) {
-        if let Some((k0, c0)) = vars.theta {
+        if let Some((k0, c0)) = vars.theta() {
             let (d, dv) = self.spec.building.element_coordinates(p, j);
             out.add(row, k0 + j, s * d);
             out.add(row, c0 + j, s * dv);
         }
-        match (self.spec.building.element_at(j), vars.hysteretic) {
+        match (self.spec.building.element_at(j), vars.hysteretic()) {
             (Some(e), Some(r0)) => out.add(row, r0 + e, s * p.k(j)),
-            (None, _) if vars.displacements => {
+            (None, _) if vars.displacements() => {
                 let k = s * p.k(j);
                 out.add(row, j, k);
                 if j > 0 {
@@ -207,10 +224,10 @@ impl ChainCore {
             }
             _ => {}
         }
-        let below = if j > 0 { vars.velocities[j - 1] } else { None };
-        if vars.velocities[j].is_some() || below.is_some() {
+        let below = if j > 0 { vars.velocity(j - 1) } else { None };
+        if vars.velocity(j).is_some() || below.is_some() {
             let c = s * p.c(j);
-            if let Some(i) = vars.velocities[j] {
+            if let Some(i) = vars.velocity(j) {
                 out.add(row, i, c);
             }
             if let Some(i) = below {
@@ -228,7 +245,7 @@ impl ChainCore {
         row: usize,
         j: usize,
         p: &impl ChainView<T>,
-        vars: &ForceVariables,
+        vars: &impl ForceColumns,
         scale: T,
     ) {
         let s = scale * T::splat(self.inv_mass[j]);
@@ -237,10 +254,10 @@ impl ChainCore {
             self.write_force_gradient(out, row, j + 1, p, vars, s);
         }
         if self.spec.building.damping().has_mass_term() {
-            if let Some(a) = vars.alpha {
+            if let Some(a) = vars.alpha() {
                 out.add(row, a, -(scale * p.v(j)));
             }
-            if let Some(i) = vars.velocities[j] {
+            if let Some(i) = vars.velocity(j) {
                 out.add(row, i, -(scale * p.alpha()));
             }
         }

@@ -30,14 +30,14 @@
 //! A chain without hysteretic element samples nothing: xⁿ is empty and there are no sampled
 //! stages, so the MPF-EKF2 reduces to an EKF2 (exact here: a KF with bilinear terms) on x^bl.
 
-use super::{ChainCore, ChainSpec, Discretisation, ForceVariables, SpecError, NLIN};
+use super::{ChainCore, ChainSpec, Discretisation, ForceColumns, SpecError, NLIN};
 use crate::building::Building;
 use crate::structure::{ChainView, HysteresisLaw};
 use core_filters::linalg::{Sparse, SymEntries};
 use core_filters::model::{Layout, Slot, SparseHessians};
 use core_filters::real::Real;
 use core_filters::rng::StreamRng;
-use core_filters::smc::model::{ConditionallyQuadratic, QuadraticDims};
+use core_filters::smc::model::{ConditionallyQuadratic, Partition, QuadraticDims};
 
 /// Where a storey's velocity lives.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -66,8 +66,6 @@ pub struct MpfChain {
     a0: usize,
     /// Offset of (β_0, γ_0) in x^bl.
     b0: usize,
-    /// x^bl as the variables of the force gradients.
-    force_vars: ForceVariables,
     stages: Vec<Vec<usize>>,
     stage_noise: Vec<Vec<f64>>,
     stage_hessians: Vec<SparseHessians>,
@@ -113,6 +111,29 @@ impl<T: Real> ChainView<T> for View<'_, T> {
     }
 }
 
+/// x^bl as the variables of the force gradients: displacements, marginal velocities, θ.
+impl ForceColumns for MpfChain {
+    #[inline(always)]
+    fn theta(&self) -> Option<(usize, usize)> {
+        Some((self.k0, self.c0))
+    }
+    #[inline(always)]
+    fn displacements(&self) -> bool {
+        true
+    }
+    #[inline(always)]
+    fn velocity(&self, j: usize) -> Option<usize> {
+        match self.vel[j] {
+            Vel::Marginal(i) => Some(i),
+            Vel::Sampled(_) => None,
+        }
+    }
+    #[inline(always)]
+    fn alpha(&self) -> Option<usize> {
+        self.core.mass_damping().then_some(self.a0)
+    }
+}
+
 impl MpfChain {
     /// Validates the spec, builds the index maps, the stages and the constant Hessians; Euler
     /// and symplectic only (RK4 is not bilinear in x^bl given xⁿ).
@@ -149,19 +170,6 @@ impl MpfChain {
         let nvs = sampled_vel.len();
         let na = core.spec.building.damping().extra_parameters();
         let (k0, c0, a0, b0) = (n + nvm, 2 * n + nvm, 3 * n + nvm, 3 * n + nvm + na);
-        let force_vars = ForceVariables {
-            alpha: core.mass_damping().then_some(a0),
-            theta: Some((k0, c0)),
-            displacements: true,
-            hysteretic: None,
-            velocities: vel
-                .iter()
-                .map(|v| match v {
-                    Vel::Marginal(i) => Some(*i),
-                    Vel::Sampled(_) => None,
-                })
-                .collect(),
-        };
         let mut me = Self {
             core,
             symplectic,
@@ -172,7 +180,6 @@ impl MpfChain {
             c0,
             a0,
             b0,
-            force_vars,
             stages: Vec::new(),
             stage_noise: Vec::new(),
             stage_hessians: Vec::new(),
@@ -299,11 +306,11 @@ impl MpfChain {
         scale: T,
     ) {
         self.core
-            .write_acceleration_gradient(out, row, j, p, &self.force_vars, scale);
+            .write_acceleration_gradient(out, row, j, p, self, scale);
     }
 
     /// Returns `r_e + dt (g₀ + β g₁ + γ g₂)` at drift velocity `dv` and writes its row of the
-    /// Jacobian (`dt g₁`, `dt g₂` at β_e, γ_e).
+    /// Jacobian (`dt g₁`, `dt g₂` at β_e, γ_e; generally `dt g_i` at the law's linear parameters).
     #[inline]
     fn write_r_map<T: Real>(
         &self,
@@ -320,9 +327,51 @@ impl MpfChain {
         let r = xn_prev[self.r_index(e)];
         self.core.law.basis(dv, r, &phi, &mut g);
         let b = self.beta_index(e);
-        jac.add(row, b, dt * g[1]);
-        jac.add(row, b + 1, dt * g[2]);
-        r + dt * (g[0] + m[b] * g[1] + m[b + 1] * g[2])
+        let mut rate = g[0];
+        for i in 0..NLIN {
+            jac.add(row, b + i, dt * g[1 + i]);
+            rate += m[b + i] * g[1 + i];
+        }
+        r + dt * rate
+    }
+}
+
+impl Partition for MpfChain {
+    /// Zero states, each n_e drawn from its prior (SPEC §3).
+    fn sample_initial(&self, rng: &mut StreamRng, xn: &mut [f64]) {
+        xn.fill(0.0);
+        for (e, el) in self.core.spec.prior.elements.iter().enumerate() {
+            xn[self.n_index(e)] = el.n.sample(rng);
+        }
+    }
+
+    fn measurement_cov(&self) -> Vec<f64> {
+        self.core.measurement_cov()
+    }
+
+    fn layout(&self) -> Layout {
+        let (n, ne) = (self.core.n, self.core.ne);
+        let mut params: Vec<Slot> = (0..n).map(|j| Slot::Marginal(self.k0 + j)).collect();
+        params.extend((0..n).map(|j| Slot::Marginal(self.c0 + j)));
+        if self.core.mass_damping() {
+            params.push(Slot::Marginal(self.a0));
+        }
+        for e in 0..ne {
+            params.extend((0..NLIN).map(|i| Slot::Marginal(self.beta_index(e) + i)));
+            params.push(Slot::Sampled(self.n_index(e)));
+        }
+        let mut states: Vec<Slot> = (0..n).map(Slot::Marginal).collect();
+        states.extend(self.vel.iter().map(|v| match *v {
+            Vel::Sampled(i) => Slot::Sampled(i),
+            Vel::Marginal(i) => Slot::Marginal(i),
+        }));
+        states.extend((0..ne).map(|e| Slot::Sampled(self.r_index(e))));
+        Layout {
+            param_names: self.core.theta_names(),
+            params,
+            state_names: self.core.state_names(),
+            states,
+        }
     }
 }
 
@@ -341,14 +390,6 @@ impl ConditionallyQuadratic for MpfChain {
 
     fn sampled_stages(&self) -> &[Vec<usize>] {
         &self.stages
-    }
-
-    /// Zero states, each n_e drawn from its prior (SPEC §3).
-    fn sample_initial(&self, rng: &mut StreamRng, xn: &mut [f64]) {
-        xn.fill(0.0);
-        for (e, el) in self.core.spec.prior.elements.iter().enumerate() {
-            xn[self.n_index(e)] = el.n.sample(rng);
-        }
     }
 
     /// States exactly zero (variance 0); k, c, (α), β, γ from θ's Gaussian prior (SPEC §3).
@@ -371,8 +412,9 @@ impl ConditionallyQuadratic for MpfChain {
         }
         for e in 0..self.core.ne {
             let t = self.core.theta_element(e);
-            set(self.beta_index(e), t);
-            set(self.beta_index(e) + 1, t + 1);
+            for i in 0..NLIN {
+                set(self.beta_index(e) + i, t + i);
+            }
         }
     }
 
@@ -504,41 +546,8 @@ impl ConditionallyQuadratic for MpfChain {
         &self.observation_hessians
     }
 
-    fn measurement_cov(&self) -> Vec<f64> {
-        self.core.measurement_cov()
-    }
-
     /// [`ChainSpec::substeps`]: the model's grid is `dt/substeps`.
     fn substeps(&self) -> usize {
         self.core.substeps
-    }
-
-    fn layout(&self) -> Layout {
-        let (n, ne) = (self.core.n, self.core.ne);
-        let mut params: Vec<Slot> = (0..n).map(|j| Slot::Marginal(self.k0 + j)).collect();
-        params.extend((0..n).map(|j| Slot::Marginal(self.c0 + j)));
-        if self.core.mass_damping() {
-            params.push(Slot::Marginal(self.a0));
-        }
-        for e in 0..ne {
-            let b = self.beta_index(e);
-            params.extend([
-                Slot::Marginal(b),
-                Slot::Marginal(b + 1),
-                Slot::Sampled(self.n_index(e)),
-            ]);
-        }
-        let mut states: Vec<Slot> = (0..n).map(Slot::Marginal).collect();
-        states.extend(self.vel.iter().map(|v| match *v {
-            Vel::Sampled(i) => Slot::Sampled(i),
-            Vel::Marginal(i) => Slot::Marginal(i),
-        }));
-        states.extend((0..ne).map(|e| Slot::Sampled(self.r_index(e))));
-        Layout {
-            param_names: self.core.theta_names(),
-            params,
-            state_names: self.core.state_names(),
-            states,
-        }
     }
 }
