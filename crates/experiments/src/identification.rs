@@ -114,7 +114,8 @@ validate = {validate}
 loop_every = {loops}
 # Gaussian prior of the marginalised block: {{ kind = "moment_matched" }} (one moment-matched
 # Gaussian) or {{ kind = "per_particle", rel_sd = 0.1 }} (means drawn per particle). Without
-# --config the MPF-EKF2 takes per_particle when a storey carries no sensor (docs/scaling.md).
+# --config the MPF-EKF2 takes per_particle when a storey carries no sensor (docs/scaling.md) or
+# the building has 10 storeys or more (docs/calibration.md).
 marginal_prior = {{ kind = "moment_matched" }}
 
 # Point-mass priors: parameter name = value (k1..kN, c1..cN, alpha with the storey+mass damping
