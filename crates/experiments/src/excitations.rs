@@ -17,6 +17,7 @@ use std::path::Path;
 use anyhow::Result;
 use serde::Serialize;
 
+use crate::engine::write_json;
 use crate::figures::{category_panels, CategoryGroup, CategoryPanel};
 use crate::metrics::mean_sd;
 use crate::pipeline::Algorithm;
@@ -225,16 +226,15 @@ fn write_outputs(
         opts.threads,
         serde_json::json!({ "sweep_wall_s": sweep_s }),
     )?;
-    write_bytes_atomic(
+    write_json(
         &out.join("summary.json"),
-        (serde_json::to_string_pretty(&serde_json::json!({
+        &serde_json::json!({
             "study": study.name,
             "quick": opts.quick,
             "structures": values,
             "rows": rows,
             "verdicts": verdicts,
-        }))? + "\n")
-            .as_bytes(),
+        }),
     )?;
     let text = report(study, &values, &rows, &verdicts, opts.quick);
     write_bytes_atomic(&out.join("REPORT.md"), text.as_bytes())

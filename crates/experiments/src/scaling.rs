@@ -25,13 +25,14 @@ use std::time::Instant;
 use anyhow::{Context, Result};
 use serde::Serialize;
 
+use crate::engine::{load, write_json, Engine};
 use crate::metrics::mean_sd;
 use crate::pipeline::Algorithm;
 use crate::record::RunRecord;
 use crate::study::{Job, Study};
 use crate::sweep::lock::DirLock;
 use crate::sweep::progress::clock;
-use crate::sweep::{read_record, record_path, run_sweep, write_bytes_atomic, Shard, SweepOptions};
+use crate::sweep::{read_record, record_path, write_bytes_atomic, Shard};
 
 mod figures;
 mod report;
@@ -299,12 +300,6 @@ pub fn log_log_fit(points: &[(f64, f64)]) -> Option<(f64, f64)> {
     Some((slope, my - slope * mx))
 }
 
-/// The study as run (quick or not).
-pub fn load(opts: &Options) -> Result<Study> {
-    let study = Study::load(&opts.config)?;
-    Ok(if opts.quick { study.quick() } else { study })
-}
-
 /// The jobs of a structure study's sweep, in sweep order (the order `--shard i/n` deals them
 /// out in): every job of a structure this build can generate.
 pub fn sweep_jobs(study: &Study) -> Vec<Job> {
@@ -338,23 +333,24 @@ pub type Writer<'a> =
 pub fn run_with(opts: &Options, write: &Writer<'_>) -> Result<Vec<Cell>> {
     let start = Instant::now();
     let _lock = DirLock::acquire(&opts.out)?;
-    let study = load(opts)?;
-    let jobs = sweep_jobs(&study);
-    let sweep = SweepOptions {
+    let engine = Engine {
+        out: &opts.out,
         threads: opts.threads,
         shard: opts.shard,
         progress: opts.progress,
-        label: study.name.clone(),
         resume: opts.resume,
     };
+    let study = load(&opts.config, opts.quick)?;
+    let jobs = sweep_jobs(&study);
     let records_dir = opts.out.join("records");
+    let cpu_of = |jobs: &[Job]| -> Vec<Option<f64>> {
+        jobs.iter()
+            .map(|j| read_cpu(&records_dir, &study.record_id(j)))
+            .collect()
+    };
     if opts.report_only {
         let (jobs, records) = existing(&study, &jobs, &records_dir)?;
-        let cpu: Vec<Option<f64>> = jobs
-            .iter()
-            .map(|j| read_cpu(&records_dir, &study.record_id(j)))
-            .collect();
-        let cells = cells(&study, &jobs, &records, &cpu)?;
+        let cells = cells(&study, &jobs, &records, &cpu_of(&jobs))?;
         write(opts, &study, &cells, &jobs, &records, f64::NAN)?;
         eprintln!(
             "wrote {} from {} existing records",
@@ -363,20 +359,16 @@ pub fn run_with(opts: &Options, write: &Writer<'_>) -> Result<Vec<Cell>> {
         );
         return Ok(cells);
     }
-    let outcome = run_sweep(
+    let outcome = engine.sweep(
+        &study,
         &jobs,
-        |j| study.record_id(j),
-        |j| study.job_fingerprint(j),
         &records_dir,
-        &sweep,
+        |j| study.record_id(j),
         |j| {
-            let id = study.record_id(j);
             let cpu0 = thread_cpu_s();
-            let record = study
-                .run_job(j)
-                .with_context(|| format!("{}: {id}", study.name))?;
+            let record = study.run_job(j)?;
             let cpu = thread_cpu_s() - cpu0;
-            let path = cpu_path(&records_dir, &id);
+            let path = cpu_path(&records_dir, &study.record_id(j));
             if cpu.is_finite() {
                 write_bytes_atomic(&path, format!("{cpu}\n").as_bytes())?;
             } else if path.exists() {
@@ -386,23 +378,12 @@ pub fn run_with(opts: &Options, write: &Writer<'_>) -> Result<Vec<Cell>> {
             Ok(record)
         },
     )?;
-    if opts.progress {
-        eprintln!("{}: {}", study.name, outcome.summary());
-    }
-    if opts.shard != Shard::default() {
-        eprintln!(
-            "shard {}/{}: merge the shards' records (`sysid merge`) and run `sysid scaling \
-             --resume` to write the report",
-            opts.shard.index, opts.shard.count
-        );
+    if engine.sharded() {
+        engine.shard_note(&outcome.summary());
         return Ok(Vec::new());
     }
     let sweep_s = start.elapsed().as_secs_f64();
-    let cpu: Vec<Option<f64>> = jobs
-        .iter()
-        .map(|j| read_cpu(&records_dir, &study.record_id(j)))
-        .collect();
-    let cells = cells(&study, &jobs, &outcome.records, &cpu)?;
+    let cells = cells(&study, &jobs, &outcome.records, &cpu_of(&jobs))?;
     write(opts, &study, &cells, &jobs, &outcome.records, sweep_s)?;
     eprintln!(
         "wrote {}; {}",
@@ -630,17 +611,16 @@ fn write_outputs(opts: &Options, study: &Study, cells: &[Cell], sweep_s: f64) ->
         opts.threads,
         serde_json::json!({ "sweep_wall_s": sweep_s }),
     )?;
-    write_bytes_atomic(
+    write_json(
         &out.join("summary.json"),
-        (serde_json::to_string_pretty(&serde_json::json!({
+        &serde_json::json!({
             "study": study.name,
             "quick": opts.quick,
             "structures": values,
             "cells": cells,
             "cost_fits": fits,
             "not_run": unsupported,
-        }))? + "\n")
-            .as_bytes(),
+        }),
     )?;
     let text = report::write(study, &values, cells, &fits, &unsupported, opts.quick);
     write_bytes_atomic(&out.join("REPORT.md"), text.as_bytes())

@@ -14,6 +14,7 @@ use std::collections::BTreeMap;
 
 use serde::Serialize;
 
+use crate::markdown::{cell, header, row};
 use crate::metrics::mean_sd;
 use crate::record::RunRecord;
 
@@ -232,6 +233,23 @@ pub struct Finding {
     pub test: String,
     pub verdict: Verdict,
     pub evidence: String,
+}
+
+/// Writes findings as a Markdown table under the column names `columns` (statement, verdict,
+/// test, evidence).
+pub fn findings_table(out: &mut String, columns: [&str; 4], findings: &[Finding]) {
+    header(out, &columns);
+    for f in findings {
+        row(
+            out,
+            &[
+                cell(&f.statement),
+                format!("**{}**", f.verdict.label()),
+                cell(&f.test),
+                cell(&f.evidence),
+            ],
+        );
+    }
 }
 
 /// Records of one algorithm.
