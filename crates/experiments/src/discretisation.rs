@@ -19,8 +19,8 @@ use crate::pipeline::Algorithm;
 use crate::record::RunRecord;
 use crate::stats::{algorithm_stats, AlgorithmStats, PAPER_EQ31};
 use crate::verdict::{
-    above, below, findings_table, group_error, online_nrmse, paired_difference, per_run, ratio,
-    validation_nrmse, within, Estimate, Finding,
+    above, below, findings_table, group_error, in_group, online_nrmse, paired_difference, per_run,
+    ratio, validation_nrmse, within, Estimate, Finding,
 };
 
 /// The studies of the discretisation section, in the order they run (after the paper's).
@@ -145,10 +145,7 @@ fn mean_ratio(r: &RunRecord, prefix: char) -> f64 {
     let v: Vec<f64> = r
         .param_names
         .iter()
-        .filter(|n| {
-            n.strip_prefix(prefix)
-                .is_some_and(|s| s.parse::<u32>().is_ok())
-        })
+        .filter(|n| in_group(n, prefix))
         .map(|n| ratio(r, n))
         .collect();
     v.iter().sum::<f64>() / v.len().max(1) as f64
@@ -163,10 +160,7 @@ fn rel_sd(r: &RunRecord, prefix: char) -> f64 {
         .param_names
         .iter()
         .enumerate()
-        .filter(|(_, n)| {
-            n.strip_prefix(prefix)
-                .is_some_and(|s| s.parse::<u32>().is_ok())
-        })
+        .filter(|(_, n)| in_group(n, prefix))
         .filter_map(|(j, _)| Some(r.theta_sd_final.get(j)? / t[j]))
         .collect();
     if v.is_empty() {

@@ -15,6 +15,7 @@ use std::time::Instant;
 use anyhow::{Context, Result};
 
 use crate::engine::{load, write_json, Engine};
+use crate::metrics::mean_spread;
 use crate::record::RunRecord;
 use crate::sweep::lock::DirLock;
 use crate::sweep::{write_bytes_atomic, Shard};
@@ -47,13 +48,6 @@ pub struct AlgorithmSpread {
     /// Runs whose record carries at least one warning (`checks`).
     pub with_warnings: usize,
     pub params: Vec<ParamSpread>,
-}
-
-/// Mean and run-to-run s.d. ([`crate::metrics::mean_sd`]); the s.d. is undefined (NaN) below
-/// two runs rather than 0, so one run never looks free of Monte-Carlo error.
-fn mean_spread(x: &[f64]) -> (f64, f64) {
-    let (m, sd, n) = crate::metrics::mean_sd(x);
-    (m, if n > 1 { sd } else { f64::NAN })
 }
 
 /// The statistics per algorithm (in name order) and parameter.
