@@ -1,9 +1,9 @@
 //! Beyond the paper: the discretisation study (`experiments/discretisation.toml` at the paper's
 //! dt = 0.005 s and `experiments/discretisation-100hz.toml` at dt = 0.01 s; derivation and
 //! mechanism check in `docs/discretisation.md`). The marginalised filters run with forward Euler
-//! (the paper's, SPEC §3) and with semi-implicit (symplectic) Euler on the same data sets; this
-//! module takes over the Fig. 7 sweep's Euler records where they are the same jobs, and (in the
-//! report) compares the schemes run by run.
+//! (the paper's, SPEC §3) and with semi-implicit (symplectic) Euler on the same data sets; the
+//! reproduction takes over the Fig. 7 sweep's Euler records where they are the same jobs
+//! ([`crate::engine::Reuse`] from [`SOURCE`]), and this module compares the schemes run by run.
 
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
