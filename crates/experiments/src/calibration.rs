@@ -27,6 +27,8 @@ use plotters::style::text_anchor::{HPos, Pos, VPos};
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
+use crate::markdown::{header, row};
+
 /// Runs below which no verdict is given: with fewer than 10 runs the normal approximation to the
 /// binomial behind the test is poor and, at q = 0.5, not even 0 of n covered would be flagged.
 pub const MIN_RUNS_FOR_VERDICT: usize = 10;
@@ -482,11 +484,7 @@ pub fn markdown(sweep: &SweepCalibration) -> String {
             .iter()
             .map(|s| s.to_string()),
     );
-    let row = |o: &mut String, cells: &[String]| {
-        let _ = writeln!(o, "| {} |", cells.join(" | "));
-    };
-    row(&mut o, &head);
-    row(&mut o, &vec!["---".to_string(); head.len()]);
+    header(&mut o, &head);
     for a in &sweep.algorithms {
         for p in &a.params {
             let mut cells = vec![a.algorithm.clone(), p.parameter.clone(), p.runs.to_string()];

@@ -1,28 +1,26 @@
 //! Beyond the paper: the discretisation study (`experiments/discretisation.toml` at the paper's
 //! dt = 0.005 s and `experiments/discretisation-100hz.toml` at dt = 0.01 s; derivation and
 //! mechanism check in `docs/discretisation.md`). The marginalised filters run with forward Euler
-//! (the paper's, SPEC §3) and with semi-implicit (symplectic) Euler on the same data sets; this
-//! module takes over the Fig. 7 sweep's Euler records where they are the same jobs, and (in the
-//! report) compares the schemes run by run.
+//! (the paper's, SPEC §3) and with semi-implicit (symplectic) Euler on the same data sets; the
+//! reproduction takes over the Fig. 7 sweep's Euler records where they are the same jobs
+//! ([`crate::engine::Reuse`] from [`SOURCE`]), and this module compares the schemes run by run.
 
-use std::collections::{BTreeMap, HashMap};
+use std::collections::BTreeMap;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicUsize, Ordering};
 
 use anyhow::Result;
 use models::filtering::Discretisation;
 
 use crate::figures;
-use crate::markdown::row;
+use crate::markdown::{header, row};
 use crate::metrics::mean_sd;
 use crate::pipeline::Algorithm;
 use crate::record::RunRecord;
 use crate::stats::{algorithm_stats, AlgorithmStats, PAPER_EQ31};
-use crate::study::{Job, Study};
 use crate::verdict::{
-    above, below, group_error, online_nrmse, paired_difference, per_run, ratio, validation_nrmse,
-    within, Estimate, Finding,
+    above, below, findings_table, group_error, in_group, online_nrmse, paired_difference, per_run,
+    ratio, validation_nrmse, within, Estimate, Finding,
 };
 
 /// The studies of the discretisation section, in the order they run (after the paper's).
@@ -37,47 +35,6 @@ pub fn scheme(r: &RunRecord) -> Option<Discretisation> {
         .get("filter")?
         .get("discretisation")
         .and_then(|v| serde_json::from_value(v.clone()).ok())
-}
-
-/// Records of an earlier sweep of the same reproduction that a job may take over: only when the
-/// record's fingerprint (data, settings, seed, run, algorithm, numerics version) is the job's,
-/// i.e. when computing the job again would give the same record.
-#[derive(Debug, Default)]
-pub struct Reuse {
-    by_fingerprint: HashMap<String, RunRecord>,
-    taken: AtomicUsize,
-}
-
-impl Reuse {
-    /// The completed and failed records alike (a failure is the job's result too).
-    pub fn new<'a>(records: impl IntoIterator<Item = &'a RunRecord>) -> Self {
-        Self {
-            by_fingerprint: records
-                .into_iter()
-                .filter_map(|r| Some((r.fingerprint.as_ref()?.sha256.clone(), r.clone())))
-                .collect(),
-            taken: AtomicUsize::new(0),
-        }
-    }
-
-    /// The job's record: taken over (relabelled with `study`'s name) when an earlier record has
-    /// the job's fingerprint, computed otherwise.
-    pub fn run(&self, study: &Study, job: &Job) -> Result<RunRecord> {
-        if !self.by_fingerprint.is_empty() {
-            if let Some(r) = self.by_fingerprint.get(&study.job_fingerprint(job)?) {
-                self.taken.fetch_add(1, Ordering::Relaxed);
-                let mut r = r.clone();
-                r.experiment.clone_from(&study.name);
-                return Ok(r);
-            }
-        }
-        study.run_job(job)
-    }
-
-    /// How many records were taken over.
-    pub fn taken(&self) -> usize {
-        self.taken.load(Ordering::Relaxed)
-    }
 }
 
 /// The algorithms of the study, in the report's order.
@@ -188,10 +145,7 @@ fn mean_ratio(r: &RunRecord, prefix: char) -> f64 {
     let v: Vec<f64> = r
         .param_names
         .iter()
-        .filter(|n| {
-            n.strip_prefix(prefix)
-                .is_some_and(|s| s.parse::<u32>().is_ok())
-        })
+        .filter(|n| in_group(n, prefix))
         .map(|n| ratio(r, n))
         .collect();
     v.iter().sum::<f64>() / v.len().max(1) as f64
@@ -206,10 +160,7 @@ fn rel_sd(r: &RunRecord, prefix: char) -> f64 {
         .param_names
         .iter()
         .enumerate()
-        .filter(|(_, n)| {
-            n.strip_prefix(prefix)
-                .is_some_and(|s| s.parse::<u32>().is_ok())
-        })
+        .filter(|(_, n)| in_group(n, prefix))
         .filter_map(|(j, _)| Some(r.theta_sd_final.get(j)? / t[j]))
         .collect();
     if v.is_empty() {
@@ -254,8 +205,7 @@ pub fn report_section(o: &mut String, records: &BTreeMap<&str, Vec<RunRecord>>) 
             .unwrap_or_default();
         let mut head = vec!["algorithm · scheme".to_string(), "runs (failed)".into()];
         head.extend(names.iter().map(|n| format!("{n} θ_val/θ_true")));
-        row(o, &head);
-        row(o, &vec!["---".to_string(); head.len()]);
+        header(o, &head);
         for a in ALGORITHMS {
             for d in SCHEMES {
                 let rs = arm(recs, a, d);
@@ -282,8 +232,7 @@ pub fn report_section(o: &mut String, records: &BTreeMap<&str, Vec<RunRecord>>) 
             ]
             .map(String::from),
         );
-        row(o, &head);
-        row(o, &vec!["---".to_string(); head.len()]);
+        header(o, &head);
         for a in ALGORITHMS {
             for d in SCHEMES {
                 let est =
@@ -343,28 +292,11 @@ pub fn report_section(o: &mut String, records: &BTreeMap<&str, Vec<RunRecord>>) 
 }
 
 fn write_findings(o: &mut String, findings: &[Finding]) {
-    row(
+    findings_table(
         o,
-        &[
-            "statement".into(),
-            "verdict".into(),
-            "test".into(),
-            "evidence (mean ± s.e.)".into(),
-        ],
+        ["statement", "verdict", "test", "evidence (mean ± s.e.)"],
+        findings,
     );
-    row(o, &vec!["---".to_string(); 4]);
-    let cell = |s: &str| s.replace('|', "\\|");
-    for f in findings {
-        row(
-            o,
-            &[
-                cell(&f.statement),
-                format!("**{}**", f.verdict.label()),
-                cell(&f.test),
-                cell(&f.evidence),
-            ],
-        );
-    }
     let _ = writeln!(o, "\nA statement holds when its ±2 s.e. interval lies on the stated side of the threshold (inside the band), does not hold when it lies entirely on the other side, and is not resolved otherwise (as in \"What matches and what does not\"). Paired differences are over the runs both arms completed (same data set). The bands and goals (5% damping, 1.5% stiffness) are ours.\n");
 }
 

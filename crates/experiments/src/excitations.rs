@@ -209,32 +209,23 @@ fn num(v: f64) -> String {
 fn write_outputs(
     opts: &Options,
     study: &Study,
-    cells: &[Cell],
+    _cells: &[Cell],
     jobs: &[Job],
     records: &[RunRecord],
-    sweep_s: f64,
 ) -> Result<()> {
     let out = &opts.out;
     let values = structure_values(study)?;
     let rows = rows(study, jobs, records);
     let verdicts = verdicts(study, &rows);
-    write_bytes_atomic(&out.join("cells.csv"), scaling::csv(cells).as_bytes())?;
     figure(study, &rows, &out.join("errors_by_excitation.svg"))?;
-    crate::sweep::last_run::write(
-        out,
-        opts.threads,
-        serde_json::json!({ "sweep_wall_s": sweep_s }),
-    )?;
-    write_bytes_atomic(
-        &out.join("summary.json"),
-        (serde_json::to_string_pretty(&serde_json::json!({
-            "study": study.name,
-            "quick": opts.quick,
-            "structures": values,
+    scaling::write_summary(
+        opts,
+        study,
+        &values,
+        serde_json::json!({
             "rows": rows,
             "verdicts": verdicts,
-        }))? + "\n")
-            .as_bytes(),
+        }),
     )?;
     let text = report(study, &values, &rows, &verdicts, opts.quick);
     write_bytes_atomic(&out.join("REPORT.md"), text.as_bytes())

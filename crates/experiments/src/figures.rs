@@ -773,10 +773,7 @@ pub fn crosses(groups: &[(&str, Vec<&RunRecord>)], path: &Path, title: &str) -> 
 /// dampings `c…`, and the rest (the hysteresis parameters β, γ, n of SPEC §1). Empty groups are
 /// left out.
 pub fn parameter_groups(names: &[String]) -> Vec<(String, Vec<usize>)> {
-    let numbered = |name: &str, prefix: char| {
-        name.strip_prefix(prefix)
-            .is_some_and(|r| !r.is_empty() && r.chars().all(|c| c.is_ascii_digit()))
-    };
+    let numbered = crate::verdict::in_group;
     let mut groups: Vec<(String, Vec<usize>)> = vec![
         ("stiffness".into(), Vec::new()),
         ("damping".into(), Vec::new()),

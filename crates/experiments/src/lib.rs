@@ -16,6 +16,8 @@
 //! - [`regression`]: the identification-accuracy regression check;
 //! - [`plot`]: the figures of one run, from its record;
 //! - [`sweep`]: parallel, resumable, shardable sweeps over runs;
+//! - [`engine`]: runs any study description through a sweep; each study keeps only its summary
+//!   and report;
 //! - [`scaling`]: the scaling study (chains of 3 to 40 storeys), its figures and report;
 //! - [`verdict`]: the paper's statements decided by stated tests on the records (REPORT.md);
 //! - [`checks`]: plausibility warnings on a finished run record;
@@ -30,6 +32,7 @@ pub mod cluster;
 pub mod coverage;
 pub mod decimate;
 pub mod discretisation;
+pub mod engine;
 pub mod excitations;
 pub mod field;
 pub mod field_study;

@@ -71,6 +71,13 @@ pub fn mean_sd(values: &[f64]) -> (f64, f64, usize) {
     (mean, var.sqrt(), n)
 }
 
+/// Mean and run-to-run s.d. ([`mean_sd`]); the s.d. is undefined (NaN) below two runs rather
+/// than 0, so one run never looks free of Monte-Carlo error.
+pub fn mean_spread(x: &[f64]) -> (f64, f64) {
+    let (m, sd, n) = mean_sd(x);
+    (m, if n > 1 { sd } else { f64::NAN })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -6,12 +6,12 @@ use std::fmt::Write as _;
 
 use anyhow::Result;
 
-use crate::markdown::row;
+use crate::markdown::{header, row};
 use crate::pipeline::Algorithm;
 use crate::record::RunRecord;
 use crate::stats::{AlgorithmStats, PAPER_EQ31};
 use crate::study::Study;
-use crate::verdict::{paper_findings, Verdict};
+use crate::verdict::{findings_table, paper_findings, Verdict};
 
 fn stats<'a>(
     summary: &'a BTreeMap<&str, Vec<AlgorithmStats>>,
@@ -41,8 +41,7 @@ fn theta_table(out: &mut String, runs: &[(&str, &RunRecord)]) {
     };
     let mut head = vec!["parameter".to_string(), "true".to_string()];
     head.extend(runs.iter().map(|(l, _)| format!("{l} θ_val (rel. error)")));
-    row(out, &head);
-    row(out, &vec!["---".to_string(); head.len()]);
+    header(out, &head);
     for (j, name) in first.param_names.iter().enumerate() {
         let truth = first.theta_true.as_ref().map_or(f64::NAN, |t| t[j]);
         let mut cells = vec![name.clone(), format!("{truth}")];
@@ -96,8 +95,7 @@ pub fn write_report(
          is not committed: a reproduction that agrees with the committed records leaves every \
          committed file as it was.\n"
     );
-    row(&mut o, &["item".into(), "value".into()]);
-    row(&mut o, &["---".into(), "---".into()]);
+    header(&mut o, &["item", "value"]);
     row(
         &mut o,
         &["toolkit".into(), env!("CARGO_PKG_VERSION").into()],
@@ -245,8 +243,7 @@ pub fn write_report(
                 .iter()
                 .map(|s| format!("{} (n = {}, failed {})", s.algorithm, s.runs, s.failed)),
         );
-        row(&mut o, &head);
-        row(&mut o, &vec!["---".to_string(); head.len()]);
+        header(&mut o, &head);
         for (j, p) in first_alg.params.iter().enumerate() {
             let mut cells = vec![p.name.clone()];
             for s in &algs7 {
@@ -272,17 +269,16 @@ pub fn write_report(
     );
     let _ = writeln!(o, "Paper (eq. 31): θ_val = {PAPER_EQ31:?} for θ_true = [8, 8, 8, 0.25, 0.25, 0.25, 2, 1, 2] (k errors 0.3–1.1%, c errors 11–37%); the validation loop matches the true loop very well.\n");
     if let Some(r) = first("fig8", Algorithm::MpfEkf2) {
-        row(
+        header(
             &mut o,
             &[
-                "parameter".into(),
-                "true".into(),
-                "paper eq. 31".into(),
-                "ours θ_val".into(),
-                "ours rel. error".into(),
+                "parameter",
+                "true",
+                "paper eq. 31",
+                "ours θ_val",
+                "ours rel. error",
             ],
         );
-        row(&mut o, &vec!["---".to_string(); 5]);
         for (j, name) in r.param_names.iter().enumerate() {
             let t = r.theta_true.as_ref().map_or(f64::NAN, |t| t[j]);
             row(
@@ -307,34 +303,16 @@ pub fn write_report(
     // Findings
     let _ = writeln!(o, "## What matches and what does not\n");
     let _ = writeln!(o, "Each statement of the paper (SPEC §8) is decided by the test written beside it, on the records of the Fig. 7 sweep (and the Fig. 4 study for the bootstrap collapse). s.e. is the standard error over runs; comparisons of two algorithms use the paired difference over the runs both completed (all algorithms of one run see the same data set). A statement **holds** when its ±2 s.e. interval lies on the stated side of the threshold (inside the stated band), **does not hold** when it lies entirely on the other side (outside the band), and is **not resolved** otherwise: the runs cannot tell.\n");
-    row(
-        &mut o,
-        &[
-            "statement (paper)".into(),
-            "on our data".into(),
-            "test".into(),
-            "evidence".into(),
-        ],
-    );
-    row(&mut o, &vec!["---".to_string(); 4]);
     let none: Vec<RunRecord> = Vec::new();
     let findings = paper_findings(
         records.get("fig4").unwrap_or(&none),
         records.get("fig7").unwrap_or(&none),
     );
-    // A `|` inside a cell (|ratio − 1|) would end the cell.
-    let cell = |s: &str| s.replace('|', "\\|");
-    for f in &findings {
-        row(
-            &mut o,
-            &[
-                cell(&f.statement),
-                format!("**{}**", f.verdict.label()),
-                cell(&f.test),
-                cell(&f.evidence),
-            ],
-        );
-    }
+    findings_table(
+        &mut o,
+        ["statement (paper)", "on our data", "test", "evidence"],
+        &findings,
+    );
     let count = |v: Verdict| findings.iter().filter(|f| f.verdict == v).count();
     let _ = writeln!(
         o,
@@ -352,15 +330,10 @@ pub fn write_report(
         o,
         "## Performance (this machine, from the records' own timings)\n"
     );
-    row(
+    header(
         &mut o,
-        &[
-            "algorithm".into(),
-            "mean wall per run (s)".into(),
-            "particle-steps/s".into(),
-        ],
+        &["algorithm", "mean wall per run (s)", "particle-steps/s"],
     );
-    row(&mut o, &vec!["---".to_string(); 3]);
     for s in &summary["fig7"] {
         row(
             &mut o,

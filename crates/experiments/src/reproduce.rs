@@ -10,15 +10,16 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use anyhow::{Context, Result};
+use anyhow::Result;
 
+use crate::engine::{load, write_json, Engine, Reuse};
 use crate::figures;
 use crate::pipeline::Algorithm;
 use crate::record::RunRecord;
 use crate::study::Study;
 use crate::sweep::lock::DirLock;
 use crate::sweep::progress::clock;
-use crate::sweep::{run_sweep, write_bytes_atomic, Shard, SweepOptions};
+use crate::sweep::{write_bytes_atomic, Shard};
 
 pub use crate::stats::{algorithm_stats, AlgorithmStats, ParamStats, PAPER_EQ31, STUDIES};
 
@@ -73,6 +74,13 @@ fn by_algorithm<'a>(
 pub fn reproduce(opts: &Options) -> Result<Done> {
     let start = Instant::now();
     let _lock = DirLock::acquire(&opts.out)?;
+    let engine = Engine {
+        out: &opts.out,
+        threads: opts.threads,
+        shard: opts.shard,
+        progress: opts.progress,
+        resume: opts.resume,
+    };
     let mut studies = BTreeMap::new();
     let mut records = BTreeMap::new();
     let mut done = Done::default();
@@ -82,39 +90,23 @@ pub fn reproduce(opts: &Options) -> Result<Done> {
         if crate::discretisation::STUDIES.contains(&name) && !path.exists() {
             continue;
         }
-        let mut study = Study::load(&path)?;
-        if opts.quick {
-            study = study.quick();
-        }
-        let dir = opts.out.join("records").join(name);
-        let sweep = SweepOptions {
-            threads: opts.threads,
-            shard: opts.shard,
-            progress: opts.progress,
-            label: name.to_string(),
-            resume: opts.resume,
-        };
+        let study = load(&path, opts.quick)?;
         // The discretisation studies take over the Fig. 7 records that are the same jobs.
         let reuse = match crate::discretisation::STUDIES.contains(&name) {
-            true => crate::discretisation::Reuse::new(
+            true => Reuse::new(
                 records
                     .get(crate::discretisation::SOURCE)
                     .into_iter()
                     .flatten(),
             ),
-            false => crate::discretisation::Reuse::default(),
+            false => Reuse::default(),
         };
-        let outcome = run_sweep(
+        let outcome = engine.sweep(
+            &study,
             &study.jobs(),
+            &opts.out.join("records").join(name),
             Study::job_id,
-            |job| study.job_fingerprint(job),
-            &dir,
-            &sweep,
-            |job| {
-                reuse
-                    .run(&study, job)
-                    .with_context(|| format!("{name}: {}", Study::job_id(job)))
-            },
+            |job| reuse.run(&study, job),
         )?;
         if opts.progress && reuse.taken() > 0 {
             eprintln!(
@@ -131,16 +123,13 @@ pub fn reproduce(opts: &Options) -> Result<Done> {
         studies.insert(name, study);
     }
     let (executed, total_jobs) = (done.executed, done.total);
-    if opts.shard != Shard::default() {
-        eprintln!(
-            "shard {}/{}: {total_jobs} runs, {executed} executed ({} failed), {} reused, {}; \
-             merge the shards' records (`sysid merge`) and run `sysid reproduce --resume` to draw",
-            opts.shard.index,
-            opts.shard.count,
+    if engine.sharded() {
+        engine.shard_note(&format!(
+            "{total_jobs} runs, {executed} executed ({} failed), {} reused, {}",
             done.failed,
             done.reused,
             clock(start.elapsed())
-        );
+        ));
         return Ok(done);
     }
     let sweep_s = start.elapsed().as_secs_f64();
@@ -177,15 +166,13 @@ pub fn reproduce(opts: &Options) -> Result<Done> {
     }
     summary.extend(crate::discretisation::summary(&records));
     let total_s = start.elapsed().as_secs_f64();
-    let summary_path = opts.out.join("summary.json");
-    write_bytes_atomic(
-        &summary_path,
-        (serde_json::to_string_pretty(&serde_json::json!({
+    write_json(
+        &opts.out.join("summary.json"),
+        &serde_json::json!({
             "quick": opts.quick,
             "studies": summary,
             "coverage": coverage,
-        }))? + "\n")
-            .as_bytes(),
+        }),
     )?;
     let report = crate::report::write_report(
         &crate::report::Target {
@@ -201,14 +188,10 @@ pub fn reproduce(opts: &Options) -> Result<Done> {
     write_bytes_atomic(&path, report.as_bytes())?;
     // What this invocation did, beside the committed results but not among them: timings and
     // counts change from run to run even when every record agrees.
-    crate::sweep::last_run::write(
-        &opts.out,
-        opts.threads,
-        serde_json::json!({
+    engine.last_run(serde_json::json!({
             "wall_s": { "sweeps": sweep_s, "total": total_s },
-            "runs": { "executed": executed, "reused": done.reused, "failed": done.failed, "total": total_jobs },
-        }),
-    )?;
+        "runs": { "executed": executed, "reused": done.reused, "failed": done.failed, "total": total_jobs },
+    }))?;
     eprintln!(
         "wrote {}; {total_jobs} runs: {executed} executed ({} failed), {} reused; {}",
         path.display(),

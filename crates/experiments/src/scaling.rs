@@ -25,13 +25,15 @@ use std::time::Instant;
 use anyhow::{Context, Result};
 use serde::Serialize;
 
-use crate::metrics::mean_sd;
+use crate::engine::{load, write_json, Engine};
+use crate::metrics::{mean_sd, mean_spread};
 use crate::pipeline::Algorithm;
 use crate::record::RunRecord;
 use crate::study::{Job, Study};
 use crate::sweep::lock::DirLock;
 use crate::sweep::progress::clock;
-use crate::sweep::{read_record, record_path, run_sweep, write_bytes_atomic, Shard, SweepOptions};
+use crate::sweep::{read_record, record_path, write_bytes_atomic, Shard};
+use crate::verdict::group_mean_error;
 
 mod figures;
 mod report;
@@ -154,24 +156,6 @@ pub fn read_cpu(records: &Path, id: &str) -> Option<f64> {
         .filter(|v| v.is_finite() && *v > 0.0)
 }
 
-/// Storey-averaged relative error of the parameters named `<prefix><digits>` of one record.
-fn group_error(r: &RunRecord, prefix: char) -> Option<f64> {
-    let errs = r.rel_error.as_ref()?;
-    let picked: Vec<f64> = r
-        .param_names
-        .iter()
-        .zip(errs)
-        .filter(|(n, _)| is_storey_param(n, prefix))
-        .map(|(_, e)| *e)
-        .collect();
-    (!picked.is_empty()).then(|| picked.iter().sum::<f64>() / picked.len() as f64)
-}
-
-fn is_storey_param(name: &str, prefix: char) -> bool {
-    name.strip_prefix(prefix)
-        .is_some_and(|d| !d.is_empty() && d.chars().all(|c| c.is_ascii_digit()))
-}
-
 fn median(mut v: Vec<f64>) -> f64 {
     v.retain(|x| x.is_finite());
     if v.is_empty() {
@@ -206,12 +190,14 @@ pub fn cell(
         .filter(|r| !r.is_failure())
         .collect();
     // A run-to-run s.d. needs two runs: NaN (written "–") with one.
-    let spread = |v: Vec<f64>| match mean_sd(&v) {
-        (m, s, n) if n >= 2 => (m, s),
-        (m, _, _) => (m, f64::NAN),
+    let spread = |prefix| {
+        mean_spread(
+            &ok.iter()
+                .filter_map(|r| group_mean_error(r, prefix))
+                .collect::<Vec<_>>(),
+        )
     };
-    let (k_mean, k_sd) = spread(ok.iter().filter_map(|r| group_error(r, 'k')).collect());
-    let (c_mean, c_sd) = spread(ok.iter().filter_map(|r| group_error(r, 'c')).collect());
+    let ((k_mean, k_sd), (c_mean, c_sd)) = (spread('k'), spread('c'));
     let k_worst = (1..=storeys)
         .map(|j| {
             let name = format!("k{j}");
@@ -299,12 +285,6 @@ pub fn log_log_fit(points: &[(f64, f64)]) -> Option<(f64, f64)> {
     Some((slope, my - slope * mx))
 }
 
-/// The study as run (quick or not).
-pub fn load(opts: &Options) -> Result<Study> {
-    let study = Study::load(&opts.config)?;
-    Ok(if opts.quick { study.quick() } else { study })
-}
-
 /// The jobs of a structure study's sweep, in sweep order (the order `--shard i/n` deals them
 /// out in): every job of a structure this build can generate.
 pub fn sweep_jobs(study: &Study) -> Vec<Job> {
@@ -321,16 +301,15 @@ pub fn sweep_jobs(study: &Study) -> Vec<Job> {
 /// Runs the study's sweep (the structures this build can generate), then, unless sharded,
 /// writes the cells, figures and report. Returns the cells.
 pub fn run(opts: &Options) -> Result<Vec<Cell>> {
-    run_with(opts, &|opts, study, cells, _jobs, _records, sweep_s| {
-        write_outputs(opts, study, cells, sweep_s)
+    run_with(opts, &|opts, study, cells, _jobs, _records| {
+        write_outputs(opts, study, cells)
     })
 }
 
 /// What writes a structure study's outputs from its cells and records.
 /// Its arguments: the options, the study, the cells, the jobs with a record and those records
-/// (in the same order), and the sweep's wall time (NaN when nothing was computed).
-pub type Writer<'a> =
-    dyn Fn(&Options, &Study, &[Cell], &[Job], &[RunRecord], f64) -> Result<()> + 'a;
+/// (in the same order); `cells.csv` and `last-run.json` are written before it is called.
+pub type Writer<'a> = dyn Fn(&Options, &Study, &[Cell], &[Job], &[RunRecord]) -> Result<()> + 'a;
 
 /// [`run`] with another writer of the outputs: the sweep over a study's structure axis,
 /// resumable, shardable, with CPU times, shared by the studies that have one (the scaling and
@@ -338,24 +317,26 @@ pub type Writer<'a> =
 pub fn run_with(opts: &Options, write: &Writer<'_>) -> Result<Vec<Cell>> {
     let start = Instant::now();
     let _lock = DirLock::acquire(&opts.out)?;
-    let study = load(opts)?;
-    let jobs = sweep_jobs(&study);
-    let sweep = SweepOptions {
+    let engine = Engine {
+        out: &opts.out,
         threads: opts.threads,
         shard: opts.shard,
         progress: opts.progress,
-        label: study.name.clone(),
         resume: opts.resume,
     };
+    let study = load(&opts.config, opts.quick)?;
+    let jobs = sweep_jobs(&study);
     let records_dir = opts.out.join("records");
+    let cpu_of = |jobs: &[Job]| -> Vec<Option<f64>> {
+        jobs.iter()
+            .map(|j| read_cpu(&records_dir, &study.record_id(j)))
+            .collect()
+    };
     if opts.report_only {
         let (jobs, records) = existing(&study, &jobs, &records_dir)?;
-        let cpu: Vec<Option<f64>> = jobs
-            .iter()
-            .map(|j| read_cpu(&records_dir, &study.record_id(j)))
-            .collect();
-        let cells = cells(&study, &jobs, &records, &cpu)?;
-        write(opts, &study, &cells, &jobs, &records, f64::NAN)?;
+        let cells = cells(&study, &jobs, &records, &cpu_of(&jobs))?;
+        write_cells(&engine, &cells, f64::NAN)?;
+        write(opts, &study, &cells, &jobs, &records)?;
         eprintln!(
             "wrote {} from {} existing records",
             opts.out.join("REPORT.md").display(),
@@ -363,20 +344,16 @@ pub fn run_with(opts: &Options, write: &Writer<'_>) -> Result<Vec<Cell>> {
         );
         return Ok(cells);
     }
-    let outcome = run_sweep(
+    let outcome = engine.sweep(
+        &study,
         &jobs,
-        |j| study.record_id(j),
-        |j| study.job_fingerprint(j),
         &records_dir,
-        &sweep,
+        |j| study.record_id(j),
         |j| {
-            let id = study.record_id(j);
             let cpu0 = thread_cpu_s();
-            let record = study
-                .run_job(j)
-                .with_context(|| format!("{}: {id}", study.name))?;
+            let record = study.run_job(j)?;
             let cpu = thread_cpu_s() - cpu0;
-            let path = cpu_path(&records_dir, &id);
+            let path = cpu_path(&records_dir, &study.record_id(j));
             if cpu.is_finite() {
                 write_bytes_atomic(&path, format!("{cpu}\n").as_bytes())?;
             } else if path.exists() {
@@ -386,30 +363,46 @@ pub fn run_with(opts: &Options, write: &Writer<'_>) -> Result<Vec<Cell>> {
             Ok(record)
         },
     )?;
-    if opts.progress {
-        eprintln!("{}: {}", study.name, outcome.summary());
-    }
-    if opts.shard != Shard::default() {
-        eprintln!(
-            "shard {}/{}: merge the shards' records (`sysid merge`) and run `sysid scaling \
-             --resume` to write the report",
-            opts.shard.index, opts.shard.count
-        );
+    if engine.sharded() {
+        engine.shard_note(&outcome.summary());
         return Ok(Vec::new());
     }
     let sweep_s = start.elapsed().as_secs_f64();
-    let cpu: Vec<Option<f64>> = jobs
-        .iter()
-        .map(|j| read_cpu(&records_dir, &study.record_id(j)))
-        .collect();
-    let cells = cells(&study, &jobs, &outcome.records, &cpu)?;
-    write(opts, &study, &cells, &jobs, &outcome.records, sweep_s)?;
+    let cells = cells(&study, &jobs, &outcome.records, &cpu_of(&jobs))?;
+    write_cells(&engine, &cells, sweep_s)?;
+    write(opts, &study, &cells, &jobs, &outcome.records)?;
     eprintln!(
         "wrote {}; {}",
         opts.out.join("REPORT.md").display(),
         clock(start.elapsed())
     );
     Ok(cells)
+}
+
+/// Writes `cells.csv` and `last-run.json` (with the sweep's wall time, NaN when nothing was
+/// computed): the outputs every structure study has.
+fn write_cells(engine: &Engine<'_>, cells: &[Cell], sweep_s: f64) -> Result<()> {
+    write_bytes_atomic(&engine.out.join("cells.csv"), csv(cells).as_bytes())?;
+    engine.last_run(serde_json::json!({ "sweep_wall_s": sweep_s }))
+}
+
+/// Writes a structure study's `summary.json`: its name, form and structures, and the fields of
+/// `results`.
+pub fn write_summary(
+    opts: &Options,
+    study: &Study,
+    values: &[structures::StructureValues],
+    results: serde_json::Value,
+) -> Result<()> {
+    let mut summary = serde_json::json!({
+        "study": study.name,
+        "quick": opts.quick,
+        "structures": values,
+    });
+    if let (Some(s), serde_json::Value::Object(r)) = (summary.as_object_mut(), results) {
+        s.extend(r);
+    }
+    write_json(&opts.out.join("summary.json"), &summary)
 }
 
 /// The jobs whose record exists, reads back and carries the job's fingerprint, with their
@@ -612,9 +605,8 @@ pub fn cost_dimension(c: &Cell) -> usize {
     }
 }
 
-fn write_outputs(opts: &Options, study: &Study, cells: &[Cell], sweep_s: f64) -> Result<()> {
+fn write_outputs(opts: &Options, study: &Study, cells: &[Cell]) -> Result<()> {
     let out = &opts.out;
-    write_bytes_atomic(&out.join("cells.csv"), csv(cells).as_bytes())?;
     let fits = cost_fits(cells);
     figures::cost(&fits, &out.join("cost_vs_dimension.svg"))?;
     figures::accuracy(cells, &out.join("accuracy_vs_storeys.svg"))?;
@@ -625,22 +617,15 @@ fn write_outputs(opts: &Options, study: &Study, cells: &[Cell], sweep_s: f64) ->
         .filter_map(|s| s.unsupported())
         .collect();
     let values = structures::structure_values(study)?;
-    crate::sweep::last_run::write(
-        out,
-        opts.threads,
-        serde_json::json!({ "sweep_wall_s": sweep_s }),
-    )?;
-    write_bytes_atomic(
-        &out.join("summary.json"),
-        (serde_json::to_string_pretty(&serde_json::json!({
-            "study": study.name,
-            "quick": opts.quick,
-            "structures": values,
+    write_summary(
+        opts,
+        study,
+        &values,
+        serde_json::json!({
             "cells": cells,
             "cost_fits": fits,
             "not_run": unsupported,
-        }))? + "\n")
-            .as_bytes(),
+        }),
     )?;
     let text = report::write(study, &values, cells, &fits, &unsupported, opts.quick);
     write_bytes_atomic(&out.join("REPORT.md"), text.as_bytes())
@@ -678,13 +663,5 @@ mod tests {
         assert!((s - 2.0).abs() < 1e-12 && (b - 3f64.ln()).abs() < 1e-12);
         assert!(log_log_fit(&[(10.0, 1.0)]).is_none());
         assert!(log_log_fit(&[(10.0, 1.0), (10.0, 2.0)]).is_none());
-    }
-
-    #[test]
-    fn storey_parameters() {
-        assert!(is_storey_param("k12", 'k'));
-        assert!(!is_storey_param("k", 'k'));
-        assert!(!is_storey_param("c1", 'k'));
-        assert!(!is_storey_param("kx", 'k'));
     }
 }

@@ -14,10 +14,11 @@ use std::time::Instant;
 
 use anyhow::{Context, Result};
 
+use crate::engine::{load, write_json, Engine};
+use crate::metrics::mean_spread;
 use crate::record::RunRecord;
-use crate::study::Study;
 use crate::sweep::lock::DirLock;
-use crate::sweep::{run_sweep, write_bytes_atomic, Shard, SweepOptions};
+use crate::sweep::{write_bytes_atomic, Shard};
 
 /// One algorithm's statistics of one parameter over the runs of a study.
 #[derive(Debug, Clone, PartialEq, Serialize)]
@@ -47,13 +48,6 @@ pub struct AlgorithmSpread {
     /// Runs whose record carries at least one warning (`checks`).
     pub with_warnings: usize,
     pub params: Vec<ParamSpread>,
-}
-
-/// Mean and run-to-run s.d. ([`crate::metrics::mean_sd`]); the s.d. is undefined (NaN) below
-/// two runs rather than 0, so one run never looks free of Monte-Carlo error.
-fn mean_spread(x: &[f64]) -> (f64, f64) {
-    let (m, sd, n) = crate::metrics::mean_sd(x);
-    (m, if n > 1 { sd } else { f64::NAN })
 }
 
 /// The statistics per algorithm (in name order) and parameter.
@@ -263,36 +257,26 @@ pub struct Options {
 /// records.
 pub fn run(args: &Options) -> Result<()> {
     let start = Instant::now();
-    let mut study = Study::load(&args.config)?;
-    if args.quick {
-        study = study.quick();
-    }
+    let study = load(&args.config, args.quick)?;
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("creating {}", args.out.display()))?;
     let _lock = DirLock::acquire(&args.out)?;
-    let sweep = SweepOptions {
+    let engine = Engine {
+        out: &args.out,
         threads: args.threads,
         shard: args.shard,
         progress: true,
-        label: study.name.clone(),
         resume: args.resume,
     };
-    let outcome = run_sweep(
+    let outcome = engine.sweep(
+        &study,
         &study.jobs(),
-        |job| study.record_id(job),
-        |job| study.job_fingerprint(job),
         &args.out.join("records"),
-        &sweep,
+        |job| study.record_id(job),
         |job| study.run_job(job),
     )?;
-    if args.shard != Shard::default() {
-        eprintln!(
-            "shard {}/{}: {}; merge the shards' records (`sysid merge`) and run `sysid study \
-             --resume` to write the report",
-            args.shard.index,
-            args.shard.count,
-            outcome.summary()
-        );
+    if engine.sharded() {
+        engine.shard_note(&outcome.summary());
         return Ok(());
     }
     let spreads = spreads(&outcome.records);
@@ -300,23 +284,18 @@ pub fn run(args: &Options) -> Result<()> {
         Some(d) => d.display().to_string(),
         None => format!("preset {} (one data set per run)", study.data.preset),
     };
-    write_bytes_atomic(
+    write_json(
         &args.out.join("summary.json"),
-        (serde_json::to_string_pretty(&serde_json::json!({
+        &serde_json::json!({
             "study": study.name,
             "data": data,
             "algorithms": spreads,
-        }))? + "\n")
-            .as_bytes(),
-    )?;
-    crate::sweep::last_run::write(
-        &args.out,
-        args.threads,
-        serde_json::json!({
-            "runs": { "executed": outcome.executed, "reused": outcome.reused, "failed": outcome.failed },
-            "wall_s": start.elapsed().as_secs_f64(),
         }),
     )?;
+    engine.last_run(serde_json::json!({
+        "runs": { "executed": outcome.executed, "reused": outcome.reused, "failed": outcome.failed },
+        "wall_s": start.elapsed().as_secs_f64(),
+    }))?;
     figures(&spreads, &args.out)?;
     let report = markdown(&study.name, &study.description, &data, &spreads);
     write_bytes_atomic(&args.out.join("REPORT.md"), report.as_bytes())?;

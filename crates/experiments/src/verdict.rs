@@ -14,6 +14,7 @@ use std::collections::BTreeMap;
 
 use serde::Serialize;
 
+use crate::markdown::{cell, header, row};
 use crate::metrics::mean_sd;
 use crate::record::RunRecord;
 
@@ -165,29 +166,27 @@ pub fn paired_difference(a: &BTreeMap<u64, f64>, b: &BTreeMap<u64, f64>) -> Esti
 }
 
 /// Whether `name` is a parameter of the group `prefix` followed by digits (`k1`, `c12`).
-fn in_group(name: &str, prefix: char) -> bool {
+pub fn in_group(name: &str, prefix: char) -> bool {
     name.strip_prefix(prefix)
         .is_some_and(|rest| !rest.is_empty() && rest.chars().all(|c| c.is_ascii_digit()))
 }
 
 /// Mean relative error of one run over a group of parameters (`k` stiffnesses, `c` dampings);
-/// NaN without truth or without such parameters.
-pub fn group_error(r: &RunRecord, prefix: char) -> f64 {
-    let Some(err) = &r.rel_error else {
-        return f64::NAN;
-    };
+/// `None` without truth or without such parameters.
+pub fn group_mean_error(r: &RunRecord, prefix: char) -> Option<f64> {
     let v: Vec<f64> = r
         .param_names
         .iter()
-        .zip(err)
+        .zip(r.rel_error.as_ref()?)
         .filter(|(n, _)| in_group(n, prefix))
         .map(|(_, e)| *e)
         .collect();
-    if v.is_empty() {
-        f64::NAN
-    } else {
-        v.iter().sum::<f64>() / v.len() as f64
-    }
+    (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64)
+}
+
+/// [`group_mean_error`], NaN where it has none.
+pub fn group_error(r: &RunRecord, prefix: char) -> f64 {
+    group_mean_error(r, prefix).unwrap_or(f64::NAN)
 }
 
 /// θ_val / θ_true of the parameter `name` in one run (NaN when absent).
@@ -232,6 +231,23 @@ pub struct Finding {
     pub test: String,
     pub verdict: Verdict,
     pub evidence: String,
+}
+
+/// Writes findings as a Markdown table under the column names `columns` (statement, verdict,
+/// test, evidence).
+pub fn findings_table(out: &mut String, columns: [&str; 4], findings: &[Finding]) {
+    header(out, &columns);
+    for f in findings {
+        row(
+            out,
+            &[
+                cell(&f.statement),
+                format!("**{}**", f.verdict.label()),
+                cell(&f.test),
+                cell(&f.evidence),
+            ],
+        );
+    }
 }
 
 /// Records of one algorithm.

@@ -1,7 +1,8 @@
 //! The discretisation study's machinery: the sweep's discretisation axis, the decimated data and
 //! the take-over of records only for the same job (same fingerprint).
 
-use experiments::discretisation::{scheme, Reuse};
+use experiments::discretisation::scheme;
+use experiments::engine::Reuse;
 use experiments::study::Study;
 use models::filtering::Discretisation;
 
