@@ -103,10 +103,25 @@ pub fn spreads(records: &[RunRecord]) -> Vec<AlgorithmSpread> {
         .collect()
 }
 
-/// The report of a study on a user's record.
-pub fn markdown(name: &str, description: &str, data: &str, spreads: &[AlgorithmSpread]) -> String {
+/// The report of a study: on a user's record (`one_record`: every run filters the same data) or
+/// on a preset (every run generates its own data set).
+pub fn markdown(
+    name: &str,
+    description: &str,
+    data: &str,
+    one_record: bool,
+    spreads: &[AlgorithmSpread],
+) -> String {
     let mut o = String::new();
-    let _ = writeln!(o, "# Study `{name}`\n\n{description}\n\nData: `{data}`. Every run filters this record with its own filter streams (seed, run), so the spread over runs is the Monte-Carlo error of one run's answer.\n");
+    let spread = if one_record {
+        "Every run filters this record with its own filter streams (seed, run), so the spread over runs is the Monte-Carlo error of one run's answer."
+    } else {
+        "Every run generates its own data set from (master seed, run) and filters it with its own filter streams, so the spread over runs is that of the data and of the Monte-Carlo error together."
+    };
+    let _ = writeln!(
+        o,
+        "# Study `{name}`\n\n{description}\n\nData: `{data}`. {spread}\n"
+    );
     let _ = writeln!(o, "| algorithm | runs (failed, with warnings) | parameter | θ_val mean over runs | run-to-run s.d. | mean posterior s.d. | posterior s.d. / spread | truth |");
     let _ = writeln!(o, "|---|---|---|---|---|---|---|---|");
     for a in spreads {
@@ -297,7 +312,13 @@ pub fn run(args: &Options) -> Result<()> {
         "wall_s": start.elapsed().as_secs_f64(),
     }))?;
     figures(&spreads, &args.out)?;
-    let report = markdown(&study.name, &study.description, &data, &spreads);
+    let report = markdown(
+        &study.name,
+        &study.description,
+        &data,
+        study.data.dir.is_some(),
+        &spreads,
+    );
     write_bytes_atomic(&args.out.join("REPORT.md"), report.as_bytes())?;
     print!("{report}");
     eprintln!(

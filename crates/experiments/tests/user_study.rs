@@ -109,3 +109,21 @@ fn a_study_names_its_data_once() {
     assert!(format!("{e:#}").contains("field `dir`"), "{e:#}");
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// The report says what the spread over runs is: the Monte-Carlo error alone when every run
+/// filters one record, the data's spread as well when every run generates its own data set.
+#[test]
+fn the_report_says_what_the_spread_over_runs_measures() {
+    use experiments::user_study::markdown;
+    let one = markdown("s", "d", "dir", true, &[]);
+    assert!(one.contains("the spread over runs is the Monte-Carlo error of one run's answer"));
+    let preset = markdown("s", "d", "preset paper-3dof", false, &[]);
+    assert!(
+        preset.contains("Every run generates its own data set"),
+        "{preset}"
+    );
+    assert!(
+        !preset.contains("Every run filters this record"),
+        "{preset}"
+    );
+}
