@@ -312,13 +312,35 @@ pub fn run(args: &Options) -> Result<()> {
         "wall_s": start.elapsed().as_secs_f64(),
     }))?;
     figures(&spreads, &args.out)?;
-    let report = markdown(
+    let mut report = markdown(
         &study.name,
         &study.description,
         &data,
         study.data.dir.is_some(),
         &spreads,
     );
+    // With a known truth (a preset), how often the intervals hold it.
+    if let Some(c) = crate::coverage::study_coverage(&study, &outcome.records)? {
+        let _ = writeln!(report);
+        crate::coverage::report_section(&mut report, "Coverage of the credible intervals", &c);
+        for a in &study.sweep.algorithms {
+            let recs: Vec<&RunRecord> = outcome
+                .records
+                .iter()
+                .filter(|r| r.algorithm == a.name())
+                .collect();
+            let (fraction, pairs) = crate::coverage::stiffness_damping_coverage(&recs, 0.95);
+            if pairs > 0 {
+                let _ = writeln!(
+                    report,
+                    "{}: the 95 % intervals of the stiffnesses and dampings hold the truth in {} of {} (run, parameter) pairs ({fraction:.2}).",
+                    a.name(),
+                    (fraction * pairs as f64).round() as usize,
+                    pairs
+                );
+            }
+        }
+    }
     write_bytes_atomic(&args.out.join("REPORT.md"), report.as_bytes())?;
     print!("{report}");
     eprintln!(

@@ -127,3 +127,80 @@ fn the_report_says_what_the_spread_over_runs_measures() {
         "{preset}"
     );
 }
+
+/// A study on a preset knows the truth: its report gives the coverage of the credible intervals
+/// per algorithm and parameter, and the pooled 95 % coverage of the stiffnesses and dampings,
+/// counted from the records.
+#[test]
+fn a_preset_study_reports_the_coverage_of_its_intervals() {
+    let dir = temp_dir("preset");
+    let config = dir.join("s.toml");
+    std::fs::write(
+        &config,
+        r#"
+name = "tiny"
+description = "three data sets of the paper's structure"
+[data]
+preset = "paper-3dof"
+duration = 2.0
+[sweep]
+algorithms = ["mpf-ekf2"]
+runs = 3
+master_seed = 7
+particles = [40]
+[filter]
+trace_every = 0
+loop_every = 0
+validate = false
+"#,
+    )
+    .unwrap();
+    let out = dir.join("out");
+    let o = Command::new(env!("CARGO_BIN_EXE_sysid"))
+        .args(["study", "--threads", "1", "--config"])
+        .arg(&config)
+        .arg("--out")
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let report = std::fs::read_to_string(out.join("REPORT.md")).unwrap();
+    assert!(
+        report.contains("### Coverage of the credible intervals"),
+        "{report}"
+    );
+    // The pooled count, recomputed from the records.
+    let (mut covered, mut pairs) = (0, 0);
+    for e in std::fs::read_dir(out.join("records")).unwrap() {
+        let r: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(e.unwrap().path()).unwrap()).unwrap();
+        let truth = r["theta_true"].as_array().unwrap();
+        for (j, name) in r["param_names"].as_array().unwrap().iter().enumerate() {
+            let name = name.as_str().unwrap();
+            if !(name.starts_with('k') || name.starts_with('c')) {
+                continue;
+            }
+            let p = r["credible"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .find(|p| p["parameter"] == name)
+                .unwrap();
+            let i = p["intervals"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .find(|i| i["level"] == 0.95)
+                .unwrap();
+            let t = truth[j].as_f64().unwrap();
+            pairs += 1;
+            if i["lo"].as_f64().unwrap() <= t && t <= i["hi"].as_f64().unwrap() {
+                covered += 1;
+            }
+        }
+    }
+    assert_eq!(pairs, 18);
+    let line = format!("hold the truth in {covered} of {pairs} (run, parameter) pairs");
+    assert!(report.contains(&line), "{line}\n{report}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
