@@ -497,14 +497,16 @@ fn identify(
     // Without a config, the MPF-EKF2's default prior Gaussian as `sysid filter` chooses it: per
     // particle where storeys carry no sensor or the building is tall
     // (`FilterSettings::recommended_for`).
+    // A data set the spec refuses is reported by the run itself, with its own message.
     if config.is_none() && config_json.is_none() && algorithm == Algorithm::MpfEkf2 {
-        let spec = chain_spec(d, data.chain.as_ref(), &settings).map_err(err)?;
-        settings.marginal_prior = FilterSettings::recommended_for(
-            algorithm,
-            spec.n_storeys(),
-            &unmeasured_storeys(&spec),
-        )
-        .marginal_prior;
+        if let Ok(spec) = chain_spec(d, data.chain.as_ref(), &settings) {
+            settings.marginal_prior = FilterSettings::recommended_for(
+                algorithm,
+                spec.n_storeys(),
+                &unmeasured_storeys(&spec),
+            )
+            .marginal_prior;
+        }
     }
     let input = RunInput {
         data: d,
