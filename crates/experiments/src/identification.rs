@@ -408,15 +408,12 @@ pub fn identify_request(req: &FilterRequest, note: &mut dyn FnMut(Note)) -> Resu
         // Settings first, so that their refusal names the key as it does in every other run.
         crate::limits::check_filter_settings(&settings)?;
         let spec = chain_spec(&data, chain.as_ref(), &settings)?;
-        let reason = per_particle_reason(spec.n_storeys(), &unmeasured_storeys(&spec));
-        if let Some(reason) = reason {
+        let (storeys, unmeasured) = (spec.n_storeys(), unmeasured_storeys(&spec));
+        if let Some(reason) = per_particle_reason(storeys, &unmeasured) {
             if req.config.is_none() {
-                settings.marginal_prior = FilterSettings::recommended_for(
-                    req.algorithm,
-                    spec.n_storeys(),
-                    &unmeasured_storeys(&spec),
-                )
-                .marginal_prior;
+                settings.marginal_prior =
+                    FilterSettings::recommended_for(req.algorithm, storeys, &unmeasured)
+                        .marginal_prior;
                 note(Note::Sparse(format!(
                     "note: {reason}: the MPF-EKF2 starts every particle from its own prior mean (marginal_prior = {{ kind = \"per_particle\", rel_sd = {SPARSE_REL_SD} }}; with one shared prior Gaussian it loses its particles where storeys carry no sensor, docs/scaling.md, and is less accurate from {PER_PARTICLE_MIN_STOREYS} storeys on, docs/calibration.md)"
                 )));

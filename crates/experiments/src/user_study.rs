@@ -334,26 +334,32 @@ pub fn run(args: &Options) -> Result<()> {
             .collect()
     };
     for (suffix, structure) in groups {
-        let records: Vec<RunRecord> = outcome
+        let records: Vec<&RunRecord> = outcome
             .records
             .iter()
             .zip(&jobs)
             .filter(|(_, j)| j.structure == structure)
-            .map(|(r, _)| r.clone())
+            .map(|(r, _)| r)
             .collect();
-        if let Some(c) = crate::coverage::study_coverage(&study, &records)? {
+        let by_algorithm: Vec<(&str, Vec<&RunRecord>)> = study
+            .sweep
+            .algorithms
+            .iter()
+            .map(|a| {
+                let recs = records.iter().copied().filter(|r| r.algorithm == a.name());
+                (a.name(), recs.collect())
+            })
+            .collect();
+        if let Some(c) = crate::coverage::sweep_coverage(&study.name, &by_algorithm)? {
             let _ = writeln!(report);
             let title = format!("Coverage of the credible intervals{suffix}");
             crate::coverage::report_section(&mut report, &title, &c);
-            for a in &study.sweep.algorithms {
-                let recs: Vec<&RunRecord> =
-                    records.iter().filter(|r| r.algorithm == a.name()).collect();
-                let (fraction, pairs) = crate::coverage::stiffness_damping_coverage(&recs, 0.95);
+            for (name, recs) in &by_algorithm {
+                let (fraction, pairs) = crate::coverage::stiffness_damping_coverage(recs, 0.95);
                 if pairs > 0 {
                     let _ = writeln!(
                         report,
-                        "{}: the 95 % intervals of the stiffnesses and dampings hold the truth in {} of {} (run, parameter) pairs ({fraction:.2}).",
-                        a.name(),
+                        "{name}: the 95 % intervals of the stiffnesses and dampings hold the truth in {} of {} (run, parameter) pairs ({fraction:.2}).",
                         (fraction * pairs as f64).round() as usize,
                         pairs
                     );
