@@ -89,6 +89,18 @@ fn only_the_mpf_ekf2_on_a_sparse_layout_or_a_tall_building_leaves_the_recommende
     );
 }
 
+/// `sysid simulate --preset building-chain --seed 1` with `args`, into `data`.
+fn simulate_building_chain(data: &std::path::Path, args: &[&str]) {
+    let st = sysid()
+        .args(["simulate", "--preset", "building-chain", "--seed", "1"])
+        .args(args)
+        .arg("--out")
+        .arg(data)
+        .status()
+        .unwrap();
+    assert!(st.success());
+}
+
 fn sysid() -> Command {
     Command::new(env!("CARGO_BIN_EXE_sysid"))
 }
@@ -110,27 +122,20 @@ fn a_sparse_twenty_storey_run_completes_with_intervals_that_hold_the_unmeasured_
     let dir = temp_dir("n20");
     let data = dir.join("d");
     let sensors: Vec<String> = SPARSE_20.iter().map(|s| s.to_string()).collect();
-    let st = sysid()
-        .args([
-            "simulate",
-            "--preset",
-            "building-chain",
+    let sensors = sensors.join(",");
+    simulate_building_chain(
+        &data,
+        &[
             "--storeys",
             "20",
             "--sensors",
-            &sensors.join(","),
+            &sensors,
             "--scale",
             "36",
             "--duration",
             "3",
-            "--seed",
-            "1",
-            "--out",
-        ])
-        .arg(&data)
-        .status()
-        .unwrap();
-    assert!(st.success());
+        ],
+    );
     let out = dir.join("r.json");
     let o = sysid()
         .args(["filter", "--algorithm", "mpf-ekf2", "--seed", "1", "--data"])
@@ -196,23 +201,8 @@ fn a_sparse_twenty_storey_run_completes_with_intervals_that_hold_the_unmeasured_
 fn a_tall_fully_measured_building_gets_per_particle_prior_means_by_default() {
     let dir = temp_dir("tall");
     let data = dir.join("d");
-    let st = sysid()
-        .args([
-            "simulate",
-            "--preset",
-            "building-chain",
-            "--storeys",
-            &PER_PARTICLE_MIN_STOREYS.to_string(),
-            "--duration",
-            "0.5",
-            "--seed",
-            "1",
-            "--out",
-        ])
-        .arg(&data)
-        .status()
-        .unwrap();
-    assert!(st.success());
+    let storeys = PER_PARTICLE_MIN_STOREYS.to_string();
+    simulate_building_chain(&data, &["--storeys", &storeys, "--duration", "0.5"]);
     let config = dir.join("shared.toml");
     std::fs::write(&config, "marginal_prior = { kind = \"moment_matched\" }\n").unwrap();
     for with_config in [false, true] {
