@@ -16,10 +16,10 @@ use std::time::{Duration, Instant};
 
 use core_filters::resampling::Scheme;
 use core_filters::smc::storvik::StorvikUpdate;
+use experiments::error::{Context, Error};
 use experiments::field::{self, StructureSettings};
 use experiments::pipeline::{
-    chain_spec, identify_stoppable, unmeasured_storeys, Algorithm, FilterSettings, Interrupted,
-    RunInput,
+    chain_spec, identify_stoppable, unmeasured_storeys, Algorithm, FilterSettings, RunInput,
 };
 use experiments::record::RunRecord;
 use models::dataset::{Dataset, LoadedDataset, MEASURED};
@@ -39,21 +39,19 @@ pyo3::create_exception!(
 );
 
 /// The error and its causes as `sysid` prints them (without the leading `Error: `).
-fn message(e: &anyhow::Error) -> String {
+fn message(e: &Error) -> String {
     let mut s = e.to_string();
-    for cause in e.chain().skip(1) {
+    let mut cause = std::error::Error::source(e);
+    while let Some(c) = cause {
         s.push_str("\n  caused by: ");
-        s.push_str(&cause.to_string());
+        s.push_str(&c.to_string());
+        cause = c.source();
     }
     s
 }
 
-fn err(e: anyhow::Error) -> PyErr {
-    SysidError::new_err(message(&e))
-}
-
-fn py_err<E: Into<anyhow::Error>>(e: E) -> PyErr {
-    err(e.into())
+fn err<E: Into<Error>>(e: E) -> PyErr {
+    SysidError::new_err(message(&e.into()))
 }
 
 /// A flat row-major vector as a `rows × cols` array (no copy of the values).
@@ -180,7 +178,7 @@ impl PyDataset {
         let Some(meta) = &self.loaded.meta else {
             return Ok(None);
         };
-        let d = meta.structure().map_err(py_err)?;
+        let d = meta.structure().map_err(err)?;
         let out = PyDict::new(py);
         out.set_item("storeys", d.storeys)?;
         out.set_item("masses", d.masses)?;
@@ -195,7 +193,7 @@ impl PyDataset {
         self.loaded
             .meta
             .as_ref()
-            .map(|m| serde_json::to_string(m).map_err(py_err))
+            .map(|m| serde_json::to_string(m).map_err(err))
             .transpose()
     }
     /// Writes the data set as a directory (`measured.csv`, and `truth.csv` and `dataset.json`
@@ -214,13 +212,11 @@ impl PyDataset {
         py.allow_threads(|| match &self.generated {
             Some(ds) => ds
                 .write_dir(&dir)
-                .map_err(anyhow::Error::from)
-                .map_err(|e| e.context(format!("writing the data set to {}", dir.display()))),
+                .with_context(|| format!("writing the data set to {}", dir.display())),
             None => self
                 .loaded
                 .write_measured_dir(&dir)
-                .map_err(anyhow::Error::from)
-                .map_err(|e| e.context(format!("writing the data set to {}", dir.display()))),
+                .with_context(|| format!("writing the data set to {}", dir.display())),
         })
         .map_err(err)
     }
@@ -286,10 +282,10 @@ fn simulate(
         absolute,
         noise_fraction,
     };
-    let config = dataset_config(&request).map_err(py_err)?;
+    let config = dataset_config(&request).map_err(err)?;
     let ds = py
         .allow_threads(|| models::dataset::generate(&config))
-        .map_err(py_err)?;
+        .map_err(err)?;
     Ok(PyDataset {
         loaded: ds.to_loaded(),
         chain: Some(ds.chain.clone()),
@@ -303,12 +299,12 @@ fn simulate(
 fn load_dataset(py: Python<'_>, dir: PathBuf) -> PyResult<PyDataset> {
     let loaded = py
         .allow_threads(|| models::dataset::load_dir(&dir))
-        .map_err(|e| {
-            err(anyhow::Error::from(e).context(format!("loading data set {}", dir.display())))
-        })?;
+        .with_context(|| format!("loading data set {}", dir.display()))
+        .map_err(err)?;
     let chain = loaded
         .true_chain()
-        .map_err(|e| err(anyhow::Error::from(e).context("rebuilding the data set's structure")))?;
+        .context("rebuilding the data set's structure")
+        .map_err(err)?;
     Ok(PyDataset {
         loaded,
         chain,
@@ -351,7 +347,7 @@ fn field_data(
             "sensors: {sensors:?} is not a list of storeys numbered from 1, increasing"
         ));
     }
-    models::limits::check_table(k, cols + 2).map_err(py_err)?;
+    models::limits::check_table(k, cols + 2).map_err(err)?;
     let check = |what: &str, i: usize, v: f64| -> PyResult<()> {
         models::limits::check_value(v)
             .map(|_| ())
@@ -427,9 +423,11 @@ fn identify(
         (Some(path), None) => experiments::limits::load_filter_settings(path).map_err(err)?,
         (None, Some(text)) => {
             let s: FilterSettings = serde_json::from_str(text)
-                .map_err(|e| err(anyhow::Error::from(e).context("parsing config (dict)")))?;
+                .context("parsing config (dict)")
+                .map_err(err)?;
             experiments::limits::check_filter_settings(&s)
-                .map_err(|e| err(e.context("config (dict)")))?;
+                .context("config (dict)")
+                .map_err(err)?;
             s
         }
         (None, None) => FilterSettings::recommended(),
@@ -464,7 +462,7 @@ fn identify(
         let text: Vec<String> = f.iter().map(|(k, v)| format!("{k}={v:e}")).collect();
         settings
             .fix
-            .extend(experiments::identification::parse_fix(&text.join(",")).map_err(py_err)?);
+            .extend(experiments::identification::parse_fix(&text.join(",")).map_err(err)?);
     }
     let flags = StructureSettings {
         storeys,
@@ -540,15 +538,15 @@ fn identify(
             // Written as `sysid filter` writes it: a temporary file renamed into place.
             experiments::sweep::write_atomic(out, &record)?;
         }
-        Ok::<_, anyhow::Error>(record)
+        Ok::<_, experiments::error::Error>(record)
     });
     match outcome {
         Ok(record) => Ok(PyRecord { r: record }),
-        Err(e) if e.downcast_ref::<Interrupted>().is_some() => Err(pending
+        Err(e) if e.interrupted().is_some() => Err(pending
             .lock()
             .expect("not poisoned")
             .take()
-            .unwrap_or_else(|| pyo3::exceptions::PyKeyboardInterrupt::new_err(message(&e)))),
+            .unwrap_or_else(|| pyo3::exceptions::PyKeyboardInterrupt::new_err(e.to_string()))),
         Err(e) => Err(err(e)),
     }
 }
@@ -560,7 +558,7 @@ struct PyRecord {
 }
 
 fn json_value(py: Python<'_>, v: &impl serde::Serialize) -> PyResult<PyObject> {
-    let text = serde_json::to_string(v).map_err(py_err)?;
+    let text = serde_json::to_string(v).map_err(err)?;
     Ok(py.import("json")?.call_method1("loads", (text,))?.unbind())
 }
 
@@ -754,7 +752,7 @@ impl PyRecord {
     }
     /// The record as the JSON text `sysid filter` writes.
     fn to_json(&self) -> PyResult<String> {
-        serde_json::to_string_pretty(&self.r).map_err(py_err)
+        serde_json::to_string_pretty(&self.r).map_err(err)
     }
     /// Writes the record as `sysid filter --out` does: a temporary file renamed into place.
     fn write(&self, py: Python<'_>, path: PathBuf) -> PyResult<()> {
@@ -779,7 +777,7 @@ impl PyRecord {
 fn read_record(path: PathBuf) -> PyResult<PyRecord> {
     experiments::record::read::read::<RunRecord>(&path)
         .map(|r| PyRecord { r })
-        .map_err(py_err)
+        .map_err(err)
 }
 
 /// Parses and checks the JSON text of a run record.
@@ -787,14 +785,14 @@ fn read_record(path: PathBuf) -> PyResult<PyRecord> {
 fn parse_record(text: &str) -> PyResult<PyRecord> {
     experiments::record::read::parse::<RunRecord>(text.as_bytes(), Path::new("<text>"))
         .map(|r| PyRecord { r })
-        .map_err(py_err)
+        .map_err(err)
 }
 
 /// Table I of the paper by computation: moments of z = xᵀx, x ~ N(0, I), by the exact χ²
 /// formulas, linearisation (T1), the second-order EKF (T2) and the unscented transform (UT).
 #[pyfunction]
 fn table1(py: Python<'_>) -> PyResult<Bound<'_, PyList>> {
-    let rows = core_filters::kalman::table1().map_err(py_err)?;
+    let rows = core_filters::kalman::table1().map_err(err)?;
     let out = PyList::empty(py);
     for r in rows {
         let d = PyDict::new(py);

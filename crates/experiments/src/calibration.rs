@@ -20,7 +20,7 @@
 use std::fmt::Write as _;
 use std::path::Path;
 
-use anyhow::{bail, Context, Result};
+use crate::error::{bail, Context, Result};
 use core_filters::credible::{CredibleInterval, WeightedSample};
 use plotters::prelude::*;
 use plotters::style::text_anchor::{HPos, Pos, VPos};
@@ -91,6 +91,8 @@ pub enum CalibrationError {
         hi: f64,
     },
 }
+
+crate::error::domain_error!(CalibrationError);
 
 /// Outcome of the calibration test at one level.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]

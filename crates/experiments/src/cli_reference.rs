@@ -5,7 +5,7 @@ use std::fmt::Write as _;
 use std::path::Path;
 use std::process::Command;
 
-use anyhow::{bail, Context, Result};
+use crate::error::{bail, Context, Result};
 
 /// The subcommands listed under "Commands:" in a clap help text (without `help`).
 fn subcommands(help: &str) -> Vec<String> {

@@ -12,7 +12,7 @@
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
 
-use anyhow::{Context, Result};
+use crate::error::{Context, Result};
 use core_filters::credible::STANDARD_LEVELS;
 use serde::{Deserialize, Serialize};
 
@@ -103,7 +103,7 @@ pub fn sweep_coverage(
         let (mut failed, mut without) = (0, 0);
         for r in records {
             if r.param_names != names {
-                anyhow::bail!(
+                crate::error::bail!(
                     "sweep {sweep}: the record of {} run {} has parameters {:?}, the sweep {:?}",
                     r.algorithm,
                     r.run,

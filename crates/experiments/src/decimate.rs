@@ -31,6 +31,8 @@ pub enum DecimateError {
     },
 }
 
+crate::error::domain_error!(DecimateError);
+
 /// Checks a decimation factor on its own (before any data exist).
 pub fn check_factor(factor: usize) -> Result<(), DecimateError> {
     if (1..=MAX_FACTOR).contains(&factor) {

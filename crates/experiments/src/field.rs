@@ -10,7 +10,7 @@
 
 use std::path::Path;
 
-use anyhow::{bail, Result};
+use crate::error::{bail, Result};
 use models::building::BuildingError;
 use models::dataset::{LoadedDataset, MEASURED, META};
 use models::description::StructureDescription;
@@ -215,7 +215,7 @@ pub fn resolve(
         damping: given.damping.unwrap_or_default(),
     };
     d.building()
-        .map_err(|e: BuildingError| anyhow::anyhow!("{}: {}", name(e.field), e.message))?;
+        .map_err(|e: BuildingError| crate::error::invalid!("{}: {}", name(e.field), e.message))?;
     // The header against the stated structure: every measured storey must exist.
     if let Some(&s) = data.sensors.iter().find(|&&s| s > n) {
         bail!(
@@ -226,7 +226,7 @@ pub fn resolve(
         );
     }
     d.sensor_layout()
-        .map_err(|e| anyhow::anyhow!("{}: {}", measured_file.display(), e))?;
+        .map_err(|e| crate::error::invalid!("{}: {}", measured_file.display(), e))?;
     Ok(d)
 }
 

@@ -17,7 +17,7 @@ use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-use anyhow::{bail, Context, Result};
+use crate::error::{bail, Context, Result};
 use serde::Deserialize;
 
 use crate::pipeline::Algorithm;
@@ -128,7 +128,7 @@ impl FieldStudy {
             }
         }
         s.check()
-            .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+            .map_err(|e| crate::error::invalid!("{}: {e}", path.display()))?;
         Ok(s)
     }
 

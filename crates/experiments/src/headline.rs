@@ -9,7 +9,7 @@
 use std::fmt::Write as _;
 use std::path::Path;
 
-use anyhow::{bail, Context, Result};
+use crate::error::{bail, Context, Result};
 
 use crate::record::RunRecord;
 use crate::reproduce::{algorithm_stats, AlgorithmStats};

@@ -10,7 +10,7 @@ use std::collections::BTreeMap;
 use std::fmt;
 use std::path::{Path, PathBuf};
 
-use anyhow::{Context, Result};
+use crate::error::{Context, Result};
 use core_filters::resampling::Scheme;
 use core_filters::smc::storvik::StorvikUpdate;
 use models::dataset::{load_dir, LoadedDataset, MEASURED, META};
@@ -44,6 +44,8 @@ pub enum FixError {
     #[error("--fix: {0} is given twice")]
     Twice(String),
 }
+
+crate::error::domain_error!(FixError);
 
 /// Parses `name=value,name=value`.
 pub fn parse_fix(s: &str) -> Result<BTreeMap<String, f64>, FixError> {
@@ -466,6 +468,8 @@ pub enum Rejected {
         out: PathBuf,
     },
 }
+
+crate::error::domain_error!(Rejected);
 
 /// A finished run with its plausibility warnings, its record written.
 #[derive(Debug)]

@@ -33,6 +33,7 @@ pub mod coverage;
 pub mod decimate;
 pub mod discretisation;
 pub mod engine;
+pub mod error;
 pub mod excitations;
 pub mod field;
 pub mod field_study;

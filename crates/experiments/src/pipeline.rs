@@ -8,7 +8,7 @@
 use std::collections::BTreeMap;
 use std::time::Instant;
 
-use anyhow::{anyhow, bail, Context, Result};
+use crate::error::{bail, invalid, Context, Result};
 use core_filters::resampling::ResamplePolicy;
 use core_filters::rng::{purpose, stream};
 use core_filters::smc::bootstrap::BootstrapPf;
@@ -396,15 +396,7 @@ pub fn build_filter(
     })
 }
 
-/// A run stopped at its caller's request ([`identify_stoppable`]): no record is made of it.
-#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
-#[error("interrupted before step {step} of {steps}")]
-pub struct Interrupted {
-    /// The step that was not run (1-based).
-    pub step: usize,
-    /// The steps of the run.
-    pub steps: usize,
-}
+pub use crate::error::Interrupted;
 
 /// Which filter of a pool [`drive`] runs, when the whole run started (its pace is timed over
 /// all the pool's filters, [`crate::pace`]) and whether its caller asks it to stop.
@@ -518,8 +510,8 @@ pub fn identify(input: &RunInput, algorithm: Algorithm, s: &FilterSettings) -> R
 }
 
 /// [`identify`], asking `stop` before every filter step whether to stop (an interactive caller's
-/// Ctrl-C): when it answers `true` the run ends and the error is [`Interrupted`] (downcast it
-/// from the `anyhow::Error`); nothing else differs, so a run that is not stopped returns the
+/// Ctrl-C): when it answers `true` the run ends and the error is [`Interrupted`]
+/// ([`crate::error::Error::interrupted`]); nothing else differs, so a run that is not stopped returns the
 /// record [`identify`] returns.
 pub fn identify_stoppable(
     input: &RunInput,
@@ -640,7 +632,7 @@ pub fn identify_stoppable(
     let theta_true = data.meta.as_ref().map(|m| m.theta_true.clone());
     if let Some(t) = &theta_true {
         if t.len() != d.param_names.len() {
-            return Err(anyhow!(
+            return Err(invalid!(
                 "the data set's true θ has {} entries, the filter's θ {}",
                 t.len(),
                 d.param_names.len()

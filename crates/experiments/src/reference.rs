@@ -23,7 +23,7 @@
 //! a logistic map onto the interval of uniform priors and onto the (β, γ) triangle
 //! (`β = β_max σ(a)`, `γ = β (2σ(b) − 1)`), with the Jacobians in the log-prior.
 
-use anyhow::{bail, Result};
+use crate::error::{bail, Result};
 use core_filters::pmmh::{effective_sample_size, pmmh, PmmhChain, PmmhConfig, Target};
 use core_filters::resampling::{ResamplePolicy, Scheme};
 use core_filters::rng::StreamRng;
@@ -364,7 +364,7 @@ pub fn run_chain(
 /// mean of the means, variance the mean variance plus the variance of the means (so chains that
 /// disagree widen the reference instead of hiding it), ESS summed; quantiles are not pooled
 /// (NaN) unless there is one chain.
-pub fn pool_chains(chains: &[Vec<ParamSummary>]) -> anyhow::Result<Vec<ParamSummary>> {
+pub fn pool_chains(chains: &[Vec<ParamSummary>]) -> crate::error::Result<Vec<ParamSummary>> {
     let Some(first) = chains.first() else {
         bail!("no reference chain given");
     };
@@ -377,7 +377,7 @@ pub fn pool_chains(chains: &[Vec<ParamSummary>]) -> anyhow::Result<Vec<ParamSumm
             .iter()
             .map(|c| c.get(i).filter(|q| q.name == p.name))
             .collect::<Option<_>>()
-            .ok_or_else(|| anyhow::anyhow!("the chains do not have the same parameters"))?;
+            .ok_or_else(|| crate::error::invalid!("the chains do not have the same parameters"))?;
         let m = same.len() as f64;
         let mean = same.iter().map(|q| q.mean).sum::<f64>() / m;
         let var = same

@@ -18,7 +18,7 @@ use std::collections::BTreeMap;
 use std::fmt::Write as _;
 use std::path::Path;
 
-use anyhow::{bail, Context, Result};
+use crate::error::{bail, Context, Result};
 use serde::{Deserialize, Serialize};
 
 use crate::metrics::mean_sd;
@@ -303,6 +303,8 @@ pub struct RegressionRun {
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 #[error("{} regression bound(s) breached:\n  {}", .0.len(), .0.join("\n  "))]
 pub struct Breaches(pub Vec<String>);
+
+crate::error::domain_error!(Breaches);
 
 /// Runs the study of `file` into `options.out` (locked for the lifetime of the result) and
 /// compares its statistics with the bounds.

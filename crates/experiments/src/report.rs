@@ -4,7 +4,7 @@
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
 
-use anyhow::Result;
+use crate::error::Result;
 
 use crate::markdown::{header, row};
 use crate::pipeline::Algorithm;

@@ -10,7 +10,7 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use anyhow::Result;
+use crate::error::Result;
 
 use crate::engine::{load, write_json, Engine, Reuse};
 use crate::figures;

@@ -12,7 +12,7 @@
 //! above 1, or errors correlated in time (Ljung–Box, [`whiteness`]), say that the
 //! model or its noise levels do not fit the record.
 
-use anyhow::Result;
+use crate::error::Result;
 use core_filters::model::Layout;
 use core_filters::smc::model::{Partition, StateSpace};
 use core_filters::smc::Posterior;

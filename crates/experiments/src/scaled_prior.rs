@@ -22,7 +22,7 @@
 //! a 1 % ratio (ζ − [`ALPHA_DAMPING_RATIO`]) and α ~ LogNormal(2·1 %·ω₁, 1.0)
 //! ([`models::filtering::prior::alpha_prior`]; pure mass damping has ζ = α/(2ω)).
 
-use anyhow::{bail, Result};
+use crate::error::{bail, Result};
 use models::dataset::LoadedDataset;
 use models::description::StructureDescription;
 use models::filtering::prior::{alpha_prior, ALPHA_DAMPING_RATIO};

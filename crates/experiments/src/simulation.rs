@@ -40,6 +40,8 @@ pub enum SimulationError {
     Preset(#[from] PresetError),
 }
 
+crate::error::domain_error!(SimulationError);
+
 /// What to simulate: every flag of `sysid simulate` but `--out`.
 #[derive(Debug, Clone)]
 pub struct SimulationRequest {

@@ -8,7 +8,7 @@
 
 use std::path::Path;
 
-use anyhow::{bail, Context, Result};
+use crate::error::{bail, Context, Result};
 use core_filters::resampling::Scheme;
 use models::dataset::{generate, DatasetConfig, LoadedDataset};
 use models::filtering::Discretisation;

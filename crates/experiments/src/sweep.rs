@@ -27,13 +27,16 @@ use std::fs;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use anyhow::{Context, Result};
+use crate::error::{Context, Result};
 use rayon::prelude::*;
 use serde::Serialize;
 
 use progress::{clock, Progress};
 
-pub use crate::record::atomic::write_bytes_atomic;
+/// [`crate::record::atomic::write_bytes_atomic`], as this crate's error.
+pub fn write_bytes_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
+    Ok(crate::record::atomic::write_bytes_atomic(path, bytes)?)
+}
 pub use crate::record::read::SweepRecord;
 
 /// Part `index` of `count` of a sweep (`0 ≤ index < count`).

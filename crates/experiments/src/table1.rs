@@ -3,7 +3,7 @@
 //! expansion (T2, EKF2) and the unscented transform (UT, β = 2, κ = 0), and writes `table1.json`
 //! and `table1.md` to the output directory.
 
-use anyhow::Context;
+use crate::error::Context;
 use core_filters::kalman::table1::TABLE1_UT_ALPHA;
 use core_filters::kalman::{table1, Table1Row};
 use std::fmt::Write as _;
@@ -55,7 +55,7 @@ fn fmt(v: f64) -> String {
 }
 
 /// Computes Table I, prints it as Markdown and writes `table1.json` and `table1.md` into `out`.
-pub fn write(out: &Path) -> anyhow::Result<()> {
+pub fn write(out: &Path) -> crate::error::Result<()> {
     let rows = table1().context("computing Table I")?;
     let md = markdown(&rows);
     print!("{md}");

@@ -12,7 +12,7 @@ use serde::Serialize;
 use std::path::PathBuf;
 use std::time::Instant;
 
-use anyhow::{Context, Result};
+use crate::error::{Context, Result};
 
 use crate::engine::{load, write_json, Engine};
 use crate::metrics::mean_spread;
@@ -165,7 +165,7 @@ pub fn markdown(
 pub fn figures(
     spreads: &[AlgorithmSpread],
     out: &std::path::Path,
-) -> anyhow::Result<Vec<std::path::PathBuf>> {
+) -> crate::error::Result<Vec<std::path::PathBuf>> {
     use crate::figures::{category_panels, CategoryGroup, CategoryPanel};
     let Some(first) = spreads.iter().find(|a| !a.params.is_empty()) else {
         return Ok(Vec::new());

@@ -28,7 +28,7 @@ fn stderr(o: &Output) -> String {
     String::from_utf8_lossy(&o.stderr).into_owned()
 }
 
-/// An exit through an error (1 for anyhow, 2 for clap), never a panic (101) or a signal.
+/// An exit through an error (1 for a toolkit error, 2 for clap), never a panic (101) or a signal.
 fn assert_error_exit(o: &Output, what: &str) {
     let code = o.status.code();
     assert!(

@@ -32,7 +32,7 @@ fn stderr(o: &Output) -> String {
     String::from_utf8_lossy(&o.stderr).into_owned()
 }
 
-/// An error exit (1 for anyhow, 2 for clap) whose message holds every one of `words`.
+/// An error exit (1 for a toolkit error, 2 for clap) whose message holds every one of `words`.
 fn assert_refused(o: &Output, words: &[&str]) {
     let code = o.status.code();
     let e = stderr(o);

@@ -39,7 +39,7 @@ fn a_stopped_run_is_interrupted_and_an_unstopped_one_unchanged() {
             };
             let e = identify_stoppable(&input, alg, &s, &stop).unwrap_err();
             let i = e
-                .downcast_ref::<Interrupted>()
+                .interrupted()
                 .unwrap_or_else(|| panic!("{}: not Interrupted: {e:#}", alg.name()));
             assert_eq!(*i, Interrupted { step: 30, steps });
             assert_eq!(asked.get(), 30, "{}: no step after the stop", alg.name());

@@ -3,7 +3,7 @@
 
 use std::path::PathBuf;
 
-use anyhow::{Context, Result};
+use crate::error::{Context, Result};
 
 use crate::field_study::{run as run_study, FieldStudy, RunOptions};
 

@@ -6,7 +6,7 @@
 //! runs on the result, naming what the recordings cannot say (storeys, masses, hysteretic
 //! storeys).
 
-use anyhow::Context;
+use crate::error::Context;
 use models::import::{self, channel_map::ChannelMap};
 use std::path::PathBuf;
 
@@ -22,7 +22,7 @@ pub struct Args {
     pub out: PathBuf,
 }
 
-pub fn run(args: Args) -> anyhow::Result<()> {
+pub fn run(args: Args) -> crate::error::Result<()> {
     let map = ChannelMap::load(&args.map)?;
     let imported = import::import(&map)?;
     let record = imported

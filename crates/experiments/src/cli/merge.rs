@@ -7,7 +7,7 @@
 
 use std::path::PathBuf;
 
-use anyhow::Result;
+use crate::error::Result;
 
 use crate::record::RunRecord;
 use crate::sweep::lock::DirLock;

@@ -3,7 +3,7 @@
 
 use std::path::PathBuf;
 
-use anyhow::{bail, Context, Result};
+use crate::error::{bail, Context, Result};
 
 use crate::pipeline::Algorithm;
 use crate::reference::posterior::{reference_posterior, write_reference, ReferenceRequest};

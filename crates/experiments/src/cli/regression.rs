@@ -17,7 +17,7 @@
 use std::path::PathBuf;
 use std::time::Instant;
 
-use anyhow::Result;
+use crate::error::Result;
 
 use crate::regression::{format_table, RegressionFile, RegressionOptions};
 

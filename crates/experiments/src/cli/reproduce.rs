@@ -33,7 +33,7 @@ pub struct Args {
 }
 
 /// Runs `sysid reproduce`.
-pub fn run(args: Args) -> anyhow::Result<()> {
+pub fn run(args: Args) -> crate::error::Result<()> {
     reproduce(&Options {
         experiments: args.experiments,
         out: args.out,

@@ -58,13 +58,13 @@ impl Args {
 }
 
 /// Runs `sysid scaling`.
-pub fn run(args: Args) -> anyhow::Result<()> {
+pub fn run(args: Args) -> crate::error::Result<()> {
     run_study(&args.options("scaling"))?;
     Ok(())
 }
 
 /// Runs `sysid excitations`.
-pub fn run_excitations(args: Args) -> anyhow::Result<()> {
+pub fn run_excitations(args: Args) -> crate::error::Result<()> {
     crate::excitations::run(&args.options("excitations"))?;
     Ok(())
 }

@@ -6,7 +6,7 @@
 //! ([`models::dataset::Dataset::write_dir`]): an interrupted `simulate` leaves the previous data
 //! set or the new one, never a mix.
 
-use anyhow::Context;
+use crate::error::Context;
 use models::dataset;
 use models::readers::Units;
 use std::path::PathBuf;
@@ -94,7 +94,7 @@ impl Args {
 }
 
 /// Runs `sysid simulate`.
-pub fn run(args: Args) -> anyhow::Result<()> {
+pub fn run(args: Args) -> crate::error::Result<()> {
     let config = dataset_config(&args.request())?;
     let ds = dataset::generate(&config)?;
     ds.write_dir(&args.out)

@@ -11,6 +11,6 @@ pub struct Args {
 }
 
 /// Runs `sysid table1`.
-pub fn run(args: Args) -> anyhow::Result<()> {
+pub fn run(args: Args) -> crate::error::Result<()> {
     crate::table1::write(&args.out)
 }

@@ -6,7 +6,7 @@
 
 use std::path::PathBuf;
 
-use anyhow::{Context, Result};
+use crate::error::{Context, Result};
 
 use crate::validation::cross::cross_validate;
 use crate::validation::{self, BAND_DRAWS};

@@ -53,6 +53,8 @@ pub enum ClusterError {
     },
 }
 
+crate::error::domain_error!(ClusterError);
+
 impl ClusterError {
     pub(crate) fn file(path: &std::path::Path, e: impl std::fmt::Display) -> Self {
         ClusterError::File {

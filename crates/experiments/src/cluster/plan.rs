@@ -254,7 +254,7 @@ impl Plan {
 
     /// The study's sweeps, as its subcommand runs them.
     pub fn sweeps(&self) -> Result<Vec<Sweep>, ClusterError> {
-        let err = |e: anyhow::Error| ClusterError::Study {
+        let err = |e: crate::error::Error| ClusterError::Study {
             config: self.config.display().to_string(),
             message: format!("{e:#}"),
         };

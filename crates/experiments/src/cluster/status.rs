@@ -171,7 +171,7 @@ impl Status {
 /// when a record exists).
 fn usable(
     path: &Path,
-    expected: &dyn Fn() -> anyhow::Result<String>,
+    expected: &dyn Fn() -> crate::error::Result<String>,
 ) -> Result<Option<Result<(), String>>, ClusterError> {
     if !path.exists() {
         return Ok(None);

@@ -281,7 +281,7 @@ pub fn finish(plan: &Plan) -> Result<Finished, ClusterError> {
 }
 
 /// The study's report from the merged records, by the study's own code path.
-fn report(plan: &Plan) -> anyhow::Result<()> {
+fn report(plan: &Plan) -> crate::error::Result<()> {
     let (config, out) = (plan.config.clone(), plan.out.clone());
     match plan.kind {
         super::Kind::Paper => {

@@ -42,9 +42,19 @@ pub trait SweepRecord: Serialize + Checked + Send {
     fn same_result(&self, other: &Self) -> bool;
 }
 
-/// Why a record could not be read; every variant names the file.
+/// Why a record could not be read (or written); every variant names the file.
 #[derive(Debug, Error)]
 pub enum ReadError {
+    #[error("serialising a record")]
+    Serialise(#[source] serde_json::Error),
+    #[error("writing {}", path.display())]
+    Write {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error("the record was written but does not read back")]
+    NoReadBack(#[source] Box<ReadError>),
     #[error("reading {}: {source}", path.display())]
     Io {
         path: PathBuf,
@@ -149,11 +159,14 @@ pub fn read<R: Checked>(path: &Path) -> Result<R, ReadError> {
 /// written text back through [`parse`]: a record that would not read back is written (it holds
 /// the run's results) but reported as an error, so no command reports success on a record its
 /// own readers refuse.
-pub fn write<R: Checked + serde::Serialize>(path: &Path, record: &R) -> anyhow::Result<()> {
-    use anyhow::Context;
-    let text = serde_json::to_string_pretty(record).context("serialising a record")? + "\n";
-    super::atomic::write_bytes_atomic(path, text.as_bytes())?;
-    parse::<R>(text.as_bytes(), path)
-        .map(|_| ())
-        .context("the record was written but does not read back")
+pub fn write<R: Checked + serde::Serialize>(path: &Path, record: &R) -> Result<(), ReadError> {
+    let text = serde_json::to_string_pretty(record).map_err(ReadError::Serialise)? + "\n";
+    super::atomic::write_bytes_atomic(path, text.as_bytes()).map_err(|source| {
+        ReadError::Write {
+            path: path.to_path_buf(),
+            source,
+        }
+    })?;
+    parse::<R>(text.as_bytes(), path).map_err(|e| ReadError::NoReadBack(Box::new(e)))?;
+    Ok(())
 }

@@ -4,7 +4,7 @@
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use anyhow::{bail, Context, Result};
+use crate::error::{bail, Context, Result};
 use core_filters::pmmh::PmmhConfig;
 use core_filters::rng::stream;
 use models::dataset::load_dir;
@@ -46,7 +46,7 @@ pub fn reference_posterior(
     crate::limits::check_count(args.particles, 1, crate::limits::MAX_PARTICLES)
         .context("--particles")?;
     crate::limits::check_chain(args.iterations, args.burn_in, args.probe)
-        .map_err(|(flag, e)| anyhow::anyhow!("{flag}: {e}"))?;
+        .map_err(|(flag, e)| crate::error::invalid!("{flag}: {e}"))?;
     let data = load_dir(&args.data)
         .with_context(|| format!("loading data set {}", args.data.display()))?;
     let chain = data

@@ -4,7 +4,7 @@
 
 use std::path::Path;
 
-use anyhow::{bail, Context, Result};
+use crate::error::{bail, Context, Result};
 use plotters::prelude::*;
 
 use super::{is_reference, Cell, CostFit};

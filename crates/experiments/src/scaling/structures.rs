@@ -4,7 +4,7 @@
 //! towards its saturation (β + γ)^(−1/n) in the data of run 0 (the same for every run: the runs
 //! differ by their noise only).
 
-use anyhow::{Context, Result};
+use crate::error::{Context, Result};
 use nalgebra::{DMatrix, SymmetricEigen};
 use serde::Serialize;
 

@@ -15,7 +15,7 @@ use std::collections::BTreeMap;
 use std::fs;
 use std::path::{Path, PathBuf};
 
-use anyhow::{bail, Context, Result};
+use crate::error::{bail, Context, Result};
 
 use super::{clean_stale_temporaries, same_but_timing, write_bytes_atomic, SweepRecord};
 use crate::record::read::{parse, read_bytes};

@@ -5,7 +5,7 @@
 
 use std::path::Path;
 
-use anyhow::{bail, Context, Result};
+use crate::error::{bail, Context, Result};
 use models::dataset::{load_dir, MEASURED, META};
 use models::description::StructureDescription;
 use serde::{Deserialize, Serialize};
@@ -43,7 +43,7 @@ pub fn read_record(path: &Path) -> Result<RunRecord> {
     let r: RunRecord = serde_json::from_str(&text)
         .with_context(|| format!("{}: not a run record", path.display()))?;
     r.check()
-        .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+        .map_err(|e| crate::error::invalid!("{}: {e}", path.display()))?;
     Ok(r)
 }
 

@@ -50,6 +50,8 @@ pub enum FreeRunError {
     TooShort(usize),
 }
 
+crate::error::domain_error!(FreeRunError);
+
 /// The chain of building `d` with parameters θ = `[k1..kN, c1..cN, (α), (β, γ, n) per
 /// element]` (α with the storey+mass damping form of `d`).
 pub fn chain_of(d: &StructureDescription, theta: &[f64]) -> Result<ShearChain, FreeRunError> {

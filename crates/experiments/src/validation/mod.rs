@@ -19,7 +19,7 @@ pub mod spectral;
 
 use std::fmt::Write as _;
 
-use anyhow::{bail, Context, Result};
+use crate::error::{bail, Context, Result};
 use models::dataset::LoadedDataset;
 use models::description::StructureDescription;
 use models::modal::Mode;

@@ -41,6 +41,8 @@ pub enum SpectralError {
     NoInput,
 }
 
+crate::error::domain_error!(SpectralError);
+
 /// In-place radix-2 FFT of (re, im), length a power of two: X_k = Σ x_n e^{−2πikn/L}.
 pub fn fft(re: &mut [f64], im: &mut [f64]) {
     let n = re.len();
