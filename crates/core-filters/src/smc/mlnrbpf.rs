@@ -26,95 +26,69 @@
 
 use crate::health::Health;
 use crate::linalg::gauss::factorise;
-use crate::linalg::{Factor, Sparse};
 use crate::model::Layout;
 use crate::real::Real;
 use crate::rng::StreamRng;
 
 use super::batch::{Ancestry, Marginalized, ParticleStep, Slots};
-use super::model::{linear_patterns, ConditionallyLinear, LinearDims, Stage};
+use super::linear_plan::{LinearPlan, LinearScratch};
+use super::model::{ConditionallyLinear, LinearDims};
 use super::store::Shape;
 
 /// The per-particle step of the MLN-RBPF (SPEC §5.2) and what it needs from the model, read once.
 pub struct MlnStep<M> {
     model: M,
-    dims: LinearDims,
-    stages: Vec<StagePlan>,
-    /// Recorded patterns of `F` per stage and of `H`.
-    f_patterns: Vec<Sparse<f64>>,
-    h_pattern: Sparse<f64>,
-    r: Vec<f64>,
+    plan: LinearPlan,
+    /// Per stage, the rows that do not depend on `z`.
+    unlinked: Vec<Unlinked>,
     draws: usize,
 }
 
-/// One stage with its noise levels split into linked and unlinked rows.
-struct StagePlan {
-    stage: Stage,
-    /// Position in `stage.rows` of each linked row.
-    linked_pos: Vec<usize>,
-    /// Unlinked rows with non-zero noise: (position in `stage.rows`, row of `u`, s.d.).
-    noisy_unlinked: Vec<(usize, usize, f64)>,
-    /// Unlinked rows without noise: (position in `stage.rows`, row of `u`).
-    quiet_unlinked: Vec<(usize, usize)>,
-    /// `Q_L` (dense, `l × l`).
-    q_l: Vec<f64>,
+/// The rows of a stage that do not depend on `z`, split by their noise.
+struct Unlinked {
+    /// With non-zero noise: (position in `stage.rows`, row of `u`, s.d.).
+    noisy: Vec<(usize, usize, f64)>,
+    /// Without noise: (position in `stage.rows`, row of `u`).
+    quiet: Vec<(usize, usize)>,
 }
 
 /// Scratch of one [`MlnStep`] for one number type.
 pub struct MlnScratch<T> {
+    lin: LinearScratch<T>,
     f: Vec<T>,
-    F: Vec<Sparse<T>>,
     pred: Vec<T>,
     drawn: Vec<T>,
-    q_l: Vec<Vec<T>>,
-    factors: Vec<Factor<T>>,
-    h: Vec<T>,
-    H: Sparse<T>,
-    r: Vec<T>,
-    resid: Vec<T>,
-    y_factor: Factor<T>,
 }
 
 impl<M: ConditionallyLinear> MlnStep<M> {
     /// Reads the model's dimensions, stages, noise and `R`, and records the Jacobian patterns.
     #[track_caller]
     pub fn new(model: M) -> Self {
-        let dims = model.dims();
-        let sd = model.process_noise_sd().to_vec();
-        assert_eq!(sd.len(), dims.nu, "process noise s.d. of every row of u");
-        let mut stages = Vec::new();
+        let plan = LinearPlan::new(&model);
         let mut draws = 0;
-        for st in model.stages() {
-            let linked_pos = st.linked_positions();
-            let mut noisy_unlinked = Vec::new();
-            let mut quiet_unlinked = Vec::new();
-            for (p, &r) in st.rows.iter().enumerate() {
-                if st.linked.contains(&r) {
-                    continue;
+        let unlinked: Vec<Unlinked> = plan
+            .stages
+            .iter()
+            .map(|st| {
+                let mut u = Unlinked {
+                    noisy: Vec::new(),
+                    quiet: Vec::new(),
+                };
+                for (p, &r) in st.stage.rows.iter().enumerate() {
+                    match (st.linked_index[p], st.sd[p]) {
+                        (Some(_), _) => {}
+                        (None, 0.0) => u.quiet.push((p, r)),
+                        (None, sd) => u.noisy.push((p, r, sd)),
+                    }
                 }
-                if sd[r] != 0.0 {
-                    noisy_unlinked.push((p, r, sd[r]));
-                } else {
-                    quiet_unlinked.push((p, r));
-                }
-            }
-            draws += st.linked.len() + noisy_unlinked.len();
-            stages.push(StagePlan {
-                stage: st.clone(),
-                linked_pos,
-                noisy_unlinked,
-                quiet_unlinked,
-                q_l: st.linked_noise_cov(&sd),
-            });
-        }
-        let (f_patterns, h_pattern, r) = linear_patterns(&model);
+                draws += st.stage.linked.len() + u.noisy.len();
+                u
+            })
+            .collect();
         Self {
             model,
-            dims,
-            stages,
-            f_patterns,
-            h_pattern,
-            r,
+            plan,
+            unlinked,
             draws,
         }
     }
@@ -141,46 +115,21 @@ impl<M: ConditionallyLinear> ParticleStep for MlnStep<M> {
     }
 
     fn broken_pattern<T: Real>(s: &MlnScratch<T>) -> Option<&'static str> {
-        if s.F.iter().any(Sparse::pattern_broken) {
-            Some("transition matrix F")
-        } else if s.H.pattern_broken() {
-            Some("measurement matrix H")
-        } else {
-            None
-        }
+        s.lin.broken_pattern()
     }
 
     fn scratch<T: Real>(&self) -> MlnScratch<T> {
-        let LinearDims { nu, nz, ny } = self.dims;
-        let splat = |v: &[f64]| v.iter().map(|x| T::splat(*x)).collect::<Vec<T>>();
+        let LinearDims { nu, .. } = self.plan.dims;
         MlnScratch {
+            lin: self.plan.scratch(),
             f: vec![T::splat(0.0); nu],
-            F: self
-                .f_patterns
-                .iter()
-                .map(Sparse::with_pattern_of)
-                .collect(),
             pred: vec![T::splat(0.0); nu],
             drawn: vec![T::splat(0.0); nu],
-            q_l: self.stages.iter().map(|p| splat(&p.q_l)).collect(),
-            factors: self
-                .stages
-                .iter()
-                .map(|p| Factor::new(nz, p.stage.linked.len()))
-                .collect(),
-            h: vec![T::splat(0.0); ny],
-            H: Sparse::with_pattern_of(&self.h_pattern),
-            r: splat(&self.r),
-            resid: vec![T::splat(0.0); ny],
-            y_factor: Factor::new(nz, ny),
         }
     }
 
     fn shape(&self) -> Shape {
-        Shape {
-            sampled: self.dims.nu,
-            marginal: self.dims.nz,
-        }
+        self.plan.shape()
     }
 
     fn draws(&self) -> usize {
@@ -204,15 +153,15 @@ impl<M: ConditionallyLinear> ParticleStep for MlnStep<M> {
         let (u, mu, C) = (p.sampled, p.mean, p.cov);
         let mut ok = T::all_true();
         let mut next_draw = 0;
-        for (st, plan) in self.stages.iter().enumerate() {
-            let F = &mut s.F[st];
+        for (st, (plan, unlinked)) in self.plan.stages.iter().zip(&self.unlinked).enumerate() {
+            let F = &mut s.lin.F[st];
             F.evaluate(|j| self.model.transition(st, k, u_prev, u, &mut s.f, j));
             // Rows that do not depend on z: f plus their own noise (or copied exactly).
-            for &(pos, row, sd) in &plan.noisy_unlinked {
+            for &(pos, row, sd) in &unlinked.noisy {
                 u[row] = s.f[pos] + T::splat(sd) * xi[next_draw];
                 next_draw += 1;
             }
-            for &(pos, row) in &plan.quiet_unlinked {
+            for &(pos, row) in &unlinked.quiet {
                 u[row] = s.f[pos];
             }
             let l = plan.stage.linked.len();
@@ -224,8 +173,8 @@ impl<M: ConditionallyLinear> ParticleStep for MlnStep<M> {
                 s.pred[i] = s.f[pos];
             }
             F.mul_add(mu, &mut s.pred[..l]);
-            let factor = &mut s.factors[st];
-            ok = ok & factorise(factor, C, F, &s.q_l[st], health);
+            let factor = &mut s.lin.factors[st];
+            ok = ok & factorise(factor, C, F, &s.lin.q_l[st], health);
             // (a) u_L = mean + chol(S) ξ and (b) the update of (μ, C) with it: whitened by ξ.
             let xi_l = &xi[next_draw..next_draw + l];
             next_draw += l;
@@ -236,16 +185,12 @@ impl<M: ConditionallyLinear> ParticleStep for MlnStep<M> {
         }
         debug_assert_eq!(next_draw, self.draws);
         // (c)+(d): y_k = h(u_k) + H(u_k) z + η: weight and update in one.
-        s.H.evaluate(|j| self.model.observation(k, u, &mut s.h, j));
-        for (j, r) in s.resid.iter_mut().enumerate() {
-            *r = T::splat(y[j]) - s.h[j];
-        }
-        for e in 0..s.H.nnz() {
-            let (r, c, v) = s.H.entry(e);
-            s.resid[r] -= v * mu[c];
-        }
-        ok = ok & factorise(&mut s.y_factor, C, &s.H, &s.r, health);
-        let (loglik, upd) = s.y_factor.update(mu, C, &s.resid);
+        let lin = &mut s.lin;
+        lin.H
+            .evaluate(|j| self.model.observation(k, u, &mut lin.h, j));
+        lin.innovation(y, mu);
+        ok = ok & factorise(&mut lin.y_factor, C, &lin.H, &lin.r, health);
+        let (loglik, upd) = lin.y_factor.update(mu, C, &lin.resid);
         (loglik, ok & upd)
     }
 }

@@ -12,6 +12,7 @@
 
 pub mod batch;
 pub mod bootstrap;
+pub mod linear_plan;
 pub mod mlnrbpf;
 pub mod model;
 pub mod mpf;

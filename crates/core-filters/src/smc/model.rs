@@ -108,35 +108,6 @@ impl Stage {
     }
 }
 
-/// The set-up the MLN-RBPF and Storvik share: the patterns of `F` (one per stage, over its
-/// linked rows) and of `H`, recorded with one evaluation at `u = 0` (the values are irrelevant,
-/// the pattern is the structure's), and `R`.
-#[track_caller]
-#[allow(non_snake_case)]
-pub fn linear_patterns<M: ConditionallyLinear>(
-    model: &M,
-) -> (Vec<Sparse<f64>>, Sparse<f64>, Vec<f64>) {
-    let LinearDims { nu, nz, ny } = model.dims();
-    let zeros = vec![0.0; nu];
-    let mut f = vec![0.0; nu];
-    let F = model
-        .stages()
-        .iter()
-        .enumerate()
-        .map(|(s, stage)| {
-            let mut F = Sparse::recording(stage.linked.len(), nz);
-            F.evaluate(|j| model.transition(s, 1, &zeros, &zeros, &mut f, j));
-            F
-        })
-        .collect();
-    let mut H = Sparse::recording(ny, nz);
-    let mut h = vec![0.0; ny];
-    H.evaluate(|j| model.observation(1, &zeros, &mut h, j));
-    let r = model.measurement_cov();
-    assert_eq!(r.len(), ny * ny, "R is ny × ny");
-    (F, H, r)
-}
-
 /// A mixed linear/nonlinear model, linear in a static block `z` given the sampled block `u`
 /// (MLN-RBPF and Storvik, SPEC §5.2–5.3), with a staged transition (module docs):
 ///

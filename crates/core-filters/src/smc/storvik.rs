@@ -27,13 +27,14 @@ use serde::{Deserialize, Serialize};
 use crate::error::FilterError;
 use crate::health::Health;
 use crate::linalg::gauss::{factorise, lower_mul, psd_cholesky};
-use crate::linalg::{Factor, FactoredNoise, Sparse};
+use crate::linalg::{FactoredNoise, Sparse};
 use crate::model::Layout;
 use crate::real::Real;
 use crate::rng::StreamRng;
 
 use super::batch::{Ancestry, Marginalized, ParticleStep, Slots};
-use super::model::{linear_patterns, ConditionallyLinear, LinearDims, Stage};
+use super::linear_plan::{LinearPlan, LinearScratch};
+use super::model::{ConditionallyLinear, LinearDims};
 use super::store::Shape;
 
 /// How Storvik's step (iii) treats the measurement `y_k` (SPEC §5.3).
@@ -56,91 +57,50 @@ impl StorvikUpdate {
     }
 }
 
-struct StagePlan {
-    stage: Stage,
-    /// Per row of the stage: index into the stage's linked rows, if linked.
-    linked_index: Vec<Option<usize>>,
-    /// Per linked row: its position in the stage's rows.
-    linked_pos: Vec<usize>,
-    /// Per row of the stage: the noise s.d.
-    sd: Vec<f64>,
-    q_l: Vec<f64>,
-}
-
 /// The per-particle step of Storvik's algorithm (SPEC §5.3).
 pub struct StorvikStep<M> {
     model: M,
-    dims: LinearDims,
+    plan: LinearPlan,
     update: StorvikUpdate,
-    stages: Vec<StagePlan>,
-    f_patterns: Vec<Sparse<f64>>,
-    h_pattern: Sparse<f64>,
     ju_pattern: Sparse<f64>,
     s_pattern: Sparse<f64>,
     /// Entries of the sensitivity pattern by row.
     s_rows: Vec<Vec<usize>>,
-    r: Vec<f64>,
     noise: Result<FactoredNoise, FilterError>,
     draws: usize,
 }
 
 /// Scratch of one [`StorvikStep`] for one number type.
 pub struct StorvikScratch<T> {
+    lin: LinearScratch<T>,
     L: Vec<T>,
     z0: Vec<T>,
     /// `f` of every stage (kept for the updates of step (iii)).
     f: Vec<Vec<T>>,
-    F: Vec<Sparse<T>>,
     fz: Vec<T>,
     resid_l: Vec<T>,
-    q_l: Vec<Vec<T>>,
-    factors: Vec<Factor<T>>,
-    h: Vec<T>,
-    H: Sparse<T>,
     Ju: Sparse<T>,
     S: Sparse<T>,
     G: Sparse<T>,
     yhat: Vec<T>,
-    resid: Vec<T>,
     white: Vec<T>,
-    r: Vec<T>,
-    y_factor: Factor<T>,
 }
 
 impl<M: ConditionallyLinear> StorvikStep<M> {
     /// Reads the model, records the Jacobian patterns and factorises `R` once.
     #[track_caller]
     pub fn new(model: M, update: StorvikUpdate) -> Self {
-        let dims = model.dims();
-        let LinearDims { nu, nz, ny } = dims;
-        let sd = model.process_noise_sd().to_vec();
-        assert_eq!(sd.len(), nu, "process noise s.d. of every row of u");
-        let mut draws = nz;
-        let stages: Vec<StagePlan> = model
-            .stages()
-            .iter()
-            .map(|st| {
-                let linked_index = st
-                    .rows
-                    .iter()
-                    .map(|r| st.linked.iter().position(|l| l == r))
-                    .collect();
-                let linked_pos = st.linked_positions();
-                let q_l = st.linked_noise_cov(&sd);
-                let row_sd: Vec<f64> = st.rows.iter().map(|&r| sd[r]).collect();
-                draws += row_sd.iter().filter(|s| **s != 0.0).count();
-                StagePlan {
-                    stage: st.clone(),
-                    linked_index,
-                    linked_pos,
-                    sd: row_sd,
-                    q_l,
-                }
-            })
-            .collect();
+        let plan = LinearPlan::new(&model);
+        let LinearDims { nu, nz, ny } = plan.dims;
+        // z0 takes nz draws; every row with noise one more.
+        let draws = nz
+            + plan
+                .stages
+                .iter()
+                .map(|st| st.sd.iter().filter(|s| **s != 0.0).count())
+                .sum::<usize>();
         let zu = vec![0.0; nu];
         let zz = vec![0.0; nz];
-        let (f_patterns, h_pattern, r) = linear_patterns(&model);
         let mut ju_pattern = Sparse::recording(ny, nu);
         ju_pattern.evaluate(|j| model.observation_jacobian_u(1, &zu, &zz, j));
         let mut s_pattern = Sparse::recording(nu, nz);
@@ -150,18 +110,14 @@ impl<M: ConditionallyLinear> StorvikStep<M> {
             s_rows[s_pattern.entry(e).0].push(e);
         }
         let mut setup = Health::default();
-        let noise = FactoredNoise::new(&r, ny, "measurement covariance R", &mut setup);
+        let noise = FactoredNoise::new(&plan.r, ny, "measurement covariance R", &mut setup);
         Self {
             model,
-            dims,
+            plan,
             update,
-            stages,
-            f_patterns,
-            h_pattern,
             ju_pattern,
             s_pattern,
             s_rows,
-            r,
             noise,
             draws,
         }
@@ -203,10 +159,8 @@ impl<M: ConditionallyLinear> ParticleStep for StorvikStep<M> {
     }
 
     fn broken_pattern<T: Real>(s: &StorvikScratch<T>) -> Option<&'static str> {
-        if s.F.iter().any(Sparse::pattern_broken) {
-            Some("transition matrix F")
-        } else if s.H.pattern_broken() {
-            Some("measurement matrix H")
+        if let Some(which) = s.lin.broken_pattern() {
+            Some(which)
         } else if s.Ju.pattern_broken() {
             Some("measurement Jacobian J_u")
         } else if s.S.pattern_broken() {
@@ -217,44 +171,25 @@ impl<M: ConditionallyLinear> ParticleStep for StorvikStep<M> {
     }
 
     fn scratch<T: Real>(&self) -> StorvikScratch<T> {
-        let LinearDims { nu, nz, ny } = self.dims;
+        let LinearDims { nu, nz, ny } = self.plan.dims;
         let z = T::splat(0.0);
-        let splat = |v: &[f64]| v.iter().map(|x| T::splat(*x)).collect::<Vec<T>>();
         StorvikScratch {
+            lin: self.plan.scratch(),
             L: vec![z; nz * nz],
             z0: vec![z; nz],
-            f: self.stages.iter().map(|_| vec![z; nu]).collect(),
-            F: self
-                .f_patterns
-                .iter()
-                .map(Sparse::with_pattern_of)
-                .collect(),
+            f: self.plan.stages.iter().map(|_| vec![z; nu]).collect(),
             fz: vec![z; nu],
             resid_l: vec![z; nu],
-            q_l: self.stages.iter().map(|p| splat(&p.q_l)).collect(),
-            factors: self
-                .stages
-                .iter()
-                .map(|p| Factor::new(nz, p.stage.linked.len()))
-                .collect(),
-            h: vec![z; ny],
-            H: Sparse::with_pattern_of(&self.h_pattern),
             Ju: Sparse::with_pattern_of(&self.ju_pattern),
             S: Sparse::with_pattern_of(&self.s_pattern),
             G: Sparse::dense(ny, nz),
             yhat: vec![z; ny],
-            resid: vec![z; ny],
             white: vec![z; ny],
-            r: splat(&self.r),
-            y_factor: Factor::new(nz, ny),
         }
     }
 
     fn shape(&self) -> Shape {
-        Shape {
-            sampled: self.dims.nu,
-            marginal: self.dims.nz,
-        }
+        self.plan.shape()
     }
 
     fn draws(&self) -> usize {
@@ -276,7 +211,7 @@ impl<M: ConditionallyLinear> ParticleStep for StorvikStep<M> {
             xi,
         } = from;
         let (u, mu, C) = (p.sampled, p.mean, p.cov);
-        let LinearDims { nz, ny, .. } = self.dims;
+        let LinearDims { nz, ny, .. } = self.plan.dims;
         let noise = match &self.noise {
             Ok(n) => n,
             Err(_) => return (T::splat(f64::NAN), T::not(T::all_true())),
@@ -289,8 +224,8 @@ impl<M: ConditionallyLinear> ParticleStep for StorvikStep<M> {
         }
         let mut next_draw = nz;
         // (ii) u_k ~ N(f + F z0, Q_u), stage by stage.
-        for (st, plan) in self.stages.iter().enumerate() {
-            let (F, f) = (&mut s.F[st], &mut s.f[st]);
+        for (st, plan) in self.plan.stages.iter().enumerate() {
+            let (F, f) = (&mut s.lin.F[st], &mut s.f[st]);
             F.evaluate(|j| self.model.transition(st, k, u_prev, u, f, j));
             let l = plan.stage.linked.len();
             s.fz[..l].fill(T::splat(0.0));
@@ -308,20 +243,22 @@ impl<M: ConditionallyLinear> ParticleStep for StorvikStep<M> {
             }
         }
         // Weight N(y_k; H(u_k) z0 + h(u_k), R).
-        s.H.evaluate(|j| self.model.observation(k, u, &mut s.h, j));
-        s.yhat.copy_from_slice(&s.h);
-        s.H.mul_add(&s.z0, &mut s.yhat);
+        let lin = &mut s.lin;
+        lin.H
+            .evaluate(|j| self.model.observation(k, u, &mut lin.h, j));
+        s.yhat.copy_from_slice(&lin.h);
+        lin.H.mul_add(&s.z0, &mut s.yhat);
         for j in 0..ny {
-            s.resid[j] = T::splat(y[j]) - s.yhat[j];
+            lin.resid[j] = T::splat(y[j]) - s.yhat[j];
         }
-        let loglik = noise.log_density(&s.resid, &mut s.white);
+        let loglik = noise.log_density(&lin.resid, &mut s.white);
         // (iii) the linked rows of every stage: linear in z along the sampled path.
-        for (st, plan) in self.stages.iter().enumerate() {
+        for (st, plan) in self.plan.stages.iter().enumerate() {
             let l = plan.stage.linked.len();
             if l == 0 {
                 continue;
             }
-            let F = &s.F[st];
+            let F = &lin.F[st];
             for (i, &pos) in plan.linked_pos.iter().enumerate() {
                 s.resid_l[i] = u[plan.stage.rows[pos]] - s.f[st][pos];
             }
@@ -329,22 +266,16 @@ impl<M: ConditionallyLinear> ParticleStep for StorvikStep<M> {
                 let (r, c, v) = F.entry(e);
                 s.resid_l[r] -= v * mu[c];
             }
-            let factor = &mut s.factors[st];
-            ok = ok & factorise(factor, C, F, &s.q_l[st], health);
+            let factor = &mut lin.factors[st];
+            ok = ok & factorise(factor, C, F, &lin.q_l[st], health);
             let (_, upd) = factor.update(mu, C, &s.resid_l[..l]);
             ok = ok & upd;
         }
         // … then y_k.
         match self.update {
             StorvikUpdate::Exact => {
-                for j in 0..ny {
-                    s.resid[j] = T::splat(y[j]) - s.h[j];
-                }
-                for e in 0..s.H.nnz() {
-                    let (r, c, v) = s.H.entry(e);
-                    s.resid[r] -= v * mu[c];
-                }
-                ok = ok & factorise(&mut s.y_factor, C, &s.H, &s.r, health);
+                lin.innovation(y, mu);
+                ok = ok & factorise(&mut lin.y_factor, C, &lin.H, &lin.r, health);
             }
             StorvikUpdate::Linearised => {
                 // G = H(u_k) + J_u ∂u_k/∂z at z0, dense (ny × nz, column-major values).
@@ -352,8 +283,8 @@ impl<M: ConditionallyLinear> ParticleStep for StorvikStep<M> {
                 s.S.evaluate(|j| self.model.transition_sensitivity(k, u_prev, u, &s.z0, j));
                 let g = s.G.values_mut();
                 g.fill(T::splat(0.0));
-                for e in 0..s.H.nnz() {
-                    let (r, c, v) = s.H.entry(e);
+                for e in 0..lin.H.nnz() {
+                    let (r, c, v) = lin.H.entry(e);
                     g[r + c * ny] += v;
                 }
                 for e in 0..s.Ju.nnz() {
@@ -365,18 +296,18 @@ impl<M: ConditionallyLinear> ParticleStep for StorvikStep<M> {
                 }
                 // ŷ = g(z0) + G (μ − z0), g(z0) = h + H z0 (= s.yhat).
                 for j in 0..ny {
-                    s.resid[j] = T::splat(y[j]) - s.yhat[j];
+                    lin.resid[j] = T::splat(y[j]) - s.yhat[j];
                 }
                 for c in 0..nz {
                     let d = mu[c] - s.z0[c];
                     for r in 0..ny {
-                        s.resid[r] -= g[r + c * ny] * d;
+                        lin.resid[r] -= g[r + c * ny] * d;
                     }
                 }
-                ok = ok & factorise(&mut s.y_factor, C, &s.G, &s.r, health);
+                ok = ok & factorise(&mut lin.y_factor, C, &s.G, &lin.r, health);
             }
         }
-        let (_, upd) = s.y_factor.update(mu, C, &s.resid);
+        let (_, upd) = lin.y_factor.update(mu, C, &lin.resid);
         debug_assert_eq!(next_draw, self.draws);
         (loglik, ok & upd)
     }
