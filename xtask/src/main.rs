@@ -15,9 +15,11 @@
 //!   `experiments/real/study.toml` into `results/real/` (REPORT.md). Without Python or network
 //!   the committed baseline numbers are used and the run says so.
 //! - `regression [--threads N] [--resume]`: builds `sysid` in release and runs `sysid regression`
-//!   on `experiments/regression.toml` (into `results/regression/`) and
-//!   `experiments/regression-symplectic.toml` (into `results/regression-symplectic/`); fails when
-//!   a bound is breached.
+//!   on `experiments/regression.toml` (the paper's settings, into `results/regression/`),
+//!   `experiments/regression-symplectic.toml` (into `results/regression-symplectic/`) and
+//!   `experiments/regression-defaults.toml` (`sysid filter`'s default settings, with bounds on
+//!   the 95 % coverage of k and c, into `results/regression-defaults/`); fails when a bound is
+//!   breached.
 //!   Every run is computed unless `--resume` is given.
 //! - `docs`: regenerates the README's headline table (from the paper's Fig. 7 records),
 //!   `docs/cli.md` (from `sysid`'s own help) and the module layers of `docs/architecture.md`;
@@ -94,7 +96,8 @@ enum Task {
         #[arg(long)]
         resume: bool,
     },
-    /// Identification-accuracy regression check (experiments/regression.toml).
+    /// Identification-accuracy regression checks (experiments/regression.toml,
+    /// regression-symplectic.toml and regression-defaults.toml).
     Regression {
         /// Worker threads (0: one per core).
         #[arg(long, default_value_t = 0)]
@@ -273,12 +276,17 @@ fn main() -> Result<()> {
         Task::ReproduceExcitations(a) => reproduce_study(&root, "excitations", a),
         Task::Regression { threads, resume } => {
             let sysid = build_sysid(&root)?;
-            // The paper's (forward Euler) filters, then the symplectic scheme's bounds.
+            // The paper's (forward Euler) filters, the symplectic scheme's bounds, then the
+            // default settings of `sysid filter` (with coverage bounds).
             for (config, out) in [
                 ("experiments/regression.toml", "results/regression"),
                 (
                     "experiments/regression-symplectic.toml",
                     "results/regression-symplectic",
+                ),
+                (
+                    "experiments/regression-defaults.toml",
+                    "results/regression-defaults",
                 ),
             ] {
                 let mut cmd = Command::new(&sysid);

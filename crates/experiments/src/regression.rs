@@ -8,7 +8,10 @@
 //!   and the run-to-run s.d. of θ_val/θ_true (the Fig. 7 cross of SPEC §8);
 //! - per algorithm, the number of failed runs (SPEC §3: a failure is reported, never hidden);
 //! - optionally, a degeneracy bound: the mean over runs of the number of distinct values of each
-//!   sampled static parameter (SPEC §5.1: the bootstrap PF is expected to collapse).
+//!   sampled static parameter (SPEC §5.1: the bootstrap PF is expected to collapse);
+//! - optionally, a lower bound on the pooled coverage of the central 95 % credible intervals of
+//!   the stiffnesses and dampings (SPEC §9; counted by
+//!   [`crate::coverage::stiffness_damping_coverage`]).
 //!
 //! Every run draws from streams seeded by (master seed, run), so on unchanged code the measured
 //! values are reproduced exactly; the margins in the file allow a change that is statistically
@@ -41,6 +44,10 @@ pub struct AlgorithmThresholds {
     /// Bound on the mean over runs of the number of distinct values of every sampled static
     /// parameter at the end of the run (degeneracy, SPEC §5.1, §7).
     pub max_distinct_sampled_mean: Option<f64>,
+    /// Lower bound on the pooled coverage of the central 95 % credible intervals of every k_j
+    /// and c_j over the completed runs ([`KcCoverage`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub min_coverage95_kc: Option<f64>,
 }
 
 /// A regression file: the study to run and the bounds its statistics must meet.
@@ -100,6 +107,14 @@ impl RegressionFile {
                     }
                 }
             }
+            if let Some(c) = t.min_coverage95_kc {
+                if !(0.0..=1.0).contains(&c) {
+                    bail!(
+                        "[thresholds.{}] min_coverage95_kc = {c} is not a proportion in [0, 1]",
+                        a.name()
+                    );
+                }
+            }
             if let Some(d) = t.max_distinct_sampled_mean {
                 if !(d.is_finite() && d >= 1.0) {
                     bail!(
@@ -121,16 +136,19 @@ impl RegressionFile {
 /// Parameter names of the `paper-3dof` preset (SPEC §1).
 pub const PAPER_PARAMS: [&str; 9] = ["k1", "k2", "k3", "c1", "c2", "c3", "beta", "gamma", "n"];
 
-/// One comparison of a measured statistic with its bound (`measured ≤ bound` passes; NaN fails).
+/// One comparison of a measured statistic with its bound (`measured ≤ bound` passes, or
+/// `measured ≥ bound` for a lower bound; NaN fails).
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Check {
     pub algorithm: String,
-    /// `rel_error_mean`, `ratio_sd`, `failed` or `distinct_sampled_mean`.
+    /// `rel_error_mean`, `ratio_sd`, `failed`, `distinct_sampled_mean` or `coverage95_kc`.
     pub quantity: String,
-    /// Parameter name (empty for `failed`).
+    /// Parameter name (empty for `failed`; `k,c` for the pooled coverage).
     pub parameter: String,
     pub measured: f64,
     pub bound: f64,
+    /// The bound is a lower bound (coverage) instead of an upper one.
+    pub at_least: bool,
     /// Standard error of the measured value over the runs, when defined (for recalibration).
     pub std_error: Option<f64>,
 }
@@ -138,8 +156,83 @@ pub struct Check {
 impl Check {
     /// Whether the measured value meets its bound (a NaN never does).
     pub fn ok(&self) -> bool {
-        self.measured <= self.bound
+        if self.at_least {
+            self.measured >= self.bound
+        } else {
+            self.measured <= self.bound
+        }
     }
+}
+
+/// Pooled coverage of the central 95 % credible intervals of the stiffnesses and dampings of one
+/// algorithm's records: over the completed runs with a known truth, the fraction of (run, k_j or
+/// c_j) pairs whose interval contains the true value
+/// ([`crate::coverage::stiffness_damping_coverage`]).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct KcCoverage {
+    /// Covered pairs / pairs (NaN without a pair).
+    pub fraction: f64,
+    /// (run, parameter) pairs counted.
+    pub pairs: usize,
+    /// Runs contributing pairs.
+    pub runs: usize,
+    /// Standard error of `fraction`: the larger of the binomial s.e. √(p(1 − p)/pairs) and the
+    /// s.e. over runs (s.d. of the per-run fractions / √runs), since the intervals of one run are
+    /// not independent. NaN with fewer than 2 runs.
+    pub std_error: f64,
+}
+
+/// The pooled 95 % coverage of the k_j and c_j of `records` (one algorithm's runs), counted by
+/// [`crate::coverage::stiffness_damping_coverage`] over all of them and per run for the s.e.
+pub fn kc_coverage95(records: &[&RunRecord]) -> KcCoverage {
+    let (fraction, pairs) = crate::coverage::stiffness_damping_coverage(records, 0.95);
+    let per_run: Vec<f64> = records
+        .iter()
+        .filter_map(
+            |r| match crate::coverage::stiffness_damping_coverage(&[*r], 0.95) {
+                (f, n) if n > 0 => Some(f),
+                _ => None,
+            },
+        )
+        .collect();
+    let (_, sd, runs) = mean_sd(&per_run);
+    let std_error = if runs > 1 && pairs > 0 {
+        let binomial = (fraction * (1.0 - fraction) / pairs as f64).sqrt();
+        binomial.max(sd / (runs as f64).sqrt())
+    } else {
+        f64::NAN
+    };
+    KcCoverage {
+        fraction,
+        pairs,
+        runs,
+        std_error,
+    }
+}
+
+/// Compares the pooled 95 % coverage of every algorithm with a `min_coverage95_kc` bound with
+/// that bound. An algorithm without a measured coverage (no record, or no interval) yields a
+/// failing check (NaN).
+pub fn evaluate_coverage(
+    thresholds: &BTreeMap<String, AlgorithmThresholds>,
+    coverage: &BTreeMap<String, KcCoverage>,
+) -> Vec<Check> {
+    thresholds
+        .iter()
+        .filter_map(|(alg, t)| {
+            let bound = t.min_coverage95_kc?;
+            let c = coverage.get(alg);
+            Some(Check {
+                algorithm: alg.clone(),
+                quantity: "coverage95_kc".into(),
+                parameter: "k,c".into(),
+                measured: c.map_or(f64::NAN, |c| c.fraction),
+                bound,
+                at_least: true,
+                std_error: c.map(|c| c.std_error).filter(|s| s.is_finite()),
+            })
+        })
+        .collect()
 }
 
 /// Compares statistics with bounds. An algorithm with bounds but without statistics, or a
@@ -159,6 +252,7 @@ pub fn evaluate(
             parameter: parameter.into(),
             measured,
             bound,
+            at_least: false,
             std_error: None,
         };
         out.push(check(
@@ -256,15 +350,17 @@ pub fn format_table(checks: &[Check]) -> String {
     );
     for c in checks {
         let se = c.std_error.map_or("-".into(), |v| format!("{v:.4}"));
+        // A lower bound is marked `≥`.
+        let bound = format!("{}{:.4}", if c.at_least { "≥" } else { "" }, c.bound);
         let _ = writeln!(
             s,
-            "{:<10} {:<22} {:<6} {:>10.4} {:>10} {:>10.4}  {}",
+            "{:<10} {:<22} {:<6} {:>10.4} {:>10} {:>10}  {}",
             c.algorithm,
             c.quantity,
             c.parameter,
             c.measured,
             se,
-            c.bound,
+            bound,
             if c.ok() { "ok" } else { "BREACH" }
         );
     }
@@ -294,6 +390,8 @@ pub struct RegressionRun {
     /// Records reused (`resume`).
     pub reused: usize,
     pub stats: Vec<AlgorithmStats>,
+    /// Algorithm → pooled 95 % coverage of its k_j and c_j.
+    pub coverage: BTreeMap<String, KcCoverage>,
     pub checks: Vec<Check>,
     _lock: DirLock,
 }
@@ -346,12 +444,24 @@ pub fn run(file: &RegressionFile, options: &RegressionOptions) -> Result<Regress
             algorithm_stats(a.name(), &recs)
         })
         .collect();
-    let checks = evaluate(&file.thresholds, &stats, &rel_error_std_errors(&records));
+    let coverage: BTreeMap<String, KcCoverage> = study
+        .sweep
+        .algorithms
+        .iter()
+        .map(|a| {
+            let recs: Vec<&RunRecord> =
+                records.iter().filter(|r| r.algorithm == a.name()).collect();
+            (a.name().to_string(), kc_coverage95(&recs))
+        })
+        .collect();
+    let mut checks = evaluate(&file.thresholds, &stats, &rel_error_std_errors(&records));
+    checks.extend(evaluate_coverage(&file.thresholds, &coverage));
     Ok(RegressionRun {
         records,
         executed: outcome.executed,
         reused: outcome.reused,
         stats,
+        coverage,
         checks,
         _lock: lock,
     })
@@ -368,6 +478,7 @@ impl RegressionRun {
                 "wall_s": wall_s,
                 "runs": { "executed": self.executed, "reused": self.reused, "total": self.records.len() },
                 "stats": self.stats,
+                "coverage95_kc": self.coverage,
                 "checks": self.checks.iter().map(|c| serde_json::json!({
                     "check": c, "ok": c.ok()
                 })).collect::<Vec<_>>(),
@@ -384,8 +495,13 @@ impl RegressionRun {
             .filter(|c| !c.ok())
             .map(|c| {
                 format!(
-                    "{} {} {}: {} > {}",
-                    c.algorithm, c.quantity, c.parameter, c.measured, c.bound
+                    "{} {} {}: {} {} {}",
+                    c.algorithm,
+                    c.quantity,
+                    c.parameter,
+                    c.measured,
+                    if c.at_least { "<" } else { ">" },
+                    c.bound
                 )
             })
             .collect();
@@ -430,6 +546,7 @@ mod tests {
             rel_error_mean: [("k1".to_string(), 0.05)].into(),
             ratio_sd: [("k1".to_string(), 0.02)].into(),
             max_distinct_sampled_mean: None,
+            min_coverage95_kc: None,
         };
         [("mln-rbpf".to_string(), t)].into()
     }
@@ -452,6 +569,64 @@ mod tests {
             &BTreeMap::new(),
         );
         assert!(c.iter().all(|c| !c.ok()));
+    }
+
+    #[test]
+    fn coverage_below_its_lower_bound_is_a_breach() {
+        let mut t = bounds();
+        t.get_mut("mln-rbpf").unwrap().min_coverage95_kc = Some(0.7);
+        let cov = |fraction: f64| -> BTreeMap<String, KcCoverage> {
+            [(
+                "mln-rbpf".to_string(),
+                KcCoverage {
+                    fraction,
+                    pairs: 144,
+                    runs: 24,
+                    std_error: 0.03,
+                },
+            )]
+            .into()
+        };
+        // At the bound and above: met (the bound is inclusive).
+        for f in [0.7, 0.9, 1.0] {
+            let c = evaluate_coverage(&t, &cov(f));
+            assert_eq!(c.len(), 1);
+            assert!(c[0].ok() && c[0].at_least, "{f}");
+            assert_eq!(c[0].std_error, Some(0.03));
+        }
+        // Below it, NaN (no interval) or no records of the algorithm: breached.
+        for f in [0.7 - 1e-9, 0.5, 0.0, f64::NAN] {
+            assert!(!evaluate_coverage(&t, &cov(f))[0].ok(), "{f}");
+        }
+        assert!(!evaluate_coverage(&t, &BTreeMap::new())[0].ok());
+        // An algorithm without a coverage bound gets no coverage check.
+        assert!(evaluate_coverage(&bounds(), &cov(0.0)).is_empty());
+        // The table marks the lower bound and the breach.
+        let c = evaluate_coverage(&t, &cov(0.5));
+        let table = format_table(&c);
+        assert!(
+            table.contains("≥0.7000") && table.contains("BREACH"),
+            "{table}"
+        );
+    }
+
+    #[test]
+    fn a_coverage_bound_must_be_a_proportion() {
+        let text = |c: f64| {
+            format!(
+                "[study]\nname = \"r\"\ndescription = \"d\"\n[study.data]\npreset = \"paper-3dof\"\n\
+                 [study.sweep]\nalgorithms = [\"mln-rbpf\"]\nruns = 2\nmaster_seed = 1\n\
+                 particles = [10]\n[thresholds.mln-rbpf]\nmax_failed = 0\n\
+                 min_coverage95_kc = {c}\n[thresholds.mln-rbpf.rel_error_mean]\nk1 = 0.1\n\
+                 [thresholds.mln-rbpf.ratio_sd]\nk1 = 0.1\n"
+            )
+        };
+        let f = RegressionFile::parse(&text(0.7), &["k1"]).unwrap();
+        assert_eq!(f.thresholds["mln-rbpf"].min_coverage95_kc, Some(0.7));
+        for bad in [1.5, -0.1] {
+            let err = RegressionFile::parse(&text(bad), &["k1"]).unwrap_err();
+            assert!(err.to_string().contains("min_coverage95_kc"), "{err}");
+        }
     }
 
     #[test]

@@ -1,11 +1,20 @@
 //! The regression file parses, covers every algorithm and parameter of its sweep, and its bounds
 //! flag a statistic that moved past them.
 
+mod common;
+
 use std::collections::BTreeMap;
 use std::path::PathBuf;
 
-use experiments::regression::{evaluate, format_table, RegressionFile, PAPER_PARAMS};
+use core_filters::credible::{CredibleInterval, STANDARD_LEVELS};
+use experiments::observe::{ParamIntervals, PosteriorShape};
+use experiments::record::RunRecord;
+use experiments::regression::{
+    evaluate, evaluate_coverage, format_table, kc_coverage95, KcCoverage, RegressionFile,
+    PAPER_PARAMS,
+};
 use experiments::reproduce::{AlgorithmStats, ParamStats};
+use experiments::settings::FilterSettings;
 
 fn file() -> RegressionFile {
     let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../experiments/regression.toml");
@@ -141,4 +150,110 @@ fn statistics_at_the_bounds_pass_and_each_synthetic_breach_is_flagged() {
         .iter()
         .any(|c| !c.ok() && c.parameter == "n" && c.quantity == "ratio_sd"));
     assert!(c.iter().filter(|c| c.algorithm == algs[3]).all(|c| !c.ok()));
+}
+
+fn defaults_file() -> RegressionFile {
+    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../../experiments/regression-defaults.toml");
+    RegressionFile::load(&path).expect("experiments/regression-defaults.toml")
+}
+
+#[test]
+fn the_defaults_regression_file_runs_the_settings_of_sysid_filter() {
+    let f = defaults_file();
+    assert_eq!(f.study.data.preset, "paper-3dof");
+    // Every job runs what `sysid filter` uses without --config on this structure (3 storeys,
+    // every storey measured), but keeps no trace, loops or validation.
+    for job in f.study.jobs() {
+        let mut expected = FilterSettings::recommended_for(job.algorithm, 3, &[]);
+        expected.trace_every = 0;
+        expected.loop_every = 0;
+        expected.validate = false;
+        assert_eq!(f.study.settings(&job), expected, "{}", job.algorithm.name());
+    }
+    // The three marginalised filters never fail and have a coverage bound.
+    for alg in ["mln-rbpf", "storvik", "mpf-ekf2"] {
+        let t = &f.thresholds[alg];
+        assert_eq!(t.max_failed, 0, "{alg}");
+        assert!(t.min_coverage95_kc.is_some_and(|c| c > 0.5), "{alg}");
+    }
+}
+
+/// Run `i` of one algorithm: every parameter's 95 % interval is θ_true ± 5 %, shifted off the
+/// truth for the first `missed` of k1, k2, k3, c1, c2, c3.
+fn covering(i: u64, missed: usize) -> RunRecord {
+    let mut r = common::record("mpf-ekf2", i, [1.0; 9], 0.05);
+    r.credible = common::NAMES
+        .iter()
+        .enumerate()
+        .map(|(j, name)| {
+            let t = common::THETA_TRUE[j];
+            let centre = if j < missed { 1.2 * t } else { t };
+            ParamIntervals {
+                parameter: name.to_string(),
+                shape: PosteriorShape::GaussianMixture,
+                intervals: STANDARD_LEVELS
+                    .iter()
+                    .map(|&level| CredibleInterval {
+                        level,
+                        lo: centre - 0.05 * t,
+                        hi: centre + 0.05 * t,
+                    })
+                    .collect(),
+                error: None,
+                mc_se: None,
+            }
+        })
+        .collect();
+    r
+}
+
+#[test]
+fn coverage_counted_from_records_and_breached_below_the_bound() {
+    // 10 runs: runs 0–4 miss one k or c of six, runs 5–9 none: 55 of 60 covered.
+    let records: Vec<RunRecord> = (0..10).map(|i| covering(i, usize::from(i < 5))).collect();
+    let refs: Vec<&RunRecord> = records.iter().collect();
+    let c = kc_coverage95(&refs);
+    assert_eq!((c.pairs, c.runs), (60, 10));
+    assert!((c.fraction - 55.0 / 60.0).abs() < 1e-12, "{c:?}");
+    // s.e.: the larger of the binomial one (0.0357) and the one over runs (per-run fractions
+    // 5/6 and 1, s.d. 0.0878, / √10 = 0.0278).
+    let binomial = (55.0 / 60.0 * 5.0 / 60.0 / 60.0_f64).sqrt();
+    assert!((c.std_error - binomial).abs() < 1e-12, "{c:?}");
+
+    // Against the defaults file's MPF-EKF2 bound: a coverage at the bound passes, the same
+    // records with more intervals off the truth breach it.
+    let f = defaults_file();
+    let bound = f.thresholds["mpf-ekf2"].min_coverage95_kc.unwrap();
+    let at: BTreeMap<String, KcCoverage> = [(
+        "mpf-ekf2".to_string(),
+        KcCoverage {
+            fraction: bound,
+            ..c
+        },
+    )]
+    .into();
+    let checks = evaluate_coverage(&f.thresholds, &at);
+    let mpf: Vec<_> = checks
+        .iter()
+        .filter(|c| c.algorithm == "mpf-ekf2")
+        .collect();
+    assert_eq!(mpf.len(), 1);
+    assert!(mpf[0].ok());
+    // Three of six missed in every run: coverage 0.5, below every bound of the file.
+    let worse: Vec<RunRecord> = (0..10).map(|i| covering(i, 3)).collect();
+    let worse: Vec<&RunRecord> = worse.iter().collect();
+    let w = kc_coverage95(&worse);
+    assert!((w.fraction - 0.5).abs() < 1e-12);
+    let checks = evaluate_coverage(&f.thresholds, &[("mpf-ekf2".to_string(), w)].into());
+    let mpf: Vec<_> = checks
+        .iter()
+        .filter(|c| c.algorithm == "mpf-ekf2")
+        .collect();
+    assert!(!mpf[0].ok(), "{}", format_table(&checks));
+    // Algorithms with a bound but no coverage measured are breaches too.
+    assert!(checks
+        .iter()
+        .filter(|c| c.algorithm != "mpf-ekf2")
+        .all(|c| !c.ok()));
 }

@@ -8,7 +8,9 @@
 //!   and the run-to-run s.d. of θ_val/θ_true (the Fig. 7 cross of SPEC §8);
 //! - per algorithm, the number of failed runs (SPEC §3: a failure is reported, never hidden);
 //! - optionally, a degeneracy bound: the mean over runs of the number of distinct values of each
-//!   sampled static parameter (SPEC §5.1: the bootstrap PF is expected to collapse).
+//!   sampled static parameter (SPEC §5.1: the bootstrap PF is expected to collapse);
+//! - optionally, a lower bound on the pooled coverage of the 95 % credible intervals of the
+//!   stiffnesses and dampings (`experiments/regression-defaults.toml`).
 //!
 //! Every run draws from streams seeded by (master seed, run), so on unchanged code the measured
 //! values are reproduced exactly; the margins in the file allow a change that is statistically
