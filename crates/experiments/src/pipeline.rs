@@ -383,6 +383,28 @@ pub fn resolve_substeps(
     Some(a)
 }
 
+/// With `substeps = "auto"`, on field data with the data-scaled prior and a building with
+/// Bouc–Wen elements: the sub-steps [`crate::scaled_prior::hysteretic_substeps`] asks for from
+/// ω₁·dt, when they are more than `spec.substeps` (MPF-EKF2 and bootstrap PF; MLN-RBPF and
+/// Storvik keep one transition per sample). Returns the rule's reading when it applies.
+pub fn resolve_hysteretic_substeps(
+    algorithm: Algorithm,
+    spec: &mut ChainSpec,
+    s: &FilterSettings,
+    scaled: Option<&crate::scaled_prior::ScaledPrior>,
+) -> Option<crate::scaled_prior::HystereticSubsteps> {
+    let scaled = scaled?;
+    if s.substeps != Substeps::Auto
+        || spec.building.hysteretic().is_empty()
+        || matches!(algorithm, Algorithm::MlnRbpf | Algorithm::Storvik)
+    {
+        return None;
+    }
+    let h = crate::scaled_prior::HystereticSubsteps::new(scaled.omega1, spec.dt);
+    spec.substeps = spec.substeps.max(h.substeps);
+    Some(h)
+}
+
 pub fn build_filter(
     algorithm: Algorithm,
     spec: ChainSpec,
@@ -529,6 +551,22 @@ pub fn identify_stoppable(
     crate::limits::check_filter_settings(s)?;
     let mut spec = chain_spec(data, input.chain, s)?;
     let auto = resolve_substeps(algorithm, &mut spec, s);
+    let scaled = prior_from_data(data, input.chain, s)?;
+    let hysteretic_auto = resolve_hysteretic_substeps(algorithm, &mut spec, s, scaled.as_ref());
+    if let (Some(h), true) = (hysteretic_auto, input.progress) {
+        if h.substeps > 1 {
+            eprintln!(
+                "sub-steps: {} per sample (auto: Bouc–Wen elements and ω₁·dt = {:.4} above {}; \
+                 ω₁·dt/{} = {:.4} ≤ {})",
+                spec.substeps,
+                h.omega1_dt,
+                h.above,
+                h.substeps,
+                h.omega1_dt / h.substeps as f64,
+                h.max_omega1_h
+            );
+        }
+    }
     if let (Some(a), true) = (auto, input.progress) {
         if a.substeps == 1 && a.error_one > models::filtering::substeps::SUBSTEP_ABOVE {
             eprintln!(
@@ -651,7 +689,6 @@ pub fn identify_stoppable(
     if let Some(f) = &d.summary.failure {
         failures.insert(f.kind().to_string(), 1);
     }
-    let scaled = prior_from_data(data, input.chain, s)?;
     let mut config = serde_json::json!({
         "algorithm": algorithm.name(),
         "filter": s,
@@ -669,6 +706,9 @@ pub fn identify_stoppable(
     }
     if let Some(a) = auto {
         config["substeps_auto"] = serde_json::to_value(a).expect("serialisable");
+    }
+    if let Some(h) = hysteretic_auto {
+        config["substeps_hysteretic"] = serde_json::to_value(h).expect("serialisable");
     }
     if !spec.building.damping().is_default() {
         config["spec"]["damping"] = spec.building.damping().name().into();
