@@ -93,10 +93,15 @@ impl ScaledPrior {
 pub const HYSTERETIC_SUBSTEP_ABOVE: f64 = 0.01;
 /// Largest ω₁·h (h = dt/M, the filter's step) left once it sub-steps.
 pub const HYSTERETIC_MAX_OMEGA1_H: f64 = 0.0035;
+/// Most sub-steps the rule chooses: the most it was measured with. A record sampled more
+/// coarsely still (the shake-table frame at 120 Hz has ω₁·dt ≈ 0.19 and would ask for 55) gets
+/// these 8 and a cost 8 times one step's, not a cost without a measured gain; `--substeps N`
+/// chooses more.
+pub const HYSTERETIC_MAX_SUBSTEPS: usize = 8;
 
 /// Sub-steps for a building with Bouc–Wen elements, from the data-scaled ω₁ (rad/s) and the
 /// sample interval `dt` (s): 1 while ω₁·dt ≤ [`HYSTERETIC_SUBSTEP_ABOVE`], else the fewest M
-/// (at most [`models::filtering::MAX_SUBSTEPS`]) with ω₁·dt/M ≤ [`HYSTERETIC_MAX_OMEGA1_H`].
+/// with ω₁·dt/M ≤ [`HYSTERETIC_MAX_OMEGA1_H`], at most [`HYSTERETIC_MAX_SUBSTEPS`].
 ///
 /// Why ω₁ and not the linear modes' frequency error
 /// ([`models::filtering::substeps::auto_substeps`]): the filters update the hysteretic variable
@@ -113,7 +118,7 @@ pub fn hysteretic_substeps(omega1: f64, dt: f64) -> usize {
     if !(x.is_finite() && x > HYSTERETIC_SUBSTEP_ABOVE) {
         return 1;
     }
-    ((x / HYSTERETIC_MAX_OMEGA1_H).ceil() as usize).clamp(1, models::filtering::MAX_SUBSTEPS)
+    ((x / HYSTERETIC_MAX_OMEGA1_H).ceil() as usize).clamp(1, HYSTERETIC_MAX_SUBSTEPS)
 }
 
 /// What [`hysteretic_substeps`] chose for a run (printed and recorded under
@@ -298,11 +303,10 @@ mod tests {
         assert_eq!(hysteretic_substeps(1.0, 0.0101), 3);
         // The ×4 building at 200 Hz: 0.0277/0.0035 = 7.9.
         assert_eq!(hysteretic_substeps(5.53, 0.005), 8);
-        // Capped; nonsense is one step.
-        assert_eq!(
-            hysteretic_substeps(1e3, 0.01),
-            models::filtering::MAX_SUBSTEPS
-        );
+        // Capped at the most measured (the frame at 120 Hz would ask for 55); nonsense is one
+        // step.
+        assert_eq!(hysteretic_substeps(0.19 * 120.0, 1.0 / 120.0), 8);
+        assert_eq!(hysteretic_substeps(1e3, 0.01), HYSTERETIC_MAX_SUBSTEPS);
         assert_eq!(hysteretic_substeps(f64::NAN, 0.01), 1);
     }
 

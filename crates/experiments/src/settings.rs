@@ -61,7 +61,8 @@ pub struct FilterSettings {
 }
 
 /// Transitions per sample interval: a number, or chosen by the rule of
-/// [`models::filtering::substeps`] (`"auto"`).
+/// [`models::filtering::substeps`] (`"auto"`; on field data with Bouc–Wen elements also by the
+/// data-scaled ω₁·dt, `scaled_prior::hysteretic_substeps`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Substeps {
     Fixed(usize),

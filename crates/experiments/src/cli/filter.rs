@@ -56,8 +56,9 @@ pub struct Args {
     /// Transitions inside the filter per sample interval (MPF-EKF2 and bootstrap PF), for data
     /// sampled coarsely relative to the structure's highest modes: a number, or `auto` (the
     /// default without --config: where one step per sample would shift the highest mode of the
-    /// prior's building by more than 2 %, enough sub-steps to bring that shift under 0.5 %;
-    /// docs/real-frame.md).
+    /// prior's building by more than 2 %, enough sub-steps to bring that shift under 0.5 %
+    /// (docs/real-frame.md); and on field data with Bouc–Wen elements whose data-scaled ω₁·dt
+    /// exceeds 0.01, enough to bring it to 0.0035, at most 8 (docs/structures.md)).
     #[arg(long)]
     pub substeps: Option<crate::settings::Substeps>,
     /// TOML file with filter settings (priors, noise fraction, masses, …) over the SPEC's (the
