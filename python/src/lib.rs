@@ -17,10 +17,9 @@ use std::time::{Duration, Instant};
 use core_filters::resampling::Scheme;
 use core_filters::smc::storvik::StorvikUpdate;
 use experiments::error::{Context, Error};
-use experiments::field::{self, StructureSettings};
-use experiments::pipeline::{
-    chain_spec, identify_stoppable, unmeasured_storeys, Algorithm, FilterSettings, RunInput,
-};
+use experiments::field::StructureSettings;
+use experiments::identification::{settle, Overrides, Target};
+use experiments::pipeline::{identify_stoppable, Algorithm, FilterSettings, RunInput};
 use experiments::record::RunRecord;
 use models::dataset::{Dataset, LoadedDataset, MEASURED};
 use models::filtering::Discretisation;
@@ -413,8 +412,9 @@ fn identify(
 ) -> PyResult<PyRecord> {
     let algorithm: Algorithm = parse("algorithm", algorithm)?;
     // The settings as `sysid filter` builds them: a config file (or its JSON form) over the
-    // SPEC's defaults, else the recommended settings; options over both.
-    let mut settings = match (&config, &config_json) {
+    // SPEC's defaults, else the recommended settings; options over both; then settled on the
+    // data set by the same function (`identification::settle`).
+    let settings = match (&config, &config_json) {
         (Some(_), Some(_)) => {
             return Err(SysidError::new_err(
                 "config: give a file or a dict, not both",
@@ -432,38 +432,36 @@ fn identify(
         }
         (None, None) => FilterSettings::recommended(),
     };
-    if let Some(p) = particles {
-        settings.particles = p;
-    }
-    if let Some(r) = &resampling {
-        settings.resampling = parse::<Scheme>("resampling", r)?;
-    }
-    if ess_threshold.is_some() {
-        settings.ess_threshold = ess_threshold;
-    }
-    if let Some(d) = &discretisation {
-        settings.discretisation = parse::<Discretisation>("discretisation", d)?;
-    }
-    if let Some(m) = substeps {
-        settings.substeps = experiments::settings::Substeps::Fixed(m);
-    }
-    if let Some(u) = &storvik_update {
-        settings.storvik_update = match u.as_str() {
-            "linearised" | "linearized" => StorvikUpdate::Linearised,
-            "exact" => StorvikUpdate::Exact,
-            _ => {
+    let overrides = Overrides {
+        particles,
+        resampling: resampling
+            .as_deref()
+            .map(|r| parse::<Scheme>("resampling", r))
+            .transpose()?,
+        ess_threshold,
+        discretisation: discretisation
+            .as_deref()
+            .map(|d| parse::<Discretisation>("discretisation", d))
+            .transpose()?,
+        substeps: substeps.map(experiments::settings::Substeps::Fixed),
+        storvik_update: match storvik_update.as_deref() {
+            None => None,
+            Some("linearised" | "linearized") => Some(StorvikUpdate::Linearised),
+            Some("exact") => Some(StorvikUpdate::Exact),
+            Some(u) => {
                 return Err(SysidError::new_err(format!(
                     "--storvik-update: unknown Storvik update `{u}` (expected linearised or exact)"
                 )))
             }
-        };
-    }
-    if let Some(f) = &fix {
-        let text: Vec<String> = f.iter().map(|(k, v)| format!("{k}={v:e}")).collect();
-        settings
-            .fix
-            .extend(experiments::identification::parse_fix(&text.join(",")).map_err(err)?);
-    }
+        },
+        fix: match &fix {
+            Some(f) => {
+                let text: Vec<String> = f.iter().map(|(k, v)| format!("{k}={v:e}")).collect();
+                experiments::identification::parse_fix(&text.join(",")).map_err(err)?
+            }
+            None => Default::default(),
+        },
+    };
     let flags = StructureSettings {
         storeys,
         hysteretic,
@@ -478,34 +476,20 @@ fn identify(
             .transpose()?,
     };
     let d = &data.loaded;
-    let flag_name = |key: &str| format!("--{key}");
-    let config_name = config
-        .as_ref()
-        .map_or_else(String::new, |p| p.display().to_string());
-    let table_name = |key: &str| format!("[structure] `{key}` in {config_name}");
-    let both_name = |key: &str| format!("--{key} (or {})", field::table_key(key));
-    if d.meta.is_some() {
-        field::resolve(d, None, &flags, &data.measured, &flag_name).map_err(err)?;
-        field::resolve(d, None, &settings.structure, &data.measured, &table_name).map_err(err)?;
-        settings.structure = StructureSettings::default();
-    } else if data.chain.is_none() {
-        settings.structure.overlay(&flags);
-        field::resolve(d, None, &settings.structure, &data.measured, &both_name).map_err(err)?;
-    }
-    // Without a config, the MPF-EKF2's default prior Gaussian as `sysid filter` chooses it: per
-    // particle where storeys carry no sensor or the building is tall
-    // (`FilterSettings::recommended_for`).
-    // A data set the spec refuses is reported by the run itself, with its own message.
-    if config.is_none() && config_json.is_none() && algorithm == Algorithm::MpfEkf2 {
-        if let Ok(spec) = chain_spec(d, data.chain.as_ref(), &settings) {
-            settings.marginal_prior = FilterSettings::recommended_for(
-                algorithm,
-                spec.n_storeys(),
-                &unmeasured_storeys(&spec),
-            )
-            .marginal_prior;
-        }
-    }
+    let config_name = match (&config, &config_json) {
+        (Some(p), _) => Some(p.display().to_string()),
+        (None, Some(_)) => Some("config (dict)".to_string()),
+        (None, None) => None,
+    };
+    let target = Target {
+        algorithm,
+        data: d,
+        chain: data.chain.as_ref(),
+        measured: &data.measured,
+        flags: &flags,
+        config: config_name.as_deref(),
+    };
+    let settings = settle(&target, overrides.apply(settings), &mut |_| {}).map_err(err)?;
     let input = RunInput {
         data: d,
         chain: data.chain.as_ref(),

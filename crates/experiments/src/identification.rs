@@ -343,79 +343,124 @@ pub struct Identified {
     pub noise: Option<NoiseLevels>,
 }
 
+/// The options of a run that override a filter setting (`sysid filter`'s flags, the Python
+/// `identify`'s keywords).
+#[derive(Debug, Clone, Default)]
+pub struct Overrides {
+    pub particles: Option<usize>,
+    pub resampling: Option<Scheme>,
+    pub ess_threshold: Option<f64>,
+    pub discretisation: Option<models::filtering::Discretisation>,
+    pub substeps: Option<crate::settings::Substeps>,
+    pub storvik_update: Option<StorvikUpdate>,
+    /// Fixed parameters, added to the settings' own.
+    pub fix: BTreeMap<String, f64>,
+}
+
+impl Overrides {
+    /// `settings` with these options over them.
+    pub fn apply(&self, mut settings: FilterSettings) -> FilterSettings {
+        if let Some(p) = self.particles {
+            settings.particles = p;
+        }
+        if let Some(r) = self.resampling {
+            settings.resampling = r;
+        }
+        if self.ess_threshold.is_some() {
+            settings.ess_threshold = self.ess_threshold;
+        }
+        if let Some(d) = self.discretisation {
+            settings.discretisation = d;
+        }
+        if let Some(m) = self.substeps {
+            settings.substeps = m;
+        }
+        if let Some(u) = self.storvik_update {
+            settings.storvik_update = u;
+        }
+        settings.fix.extend(self.fix.clone());
+        settings
+    }
+}
+
 /// The settings of a request: the config file's (or the recommended ones) under the request's
 /// overrides.
 fn request_settings(req: &FilterRequest) -> Result<FilterSettings> {
-    let mut settings = match &req.config {
+    let settings = match &req.config {
         Some(path) => crate::limits::load_filter_settings(path)?,
         None => FilterSettings::recommended(),
     };
-    if let Some(p) = req.particles {
-        settings.particles = p;
-    }
-    if let Some(r) = req.resampling {
-        settings.resampling = r;
-    }
-    if req.ess_threshold.is_some() {
-        settings.ess_threshold = req.ess_threshold;
-    }
-    if let Some(d) = req.discretisation {
-        settings.discretisation = d;
-    }
-    if let Some(m) = req.substeps {
-        settings.substeps = m;
-    }
-    if let Some(u) = req.storvik_update {
-        settings.storvik_update = u;
-    }
-    if let Some(f) = &req.fix {
-        settings.fix.extend(parse_fix(f)?);
-    }
-    Ok(settings)
+    let overrides = Overrides {
+        particles: req.particles,
+        resampling: req.resampling,
+        ess_threshold: req.ess_threshold,
+        discretisation: req.discretisation,
+        substeps: req.substeps,
+        storvik_update: req.storvik_update,
+        fix: match &req.fix {
+            Some(f) => parse_fix(f)?,
+            None => BTreeMap::new(),
+        },
+    };
+    Ok(overrides.apply(settings))
 }
 
-/// Runs the identification a request asks for: settings, the building (simulated data carry
-/// theirs and a stated key must agree with it; field data take the flags over the config's
-/// `[structure]` table and are refused by name when incomplete), the run, and for field data the
-/// validation without the truth (free run, modes; docs/validation.md). `note` hears, in order,
-/// what there is to say before the run ends.
-pub fn identify_request(req: &FilterRequest, note: &mut dyn FnMut(Note)) -> Result<Identified> {
-    let mut settings = request_settings(req)?;
-    let flags = structure_flags(req)?;
-    let data: LoadedDataset =
-        load_dir(&req.data).with_context(|| format!("loading data set {}", req.data.display()))?;
-    let measured = req.data.join(MEASURED);
-    let config_name = req
-        .config
-        .as_ref()
-        .map_or_else(String::new, |p| p.display().to_string());
+/// A run to settle ([`settle`]): its algorithm, its data set (and `measured.csv` path), the
+/// true structure when the data set says what it is, the structure flags, and where the settings
+/// came from.
+pub struct Target<'a> {
+    pub algorithm: Algorithm,
+    pub data: &'a LoadedDataset,
+    pub chain: Option<&'a models::structure::ShearChain>,
+    pub measured: &'a Path,
+    pub flags: &'a StructureSettings,
+    /// The config's name (a file, or how else it was given); `None` when the run has no config
+    /// and takes the recommended settings.
+    pub config: Option<&'a str>,
+}
+
+/// Settles the settings of a run before it starts: the building — simulated data carry theirs
+/// and a stated key (flag or the config's `[structure]` table) must agree with it; field data
+/// take the flags over the table and are refused by name when incomplete — and, for the
+/// MPF-EKF2 without a config, the prior Gaussian the building asks for
+/// ([`FilterSettings::recommended_for`]). `note` hears what there is to say, in order. One
+/// function for `sysid filter` and the Python `identify`, so they settle a run alike.
+pub fn settle(
+    t: &Target,
+    mut settings: FilterSettings,
+    note: &mut dyn FnMut(Note),
+) -> Result<FilterSettings> {
+    let Target {
+        algorithm,
+        data,
+        chain,
+        measured,
+        flags,
+        config,
+    } = *t;
+    let config_name = config.unwrap_or_default();
     let table_name = |key: &str| format!("[structure] `{key}` in {config_name}");
     let both_name = |key: &str| format!("{} (or {})", flag_name(key), field::table_key(key));
     if data.meta.is_some() {
-        field::resolve(&data, None, &flags, &measured, &flag_name)?;
-        field::resolve(&data, None, &settings.structure, &measured, &table_name)?;
+        field::resolve(data, None, flags, measured, &flag_name)?;
+        field::resolve(data, None, &settings.structure, measured, &table_name)?;
         settings.structure = StructureSettings::default();
-    } else {
-        settings.structure.overlay(&flags);
-        let d = field::resolve(&data, None, &settings.structure, &measured, &both_name)?;
+    } else if chain.is_none() {
+        settings.structure.overlay(flags);
+        let d = field::resolve(data, None, &settings.structure, measured, &both_name)?;
         note(Note::Field(&d));
     }
-    // The true structure, for the validation run, when the data set says what it is.
-    let chain = data
-        .true_chain()
-        .context("rebuilding the data set's structure")?;
     // What the sensors cannot see, and the size of the building, decide the MPF-EKF2's default
     // prior Gaussian (`FilterSettings::recommended_for`).
-    if req.algorithm == Algorithm::MpfEkf2 {
+    if algorithm == Algorithm::MpfEkf2 {
         // Settings first, so that their refusal names the key as it does in every other run.
         crate::limits::check_filter_settings(&settings)?;
-        let spec = chain_spec(&data, chain.as_ref(), &settings)?;
+        let spec = chain_spec(data, chain, &settings)?;
         let (storeys, unmeasured) = (spec.n_storeys(), unmeasured_storeys(&spec));
         if let Some(reason) = per_particle_reason(storeys, &unmeasured) {
-            if req.config.is_none() {
+            if config.is_none() {
                 settings.marginal_prior =
-                    FilterSettings::recommended_for(req.algorithm, storeys, &unmeasured)
-                        .marginal_prior;
+                    FilterSettings::recommended_for(algorithm, storeys, &unmeasured).marginal_prior;
                 note(Note::Sparse(format!(
                     "note: {reason}: the MPF-EKF2 starts every particle from its own prior mean (marginal_prior = {{ kind = \"per_particle\", rel_sd = {SPARSE_REL_SD} }}; with one shared prior Gaussian it loses its particles where storeys carry no sensor, docs/scaling.md, and is less accurate from {PER_PARTICLE_MIN_STOREYS} storeys on, docs/calibration.md)"
                 )));
@@ -426,6 +471,34 @@ pub fn identify_request(req: &FilterRequest, note: &mut dyn FnMut(Note)) -> Resu
             }
         }
     }
+    Ok(settings)
+}
+
+/// Runs the identification a request asks for: settings, the building (simulated data carry
+/// theirs and a stated key must agree with it; field data take the flags over the config's
+/// `[structure]` table and are refused by name when incomplete), the run, and for field data the
+/// validation without the truth (free run, modes; docs/validation.md). `note` hears, in order,
+/// what there is to say before the run ends.
+pub fn identify_request(req: &FilterRequest, note: &mut dyn FnMut(Note)) -> Result<Identified> {
+    let settings = request_settings(req)?;
+    let flags = structure_flags(req)?;
+    let data: LoadedDataset =
+        load_dir(&req.data).with_context(|| format!("loading data set {}", req.data.display()))?;
+    let measured = req.data.join(MEASURED);
+    // The true structure, for the validation run, when the data set says what it is.
+    let chain = data
+        .true_chain()
+        .context("rebuilding the data set's structure")?;
+    let config_name = req.config.as_ref().map(|p| p.display().to_string());
+    let target = Target {
+        algorithm: req.algorithm,
+        data: &data,
+        chain: chain.as_ref(),
+        measured: &measured,
+        flags: &flags,
+        config: config_name.as_deref(),
+    };
+    let settings = settle(&target, settings, note)?;
     let input = RunInput {
         data: &data,
         chain: chain.as_ref(),
