@@ -294,6 +294,20 @@ impl Study {
                     .context("table `data`")?;
             }
         }
+        if !self.verdicts.is_empty()
+            && (self.sweep.particles.len() > 1
+                || self.sweep.resampling.len() > 1
+                || self.discretisations().len() > 1)
+        {
+            bail!(
+                "table `verdicts`: a verdict compares the algorithms run by run, so the sweep may \
+                 have one particle count, one resampling scheme and one discretisation; it has \
+                 {}, {} and {}",
+                self.sweep.particles.len(),
+                self.sweep.resampling.len(),
+                self.discretisations().len()
+            );
+        }
         let algorithms: Vec<&str> = self.sweep.algorithms.iter().map(|a| a.name()).collect();
         for v in &self.verdicts {
             v.check(&algorithms)?;

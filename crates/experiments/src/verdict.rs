@@ -266,7 +266,7 @@ fn label(algorithm: &str) -> &str {
 }
 
 /// Parameter names of a group in the records (`k1`, `k2`, … for `k`).
-fn group_names(records: &[RunRecord], prefix: char) -> Vec<String> {
+fn group_names(records: &[&RunRecord], prefix: char) -> Vec<String> {
     records
         .first()
         .map(|r| {
@@ -288,9 +288,11 @@ pub fn paper_findings(
     fig4: &[RunRecord],
     fig7: &[RunRecord],
 ) -> Vec<Finding> {
+    let fig4: Vec<&RunRecord> = fig4.iter().collect();
+    let fig7: Vec<&RunRecord> = fig7.iter().collect();
     statements
         .iter()
-        .filter_map(|d| d.decide(fig7, fig4))
+        .filter_map(|d| d.decide(&fig7, &fig4))
         .collect()
 }
 

@@ -238,7 +238,7 @@ impl Declared {
     /// The finding on `records` (the study's); `beside` are runs of another study that the
     /// `bootstrap-collapse` test counts too. `None` when the statement's algorithms have no
     /// records, or the records lack a parameter of `params`.
-    pub fn decide(&self, records: &[RunRecord], beside: &[RunRecord]) -> Option<Finding> {
+    pub fn decide(&self, records: &[&RunRecord], beside: &[&RunRecord]) -> Option<Finding> {
         let present: Vec<&str> = self
             .algorithms
             .iter()
@@ -280,7 +280,7 @@ impl Declared {
     }
 
     /// `below`, `above`, `within`, `outside`: one estimate per algorithm and parameter.
-    fn single(&self, records: &[RunRecord], present: &[&str]) -> (String, Verdict, String) {
+    fn single(&self, records: &[&RunRecord], present: &[&str]) -> (String, Verdict, String) {
         let metric = self.metric.expect("checked: the test has a metric");
         let (scale, decimals, unit) = metric.display();
         let params: Vec<&str> = if self.params.is_empty() {
@@ -366,7 +366,11 @@ impl Declared {
     }
 
     /// `lower` and `paired-below`: paired differences over the runs both algorithms completed.
-    fn paired(&self, records: &[RunRecord], present: &[&str]) -> Option<(String, Verdict, String)> {
+    fn paired(
+        &self,
+        records: &[&RunRecord],
+        present: &[&str],
+    ) -> Option<(String, Verdict, String)> {
         let metric = self.metric.expect("checked: the test has a metric");
         let (scale, _, unit) = metric.display();
         let param = self.params.first().map_or("", String::as_str);
@@ -430,14 +434,15 @@ impl Declared {
     /// indices may repeat: each is its own data set and filter).
     fn collapse(
         &self,
-        records: &[RunRecord],
-        beside: &[RunRecord],
+        records: &[&RunRecord],
+        beside: &[&RunRecord],
     ) -> Option<(String, Verdict, String)> {
         let t = self.threshold.expect("checked: the test has a threshold");
         let runs: Vec<&RunRecord> = beside
             .iter()
             .chain(records)
             .filter(|r| self.algorithms.contains(&r.algorithm))
+            .copied()
             .collect();
         if runs.is_empty() {
             return None;
@@ -457,7 +462,11 @@ impl Declared {
     }
 
     /// `lower-spread`: log(s.d._other / s.d._this) of θ_val/θ_true over runs, for every k and c.
-    fn spread(&self, records: &[RunRecord], present: &[&str]) -> Option<(String, Verdict, String)> {
+    fn spread(
+        &self,
+        records: &[&RunRecord],
+        present: &[&str],
+    ) -> Option<(String, Verdict, String)> {
         let mut names = group_names(records, 'k');
         names.extend(group_names(records, 'c'));
         let spread = |a: &str, p: &str| {
@@ -507,7 +516,7 @@ impl Declared {
 }
 
 /// `no-failures`: a count of failed runs.
-fn no_failures(records: &[RunRecord], present: &[&str]) -> (String, Verdict, String) {
+fn no_failures(records: &[&RunRecord], present: &[&str]) -> (String, Verdict, String) {
     let mut any = false;
     let counts: Vec<String> = present
         .iter()
@@ -530,9 +539,10 @@ fn no_failures(records: &[RunRecord], present: &[&str]) -> (String, Verdict, Str
 }
 
 /// Records of one algorithm.
-fn of<'a>(records: &'a [RunRecord], algorithm: &str) -> Vec<&'a RunRecord> {
+fn of<'a>(records: &[&'a RunRecord], algorithm: &str) -> Vec<&'a RunRecord> {
     records
         .iter()
+        .copied()
         .filter(|r| r.algorithm == algorithm)
         .collect()
 }
