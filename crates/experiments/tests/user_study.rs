@@ -14,6 +14,14 @@ fn temp_dir(tag: &str) -> PathBuf {
     d
 }
 
+/// A fresh directory holding the study file `s.toml` with `text`: (directory, file).
+fn study_file(tag: &str, text: &str) -> (PathBuf, PathBuf) {
+    let dir = temp_dir(tag);
+    let config = dir.join("s.toml");
+    std::fs::write(&config, text).unwrap();
+    (dir, config)
+}
+
 const STUDY: &str = r#"
 name = "own-record"
 description = "three filter seeds on one record"
@@ -133,10 +141,8 @@ fn the_report_says_what_the_spread_over_runs_measures() {
 /// counted from the records; and it decides the statements its file declares, on its records.
 #[test]
 fn a_preset_study_reports_the_coverage_of_its_intervals() {
-    let dir = temp_dir("preset");
-    let config = dir.join("s.toml");
-    std::fs::write(
-        &config,
+    let (dir, config) = study_file(
+        "preset",
         r#"
 name = "tiny"
 description = "three data sets of the paper's structure"
@@ -169,8 +175,7 @@ metric = "k-error"
 algorithms = ["mpf-ekf2"]
 threshold = 0
 "#,
-    )
-    .unwrap();
+    );
     let out = dir.join("out");
     let o = Command::new(env!("CARGO_BIN_EXE_sysid"))
         .args(["study", "--threads", "1", "--config"])
@@ -267,10 +272,8 @@ threshold = 0
 /// per run and algorithm, and its file is refused with the reason.
 #[test]
 fn verdicts_need_one_record_per_run_and_algorithm() {
-    let dir = temp_dir("verdict-arms");
-    let config = dir.join("s.toml");
-    std::fs::write(
-        &config,
+    let (dir, config) = study_file(
+        "verdict-arms",
         r#"
 name = "arms"
 description = "two particle counts"
@@ -288,8 +291,7 @@ metric = "k-error"
 algorithms = ["mpf-ekf2"]
 than = ["storvik"]
 "#,
-    )
-    .unwrap();
+    );
     let e = format!(
         "{:#}",
         experiments::study::Study::load(&config).unwrap_err()
