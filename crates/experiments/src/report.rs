@@ -305,6 +305,7 @@ pub fn write_report(
     let _ = writeln!(o, "Each statement of the paper (SPEC §8) is decided by the test written beside it, on the records of the Fig. 7 sweep (and the Fig. 4 study for the bootstrap collapse). s.e. is the standard error over runs; comparisons of two algorithms use the paired difference over the runs both completed (all algorithms of one run see the same data set). A statement **holds** when its ±2 s.e. interval lies on the stated side of the threshold (inside the stated band), **does not hold** when it lies entirely on the other side (outside the band), and is **not resolved** otherwise: the runs cannot tell.\n");
     let none: Vec<RunRecord> = Vec::new();
     let findings = paper_findings(
+        studies.get("fig7").map_or(&[], |s| &s.verdicts),
         records.get("fig4").unwrap_or(&none),
         records.get("fig7").unwrap_or(&none),
     );

@@ -10,7 +10,7 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use crate::error::Result;
+use crate::error::{bail, Result};
 
 use crate::engine::{load, write_json, Engine, Reuse};
 use crate::figures;
@@ -91,6 +91,13 @@ pub fn reproduce(opts: &Options) -> Result<Done> {
             continue;
         }
         let study = load(&path, opts.quick)?;
+        if name != "fig7" && !study.verdicts.is_empty() {
+            bail!(
+                "{}: the reproduction decides the `[[verdicts]]` of fig7.toml only (the report's \
+                 \"What matches and what does not\"); declare the statement there",
+                path.display()
+            );
+        }
         // The discretisation studies take over the Fig. 7 records that are the same jobs.
         let reuse = match crate::discretisation::STUDIES.contains(&name) {
             true => Reuse::new(

@@ -22,7 +22,7 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use crate::error::{Context, Result};
+use crate::error::{bail, Context, Result};
 use serde::Serialize;
 
 use crate::engine::{load, write_json, Engine};
@@ -325,6 +325,13 @@ pub fn run_with(opts: &Options, write: &Writer<'_>) -> Result<Vec<Cell>> {
         resume: opts.resume,
     };
     let study = load(&opts.config, opts.quick)?;
+    if !study.verdicts.is_empty() {
+        bail!(
+            "{}: the scaling and excitations studies do not decide `[[verdicts]]`; `sysid study` \
+             does",
+            opts.config.display()
+        );
+    }
     let jobs = sweep_jobs(&study);
     let records_dir = opts.out.join("records");
     let cpu_of = |jobs: &[Job]| -> Vec<Option<f64>> {

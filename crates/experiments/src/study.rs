@@ -17,6 +17,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::pipeline::{identify, Algorithm, FilterSettings, RunInput};
 use crate::record::{Fingerprint, RunRecord};
+use crate::verdict::Declared;
 
 /// The data of a study.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -203,6 +204,10 @@ pub struct Study {
     #[serde(default)]
     pub filter: FilterSettings,
     pub quick: Option<QuickSection>,
+    /// The statements the study's report decides (`[[verdicts]]`, see
+    /// [`crate::verdict::declared`]).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub verdicts: Vec<Declared>,
 }
 
 /// One run of a study.
@@ -288,6 +293,24 @@ impl Study {
                 models::dataset::check_config(&self.dataset_config(0)?)
                     .context("table `data`")?;
             }
+        }
+        if !self.verdicts.is_empty()
+            && (self.sweep.particles.len() > 1
+                || self.sweep.resampling.len() > 1
+                || self.discretisations().len() > 1)
+        {
+            bail!(
+                "table `verdicts`: a verdict compares the algorithms run by run, so the sweep may \
+                 have one particle count, one resampling scheme and one discretisation; it has \
+                 {}, {} and {}",
+                self.sweep.particles.len(),
+                self.sweep.resampling.len(),
+                self.discretisations().len()
+            );
+        }
+        let algorithms: Vec<&str> = self.sweep.algorithms.iter().map(|a| a.name()).collect();
+        for v in &self.verdicts {
+            v.check(&algorithms)?;
         }
         let mut labels = std::collections::BTreeSet::new();
         for (i, st) in self.sweep.structures.iter().enumerate() {

@@ -19,6 +19,7 @@ use crate::metrics::mean_spread;
 use crate::record::RunRecord;
 use crate::sweep::lock::DirLock;
 use crate::sweep::{write_bytes_atomic, Shard};
+use crate::verdict::{findings_table, Finding};
 
 /// One algorithm's statistics of one parameter over the runs of a study.
 #[derive(Debug, Clone, PartialEq, Serialize)]
@@ -299,14 +300,6 @@ pub fn run(args: &Options) -> Result<()> {
         Some(d) => d.display().to_string(),
         None => format!("preset {} (one data set per run)", study.data.preset),
     };
-    write_json(
-        &args.out.join("summary.json"),
-        &serde_json::json!({
-            "study": study.name,
-            "data": data,
-            "algorithms": spreads,
-        }),
-    )?;
     engine.last_run(serde_json::json!({
         "runs": { "executed": outcome.executed, "reused": outcome.reused, "failed": outcome.failed },
         "wall_s": start.elapsed().as_secs_f64(),
@@ -319,8 +312,8 @@ pub fn run(args: &Options) -> Result<()> {
         study.data.dir.is_some(),
         &spreads,
     );
-    // With a known truth (a preset), how often the intervals hold it: per structure of the
-    // structure axis (their parameters differ), else over the whole sweep.
+    // Per structure of the structure axis (their parameters differ), else over the whole sweep:
+    // the declared verdicts and, with a known truth (a preset), how often the intervals hold it.
     let jobs = study.jobs();
     let groups: Vec<(String, Option<usize>)> = if study.sweep.structures.is_empty() {
         vec![(String::new(), None)]
@@ -333,6 +326,7 @@ pub fn run(args: &Options) -> Result<()> {
             .map(|(i, s)| (format!(", structure `{}`", s.label), Some(i)))
             .collect()
     };
+    let mut all_findings = Vec::new();
     for (suffix, structure) in groups {
         let records: Vec<&RunRecord> = outcome
             .records
@@ -350,6 +344,25 @@ pub fn run(args: &Options) -> Result<()> {
                 (a.name(), recs.collect())
             })
             .collect();
+        // The statements the study declares, decided on this group's records.
+        let findings: Vec<Finding> = study
+            .verdicts
+            .iter()
+            .filter_map(|d| d.decide(&records, &[]))
+            .collect();
+        if !findings.is_empty() {
+            let _ = writeln!(report, "\n### Verdicts{suffix}\n");
+            findings_table(
+                &mut report,
+                ["statement", "verdict", "test", "evidence"],
+                &findings,
+            );
+            let _ = writeln!(report, "\nA statement holds when its ±2 s.e. interval lies on the stated side of the threshold (inside the band), does not hold when it lies entirely on the other side, and is not resolved otherwise; comparisons of two algorithms use the paired difference over the runs both completed.");
+            all_findings.push(serde_json::json!({
+                "structure": structure.map(|i| study.sweep.structures[i].label.clone()),
+                "findings": findings,
+            }));
+        }
         if let Some(c) = crate::coverage::sweep_coverage(&study.name, &by_algorithm)? {
             let _ = writeln!(report);
             let title = format!("Coverage of the credible intervals{suffix}");
@@ -367,6 +380,15 @@ pub fn run(args: &Options) -> Result<()> {
             }
         }
     }
+    let mut summary = serde_json::json!({
+        "study": study.name,
+        "data": data,
+        "algorithms": spreads,
+    });
+    if !all_findings.is_empty() {
+        summary["verdicts"] = serde_json::Value::Array(all_findings);
+    }
+    write_json(&args.out.join("summary.json"), &summary)?;
     write_bytes_atomic(&args.out.join("REPORT.md"), report.as_bytes())?;
     print!("{report}");
     eprintln!(

@@ -14,6 +14,14 @@ fn temp_dir(tag: &str) -> PathBuf {
     d
 }
 
+/// A fresh directory holding the study file `s.toml` with `text`: (directory, file).
+fn study_file(tag: &str, text: &str) -> (PathBuf, PathBuf) {
+    let dir = temp_dir(tag);
+    let config = dir.join("s.toml");
+    std::fs::write(&config, text).unwrap();
+    (dir, config)
+}
+
 const STUDY: &str = r#"
 name = "own-record"
 description = "three filter seeds on one record"
@@ -130,13 +138,11 @@ fn the_report_says_what_the_spread_over_runs_measures() {
 
 /// A study on a preset knows the truth: its report gives the coverage of the credible intervals
 /// per algorithm and parameter, and the pooled 95 % coverage of the stiffnesses and dampings,
-/// counted from the records.
+/// counted from the records; and it decides the statements its file declares, on its records.
 #[test]
 fn a_preset_study_reports_the_coverage_of_its_intervals() {
-    let dir = temp_dir("preset");
-    let config = dir.join("s.toml");
-    std::fs::write(
-        &config,
+    let (dir, config) = study_file(
+        "preset",
         r#"
 name = "tiny"
 description = "three data sets of the paper's structure"
@@ -152,9 +158,24 @@ particles = [40]
 trace_every = 0
 loop_every = 0
 validate = false
+[[verdicts]]
+statement = "every run completes"
+test = "no-failures"
+algorithms = ["mpf-ekf2"]
+[[verdicts]]
+statement = "mean stiffness error below 1000"
+test = "below"
+metric = "k-error"
+algorithms = ["mpf-ekf2"]
+threshold = 1000
+[[verdicts]]
+statement = "mean stiffness error below 0"
+test = "below"
+metric = "k-error"
+algorithms = ["mpf-ekf2"]
+threshold = 0
 "#,
-    )
-    .unwrap();
+    );
     let out = dir.join("out");
     let o = Command::new(env!("CARGO_BIN_EXE_sysid"))
         .args(["study", "--threads", "1", "--config"])
@@ -202,5 +223,82 @@ validate = false
     assert_eq!(pairs, 18);
     let line = format!("hold the truth in {covered} of {pairs} (run, parameter) pairs");
     assert!(report.contains(&line), "{line}\n{report}");
+    // The declared statements, decided on the three runs: the mean of the per-run stiffness
+    // errors (each ≥ 0) recomputed from the records is what the evidence shows.
+    assert!(report.contains("### Verdicts"), "{report}");
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    let findings = summary["verdicts"][0]["findings"].as_array().unwrap();
+    let verdicts: Vec<&str> = findings
+        .iter()
+        .map(|f| f["verdict"].as_str().unwrap())
+        .collect();
+    let mut k_errors = Vec::new();
+    for e in std::fs::read_dir(out.join("records")).unwrap() {
+        let r: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(e.unwrap().path()).unwrap()).unwrap();
+        let names = r["param_names"].as_array().unwrap();
+        let err = r["rel_error"].as_array().unwrap();
+        let k: Vec<f64> = names
+            .iter()
+            .zip(err)
+            .filter(|(n, _)| n.as_str().unwrap().starts_with('k'))
+            .map(|(_, e)| e.as_f64().unwrap())
+            .collect();
+        k_errors.push(k.iter().sum::<f64>() / k.len() as f64);
+    }
+    let n = k_errors.len() as f64;
+    let mean = k_errors.iter().sum::<f64>() / n;
+    let se = (k_errors.iter().map(|e| (e - mean).powi(2)).sum::<f64>() / (n - 1.0) / n).sqrt();
+    // Below 0 holds for no error; it does not hold once the ±2 s.e. interval is above 0.
+    let at_zero = if mean - 2.0 * se > 0.0 {
+        "DoesNotHold"
+    } else {
+        "NotResolved"
+    };
+    assert_eq!(verdicts, ["Holds", "Holds", at_zero], "{findings:#?}");
+    let shown = format!("{:.2}%", 100.0 * mean);
+    assert!(
+        findings[1]["evidence"]
+            .as_str()
+            .unwrap()
+            .starts_with(&shown),
+        "{shown}: {findings:#?}"
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// A verdict compares algorithms run by run: a sweep with two particle counts has two records
+/// per run and algorithm, and its file is refused with the reason.
+#[test]
+fn verdicts_need_one_record_per_run_and_algorithm() {
+    let (dir, config) = study_file(
+        "verdict-arms",
+        r#"
+name = "arms"
+description = "two particle counts"
+[data]
+preset = "paper-3dof"
+[sweep]
+algorithms = ["mpf-ekf2", "storvik"]
+runs = 2
+master_seed = 7
+particles = [40, 80]
+[[verdicts]]
+statement = "MPF-EKF2 lower stiffness error"
+test = "lower"
+metric = "k-error"
+algorithms = ["mpf-ekf2"]
+than = ["storvik"]
+"#,
+    );
+    let e = format!(
+        "{:#}",
+        experiments::study::Study::load(&config).unwrap_err()
+    );
+    assert!(
+        e.contains("s.toml") && e.contains("one particle count"),
+        "{e}"
+    );
     std::fs::remove_dir_all(&dir).unwrap();
 }

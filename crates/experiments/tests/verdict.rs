@@ -1,14 +1,26 @@
 //! The report's verdicts on constructed Fig. 7 sweeps where each verdict is known by
 //! construction: clear differences (holds), reversed ones (does not hold) and differences
-//! smaller than their standard error (not resolved).
+//! smaller than their standard error (not resolved). The statements are the ones
+//! `experiments/fig7.toml` declares.
 
 mod common;
 
 use common::{record, wiggle};
 use experiments::record::RunRecord;
-use experiments::verdict::{paper_findings, Finding, Verdict};
+use experiments::study::Study;
+use experiments::verdict::{paper_findings, Declared, Finding, Verdict};
 
 const RUNS: u64 = 20;
+
+/// The statements of the Fig. 7 study file.
+fn statements() -> Vec<Declared> {
+    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../../experiments/fig7.toml");
+    Study::load(std::path::Path::new(path)).unwrap().verdicts
+}
+
+fn findings(records: &[RunRecord]) -> Vec<Finding> {
+    paper_findings(&statements(), &[], records)
+}
 
 /// Ratios θ_val/θ_true of one run: stiffnesses `k`, dampings `c1, c2, c3`, then β, γ, n.
 fn ratios(k: f64, c: [f64; 3], beta: f64) -> [f64; 9] {
@@ -86,7 +98,7 @@ fn clear() -> Vec<RunRecord> {
 
 #[test]
 fn clear_differences_hold() {
-    let f = paper_findings(&[], &clear());
+    let f = findings(&clear());
     use Verdict::Holds;
     assert_verdict(&f, "bootstrap PF collapses", Holds);
     assert_verdict(&f, "MLN-RBPF better than Storvik on stiffness", Holds);
@@ -153,7 +165,7 @@ fn reversed_differences_do_not_hold() {
     }
     // One failed MLN-RBPF run.
     recs[0].failure = Some("all weights zero at step 12".into());
-    let f = paper_findings(&[], &recs);
+    let f = findings(&recs);
     use Verdict::DoesNotHold;
     assert_verdict(&f, "bootstrap PF collapses", DoesNotHold);
     assert_verdict(&f, "MLN-RBPF better than Storvik on stiffness", DoesNotHold);
@@ -198,7 +210,7 @@ fn differences_within_two_standard_errors_are_not_resolved() {
             0.07 + 0.01 * w(2) + 0.01 * alt,
         ));
     }
-    let f = paper_findings(&[], &recs);
+    let f = findings(&recs);
     use Verdict::NotResolved;
     assert_verdict(&f, "MLN-RBPF better than Storvik on stiffness", NotResolved);
     assert_verdict(&f, "lower online state NRMSE", NotResolved);
@@ -208,4 +220,59 @@ fn differences_within_two_standard_errors_are_not_resolved() {
     assert!(f
         .iter()
         .all(|x| !x.statement.contains("bootstrap PF collapses")));
+}
+
+#[test]
+fn every_declared_statement_is_decided() {
+    let f = findings(&clear());
+    let declared = statements();
+    assert_eq!(f.len(), declared.len(), "{f:#?}");
+    for (x, d) in f.iter().zip(&declared) {
+        assert_eq!(x.statement, d.statement);
+    }
+}
+
+/// A statement declared in a study file alone, with no code of its own, is decided by its
+/// test; both directions, by construction (online NRMSE: MPF-EKF2 0.05, Storvik 0.09).
+#[test]
+fn a_new_statement_needs_only_its_declaration() {
+    let text = r#"
+name = "declared"
+description = "statements declared in the file"
+[data]
+preset = "paper-3dof"
+[sweep]
+algorithms = ["storvik", "mpf-ekf2"]
+runs = 2
+master_seed = 1
+[[verdicts]]
+statement = "MPF-EKF2 tracks the states within 0.07"
+test = "below"
+metric = "online-nrmse"
+algorithms = ["mpf-ekf2"]
+threshold = 0.07
+[[verdicts]]
+statement = "Storvik tracks the states within 0.07"
+test = "below"
+metric = "online-nrmse"
+algorithms = ["storvik"]
+threshold = 0.07
+"#;
+    let dir = std::env::temp_dir().join(format!("sysid-verdict-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("declared.toml");
+    std::fs::write(&path, text).unwrap();
+    let study = Study::load(&path).unwrap();
+    let f = paper_findings(&study.verdicts, &[], &clear());
+    assert_verdict(&f, "MPF-EKF2 tracks", Verdict::Holds);
+    assert_verdict(&f, "Storvik tracks", Verdict::DoesNotHold);
+    assert!(find(&f, "MPF-EKF2 tracks").test.contains("< 0.07"));
+    // A declaration the sweep cannot decide is refused when the file is read, naming it.
+    std::fs::write(&path, text.replace("[\"storvik\"]", "[\"mln-rbpf\"]")).unwrap();
+    let e = format!("{:#}", Study::load(&path).unwrap_err());
+    assert!(
+        e.contains("Storvik tracks") && e.contains("`mln-rbpf` is not one of the sweep's"),
+        "{e}"
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
 }
