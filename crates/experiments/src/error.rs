@@ -41,7 +41,7 @@ macro_rules! error_type {
             Figure(String),
             /// An error of one of this crate's studies or checks (a cluster run, a simulation,
             /// a refused answer, broken regression bounds, …), kept with its own type: the
-            /// module that defines it declares it with [`domain_error!`], and
+            /// module that defines it declares it with the crate's `domain_error!` macro, and
             /// [`Error::domain`] finds it again by type.
             Domain(Box<dyn std::error::Error + Send + Sync + 'static>),
             /// `source`, with what was being done when it happened.

@@ -9,7 +9,7 @@
 //!   rows of the stage are `f + noise` (they do not depend on `z`);
 //! - (b) pseudo-measurement update of `(μ, C)` with `u_L` (Jacobian `F`, noise `Q_L`): its
 //!   innovation covariance is the proposal covariance of (a), factorised once, and the whitened
-//!   innovation is the draw `ξ` itself ([`Factor::condition_on_draw`]);
+//!   innovation is the draw `ξ` itself ([`crate::linalg::Factor::condition_on_draw`]);
 //!
 //! then
 //! - (c) weight `N(y_k; H μ + h, H C Hᵀ + R)` with `(h, H) = observation(k, u_k)`, which is the
