@@ -455,7 +455,10 @@ pub fn settle(
     if algorithm == Algorithm::MpfEkf2 {
         // Settings first, so that their refusal names the key as it does in every other run.
         crate::limits::check_filter_settings(&settings)?;
-        let spec = chain_spec(data, chain, &settings)?;
+        // A data set the spec refuses is refused by the run itself, with its own message.
+        let Ok(spec) = chain_spec(data, chain, &settings) else {
+            return Ok(settings);
+        };
         let (storeys, unmeasured) = (spec.n_storeys(), unmeasured_storeys(&spec));
         if let Some(reason) = per_particle_reason(storeys, &unmeasured) {
             if config.is_none() {
