@@ -434,25 +434,23 @@ pub fn run(file: &RegressionFile, options: &RegressionOptions) -> Result<Regress
         },
     )?;
     let records = outcome.records;
-    let stats: Vec<AlgorithmStats> = study
+    // Each algorithm's records, in the sweep's order.
+    let groups: Vec<(&str, Vec<&RunRecord>)> = study
         .sweep
         .algorithms
         .iter()
         .map(|a| {
-            let recs: Vec<&RunRecord> =
-                records.iter().filter(|r| r.algorithm == a.name()).collect();
-            algorithm_stats(a.name(), &recs)
+            let recs = records.iter().filter(|r| r.algorithm == a.name()).collect();
+            (a.name(), recs)
         })
         .collect();
-    let coverage: BTreeMap<String, KcCoverage> = study
-        .sweep
-        .algorithms
+    let stats: Vec<AlgorithmStats> = groups
         .iter()
-        .map(|a| {
-            let recs: Vec<&RunRecord> =
-                records.iter().filter(|r| r.algorithm == a.name()).collect();
-            (a.name().to_string(), kc_coverage95(&recs))
-        })
+        .map(|(name, recs)| algorithm_stats(name, recs))
+        .collect();
+    let coverage: BTreeMap<String, KcCoverage> = groups
+        .iter()
+        .map(|(name, recs)| (name.to_string(), kc_coverage95(recs)))
         .collect();
     let mut checks = evaluate(&file.thresholds, &stats, &rel_error_std_errors(&records));
     checks.extend(evaluate_coverage(&file.thresholds, &coverage));
