@@ -220,10 +220,7 @@ impl MlnChain {
 impl Partition for MlnChain {
     /// Zero states, each n_e drawn from its prior (SPEC §3).
     fn sample_initial(&self, rng: &mut StreamRng, u: &mut [f64]) {
-        u.fill(0.0);
-        for (e, el) in self.core.spec.prior.elements.iter().enumerate() {
-            u[self.n_index(e)] = el.n.sample(rng);
-        }
+        self.core.sample_initial(rng, u, |e| self.n_index(e));
     }
 
     fn measurement_cov(&self) -> Vec<f64> {

@@ -185,6 +185,20 @@ impl ChainCore {
     }
 
     /// `R` (column-major, diagonal).
+    /// The sampled block at the start (SPEC §3): zero states, and each element's n drawn from
+    /// its prior into `out[n_index(e)]`, in element order.
+    pub fn sample_initial(
+        &self,
+        rng: &mut StreamRng,
+        out: &mut [f64],
+        n_index: impl Fn(usize) -> usize,
+    ) {
+        out.fill(0.0);
+        for (e, el) in self.spec.prior.elements.iter().enumerate() {
+            out[n_index(e)] = el.n.sample(rng);
+        }
+    }
+
     pub fn measurement_cov(&self) -> Vec<f64> {
         let m = self.sensors.len();
         let mut r = vec![0.0; m * m];

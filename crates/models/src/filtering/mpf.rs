@@ -339,10 +339,7 @@ impl MpfChain {
 impl Partition for MpfChain {
     /// Zero states, each n_e drawn from its prior (SPEC §3).
     fn sample_initial(&self, rng: &mut StreamRng, xn: &mut [f64]) {
-        xn.fill(0.0);
-        for (e, el) in self.core.spec.prior.elements.iter().enumerate() {
-            xn[self.n_index(e)] = el.n.sample(rng);
-        }
+        self.core.sample_initial(rng, xn, |e| self.n_index(e));
     }
 
     fn measurement_cov(&self) -> Vec<f64> {
