@@ -361,50 +361,51 @@ pub fn prior_from_data(
     Ok(Some(crate::scaled_prior::scaled_prior(data, &structure)?))
 }
 
-/// The filter of `algorithm` on the partitions of `spec` (no size table: every dimension is the
-/// structure's).
-/// Resolves `substeps = "auto"` ([`models::filtering::substeps`]) for the algorithms that
-/// sub-step (MPF-EKF2, bootstrap PF); MLN-RBPF and Storvik keep one transition per sample.
-/// Returns the choice when it was automatic.
+/// What `substeps = "auto"` chose for a run: by the linear modes of the prior's building
+/// ([`models::filtering::substeps`]) and, on field data with Bouc–Wen elements, by the
+/// data-scaled ω₁·dt ([`crate::scaled_prior::hysteretic_substeps`]); the run takes the larger.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct AutoChoice {
+    pub linear: Option<models::filtering::substeps::AutoSubsteps>,
+    pub hysteretic: Option<crate::scaled_prior::HystereticSubsteps>,
+}
+
+/// Resolves `substeps = "auto"` for the algorithms that sub-step (MPF-EKF2, bootstrap PF);
+/// MLN-RBPF and Storvik keep one transition per sample. `scaled` is the run's data-scaled
+/// prior ([`prior_from_data`]), if it has one. Returns what was chosen automatically (nothing
+/// for a fixed number).
 pub fn resolve_substeps(
     algorithm: Algorithm,
     spec: &mut ChainSpec,
     s: &FilterSettings,
-) -> Option<models::filtering::substeps::AutoSubsteps> {
+    scaled: Option<&crate::scaled_prior::ScaledPrior>,
+) -> AutoChoice {
     if s.substeps != Substeps::Auto {
-        return None;
+        return AutoChoice::default();
     }
+    let sub_steps = !matches!(algorithm, Algorithm::MlnRbpf | Algorithm::Storvik);
     let mut a = models::filtering::substeps::auto_substeps(spec);
-    if matches!(algorithm, Algorithm::MlnRbpf | Algorithm::Storvik) {
+    if !sub_steps {
         a.substeps = 1;
         a.error_chosen = a.error_one;
     }
     spec.substeps = a.substeps;
-    Some(a)
-}
-
-/// With `substeps = "auto"`, on field data with the data-scaled prior and a building with
-/// Bouc–Wen elements: the sub-steps [`crate::scaled_prior::hysteretic_substeps`] asks for from
-/// ω₁·dt, when they are more than `spec.substeps` (MPF-EKF2 and bootstrap PF; MLN-RBPF and
-/// Storvik keep one transition per sample). Returns the rule's reading when it applies.
-pub fn resolve_hysteretic_substeps(
-    algorithm: Algorithm,
-    spec: &mut ChainSpec,
-    s: &FilterSettings,
-    scaled: Option<&crate::scaled_prior::ScaledPrior>,
-) -> Option<crate::scaled_prior::HystereticSubsteps> {
-    let scaled = scaled?;
-    if s.substeps != Substeps::Auto
-        || spec.building.hysteretic().is_empty()
-        || matches!(algorithm, Algorithm::MlnRbpf | Algorithm::Storvik)
-    {
-        return None;
+    let hysteretic = match scaled {
+        Some(p) if sub_steps && !spec.building.hysteretic().is_empty() => {
+            let h = crate::scaled_prior::HystereticSubsteps::new(p.omega1, spec.dt);
+            spec.substeps = spec.substeps.max(h.substeps);
+            Some(h)
+        }
+        _ => None,
+    };
+    AutoChoice {
+        linear: Some(a),
+        hysteretic,
     }
-    let h = crate::scaled_prior::HystereticSubsteps::new(scaled.omega1, spec.dt);
-    spec.substeps = spec.substeps.max(h.substeps);
-    Some(h)
 }
 
+/// The filter of `algorithm` on the partitions of `spec` (no size table: every dimension is the
+/// structure's).
 pub fn build_filter(
     algorithm: Algorithm,
     spec: ChainSpec,
@@ -550,10 +551,9 @@ pub fn identify_stoppable(
     }
     crate::limits::check_filter_settings(s)?;
     let mut spec = chain_spec(data, input.chain, s)?;
-    let auto = resolve_substeps(algorithm, &mut spec, s);
     let scaled = prior_from_data(data, input.chain, s)?;
-    let hysteretic_auto = resolve_hysteretic_substeps(algorithm, &mut spec, s, scaled.as_ref());
-    if let (Some(h), true) = (hysteretic_auto, input.progress) {
+    let auto = resolve_substeps(algorithm, &mut spec, s, scaled.as_ref());
+    if let (Some(h), true) = (auto.hysteretic, input.progress) {
         if h.substeps > 1 {
             eprintln!(
                 "sub-steps: {} per sample (auto: Bouc–Wen elements and ω₁·dt = {:.4} above {}; \
@@ -567,7 +567,7 @@ pub fn identify_stoppable(
             );
         }
     }
-    if let (Some(a), true) = (auto, input.progress) {
+    if let (Some(a), true) = (auto.linear, input.progress) {
         if a.substeps == 1 && a.error_one > models::filtering::substeps::SUBSTEP_ABOVE {
             eprintln!(
                 "warning: the prior's building has modes up to {:.2} Hz (ω·dt = {:.2}): one step \
@@ -704,10 +704,10 @@ pub fn identify_stoppable(
     if spec.substeps != 1 {
         config["spec"]["substeps"] = spec.substeps.into();
     }
-    if let Some(a) = auto {
+    if let Some(a) = auto.linear {
         config["substeps_auto"] = serde_json::to_value(a).expect("serialisable");
     }
-    if let Some(h) = hysteretic_auto {
+    if let Some(h) = auto.hysteretic {
         config["substeps_hysteretic"] = serde_json::to_value(h).expect("serialisable");
     }
     if !spec.building.damping().is_default() {

@@ -61,7 +61,9 @@ fn a_stiff_record_is_sub_stepped_until_its_highest_mode_is_represented() {
     let s = frame_settings();
     assert_eq!(s.substeps, Substeps::Auto);
     let mut spec = chain_spec(&data, None, &s).unwrap();
-    let a = resolve_substeps(Algorithm::MpfEkf2, &mut spec, &s).unwrap();
+    let a = resolve_substeps(Algorithm::MpfEkf2, &mut spec, &s, None)
+        .linear
+        .unwrap();
     // One step per sample would shift the highest mode by several per cent; the choice keeps
     // it under the rule's 0.5 % with the fewest sub-steps.
     assert!(a.substeps >= 2, "{a:?}");
@@ -77,7 +79,9 @@ fn a_stiff_record_is_sub_stepped_until_its_highest_mode_is_represented() {
     assert_eq!(spec.substeps, a.substeps);
     // Filters that do not sub-step keep one transition (and say what it costs).
     let mut spec1 = chain_spec(&data, None, &s).unwrap();
-    let b = resolve_substeps(Algorithm::MlnRbpf, &mut spec1, &s).unwrap();
+    let b = resolve_substeps(Algorithm::MlnRbpf, &mut spec1, &s, None)
+        .linear
+        .unwrap();
     assert_eq!((b.substeps, spec1.substeps), (1, 1));
     assert_eq!(b.error_chosen, b.error_one);
     // A fixed number is kept as given.
@@ -86,7 +90,11 @@ fn a_stiff_record_is_sub_stepped_until_its_highest_mode_is_represented() {
         ..s.clone()
     };
     let mut spec2 = chain_spec(&data, None, &fixed).unwrap();
-    assert!(resolve_substeps(Algorithm::MpfEkf2, &mut spec2, &fixed).is_none());
+    assert!(
+        resolve_substeps(Algorithm::MpfEkf2, &mut spec2, &fixed, None)
+            .linear
+            .is_none()
+    );
     assert_eq!(spec2.substeps, 2);
     // The run records the choice.
     let input = RunInput {
@@ -113,6 +121,8 @@ fn the_papers_data_need_no_sub_step() {
     let chain = data.true_chain().unwrap();
     let s = FilterSettings::recommended();
     let mut spec = chain_spec(&data, chain.as_ref(), &s).unwrap();
-    let a = resolve_substeps(Algorithm::MpfEkf2, &mut spec, &s).unwrap();
+    let a = resolve_substeps(Algorithm::MpfEkf2, &mut spec, &s, None)
+        .linear
+        .unwrap();
     assert_eq!(a.substeps, 1, "{a:?}");
 }

@@ -73,7 +73,8 @@ pub fn reference_posterior(
     }
     let mut spec = chain_spec(&data, chain.as_ref(), &settings)?;
     // `substeps = "auto"` in a config is resolved as in `sysid filter`, not silently one.
-    crate::pipeline::resolve_substeps(args.estimator, &mut spec, &settings);
+    let scaled = crate::pipeline::prior_from_data(&data, chain.as_ref(), &settings)?;
+    crate::pipeline::resolve_substeps(args.estimator, &mut spec, &settings, scaled.as_ref());
     let names = spec.prior.names();
     let map = ThetaMap::new(&spec.prior)?;
     let truth = data.meta.as_ref().map(|m| m.theta_true.clone());
