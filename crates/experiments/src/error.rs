@@ -281,6 +281,28 @@ mod tests {
         assert_eq!(format!("{e:#}"), format!("filtering: {inner}"));
     }
 
+    /// A study error of this crate, declared as the modules declare theirs.
+    #[derive(Debug, Clone, PartialEq, thiserror::Error)]
+    #[error("bound breached")]
+    struct Breached(u32);
+    domain_error!(Breached);
+
+    #[derive(Debug, thiserror::Error)]
+    #[error("other")]
+    struct Other;
+
+    #[test]
+    fn a_domain_error_is_found_by_its_type_through_context() {
+        let e = Err::<(), _>(Breached(3))
+            .context("regression check")
+            .unwrap_err();
+        assert!(matches!(e.kind(), Error::Domain(_)));
+        assert_eq!(e.domain::<Breached>(), Some(&Breached(3)));
+        assert!(e.domain::<Other>().is_none());
+        assert!(Error::invalid("x").domain::<Breached>().is_none());
+        assert_eq!(format!("{e:#}"), "regression check: bound breached");
+    }
+
     #[test]
     fn bail_and_option_context_are_invalid_input() {
         fn f(x: i32) -> Result<i32> {
