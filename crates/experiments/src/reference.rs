@@ -490,6 +490,149 @@ pub fn compare_markdown(
     o
 }
 
+/// Whether the reference's central 95 % interval of `p` holds its truth: the chain's 2.5 and
+/// 97.5 % quantiles for one chain, mean ± 1.96 s.d. for pooled chains (whose quantiles are not
+/// pooled). `None` without a truth.
+pub fn reference_covers(p: &ParamSummary) -> Option<bool> {
+    let t = p.truth?;
+    let [lo, .., hi] = p.quantiles;
+    Some(if lo.is_finite() && hi.is_finite() {
+        lo <= t && t <= hi
+    } else {
+        (p.mean - t).abs() <= 1.96 * p.sd
+    })
+}
+
+/// One parameter and algorithm over several data sets: what the reference posterior of each
+/// record reaches (the information in the data) beside what the online filter reports.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct LimitRow {
+    pub param: String,
+    pub algorithm: String,
+    /// Data sets with a reference and a truth for this parameter.
+    pub data_sets: usize,
+    /// Mean over data sets of |reference mean / truth − 1|.
+    pub ref_rel_error: f64,
+    /// Mean over data sets of reference s.d. / |truth|.
+    pub ref_rel_sd: f64,
+    /// Data sets whose reference 95 % interval holds the truth ([`reference_covers`]).
+    pub ref_covered: usize,
+    /// Completed online runs over all data sets.
+    pub runs: usize,
+    /// Mean over runs of |θ_val / truth − 1|.
+    pub online_rel_error: f64,
+    /// Runs whose recorded 95 % credible interval holds the truth, of `intervals` runs with one.
+    pub online_covered: usize,
+    pub intervals: usize,
+    /// Mean over runs of online s.d. / the reference s.d. of the run's data set.
+    pub sd_ratio: f64,
+}
+
+/// The information limit over several data sets: `groups` holds, per data set, the (pooled)
+/// reference and the online records of that data set. Rows per algorithm and parameter (in the
+/// reference's order); failed runs are left out, as in [`compare`].
+pub fn information_limit(
+    groups: &[(Vec<ParamSummary>, Vec<crate::record::RunRecord>)],
+) -> Vec<LimitRow> {
+    let mut algorithms: Vec<&str> = groups
+        .iter()
+        .flat_map(|(_, rs)| rs.iter().map(|r| r.algorithm.as_str()))
+        .collect();
+    algorithms.sort();
+    algorithms.dedup();
+    let Some((first, _)) = groups.first() else {
+        return Vec::new();
+    };
+    let mut out = Vec::new();
+    for alg in algorithms {
+        for name in first.iter().map(|p| p.name.as_str()) {
+            let (mut ref_err, mut ref_sd, mut ref_cov) = (Vec::new(), Vec::new(), 0usize);
+            let (mut err, mut ratio, mut covered, mut intervals) = (Vec::new(), Vec::new(), 0, 0);
+            for (reference, records) in groups {
+                let Some(p) = reference.iter().find(|p| p.name == name) else {
+                    continue;
+                };
+                let Some(t) = p.truth.filter(|t| *t != 0.0) else {
+                    continue;
+                };
+                ref_err.push((p.mean / t - 1.0).abs());
+                ref_sd.push(p.sd / t.abs());
+                ref_cov += usize::from(reference_covers(p) == Some(true));
+                for r in records
+                    .iter()
+                    .filter(|r| r.algorithm == alg && !r.is_failure())
+                {
+                    let Some(j) = r.param_names.iter().position(|n| n == name) else {
+                        continue;
+                    };
+                    let (Some(m), Some(sd)) = (r.theta_val.get(j), r.theta_sd_final.get(j)) else {
+                        continue;
+                    };
+                    err.push((m / t - 1.0).abs());
+                    ratio.push(sd / p.sd);
+                    if let Ok(post) = crate::coverage::run_posterior(r, j) {
+                        if let Some(ci) = post
+                            .intervals
+                            .iter()
+                            .find(|c| (c.level - 0.95).abs() < 1e-9)
+                        {
+                            intervals += 1;
+                            covered += usize::from(ci.lo <= t && t <= ci.hi);
+                        }
+                    }
+                }
+            }
+            if err.is_empty() {
+                continue;
+            }
+            let mean = |x: &[f64]| x.iter().sum::<f64>() / x.len() as f64;
+            out.push(LimitRow {
+                param: name.to_string(),
+                algorithm: alg.to_string(),
+                data_sets: ref_err.len(),
+                ref_rel_error: mean(&ref_err),
+                ref_rel_sd: mean(&ref_sd),
+                ref_covered: ref_cov,
+                runs: err.len(),
+                online_rel_error: mean(&err),
+                online_covered: covered,
+                intervals,
+                sd_ratio: mean(&ratio),
+            });
+        }
+    }
+    out
+}
+
+/// The information limit as a markdown table.
+pub fn limit_markdown(rows: &[LimitRow]) -> String {
+    use std::fmt::Write as _;
+    let mut o = String::new();
+    let _ = writeln!(o, "| parameter | algorithm | data sets | reference: mean \\|error\\| | reference: mean s.d. / truth | reference 95 % intervals holding the truth | online runs | online: mean \\|error\\| | online error / reference error | online 95 % intervals holding the truth | online s.d. / ref. s.d. |");
+    let _ = writeln!(o, "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|");
+    for r in rows {
+        let _ = writeln!(
+            o,
+            "| {} | {} | {} | {:.2} % | {:.2} % | {} of {} | {} | {:.2} % | {:.2} | {} of {} ({:.2}) | {:.2} |",
+            r.param,
+            r.algorithm,
+            r.data_sets,
+            100.0 * r.ref_rel_error,
+            100.0 * r.ref_rel_sd,
+            r.ref_covered,
+            r.data_sets,
+            r.runs,
+            100.0 * r.online_rel_error,
+            r.online_rel_error / r.ref_rel_error,
+            r.online_covered,
+            r.intervals,
+            r.online_covered as f64 / r.intervals.max(1) as f64,
+            r.sd_ratio
+        );
+    }
+    o
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

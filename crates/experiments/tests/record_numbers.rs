@@ -175,6 +175,7 @@ fn reference_from(v: &[f64]) -> ReferenceRecord {
     let head = take(6);
     let r = ReferenceRecord {
         data: "d".into(),
+        data_sha256: None,
         steps: 200,
         dt: head[0],
         estimator: "mpf-ekf2".into(),

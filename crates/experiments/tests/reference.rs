@@ -6,7 +6,10 @@ mod common;
 
 use core_filters::rng::stream;
 use experiments::pipeline::{chain_spec, Algorithm, FilterSettings};
-use experiments::reference::{compare, pool_chains, FilterLikelihood, ParamSummary, ThetaMap};
+use experiments::reference::{
+    compare, information_limit, pool_chains, reference_covers, FilterLikelihood, ParamSummary,
+    ThetaMap,
+};
 use models::dataset::{generate, DatasetConfig};
 
 /// `log mean exp` of independent log-likelihood estimates (an estimate of log p(y | θ) whose
@@ -135,4 +138,59 @@ fn untrustworthy_chains_are_flagged() {
     assert!(few[0].starts_with("k1: chain ESS 25"), "{few:?}");
     assert!(few[0].contains("0.020"), "{few:?}");
     assert!(few[1].contains("3 of 100"), "{few:?}");
+}
+
+/// The information limit over two constructed data sets whose answer is known. k1 = 8:
+/// references 8.0 ± 0.1 (error 0) and 8.16 ± 0.05 (error 2 %, its 95 % interval 8.062–8.258
+/// misses the truth), so the reference's mean error is 1 %, its mean relative s.d. 0.9375 %, and
+/// one of two intervals holds the truth. Online: θ_val 8.08 on the first data set, 7.84 on the
+/// second (errors 1 % and 2 %, mean 1.5 %, ratio 1.5 to the reference), s.d. 0.4 (ratios 4 and
+/// 8, mean 6), 95 % intervals θ_val ± 0.1 (the first holds 8, the second does not); a failed run
+/// on the first data set is left out.
+#[test]
+fn information_limit_on_constructed_records() {
+    use core_filters::credible::CredibleInterval;
+    use experiments::observe::{ParamIntervals, PosteriorShape};
+    let summary = |mean: f64, sd: f64| ParamSummary {
+        name: "k1".into(),
+        mean,
+        sd,
+        quantiles: [f64::NAN; 5],
+        ess: 500.0,
+        truth: Some(8.0),
+    };
+    let online = |run: u64, k1: f64| {
+        let mut ratios = [1.0; 9];
+        ratios[0] = k1 / 8.0;
+        let mut r = common::record("storvik", run, ratios, 0.1);
+        r.credible = vec![ParamIntervals {
+            parameter: "k1".into(),
+            shape: PosteriorShape::GaussianMixture,
+            intervals: vec![CredibleInterval {
+                level: 0.95,
+                lo: k1 - 0.1,
+                hi: k1 + 0.1,
+            }],
+            error: None,
+            mc_se: None,
+        }];
+        r
+    };
+    let mut failed = online(2, 9.0);
+    failed.failure = Some("constructed".into());
+    assert_eq!(reference_covers(&summary(8.0, 0.1)), Some(true));
+    assert_eq!(reference_covers(&summary(8.16, 0.05)), Some(false));
+    let rows = information_limit(&[
+        (vec![summary(8.0, 0.1)], vec![online(0, 8.08), failed]),
+        (vec![summary(8.16, 0.05)], vec![online(1, 7.84)]),
+    ]);
+    assert_eq!(rows.len(), 1);
+    let r = &rows[0];
+    assert_eq!((r.param.as_str(), r.algorithm.as_str()), ("k1", "storvik"));
+    assert_eq!((r.data_sets, r.ref_covered, r.runs), (2, 1, 2));
+    assert!((r.ref_rel_error - 0.01).abs() < 1e-12);
+    assert!((r.ref_rel_sd - 0.009375).abs() < 1e-12);
+    assert!((r.online_rel_error - 0.015).abs() < 1e-12);
+    assert_eq!((r.online_covered, r.intervals), (1, 2));
+    assert!((r.sd_ratio - 6.0).abs() < 1e-9);
 }

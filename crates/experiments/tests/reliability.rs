@@ -335,6 +335,7 @@ fn write_reference(path: &Path) {
     let truth = [8.0, 8.0, 8.0, 0.25, 0.25, 0.25, 2.0, 1.0, 2.0];
     let r = ReferenceRecord {
         data: "d".into(),
+        data_sha256: None,
         steps: 200,
         dt: 0.005,
         estimator: "mpf-ekf2".into(),
@@ -439,4 +440,72 @@ fn building_chains_simulate_across_the_documented_range() {
         let data = models::dataset::load_dir(&dir.join(&out)).unwrap();
         assert!(data.y_meas.iter().all(|v| v.is_finite() && v.abs() < 1e4));
     }
+}
+
+/// `compare-reference` with the chains of two data sets puts each online record beside the
+/// reference of its own data set (named by the data set's digest in both records) and adds the
+/// information limit across them; a record of a third data set is refused, naming its file.
+#[test]
+fn compare_reference_groups_records_by_their_data_set() {
+    let dir = temp_dir("groups");
+    for (name, seed) in [("a", "1"), ("b", "2"), ("c", "3")] {
+        let o = run(
+            &["simulate", "--duration", "1", "--seed", seed, "--out", name],
+            &dir,
+        );
+        assert!(o.status.success(), "{}", stderr(&o));
+        let o = run(
+            &[
+                "filter",
+                "--algorithm",
+                "mpf-ekf2",
+                "--data",
+                name,
+                "--particles",
+                "20",
+                "--out",
+                &format!("online-{name}.json"),
+            ],
+            &dir,
+        );
+        assert!(o.status.success(), "{}", stderr(&o));
+    }
+    for name in ["a", "b"] {
+        let o = run(
+            &[
+                "reference",
+                "--data",
+                name,
+                "--particles",
+                "10",
+                "--burn-in",
+                "20",
+                "--iterations",
+                "40",
+                "--probe",
+                "2",
+                "--start-at-truth",
+                "--out",
+                &format!("ref-{name}.json"),
+            ],
+            &dir,
+        );
+        assert!(o.status.success(), "{}", stderr(&o));
+    }
+    let refs = ["--reference", "ref-a.json", "--reference", "ref-b.json"];
+    let mut args = vec!["compare-reference"];
+    args.extend(refs);
+    args.extend(["online-a.json", "online-b.json", "--out", "cmp.md"]);
+    let o = run(&args, &dir);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let md = std::fs::read_to_string(dir.join("cmp.md")).unwrap();
+    assert_eq!(md.matches("## Data set ").count(), 2, "{md}");
+    assert!(md.contains("## Across the 2 data sets"), "{md}");
+    // Each data set's table holds its one run; the limit table counts both.
+    assert_eq!(md.matches("| mpf-ekf2 | 1 |").count(), 18, "{md}");
+    assert!(md.contains("| k1 | mpf-ekf2 | 2 |"), "{md}");
+    let mut args = vec!["compare-reference"];
+    args.extend(refs);
+    args.extend(["online-a.json", "online-c.json"]);
+    refused(&run(&args, &dir), "online-c.json");
 }

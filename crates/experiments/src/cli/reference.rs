@@ -109,10 +109,11 @@ pub fn run(args: Args) -> Result<()> {
 #[derive(Debug, clap::Args)]
 pub struct CompareArgs {
     /// The reference posterior written by `sysid reference`; several chains on the same data are
-    /// pooled as an equal-weight mixture (give it once per chain).
+    /// pooled as an equal-weight mixture (give it once per chain). Chains of several data sets
+    /// (each record names its data set) give one table per data set and one across them.
     #[arg(long, required = true)]
     pub reference: Vec<PathBuf>,
-    /// Run records of online filters on the same data set.
+    /// Run records of online filters on the reference's data set(s).
     #[arg(required = true)]
     pub records: Vec<PathBuf>,
     /// Write the markdown table here (default: stdout only).
@@ -120,9 +121,29 @@ pub struct CompareArgs {
     pub out: Option<PathBuf>,
 }
 
-/// `sysid compare-reference`: the online filters' final posteriors against the reference.
+/// The data set a run record was computed on (`data.sha256` of its fingerprint).
+fn record_data_sha(r: &crate::record::RunRecord) -> Option<&str> {
+    r.fingerprint
+        .as_ref()?
+        .inputs
+        .get("data")?
+        .get("sha256")?
+        .as_str()
+}
+
+/// The chains of one data set and the online records computed on it.
+struct DataSetGroup {
+    data: String,
+    sha: Option<String>,
+    chains: Vec<Vec<crate::reference::ParamSummary>>,
+    records: Vec<crate::record::RunRecord>,
+}
+
+/// `sysid compare-reference`: the online filters' final posteriors against the reference; with
+/// references of several data sets, each online record against the reference of its own data
+/// set, and the information limit across them.
 pub fn compare(args: CompareArgs) -> Result<()> {
-    let mut chains = Vec::new();
+    let mut groups: Vec<DataSetGroup> = Vec::new();
     for path in &args.reference {
         let r: ReferenceRecord = crate::record::read::read(path)?;
         // Older records carry no warnings: recompute them from what they hold.
@@ -136,15 +157,69 @@ pub fn compare(args: CompareArgs) -> Result<()> {
         for w in &warnings {
             eprintln!("warning: {}: {w}", path.display());
         }
-        chains.push(r.params);
+        match groups.iter_mut().find(|g| g.sha == r.data_sha256) {
+            Some(g) => g.chains.push(r.params),
+            None => groups.push(DataSetGroup {
+                data: r.data,
+                sha: r.data_sha256,
+                chains: vec![r.params],
+                records: Vec::new(),
+            }),
+        }
     }
-    let pooled = crate::reference::pool_chains(&chains)?;
-    let mut records = Vec::new();
+    if groups.len() > 1 && groups.iter().any(|g| g.sha.is_none()) {
+        bail!(
+            "the references name different data sets, and some were written before references \
+             recorded their data set: compare those one data set at a time"
+        );
+    }
     for p in &args.records {
         let r: crate::record::RunRecord = crate::sweep::read_record(p)?;
-        records.push(r);
+        let sha = record_data_sha(&r);
+        let group = match groups.as_mut_slice() {
+            // A reference that does not name its data set is compared with every record, as
+            // before references recorded it.
+            [g] if g.sha.is_none() => g,
+            gs => gs
+                .iter_mut()
+                .find(|g| g.sha.as_deref() == sha)
+                .ok_or_else(|| {
+                    crate::error::invalid!(
+                        "{}: its data set (sha256 {}) is not that of any reference given",
+                        p.display(),
+                        sha.unwrap_or("unknown")
+                    )
+                })?,
+        };
+        group.records.push(r);
     }
-    let md = crate::reference::compare_markdown(&pooled, &records);
+    let several = groups.len() > 1;
+    let mut md = String::new();
+    let mut compared = Vec::new();
+    for g in groups {
+        let pooled = crate::reference::pool_chains(&g.chains)?;
+        if several {
+            md.push_str(&format!(
+                "## Data set {} (sha256 {})\n\n",
+                g.data,
+                g.sha.as_deref().map_or("?", |s| &s[..s.len().min(12)])
+            ));
+        }
+        md.push_str(&crate::reference::compare_markdown(&pooled, &g.records));
+        if several {
+            md.push('\n');
+        }
+        compared.push((pooled, g.records));
+    }
+    if several {
+        md.push_str(&format!(
+            "## Across the {} data sets: the information limit\n\n",
+            compared.len()
+        ));
+        md.push_str(&crate::reference::limit_markdown(
+            &crate::reference::information_limit(&compared),
+        ));
+    }
     print!("{md}");
     if let Some(out) = &args.out {
         std::fs::write(out, &md).with_context(|| format!("writing {}", out.display()))?;

@@ -168,6 +168,10 @@ pub fn reference_posterior(
     );
     let record = ReferenceRecord {
         data: args.data.display().to_string(),
+        data_sha256: crate::record::fingerprint::data_identity(&data)
+            .get("sha256")
+            .and_then(|v| v.as_str())
+            .map(str::to_string),
         steps,
         dt: data.dt,
         estimator: args.estimator.name().to_string(),

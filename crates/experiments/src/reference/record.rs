@@ -9,6 +9,11 @@ use super::ParamSummary;
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct ReferenceRecord {
     pub data: String,
+    /// SHA-256 of the data set as the estimator saw it (`data.sha256` of a run record's
+    /// fingerprint), so that online records are compared with the reference of their own data
+    /// set; absent in records written before it was recorded.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub data_sha256: Option<String>,
     pub steps: usize,
     #[serde(with = "crate::record::number::scalar")]
     pub dt: f64,
