@@ -430,7 +430,7 @@ fn identify(
                 .map_err(err)?;
             s
         }
-        (None, None) => FilterSettings::recommended(),
+        (None, None) => FilterSettings::recommended_with(particles),
     };
     let overrides = Overrides {
         particles,

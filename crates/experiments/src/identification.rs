@@ -94,6 +94,7 @@ resampling = {resampling}
 ess_threshold = {ess}
 # Independent filters pooled into one run (the particles split between them); θ_val is their
 # mean and its Monte-Carlo s.e. is reported (docs/calibration.md). 1: one filter (the paper's).
+# Without a config, --particles P pools one filter per 125 particles (1 to 8).
 pool = {pool}
 # Storvik's step (iii): "linearised" (the paper's) or "exact".
 storvik_update = {storvik}
@@ -388,7 +389,7 @@ impl Overrides {
 fn request_settings(req: &FilterRequest) -> Result<FilterSettings> {
     let settings = match &req.config {
         Some(path) => crate::limits::load_filter_settings(path)?,
-        None => FilterSettings::recommended(),
+        None => FilterSettings::recommended_with(req.particles),
     };
     let overrides = Overrides {
         particles: req.particles,

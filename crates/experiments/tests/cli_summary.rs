@@ -59,11 +59,11 @@ fn filter_prints_a_summary_table_and_records_its_warnings() {
         .all(|p| p["intervals"].as_array().unwrap().len() == 3));
     assert!(r["config"]["filter"].get("pool").is_none());
 
-    // Without a configuration file: the recommended settings, 4 pooled filters that report
-    // the Monte-Carlo s.e. of θ_val.
+    // Without a configuration file: the recommended settings, one pooled filter per 125
+    // particles (here 2) that report the Monte-Carlo s.e. of θ_val.
     let out = dir.join("recommended.json");
     let o = Command::new(env!("CARGO_BIN_EXE_sysid"))
-        .args(["filter", "--algorithm", "mpf-ekf2", "--particles", "40"])
+        .args(["filter", "--algorithm", "mpf-ekf2", "--particles", "250"])
         .args(["--seed", "3", "--data"])
         .arg(&data)
         .arg("--out")
@@ -73,9 +73,9 @@ fn filter_prints_a_summary_table_and_records_its_warnings() {
     let stdout = String::from_utf8_lossy(&o.stdout);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     assert!(stdout.contains("θ_val MC s.e."), "{stdout}");
-    assert!(stdout.contains("4 filters pooled"), "{stdout}");
+    assert!(stdout.contains("2 filters pooled"), "{stdout}");
     let r: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
-    assert_eq!(r["config"]["filter"]["pool"], 4);
+    assert_eq!(r["config"]["filter"]["pool"], 2);
     assert_eq!(r["config"]["filter"]["ess_threshold"], 0.5);
 }

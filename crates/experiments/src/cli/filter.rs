@@ -21,7 +21,8 @@ pub struct Args {
     /// `dataset.json` optional).
     #[arg(long, required_unless_present = "print_config")]
     pub data: Option<PathBuf>,
-    /// Number of particles (default 500, or the config file's value).
+    /// Number of particles (the config file's value; without a config 1000, as 8 pooled filters,
+    /// and P given here is pooled as one filter per 125 particles, 1 to 8).
     #[arg(long)]
     pub particles: Option<usize>,
     /// Master seed of the filter's random stream.
