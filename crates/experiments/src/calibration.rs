@@ -20,7 +20,7 @@
 use std::fmt::Write as _;
 use std::path::Path;
 
-use crate::error::{bail, Context, Result};
+use crate::error::{bail, Result};
 use core_filters::credible::{CredibleInterval, WeightedSample};
 use plotters::prelude::*;
 use plotters::style::text_anchor::{HPos, Pos, VPos};
@@ -517,19 +517,11 @@ pub fn markdown(sweep: &SweepCalibration) -> String {
 // ---------------------------------------------------------------------------------------------
 
 // Fonts, sizes and palette of every figure of the project.
-use crate::figures::{marker, style, CAPTION_SIZE, DESC_SIZE, FONT, LABEL_SIZE, TITLE_SIZE, WIDTH};
+use crate::figures::{
+    draw_mesh, grid_dims, marker, open_figure, present, style, CAPTION_SIZE, DESC_SIZE, FONT,
+};
 
 const LEGEND_ROW: i32 = 34;
-
-/// Panels as close to square as possible (9 → 3×3, 2 → 1×2).
-fn grid_dims(n: usize) -> (usize, usize) {
-    let n = n.max(1);
-    let mut cols = 1;
-    while cols * cols < n {
-        cols += 1;
-    }
-    (n.div_ceil(cols), cols)
-}
 
 /// Coverage figure of a sweep: one panel per parameter, coverage (y) against nominal level (x),
 /// one colour and marker per algorithm with ± 2 s.e. bars (s.e. at the observed coverage), the
@@ -549,14 +541,7 @@ pub fn coverage_figure(sweep: &SweepCalibration, path: &Path, title: &str) -> Re
     let legend_h = (legend_rows * LEGEND_ROW + 16) as u32;
     let (rows, cols) = grid_dims(names.len());
     let height = 60 + legend_h + 330 * rows as u32;
-    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
-        std::fs::create_dir_all(dir)
-            .with_context(|| format!("creating directory {}", dir.display()))?;
-    }
-    let root = SVGBackend::new(path, (WIDTH, height)).into_drawing_area();
-    root.fill(&WHITE)?;
-    let body = root.titled(title, (FONT, TITLE_SIZE))?;
-    let (grid, legend) = body.split_vertically(body.dim_in_pixel().1 - legend_h);
+    let (root, grid, legend) = open_figure(path, height, title, legend_h)?;
     let panels = grid.split_evenly((rows, cols));
     // Nominal levels spread over [0, 1]; algorithms side by side around each level.
     let offset = |i: usize| (i as f64 - (g as f64 - 1.0) / 2.0) * 0.012;
@@ -573,18 +558,16 @@ pub fn coverage_figure(sweep: &SweepCalibration, path: &Path, title: &str) -> Re
             .x_label_area_size(48)
             .y_label_area_size(62)
             .build_cartesian_2d(0.0..1.0, 0.0..1.0)?;
-        chart
-            .configure_mesh()
-            .x_desc("nominal level")
-            .y_desc("coverage")
-            .x_labels(6)
-            .y_labels(6)
-            .x_label_formatter(&|v| format!("{v:.1}"))
-            .y_label_formatter(&|v| format!("{v:.1}"))
-            .label_style((FONT, LABEL_SIZE))
-            .axis_desc_style((FONT, DESC_SIZE))
-            .light_line_style(WHITE)
-            .draw()?;
+        draw_mesh(
+            chart
+                .configure_mesh()
+                .x_desc("nominal level")
+                .y_desc("coverage")
+                .x_labels(6)
+                .y_labels(6)
+                .x_label_formatter(&|v| format!("{v:.1}"))
+                .y_label_formatter(&|v| format!("{v:.1}")),
+        )?;
         let n_min = per_alg
             .iter()
             .flatten()
@@ -700,9 +683,7 @@ pub fn coverage_figure(sweep: &SweepCalibration, path: &Path, title: &str) -> Re
         }
         legend.draw(&Text::new(label.clone(), (x + 48, y), text.clone()))?;
     }
-    root.present()
-        .with_context(|| format!("writing {}", path.display()))?;
-    Ok(())
+    present(&root, path)
 }
 
 #[cfg(test)]
@@ -741,12 +722,5 @@ mod tests {
         assert_eq!(percent(0.5), "50 %");
         assert_eq!(percent(0.95), "95 %");
         assert_eq!(percent(0.975), "97.5 %");
-    }
-
-    #[test]
-    fn grids_are_near_square() {
-        assert_eq!(grid_dims(9), (3, 3));
-        assert_eq!(grid_dims(2), (1, 2));
-        assert_eq!(grid_dims(1), (1, 1));
     }
 }

@@ -363,33 +363,27 @@ pub fn findings(recs: &[RunRecord], dt: f64) -> Vec<Finding> {
             evidence: d.show(1.0, 4, ""),
         });
     }
-    let mpf = |f: &dyn Fn(&RunRecord) -> f64| {
-        Estimate::of(&values(&runs(
+    // The goals, per parameter group: its name, the goal and the decimals of the goal in the
+    // statement and of the measured error in the evidence.
+    for (group, name, goal, goal_digits, digits) in [
+        ('c', "damping", GOAL_DAMPING, 0, 1),
+        ('k', "stiffness", GOAL_STIFFNESS, 1, 2),
+    ] {
+        let e = Estimate::of(&values(&runs(
             recs,
             Algorithm::MpfEkf2,
             Discretisation::Symplectic,
-            f,
-        )))
-    };
-    let c = mpf(&|r| group_error(r, 'c'));
-    out.push(Finding {
-        statement: format!(
-            "MPF-EKF2, symplectic: mean damping error ≤ {:.0}% (goal)",
-            100.0 * GOAL_DAMPING
-        ),
-        test: format!("mean over runs of the mean c error below {GOAL_DAMPING}"),
-        verdict: below(&c, GOAL_DAMPING),
-        evidence: c.show(100.0, 1, "%"),
-    });
-    let k = mpf(&|r| group_error(r, 'k'));
-    out.push(Finding {
-        statement: format!(
-            "MPF-EKF2, symplectic: mean stiffness error ≤ {:.1}% (goal)",
-            100.0 * GOAL_STIFFNESS
-        ),
-        test: format!("mean over runs of the mean k error below {GOAL_STIFFNESS}"),
-        verdict: below(&k, GOAL_STIFFNESS),
-        evidence: k.show(100.0, 2, "%"),
-    });
+            |r| group_error(r, group),
+        )));
+        out.push(Finding {
+            statement: format!(
+                "MPF-EKF2, symplectic: mean {name} error ≤ {:.goal_digits$}% (goal)",
+                100.0 * goal
+            ),
+            test: format!("mean over runs of the mean {group} error below {goal}"),
+            verdict: below(&e, goal),
+            evidence: e.show(100.0, digits, "%"),
+        });
+    }
     out
 }

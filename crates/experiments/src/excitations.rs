@@ -18,6 +18,7 @@ use crate::error::Result;
 use serde::Serialize;
 
 use crate::figures::{category_panels, CategoryGroup, CategoryPanel};
+use crate::markdown::{compact_header, joined, num, share};
 use crate::metrics::mean_sd;
 use crate::pipeline::Algorithm;
 use crate::record::RunRecord;
@@ -198,14 +199,6 @@ fn pct(e: &Estimate) -> String {
     }
 }
 
-fn num(v: f64) -> String {
-    if v.is_finite() {
-        format!("{v:.2}")
-    } else {
-        "–".into()
-    }
-}
-
 fn write_outputs(
     opts: &Options,
     study: &Study,
@@ -304,13 +297,7 @@ pub fn report(
          (docs/excitations.md).\n",
         study.description,
         study.sweep.master_seed,
-        study
-            .sweep
-            .particles
-            .iter()
-            .map(|p| p.to_string())
-            .collect::<Vec<_>>()
-            .join(", "),
+        joined(&study.sweep.particles, ", "),
         study.filter.discretisation.name(),
     );
     let _ = writeln!(o, "## Beyond the paper: other ground motions\n");
@@ -326,18 +313,20 @@ pub fn report(
          (0.65): the structure yields as much under every record, so what differs is the \
          frequency content and the duration. The first row is the paper's data (the control).\n"
     );
-    let _ = writeln!(
-        o,
-        "| ground motion | record | scale | PGA | duration (s) | max \\|r₁\\| / saturation |"
+    compact_header(
+        &mut o,
+        &[
+            "ground motion",
+            "record",
+            "scale",
+            "PGA",
+            "duration (s)",
+            "max \\|r₁\\| / saturation",
+        ],
+        "llrrrr",
     );
-    let _ = writeln!(o, "|---|---|---:|---:|---:|---:|");
     for v in values {
-        let y = v
-            .yielding
-            .iter()
-            .map(|(_, r)| format!("{r:.2}"))
-            .collect::<Vec<_>>()
-            .join(", ");
+        let y = joined(v.yielding.iter().map(|(_, r)| format!("{r:.2}")), ", ");
         let _ = writeln!(
             o,
             "| `{}` | {} | {} | {:.2} | {:.1} | {} |",
@@ -351,11 +340,21 @@ pub fn report(
          the fraction of (run, k or c) pairs whose central 95 % interval holds the truth, and \
          the failed runs.\n"
     );
-    let _ = writeln!(
-        o,
-        "| ground motion | algorithm | k error | c error | β ratio | γ ratio | n ratio | 95 % coverage (k, c) | runs (failed) |"
+    compact_header(
+        &mut o,
+        &[
+            "ground motion",
+            "algorithm",
+            "k error",
+            "c error",
+            "β ratio",
+            "γ ratio",
+            "n ratio",
+            "95 % coverage (k, c)",
+            "runs (failed)",
+        ],
+        "llrrrrrrr",
     );
-    let _ = writeln!(o, "|---|---|---:|---:|---:|---:|---:|---:|---:|");
     for r in rows {
         let _ = writeln!(
             o,
@@ -364,14 +363,10 @@ pub fn report(
             r.algorithm,
             pct(&r.k_error),
             pct(&r.c_error),
-            num(r.beta_ratio),
-            num(r.gamma_ratio),
-            num(r.n_ratio),
-            if r.coverage95_kc.is_finite() {
-                format!("{:.2} of {}", r.coverage95_kc, r.coverage_pairs)
-            } else {
-                "–".into()
-            },
+            num(r.beta_ratio, 2),
+            num(r.gamma_ratio, 2),
+            num(r.n_ratio, 2),
+            share(r.coverage95_kc, r.coverage_pairs),
             r.runs,
             r.failed
         );
@@ -392,18 +387,22 @@ pub fn report(
         100.0 * SAME_MARGIN,
         MIN_RUNS
     );
-    let _ = writeln!(
-        o,
-        "| algorithm | differences from the control (k error) | verdict |"
+    compact_header(
+        &mut o,
+        &[
+            "algorithm",
+            "differences from the control (k error)",
+            "verdict",
+        ],
+        "lll",
     );
-    let _ = writeln!(o, "|---|---|---|");
     for v in verdicts {
-        let d = v
-            .differences
-            .iter()
-            .map(|(s, e)| format!("`{s}` {:+.2} ± {:.2} pp", 100.0 * e.mean, 100.0 * e.se))
-            .collect::<Vec<_>>()
-            .join("; ");
+        let d = joined(
+            v.differences
+                .iter()
+                .map(|(s, e)| format!("`{s}` {:+.2} ± {:.2} pp", 100.0 * e.mean, 100.0 * e.se)),
+            "; ",
+        );
         let _ = writeln!(o, "| {} | {} | **{}** |", v.algorithm, d, v.verdict.label());
     }
     let _ = writeln!(o);

@@ -18,6 +18,7 @@
 use std::path::Path;
 
 use crate::error::{bail, Context, Result};
+use plotters::chart::MeshStyle;
 use plotters::coord::types::RangedCoordf64;
 use plotters::coord::Shift;
 use plotters::prelude::*;
@@ -74,7 +75,7 @@ pub fn param_unit(name: &str) -> &'static str {
 
 /// Grid of panels for `n` panels: as square as possible, columns first (9 → 3×3, 4 → 2×2,
 /// 2 → 1×2, 5 → 2×3).
-fn grid_dims(n: usize) -> (usize, usize) {
+pub(crate) fn grid_dims(n: usize) -> (usize, usize) {
     let n = n.max(1);
     let mut cols = 1;
     while cols * cols < n {
@@ -154,13 +155,62 @@ fn segments(n: usize, ok: impl Fn(usize) -> bool) -> Vec<std::ops::Range<usize>>
     out
 }
 
-/// Opens the SVG root, white background, with the figure title drawn; returns the area below it.
-fn titled_root<'b>(
-    root: &DrawingArea<SVGBackend<'b>, Shift>,
+/// A drawing area of an SVG figure.
+pub(crate) type Area<'a> = DrawingArea<SVGBackend<'a>, Shift>;
+
+/// Opens the SVG figure `path`, [`WIDTH`] × `height` px: creates its parent directory, fills the
+/// background white, draws the title and splits a legend strip `legend_h` px high off the
+/// bottom. Returns the root (for [`present`]), the area below the title and the legend strip.
+pub(crate) fn open_figure<'a>(
+    path: &'a Path,
+    height: u32,
     title: &str,
-) -> Result<DrawingArea<SVGBackend<'b>, Shift>> {
+    legend_h: u32,
+) -> Result<(Area<'a>, Area<'a>, Area<'a>)> {
+    create_parent(path)?;
+    let root = SVGBackend::new(path, (WIDTH, height)).into_drawing_area();
     root.fill(&WHITE)?;
-    Ok(root.titled(title, (FONT, TITLE_SIZE))?)
+    let body = root.titled(title, (FONT, TITLE_SIZE))?;
+    let (body, legend) = body.split_vertically(body.dim_in_pixel().1 - legend_h);
+    Ok((root, body, legend))
+}
+
+/// Writes the figure drawn on `root` to its file, `path`.
+pub(crate) fn present(root: &Area<'_>, path: &Path) -> Result<()> {
+    root.present()
+        .with_context(|| format!("writing {}", path.display()))?;
+    Ok(())
+}
+
+/// A chart of the figures' axes.
+type Chart<'a> = ChartContext<'a, SVGBackend<'a>, Cartesian2d<RangedCoordf64, RangedCoordf64>>;
+
+/// The chart of one panel of a figure of several: its caption above, an 8 px margin, an x label
+/// area 48 px high and a y label area `y_label_area` px wide.
+fn panel_chart<'a>(
+    area: &Area<'a>,
+    caption: &str,
+    y_label_area: u32,
+    x: std::ops::Range<f64>,
+    y: std::ops::Range<f64>,
+) -> Result<Chart<'a>> {
+    Ok(ChartBuilder::on(area)
+        .caption(caption, (FONT, CAPTION_SIZE))
+        .margin(8)
+        .x_label_area_size(48)
+        .y_label_area_size(y_label_area)
+        .build_cartesian_2d(x, y)?)
+}
+
+/// Draws a mesh configured by the caller in the figures' fonts, without light grid lines.
+pub(crate) fn draw_mesh(
+    mesh: &mut MeshStyle<'_, '_, RangedCoordf64, RangedCoordf64, SVGBackend<'_>>,
+) -> Result<()> {
+    mesh.label_style((FONT, LABEL_SIZE))
+        .axis_desc_style((FONT, DESC_SIZE))
+        .light_line_style(WHITE)
+        .draw()?;
+    Ok(())
 }
 
 /// One legend entry of a manually drawn legend strip.
@@ -241,10 +291,7 @@ fn arm_segments(
 }
 
 /// Draws legend entries in the grid given by [`legend_layout`].
-fn legend_strip(
-    area: &DrawingArea<SVGBackend<'_>, Shift>,
-    entries: &[(Swatch, String)],
-) -> Result<()> {
+fn legend_strip(area: &Area<'_>, entries: &[(Swatch, String)]) -> Result<()> {
     if entries.is_empty() {
         return Ok(());
     }
@@ -290,6 +337,17 @@ fn legend_strip(
         area.draw(&Text::new(label.clone(), (x + 48, y), text.clone()))?;
     }
     Ok(())
+}
+
+/// Draws the legend strip of `entries` and writes the figure ([`present`]).
+fn finish(
+    root: &Area<'_>,
+    legend: &Area<'_>,
+    entries: &[(Swatch, String)],
+    path: &Path,
+) -> Result<()> {
+    legend_strip(legend, entries)?;
+    present(root, path)
 }
 
 /// Value of parameter `j` in trace row `k` (NaN when the row is short).
@@ -391,10 +449,7 @@ pub fn convergence(runs: &[(&str, &RunRecord)], path: &Path, title: &str) -> Res
 
     let (rows, cols) = grid_dims(names.len());
     let height = 60 + legend_h + 265 * rows as u32;
-    create_parent(path)?;
-    let root = SVGBackend::new(path, (WIDTH, height)).into_drawing_area();
-    let body = titled_root(&root, title)?;
-    let (grid, legend) = body.split_vertically(body.dim_in_pixel().1 - legend_h);
+    let (root, grid, legend) = open_figure(path, height, title, legend_h)?;
     let panels = grid.split_evenly((rows, cols));
 
     for (j, (name, area)) in names.iter().zip(&panels).enumerate() {
@@ -405,24 +460,17 @@ pub fn convergence(runs: &[(&str, &RunRecord)], path: &Path, title: &str) -> Res
         } else {
             format!("{name} {}", param_unit(name))
         };
-        let mut chart = ChartBuilder::on(area)
-            .caption(caption, (FONT, CAPTION_SIZE))
-            .margin(8)
-            .x_label_area_size(48)
-            .y_label_area_size(70)
-            .build_cartesian_2d(t0..t1, lo..hi)?;
+        let mut chart = panel_chart(area, &caption, 70, t0..t1, lo..hi)?;
         let (tspan, yspan) = (t1 - t0, hi - lo);
-        chart
-            .configure_mesh()
-            .x_desc("t [s]")
-            .x_labels(6)
-            .y_labels(5)
-            .x_label_formatter(&|v| tick(*v, tspan))
-            .y_label_formatter(&|v| tick(*v, yspan))
-            .label_style((FONT, LABEL_SIZE))
-            .axis_desc_style((FONT, DESC_SIZE))
-            .light_line_style(WHITE)
-            .draw()?;
+        draw_mesh(
+            chart
+                .configure_mesh()
+                .x_desc("t [s]")
+                .x_labels(6)
+                .y_labels(5)
+                .x_label_formatter(&|v| tick(*v, tspan))
+                .y_label_formatter(&|v| tick(*v, yspan)),
+        )?;
         let clamp = |v: f64| v.clamp(lo, hi);
         // Bands first so that no mean line is hidden under another run's band.
         for (i, (_, r)) in runs.iter().enumerate() {
@@ -475,10 +523,7 @@ pub fn convergence(runs: &[(&str, &RunRecord)], path: &Path, title: &str) -> Res
         }
     }
 
-    legend_strip(&legend, &entries)?;
-    root.present()
-        .with_context(|| format!("writing {}", path.display()))?;
-    Ok(())
+    finish(&root, &legend, &entries, path)
 }
 
 /// Hysteresis figure (SPEC §7 validation, Figs. 4 (b) and 8): restoring force k1·r1 against the
@@ -505,52 +550,37 @@ pub fn hysteresis(run: &RunRecord, path: &Path, title: &str) -> Result<()> {
     let pairs = |l: &crate::record::Loop| -> Vec<(f64, f64)> {
         l.x.iter().copied().zip(l.force.iter().copied()).collect()
     };
-    let (x0, x1) = padded(
-        finite_range(
-            loops
-                .iter()
-                .flat_map(|(l, ..)| pairs(l))
-                .filter(|p| p.1.is_finite())
-                .map(|p| p.0),
-        )
-        .unwrap_or((-1.0, 1.0)),
-    );
-    let (f0, f1) = padded(
-        finite_range(
-            loops
-                .iter()
-                .flat_map(|(l, ..)| pairs(l))
-                .filter(|p| p.0.is_finite())
-                .map(|p| p.1),
-        )
-        .unwrap_or((-1.0, 1.0)),
-    );
+    // The axes hold every point drawn: those with both coordinates finite.
+    let drawn: Vec<(f64, f64)> = loops
+        .iter()
+        .flat_map(|(l, ..)| pairs(l))
+        .filter(|p| p.0.is_finite() && p.1.is_finite())
+        .collect();
+    let axis = |coordinate: fn(&(f64, f64)) -> f64| {
+        padded(finite_range(drawn.iter().map(coordinate)).unwrap_or((-1.0, 1.0)))
+    };
+    let ((x0, x1), (f0, f1)) = (axis(|p| p.0), axis(|p| p.1));
 
-    create_parent(path)?;
     let entries: Vec<(Swatch, String)> = loops
         .iter()
         .map(|(_, c, label)| (Swatch::Line(*c), label.clone()))
         .collect();
     let (_, legend_h) = legend_layout(&entries);
-    let root = SVGBackend::new(path, (WIDTH, 900)).into_drawing_area();
-    let body = titled_root(&root, title)?;
-    let (body, legend) = body.split_vertically(body.dim_in_pixel().1 - legend_h);
+    let (root, body, legend) = open_figure(path, 900, title, legend_h)?;
     let mut chart = ChartBuilder::on(&body)
         .margin(20)
         .x_label_area_size(60)
         .y_label_area_size(100)
         .build_cartesian_2d(x0..x1, f0..f1)?;
     let (xspan, fspan) = (x1 - x0, f1 - f0);
-    chart
-        .configure_mesh()
-        .x_desc("x1 [m]")
-        .y_desc("k1·r1 [m/s²]")
-        .x_label_formatter(&|v| tick(*v, xspan))
-        .y_label_formatter(&|v| tick(*v, fspan))
-        .label_style((FONT, LABEL_SIZE))
-        .axis_desc_style((FONT, DESC_SIZE))
-        .light_line_style(WHITE)
-        .draw()?;
+    draw_mesh(
+        chart
+            .configure_mesh()
+            .x_desc("x1 [m]")
+            .y_desc("k1·r1 [m/s²]")
+            .x_label_formatter(&|v| tick(*v, xspan))
+            .y_label_formatter(&|v| tick(*v, fspan)),
+    )?;
 
     for (l, c, _) in &loops {
         let xy = pairs(l);
@@ -572,16 +602,13 @@ pub fn hysteresis(run: &RunRecord, path: &Path, title: &str) -> Result<()> {
             .pos(Pos::new(HPos::Center, VPos::Center));
         body.draw(&Text::new(why, (w as i32 / 2, h as i32 / 2), style))?;
     }
-    legend_strip(&legend, &entries)?;
-    root.present()
-        .with_context(|| format!("writing {}", path.display()))?;
-    Ok(())
+    finish(&root, &legend, &entries, path)
 }
 
 /// Category labels under the x axis: name `j` centred at x = j (plotters' automatic ticks of
 /// a float axis need not fall on the integers).
 fn category_labels(
-    root: &DrawingArea<SVGBackend<'_>, Shift>,
+    root: &Area<'_>,
     chart: &ChartContext<'_, SVGBackend<'_>, Cartesian2d<RangedCoordf64, RangedCoordf64>>,
     names: &[String],
     y_axis: f64,
@@ -684,10 +711,7 @@ pub fn crosses(groups: &[(&str, Vec<&RunRecord>)], path: &Path, title: &str) -> 
     // One panel per parameter group, each on its own scale, so that the stiffnesses' small
     // differences are not flattened by the hysteresis parameters' large ones.
     let panels = parameter_groups(names);
-    create_parent(path)?;
-    let root = SVGBackend::new(path, (WIDTH, 760 + legend_h)).into_drawing_area();
-    let body = titled_root(&root, title)?;
-    let (body, legend) = body.split_vertically(body.dim_in_pixel().1 - legend_h);
+    let (root, body, legend) = open_figure(path, 760 + legend_h, title, legend_h)?;
     let (body_w, _) = body.dim_in_pixel();
     // Widths in proportion to the parameters shown, plus room for each panel's y labels.
     let weight = |p: &(String, Vec<usize>)| p.1.len() as f64 + 1.2;
@@ -718,17 +742,15 @@ pub fn crosses(groups: &[(&str, Vec<&RunRecord>)], path: &Path, title: &str) -> 
             .y_label_area_size(80)
             .build_cartesian_2d(-0.5..(k as f64 - 0.5), lo..hi)?;
         let yspan = hi - lo;
-        chart
-            .configure_mesh()
-            .disable_x_mesh()
-            .x_labels(0)
-            .y_labels(8)
-            .y_label_formatter(&|v| tick(*v, yspan))
-            .y_desc("θ_val / θ_true [-]")
-            .label_style((FONT, LABEL_SIZE))
-            .axis_desc_style((FONT, DESC_SIZE))
-            .light_line_style(WHITE)
-            .draw()?;
+        draw_mesh(
+            chart
+                .configure_mesh()
+                .disable_x_mesh()
+                .x_labels(0)
+                .y_labels(8)
+                .y_label_formatter(&|v| tick(*v, yspan))
+                .y_desc("θ_val / θ_true [-]"),
+        )?;
         let sub: Vec<String> = idx.iter().map(|&j| names[j].clone()).collect();
         category_labels(&root, &chart, &sub, lo)?;
         chart.draw_series(DashedLineSeries::new(
@@ -763,10 +785,7 @@ pub fn crosses(groups: &[(&str, Vec<&RunRecord>)], path: &Path, title: &str) -> 
             }
         }
     }
-    legend_strip(&legend, &entries)?;
-    root.present()
-        .with_context(|| format!("writing {}", path.display()))?;
-    Ok(())
+    finish(&root, &legend, &entries, path)
 }
 
 /// Parameters grouped for separate panels, in order of first appearance: stiffnesses `k…`,
@@ -894,26 +913,21 @@ pub fn state_errors(groups: &[(&str, Vec<&RunRecord>)], path: &Path, title: &str
     ));
     let (_, legend_h) = legend_layout(&entries);
 
-    create_parent(path)?;
-    let root = SVGBackend::new(path, (WIDTH, 760 + legend_h)).into_drawing_area();
-    let body = titled_root(&root, title)?;
-    let (body, legend) = body.split_vertically(body.dim_in_pixel().1 - legend_h);
+    let (root, body, legend) = open_figure(path, 760 + legend_h, title, legend_h)?;
     let mut chart = ChartBuilder::on(&body)
         .margin(20)
         .x_label_area_size(60)
         .y_label_area_size(90)
         .build_cartesian_2d(-0.5..(n as f64 - 0.5), 0.0..top)?;
-    chart
-        .configure_mesh()
-        .disable_x_mesh()
-        .x_labels(0)
-        .y_label_formatter(&|v| tick(*v, top))
-        .x_desc("state")
-        .y_desc("online NRMSE [-]")
-        .label_style((FONT, LABEL_SIZE))
-        .axis_desc_style((FONT, DESC_SIZE))
-        .light_line_style(WHITE)
-        .draw()?;
+    draw_mesh(
+        chart
+            .configure_mesh()
+            .disable_x_mesh()
+            .x_labels(0)
+            .y_label_formatter(&|v| tick(*v, top))
+            .x_desc("state")
+            .y_desc("online NRMSE [-]"),
+    )?;
     category_labels(&root, &chart, &names, 0.0)?;
 
     for (i, per_state) in values.iter().enumerate() {
@@ -952,10 +966,7 @@ pub fn state_errors(groups: &[(&str, Vec<&RunRecord>)], path: &Path, title: &str
             }))?;
         }
     }
-    legend_strip(&legend, &entries)?;
-    root.present()
-        .with_context(|| format!("writing {}", path.display()))?;
-    Ok(())
+    finish(&root, &legend, &entries, path)
 }
 
 /// One line of a [`time_series`] panel.
@@ -998,10 +1009,7 @@ pub fn time_series(panels: &[Panel<'_>], path: &Path, title: &str) -> Result<()>
         .collect();
     let (_, legend_h) = legend_layout(&entries);
     let height = 60 + legend_h + 300 * panels.len() as u32;
-    create_parent(path)?;
-    let root = SVGBackend::new(path, (WIDTH, height)).into_drawing_area();
-    let body = titled_root(&root, title)?;
-    let (grid, legend) = body.split_vertically(body.dim_in_pixel().1 - legend_h);
+    let (root, grid, legend) = open_figure(path, height, title, legend_h)?;
     let areas = grid.split_evenly((panels.len(), 1));
     for (panel, area) in panels.iter().zip(&areas) {
         let values = panel
@@ -1010,25 +1018,18 @@ pub fn time_series(panels: &[Panel<'_>], path: &Path, title: &str) -> Result<()>
             .flat_map(|s| s.y.iter().copied())
             .chain(panel.reference.iter().copied());
         let (lo, hi) = padded(finite_range(values).unwrap_or((-1.0, 1.0)));
-        let mut chart = ChartBuilder::on(area)
-            .caption(panel.caption.clone(), (FONT, CAPTION_SIZE))
-            .margin(8)
-            .x_label_area_size(48)
-            .y_label_area_size(80)
-            .build_cartesian_2d(t0..t1, lo..hi)?;
+        let mut chart = panel_chart(area, &panel.caption, 80, t0..t1, lo..hi)?;
         let (tspan, yspan) = (t1 - t0, hi - lo);
-        chart
-            .configure_mesh()
-            .x_desc("t [s]")
-            .y_desc(panel.y_desc.clone())
-            .x_labels(8)
-            .y_labels(5)
-            .x_label_formatter(&|v| tick(*v, tspan))
-            .y_label_formatter(&|v| tick(*v, yspan))
-            .label_style((FONT, LABEL_SIZE))
-            .axis_desc_style((FONT, DESC_SIZE))
-            .light_line_style(WHITE)
-            .draw()?;
+        draw_mesh(
+            chart
+                .configure_mesh()
+                .x_desc("t [s]")
+                .y_desc(panel.y_desc.clone())
+                .x_labels(8)
+                .y_labels(5)
+                .x_label_formatter(&|v| tick(*v, tspan))
+                .y_label_formatter(&|v| tick(*v, yspan)),
+        )?;
         for r in &panel.reference {
             chart.draw_series(DashedLineSeries::new(
                 vec![(t0, *r), (t1, *r)],
@@ -1046,10 +1047,7 @@ pub fn time_series(panels: &[Panel<'_>], path: &Path, title: &str) -> Result<()>
             }
         }
     }
-    legend_strip(&legend, &entries)?;
-    root.present()
-        .with_context(|| format!("writing {}", path.display()))?;
-    Ok(())
+    finish(&root, &legend, &entries, path)
 }
 
 /// Autocorrelation figure: for each channel a panel of the sample autocorrelation at lags
@@ -1075,33 +1073,23 @@ pub fn autocorrelation(
     ];
     let (_, legend_h) = legend_layout(&entries);
     let height = 60 + legend_h + 260 * channels.len() as u32;
-    create_parent(path)?;
-    let root = SVGBackend::new(path, (WIDTH, height)).into_drawing_area();
-    let body = titled_root(&root, title)?;
-    let (grid, legend) = body.split_vertically(body.dim_in_pixel().1 - legend_h);
+    let (root, grid, legend) = open_figure(path, height, title, legend_h)?;
     let areas = grid.split_evenly((channels.len(), 1));
     for ((name, rho), area) in channels.iter().zip(&areas) {
         let lags = rho.len().max(1) as f64;
         let (lo, hi) = padded(
             finite_range(rho.iter().copied().chain([bound, -bound, 0.0])).unwrap_or((-1.0, 1.0)),
         );
-        let mut chart = ChartBuilder::on(area)
-            .caption(name.clone(), (FONT, CAPTION_SIZE))
-            .margin(8)
-            .x_label_area_size(48)
-            .y_label_area_size(80)
-            .build_cartesian_2d(0.0..lags + 0.5, lo..hi)?;
+        let mut chart = panel_chart(area, name, 80, 0.0..lags + 0.5, lo..hi)?;
         let yspan = hi - lo;
-        chart
-            .configure_mesh()
-            .x_desc("lag [steps]")
-            .y_desc("autocorrelation [-]")
-            .x_label_formatter(&|v| format!("{v:.0}"))
-            .y_label_formatter(&|v| tick(*v, yspan))
-            .label_style((FONT, LABEL_SIZE))
-            .axis_desc_style((FONT, DESC_SIZE))
-            .light_line_style(WHITE)
-            .draw()?;
+        draw_mesh(
+            chart
+                .configure_mesh()
+                .x_desc("lag [steps]")
+                .y_desc("autocorrelation [-]")
+                .x_label_formatter(&|v| format!("{v:.0}"))
+                .y_label_formatter(&|v| tick(*v, yspan)),
+        )?;
         for b in [bound, -bound] {
             chart.draw_series(DashedLineSeries::new(
                 vec![(0.0, b), (lags + 0.5, b)],
@@ -1118,10 +1106,7 @@ pub fn autocorrelation(
             )))?;
         }
     }
-    legend_strip(&legend, &entries)?;
-    root.present()
-        .with_context(|| format!("writing {}", path.display()))?;
-    Ok(())
+    finish(&root, &legend, &entries, path)
 }
 
 /// Checks that `path` is a non-empty SVG document: it opens with `<svg` or `<?xml` and closes
@@ -1185,10 +1170,7 @@ pub fn category_panels(
         .collect();
     let (_, legend_h) = legend_layout(&entries);
     let height = 60 + legend_h + 320 * panels.len() as u32;
-    create_parent(path)?;
-    let root = SVGBackend::new(path, (WIDTH, height)).into_drawing_area();
-    let body = titled_root(&root, title)?;
-    let (grid, legend) = body.split_vertically(body.dim_in_pixel().1 - legend_h);
+    let (root, grid, legend) = open_figure(path, height, title, legend_h)?;
     let areas = grid.split_evenly((panels.len(), 1));
     let n = categories.len();
     for (panel, area) in panels.iter().zip(&areas) {
@@ -1199,32 +1181,25 @@ pub fn category_panels(
                 .flat_map(|(m, h)| [m - h.max(0.0), m + h.max(0.0), *m])
         });
         let (lo, hi) = padded(finite_range(values).unwrap_or((0.0, 1.0)));
-        let mut chart = ChartBuilder::on(area)
-            .caption(panel.caption.clone(), (FONT, CAPTION_SIZE))
-            .margin(8)
-            .x_label_area_size(48)
-            .y_label_area_size(80)
-            .build_cartesian_2d(-0.5..(n as f64 - 0.5), lo..hi)?;
+        let mut chart = panel_chart(area, &panel.caption, 80, -0.5..(n as f64 - 0.5), lo..hi)?;
         let yspan = hi - lo;
         let names = categories.to_vec();
-        chart
-            .configure_mesh()
-            .y_desc(panel.y_desc.clone())
-            .x_labels(n)
-            .y_labels(5)
-            .x_label_formatter(&|v| {
-                let i = v.round();
-                if (v - i).abs() < 1e-6 && i >= 0.0 && (i as usize) < names.len() {
-                    names[i as usize].clone()
-                } else {
-                    String::new()
-                }
-            })
-            .y_label_formatter(&|v| tick(*v, yspan))
-            .label_style((FONT, LABEL_SIZE))
-            .axis_desc_style((FONT, DESC_SIZE))
-            .light_line_style(WHITE)
-            .draw()?;
+        draw_mesh(
+            chart
+                .configure_mesh()
+                .y_desc(panel.y_desc.clone())
+                .x_labels(n)
+                .y_labels(5)
+                .x_label_formatter(&|v| {
+                    let i = v.round();
+                    if (v - i).abs() < 1e-6 && i >= 0.0 && (i as usize) < names.len() {
+                        names[i as usize].clone()
+                    } else {
+                        String::new()
+                    }
+                })
+                .y_label_formatter(&|v| tick(*v, yspan)),
+        )?;
         let width = 0.6 / panel.groups.len().max(1) as f64;
         for (gi, g) in panel.groups.iter().enumerate() {
             let st = style::for_label(&g.label, gi);
@@ -1246,10 +1221,7 @@ pub fn category_panels(
             }
         }
     }
-    legend_strip(&legend, &entries)?;
-    root.present()
-        .with_context(|| format!("writing {}", path.display()))?;
-    Ok(())
+    finish(&root, &legend, &entries, path)
 }
 
 #[cfg(test)]

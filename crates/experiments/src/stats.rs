@@ -44,21 +44,36 @@ pub struct AlgorithmStats {
     pub particle_steps_per_s_mean: f64,
 }
 
-/// Statistics of one algorithm's records.
-pub fn algorithm_stats(algorithm: &str, records: &[&RunRecord]) -> AlgorithmStats {
-    let ok: Vec<&&RunRecord> = records.iter().filter(|r| !r.is_failure()).collect();
+/// The completed runs among one algorithm's `records`, and the parameter names (those of the
+/// first record).
+pub(crate) fn completed<'a>(records: &[&'a RunRecord]) -> (Vec<&'a RunRecord>, Vec<String>) {
+    let ok = records
+        .iter()
+        .copied()
+        .filter(|r| !r.is_failure())
+        .collect();
     let names = records
         .first()
         .map(|r| r.param_names.clone())
         .unwrap_or_default();
+    (ok, names)
+}
+
+/// The true value of parameter `j` as the first completed run knows it.
+pub(crate) fn truth(ok: &[&RunRecord], j: usize) -> Option<f64> {
+    ok.first()
+        .and_then(|r| r.theta_true.as_ref())
+        .and_then(|t| t.get(j).copied())
+}
+
+/// Statistics of one algorithm's records.
+pub fn algorithm_stats(algorithm: &str, records: &[&RunRecord]) -> AlgorithmStats {
+    let (ok, names) = completed(records);
     let params = names
         .iter()
         .enumerate()
         .map(|(j, name)| {
-            let truth = ok
-                .first()
-                .and_then(|r| r.theta_true.as_ref())
-                .map_or(f64::NAN, |t| t[j]);
+            let truth = truth(&ok, j).unwrap_or(f64::NAN);
             let ratios: Vec<f64> = ok.iter().map(|r| r.theta_val[j] / truth).collect();
             let errs: Vec<f64> = ok
                 .iter()

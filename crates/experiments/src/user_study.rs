@@ -15,8 +15,10 @@ use std::time::Instant;
 use crate::error::{Context, Result};
 
 use crate::engine::{load, write_json, Engine};
+use crate::markdown::compact_header;
 use crate::metrics::mean_spread;
 use crate::record::RunRecord;
+use crate::stats::{completed, truth};
 use crate::sweep::lock::DirLock;
 use crate::sweep::{write_bytes_atomic, Shard};
 use crate::verdict::{findings_table, Finding};
@@ -59,11 +61,7 @@ pub fn spreads(records: &[RunRecord]) -> Vec<AlgorithmSpread> {
     }
     by.into_iter()
         .map(|(alg, rs)| {
-            let ok: Vec<&&RunRecord> = rs.iter().filter(|r| !r.is_failure()).collect();
-            let names = rs
-                .first()
-                .map(|r| r.param_names.clone())
-                .unwrap_or_default();
+            let (ok, names) = completed(&rs);
             let params = names
                 .iter()
                 .enumerate()
@@ -86,10 +84,7 @@ pub fn spreads(records: &[RunRecord]) -> Vec<AlgorithmSpread> {
                         spread,
                         posterior_sd,
                         sd_over_spread: posterior_sd / spread,
-                        truth: ok
-                            .first()
-                            .and_then(|r| r.theta_true.as_ref())
-                            .and_then(|t| t.get(j).copied()),
+                        truth: truth(&ok, j),
                     }
                 })
                 .collect();
@@ -123,8 +118,20 @@ pub fn markdown(
         o,
         "# Study `{name}`\n\n{description}\n\nData: `{data}`. {spread}\n"
     );
-    let _ = writeln!(o, "| algorithm | runs (failed, with warnings) | parameter | θ_val mean over runs | run-to-run s.d. | mean posterior s.d. | posterior s.d. / spread | truth |");
-    let _ = writeln!(o, "|---|---|---|---|---|---|---|---|");
+    compact_header(
+        &mut o,
+        &[
+            "algorithm",
+            "runs (failed, with warnings)",
+            "parameter",
+            "θ_val mean over runs",
+            "run-to-run s.d.",
+            "mean posterior s.d.",
+            "posterior s.d. / spread",
+            "truth",
+        ],
+        "llllllll",
+    );
     for a in spreads {
         for p in &a.params {
             let _ = writeln!(

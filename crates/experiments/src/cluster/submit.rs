@@ -94,13 +94,7 @@ pub fn submit(plan: &Plan, dry_run: bool) -> Result<(Submitted, usize, [String; 
     let scripts = [shard_script(plan), finish_script(plan)];
     let all: Vec<usize> = (0..plan.tasks).collect();
     let a_args = array_args(plan, &all);
-    let mut commands = vec![
-        shown(&plan.shard_script(), &a_args),
-        shown(
-            &plan.finish_script(),
-            &finish_args(&["<array job>".to_string()]),
-        ),
-    ];
+    let mut commands = planned_commands(plan, &a_args, &[]);
     if dry_run {
         return Ok((
             Submitted {
@@ -126,17 +120,7 @@ pub fn submit(plan: &Plan, dry_run: bool) -> Result<(Submitted, usize, [String; 
     write_script(&plan.shard_script(), &scripts[0])?;
     write_script(&plan.finish_script(), &scripts[1])?;
     plan.save()?;
-    let array_job = scheduler::sbatch(&plan.shard_script(), &a_args)?;
-    let f_args = finish_args(std::slice::from_ref(&array_job));
-    commands[1] = shown(&plan.finish_script(), &f_args);
-    let finish_job = submit_finish(plan, &array_job, &all, &f_args)?;
-    let submission = Submission {
-        array_job,
-        finish_job,
-        shards: all,
-        submitted: utc_now(),
-    };
-    scheduler::record_submission(plan, submission.clone())?;
+    let submission = submit_array(plan, &a_args, all, &[], &mut commands)?;
     Ok((
         Submitted {
             commands,
@@ -178,14 +162,11 @@ pub fn resubmit(plan: &Plan, dry_run: bool) -> Result<Option<Submitted>, Cluster
         .collect();
     let stale_finish: Vec<String> = st.finish_queued.iter().map(|(j, _)| j.clone()).collect();
     let a_args = array_args(plan, &failed);
-    let mut after = vec!["<array job>".to_string()];
-    after.extend(earlier.iter().cloned());
     let mut commands = Vec::new();
     if !stale_finish.is_empty() {
         commands.push(format!("scancel {}", stale_finish.join(" ")));
     }
-    commands.push(shown(&plan.shard_script(), &a_args));
-    commands.push(shown(&plan.finish_script(), &finish_args(&after)));
+    commands.extend(planned_commands(plan, &a_args, &earlier));
     if dry_run {
         return Ok(Some(Submitted {
             commands,
@@ -193,23 +174,52 @@ pub fn resubmit(plan: &Plan, dry_run: bool) -> Result<Option<Submitted>, Cluster
         }));
     }
     scheduler::scancel(&stale_finish)?;
-    let array_job = scheduler::sbatch(&plan.shard_script(), &a_args)?;
-    after[0] = array_job.clone();
-    let f_args = finish_args(&after);
-    let last = commands.len() - 1;
-    commands[last] = shown(&plan.finish_script(), &f_args);
-    let finish_job = submit_finish(plan, &array_job, &failed, &f_args)?;
-    let submission = Submission {
-        array_job,
-        finish_job,
-        shards: failed,
-        submitted: utc_now(),
-    };
-    scheduler::record_submission(plan, submission.clone())?;
+    let submission = submit_array(plan, &a_args, failed, &earlier, &mut commands)?;
     Ok(Some(Submitted {
         commands,
         submission: Some(submission),
     }))
+}
+
+/// The `sbatch` commands of an array (its arguments `a_args`) and of the finish job after it and
+/// after the `earlier` arrays, the array's job id still a placeholder: what a dry run shows.
+fn planned_commands(plan: &Plan, a_args: &[String], earlier: &[String]) -> Vec<String> {
+    let after: Vec<String> = std::iter::once("<array job>".to_string())
+        .chain(earlier.iter().cloned())
+        .collect();
+    vec![
+        shown(&plan.shard_script(), a_args),
+        shown(&plan.finish_script(), &finish_args(&after)),
+    ]
+}
+
+/// Submits the array of `shards` (its `sbatch` arguments `a_args`) and the finish job after it
+/// and after the `earlier` arrays, writes the finish job's actual command into the last of
+/// `commands`, and records the submission.
+fn submit_array(
+    plan: &Plan,
+    a_args: &[String],
+    shards: Vec<usize>,
+    earlier: &[String],
+    commands: &mut [String],
+) -> Result<Submission, ClusterError> {
+    let array_job = scheduler::sbatch(&plan.shard_script(), a_args)?;
+    let after: Vec<String> = std::iter::once(array_job.clone())
+        .chain(earlier.iter().cloned())
+        .collect();
+    let f_args = finish_args(&after);
+    if let Some(last) = commands.last_mut() {
+        *last = shown(&plan.finish_script(), &f_args);
+    }
+    let finish_job = submit_finish(plan, &array_job, &shards, &f_args)?;
+    let submission = Submission {
+        array_job,
+        finish_job,
+        shards,
+        submitted: utc_now(),
+    };
+    scheduler::record_submission(plan, submission.clone())?;
+    Ok(submission)
 }
 
 /// Submits the finish job after an array that is already submitted. Should that fail, the

@@ -29,6 +29,20 @@ fn create_parent(path: &Path) -> Result<()> {
     Ok(())
 }
 
+/// The legend of a chart's labelled series, boxed in its upper left corner.
+fn series_labels<'a>(
+    chart: &mut ChartContext<'a, SVGBackend<'a>, Cartesian2d<LogCoord<f64>, LogCoord<f64>>>,
+) -> Result<()> {
+    chart
+        .configure_series_labels()
+        .position(SeriesLabelPosition::UpperLeft)
+        .label_font((FONT, DESC_SIZE))
+        .background_style(WHITE.mix(0.9))
+        .border_style(BLACK)
+        .draw()?;
+    Ok(())
+}
+
 /// Cost per particle-step (µs) against the marginalised dimension, log–log; the bootstrap PF,
 /// which marginalises nothing, against its sampled dimension. The legend gives each fitted
 /// slope.
@@ -118,13 +132,7 @@ pub fn cost(fits: &[CostFit], path: &Path) -> Result<()> {
                 PathElement::new(vec![(x, y), (x + 20, y)], grey.stroke_width(2))
             });
     }
-    chart
-        .configure_series_labels()
-        .position(SeriesLabelPosition::UpperLeft)
-        .label_font((FONT, DESC_SIZE))
-        .background_style(WHITE.mix(0.9))
-        .border_style(BLACK)
-        .draw()?;
+    series_labels(&mut chart)?;
     root.present()?;
     Ok(())
 }
@@ -210,13 +218,7 @@ pub fn accuracy(cells: &[Cell], path: &Path) -> Result<()> {
                 PathElement::new(vec![(p.0, bottom), (p.0, top)], c.stroke_width(2))
             }))?;
         }
-        chart
-            .configure_series_labels()
-            .position(SeriesLabelPosition::UpperLeft)
-            .label_font((FONT, DESC_SIZE))
-            .background_style(WHITE.mix(0.9))
-            .border_style(BLACK)
-            .draw()?;
+        series_labels(&mut chart)?;
     }
     root.present()?;
     Ok(())

@@ -5,6 +5,7 @@
 use std::fmt::Write as _;
 
 use super::{is_reference, Cell, CostFit};
+use crate::markdown::{compact_header, joined, num, share};
 use crate::pipeline::Algorithm;
 use crate::study::Study;
 
@@ -23,14 +24,6 @@ const COLLAPSE_K_ERROR: f64 = 0.20;
 fn pct(v: f64) -> String {
     if v.is_finite() {
         format!("{:.1}%", 100.0 * v)
-    } else {
-        "–".into()
-    }
-}
-
-fn num(v: f64, digits: usize) -> String {
-    if v.is_finite() {
-        format!("{v:.digits$}")
     } else {
         "–".into()
     }
@@ -88,13 +81,7 @@ pub fn write(
          `building-chain`).\n",
         study.description,
         study.sweep.master_seed,
-        study
-            .sweep
-            .particles
-            .iter()
-            .map(|p| p.to_string())
-            .collect::<Vec<_>>()
-            .join(", "),
+        joined(&study.sweep.particles, ", "),
         study.filter.discretisation.name(),
         study.data.preset,
     );
@@ -132,11 +119,21 @@ pub fn write(
          load of the moment while a CPU time does not.\n"
     );
     let reference: Vec<&Cell> = cells.iter().filter(|c| is_reference(c)).collect();
-    let _ = writeln!(
-        o,
-        "| N | steps | algorithm | sampled dim. | marginalised dim. | CPU µs / particle-step | wall µs / particle-step | wall s / run | runs (failed) / planned |"
+    compact_header(
+        &mut o,
+        &[
+            "N",
+            "steps",
+            "algorithm",
+            "sampled dim.",
+            "marginalised dim.",
+            "CPU µs / particle-step",
+            "wall µs / particle-step",
+            "wall s / run",
+            "runs (failed) / planned",
+        ],
+        "rrlrrrrrr",
     );
-    let _ = writeln!(o, "|---:|---:|---|---:|---:|---:|---:|---:|---:|");
     for c in &reference {
         let _ = writeln!(
             o,
@@ -160,8 +157,7 @@ pub fn write(
          sizes above (marginalised dimension; the bootstrap PF against its sampled dimension, \
          which is the whole problem's):\n"
     );
-    let _ = writeln!(o, "| algorithm | sizes | time | slope |");
-    let _ = writeln!(o, "|---|---:|---|---:|");
+    compact_header(&mut o, &["algorithm", "sizes", "time", "slope"], "lrlr");
     for f in fits {
         let _ = writeln!(
             o,
@@ -256,18 +252,30 @@ fn structures_table(o: &mut String, values: &[super::structures::StructureValues
          |r| over its saturation (β + γ)^(−1/n) in the data (the same in every run: runs differ \
          by their noise).\n"
     );
-    let _ = writeln!(
+    compact_header(
         o,
-        "| structure | N | k₁ | c₁ | T₁ (s) | T_N (s) | ζ₁ | ζ_N | scale | data (s) | max \\|r\\| / saturation |"
+        &[
+            "structure",
+            "N",
+            "k₁",
+            "c₁",
+            "T₁ (s)",
+            "T_N (s)",
+            "ζ₁",
+            "ζ_N",
+            "scale",
+            "data (s)",
+            "max \\|r\\| / saturation",
+        ],
+        "lrrrrrrrrrl",
     );
-    let _ = writeln!(o, "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|");
     for v in values {
-        let y = v
-            .yielding
-            .iter()
-            .map(|(s, r)| format!("storey {s}: {r:.2}"))
-            .collect::<Vec<_>>()
-            .join(", ");
+        let y = joined(
+            v.yielding
+                .iter()
+                .map(|(s, r)| format!("storey {s}: {r:.2}")),
+            ", ",
+        );
         let _ = writeln!(
             o,
             "| `{}` | {} | {} | {} | {:.2} | {:.3} | {} | {} | {} | {:.1} | {} |",
@@ -288,13 +296,24 @@ fn structures_table(o: &mut String, values: &[super::structures::StructureValues
 }
 
 fn accuracy_table(o: &mut String, cells: &[Cell]) {
-    let _ = writeln!(
+    compact_header(
         o,
-        "| structure | N | hyst. | sensors | algorithm | k error | worst k | c error | state NRMSE | ESS | 95 % coverage (k, c) | runs (failed) | verdict |"
-    );
-    let _ = writeln!(
-        o,
-        "|---|---:|---|---:|---|---:|---:|---:|---:|---:|---:|---:|---|"
+        &[
+            "structure",
+            "N",
+            "hyst.",
+            "sensors",
+            "algorithm",
+            "k error",
+            "worst k",
+            "c error",
+            "state NRMSE",
+            "ESS",
+            "95 % coverage (k, c)",
+            "runs (failed)",
+            "verdict",
+        ],
+        "lrlrlrrrrrrrl",
     );
     for c in cells.iter().filter(|c| c.runs > 0) {
         let _ = writeln!(
@@ -312,11 +331,7 @@ fn accuracy_table(o: &mut String, cells: &[Cell]) {
             pct(c.c_error_sd),
             num(c.state_nrmse, 3),
             num(c.ess_fraction, 2),
-            if c.coverage_pairs > 0 {
-                format!("{:.2} of {}", c.coverage95_kc, c.coverage_pairs)
-            } else {
-                "–".to_string()
-            },
+            share(c.coverage95_kc, c.coverage_pairs),
             c.runs,
             c.failed,
             verdict(c)
