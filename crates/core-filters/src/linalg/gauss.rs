@@ -58,6 +58,32 @@ fn zero<T: Real>() -> T {
     T::splat(0.0)
 }
 
+/// Column `j` of a Cholesky recurrence ([`cholesky`], [`psd_cholesky`]) up to its pivot: zeroes
+/// the column's upper part and returns the pivot `d = a_jj − Σ_{k<j} l_jk²` (columns `< j` of
+/// `l` done).
+#[inline(always)]
+fn pivot<T: Real>(a: &[T], q: usize, l: &mut [T], j: usize) -> T {
+    for i in 0..j {
+        l[i + j * q] = zero();
+    }
+    let mut d = a[j + j * q];
+    for k in 0..j {
+        let ljk = l[j + k * q];
+        d -= ljk * ljk;
+    }
+    d
+}
+
+/// Entry `(i, j)` below the pivot before its scaling: `a_ij − Σ_{k<j} l_ik l_jk`.
+#[inline(always)]
+fn below_pivot<T: Real>(a: &[T], q: usize, l: &[T], i: usize, j: usize) -> T {
+    let mut s = a[i + j * q];
+    for k in 0..j {
+        s -= l[i + k * q] * l[j + k * q];
+    }
+    s
+}
+
 /// Lower Cholesky factor `l` (`q × q`, column-major, upper part zero) of the symmetric `a`
 /// (lower triangle read). Returns the lanes whose every pivot was clearly positive
 /// (`d > 0` and `d > 16 ε a_jj`; a NaN or infinity fails). A failing lane goes on with
@@ -67,25 +93,14 @@ pub fn cholesky<T: Real>(a: &[T], q: usize, l: &mut [T]) -> T::Mask {
     let mut ok = T::all_true();
     let tol = T::splat(PIVOT_REL_TOL);
     for j in 0..q {
-        for i in 0..j {
-            l[i + j * q] = zero();
-        }
-        let mut d = a[j + j * q];
-        for k in 0..j {
-            let ljk = l[j + k * q];
-            d -= ljk * ljk;
-        }
+        let d = pivot(a, q, l, j);
         ok = ok & d.gt(zero()) & d.gt(tol * a[j + j * q]);
         let ljj = d.sqrt();
         l[j + j * q] = ljj;
         // 1/ljj as ljj/d: the square root and the division run side by side.
         let inv = ljj * (T::splat(1.0) / d);
         for i in (j + 1)..q {
-            let mut s = a[i + j * q];
-            for k in 0..j {
-                s -= l[i + k * q] * l[j + k * q];
-            }
-            l[i + j * q] = s * inv;
+            l[i + j * q] = below_pivot(a, q, l, i, j) * inv;
         }
     }
     ok
@@ -110,25 +125,14 @@ pub fn psd_cholesky<T: Real>(a: &[T], q: usize, l: &mut [T]) -> T::Mask {
     let mut ok = finite.eq(zero());
     let tol = T::splat(PSD_PIVOT_REL_TOL) * max_diag;
     for j in 0..q {
-        for i in 0..j {
-            l[i + j * q] = zero();
-        }
-        let mut d = a[j + j * q];
-        for k in 0..j {
-            let ljk = l[j + k * q];
-            d -= ljk * ljk;
-        }
+        let d = pivot(a, q, l, j);
         ok = ok & T::not(d.lt(-tol));
         let zero_col = d.le(tol);
         let ljj = d.sqrt();
         l[j + j * q] = T::select(zero_col, zero(), ljj);
         let inv = ljj * (T::splat(1.0) / d);
         for i in (j + 1)..q {
-            let mut s = a[i + j * q];
-            for k in 0..j {
-                s -= l[i + k * q] * l[j + k * q];
-            }
-            l[i + j * q] = T::select(zero_col, zero(), s * inv);
+            l[i + j * q] = T::select(zero_col, zero(), below_pivot(a, q, l, i, j) * inv);
         }
     }
     ok
