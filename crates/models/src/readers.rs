@@ -130,8 +130,7 @@ pub(crate) fn parse_field(
     field: &str,
     raw: &str,
 ) -> Result<f64, ReadError> {
-    let v = parse_number(file, line, field, raw)?;
-    limits::check_value(v).map_err(|e| limit_error(file, line, field, e))
+    parse_within(file, line, field, raw, limits::check_value)
 }
 
 /// Parses one time stamp, rejecting NaN, infinities and values beyond `±MAX_ABS_TIME`.
@@ -141,8 +140,19 @@ pub(crate) fn parse_time(
     field: &str,
     raw: &str,
 ) -> Result<f64, ReadError> {
+    parse_within(file, line, field, raw, limits::check_time)
+}
+
+/// Parses one number ([`parse_number`]) and checks it against its limit (`check`).
+fn parse_within(
+    file: &Path,
+    line: usize,
+    field: &str,
+    raw: &str,
+    check: fn(f64) -> Result<f64, LimitError>,
+) -> Result<f64, ReadError> {
     let v = parse_number(file, line, field, raw)?;
-    limits::check_time(v).map_err(|e| limit_error(file, line, field, e))
+    check(v).map_err(|e| limit_error(file, line, field, e))
 }
 
 /// Parses one number (Fortran `D` exponents accepted), rejecting NaN and infinities.
