@@ -336,13 +336,15 @@ pub fn state_names(n_storeys: usize, hysteretic: &[usize]) -> Vec<String> {
     names
 }
 
-/// A state vector `[x, v, r]` of a [`ShearChain`] with its parameters.
-struct StateView<'a> {
-    s: &'a [f64],
-    n: usize,
-    k: &'a [f64],
-    c: &'a [f64],
-    alpha: f64,
+/// A state vector `[x, v, r]` of an `n`-storey chain with its parameters: the point of a
+/// [`ShearChain`], and of the bootstrap PF's augmented state (`crate::filtering::augmented`).
+pub(crate) struct StateView<'a> {
+    pub s: &'a [f64],
+    pub n: usize,
+    pub k: &'a [f64],
+    pub c: &'a [f64],
+    /// α (read only with the mass-proportional damping term).
+    pub alpha: f64,
 }
 
 impl ChainView<f64> for StateView<'_> {
