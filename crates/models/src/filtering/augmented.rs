@@ -202,14 +202,11 @@ impl Partition for AugmentedChain {
 
     fn layout(&self) -> Layout {
         let d = self.dyn_dim();
-        Layout {
-            param_names: self.core.theta_names(),
-            params: (0..self.core.theta_mean.len())
-                .map(|i| Slot::Sampled(d + i))
-                .collect(),
-            state_names: self.core.state_names(),
-            states: (0..d).map(Slot::Sampled).collect(),
-        }
+        let params = (0..self.core.theta_mean.len())
+            .map(|i| Slot::Sampled(d + i))
+            .collect();
+        self.core
+            .layout(params, (0..d).map(Slot::Sampled).collect())
     }
 }
 

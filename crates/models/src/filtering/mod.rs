@@ -52,6 +52,7 @@ pub use spec::{ChainSpec, RmsLevels, SpecError, MAX_SUBSTEPS};
 
 use crate::structure::{state_names, theta_names_damped, BoucWenLaw, ChainView, HysteresisLaw};
 use core_filters::linalg::Sparse;
+use core_filters::model::{Layout, Slot};
 use core_filters::real::Real;
 use core_filters::rng::StreamRng;
 
@@ -184,7 +185,6 @@ impl ChainCore {
         self.spec.sensors.ground(self.ug[k])
     }
 
-    /// `R` (column-major, diagonal).
     /// The sampled block at the start (SPEC §3): zero states, and each element's n drawn from
     /// its prior into `out[n_index(e)]`, in element order.
     pub fn sample_initial(
@@ -199,6 +199,7 @@ impl ChainCore {
         }
     }
 
+    /// `R` (column-major, diagonal).
     pub fn measurement_cov(&self) -> Vec<f64> {
         let m = self.sensors.len();
         let mut r = vec![0.0; m * m];
@@ -311,6 +312,45 @@ impl ChainCore {
                     .collect();
                 (mean, var)
             }
+        }
+    }
+
+    /// Whether the scheme is symplectic Euler (`false`: forward Euler), the two schemes of the
+    /// MLN and MPF partitions; any other is refused for `partition`.
+    pub fn symplectic(&self, partition: &'static str) -> Result<bool, SpecError> {
+        match self.spec.discretisation {
+            Discretisation::Euler => Ok(false),
+            Discretisation::Symplectic => Ok(true),
+            discretisation => Err(SpecError::Unsupported {
+                partition,
+                discretisation,
+            }),
+        }
+    }
+
+    /// A partition's layout: θ's slots (in θ order) and the states' slots, with the
+    /// structure's names.
+    pub fn layout(&self, params: Vec<Slot>, states: Vec<Slot>) -> Layout {
+        Layout {
+            param_names: self.theta_names(),
+            params,
+            state_names: self.state_names(),
+            states,
+        }
+    }
+
+    /// Appends the slots of every element's θ entries in θ order: its linear parameters at
+    /// `linear(e) + i` of the marginal block, its n at `n_index(e)` of the sampled block (the
+    /// MLN and MPF partitions).
+    pub fn push_element_slots(
+        &self,
+        params: &mut Vec<Slot>,
+        linear: impl Fn(usize) -> usize,
+        n_index: impl Fn(usize) -> usize,
+    ) {
+        for e in 0..self.ne {
+            params.extend((0..NLIN).map(|i| Slot::Marginal(linear(e) + i)));
+            params.push(Slot::Sampled(n_index(e)));
         }
     }
 
