@@ -536,6 +536,25 @@ impl FactoredNoise {
         })
     }
 
+    /// A noise factorised once at set-up ([`FactoredNoise::new`]), as step `k` of a filter sees
+    /// it: the factor, or the failure of its factorisation dated at step `k` (a filter whose `R`
+    /// could not be factorised fails every step with it).
+    pub fn at_step(
+        noise: &Result<FactoredNoise, FilterError>,
+        k: usize,
+    ) -> Result<&FactoredNoise, FilterError> {
+        match noise {
+            Ok(n) => Ok(n),
+            Err(FilterError::NotPositiveDefinite { which, .. }) => {
+                Err(FilterError::NotPositiveDefinite { step: k, which })
+            }
+            Err(FilterError::NonFinite { which, .. }) => {
+                Err(FilterError::NonFinite { step: k, which })
+            }
+            Err(e) => Err(e.clone()),
+        }
+    }
+
     /// `log N(r; 0, R)`; `scratch` has length `q` and is overwritten.
     #[inline]
     pub fn log_density<T: Real>(&self, residual: &[T], scratch: &mut [T]) -> T {
@@ -711,6 +730,39 @@ mod tests {
         let e = [0.7 / 2.0];
         let expected = -0.5 * (0.7_f64 / 2.0).powi(2) - 2.0_f64.ln() - 0.5 * LN_2PI;
         assert!((whitened_loglik(&e, &[2.0], 1) - expected).abs() < 1e-15);
+    }
+
+    /// The failure to factorise a noise at set-up (dated step 0) is the failure of every step,
+    /// dated at that step; a factorised noise passes through.
+    #[test]
+    fn a_noise_that_could_not_be_factorised_fails_each_step_at_its_own_date() {
+        let mut h = Health::default();
+        let indefinite = FactoredNoise::new(&[1.0, 0.0, 0.0, -1.0], 2, "R", &mut h);
+        assert_eq!(
+            indefinite.as_ref().err(),
+            Some(&FilterError::NotPositiveDefinite {
+                step: 0,
+                which: "R"
+            })
+        );
+        assert_eq!(
+            FactoredNoise::at_step(&indefinite, 7).err(),
+            Some(FilterError::NotPositiveDefinite {
+                step: 7,
+                which: "R"
+            })
+        );
+        let nan = FactoredNoise::new(&[f64::NAN], 1, "R", &mut h);
+        assert_eq!(
+            FactoredNoise::at_step(&nan, 3).err(),
+            Some(FilterError::NonFinite {
+                step: 3,
+                which: "R"
+            })
+        );
+        let ok = FactoredNoise::new(&[4.0], 1, "R", &mut h);
+        let n = FactoredNoise::at_step(&ok, 5).unwrap();
+        assert!(std::ptr::eq(n, ok.as_ref().unwrap()));
     }
 
     /// A pseudo-measurement drawn as `ŷ + C ξ` updated through its whitened innovation `ξ` gives
