@@ -281,6 +281,19 @@ mod tests {
             assert!(err.contains(n), "{err}");
         }
         assert!(Preset::from_name("shear-chain", Some(0)).is_err());
+        for zero in [Preset::chain(0), Preset::building_chain(0)] {
+            assert_eq!(zero.unwrap_err(), PresetError::NoStorey { storeys: 0 });
+        }
+        // The two uniform chains differ by their stiffness and damping only.
+        let c = 2.0 * BUILDING_ZETA1 * BUILDING_K / uniform_chain_omega(BUILDING_K, 1.0, 2, 1);
+        let element = [BOUC_WEN_BETA, BOUC_WEN_GAMMA, BOUC_WEN_N];
+        for (chain, k, c) in [
+            (Preset::chain(2).unwrap(), 8.0, 0.25),
+            (Preset::building_chain(2).unwrap(), BUILDING_K, c),
+        ] {
+            assert_eq!(chain.theta(), [[k, k, c, c].as_slice(), &element].concat());
+            assert_eq!(chain.bouc_wen()[0].storey, 0);
+        }
     }
 
     #[test]

@@ -470,6 +470,23 @@ mod tests {
         assert_eq!(c.acc, vec![0.1, -0.2]);
     }
 
+    /// A data value and a time stamp are each held to their own limit: 10¹¹ is a value but not
+    /// a time; beyond 10¹² neither.
+    #[test]
+    fn values_and_times_have_their_own_limits() {
+        let f = Path::new("mem.csv");
+        assert_eq!(parse_field(f, 3, "acc", " 1e11 ").unwrap(), 1e11);
+        assert_eq!(parse_field(f, 3, "acc", "-2.5D3").unwrap(), -2500.0);
+        assert_eq!(parse_time(f, 3, "t", "1e9").unwrap(), 1e9);
+        let limit = |r: Result<f64, ReadError>| match r {
+            Err(ReadError::Limit { line, field, .. }) => (line, field),
+            other => panic!("{other:?}"),
+        };
+        assert_eq!(limit(parse_time(f, 3, "t", "1e11")), (3, "t".into()));
+        assert_eq!(limit(parse_time(f, 4, "t", "2e12")), (4, "t".into()));
+        assert_eq!(limit(parse_field(f, 5, "acc", "2e12")), (5, "acc".into()));
+    }
+
     #[test]
     fn at2_header_formats() {
         let f = Path::new("mem.AT2");
