@@ -363,3 +363,47 @@ impl ChainCore {
         state_names(self.n, self.spec.building.hysteretic())
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::building::{Building, Damping};
+    use crate::sensors::{MeasurementKind, SensorLayout};
+
+    fn spec(discretisation: Discretisation) -> ChainSpec {
+        let building = Building::new(vec![1.0; 3], vec![0], Damping::Storey).unwrap();
+        let sensors = SensorLayout::new(3, &[1, 2, 3], MeasurementKind::Relative).unwrap();
+        let rms = RmsLevels {
+            acc: vec![2.0; 3],
+            ug: 3.0,
+            drift_velocity: vec![0.5],
+        };
+        let ug = vec![0.0; 11];
+        let mut spec = ChainSpec::from_rms(0.005, building, sensors, ug, &rms, 0.1).unwrap();
+        spec.discretisation = discretisation;
+        spec
+    }
+
+    /// The MLN and MPF partitions take forward and symplectic Euler and refuse RK4 by their
+    /// own name; the augmented state takes all three.
+    #[test]
+    fn the_conditional_partitions_take_the_two_euler_schemes_only() {
+        use Discretisation::{Euler, Rk4, Symplectic};
+        for (d, symplectic) in [(Euler, false), (Symplectic, true)] {
+            let core = ChainCore::new(spec(d)).unwrap();
+            assert_eq!(core.symplectic("any"), Ok(symplectic));
+            assert!(MlnChain::new(spec(d)).is_ok() && MpfChain::new(spec(d)).is_ok());
+        }
+        for (partition, refused) in [
+            ("MLN-RBPF/Storvik", MlnChain::new(spec(Rk4)).err()),
+            ("MPF-EKF2", MpfChain::new(spec(Rk4)).err()),
+        ] {
+            let want = SpecError::Unsupported {
+                partition,
+                discretisation: Rk4,
+            };
+            assert_eq!(refused, Some(want));
+        }
+        assert!(AugmentedChain::new(spec(Rk4)).is_ok());
+    }
+}
