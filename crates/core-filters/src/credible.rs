@@ -131,6 +131,25 @@ pub fn central_probabilities(level: f64) -> Result<(f64, f64), CredibleError> {
     Ok((0.5 * (1.0 - level), 0.5 * (1.0 + level)))
 }
 
+/// `out[i] = interval(levels[i])` in order, after checking that `out` has one slot per level:
+/// the one loop of every `central_intervals` (`interval` may carry what the earlier levels left).
+fn each_level(
+    levels: &[f64],
+    out: &mut [CredibleInterval],
+    mut interval: impl FnMut(f64) -> Result<CredibleInterval, CredibleError>,
+) -> Result<(), CredibleError> {
+    if levels.len() != out.len() {
+        return Err(CredibleError::OutputLength {
+            levels: levels.len(),
+            out: out.len(),
+        });
+    }
+    for (o, &level) in out.iter_mut().zip(levels) {
+        *o = interval(level)?;
+    }
+    Ok(())
+}
+
 fn check_probability(p: f64) -> Result<(), CredibleError> {
     if p > 0.0 && p < 1.0 {
         Ok(())
@@ -294,16 +313,7 @@ impl WeightedSample {
         levels: &[f64],
         out: &mut [CredibleInterval],
     ) -> Result<(), CredibleError> {
-        if levels.len() != out.len() {
-            return Err(CredibleError::OutputLength {
-                levels: levels.len(),
-                out: out.len(),
-            });
-        }
-        for (o, &level) in out.iter_mut().zip(levels) {
-            *o = self.central_interval(level)?;
-        }
-        Ok(())
+        each_level(levels, out, |level| self.central_interval(level))
     }
 }
 
@@ -732,12 +742,6 @@ impl<'a> GaussianMixture<'a> {
         levels: &[f64],
         out: &mut [CredibleInterval],
     ) -> Result<(), CredibleError> {
-        if levels.len() != out.len() {
-            return Err(CredibleError::OutputLength {
-                levels: levels.len(),
-                out: out.len(),
-            });
-        }
         let mut known = [Known {
             x: f64::NAN,
             tail: Tail::Lower,
@@ -746,7 +750,7 @@ impl<'a> GaussianMixture<'a> {
         }; KNOWN];
         let mut n_known = 0;
         let mut next = 0;
-        for (o, &level) in out.iter_mut().zip(levels) {
+        each_level(levels, out, |level| {
             let (pl, pu) = central_probabilities(level)?;
             let mut ends = [0.0; 2];
             for (end, p) in ends.iter_mut().zip([pl, pu]) {
@@ -758,13 +762,12 @@ impl<'a> GaussianMixture<'a> {
                     n_known = (n_known + 1).min(KNOWN);
                 }
             }
-            *o = CredibleInterval {
+            Ok(CredibleInterval {
                 level,
                 lo: ends[0],
                 hi: ends[1],
-            };
-        }
-        Ok(())
+            })
+        })
     }
 }
 

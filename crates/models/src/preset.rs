@@ -105,13 +105,19 @@ impl Preset {
     /// The paper's structure (SPEC §1) generalised to `storeys` storeys: unit masses, k = 8,
     /// c = 0.25, Bouc–Wen element (β = 2, γ = 1, n = 2) between the ground and storey 1.
     pub fn chain(storeys: usize) -> Result<ShearChain, PresetError> {
+        Self::uniform_chain(storeys, 8.0, 0.25)
+    }
+
+    /// `storeys` storeys of unit mass, stiffness `k` and damping `c`, with the paper's Bouc–Wen
+    /// element between the ground and storey 1.
+    fn uniform_chain(storeys: usize, k: f64, c: f64) -> Result<ShearChain, PresetError> {
         if storeys == 0 {
             return Err(PresetError::NoStorey { storeys });
         }
         Ok(ShearChain::new(
             vec![1.0; storeys],
-            vec![8.0; storeys],
-            vec![0.25; storeys],
+            vec![k; storeys],
+            vec![c; storeys],
             vec![BoucWen {
                 storey: 0,
                 beta: BOUC_WEN_BETA,
@@ -160,23 +166,10 @@ impl Preset {
     /// c = 2ζ₁k/ω₁ with ζ₁ = [`BUILDING_ZETA1`] (stiffness-proportional, so mode i has
     /// ζ_i = ζ₁ω_i/ω₁), and the paper's Bouc–Wen element at storey 1.
     pub fn building_chain(storeys: usize) -> Result<ShearChain, PresetError> {
-        if storeys == 0 {
-            return Err(PresetError::NoStorey { storeys });
-        }
+        // ω₁ is a finite number for any count, zero included (refused by `uniform_chain`).
         let omega1 = uniform_chain_omega(BUILDING_K, 1.0, storeys, 1);
         let c = 2.0 * BUILDING_ZETA1 * BUILDING_K / omega1;
-        Ok(ShearChain::new(
-            vec![1.0; storeys],
-            vec![BUILDING_K; storeys],
-            vec![c; storeys],
-            vec![BoucWen {
-                storey: 0,
-                beta: BOUC_WEN_BETA,
-                gamma: BOUC_WEN_GAMMA,
-                n: BOUC_WEN_N,
-            }],
-        )
-        .expect("the preset values are valid"))
+        Self::uniform_chain(storeys, BUILDING_K, c)
     }
 
     /// `building-chain` of `storeys` storeys under El Centro × [`BUILDING_SCALE`].
@@ -288,6 +281,19 @@ mod tests {
             assert!(err.contains(n), "{err}");
         }
         assert!(Preset::from_name("shear-chain", Some(0)).is_err());
+        for zero in [Preset::chain(0), Preset::building_chain(0)] {
+            assert_eq!(zero.unwrap_err(), PresetError::NoStorey { storeys: 0 });
+        }
+        // The two uniform chains differ by their stiffness and damping only.
+        let c = 2.0 * BUILDING_ZETA1 * BUILDING_K / uniform_chain_omega(BUILDING_K, 1.0, 2, 1);
+        let element = [BOUC_WEN_BETA, BOUC_WEN_GAMMA, BOUC_WEN_N];
+        for (chain, k, c) in [
+            (Preset::chain(2).unwrap(), 8.0, 0.25),
+            (Preset::building_chain(2).unwrap(), BUILDING_K, c),
+        ] {
+            assert_eq!(chain.theta(), [[k, k, c, c].as_slice(), &element].concat());
+            assert_eq!(chain.bouc_wen()[0].storey, 0);
+        }
     }
 
     #[test]

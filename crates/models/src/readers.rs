@@ -130,8 +130,7 @@ pub(crate) fn parse_field(
     field: &str,
     raw: &str,
 ) -> Result<f64, ReadError> {
-    let v = parse_number(file, line, field, raw)?;
-    limits::check_value(v).map_err(|e| limit_error(file, line, field, e))
+    parse_within(file, line, field, raw, limits::check_value)
 }
 
 /// Parses one time stamp, rejecting NaN, infinities and values beyond `±MAX_ABS_TIME`.
@@ -141,8 +140,19 @@ pub(crate) fn parse_time(
     field: &str,
     raw: &str,
 ) -> Result<f64, ReadError> {
+    parse_within(file, line, field, raw, limits::check_time)
+}
+
+/// Parses one number ([`parse_number`]) and checks it against its limit (`check`).
+fn parse_within(
+    file: &Path,
+    line: usize,
+    field: &str,
+    raw: &str,
+    check: fn(f64) -> Result<f64, LimitError>,
+) -> Result<f64, ReadError> {
     let v = parse_number(file, line, field, raw)?;
-    limits::check_time(v).map_err(|e| limit_error(file, line, field, e))
+    check(v).map_err(|e| limit_error(file, line, field, e))
 }
 
 /// Parses one number (Fortran `D` exponents accepted), rejecting NaN and infinities.
@@ -458,6 +468,23 @@ mod tests {
         assert!((a.acc[1] + 0.2 * G).abs() < 1e-12);
         let c = parse_csv(f, "0,0.1\n0.01,-0.2\n", Units::MetersPerSecond2).unwrap();
         assert_eq!(c.acc, vec![0.1, -0.2]);
+    }
+
+    /// A data value and a time stamp are each held to their own limit: 10¹¹ is a value but not
+    /// a time; beyond 10¹² neither.
+    #[test]
+    fn values_and_times_have_their_own_limits() {
+        let f = Path::new("mem.csv");
+        assert_eq!(parse_field(f, 3, "acc", " 1e11 ").unwrap(), 1e11);
+        assert_eq!(parse_field(f, 3, "acc", "-2.5D3").unwrap(), -2500.0);
+        assert_eq!(parse_time(f, 3, "t", "1e9").unwrap(), 1e9);
+        let limit = |r: Result<f64, ReadError>| match r {
+            Err(ReadError::Limit { line, field, .. }) => (line, field),
+            other => panic!("{other:?}"),
+        };
+        assert_eq!(limit(parse_time(f, 3, "t", "1e11")), (3, "t".into()));
+        assert_eq!(limit(parse_time(f, 4, "t", "2e12")), (4, "t".into()));
+        assert_eq!(limit(parse_field(f, 5, "acc", "2e12")), (5, "acc".into()));
     }
 
     #[test]

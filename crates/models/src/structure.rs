@@ -336,13 +336,15 @@ pub fn state_names(n_storeys: usize, hysteretic: &[usize]) -> Vec<String> {
     names
 }
 
-/// A state vector `[x, v, r]` of a [`ShearChain`] with its parameters.
-struct StateView<'a> {
-    s: &'a [f64],
-    n: usize,
-    k: &'a [f64],
-    c: &'a [f64],
-    alpha: f64,
+/// A state vector `[x, v, r]` of an `n`-storey chain with its parameters: the point of a
+/// [`ShearChain`], and of the bootstrap PF's augmented state (`crate::filtering::augmented`).
+pub(crate) struct StateView<'a> {
+    pub s: &'a [f64],
+    pub n: usize,
+    pub k: &'a [f64],
+    pub c: &'a [f64],
+    /// α (read only with the mass-proportional damping term).
+    pub alpha: f64,
 }
 
 impl ChainView<f64> for StateView<'_> {
@@ -667,6 +669,23 @@ mod tests {
         .unwrap()
     }
 
+    /// Two storeys of mass `mass` (k = 3, 5; c = 0.1, 0.2), a Bouc–Wen element (β = γ = 0.5,
+    /// n = 1.5) at the upper one.
+    fn upper_storey_element(mass: f64) -> ShearChain {
+        ShearChain::new(
+            vec![mass; 2],
+            vec![3.0, 5.0],
+            vec![0.1, 0.2],
+            vec![BoucWen {
+                storey: 1,
+                beta: 0.5,
+                gamma: 0.5,
+                n: 1.5,
+            }],
+        )
+        .unwrap()
+    }
+
     #[test]
     fn rhs_matches_spec_equations() {
         // SPEC §1 written out by hand for the paper's chain, at an arbitrary state.
@@ -726,20 +745,7 @@ mod tests {
         assert_eq!(damped.with_theta(&damped.theta()).unwrap(), damped);
         assert!(damped.with_theta(&plain.theta()).is_err());
         // A Bouc–Wen element's parameters follow α.
-        let bw = ShearChain::new(
-            vec![1.0; 2],
-            vec![3.0, 5.0],
-            vec![0.1, 0.2],
-            vec![BoucWen {
-                storey: 1,
-                beta: 0.5,
-                gamma: 0.5,
-                n: 1.5,
-            }],
-        )
-        .unwrap()
-        .with_mass_damping(0.0)
-        .unwrap();
+        let bw = upper_storey_element(1.0).with_mass_damping(0.0).unwrap();
         let t = [3.0, 5.0, 0.1, 0.2, 0.4, 1.0, -0.5, 2.0];
         let again = bw.with_theta(&t).unwrap();
         assert_eq!(again.theta(), t);
@@ -880,18 +886,7 @@ mod tests {
 
     #[test]
     fn bouc_wen_at_upper_storey_uses_relative_velocity() {
-        let ch = ShearChain::new(
-            vec![2.0; 2],
-            vec![3.0, 5.0],
-            vec![0.1, 0.2],
-            vec![BoucWen {
-                storey: 1,
-                beta: 0.5,
-                gamma: 0.5,
-                n: 1.5,
-            }],
-        )
-        .unwrap();
+        let ch = upper_storey_element(2.0);
         let s = [0.1, 0.4, 0.2, -0.3, 0.15];
         let mut d = [0.0; 5];
         ch.rhs(&s, 0.5, &mut d);

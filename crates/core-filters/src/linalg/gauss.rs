@@ -58,6 +58,32 @@ fn zero<T: Real>() -> T {
     T::splat(0.0)
 }
 
+/// Column `j` of a Cholesky recurrence ([`cholesky`], [`psd_cholesky`]) up to its pivot: zeroes
+/// the column's upper part and returns the pivot `d = a_jj − Σ_{k<j} l_jk²` (columns `< j` of
+/// `l` done).
+#[inline(always)]
+fn pivot<T: Real>(a: &[T], q: usize, l: &mut [T], j: usize) -> T {
+    for i in 0..j {
+        l[i + j * q] = zero();
+    }
+    let mut d = a[j + j * q];
+    for k in 0..j {
+        let ljk = l[j + k * q];
+        d -= ljk * ljk;
+    }
+    d
+}
+
+/// Entry `(i, j)` below the pivot before its scaling: `a_ij − Σ_{k<j} l_ik l_jk`.
+#[inline(always)]
+fn below_pivot<T: Real>(a: &[T], q: usize, l: &[T], i: usize, j: usize) -> T {
+    let mut s = a[i + j * q];
+    for k in 0..j {
+        s -= l[i + k * q] * l[j + k * q];
+    }
+    s
+}
+
 /// Lower Cholesky factor `l` (`q × q`, column-major, upper part zero) of the symmetric `a`
 /// (lower triangle read). Returns the lanes whose every pivot was clearly positive
 /// (`d > 0` and `d > 16 ε a_jj`; a NaN or infinity fails). A failing lane goes on with
@@ -67,25 +93,14 @@ pub fn cholesky<T: Real>(a: &[T], q: usize, l: &mut [T]) -> T::Mask {
     let mut ok = T::all_true();
     let tol = T::splat(PIVOT_REL_TOL);
     for j in 0..q {
-        for i in 0..j {
-            l[i + j * q] = zero();
-        }
-        let mut d = a[j + j * q];
-        for k in 0..j {
-            let ljk = l[j + k * q];
-            d -= ljk * ljk;
-        }
+        let d = pivot(a, q, l, j);
         ok = ok & d.gt(zero()) & d.gt(tol * a[j + j * q]);
         let ljj = d.sqrt();
         l[j + j * q] = ljj;
         // 1/ljj as ljj/d: the square root and the division run side by side.
         let inv = ljj * (T::splat(1.0) / d);
         for i in (j + 1)..q {
-            let mut s = a[i + j * q];
-            for k in 0..j {
-                s -= l[i + k * q] * l[j + k * q];
-            }
-            l[i + j * q] = s * inv;
+            l[i + j * q] = below_pivot(a, q, l, i, j) * inv;
         }
     }
     ok
@@ -110,25 +125,14 @@ pub fn psd_cholesky<T: Real>(a: &[T], q: usize, l: &mut [T]) -> T::Mask {
     let mut ok = finite.eq(zero());
     let tol = T::splat(PSD_PIVOT_REL_TOL) * max_diag;
     for j in 0..q {
-        for i in 0..j {
-            l[i + j * q] = zero();
-        }
-        let mut d = a[j + j * q];
-        for k in 0..j {
-            let ljk = l[j + k * q];
-            d -= ljk * ljk;
-        }
+        let d = pivot(a, q, l, j);
         ok = ok & T::not(d.lt(-tol));
         let zero_col = d.le(tol);
         let ljj = d.sqrt();
         l[j + j * q] = T::select(zero_col, zero(), ljj);
         let inv = ljj * (T::splat(1.0) / d);
         for i in (j + 1)..q {
-            let mut s = a[i + j * q];
-            for k in 0..j {
-                s -= l[i + k * q] * l[j + k * q];
-            }
-            l[i + j * q] = T::select(zero_col, zero(), s * inv);
+            l[i + j * q] = T::select(zero_col, zero(), below_pivot(a, q, l, i, j) * inv);
         }
     }
     ok
@@ -532,6 +536,25 @@ impl FactoredNoise {
         })
     }
 
+    /// A noise factorised once at set-up ([`FactoredNoise::new`]), as step `k` of a filter sees
+    /// it: the factor, or the failure of its factorisation dated at step `k` (a filter whose `R`
+    /// could not be factorised fails every step with it).
+    pub fn at_step(
+        noise: &Result<FactoredNoise, FilterError>,
+        k: usize,
+    ) -> Result<&FactoredNoise, FilterError> {
+        match noise {
+            Ok(n) => Ok(n),
+            Err(FilterError::NotPositiveDefinite { which, .. }) => {
+                Err(FilterError::NotPositiveDefinite { step: k, which })
+            }
+            Err(FilterError::NonFinite { which, .. }) => {
+                Err(FilterError::NonFinite { step: k, which })
+            }
+            Err(e) => Err(e.clone()),
+        }
+    }
+
     /// `log N(r; 0, R)`; `scratch` has length `q` and is overwritten.
     #[inline]
     pub fn log_density<T: Real>(&self, residual: &[T], scratch: &mut [T]) -> T {
@@ -707,6 +730,39 @@ mod tests {
         let e = [0.7 / 2.0];
         let expected = -0.5 * (0.7_f64 / 2.0).powi(2) - 2.0_f64.ln() - 0.5 * LN_2PI;
         assert!((whitened_loglik(&e, &[2.0], 1) - expected).abs() < 1e-15);
+    }
+
+    /// The failure to factorise a noise at set-up (dated step 0) is the failure of every step,
+    /// dated at that step; a factorised noise passes through.
+    #[test]
+    fn a_noise_that_could_not_be_factorised_fails_each_step_at_its_own_date() {
+        let mut h = Health::default();
+        let indefinite = FactoredNoise::new(&[1.0, 0.0, 0.0, -1.0], 2, "R", &mut h);
+        assert_eq!(
+            indefinite.as_ref().err(),
+            Some(&FilterError::NotPositiveDefinite {
+                step: 0,
+                which: "R"
+            })
+        );
+        assert_eq!(
+            FactoredNoise::at_step(&indefinite, 7).err(),
+            Some(FilterError::NotPositiveDefinite {
+                step: 7,
+                which: "R"
+            })
+        );
+        let nan = FactoredNoise::new(&[f64::NAN], 1, "R", &mut h);
+        assert_eq!(
+            FactoredNoise::at_step(&nan, 3).err(),
+            Some(FilterError::NonFinite {
+                step: 3,
+                which: "R"
+            })
+        );
+        let ok = FactoredNoise::new(&[4.0], 1, "R", &mut h);
+        let n = FactoredNoise::at_step(&ok, 5).unwrap();
+        assert!(std::ptr::eq(n, ok.as_ref().unwrap()));
     }
 
     /// A pseudo-measurement drawn as `ŷ + C ξ` updated through its whitened innovation `ξ` gives

@@ -102,16 +102,7 @@ impl<M: StateSpace> Filter for BootstrapPf<M> {
             src,
             ancestors,
         } = *input;
-        let noise = match &self.noise {
-            Ok(n) => n,
-            Err(FilterError::NotPositiveDefinite { which, .. }) => {
-                return Err(FilterError::NotPositiveDefinite { step: k, which })
-            }
-            Err(FilterError::NonFinite { which, .. }) => {
-                return Err(FilterError::NonFinite { step: k, which })
-            }
-            Err(e) => return Err(e.clone()),
-        };
+        let noise = FactoredNoise::at_step(&self.noise, k)?;
         for (i, lw) in out.log_w.iter_mut().enumerate() {
             for v in self.xi.iter_mut() {
                 *v = StandardNormal.sample(rng);

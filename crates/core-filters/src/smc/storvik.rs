@@ -146,16 +146,7 @@ impl<M: ConditionallyLinear> ParticleStep for StorvikStep<M> {
 
     /// `R` is factorised once; if it could not be, every step fails with that error.
     fn check(&self, k: usize) -> Result<(), FilterError> {
-        match &self.noise {
-            Ok(_) => Ok(()),
-            Err(FilterError::NotPositiveDefinite { which, .. }) => {
-                Err(FilterError::NotPositiveDefinite { step: k, which })
-            }
-            Err(FilterError::NonFinite { which, .. }) => {
-                Err(FilterError::NonFinite { step: k, which })
-            }
-            Err(e) => Err(e.clone()),
-        }
+        FactoredNoise::at_step(&self.noise, k).map(|_| ())
     }
 
     fn broken_pattern<T: Real>(s: &StorvikScratch<T>) -> Option<&'static str> {

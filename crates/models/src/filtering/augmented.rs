@@ -17,7 +17,7 @@
 
 use super::{ChainCore, ChainSpec, Discretisation, SpecError, NLIN, NNONLIN};
 use crate::building::Building;
-use crate::structure::{ChainView, HysteresisLaw};
+use crate::structure::{ChainView, HysteresisLaw, StateView};
 use core_filters::model::{Layout, Slot};
 use core_filters::rng::StreamRng;
 use core_filters::smc::model::{Partition, StateSpace};
@@ -34,40 +34,6 @@ pub struct AugmentedChain {
 thread_local! {
     /// The state between sub-steps (`substeps > 1`), grown once per thread.
     static SUBSTEP_SCRATCH: RefCell<Vec<f64>> = const { RefCell::new(Vec::new()) };
-}
-
-/// The dynamic part `s = [x, v, r]` and θ of an augmented state.
-struct View<'a> {
-    s: &'a [f64],
-    th: &'a [f64],
-    n: usize,
-}
-
-impl ChainView<f64> for View<'_> {
-    #[inline]
-    fn x(&self, j: usize) -> f64 {
-        self.s[j]
-    }
-    #[inline]
-    fn v(&self, j: usize) -> f64 {
-        self.s[self.n + j]
-    }
-    #[inline]
-    fn r(&self, e: usize) -> f64 {
-        self.s[2 * self.n + e]
-    }
-    #[inline]
-    fn k(&self, j: usize) -> f64 {
-        self.th[j]
-    }
-    #[inline]
-    fn c(&self, j: usize) -> f64 {
-        self.th[self.n + j]
-    }
-    #[inline]
-    fn alpha(&self) -> f64 {
-        self.th[2 * self.n]
-    }
 }
 
 thread_local! {
@@ -96,6 +62,19 @@ impl AugmentedChain {
         2 * self.core.n + self.core.ne
     }
 
+    /// The dynamic part `s = [x, v, r]` and θ of an augmented state as a chain point.
+    #[inline]
+    fn view<'a>(&self, s: &'a [f64], th: &'a [f64]) -> StateView<'a> {
+        let n = self.core.n;
+        StateView {
+            s,
+            n,
+            k: &th[..n],
+            c: &th[n..2 * n],
+            alpha: self.core.theta_alpha().map_or(0.0, |t| th[t]),
+        }
+    }
+
     /// `(θ_lin, φ)` of element `e` from θ.
     #[inline]
     fn element_params<'a>(&self, th: &'a [f64], e: usize) -> (&'a [f64], &'a [f64]) {
@@ -106,7 +85,7 @@ impl AugmentedChain {
     /// The continuous right-hand side of the dynamic part with ground term `ground = −ü_g`.
     fn rhs(&self, s: &[f64], th: &[f64], ground: f64, ds: &mut [f64]) {
         let n = self.core.n;
-        let view = View { s, th, n };
+        let view = self.view(s, th);
         ds[..n].copy_from_slice(&s[n..2 * n]);
         self.core
             .spec
@@ -133,7 +112,7 @@ impl AugmentedChain {
         let (n, dt) = (self.core.n, self.core.dt);
         let d = self.dyn_dim();
         let (s, th) = x.split_at(d);
-        let view = View { s, th, n };
+        let view = self.view(s, th);
         let ground = self.core.transition_ground(k);
         self.core
             .spec
@@ -223,14 +202,11 @@ impl Partition for AugmentedChain {
 
     fn layout(&self) -> Layout {
         let d = self.dyn_dim();
-        Layout {
-            param_names: self.core.theta_names(),
-            params: (0..self.core.theta_mean.len())
-                .map(|i| Slot::Sampled(d + i))
-                .collect(),
-            state_names: self.core.state_names(),
-            states: (0..d).map(Slot::Sampled).collect(),
-        }
+        let params = (0..self.core.theta_mean.len())
+            .map(|i| Slot::Sampled(d + i))
+            .collect();
+        self.core
+            .layout(params, (0..d).map(Slot::Sampled).collect())
     }
 }
 
@@ -275,11 +251,7 @@ impl StateSpace for AugmentedChain {
         let k = k * self.core.substeps;
         let d = self.dyn_dim();
         let (s, th) = x.split_at(d);
-        let view = View {
-            s,
-            th,
-            n: self.core.n,
-        };
+        let view = self.view(s, th);
         let ground = self.core.measurement_ground(k);
         for (o, &j) in out.iter_mut().zip(&self.core.sensors) {
             *o = self.core.spec.building.acceleration(&view, j, ground);

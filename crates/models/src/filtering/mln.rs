@@ -18,7 +18,7 @@
 //! more column of z whose `−α v_j` enters the v rows and the observation's u-Jacobian, which this
 //! partition does not carry; the MPF-EKF2 and the bootstrap PF have it.
 
-use super::{ChainCore, ChainSpec, Discretisation, ForceColumns, SpecError, NLIN, NNONLIN};
+use super::{ChainCore, ChainSpec, ForceColumns, SpecError, NLIN, NNONLIN};
 use crate::building::Building;
 use crate::structure::{ChainView, HysteresisLaw};
 use core_filters::linalg::Sparse;
@@ -115,16 +115,7 @@ impl MlnChain {
             });
         }
         let (n, ne) = (core.n, core.ne);
-        let symplectic = match core.spec.discretisation {
-            Discretisation::Euler => false,
-            Discretisation::Symplectic => true,
-            d => {
-                return Err(SpecError::Unsupported {
-                    partition: "MLN-RBPF/Storvik",
-                    discretisation: d,
-                })
-            }
-        };
+        let symplectic = core.symplectic("MLN-RBPF/Storvik")?;
         let x_rows = 0..n;
         let v_rows = n..2 * n;
         let r_rows = 2 * n..2 * n + ne;
@@ -231,16 +222,10 @@ impl Partition for MlnChain {
     fn layout(&self) -> Layout {
         let (n, ne) = (self.core.n, self.core.ne);
         let mut params: Vec<Slot> = (0..2 * n).map(Slot::Marginal).collect();
-        for e in 0..ne {
-            params.extend((0..NLIN).map(|i| Slot::Marginal(self.beta_col(e) + i)));
-            params.push(Slot::Sampled(self.n_index(e)));
-        }
-        Layout {
-            param_names: self.core.theta_names(),
-            params,
-            state_names: self.core.state_names(),
-            states: (0..2 * n + ne).map(Slot::Sampled).collect(),
-        }
+        self.core
+            .push_element_slots(&mut params, |e| self.beta_col(e), |e| self.n_index(e));
+        self.core
+            .layout(params, (0..2 * n + ne).map(Slot::Sampled).collect())
     }
 }
 

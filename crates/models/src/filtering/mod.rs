@@ -52,6 +52,7 @@ pub use spec::{ChainSpec, RmsLevels, SpecError, MAX_SUBSTEPS};
 
 use crate::structure::{state_names, theta_names_damped, BoucWenLaw, ChainView, HysteresisLaw};
 use core_filters::linalg::Sparse;
+use core_filters::model::{Layout, Slot};
 use core_filters::real::Real;
 use core_filters::rng::StreamRng;
 
@@ -184,7 +185,6 @@ impl ChainCore {
         self.spec.sensors.ground(self.ug[k])
     }
 
-    /// `R` (column-major, diagonal).
     /// The sampled block at the start (SPEC §3): zero states, and each element's n drawn from
     /// its prior into `out[n_index(e)]`, in element order.
     pub fn sample_initial(
@@ -199,6 +199,7 @@ impl ChainCore {
         }
     }
 
+    /// `R` (column-major, diagonal).
     pub fn measurement_cov(&self) -> Vec<f64> {
         let m = self.sensors.len();
         let mut r = vec![0.0; m * m];
@@ -314,6 +315,45 @@ impl ChainCore {
         }
     }
 
+    /// Whether the scheme is symplectic Euler (`false`: forward Euler), the two schemes of the
+    /// MLN and MPF partitions; any other is refused for `partition`.
+    pub fn symplectic(&self, partition: &'static str) -> Result<bool, SpecError> {
+        match self.spec.discretisation {
+            Discretisation::Euler => Ok(false),
+            Discretisation::Symplectic => Ok(true),
+            discretisation => Err(SpecError::Unsupported {
+                partition,
+                discretisation,
+            }),
+        }
+    }
+
+    /// A partition's layout: θ's slots (in θ order) and the states' slots, with the
+    /// structure's names.
+    pub fn layout(&self, params: Vec<Slot>, states: Vec<Slot>) -> Layout {
+        Layout {
+            param_names: self.theta_names(),
+            params,
+            state_names: self.state_names(),
+            states,
+        }
+    }
+
+    /// Appends the slots of every element's θ entries in θ order: its linear parameters at
+    /// `linear(e) + i` of the marginal block, its n at `n_index(e)` of the sampled block (the
+    /// MLN and MPF partitions).
+    pub fn push_element_slots(
+        &self,
+        params: &mut Vec<Slot>,
+        linear: impl Fn(usize) -> usize,
+        n_index: impl Fn(usize) -> usize,
+    ) {
+        for e in 0..self.ne {
+            params.extend((0..NLIN).map(|i| Slot::Marginal(linear(e) + i)));
+            params.push(Slot::Sampled(n_index(e)));
+        }
+    }
+
     pub fn theta_names(&self) -> Vec<String> {
         let b = &self.spec.building;
         theta_names_damped::<Law>(self.n, b.hysteretic(), b.damping())
@@ -321,5 +361,49 @@ impl ChainCore {
 
     pub fn state_names(&self) -> Vec<String> {
         state_names(self.n, self.spec.building.hysteretic())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::building::{Building, Damping};
+    use crate::sensors::{MeasurementKind, SensorLayout};
+
+    fn spec(discretisation: Discretisation) -> ChainSpec {
+        let building = Building::new(vec![1.0; 3], vec![0], Damping::Storey).unwrap();
+        let sensors = SensorLayout::new(3, &[1, 2, 3], MeasurementKind::Relative).unwrap();
+        let rms = RmsLevels {
+            acc: vec![2.0; 3],
+            ug: 3.0,
+            drift_velocity: vec![0.5],
+        };
+        let ug = vec![0.0; 11];
+        let mut spec = ChainSpec::from_rms(0.005, building, sensors, ug, &rms, 0.1).unwrap();
+        spec.discretisation = discretisation;
+        spec
+    }
+
+    /// The MLN and MPF partitions take forward and symplectic Euler and refuse RK4 by their
+    /// own name; the augmented state takes all three.
+    #[test]
+    fn the_conditional_partitions_take_the_two_euler_schemes_only() {
+        use Discretisation::{Euler, Rk4, Symplectic};
+        for (d, symplectic) in [(Euler, false), (Symplectic, true)] {
+            let core = ChainCore::new(spec(d)).unwrap();
+            assert_eq!(core.symplectic("any"), Ok(symplectic));
+            assert!(MlnChain::new(spec(d)).is_ok() && MpfChain::new(spec(d)).is_ok());
+        }
+        for (partition, refused) in [
+            ("MLN-RBPF/Storvik", MlnChain::new(spec(Rk4)).err()),
+            ("MPF-EKF2", MpfChain::new(spec(Rk4)).err()),
+        ] {
+            let want = SpecError::Unsupported {
+                partition,
+                discretisation: Rk4,
+            };
+            assert_eq!(refused, Some(want));
+        }
+        assert!(AugmentedChain::new(spec(Rk4)).is_ok());
     }
 }

@@ -30,7 +30,7 @@
 //! A chain without hysteretic element samples nothing: xⁿ is empty and there are no sampled
 //! stages, so the MPF-EKF2 reduces to an EKF2 (exact here: a KF with bilinear terms) on x^bl.
 
-use super::{ChainCore, ChainSpec, Discretisation, ForceColumns, SpecError, NLIN};
+use super::{ChainCore, ChainSpec, ForceColumns, SpecError, NLIN};
 use crate::building::Building;
 use crate::structure::{ChainView, HysteresisLaw};
 use core_filters::linalg::{Sparse, SymEntries};
@@ -140,16 +140,7 @@ impl MpfChain {
     pub fn new(spec: ChainSpec) -> Result<Self, SpecError> {
         let core = ChainCore::new(spec)?;
         let (n, ne) = (core.n, core.ne);
-        let symplectic = match core.spec.discretisation {
-            Discretisation::Euler => false,
-            Discretisation::Symplectic => true,
-            d => {
-                return Err(SpecError::Unsupported {
-                    partition: "MPF-EKF2",
-                    discretisation: d,
-                })
-            }
-        };
+        let symplectic = core.symplectic("MPF-EKF2")?;
         let mut sampled = vec![false; n];
         for &j in core.spec.building.hysteretic() {
             sampled[j] = true;
@@ -353,22 +344,15 @@ impl Partition for MpfChain {
         if self.core.mass_damping() {
             params.push(Slot::Marginal(self.a0));
         }
-        for e in 0..ne {
-            params.extend((0..NLIN).map(|i| Slot::Marginal(self.beta_index(e) + i)));
-            params.push(Slot::Sampled(self.n_index(e)));
-        }
+        self.core
+            .push_element_slots(&mut params, |e| self.beta_index(e), |e| self.n_index(e));
         let mut states: Vec<Slot> = (0..n).map(Slot::Marginal).collect();
         states.extend(self.vel.iter().map(|v| match *v {
             Vel::Sampled(i) => Slot::Sampled(i),
             Vel::Marginal(i) => Slot::Marginal(i),
         }));
         states.extend((0..ne).map(|e| Slot::Sampled(self.r_index(e))));
-        Layout {
-            param_names: self.core.theta_names(),
-            params,
-            state_names: self.core.state_names(),
-            states,
-        }
+        self.core.layout(params, states)
     }
 }
 
