@@ -570,22 +570,21 @@ pub fn information_limit(
                     };
                     err.push((m / t - 1.0).abs());
                     ratio.push(sd / p.sd);
-                    if let Ok(post) = crate::coverage::run_posterior(r, j) {
-                        if let Some(ci) = post
-                            .intervals
-                            .iter()
-                            .find(|c| (c.level - 0.95).abs() < 1e-9)
-                        {
-                            intervals += 1;
-                            covered += usize::from(ci.lo <= t && t <= ci.hi);
-                        }
+                    let interval = r
+                        .credible
+                        .iter()
+                        .find(|c| c.parameter == name && c.error.is_none())
+                        .and_then(|c| c.at(0.95));
+                    if let Some(ci) = interval {
+                        intervals += 1;
+                        covered += usize::from(ci.contains(t));
                     }
                 }
             }
             if err.is_empty() {
                 continue;
             }
-            let mean = |x: &[f64]| x.iter().sum::<f64>() / x.len() as f64;
+            let mean = |x: &[f64]| crate::metrics::mean_sd(x).0;
             out.push(LimitRow {
                 param: name.to_string(),
                 algorithm: alg.to_string(),
@@ -604,30 +603,49 @@ pub fn information_limit(
     out
 }
 
-/// The information limit as a markdown table.
+/// The information limit as a markdown table ("–" where a ratio has no finite value, e.g. a
+/// reference error of exactly zero).
 pub fn limit_markdown(rows: &[LimitRow]) -> String {
-    use std::fmt::Write as _;
+    use crate::markdown::{compact_header, num, row};
     let mut o = String::new();
-    let _ = writeln!(o, "| parameter | algorithm | data sets | reference: mean \\|error\\| | reference: mean s.d. / truth | reference 95 % intervals holding the truth | online runs | online: mean \\|error\\| | online error / reference error | online 95 % intervals holding the truth | online s.d. / ref. s.d. |");
-    let _ = writeln!(o, "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|");
+    compact_header(
+        &mut o,
+        &[
+            "parameter",
+            "algorithm",
+            "data sets",
+            "reference: mean \\|error\\|",
+            "reference: mean s.d. / truth",
+            "reference 95 % intervals holding the truth",
+            "online runs",
+            "online: mean \\|error\\|",
+            "online error / reference error",
+            "online 95 % intervals holding the truth",
+            "online s.d. / ref. s.d.",
+        ],
+        "llrrrrrrrrr",
+    );
     for r in rows {
-        let _ = writeln!(
-            o,
-            "| {} | {} | {} | {:.2} % | {:.2} % | {} of {} | {} | {:.2} % | {:.2} | {} of {} ({:.2}) | {:.2} |",
-            r.param,
-            r.algorithm,
-            r.data_sets,
-            100.0 * r.ref_rel_error,
-            100.0 * r.ref_rel_sd,
-            r.ref_covered,
-            r.data_sets,
-            r.runs,
-            100.0 * r.online_rel_error,
-            r.online_rel_error / r.ref_rel_error,
-            r.online_covered,
-            r.intervals,
-            r.online_covered as f64 / r.intervals.max(1) as f64,
-            r.sd_ratio
+        row(
+            &mut o,
+            &[
+                r.param.clone(),
+                r.algorithm.clone(),
+                r.data_sets.to_string(),
+                format!("{} %", num(100.0 * r.ref_rel_error, 2)),
+                format!("{} %", num(100.0 * r.ref_rel_sd, 2)),
+                format!("{} of {}", r.ref_covered, r.data_sets),
+                r.runs.to_string(),
+                format!("{} %", num(100.0 * r.online_rel_error, 2)),
+                num(r.online_rel_error / r.ref_rel_error, 2),
+                format!(
+                    "{} of {} ({})",
+                    r.online_covered,
+                    r.intervals,
+                    num(r.online_covered as f64 / r.intervals as f64, 2)
+                ),
+                num(r.sd_ratio, 2),
+            ],
         );
     }
     o

@@ -444,7 +444,8 @@ fn building_chains_simulate_across_the_documented_range() {
 
 /// `compare-reference` with the chains of two data sets puts each online record beside the
 /// reference of its own data set (named by the data set's digest in both records) and adds the
-/// information limit across them; a record of a third data set is refused, naming its file.
+/// information limit across them, and the chains' warnings; a record of a third data set is
+/// refused, naming its file.
 #[test]
 fn compare_reference_groups_records_by_their_data_set() {
     let dir = temp_dir("groups");
@@ -504,6 +505,10 @@ fn compare_reference_groups_records_by_their_data_set() {
     // Each data set's table holds its one run; the limit table counts both.
     assert_eq!(md.matches("| mpf-ekf2 | 1 |").count(), 18, "{md}");
     assert!(md.contains("| k1 | mpf-ekf2 | 2 |"), "{md}");
+    // 40 kept iterations: the chains' few effective samples are said in the file, not only on
+    // the terminal.
+    assert!(md.contains("Warnings on the reference chains"), "{md}");
+    assert!(md.contains("ref-a.json: k1: chain ESS"), "{md}");
     let mut args = vec!["compare-reference"];
     args.extend(refs);
     args.extend(["online-a.json", "online-c.json"]);

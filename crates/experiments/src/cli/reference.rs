@@ -144,6 +144,9 @@ struct DataSetGroup {
 /// set, and the information limit across them.
 pub fn compare(args: CompareArgs) -> Result<()> {
     let mut groups: Vec<DataSetGroup> = Vec::new();
+    // The chains' warnings go into the table's file as well, so that a reference resting on few
+    // effective samples is not read as exact.
+    let mut chain_notes = Vec::new();
     for path in &args.reference {
         let r: ReferenceRecord = crate::record::read::read(path)?;
         // Older records carry no warnings: recompute them from what they hold.
@@ -156,6 +159,7 @@ pub fn compare(args: CompareArgs) -> Result<()> {
         }
         for w in &warnings {
             eprintln!("warning: {}: {w}", path.display());
+            chain_notes.push(format!("- {}: {w}", path.display()));
         }
         match groups.iter_mut().find(|g| g.sha == r.data_sha256) {
             Some(g) => g.chains.push(r.params),
@@ -218,6 +222,12 @@ pub fn compare(args: CompareArgs) -> Result<()> {
         ));
         md.push_str(&crate::reference::limit_markdown(
             &crate::reference::information_limit(&compared),
+        ));
+    }
+    if !chain_notes.is_empty() {
+        md.push_str(&format!(
+            "\nWarnings on the reference chains:\n\n{}\n",
+            chain_notes.join("\n")
         ));
     }
     print!("{md}");
