@@ -26,6 +26,7 @@ use crate::model::Layout;
 use crate::real::{Pack, Real, PACK_LANES};
 use crate::rng::StreamRng;
 
+use super::rejuvenation::StaticParam;
 use super::runner::{Filter, StepInput, StepOutput};
 use super::store::{Particles, Shape};
 
@@ -59,6 +60,11 @@ pub trait ParticleStep: Sync + Send {
     fn name(&self) -> &'static str;
     /// Where θ and the physical states live in a particle.
     fn layout(&self) -> Layout;
+    /// The static entries of the sampled block and their supports (the model's,
+    /// [`super::model::Partition::static_params`]); none by default.
+    fn static_params(&self) -> Vec<StaticParam> {
+        Vec::new()
+    }
     /// Draws one particle's sampled block and Gaussian from the prior.
     fn initialise(
         &self,
@@ -279,6 +285,7 @@ pub struct Marginalized<S: ParticleStep> {
     step: S,
     batch: Batch<S>,
     layout: Layout,
+    statics: Vec<StaticParam>,
     health: Health,
 }
 
@@ -288,6 +295,7 @@ impl<S: ParticleStep> Marginalized<S> {
     pub fn from_step(step: S, lanes: bool) -> Self {
         Self {
             layout: step.layout(),
+            statics: step.static_params(),
             batch: Batch::new(&step, lanes),
             step,
             health: Health::default(),
@@ -312,6 +320,10 @@ impl<S: ParticleStep> Filter for Marginalized<S> {
 
     fn layout(&self) -> &Layout {
         &self.layout
+    }
+
+    fn static_params(&self) -> &[StaticParam] {
+        &self.statics
     }
 
     fn shape(&self) -> Shape {

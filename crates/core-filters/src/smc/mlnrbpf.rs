@@ -33,6 +33,7 @@ use crate::rng::StreamRng;
 use super::batch::{Ancestry, Marginalized, ParticleStep, Slots};
 use super::linear_plan::{LinearPlan, LinearScratch};
 use super::model::{ConditionallyLinear, LinearDims};
+use super::rejuvenation::StaticParam;
 use super::store::Shape;
 
 /// The per-particle step of the MLN-RBPF (SPEC §5.2) and what it needs from the model, read once.
@@ -107,6 +108,10 @@ impl<M: ConditionallyLinear> ParticleStep for MlnStep<M> {
 
     fn layout(&self) -> Layout {
         self.model.layout()
+    }
+
+    fn static_params(&self) -> Vec<StaticParam> {
+        self.model.static_params()
     }
 
     fn initialise(&self, rng: &mut StreamRng, u: &mut [f64], mu: &mut [f64], cov: &mut [f64]) {

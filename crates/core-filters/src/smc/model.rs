@@ -33,6 +33,8 @@ use crate::model::{Layout, SparseHessians};
 use crate::real::Real;
 use crate::rng::StreamRng;
 
+use super::rejuvenation::StaticParam;
+
 /// What every model provides, whatever it leaves to the particles (the sampled block: all of
 /// `x` for [`StateSpace`], `u` for [`ConditionallyLinear`], `xⁿ` for [`ConditionallyQuadratic`])
 /// and whatever it marginalises. The capability traits add only what their filter needs besides.
@@ -43,6 +45,12 @@ pub trait Partition: Send + Sync {
     fn measurement_cov(&self) -> Vec<f64>;
     /// Where θ and the physical states live.
     fn layout(&self) -> Layout;
+    /// The static entries of the sampled block (set by no stage, copied from the ancestor) that a
+    /// rejuvenation move may change, with their supports ([`super::rejuvenation`]); none by
+    /// default.
+    fn static_params(&self) -> Vec<StaticParam> {
+        Vec::new()
+    }
 }
 
 /// A general state-space model with an augmented state (bootstrap PF, SPEC §5.1):

@@ -18,7 +18,8 @@
 //! - (d)+(e) EKF2 update with `y_k` at `xⁿ_k`; its innovation log-density is the particle's
 //!   weight factor. Normalising and resampling are the runner's.
 //!
-//! Entries of `xⁿ` in no stage (the Bouc–Wen exponents) are static and copied.
+//! Entries of `xⁿ` in no stage (the Bouc–Wen exponents) are static and copied; the runner may
+//! move them after resampling ([`super::rejuvenation`], off by default).
 //!
 //! A model with `M = substeps() > 1` transitions per measurement (a time grid `M` times finer
 //! than the data) gets (a)–(c) `M` times, each with its own draws, before (d)+(e) — the same
@@ -41,6 +42,7 @@ use crate::rng::StreamRng;
 
 use super::batch::{Ancestry, Marginalized, ParticleStep, Slots};
 use super::model::{ConditionallyQuadratic, QuadraticDims};
+use super::rejuvenation::StaticParam;
 use super::store::Shape;
 
 /// What one sampled stage needs, read once from the model.
@@ -274,6 +276,10 @@ impl<M: ConditionallyQuadratic> ParticleStep for MpfStep<M> {
 
     fn layout(&self) -> Layout {
         self.model.layout()
+    }
+
+    fn static_params(&self) -> Vec<StaticParam> {
+        self.model.static_params()
     }
 
     fn initialise(&self, rng: &mut StreamRng, xn: &mut [f64], m: &mut [f64], p: &mut [f64]) {

@@ -4,7 +4,10 @@
 //!
 //! One step `k`:
 //! 1. if the previous step decided to resample, draw ancestors (from the filter's stream) and
-//!    reset the weights to uniform; otherwise every particle is its own ancestor;
+//!    reset the weights to uniform; otherwise every particle is its own ancestor. With a
+//!    rejuvenation move ([`run_with_rejuvenation`]) the resampled particles are then copied into
+//!    place, their static parameters moved by the Liu–West kernel ([`super::rejuvenation`], draws
+//!    from the same stream) and every particle becomes its own ancestor;
 //! 2. the filter advances particle `i` from its ancestor's slot of the current store into slot `i`
 //!    of the other store and adds its log-likelihood increment to `log w_i` (NaN for a numerical
 //!    failure of that particle);
@@ -25,6 +28,7 @@ use crate::resampling::{ResamplePolicy, Resampler};
 use crate::rng::StreamRng;
 use crate::weights::{normalise_log_weights, reset_uniform};
 
+use super::rejuvenation::{LiuWest, Rejuvenation, StaticParam};
 use super::store::{Particles, Shape};
 
 /// Settings shared by every particle filter.
@@ -52,6 +56,12 @@ pub trait Filter: Send {
     fn name(&self) -> &'static str;
     /// Where θ and the physical states live in a particle.
     fn layout(&self) -> &Layout;
+    /// The static entries of the sampled block that a rejuvenation move may change, with their
+    /// supports; none by default (the bootstrap PF declares none: its β and γ share a triangle,
+    /// not an interval each).
+    fn static_params(&self) -> &[StaticParam] {
+        &[]
+    }
     /// Sizes of a particle's blocks.
     fn shape(&self) -> Shape;
     /// Draws every particle from the prior and resets the filter's counters.
@@ -277,10 +287,26 @@ pub fn fill_posterior(layout: &Layout, w: &[f64], p: &Particles, out: &mut Poste
 
 /// Runs `filter` on `ys` (row `k−1` holds `y_k`, `ny` values per row): initialises, then steps
 /// through every measurement. A step failure ends the run and is returned; the runner never
-/// panics on numerical failure.
+/// panics on numerical failure. No rejuvenation move ([`run_with_rejuvenation`] with `None`).
 pub fn run(
     filter: &mut dyn Filter,
     config: &SmcConfig,
+    ys: &[f64],
+    ny: usize,
+    rng: &mut StreamRng,
+    observer: &mut dyn Observer,
+) -> RunSummary {
+    run_with_rejuvenation(filter, config, None, ys, ny, rng, observer)
+}
+
+/// [`run`], moving the filter's static parameters ([`Filter::static_params`]) with the Liu–West
+/// kernel `rejuvenation` after every resampling (module docs, step 1). With `None`, with a
+/// kernel that does not move (`δ = 1`) or with a filter that declares no static parameter, the
+/// run is [`run`]'s to the bit: no copy, no extra draw.
+pub fn run_with_rejuvenation(
+    filter: &mut dyn Filter,
+    config: &SmcConfig,
+    rejuvenation: Option<LiuWest>,
     ys: &[f64],
     ny: usize,
     rng: &mut StreamRng,
@@ -301,6 +327,8 @@ pub fn run(
     let mut ancestors: Vec<usize> = (0..np).collect();
     let mut resampler = Resampler::new(config.resampling.scheme, np);
     let mut post = Posterior::for_layout(&layout);
+    let mut rejuvenation =
+        rejuvenation.and_then(|k| Rejuvenation::new(k, filter.static_params(), np));
     filter.initialise(rng, &mut front);
     reset_uniform(&mut log_w, &mut w);
     observer.on_start(&layout, np);
@@ -327,6 +355,17 @@ pub fn run(
             resampler.resample(&w, &mut ancestors, rng);
             reset_uniform(&mut log_w, &mut w);
             health_extra.resamples += 1;
+            if let Some(move_) = &mut rejuvenation {
+                // The resampled set in place (equally weighted), its static parameters moved.
+                for (i, &a) in ancestors.iter().enumerate() {
+                    back.copy_from(i, &front, a);
+                }
+                std::mem::swap(&mut front, &mut back);
+                move_.apply(&mut front, rng);
+                for (i, a) in ancestors.iter_mut().enumerate() {
+                    *a = i;
+                }
+            }
         } else {
             for (i, a) in ancestors.iter_mut().enumerate() {
                 *a = i;

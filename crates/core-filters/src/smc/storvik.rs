@@ -35,6 +35,7 @@ use crate::rng::StreamRng;
 use super::batch::{Ancestry, Marginalized, ParticleStep, Slots};
 use super::linear_plan::{LinearPlan, LinearScratch};
 use super::model::{ConditionallyLinear, LinearDims};
+use super::rejuvenation::StaticParam;
 use super::store::Shape;
 
 /// How Storvik's step (iii) treats the measurement `y_k` (SPEC §5.3).
@@ -137,6 +138,10 @@ impl<M: ConditionallyLinear> ParticleStep for StorvikStep<M> {
 
     fn layout(&self) -> Layout {
         self.model.layout()
+    }
+
+    fn static_params(&self) -> Vec<StaticParam> {
+        self.model.static_params()
     }
 
     fn initialise(&self, rng: &mut StreamRng, u: &mut [f64], mu: &mut [f64], cov: &mut [f64]) {

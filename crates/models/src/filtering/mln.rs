@@ -26,6 +26,7 @@ use core_filters::model::{Layout, Slot};
 use core_filters::real::Real;
 use core_filters::rng::StreamRng;
 use core_filters::smc::model::{ConditionallyLinear, LinearDims, Partition, Stage};
+use core_filters::smc::rejuvenation::StaticParam;
 
 /// The chain partitioned for MLN-RBPF / Storvik.
 #[derive(Debug, Clone)]
@@ -219,6 +220,11 @@ impl Partition for MlnChain {
     }
 
     /// k, c, β, γ marginal (z order), n_e sampled; states sampled.
+    /// Each element's n, with the support of its prior.
+    fn static_params(&self) -> Vec<StaticParam> {
+        self.core.static_params(|e| self.n_index(e))
+    }
+
     fn layout(&self) -> Layout {
         let (n, ne) = (self.core.n, self.core.ne);
         let mut params: Vec<Slot> = (0..2 * n).map(Slot::Marginal).collect();

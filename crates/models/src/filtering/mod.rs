@@ -55,6 +55,9 @@ use core_filters::linalg::Sparse;
 use core_filters::model::{Layout, Slot};
 use core_filters::real::Real;
 use core_filters::rng::StreamRng;
+use core_filters::smc::rejuvenation::{StaticParam, Support};
+
+use crate::priors::Prior;
 
 /// The hysteresis law of the partitions' elements.
 pub type Law = BoucWenLaw;
@@ -78,6 +81,15 @@ fn fine_grid(ug: &[f64], dt: f64, m: usize) -> Vec<f64> {
     let fine = motion.resample_linear(dt / m as f64).acc;
     assert_eq!(fine.len(), (ug.len() - 1) * m + 1, "m samples per interval");
     fine
+}
+
+/// The support of a scalar prior, `None` for a point mass.
+fn prior_support(p: &Prior) -> Option<Support> {
+    match *p {
+        Prior::Uniform { lo, hi } => Some(Support::Interval { lo, hi }),
+        Prior::LogNormal { log_sd, .. } if log_sd > 0.0 => Some(Support::Above { lo: 0.0 }),
+        Prior::LogNormal { .. } | Prior::Fixed { .. } => None,
+    }
 }
 
 /// The variables a gradient of the storey forces is taken with respect to, by their columns, as
@@ -197,6 +209,25 @@ impl ChainCore {
         for (e, el) in self.spec.prior.elements.iter().enumerate() {
             out[n_index(e)] = el.n.sample(rng);
         }
+    }
+
+    /// The static entries of the sampled block (each element's n at `n_index(e)`) with the
+    /// support of the prior the chain actually uses (`spec.prior`, after any fixing, data scaling
+    /// or user prior): `[lo, hi]` for `U(lo, hi)`, `(0, ∞)` for a log-normal; a point mass
+    /// (fixed, or a log-normal of log-s.d. 0) is left out, it has nothing to move.
+    pub fn static_params(&self, n_index: impl Fn(usize) -> usize) -> Vec<StaticParam> {
+        self.spec
+            .prior
+            .elements
+            .iter()
+            .enumerate()
+            .filter_map(|(e, el)| {
+                prior_support(&el.n).map(|support| StaticParam {
+                    index: n_index(e),
+                    support,
+                })
+            })
+            .collect()
     }
 
     /// `R` (column-major, diagonal).

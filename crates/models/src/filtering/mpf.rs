@@ -38,6 +38,7 @@ use core_filters::model::{Layout, Slot, SparseHessians};
 use core_filters::real::Real;
 use core_filters::rng::StreamRng;
 use core_filters::smc::model::{ConditionallyQuadratic, Partition, QuadraticDims};
+use core_filters::smc::rejuvenation::StaticParam;
 
 /// Where a storey's velocity lives.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -335,6 +336,11 @@ impl Partition for MpfChain {
 
     fn measurement_cov(&self) -> Vec<f64> {
         self.core.measurement_cov()
+    }
+
+    /// Each element's n, with the support of its prior.
+    fn static_params(&self) -> Vec<StaticParam> {
+        self.core.static_params(|e| self.n_index(e))
     }
 
     fn layout(&self) -> Layout {
