@@ -120,6 +120,9 @@ loop_every = {loops}
 # --config the MPF-EKF2 takes per_particle when a storey carries no sensor (docs/scaling.md) or
 # the building has 10 storeys or more (docs/calibration.md).
 marginal_prior = {{ kind = "moment_matched" }}
+# Rejuvenation of the sampled Bouc–Wen exponents n (MLN-RBPF, Storvik, MPF-EKF2): after every
+# resampling the Liu–West kernel with discount δ in [1/3, 1] moves them; absent: no move.
+# rejuvenation = 0.98
 
 # Point-mass priors: parameter name = value (k1..kN, c1..cN, alpha with the storey+mass damping
 # form, beta, gamma, n; with several hysteretic elements beta4, gamma4, n4 for the element at
@@ -204,6 +207,8 @@ pub struct FilterRequest {
     pub storvik_update: Option<StorvikUpdate>,
     pub discretisation: Option<models::filtering::Discretisation>,
     pub substeps: Option<crate::settings::Substeps>,
+    /// Liu–West discount of the rejuvenation move (`rejuvenation`).
+    pub rejuvenation: Option<f64>,
     /// Fixed parameters, `name=value,…`.
     pub fix: Option<String>,
     pub experiment: String,
@@ -403,7 +408,11 @@ fn request_settings(req: &FilterRequest) -> Result<FilterSettings> {
             None => BTreeMap::new(),
         },
     };
-    Ok(overrides.apply(settings))
+    let mut settings = overrides.apply(settings);
+    if req.rejuvenation.is_some() {
+        settings.rejuvenation = req.rejuvenation;
+    }
+    Ok(settings)
 }
 
 /// A run to settle ([`settle`]): its algorithm, its data set (and `measured.csv` path), the

@@ -20,6 +20,7 @@ use crate::settings::FilterSettings;
 /// - `window` (θ_val averaging, SPEC eq. 26) in `1..=MAX_SAMPLES`: 0 has no mean;
 /// - `noise_fraction` in `[MIN_FILTER_NOISE_FRACTION, MAX_FILTER_NOISE_FRACTION]`;
 /// - `ess_threshold` in `(0, 1]`;
+/// - `rejuvenation` (the Liu–West discount) in `[1/3, 1]`;
 /// - `substeps` in `1..=MAX_SUBSTEPS`;
 /// - `structure.masses`: at most `MAX_STOREYS`, each finite and positive;
 /// - `fix`: finite values.
@@ -32,6 +33,7 @@ pub fn check_filter_settings(s: &FilterSettings) -> Result<()> {
             bail!("field `ess_threshold`: {t} is not in (0, 1]");
         }
     }
+    s.liu_west()?;
     if let crate::settings::Substeps::Fixed(m) = s.substeps {
         check_count(m, 1, models::filtering::MAX_SUBSTEPS).context("field `substeps`")?;
     }

@@ -4,6 +4,7 @@
 use std::collections::BTreeMap;
 
 use core_filters::resampling::Scheme;
+use core_filters::smc::rejuvenation::LiuWest;
 use core_filters::smc::storvik::StorvikUpdate;
 use models::filtering::{ChainPrior, Discretisation, MarginalPrior};
 use serde::{Deserialize, Serialize};
@@ -58,6 +59,13 @@ pub struct FilterSettings {
     /// (`docs/calibration.md`). Absent from a record's settings when 1.
     #[serde(skip_serializing_if = "is_one")]
     pub pool: usize,
+    /// Rejuvenation of the sampled static parameters (the Bouc–Wen exponents n of the MLN-RBPF,
+    /// Storvik and the MPF-EKF2): after every resampling the Liu–West kernel with this discount
+    /// δ, in [1/3, 1] (typical 0.95–0.99), moves them ([`core_filters::smc::rejuvenation`]).
+    /// Absent: no move (the SPEC's filters), and absent from a record's settings; the bootstrap
+    /// PF is never moved. Each filter of a pool moves its own particles.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub rejuvenation: Option<f64>,
 }
 
 /// Transitions per sample interval: a number, or chosen by the rule of
@@ -156,6 +164,7 @@ impl Default for FilterSettings {
             validate: true,
             loop_every: 4,
             pool: 1,
+            rejuvenation: None,
         }
     }
 }
@@ -193,6 +202,17 @@ impl FilterSettings {
             s.pool = recommended_pool(p);
         }
         s
+    }
+}
+
+impl FilterSettings {
+    /// The Liu–West kernel of `rejuvenation`, `None` without one; a discount outside [1/3, 1]
+    /// is an error naming the field.
+    pub fn liu_west(&self) -> crate::error::Result<Option<LiuWest>> {
+        self.rejuvenation
+            .map(LiuWest::new)
+            .transpose()
+            .map_err(|e| crate::error::invalid!("field `rejuvenation`: {e}"))
     }
 }
 

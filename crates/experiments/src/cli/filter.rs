@@ -62,6 +62,11 @@ pub struct Args {
     /// exceeds 0.01, enough to bring it to 0.0035, at most 8 (docs/structures.md)).
     #[arg(long)]
     pub substeps: Option<crate::settings::Substeps>,
+    /// Move the sampled Bouc–Wen exponents n (MLN-RBPF, Storvik, MPF-EKF2) after every
+    /// resampling with the Liu–West kernel of this discount δ, in [1/3, 1] (typical 0.95–0.99;
+    /// docs/calibration.md). Default: no move.
+    #[arg(long, value_name = "DELTA")]
+    pub rejuvenation: Option<f64>,
     /// TOML file with filter settings (priors, noise fraction, masses, …) over the SPEC's (the
     /// paper's) defaults; command-line options override it. Without it: the recommended
     /// settings of docs/calibration.md.
@@ -129,6 +134,7 @@ pub fn run(args: Args) -> Result<()> {
         storvik_update: args.storvik_update,
         discretisation: args.discretisation,
         substeps: args.substeps,
+        rejuvenation: args.rejuvenation,
         fix: args.fix,
         experiment: args.experiment,
         seed: args.seed,
