@@ -437,4 +437,70 @@ mod tests {
         }
         assert!(AugmentedChain::new(spec(Rk4)).is_ok());
     }
+
+    /// The MLN and MPF partitions declare each element's n, at its slot of the sampled block,
+    /// with the support of the prior the chain uses; a point mass is not declared; the augmented
+    /// state declares nothing.
+    #[test]
+    fn the_static_parameters_are_the_exponents_with_their_priors_supports() {
+        use core_filters::model::Slot;
+        use core_filters::smc::model::Partition;
+        let n_slot = |layout: Layout| match layout.params[layout.param_names.len() - 1] {
+            Slot::Sampled(i) => i,
+            Slot::Marginal(_) => panic!("n is sampled"),
+        };
+        let with_n = |n: Prior| {
+            let mut s = spec(Discretisation::Symplectic);
+            s.prior.elements[0].n = n;
+            s
+        };
+        for (prior, support) in [
+            (
+                Prior::Uniform { lo: 1.0, hi: 5.0 },
+                Some(Support::Interval { lo: 1.0, hi: 5.0 }),
+            ),
+            (
+                Prior::Uniform { lo: 1.5, hi: 2.5 },
+                Some(Support::Interval { lo: 1.5, hi: 2.5 }),
+            ),
+            (
+                Prior::LogNormal {
+                    median: 2.0,
+                    log_sd: 0.3,
+                },
+                Some(Support::Above { lo: 0.0 }),
+            ),
+            (
+                Prior::LogNormal {
+                    median: 2.0,
+                    log_sd: 0.0,
+                },
+                None,
+            ),
+            (Prior::Fixed { value: 2.0 }, None),
+        ] {
+            let mpf = MpfChain::new(with_n(prior)).unwrap();
+            let mln = MlnChain::new(with_n(prior)).unwrap();
+            for (got, index) in [
+                (mpf.static_params(), n_slot(mpf.layout())),
+                (mln.static_params(), n_slot(mln.layout())),
+            ] {
+                let want: Vec<StaticParam> = support
+                    .map(|support| StaticParam { index, support })
+                    .into_iter()
+                    .collect();
+                assert_eq!(got, want, "{prior:?}");
+            }
+            assert!(AugmentedChain::new(with_n(prior))
+                .unwrap()
+                .static_params()
+                .is_empty());
+        }
+        // The default prior of the spec is SPEC §3's n ~ U(1, 5).
+        let mpf = MpfChain::new(spec(Discretisation::Euler)).unwrap();
+        assert_eq!(
+            mpf.static_params()[0].support,
+            Support::Interval { lo: 1.0, hi: 5.0 }
+        );
+    }
 }
