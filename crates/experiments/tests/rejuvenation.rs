@@ -1,0 +1,271 @@
+//! The rejuvenation move of the sampled static parameters (`rejuvenation`, the Liu–West kernel):
+//! absent, the runs are those computed before the option existed, to the bit; with δ = 1 or on
+//! the bootstrap PF (no static parameter) nothing moves and no draw is taken; on, the Bouc–Wen
+//! exponent n of every marginalised filter keeps (nearly) as many values as particles; a run is
+//! the same with 1 and 2 threads; a discount outside [1/3, 1] is refused by name.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use experiments::pipeline::{identify, Algorithm, FilterSettings, RunInput};
+use experiments::record::RunRecord;
+use experiments::study::Study;
+use experiments::sweep::{run_sweep, Shard, SweepOptions};
+use models::dataset::{generate, Dataset, DatasetConfig};
+
+fn temp_dir(tag: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("sysid-rejuv-{tag}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+/// `duration` s of the paper's data set (seed 3).
+fn data(duration: f64) -> Dataset {
+    let mut config = DatasetConfig::from_preset("paper-3dof", 3).unwrap();
+    config.duration = Some(duration);
+    generate(&config).unwrap()
+}
+
+fn run(data: &Dataset, alg: Algorithm, s: &FilterSettings) -> RunRecord {
+    let loaded = data.to_loaded();
+    let input = RunInput {
+        data: &loaded,
+        chain: Some(&data.chain),
+        experiment: "rejuvenation",
+        seed: 5,
+        run: 0,
+        progress: false,
+        residuals: false,
+    };
+    identify(&input, alg, s).unwrap()
+}
+
+/// The record as JSON without what names the settings (config, fingerprint) or the time.
+fn numbers(r: &RunRecord) -> serde_json::Value {
+    let mut v = serde_json::to_value(r).unwrap();
+    for key in ["config", "fingerprint", "timing"] {
+        v.as_object_mut().unwrap().remove(key);
+    }
+    v
+}
+
+/// Without the field a run is the one computed before the option existed: the committed Fig. 8
+/// record (MPF-EKF2, 500 particles, the full paper record) is recomputed to the bit, with the
+/// same fingerprint, and its settings are written without the field.
+#[test]
+fn without_the_field_the_committed_record_is_recomputed_bit_for_bit() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
+    let study = Study::load(&root.join("experiments/fig8.toml")).unwrap();
+    let jobs = study.jobs();
+    assert_eq!(jobs.len(), 1);
+    let committed: RunRecord = serde_json::from_str(
+        &std::fs::read_to_string(
+            root.join("results/paper/records/fig8/mpf-ekf2-np500-systematic-run000.json"),
+        )
+        .unwrap(),
+    )
+    .unwrap();
+    assert_eq!(
+        study.job_fingerprint(&jobs[0]).unwrap(),
+        committed.fingerprint.as_ref().unwrap().sha256,
+        "the settings' fingerprint changed"
+    );
+    let fresh = study.run_job(&jobs[0]).unwrap();
+    assert!(fresh.config["filter"].get("rejuvenation").is_none());
+    assert_eq!(fresh.deterministic_json(), committed.deterministic_json());
+}
+
+/// δ = 1 does not move (h = 0) and the bootstrap PF declares no static parameter: both runs are
+/// the run without the field, number for number (no copy, no draw); only the settings differ.
+#[test]
+fn a_kernel_that_does_not_move_and_the_bootstrap_pf_change_nothing() {
+    let d = data(2.0);
+    let off = FilterSettings {
+        particles: 60,
+        validate: false,
+        ..FilterSettings::default()
+    };
+    let still = FilterSettings {
+        rejuvenation: Some(1.0),
+        ..off.clone()
+    };
+    let on = FilterSettings {
+        rejuvenation: Some(0.95),
+        ..off.clone()
+    };
+    let a = run(&d, Algorithm::MpfEkf2, &off);
+    let b = run(&d, Algorithm::MpfEkf2, &still);
+    assert_eq!(numbers(&a), numbers(&b));
+    assert_eq!(b.config["filter"]["rejuvenation"], 1.0);
+    assert_ne!(a.fingerprint, b.fingerprint);
+    // The same comparison can fail: a moving kernel changes the run.
+    assert_ne!(numbers(&a), numbers(&run(&d, Algorithm::MpfEkf2, &on)));
+    let a = run(&d, Algorithm::Bootstrap, &off);
+    let b = run(&d, Algorithm::Bootstrap, &on);
+    assert_eq!(numbers(&a), numbers(&b));
+}
+
+/// On a short record with resampling at every step, n collapses to a few values without the
+/// move and keeps nearly one value per particle with it, for the three filters that sample it;
+/// every value stays inside the prior's support U(1, 5) (its 95 % interval does).
+#[test]
+fn the_move_keeps_many_distinct_values_of_n() {
+    let d = data(3.0);
+    let off = FilterSettings {
+        particles: 125,
+        validate: false,
+        trace_every: 0,
+        ..FilterSettings::default()
+    };
+    let on = FilterSettings {
+        rejuvenation: Some(0.98),
+        ..off.clone()
+    };
+    for alg in [Algorithm::MpfEkf2, Algorithm::MlnRbpf, Algorithm::Storvik] {
+        let a = run(&d, alg, &off);
+        let b = run(&d, alg, &on);
+        assert!(a.failure.is_none() && b.failure.is_none(), "{}", alg.name());
+        let (na, nb) = (a.distinct_sampled["n"], b.distinct_sampled["n"]);
+        assert!(
+            na <= 5,
+            "{}: {na} distinct values of n without the move",
+            alg.name()
+        );
+        assert!(
+            nb >= 100,
+            "{}: {nb} distinct values of n with it",
+            alg.name()
+        );
+        let j = b.param_names.iter().position(|p| p == "n").unwrap();
+        for iv in &b.credible[j].intervals {
+            assert!(1.0 < iv.lo && iv.hi < 5.0, "{}: {iv:?}", alg.name());
+        }
+    }
+}
+
+/// A user prior of n changes the support the move keeps to: n ~ U(1.5, 2.5) stays inside it.
+#[test]
+fn the_support_is_the_prior_in_use() {
+    let d = data(2.0);
+    let mut prior = models::filtering::ChainPrior::paper(3, &[0]);
+    prior
+        .set_prior("n", models::priors::Prior::Uniform { lo: 1.5, hi: 2.5 })
+        .unwrap();
+    let s = FilterSettings {
+        particles: 60,
+        validate: false,
+        prior: Some(prior),
+        rejuvenation: Some(1.0 / 3.0),
+        ..FilterSettings::default()
+    };
+    let r = run(&d, Algorithm::MpfEkf2, &s);
+    let j = r.param_names.iter().position(|p| p == "n").unwrap();
+    assert!(r.distinct_sampled["n"] >= 50);
+    for iv in &r.credible[j].intervals {
+        assert!(1.5 < iv.lo && iv.hi < 2.5, "{iv:?}");
+    }
+}
+
+/// A sweep with the move gives the same records with 1 and 2 threads (pooled filters included).
+#[test]
+fn a_sweep_with_the_move_is_thread_count_invariant() {
+    let text = r#"
+name = "rejuv"
+description = "rejuvenation test"
+[data]
+preset = "paper-3dof"
+duration = 2.0
+[sweep]
+algorithms = ["mln-rbpf", "mpf-ekf2"]
+runs = 2
+master_seed = 7
+particles = [60]
+[filter]
+trace_every = 50
+loop_every = 0
+pool = 2
+rejuvenation = 0.97
+"#;
+    let study: Study = toml::from_str(text).unwrap();
+    let records = |threads: usize| {
+        let dir = temp_dir(&format!("t{threads}"));
+        let opts = SweepOptions {
+            threads,
+            shard: Shard::default(),
+            progress: false,
+            label: "test".into(),
+            resume: false,
+        };
+        let out = run_sweep(
+            &study.jobs(),
+            Study::job_id,
+            |j| study.job_fingerprint(j),
+            &dir,
+            &opts,
+            |j| study.run_job(j),
+        )
+        .unwrap();
+        out.records
+            .iter()
+            .map(RunRecord::deterministic_json)
+            .collect::<Vec<_>>()
+    };
+    let one = records(1);
+    assert_eq!(one.len(), 4);
+    assert!(one.iter().all(|r| r.contains("\"rejuvenation\":0.97")));
+    assert_eq!(one, records(2), "1 thread and 2 threads differ");
+}
+
+/// A discount outside [1/3, 1] is refused by the field's name: in settings, a config file and
+/// on the command line.
+#[test]
+fn a_bad_discount_is_refused_by_name() {
+    let d = data(1.0);
+    let loaded = d.to_loaded();
+    let input = RunInput {
+        data: &loaded,
+        chain: Some(&d.chain),
+        experiment: "rejuvenation",
+        seed: 1,
+        run: 0,
+        progress: false,
+        residuals: false,
+    };
+    for bad in [0.0, 0.3, 1.01, f64::NAN, -1.0] {
+        let s = FilterSettings {
+            particles: 10,
+            rejuvenation: Some(bad),
+            ..FilterSettings::default()
+        };
+        let e = format!(
+            "{:#}",
+            identify(&input, Algorithm::MpfEkf2, &s).unwrap_err()
+        );
+        assert!(e.contains("field `rejuvenation`"), "{e}");
+    }
+    let dir = temp_dir("bad");
+    let config = dir.join("bad.toml");
+    std::fs::write(&config, "rejuvenation = 2.0\n").unwrap();
+    let e = format!(
+        "{:#}",
+        experiments::limits::load_filter_settings(&config).unwrap_err()
+    );
+    assert!(
+        e.contains("`rejuvenation`") && e.contains("bad.toml"),
+        "{e}"
+    );
+    let data_dir = dir.join("d");
+    d.write_dir(&data_dir).unwrap();
+    let o = Command::new(env!("CARGO_BIN_EXE_sysid"))
+        .args(["filter", "--algorithm", "mpf-ekf2", "--particles", "10"])
+        .args(["--rejuvenation", "0.2", "--data"])
+        .arg(&data_dir)
+        .arg("--out")
+        .arg(dir.join("r.json"))
+        .output()
+        .unwrap();
+    assert!(!o.status.success());
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("`rejuvenation`"), "{err}");
+}
