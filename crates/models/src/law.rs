@@ -8,11 +8,14 @@
 //! (`crate::filtering::prior::ChainPriorOf`) and the filter partitions (`crate::filtering`) are
 //! generic over it and monomorphised, so a law costs no dynamic dispatch in a filter's step.
 //!
-//! - [`bouc_wen`]: the Bouc–Wen law of SPEC eq. 22, the toolkit's law (θ = (β, γ), φ = (n)).
+//! - [`bouc_wen`]: the Bouc–Wen law of SPEC eq. 22, the toolkit's law (θ = (β, γ), φ = (n));
+//! - [`plastic`]: a smoothed elastic–perfectly-plastic law (θ = (ρ), φ = (m)), which the tests
+//!   run through the simulator and the partitions to show that a law is one file.
 //!
 //! Adding a law is one file under `law/` implementing [`HysteresisLaw`] and its `mod` line here.
 
 pub mod bouc_wen;
+pub mod plastic;
 
 pub use bouc_wen::{BoucWen, BoucWenLaw, BoucWenPrior};
 
