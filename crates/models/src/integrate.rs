@@ -15,7 +15,8 @@
 //!   dimension (N storeys). Integrating sample interval by sample interval with a carried step
 //!   size gives all three and the output at the data times for free.
 
-use crate::structure::ShearChain;
+use crate::law::HysteresisLaw;
+use crate::structure::ShearChainOf;
 use thiserror::Error;
 
 /// A system `ẏ = g(y, ü_g)` driven by a scalar input (the ground acceleration).
@@ -26,12 +27,12 @@ pub trait ForcedSystem {
     fn rhs(&self, state: &[f64], ug: f64, dstate: &mut [f64]);
 }
 
-impl ForcedSystem for ShearChain {
+impl<L: HysteresisLaw> ForcedSystem for ShearChainOf<L> {
     fn dim(&self) -> usize {
-        ShearChain::dim(self)
+        ShearChainOf::dim(self)
     }
     fn rhs(&self, state: &[f64], ug: f64, dstate: &mut [f64]) {
-        ShearChain::rhs(self, state, ug, dstate)
+        ShearChainOf::rhs(self, state, ug, dstate)
     }
 }
 
@@ -180,7 +181,7 @@ pub const RK4_REAL_STABILITY: f64 = 2.78;
 /// overdamped top modes of a chain with stiffness-proportional damping decay at nearly this rate
 /// (the `building-chain` preset at 200 storeys: 913 s⁻¹), which is what limits an explicit step;
 /// the oscillatory modes (|λ| = ω ≤ 2√(max k/m), 89 s⁻¹ there) are far inside the limit.
-pub fn fastest_damping_rate(chain: &ShearChain) -> f64 {
+pub fn fastest_damping_rate<L: HysteresisLaw>(chain: &ShearChainOf<L>) -> f64 {
     let (m, c) = (chain.masses(), chain.damping());
     (0..m.len())
         .map(|i| {
@@ -194,7 +195,7 @@ pub fn fastest_damping_rate(chain: &ShearChain) -> f64 {
 /// stable: 1 while [`fastest_damping_rate`]`·dt ≤` [`RK4_REAL_STABILITY`] (every chain of the
 /// paper and of the scaling study, whose data are unchanged), else the smallest count that
 /// brings the sub-step inside the bound (2 for the 200-storey `building-chain`).
-pub fn rk4_substeps(chain: &ShearChain, dt: f64) -> usize {
+pub fn rk4_substeps<L: HysteresisLaw>(chain: &ShearChainOf<L>, dt: f64) -> usize {
     let z = fastest_damping_rate(chain) * dt;
     if z.is_finite() && z > RK4_REAL_STABILITY {
         (z / RK4_REAL_STABILITY).ceil() as usize

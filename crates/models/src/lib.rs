@@ -4,8 +4,10 @@
 //! N-storey Bouc–Wen shear chain (SPEC §1–3, §5–6).
 //!
 //! - [`building`]: the validated building (masses, hysteretic storeys, damping form), 0-based;
-//! - [`structure`]: the N-storey shear chain with Bouc–Wen elements, its continuous right-hand
+//! - [`structure`]: the N-storey shear chain with hysteretic elements, its continuous right-hand
 //!   side, forward-Euler map, accelerations and restoring forces; presets in [`preset`];
+//! - [`law`]: the hysteresis laws of the elements (Bouc–Wen), one file each: rate, partials,
+//!   parameter names, record, validation and prior;
 //! - [`integrate`]: classical RK4 (truth) and adaptive Dormand–Prince 5(4) (validation);
 //! - [`excitation`] and [`readers`]: ground motions (El Centro, Kanai–Tajimi, harmonic, user
 //!   records in CSV and PEER `.AT2`); [`ground_motions`]: vendored PEER NGA records by name;
@@ -25,6 +27,7 @@ pub mod filtering;
 pub mod ground_motions;
 pub mod import;
 pub mod integrate;
+pub mod law;
 pub mod limits;
 pub mod modal;
 pub mod preset;

@@ -5,9 +5,10 @@
 //! at the rest state (`r_j = 0`, where every record starts) both nonlinear terms and their first
 //! derivatives in `d_j` vanish for `n > 1` (for `n = 1` they are of second order in the motion's
 //! amplitude), so `r_j = d_j` to first order and the element's **initial tangent stiffness** is
-//! `k_j`. The linearised chain is therefore the chain with every element linear, `K` and `C`
-//! assembled from `k_j`, `c_j` (element `j` links storey `j − 1`, or the ground, to storey `j`)
-//! and `M = diag(m)`. This is the small-amplitude model: a yielding element is softer.
+//! `k_j` — as for every hysteresis law, each being normalised to `ṙ = δv` at `r = 0`
+//! (`crate::law::HysteresisLaw`). The linearised chain is therefore the chain with every element
+//! linear, `K` and `C` assembled from `k_j`, `c_j` (element `j` links storey `j − 1`, or the
+//! ground, to storey `j`) and `M = diag(m)`. This is the small-amplitude model: a yielding element is softer.
 //!
 //! **Modes.** The eigenvalues λ of the first-order matrix `A = [[0, I], [−M⁻¹K, −M⁻¹C]]` (real
 //! Schur form, `nalgebra`) come in conjugate pairs for under-damped modes:
@@ -19,7 +20,8 @@
 use nalgebra::DMatrix;
 use thiserror::Error;
 
-use crate::structure::ShearChain;
+use crate::law::HysteresisLaw;
+use crate::structure::ShearChainOf;
 
 /// One under-damped mode of the linearised chain.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -57,7 +59,9 @@ pub enum ModalError {
 
 /// `M`, `C`, `K` of the linearised chain (see the module documentation); with mass-proportional
 /// damping `C` includes `αM`.
-pub fn linearised_matrices(chain: &ShearChain) -> (DMatrix<f64>, DMatrix<f64>, DMatrix<f64>) {
+pub fn linearised_matrices<L: HysteresisLaw>(
+    chain: &ShearChainOf<L>,
+) -> (DMatrix<f64>, DMatrix<f64>, DMatrix<f64>) {
     matrices(
         chain.masses(),
         chain.stiffness(),
@@ -98,7 +102,7 @@ fn matrices(
 }
 
 /// The modes of the linearised chain (initial tangent stiffness of every Bouc–Wen element).
-pub fn modes(chain: &ShearChain) -> Result<Modes, ModalError> {
+pub fn modes<L: HysteresisLaw>(chain: &ShearChainOf<L>) -> Result<Modes, ModalError> {
     modes_of_damped(
         chain.masses(),
         chain.stiffness(),
@@ -108,7 +112,7 @@ pub fn modes(chain: &ShearChain) -> Result<Modes, ModalError> {
 }
 
 /// The modes of the chain with masses `m`, stiffnesses `k` and dampings `c` (one per storey),
-/// without the checks of [`ShearChain::new`]: an identified θ with a negative damping still has
+/// without the checks of [`ShearChainOf::with_elements`]: an identified θ with a negative damping still has
 /// modes, and one that grows shows a negative ζ and is counted in `not_decaying`.
 pub fn modes_of(m: &[f64], k: &[f64], c: &[f64]) -> Result<Modes, ModalError> {
     modes_of_damped(m, k, c, None)
@@ -175,7 +179,7 @@ pub fn modes_of_damped(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::structure::BoucWen;
+    use crate::structure::{BoucWen, ShearChain};
 
     fn chain(n: usize, k: f64, c: f64, bw: bool) -> ShearChain {
         let elements = if bw {

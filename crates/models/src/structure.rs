@@ -1,4 +1,4 @@
-//! The N-storey shear chain with Bouc–Wen hysteretic elements (SPEC §1).
+//! The N-storey shear chain with hysteretic elements (SPEC §1: Bouc–Wen).
 //!
 //! Storeys are numbered `0..N` in code (1-based `1..=N` in names and files). Element `j` links
 //! storey `j−1` to storey `j`, storey `−1` being the ground, so element 0 is the ground element.
@@ -6,8 +6,9 @@
 //! (`x_{−1} = v_{−1} = 0`), the force carried by element `j` is
 //!
 //! - linear element:    `f_j = k_j d_j + c_j δv_j`,
-//! - Bouc–Wen element:  `f_j = k_j r_j + c_j δv_j`, `ṙ_j = δv_j − β|δv_j||r_j|^(n−1) r_j − γ δv_j |r_j|^n`
-//!   (SPEC eq. 22; the dashpot stays linear),
+//! - hysteretic element: `f_j = k_j r_j + c_j δv_j`, `ṙ_j` given by the element's
+//!   [`HysteresisLaw`] (`crate::law`); for Bouc–Wen
+//!   `ṙ_j = δv_j − β|δv_j||r_j|^(n−1) r_j − γ δv_j |r_j|^n` (SPEC eq. 22; the dashpot stays linear),
 //!
 //! and storey `j` obeys `m_j ẍ_j = −m_j ü_g − f_j + f_{j+1}` (`f_N = 0`). For the paper's
 //! three-storey chain with unit masses this is exactly SPEC §1.
@@ -20,28 +21,20 @@
 //!
 //! One physics source: the forces and accelerations are evaluated by one kernel, that of the
 //! [`Building`] (over any [`ChainView`] of a point), and the hysteretic rate by one
-//! implementation of a [`HysteresisLaw`] ([`BoucWenLaw`]); the truth simulator
-//! ([`ShearChain::rhs`]) and every filter partition (`crate::filtering`) use both, generic over
-//! one particle (`f64`) or a SIMD pack of particles.
+//! implementation of a [`HysteresisLaw`] ([`BoucWenLaw`] for the toolkit's chains); the truth
+//! simulator ([`ShearChainOf::rhs`]) and every filter partition (`crate::filtering`) use both,
+//! generic over one particle (`f64`) or a SIMD pack of particles, and over the law.
 //!
-//! State layout: `[x_1..x_N, v_1..v_N, r_e for each Bouc–Wen element in order]`.
-//! Parameter vector θ: `[k_1..k_N, c_1..c_N, (α with mass damping), then (β, γ, n) per Bouc–Wen
-//! element]`, which for the paper is `[k1 k2 k3 c1 c2 c3 β γ n]`.
+//! State layout: `[x_1..x_N, v_1..v_N, r_e for each hysteretic element in order]`.
+//! Parameter vector θ: `[k_1..k_N, c_1..c_N, (α with mass damping), then the law's parameters
+//! per hysteretic element]` (Bouc–Wen: β, γ, n), which for the paper is
+//! `[k1 k2 k3 c1 c2 c3 β γ n]`.
 
 use crate::building::{Building, BuildingError};
+pub use crate::law::bouc_wen::{bouc_wen_rate, BoucWen, BoucWenLaw};
+pub use crate::law::{HysteresisLaw, LawError};
 use core_filters::real::Real;
 use thiserror::Error;
-
-/// A Bouc–Wen hysteretic element replacing the linear spring of one element of the chain.
-#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct BoucWen {
-    /// 0-based element index (element 0 links the ground to storey 1).
-    pub storey: usize,
-    pub beta: f64,
-    pub gamma: f64,
-    /// Exponent; `n ≥ 1` is required (see [`StructureError::ExponentBelowOne`]).
-    pub n: f64,
-}
 
 /// The damping form is part of the building; re-exported beside the θ layout it shapes.
 pub use crate::building::{Damping, UnknownDamping};
@@ -66,26 +59,17 @@ pub enum StructureError {
         storey: usize,
         value: f64,
     },
-    #[error("Bouc–Wen element at storey {storey}: {what} must be finite, got {value}")]
-    NonFiniteBoucWen {
-        storey: usize,
-        what: &'static str,
-        value: f64,
-    },
-    /// For `n < 1`, `|r|^(n−1)` is unbounded at `r = 0`: the right-hand side is then not
-    /// Lipschitz at the origin (the start of every simulation), uniqueness of the solution is
-    /// lost and the filters' Jacobians blow up. The priors (SPEC §3, `n ~ U(1, 5)`) never go
-    /// below 1, so the chain requires `n ≥ 1`.
-    #[error("Bouc–Wen element at storey {storey}: exponent n = {n} must be ≥ 1")]
-    ExponentBelowOne { storey: usize, n: f64 },
+    /// An element's parameters outside its law's domain (Bouc–Wen: finite, `n ≥ 1`).
+    #[error(transparent)]
+    Law(#[from] LawError),
     #[error("mass-proportional damping alpha must be non-negative and finite, got {0}")]
     NegativeAlpha(f64),
 }
 
 /// An N-storey shear chain (SPEC §1): a [`Building`] with its parameters, validated at
-/// construction.
+/// construction; its hysteretic elements follow the law `L`.
 #[derive(Debug, Clone, PartialEq)]
-pub struct ShearChain {
+pub struct ShearChainOf<L: HysteresisLaw> {
     /// Masses, hysteretic storeys and damping form; also the force kernel shared with the
     /// filter partitions.
     building: Building,
@@ -94,113 +78,13 @@ pub struct ShearChain {
     /// Mass-proportional damping coefficient α ([`Damping::StoreyMass`]); `None` for
     /// [`Damping::Storey`].
     alpha: Option<f64>,
-    bouc_wen: Vec<BoucWen>,
+    /// The hysteretic elements' parameters, in the order of [`Building::hysteretic`].
+    elements: Vec<L::Element>,
+    law: L,
 }
 
-/// `|r|^(n−1) r` and `|r|^n`, the two nonlinear terms of SPEC eq. 22 (`n ≥ 1`, so both are
-/// finite and zero at `r = 0`, including `n = 1` where `0^0 = 1` multiplies `r = 0`).
-#[inline]
-fn bw_terms(r: f64, n: f64) -> (f64, f64) {
-    let a = r.abs();
-    let pow_nm1 = a.powf(n - 1.0);
-    (pow_nm1 * r, pow_nm1 * a)
-}
-
-/// Bouc–Wen rate `ṙ = δv − β|δv||r|^(n−1) r − γ δv |r|^n` (SPEC eq. 22), through
-/// [`BoucWenLaw::rate`] (the one implementation of the law).
-#[inline]
-pub fn bouc_wen_rate(dv: f64, r: f64, beta: f64, gamma: f64, n: f64) -> f64 {
-    BoucWenLaw.rate(dv, r, &[beta, gamma], &[n])
-}
-
-/// A hysteresis law of one element, written so that the filter partitions can see which
-/// parameters enter linearly:
-///
-/// `ṙ = g₀(δv, r; φ) + Σ_i θ_i g_i(δv, r; φ)`
-///
-/// with θ the law's *linear* shape parameters (marginalised by the MLN-RBPF, Storvik and the
-/// MPF-EKF2) and φ its *nonlinear* parameters (sampled). `δv` is the element's drift velocity and
-/// `r` its hysteretic variable. Adding a law means implementing this trait (and giving its
-/// parameters a prior); the truth simulator and every partition evaluate the rate through it.
-///
-/// The methods are generic over [`Real`]: anything without an exact SIMD form (`powf`, a branch
-/// on a particle's own value) goes through [`Real::per_lane`], so that lane `b` of a
-/// [`core_filters::real::Pack`] evaluation is bit for bit the `f64` evaluation of particle `b`.
-pub trait HysteresisLaw: std::fmt::Debug + Clone + Copy + Send + Sync + 'static {
-    /// Names of the linear shape parameters θ, in order.
-    const LINEAR: &'static [&'static str];
-    /// Names of the nonlinear parameters φ, in order.
-    const NONLINEAR: &'static [&'static str];
-
-    /// `g[0] = g₀`, `g[1 + i] = g_i` (`g.len() == 1 + LINEAR.len()`).
-    fn basis<T: Real>(&self, dv: T, r: T, phi: &[T], g: &mut [T]);
-
-    /// The rate `ṙ` at (θ, φ) (the truth simulator's form).
-    fn rate<T: Real>(&self, dv: T, r: T, theta: &[T], phi: &[T]) -> T;
-
-    /// `(∂ṙ/∂δv, ∂ṙ/∂r)` at (θ, φ).
-    fn rate_partials<T: Real>(&self, dv: T, r: T, theta: &[T], phi: &[T]) -> (T, T);
-}
-
-/// The Bouc–Wen law (SPEC eq. 22): θ = (β, γ), φ = (n),
-/// `g₀ = δv`, `g₁ = −|δv||r|^(n−1) r`, `g₂ = −δv|r|^n`.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
-pub struct BoucWenLaw;
-
-impl BoucWenLaw {
-    /// `(|r|^(n−1) r, |r|^n)`, lane by lane through the scalar [`bw_terms`].
-    #[inline]
-    fn terms<T: Real>(r: T, n: T) -> (T, T) {
-        let [a, b] = T::per_lane([r, n], |[r, n]| {
-            let (a, b) = bw_terms(r, n);
-            [a, b]
-        });
-        (a, b)
-    }
-}
-
-impl HysteresisLaw for BoucWenLaw {
-    const LINEAR: &'static [&'static str] = &["beta", "gamma"];
-    const NONLINEAR: &'static [&'static str] = &["n"];
-
-    #[inline]
-    fn basis<T: Real>(&self, dv: T, r: T, phi: &[T], g: &mut [T]) {
-        let (t1, t2) = Self::terms(r, phi[0]);
-        g[0] = dv;
-        g[1] = -(dv.abs() * t1);
-        g[2] = -(dv * t2);
-    }
-
-    #[inline]
-    fn rate<T: Real>(&self, dv: T, r: T, theta: &[T], phi: &[T]) -> T {
-        let (t1, t2) = Self::terms(r, phi[0]);
-        dv - theta[0] * dv.abs() * t1 - theta[1] * dv * t2
-    }
-
-    /// `∂ṙ/∂δv = 1 − β sgn(δv)|r|^(n−1) r − γ|r|^n`,
-    /// `∂ṙ/∂r = −β|δv| n|r|^(n−1) − γ δv n|r|^(n−1) sgn(r)` (`d(|r|^(n−1) r)/dr = n|r|^(n−1)` for
-    /// `n ≥ 1`; `sgn(0) = 0`, the derivative of `|·|` at its kink taken as 0).
-    #[inline]
-    fn rate_partials<T: Real>(&self, dv: T, r: T, theta: &[T], phi: &[T]) -> (T, T) {
-        let [t1, t2, np, sdv, sr] = T::per_lane([dv, r, phi[0]], |[dv, r, n]| {
-            let (t1, t2) = bw_terms(r, n);
-            let sgn = |x: f64| {
-                if x > 0.0 {
-                    1.0
-                } else if x < 0.0 {
-                    -1.0
-                } else {
-                    0.0
-                }
-            };
-            [t1, t2, n * r.abs().powf(n - 1.0), sgn(dv), sgn(r)]
-        });
-        let (beta, gamma) = (theta[0], theta[1]);
-        let d_dv = T::splat(1.0) - beta * sdv * t1 - gamma * t2;
-        let d_r = -(beta * dv.abs() * np) - gamma * dv * np * sr;
-        (d_dv, d_r)
-    }
-}
+/// The chain with Bouc–Wen elements (SPEC §1), the toolkit's chain.
+pub type ShearChain = ShearChainOf<BoucWenLaw>;
 
 /// A point of the chain (states and parameters) seen through one representation's storage.
 /// Storeys `j` and elements are 0-based; `r(e)` is the hysteretic variable of element `e` (in
@@ -375,26 +259,46 @@ impl ChainView<f64> for StateView<'_> {
 }
 
 impl ShearChain {
-    /// A validated chain. `masses`, `k`, `c` have one entry per storey; `bouc_wen` lists the
-    /// hysteretic elements in the order their `r` appears in the state (increasing storeys).
+    /// A validated chain with Bouc–Wen elements. `masses`, `k`, `c` have one entry per storey;
+    /// `bouc_wen` lists the hysteretic elements in the order their `r` appears in the state
+    /// (increasing storeys).
     pub fn new(
         masses: Vec<f64>,
         k: Vec<f64>,
         c: Vec<f64>,
         bouc_wen: Vec<BoucWen>,
     ) -> Result<Self, StructureError> {
-        let storeys = bouc_wen.iter().map(|bw| bw.storey).collect();
-        let building = Building::new(masses, storeys, Damping::Storey)?;
-        Self::on(building, k, c, bouc_wen)
+        Self::with_elements(masses, k, c, bouc_wen)
     }
 
-    /// The chain of `building` (per-storey damping) with the element parameters `bouc_wen`,
+    /// The Bouc–Wen elements' parameters ([`ShearChainOf::elements`]).
+    pub fn bouc_wen(&self) -> &[BoucWen] {
+        &self.elements
+    }
+}
+
+impl<L: HysteresisLaw> ShearChainOf<L> {
+    /// A validated chain whose hysteretic elements follow the law `L`. `masses`, `k`, `c` have
+    /// one entry per storey; `elements` lists the hysteretic elements in the order their `r`
+    /// appears in the state (increasing storeys).
+    pub fn with_elements(
+        masses: Vec<f64>,
+        k: Vec<f64>,
+        c: Vec<f64>,
+        elements: Vec<L::Element>,
+    ) -> Result<Self, StructureError> {
+        let storeys = elements.iter().map(L::storey).collect();
+        let building = Building::new(masses, storeys, Damping::Storey)?;
+        Self::on(building, k, c, elements)
+    }
+
+    /// The chain of `building` (per-storey damping) with the element parameters `elements`,
     /// whose storeys are the building's hysteretic storeys.
     fn on(
         building: Building,
         k: Vec<f64>,
         c: Vec<f64>,
-        bouc_wen: Vec<BoucWen>,
+        elements: Vec<L::Element>,
     ) -> Result<Self, StructureError> {
         let n = building.storeys();
         for (what, v) in [("k", &k), ("c", &c)] {
@@ -417,38 +321,25 @@ impl ShearChain {
                 }
             }
         }
-        for bw in &bouc_wen {
-            for (what, v) in [("beta", bw.beta), ("gamma", bw.gamma), ("n", bw.n)] {
-                if !v.is_finite() {
-                    return Err(StructureError::NonFiniteBoucWen {
-                        storey: bw.storey,
-                        what,
-                        value: v,
-                    });
-                }
-            }
-            if bw.n < 1.0 {
-                return Err(StructureError::ExponentBelowOne {
-                    storey: bw.storey,
-                    n: bw.n,
-                });
-            }
+        for el in &elements {
+            L::validate(el)?;
         }
         Ok(Self {
             building,
             k,
             c,
             alpha: None,
-            bouc_wen,
+            elements,
+            law: L::default(),
         })
     }
 
-    /// The chain of `building` with parameters θ in the order of [`ShearChain::theta`] (for its
-    /// damping form and hysteretic storeys), validated.
+    /// The chain of `building` with parameters θ in the order of [`ShearChainOf::theta`] (for
+    /// its damping form and hysteretic storeys), validated.
     pub fn from_theta(building: &Building, theta: &[f64]) -> Result<Self, StructureError> {
         let n = building.storeys();
         let a = building.damping().extra_parameters();
-        let expected = 2 * n + a + 3 * building.hysteretic().len();
+        let expected = 2 * n + a + L::NPARAMS * building.hysteretic().len();
         if theta.len() != expected {
             return Err(StructureError::WrongLength {
                 what: "theta",
@@ -456,22 +347,17 @@ impl ShearChain {
                 found: theta.len(),
             });
         }
-        let bouc_wen = building
+        let elements = building
             .hysteretic()
             .iter()
-            .zip(theta[2 * n + a..].chunks_exact(3))
-            .map(|(&storey, p)| BoucWen {
-                storey,
-                beta: p[0],
-                gamma: p[1],
-                n: p[2],
-            })
+            .zip(theta[2 * n + a..].chunks_exact(L::NPARAMS))
+            .map(|(&storey, p)| L::element(storey, p))
             .collect();
         let chain = Self::on(
             building.clone().with_damping(Damping::Storey),
             theta[..n].to_vec(),
             theta[n..2 * n].to_vec(),
-            bouc_wen,
+            elements,
         )?;
         match building.damping() {
             Damping::Storey => Ok(chain),
@@ -505,9 +391,9 @@ impl ShearChain {
         self.building.storeys()
     }
 
-    /// State dimension `2N + (number of Bouc–Wen elements)`.
+    /// State dimension `2N + (number of hysteretic elements)`.
     pub fn dim(&self) -> usize {
-        2 * self.building.storeys() + self.bouc_wen.len()
+        2 * self.building.storeys() + self.elements.len()
     }
 
     pub fn masses(&self) -> &[f64] {
@@ -522,15 +408,16 @@ impl ShearChain {
         &self.c
     }
 
-    pub fn bouc_wen(&self) -> &[BoucWen] {
-        &self.bouc_wen
+    /// The hysteretic elements' parameters, in state order.
+    pub fn elements(&self) -> &[L::Element] {
+        &self.elements
     }
 
-    /// Index of `r_e` (Bouc–Wen element `e`) in the state vector.
+    /// Index of `r_e` (hysteretic element `e`) in the state vector.
     pub fn r_index(&self, element: usize) -> usize {
         assert!(
-            element < self.bouc_wen.len(),
-            "no Bouc–Wen element {element}"
+            element < self.elements.len(),
+            "no hysteretic element {element}"
         );
         2 * self.building.storeys() + element
     }
@@ -571,11 +458,11 @@ impl ShearChain {
         let n = self.building.storeys();
         dstate[..n].copy_from_slice(&state[n..2 * n]);
         self.relative_accelerations(state, ug, &mut dstate[n..2 * n]);
-        for (e, bw) in self.bouc_wen.iter().enumerate() {
-            let j = bw.storey;
+        for (e, el) in self.elements.iter().enumerate() {
+            let j = L::storey(el);
             let vm = if j == 0 { 0.0 } else { state[n + j - 1] };
             let dv = state[n + j] - vm;
-            dstate[2 * n + e] = bouc_wen_rate(dv, state[2 * n + e], bw.beta, bw.gamma, bw.n);
+            dstate[2 * n + e] = self.law.element_rate(el, dv, state[2 * n + e]);
         }
     }
 
@@ -588,62 +475,65 @@ impl ShearChain {
         }
     }
 
-    /// Restoring force `k_j r_j` of Bouc–Wen element `element` (the hysteresis loop plots it
+    /// Restoring force `k_j r_j` of hysteretic element `element` (the hysteresis loop plots it
     /// against the element's relative displacement).
     #[track_caller]
     pub fn restoring_force(&self, state: &[f64], element: usize) -> f64 {
         self.check_state(state);
-        let bw = &self.bouc_wen[element];
-        self.k[bw.storey] * state[self.r_index(element)]
+        let j = L::storey(&self.elements[element]);
+        self.k[j] * state[self.r_index(element)]
     }
 
-    /// Relative displacement `x_j − x_{j−1}` across Bouc–Wen element `element`.
+    /// Relative displacement `x_j − x_{j−1}` across hysteretic element `element`.
     #[track_caller]
     pub fn element_drift(&self, state: &[f64], element: usize) -> f64 {
         self.check_state(state);
-        let j = self.bouc_wen[element].storey;
+        let j = L::storey(&self.elements[element]);
         state[j] - if j == 0 { 0.0 } else { state[j - 1] }
     }
 
-    /// Saturation bound `(1/(β+γ))^(1/n)` of `|r|` for element `element`, when `β + γ > 0`
-    /// (otherwise `r` is unbounded and `None` is returned).
+    /// The bound of `|r|` of element `element` under continued loading, when its law gives one
+    /// (Bouc–Wen: `(1/(β+γ))^(1/n)` when `β + γ > 0`; otherwise `r` is unbounded and `None` is
+    /// returned).
     pub fn saturation(&self, element: usize) -> Option<f64> {
-        let bw = &self.bouc_wen[element];
-        let s = bw.beta + bw.gamma;
-        (s > 0.0).then(|| (1.0 / s).powf(1.0 / bw.n))
+        L::saturation(&self.elements[element])
     }
 
-    /// Parameter vector θ: `[k_1..k_N, c_1..c_N, (α), then (β, γ, n) per Bouc–Wen element]`.
+    /// Parameter vector θ: `[k_1..k_N, c_1..c_N, (α), then the law's parameters per element]`
+    /// (Bouc–Wen: β, γ, n).
     pub fn theta(&self) -> Vec<f64> {
-        let mut t = Vec::with_capacity(2 * self.storeys() + 1 + 3 * self.bouc_wen.len());
+        let ne = self.elements.len();
+        let mut t = Vec::with_capacity(2 * self.storeys() + 1 + L::NPARAMS * ne);
         t.extend_from_slice(&self.k);
         t.extend_from_slice(&self.c);
         t.extend(self.alpha);
-        for bw in &self.bouc_wen {
-            t.extend_from_slice(&[bw.beta, bw.gamma, bw.n]);
+        for el in &self.elements {
+            let at = t.len();
+            t.resize(at + L::NPARAMS, 0.0);
+            L::params(el, &mut t[at..]);
         }
         t
     }
 
-    /// Names of θ, in the order of [`ShearChain::theta`]: `k1..kN`, `c1..cN`, then `beta`,
-    /// `gamma`, `n` when the chain has a single Bouc–Wen element (the paper's notation), or
-    /// `beta<s>`, `gamma<s>`, `n<s>` (1-based storey `s`) when it has several.
+    /// Names of θ, in the order of [`ShearChainOf::theta`]: `k1..kN`, `c1..cN`, then the law's
+    /// parameter names — `beta`, `gamma`, `n` for a single Bouc–Wen element (the paper's
+    /// notation), `beta<s>`, `gamma<s>`, `n<s>` (1-based storey `s`) for several.
     pub fn theta_names(&self) -> Vec<String> {
-        theta_names_damped::<BoucWenLaw>(
+        theta_names_damped::<L>(
             self.storeys(),
             self.building.hysteretic(),
             self.damping_form(),
         )
     }
 
-    /// Names of the state entries: `x1..xN`, `v1..vN`, `r<s>` per Bouc–Wen element (1-based
+    /// Names of the state entries: `x1..xN`, `v1..vN`, `r<s>` per hysteretic element (1-based
     /// storey `s`).
     pub fn state_names(&self) -> Vec<String> {
         state_names(self.storeys(), self.building.hysteretic())
     }
 
-    /// The same building (masses, Bouc–Wen storeys and damping form) with parameters θ in the
-    /// order of [`ShearChain::theta`], validated (e.g. for the validation run with θ_val,
+    /// The same building (masses, hysteretic storeys and damping form) with parameters θ in the
+    /// order of [`ShearChainOf::theta`], validated (e.g. for the validation run with θ_val,
     /// SPEC §7).
     pub fn with_theta(&self, theta: &[f64]) -> Result<Self, StructureError> {
         Self::from_theta(&self.building, theta)
@@ -821,67 +711,21 @@ mod tests {
         );
         assert!(matches!(
             ok(vec![1.0; 2], vec![1.0; 2], vec![0.0; 2], vec![bw(0, 0.5)]),
-            Err(StructureError::ExponentBelowOne { .. })
+            Err(StructureError::Law(LawError::OutOfRange {
+                what: "exponent n",
+                ..
+            }))
+        ));
+        assert!(matches!(
+            ok(
+                vec![1.0; 2],
+                vec![1.0; 2],
+                vec![0.0; 2],
+                vec![bw(0, f64::NAN)]
+            ),
+            Err(StructureError::Law(LawError::NonFinite { what: "n", .. }))
         ));
         assert!(paper().with_theta(&[1.0; 4]).is_err());
-    }
-
-    #[test]
-    fn hysteresis_law_basis_partials_and_packs() {
-        use core_filters::real::Pack;
-        let law = BoucWenLaw;
-        let pts = [
-            (0.7, 0.3, 2.0, 1.0, 2.0),
-            (-1.2, -0.45, 1.5, -0.7, 1.3),
-            (0.4, -0.2, 0.5, 0.5, 1.0),
-            (-0.3, 0.55, 3.0, -2.5, 4.2),
-        ];
-        for &(dv, r, b, g, n) in &pts {
-            // The basis recombines to the rate, and the rate is the simulator's.
-            let mut basis = [0.0; 3];
-            law.basis(dv, r, &[n], &mut basis);
-            let rate = law.rate(dv, r, &[b, g], &[n]);
-            assert!((basis[0] + b * basis[1] + g * basis[2] - rate).abs() < 1e-14);
-            assert_eq!(rate, bouc_wen_rate(dv, r, b, g, n));
-            // Partials by central differences (smooth away from δv = 0 and r = 0).
-            let (d_dv, d_r) = law.rate_partials(dv, r, &[b, g], &[n]);
-            let h = 1e-6;
-            let fd_dv = (law.rate(dv + h, r, &[b, g], &[n]) - law.rate(dv - h, r, &[b, g], &[n]))
-                / (2.0 * h);
-            let fd_r = (law.rate(dv, r + h, &[b, g], &[n]) - law.rate(dv, r - h, &[b, g], &[n]))
-                / (2.0 * h);
-            assert!((d_dv - fd_dv).abs() < 1e-7, "{d_dv} vs {fd_dv}");
-            assert!((d_r - fd_r).abs() < 1e-7, "{d_r} vs {fd_r}");
-        }
-        // A pack of the four points is the scalar evaluation of each lane, bit for bit.
-        let lane = |f: fn(&(f64, f64, f64, f64, f64)) -> f64| Pack::from_lanes(|i| f(&pts[i]));
-        let (dv, r, b, g, n) = (
-            lane(|p| p.0),
-            lane(|p| p.1),
-            lane(|p| p.2),
-            lane(|p| p.3),
-            lane(|p| p.4),
-        );
-        let mut basis = [Pack::splat(0.0); 3];
-        law.basis(dv, r, &[n], &mut basis);
-        let rate = law.rate(dv, r, &[b, g], &[n]);
-        let (d_dv, d_r) = law.rate_partials(dv, r, &[b, g], &[n]);
-        for (i, &(dv, r, b, g, n)) in pts.iter().enumerate() {
-            let mut s = [0.0; 3];
-            law.basis(dv, r, &[n], &mut s);
-            let (sd, sr) = law.rate_partials(dv, r, &[b, g], &[n]);
-            let scalar = [s[0], s[1], s[2], law.rate(dv, r, &[b, g], &[n]), sd, sr];
-            let packed = [basis[0], basis[1], basis[2], rate, d_dv, d_r];
-            for (p, v) in packed.iter().zip(scalar) {
-                assert_eq!(p.lane(i).to_bits(), v.to_bits());
-            }
-        }
-    }
-
-    #[test]
-    fn bouc_wen_at_zero_is_finite_for_n_equal_one() {
-        assert_eq!(bouc_wen_rate(0.7, 0.0, 2.0, 1.0, 1.0), 0.7);
-        assert_eq!(bouc_wen_rate(0.7, 0.0, 2.0, 1.0, 2.0), 0.7);
     }
 
     #[test]

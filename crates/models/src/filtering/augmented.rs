@@ -1,6 +1,7 @@
 //! Augmented-state partition for the bootstrap PF (SPEC §5.1), any chain, three schemes.
 //!
-//! x = [x1..xN, v1..vN, r_e…, θ] with θ = [k, c, (α), (β_e, γ_e, n_e)…]; θ is static (no draw).
+//! x = [x1..xN, v1..vN, r_e…, θ] with θ = [k, c, (α), (β_e, γ_e, n_e)…] (for any law, its
+//! parameters per element); θ is static (no draw).
 //! The mass-proportional damping α (the storey+mass form) is one more static entry of θ.
 //! `noise_dim = 2N + E`: one standard normal draw per displacement, velocity and r.
 //!
@@ -15,21 +16,25 @@
 //! of these steps with `dt/M` on the interpolated `ü_g`, each with its own draws
 //! (`noise_dim = M (2N + E)`), and the measurement at sample k reads the grid at `kM`.
 
-use super::{ChainCore, ChainSpec, Discretisation, SpecError, NLIN, NNONLIN};
+use super::{ChainCore, ChainSpecOf, Discretisation, SpecError};
 use crate::building::Building;
-use crate::structure::{ChainView, HysteresisLaw, StateView};
+use crate::law::{BoucWenLaw, HysteresisLaw};
+use crate::structure::{ChainView, StateView};
 use core_filters::model::{Layout, Slot};
 use core_filters::rng::StreamRng;
 use core_filters::smc::model::{Partition, StateSpace};
 use std::cell::RefCell;
 
-/// The chain as one augmented state (SPEC §5.1).
+/// The chain as one augmented state (SPEC §5.1), its elements following the law `L`.
 #[derive(Debug, Clone)]
-pub struct AugmentedChain {
-    core: ChainCore,
+pub struct AugmentedChainOf<L: HysteresisLaw> {
+    core: ChainCore<L>,
     /// Process-noise s.d. of the 2N + E dynamic entries (per filter step).
     noise_sd: Vec<f64>,
 }
+
+/// The Bouc–Wen chain as one augmented state.
+pub type AugmentedChain = AugmentedChainOf<BoucWenLaw>;
 
 thread_local! {
     /// The state between sub-steps (`substeps > 1`), grown once per thread.
@@ -41,9 +46,9 @@ thread_local! {
     static RK4_SCRATCH: RefCell<Vec<f64>> = const { RefCell::new(Vec::new()) };
 }
 
-impl AugmentedChain {
+impl<L: HysteresisLaw> AugmentedChainOf<L> {
     /// Validates the spec; every discretisation is supported.
-    pub fn new(spec: ChainSpec) -> Result<Self, SpecError> {
+    pub fn new(spec: ChainSpecOf<L>) -> Result<Self, SpecError> {
         let core = ChainCore::new(spec)?;
         let (n, ne) = (core.n, core.ne);
         let mut noise_sd = vec![core.q_disp; n];
@@ -53,7 +58,7 @@ impl AugmentedChain {
         Ok(Self { core, noise_sd })
     }
 
-    pub fn spec(&self) -> &ChainSpec {
+    pub fn spec(&self) -> &ChainSpecOf<L> {
         &self.core.spec
     }
 
@@ -79,7 +84,7 @@ impl AugmentedChain {
     #[inline]
     fn element_params<'a>(&self, th: &'a [f64], e: usize) -> (&'a [f64], &'a [f64]) {
         let b = self.core.theta_element(e);
-        (&th[b..b + NLIN], &th[b + NLIN..b + NLIN + NNONLIN])
+        (&th[b..b + L::NLIN], &th[b + L::NLIN..b + L::NPARAMS])
     }
 
     /// The continuous right-hand side of the dynamic part with ground term `ground = −ü_g`.
@@ -188,7 +193,7 @@ impl AugmentedChain {
     }
 }
 
-impl Partition for AugmentedChain {
+impl<L: HysteresisLaw> Partition for AugmentedChainOf<L> {
     /// Zero states, θ drawn from its prior (SPEC §3).
     fn sample_initial(&self, rng: &mut StreamRng, x: &mut [f64]) {
         let d = self.dyn_dim();
@@ -210,7 +215,7 @@ impl Partition for AugmentedChain {
     }
 }
 
-impl StateSpace for AugmentedChain {
+impl<L: HysteresisLaw> StateSpace for AugmentedChainOf<L> {
     fn dim(&self) -> usize {
         self.dyn_dim() + self.core.theta_mean.len()
     }

@@ -2,8 +2,10 @@
 //! (SPEC §5.2–5.3 generalised, §9; derivation in `docs/partitions.md`).
 //!
 //! Sampled `u = [x1..xN, v1..vN, r_e…, n_e…]` (2N + 2E); marginalised
-//! `z = [k1..kN, c1..cN, (β_e, γ_e)…]` (2N + 2E). Given `u`, every acceleration is linear in
-//! `z` (`F_j = k_j d_j + c_j δv_j`) and every hysteretic rate is affine in `(β_e, γ_e)`
+//! `z = [k1..kN, c1..cN, (β_e, γ_e)…]` (2N + 2E) — for Bouc–Wen; for any law
+//! ([`HysteresisLaw`]) u holds each element's nonlinear parameters where n is, and z its linear
+//! ones where (β, γ) are. Given `u`, every acceleration is linear in `z`
+//! (`F_j = k_j d_j + c_j δv_j`) and every hysteretic rate is affine in `(β_e, γ_e)`
 //! (`ṙ = g₀ + β g₁ + γ g₂`), so:
 //!
 //! - Euler, one stage (rows x, v, r; linked: v and r rows):
@@ -18,9 +20,10 @@
 //! more column of z whose `−α v_j` enters the v rows and the observation's u-Jacobian, which this
 //! partition does not carry; the MPF-EKF2 and the bootstrap PF have it.
 
-use super::{ChainCore, ChainSpec, ForceColumns, SpecError, NLIN, NNONLIN};
+use super::{nlin, zero_basis, Basis, ChainCore, ChainSpecOf, ForceColumns, SpecError};
 use crate::building::Building;
-use crate::structure::{ChainView, HysteresisLaw};
+use crate::law::{BoucWenLaw, HysteresisLaw};
+use crate::structure::ChainView;
 use core_filters::linalg::Sparse;
 use core_filters::model::{Layout, Slot};
 use core_filters::real::Real;
@@ -28,14 +31,17 @@ use core_filters::rng::StreamRng;
 use core_filters::smc::model::{ConditionallyLinear, LinearDims, Partition, Stage};
 use core_filters::smc::rejuvenation::StaticParam;
 
-/// The chain partitioned for MLN-RBPF / Storvik.
+/// The chain partitioned for MLN-RBPF / Storvik, its elements following the law `L`.
 #[derive(Debug, Clone)]
-pub struct MlnChain {
-    core: ChainCore,
+pub struct MlnChainOf<L: HysteresisLaw> {
+    core: ChainCore<L>,
     stages: Vec<Stage>,
     noise_sd: Vec<f64>,
     symplectic: bool,
 }
+
+/// The Bouc–Wen chain partitioned for MLN-RBPF / Storvik.
+pub type MlnChain = MlnChainOf<BoucWenLaw>;
 
 /// `u` (and optionally `z`) as a chain point.
 struct View<'a, T> {
@@ -99,9 +105,9 @@ impl ForceColumns for StateColumns {
     }
 }
 
-impl MlnChain {
+impl<L: HysteresisLaw> MlnChainOf<L> {
     /// Validates the spec; Euler and symplectic only (RK4 is not linear in z given `u`).
-    pub fn new(spec: ChainSpec) -> Result<Self, SpecError> {
+    pub fn new(spec: ChainSpecOf<L>) -> Result<Self, SpecError> {
         let core = ChainCore::new(spec)?;
         if core.substeps != 1 {
             return Err(SpecError::SubstepsUnsupported {
@@ -140,7 +146,7 @@ impl MlnChain {
         let mut noise_sd = vec![core.q_disp; n];
         noise_sd.extend(std::iter::repeat_n(core.q_vel, n));
         noise_sd.extend_from_slice(&core.q_r);
-        noise_sd.extend(std::iter::repeat_n(0.0, ne));
+        noise_sd.extend(std::iter::repeat_n(0.0, L::NNONLIN * ne));
         Ok(Self {
             core,
             stages,
@@ -149,20 +155,27 @@ impl MlnChain {
         })
     }
 
-    pub fn spec(&self) -> &ChainSpec {
+    pub fn spec(&self) -> &ChainSpecOf<L> {
         &self.core.spec
     }
 
-    /// Column of β_e in z.
+    /// Column of β_e (the element's first linear parameter) in z.
     #[inline]
     fn beta_col(&self, e: usize) -> usize {
-        2 * self.core.n + NLIN * e
+        2 * self.core.n + L::NLIN * e
     }
 
-    /// Index of n_e in u.
+    /// Index of n_e (the element's first nonlinear parameter) in u.
     #[inline]
     fn n_index(&self, e: usize) -> usize {
-        2 * self.core.n + self.core.ne + e
+        2 * self.core.n + self.core.ne + L::NNONLIN * e
+    }
+
+    /// The nonlinear parameters φ of element `e` in `u`.
+    #[inline(always)]
+    fn phi<'a, T: Real>(&self, e: usize, u: &'a [T]) -> &'a [T] {
+        let i = self.n_index(e);
+        &u[i..i + L::NNONLIN]
     }
 
     /// Writes `scale · ∂a_j/∂z` at `u` into row `row` (`∂F_j/∂k_j = d_j`, `∂F_j/∂c_j = δv_j`).
@@ -198,18 +211,19 @@ impl MlnChain {
         )
     }
 
-    /// `[g₀, g₁, g₂]` of element `e` at drift velocity `dv`, `r_e` and `n_e` from `u_prev`.
+    /// `[g₀, g₁, g₂]` (Bouc–Wen; `1 + NLIN` entries) of element `e` at drift velocity `dv`,
+    /// `r_e` and `n_e` from `u_prev`.
     #[inline]
-    fn basis<T: Real>(&self, e: usize, dv: T, u_prev: &[T]) -> [T; 1 + NLIN] {
-        let mut g = [T::splat(0.0); 1 + NLIN];
+    fn basis<T: Real>(&self, e: usize, dv: T, u_prev: &[T]) -> Basis<T> {
+        let mut g = zero_basis();
         let r = u_prev[2 * self.core.n + e];
-        let phi = [u_prev[self.n_index(e)]];
-        self.core.law.basis(dv, r, &phi, &mut g);
+        let phi = self.phi(e, u_prev);
+        self.core.law.basis(dv, r, phi, &mut g[..1 + nlin::<L>()]);
         g
     }
 }
 
-impl Partition for MlnChain {
+impl<L: HysteresisLaw> Partition for MlnChainOf<L> {
     /// Zero states, each n_e drawn from its prior (SPEC §3).
     fn sample_initial(&self, rng: &mut StreamRng, u: &mut [f64]) {
         self.core.sample_initial(rng, u, |e| self.n_index(e));
@@ -235,21 +249,29 @@ impl Partition for MlnChain {
     }
 }
 
-/// Writes `dt · ∂ṙ/∂θ = dt [g₁ …]` (the law's linear parameters, from column `b`) into row `row`.
+/// Writes `dt · ∂ṙ/∂θ = dt [g₁ …]` (the law's `nlin` linear parameters, from column `b`) into
+/// row `row`.
 #[inline(always)]
-fn write_rate_row<T: Real>(out: &mut Sparse<T>, row: usize, b: usize, dt: T, g: &[T; 1 + NLIN]) {
-    for i in 0..NLIN {
+fn write_rate_row<T: Real>(
+    out: &mut Sparse<T>,
+    row: usize,
+    b: usize,
+    dt: T,
+    g: &Basis<T>,
+    nlin: usize,
+) {
+    for i in 0..nlin {
         out.add(row, b + i, dt * g[1 + i]);
     }
 }
 
 #[allow(non_snake_case)]
-impl ConditionallyLinear for MlnChain {
+impl<L: HysteresisLaw> ConditionallyLinear for MlnChainOf<L> {
     fn dims(&self) -> LinearDims {
         let (n, ne) = (self.core.n, self.core.ne);
         LinearDims {
-            nu: 2 * n + 2 * ne,
-            nz: 2 * n + NLIN * ne,
+            nu: 2 * n + ne + L::NNONLIN * ne,
+            nz: 2 * n + L::NLIN * ne,
             ny: self.core.sensors.len(),
         }
     }
@@ -262,16 +284,16 @@ impl ConditionallyLinear for MlnChain {
         &self.noise_sd
     }
 
-    /// θ's prior without the n's (z is θ with every n removed), diagonal.
+    /// θ's prior without the n's (z is θ with every nonlinear parameter removed), diagonal.
     fn marginal_prior(&self, rng: &mut StreamRng, mean: &mut [f64], cov: &mut [f64]) {
         let (n, ne) = (self.core.n, self.core.ne);
         let (m, v) = self.core.theta_prior(rng);
-        let nz = 2 * n + NLIN * ne;
+        let nz = 2 * n + L::NLIN * ne;
         cov.fill(0.0);
         let mut i = 0;
         for t in 0..m.len() {
             // Per element θ holds its linear parameters, then its nonlinear ones (n).
-            let is_n = t >= 2 * n && (t - 2 * n) % (NLIN + NNONLIN) >= NLIN;
+            let is_n = t >= 2 * n && (t - 2 * n) % L::NPARAMS >= L::NLIN;
             if !is_n {
                 mean[i] = m[t];
                 cov[i + i * nz] = v[t];
@@ -306,7 +328,7 @@ impl ConditionallyLinear for MlnChain {
                     let g = self.basis(e, self.drift_velocity(u_prev, j), u_prev);
                     f[2 * n + e] = u_prev[2 * n + e] + dt * g[0];
                     let b = self.beta_col(e);
-                    write_rate_row(F, n + e, b, dt, &g);
+                    write_rate_row(F, n + e, b, dt, &g, L::NLIN);
                 }
             }
             (true, 0) => {
@@ -323,7 +345,7 @@ impl ConditionallyLinear for MlnChain {
                     let g = self.basis(e, self.drift_velocity(u_new, j), u_prev);
                     f[n + e] = u_prev[2 * n + e] + dt * g[0];
                     let b = self.beta_col(e);
-                    write_rate_row(F, e, b, dt, &g);
+                    write_rate_row(F, e, b, dt, &g, L::NLIN);
                 }
             }
             _ => panic!("no stage {stage}"),
@@ -373,12 +395,12 @@ impl ConditionallyLinear for MlnChain {
                 let g = self.basis(e, dv, u_prev);
                 let b = self.beta_col(e);
                 let row = 2 * n + e;
-                write_rate_row(S, row, b, dt, &g);
-                let phi = [u_prev[self.n_index(e)]];
-                let (d_dv, _) = self
-                    .core
-                    .law
-                    .rate_partials(dv, u_prev[row], &z[b..b + NLIN], &phi);
+                write_rate_row(S, row, b, dt, &g, L::NLIN);
+                let phi = self.phi(e, u_prev);
+                let (d_dv, _) =
+                    self.core
+                        .law
+                        .rate_partials(dv, u_prev[row], &z[b..b + L::NLIN], phi);
                 let coef = dt * d_dv;
                 self.write_acceleration_row(S, row, j, u_prev, coef * dt);
                 if j > 0 {
@@ -392,7 +414,7 @@ impl ConditionallyLinear for MlnChain {
             for (e, &j) in hyst.iter().enumerate() {
                 let g = self.basis(e, self.drift_velocity(u_prev, j), u_prev);
                 let b = self.beta_col(e);
-                write_rate_row(S, 2 * n + e, b, dt, &g);
+                write_rate_row(S, 2 * n + e, b, dt, &g, L::NLIN);
             }
         }
     }

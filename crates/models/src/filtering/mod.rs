@@ -3,17 +3,20 @@
 //! `core_filters::smc::model`. Derivations: `docs/partitions.md`, `docs/discretisation.md`.
 //!
 //! The chain is data ([`ChainSpec`]): a [`crate::building::Building`] (N storeys with masses,
-//! Bouc–Wen elements at any storeys), sensors at any storeys ([`crate::sensors`]). Every partition
-//! evaluates forces and accelerations through the building's one force kernel and the hysteresis
-//! law through
-//! [`crate::structure::HysteresisLaw`], the same code as the truth simulator.
+//! hysteretic elements at any storeys), sensors at any storeys ([`crate::sensors`]). Every
+//! partition evaluates forces and accelerations through the building's one force kernel and the
+//! hysteresis law through [`crate::law::HysteresisLaw`], the same code as the truth simulator.
+//! Specs, priors and partitions are generic over the law (`…Of<L>`, monomorphised); the names
+//! without `Of` are the Bouc–Wen chain's.
 //!
-//! - [`augmented::AugmentedChain`]: bootstrap PF (`StateSpace`, SPEC §5.1), Euler, symplectic, RK4;
-//! - [`mln::MlnChain`]: MLN-RBPF and Storvik (`ConditionallyLinear`, SPEC §5.2–5.3);
-//! - [`mpf::MpfChain`]: MPF-EKF2 (`ConditionallyQuadratic`, SPEC §5.4, §6).
+//! - [`augmented::AugmentedChainOf`]: bootstrap PF (`StateSpace`, SPEC §5.1), Euler, symplectic,
+//!   RK4;
+//! - [`mln::MlnChainOf`]: MLN-RBPF and Storvik (`ConditionallyLinear`, SPEC §5.2–5.3);
+//! - [`mpf::MpfChainOf`]: MPF-EKF2 (`ConditionallyQuadratic`, SPEC §5.4, §6).
 //!
 //! θ = [k1..kN, c1..cN, (α with the storey+mass damping form, [`crate::structure::Damping`]),
-//! then per hysteretic element in storey order β, γ, n]; states
+//! then per hysteretic element in storey order the law's linear then nonlinear parameters
+//! (Bouc–Wen: β, γ, n)]; states
 //! x1..xN, v1..vN, `r<s>` (names from [`crate::structure::theta_names`] and
 //! [`crate::structure::state_names`]). The transition to step k uses `ug[k−1]`, the measurement
 //! at k uses `ug[k]` (SPEC §3).
@@ -43,14 +46,15 @@ pub mod prior;
 pub mod spec;
 pub mod substeps;
 
-pub use augmented::AugmentedChain;
+pub use augmented::{AugmentedChain, AugmentedChainOf};
 pub use discretisation::Discretisation;
-pub use mln::MlnChain;
-pub use mpf::MpfChain;
-pub use prior::{ChainPrior, ElementPrior, MarginalPrior};
-pub use spec::{ChainSpec, RmsLevels, SpecError, MAX_SUBSTEPS};
+pub use mln::{MlnChain, MlnChainOf};
+pub use mpf::{MpfChain, MpfChainOf};
+pub use prior::{ChainPrior, ChainPriorOf, ElementPrior, MarginalPrior};
+pub use spec::{ChainSpec, ChainSpecOf, RmsLevels, SpecError, MAX_SUBSTEPS};
 
-use crate::structure::{state_names, theta_names_damped, BoucWenLaw, ChainView, HysteresisLaw};
+use crate::law::{HysteresisLaw, MAX_LINEAR};
+use crate::structure::{state_names, theta_names_damped, ChainView};
 use core_filters::linalg::Sparse;
 use core_filters::model::{Layout, Slot};
 use core_filters::real::Real;
@@ -59,14 +63,27 @@ use core_filters::smc::rejuvenation::{StaticParam, Support};
 
 use crate::priors::Prior;
 
-/// The hysteresis law of the partitions' elements.
-pub type Law = BoucWenLaw;
-/// Linear shape parameters per element (β, γ).
-pub(crate) const NLIN: usize = 2;
-/// Nonlinear parameters per element (n).
-pub(crate) const NNONLIN: usize = 1;
-const _: () = assert!(<Law as HysteresisLaw>::LINEAR.len() == NLIN);
-const _: () = assert!(<Law as HysteresisLaw>::NONLINEAR.len() == NNONLIN);
+/// A law's basis `[g₀, g₁, …]` in a stack array: the first `1 + L::NLIN` entries are used.
+pub(crate) type Basis<T> = [T; 1 + MAX_LINEAR];
+
+/// A zero [`Basis`].
+#[inline(always)]
+pub(crate) fn zero_basis<T: Real>() -> Basis<T> {
+    [T::splat(0.0); 1 + MAX_LINEAR]
+}
+
+/// The law's linear-parameter count, checked at compile time (for each law a partition is built
+/// with) against the stack array [`Basis`].
+#[inline(always)]
+pub(crate) const fn nlin<L: HysteresisLaw>() -> usize {
+    const {
+        assert!(
+            L::NLIN <= MAX_LINEAR,
+            "a law's linear parameters exceed MAX_LINEAR"
+        )
+    };
+    L::NLIN
+}
 
 /// `ug` on a grid `m` times finer, linear between samples (`ug` itself when `m` is 1), by the
 /// one resampler of ground motions.
@@ -131,9 +148,9 @@ pub(crate) trait ForceColumns {
 /// What every partition shares: the validated spec (whose building is the force kernel) and
 /// precomputed constants.
 #[derive(Debug, Clone)]
-pub(crate) struct ChainCore {
-    pub spec: ChainSpec,
-    pub law: Law,
+pub(crate) struct ChainCore<L: HysteresisLaw> {
+    pub spec: ChainSpecOf<L>,
+    pub law: L,
     /// Storeys N.
     pub n: usize,
     /// Hysteretic elements E.
@@ -158,8 +175,8 @@ pub(crate) struct ChainCore {
     pub theta_var: Vec<f64>,
 }
 
-impl ChainCore {
-    pub fn new(spec: ChainSpec) -> Result<Self, SpecError> {
+impl<L: HysteresisLaw> ChainCore<L> {
+    pub fn new(spec: ChainSpecOf<L>) -> Result<Self, SpecError> {
         spec.validate()?;
         let (theta_mean, theta_var) = spec.prior.moments();
         let m = spec.substeps;
@@ -177,7 +194,7 @@ impl ChainCore {
             sensors: spec.sensors.storeys().to_vec(),
             theta_mean,
             theta_var,
-            law: BoucWenLaw,
+            law: L::default(),
             spec,
         })
     }
@@ -197,8 +214,8 @@ impl ChainCore {
         self.spec.sensors.ground(self.ug[k])
     }
 
-    /// The sampled block at the start (SPEC §3): zero states, and each element's n drawn from
-    /// its prior into `out[n_index(e)]`, in element order.
+    /// The sampled block at the start (SPEC §3): zero states, and each element's nonlinear
+    /// parameters (Bouc–Wen: n) drawn from its prior into `out[n_index(e)..]`, in element order.
     pub fn sample_initial(
         &self,
         rng: &mut StreamRng,
@@ -207,7 +224,8 @@ impl ChainCore {
     ) {
         out.fill(0.0);
         for (e, el) in self.spec.prior.elements.iter().enumerate() {
-            out[n_index(e)] = el.n.sample(rng);
+            let i = n_index(e);
+            L::sample_nonlinear(el, rng, &mut out[i..i + L::NNONLIN]);
         }
     }
 
@@ -321,10 +339,10 @@ impl ChainCore {
         self.mass_damping().then_some(2 * self.n)
     }
 
-    /// Index of the first θ entry of element `e` (β_e) in θ.
+    /// Index of the first θ entry of element `e` (Bouc–Wen: β_e) in θ.
     #[inline]
     pub fn theta_element(&self, e: usize) -> usize {
-        2 * self.n + self.spec.building.damping().extra_parameters() + (NLIN + NNONLIN) * e
+        2 * self.n + self.spec.building.damping().extra_parameters() + L::NPARAMS * e
     }
 
     /// Mean and variance of the Gaussian prior of θ for one particle (SPEC §3): moment-matched,
@@ -371,8 +389,8 @@ impl ChainCore {
     }
 
     /// Appends the slots of every element's θ entries in θ order: its linear parameters at
-    /// `linear(e) + i` of the marginal block, its n at `n_index(e)` of the sampled block (the
-    /// MLN and MPF partitions).
+    /// `linear(e) + i` of the marginal block, its nonlinear ones (Bouc–Wen: n) at
+    /// `n_index(e) + i` of the sampled block (the MLN and MPF partitions).
     pub fn push_element_slots(
         &self,
         params: &mut Vec<Slot>,
@@ -380,14 +398,14 @@ impl ChainCore {
         n_index: impl Fn(usize) -> usize,
     ) {
         for e in 0..self.ne {
-            params.extend((0..NLIN).map(|i| Slot::Marginal(linear(e) + i)));
-            params.push(Slot::Sampled(n_index(e)));
+            params.extend((0..L::NLIN).map(|i| Slot::Marginal(linear(e) + i)));
+            params.extend((0..L::NNONLIN).map(|i| Slot::Sampled(n_index(e) + i)));
         }
     }
 
     pub fn theta_names(&self) -> Vec<String> {
         let b = &self.spec.building;
-        theta_names_damped::<Law>(self.n, b.hysteretic(), b.damping())
+        theta_names_damped::<L>(self.n, b.hysteretic(), b.damping())
     }
 
     pub fn state_names(&self) -> Vec<String> {

@@ -6,7 +6,9 @@
 //! (static):
 //!
 //! `xⁿ = [sampled velocities by storey, r_e…, n_e…]`,
-//! `x^bl = [x1..xN, the other velocities by storey, k1..kN, c1..cN, (α), (β_e, γ_e)…]`.
+//! `x^bl = [x1..xN, the other velocities by storey, k1..kN, c1..cN, (α), (β_e, γ_e)…]`
+//! (for any law, [`HysteresisLaw`]: its nonlinear parameters where n is, its linear ones where
+//! (β, γ) are).
 //!
 //! For the paper's chain this is SPEC §6 exactly (`xⁿ = [ẋ1, r1, n]`,
 //! `x^bl = [x1 x2 x3 ẋ2 ẋ3 k1 k2 k3 c1 c2 c3 β γ]`). Given xⁿ, an element force
@@ -30,9 +32,10 @@
 //! A chain without hysteretic element samples nothing: xⁿ is empty and there are no sampled
 //! stages, so the MPF-EKF2 reduces to an EKF2 (exact here: a KF with bilinear terms) on x^bl.
 
-use super::{ChainCore, ChainSpec, ForceColumns, SpecError, NLIN};
+use super::{nlin, zero_basis, ChainCore, ChainSpecOf, ForceColumns, SpecError};
 use crate::building::Building;
-use crate::structure::{ChainView, HysteresisLaw};
+use crate::law::{BoucWenLaw, HysteresisLaw};
+use crate::structure::ChainView;
 use core_filters::linalg::{Sparse, SymEntries};
 use core_filters::model::{Layout, Slot, SparseHessians};
 use core_filters::real::Real;
@@ -49,10 +52,10 @@ enum Vel {
     Marginal(usize),
 }
 
-/// The chain partitioned for MPF-EKF2.
+/// The chain partitioned for MPF-EKF2, its elements following the law `L`.
 #[derive(Debug, Clone)]
-pub struct MpfChain {
-    core: ChainCore,
+pub struct MpfChainOf<L: HysteresisLaw> {
+    core: ChainCore<L>,
     symplectic: bool,
     /// Location of each storey's velocity.
     vel: Vec<Vel>,
@@ -75,14 +78,17 @@ pub struct MpfChain {
     marginal_noise: SymEntries,
 }
 
+/// The Bouc–Wen chain partitioned for MPF-EKF2.
+pub type MpfChain = MpfChainOf<BoucWenLaw>;
+
 /// (xⁿ, x^bl) as a chain point.
-struct View<'a, T> {
+struct View<'a, T, L: HysteresisLaw> {
     xn: &'a [T],
     m: &'a [T],
-    p: &'a MpfChain,
+    p: &'a MpfChainOf<L>,
 }
 
-impl<T: Real> ChainView<T> for View<'_, T> {
+impl<T: Real, L: HysteresisLaw> ChainView<T> for View<'_, T, L> {
     #[inline(always)]
     fn x(&self, j: usize) -> T {
         self.m[j]
@@ -113,7 +119,7 @@ impl<T: Real> ChainView<T> for View<'_, T> {
 }
 
 /// x^bl as the variables of the force gradients: displacements, marginal velocities, θ.
-impl ForceColumns for MpfChain {
+impl<L: HysteresisLaw> ForceColumns for MpfChainOf<L> {
     #[inline(always)]
     fn theta(&self) -> Option<(usize, usize)> {
         Some((self.k0, self.c0))
@@ -135,10 +141,10 @@ impl ForceColumns for MpfChain {
     }
 }
 
-impl MpfChain {
+impl<L: HysteresisLaw> MpfChainOf<L> {
     /// Validates the spec, builds the index maps, the stages and the constant Hessians; Euler
     /// and symplectic only (RK4 is not bilinear in x^bl given xⁿ).
-    pub fn new(spec: ChainSpec) -> Result<Self, SpecError> {
+    pub fn new(spec: ChainSpecOf<L>) -> Result<Self, SpecError> {
         let core = ChainCore::new(spec)?;
         let (n, ne) = (core.n, core.ne);
         let symplectic = core.symplectic("MPF-EKF2")?;
@@ -226,7 +232,7 @@ impl MpfChain {
         Ok(me)
     }
 
-    pub fn spec(&self) -> &ChainSpec {
+    pub fn spec(&self) -> &ChainSpecOf<L> {
         &self.core.spec
     }
 
@@ -241,16 +247,16 @@ impl MpfChain {
         self.sampled_vel.len() + e
     }
 
-    /// Index of n_e in xⁿ.
+    /// Index of n_e (the element's first nonlinear parameter) in xⁿ.
     #[inline]
     fn n_index(&self, e: usize) -> usize {
-        self.sampled_vel.len() + self.core.ne + e
+        self.sampled_vel.len() + self.core.ne + L::NNONLIN * e
     }
 
-    /// Index of β_e in x^bl (γ_e follows).
+    /// Index of β_e (the element's first linear parameter) in x^bl (γ_e follows).
     #[inline]
     fn beta_index(&self, e: usize) -> usize {
-        self.b0 + NLIN * e
+        self.b0 + L::NLIN * e
     }
 
     /// Pushes the constant Hessian of `scale · F_j` w.r.t. x^bl as output `out`:
@@ -294,7 +300,7 @@ impl MpfChain {
         out: &mut Sparse<T>,
         row: usize,
         j: usize,
-        p: &View<'_, T>,
+        p: &View<'_, T, L>,
         scale: T,
     ) {
         self.core
@@ -314,13 +320,14 @@ impl MpfChain {
         jac: &mut Sparse<T>,
     ) -> T {
         let dt = T::splat(self.core.dt);
-        let mut g = [T::splat(0.0); 1 + NLIN];
-        let phi = [xn_prev[self.n_index(e)]];
+        let mut g = zero_basis();
+        let i0 = self.n_index(e);
+        let phi = &xn_prev[i0..i0 + L::NNONLIN];
         let r = xn_prev[self.r_index(e)];
-        self.core.law.basis(dv, r, &phi, &mut g);
+        self.core.law.basis(dv, r, phi, &mut g[..1 + nlin::<L>()]);
         let b = self.beta_index(e);
         let mut rate = g[0];
-        for i in 0..NLIN {
+        for i in 0..L::NLIN {
             jac.add(row, b + i, dt * g[1 + i]);
             rate += m[b + i] * g[1 + i];
         }
@@ -328,7 +335,7 @@ impl MpfChain {
     }
 }
 
-impl Partition for MpfChain {
+impl<L: HysteresisLaw> Partition for MpfChainOf<L> {
     /// Zero states, each n_e drawn from its prior (SPEC §3).
     fn sample_initial(&self, rng: &mut StreamRng, xn: &mut [f64]) {
         self.core.sample_initial(rng, xn, |e| self.n_index(e));
@@ -362,15 +369,15 @@ impl Partition for MpfChain {
     }
 }
 
-impl ConditionallyQuadratic for MpfChain {
+impl<L: HysteresisLaw> ConditionallyQuadratic for MpfChainOf<L> {
     fn dims(&self) -> QuadraticDims {
         let (n, ne) = (self.core.n, self.core.ne);
         QuadraticDims {
-            nn: self.nvs() + 2 * ne,
+            nn: self.nvs() + ne + L::NNONLIN * ne,
             nbl: 3 * n
                 + self.marginal_vel.len()
                 + self.core.spec.building.damping().extra_parameters()
-                + NLIN * ne,
+                + L::NLIN * ne,
             ny: self.core.sensors.len(),
         }
     }
@@ -399,7 +406,7 @@ impl ConditionallyQuadratic for MpfChain {
         }
         for e in 0..self.core.ne {
             let t = self.core.theta_element(e);
-            for i in 0..NLIN {
+            for i in 0..L::NLIN {
                 set(self.beta_index(e) + i, t + i);
             }
         }

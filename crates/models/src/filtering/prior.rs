@@ -1,31 +1,28 @@
 //! Priors of θ for a chain with any number of hysteretic elements (SPEC §3 per parameter).
 //!
 //! θ = [k1..kN, c1..cN, (α with mass-proportional damping), then per hysteretic element in
-//! storey order (β, γ, n)]. Defaults:
-//! k_j ~ LogNormal(median 10, log-sd 0.3), c_j ~ LogNormal(0.4, 0.5), per element (β, γ) uniform
-//! on the triangle {0 ≤ β ≤ 5, |γ| ≤ β} and n ~ U(1, 5). Every parameter can be overridden, or
-//! fixed (a point mass) by name. The Monte-Carlo tests of its moments and draws are in
-//! [`crate::priors`], beside the scalar priors.
+//! storey order the law's parameters (Bouc–Wen: β, γ, n)]. Defaults:
+//! k_j ~ LogNormal(median 10, log-sd 0.3), c_j ~ LogNormal(0.4, 0.5), per element the law's
+//! default prior ([`HysteresisLaw::default_prior`]; Bouc–Wen: (β, γ) uniform on the triangle
+//! {0 ≤ β ≤ 5, |γ| ≤ β} and n ~ U(1, 5)). Every parameter can be overridden, or fixed (a point
+//! mass) by name. The Monte-Carlo tests of its moments and draws are in [`crate::priors`],
+//! beside the scalar priors.
 
-use crate::priors::{BetaGammaPrior, Prior, PriorError};
-use crate::structure::{theta_names_damped, BoucWenLaw, Damping};
+use crate::law::{BoucWenLaw, HysteresisLaw};
+use crate::priors::{Prior, PriorError};
+use crate::structure::{theta_names_damped, Damping};
 use rand::Rng;
 use serde::{Deserialize, Serialize};
 
 /// Prior of one hysteretic (Bouc–Wen) element's parameters.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct ElementPrior {
-    /// 0-based storey of the element.
-    pub storey: usize,
-    pub beta_gamma: BetaGammaPrior,
-    pub n: Prior,
-}
+pub use crate::law::BoucWenPrior as ElementPrior;
 
-/// Prior of the whole θ of a chain, independent across parameters (β, γ jointly per element).
+/// Prior of the whole θ of a chain whose elements follow the law `L`, independent across
+/// parameters (and across elements; within an element as the law states: Bouc–Wen's β, γ
+/// jointly).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct ChainPrior {
+#[serde(deny_unknown_fields, bound = "")]
+pub struct ChainPriorOf<L: HysteresisLaw> {
     pub k: Vec<Prior>,
     pub c: Vec<Prior>,
     /// Prior of the mass-proportional damping α: present exactly when the chain has the
@@ -34,8 +31,11 @@ pub struct ChainPrior {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub alpha: Option<Prior>,
     /// One per hysteretic element, in storey order.
-    pub elements: Vec<ElementPrior>,
+    pub elements: Vec<L::Prior>,
 }
+
+/// The prior of a chain with Bouc–Wen elements (SPEC §3).
+pub type ChainPrior = ChainPriorOf<BoucWenLaw>;
 
 /// The damping ratio of the fundamental mode that the default prior of the mass-proportional
 /// damping α is centred on: α = 2·ζ_α·ω₁ gives the first mode ζ_α from αM alone
@@ -59,8 +59,9 @@ pub fn alpha_prior(omega1: f64) -> Prior {
 pub const K_PRIOR_RATIO: f64 = 1.25;
 pub const C_PRIOR_RATIO: f64 = 1.6;
 
-impl ChainPrior {
-    /// SPEC §3 defaults for N storeys and hysteretic elements at the 0-based `hysteretic` storeys.
+impl<L: HysteresisLaw> ChainPriorOf<L> {
+    /// SPEC §3 defaults for N storeys and hysteretic elements at the 0-based `hysteretic` storeys
+    /// (each with its law's default prior).
     pub fn paper(n_storeys: usize, hysteretic: &[usize]) -> Self {
         Self {
             k: vec![
@@ -78,21 +79,15 @@ impl ChainPrior {
                 n_storeys
             ],
             alpha: None,
-            elements: hysteretic
-                .iter()
-                .map(|&storey| ElementPrior {
-                    storey,
-                    beta_gamma: BetaGammaPrior::Triangle { beta_max: 5.0 },
-                    n: Prior::Uniform { lo: 1.0, hi: 5.0 },
-                })
-                .collect(),
+            elements: hysteretic.iter().map(|&s| L::default_prior(s)).collect(),
         }
     }
 
     /// SPEC §3's priors carried to a structure with other storey values: each k_j and c_j prior
     /// keeps its log-s.d. and sits where SPEC §3's sits relative to the paper's truth (median
-    /// 10 for k = 8, i.e. 1.25 k_j; 0.4 for c = 0.25, i.e. 1.6 c_j); β, γ, n as SPEC §3 (they
-    /// do not depend on the storey values). `k`, `c`: the structure's per-storey values.
+    /// 10 for k = 8, i.e. 1.25 k_j; 0.4 for c = 0.25, i.e. 1.6 c_j); the law's parameters as
+    /// SPEC §3 (they do not depend on the storey values). `k`, `c`: the structure's per-storey
+    /// values.
     pub fn relative_to(k: &[f64], c: &[f64], hysteretic: &[usize]) -> Self {
         let mut p = Self::paper(k.len(), hysteretic);
         for (prior, &kj) in p.k.iter_mut().zip(k) {
@@ -137,12 +132,12 @@ impl ChainPrior {
 
     /// 0-based storeys of the elements, in order.
     pub fn hysteretic_storeys(&self) -> Vec<usize> {
-        self.elements.iter().map(|e| e.storey).collect()
+        self.elements.iter().map(L::prior_storey).collect()
     }
 
-    /// Number of parameters 2N (+ 1 with α) + 3E.
+    /// Number of parameters 2N (+ 1 with α) + (the law's parameter count)·E (3E for Bouc–Wen).
     pub fn len(&self) -> usize {
-        self.element_offset() + 3 * self.elements.len()
+        self.element_offset() + L::NPARAMS * self.elements.len()
     }
 
     /// Whether θ is empty (never: N ≥ 1 is checked by [`ChainPrior::validate`]).
@@ -152,14 +147,11 @@ impl ChainPrior {
 
     /// Names of θ in order (see [`theta_names_damped`]).
     pub fn names(&self) -> Vec<String> {
-        theta_names_damped::<BoucWenLaw>(
-            self.n_storeys(),
-            &self.hysteretic_storeys(),
-            self.damping(),
-        )
+        theta_names_damped::<L>(self.n_storeys(), &self.hysteretic_storeys(), self.damping())
     }
 
-    /// Checks every hyper-parameter; k, c, α and n must have non-negative support.
+    /// Checks every hyper-parameter; k, c and α must have non-negative support, each element's
+    /// prior as its law requires (Bouc–Wen: n with non-negative support).
     pub fn validate(&self) -> Result<(), PriorError> {
         let n = self.n_storeys();
         if self.c.len() != n {
@@ -180,16 +172,17 @@ impl ChainPrior {
             p.validate(&names[2 * n], true)?;
         }
         let e0 = self.element_offset();
+        let np = L::NPARAMS;
         for (e, el) in self.elements.iter().enumerate() {
-            el.beta_gamma.validate()?;
-            el.n.validate(&names[e0 + 3 * e + 2], true)?;
+            L::validate_prior(el, &names[e0 + np * e..e0 + np * (e + 1)])?;
         }
         Ok(())
     }
 
-    /// Makes parameter `name` (as in [`ChainPrior::names`]) a point mass at `value`. Fixing β or
-    /// γ alone keeps the other's conditional prior on the triangle (`BetaGammaPrior`). On error
-    /// the prior is unchanged.
+    /// Makes parameter `name` (as in [`ChainPriorOf::names`]) a point mass at `value`. For an
+    /// element's parameter the law decides ([`HysteresisLaw::fix_prior`]): fixing Bouc–Wen's β
+    /// or γ alone keeps the other's conditional prior on the triangle (`BetaGammaPrior`). On
+    /// error the prior is unchanged.
     pub fn fix(&mut self, name: &str, value: f64) -> Result<(), PriorError> {
         let i = self.names().iter().position(|s| s == name).ok_or_else(|| {
             PriorError::UnknownParameter {
@@ -198,13 +191,13 @@ impl ChainPrior {
         })?;
         self.set(i, |slot| match slot {
             Slot::Scalar(p) => *p = Prior::Fixed { value },
-            Slot::Beta(bg) => *bg = bg.fix_beta(value),
-            Slot::Gamma(bg) => *bg = bg.fix_gamma(value),
+            Slot::Element(el, i) => L::fix_prior(el, i, value),
         })
     }
 
-    /// Replaces the prior of scalar parameter `name` (k, c, α or n; for β, γ set
-    /// [`ElementPrior::beta_gamma`]). On error the prior is unchanged.
+    /// Replaces the prior of scalar parameter `name` (k, c, α, or an element parameter whose
+    /// law gives it a scalar prior: Bouc–Wen's n; for β, γ set [`ElementPrior::beta_gamma`]). On
+    /// error the prior is unchanged.
     pub fn set_prior(&mut self, name: &str, prior: Prior) -> Result<(), PriorError> {
         let unknown = || PriorError::UnknownParameter {
             name: name.to_string(),
@@ -217,7 +210,7 @@ impl ChainPrior {
         let mut ok = true;
         let r = self.set(i, |slot| match slot {
             Slot::Scalar(p) => *p = prior,
-            _ => ok = false,
+            Slot::Element(el, i) => ok = L::set_prior(el, i, prior),
         });
         if ok {
             r
@@ -226,7 +219,7 @@ impl ChainPrior {
         }
     }
 
-    fn set(&mut self, i: usize, f: impl FnOnce(Slot<'_>)) -> Result<(), PriorError> {
+    fn set(&mut self, i: usize, f: impl FnOnce(Slot<'_, L>)) -> Result<(), PriorError> {
         let n = self.n_storeys();
         let e0 = self.element_offset();
         let mut next = self.clone();
@@ -241,12 +234,8 @@ impl ChainPrior {
                     .expect("θ has α exactly when its prior does"),
             )
         } else {
-            let el = &mut next.elements[(i - e0) / 3];
-            match (i - e0) % 3 {
-                0 => Slot::Beta(&mut el.beta_gamma),
-                1 => Slot::Gamma(&mut el.beta_gamma),
-                _ => Slot::Scalar(&mut el.n),
-            }
+            let np = L::NPARAMS;
+            Slot::Element(&mut next.elements[(i - e0) / np], (i - e0) % np)
         };
         f(slot);
         next.validate()?;
@@ -268,11 +257,9 @@ impl ChainPrior {
             out[2 * n] = p.sample(rng);
         }
         let e0 = self.element_offset();
+        let np = L::NPARAMS;
         for (e, el) in self.elements.iter().enumerate() {
-            let (b, g) = el.beta_gamma.sample(rng);
-            out[e0 + 3 * e] = b;
-            out[e0 + 3 * e + 1] = g;
-            out[e0 + 3 * e + 2] = el.n.sample(rng);
+            L::sample_prior(el, rng, &mut out[e0 + np * e..e0 + np * (e + 1)]);
         }
     }
 
@@ -286,19 +273,19 @@ impl ChainPrior {
             var.push(v);
         }
         for el in &self.elements {
-            let (mb, mg, vb, vg) = el.beta_gamma.moments();
-            let (m, v) = el.n.moments();
-            mean.extend([mb, mg, m]);
-            var.extend([vb, vg, v]);
+            let at = mean.len();
+            mean.resize(at + L::NPARAMS, 0.0);
+            var.resize(at + L::NPARAMS, 0.0);
+            L::prior_moments(el, &mut mean[at..], &mut var[at..]);
         }
         (mean, var)
     }
 }
 
-enum Slot<'a> {
+enum Slot<'a, L: HysteresisLaw> {
     Scalar(&'a mut Prior),
-    Beta(&'a mut BetaGammaPrior),
-    Gamma(&'a mut BetaGammaPrior),
+    /// Parameter `i` (0-based within the element) of an element's prior.
+    Element(&'a mut L::Prior, usize),
 }
 
 #[cfg(test)]

@@ -1,9 +1,10 @@
 //! [`ChainSpec`]: everything the run-time partitions need (SPEC §3, §9), validated field by field.
 
 use super::discretisation::Discretisation;
-use super::prior::ChainPrior;
+use super::prior::ChainPriorOf;
 use super::prior::MarginalPrior;
 use crate::building::{Building, BuildingError, Damping};
+use crate::law::{BoucWenLaw, HysteresisLaw};
 use crate::priors::PriorError;
 use crate::sensors::{MeasurementKind, SensorError, SensorLayout};
 use serde::{Deserialize, Serialize};
@@ -54,10 +55,11 @@ fn invalid(field: &'static str, reason: impl Into<String>) -> SpecError {
 
 /// The chain, data and filter settings of the run-time partitions.
 ///
-/// Storeys are 0-based in the building; the sensor layout takes and prints them 1-based.
+/// Storeys are 0-based in the building; the sensor layout takes and prints them 1-based. The
+/// hysteretic elements follow the law `L` (its parameters' priors are in `prior`).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct ChainSpec {
+#[serde(deny_unknown_fields, bound = "")]
+pub struct ChainSpecOf<L: HysteresisLaw> {
     /// Time step (s).
     pub dt: f64,
     /// Masses (known), hysteretic storeys and damping form ([`Damping`]: per-storey dashpots,
@@ -76,7 +78,7 @@ pub struct ChainSpec {
     pub q_r: Vec<f64>,
     /// Measurement-noise variances, one per sensor.
     pub r_diag: Vec<f64>,
-    pub prior: ChainPrior,
+    pub prior: ChainPriorOf<L>,
     #[serde(default)]
     pub marginal_prior: MarginalPrior,
     #[serde(default)]
@@ -93,7 +95,10 @@ pub struct ChainSpec {
     pub substeps: usize,
 }
 
-/// Largest accepted [`ChainSpec::substeps`].
+/// The spec of a chain with Bouc–Wen elements.
+pub type ChainSpec = ChainSpecOf<BoucWenLaw>;
+
+/// Largest accepted [`ChainSpecOf::substeps`].
 pub const MAX_SUBSTEPS: usize = 64;
 
 fn one() -> usize {
@@ -104,7 +109,7 @@ fn is_one(v: &usize) -> bool {
     *v == 1
 }
 
-/// RMS values of the clean simulated signals from which [`ChainSpec::from_rms`] sets the noise
+/// RMS values of the clean simulated signals from which [`ChainSpecOf::from_rms`] sets the noise
 /// levels (SPEC §3).
 #[derive(Debug, Clone, PartialEq)]
 pub struct RmsLevels {
@@ -116,11 +121,11 @@ pub struct RmsLevels {
     pub drift_velocity: Vec<f64>,
 }
 
-impl ChainSpec {
+impl<L: HysteresisLaw> ChainSpecOf<L> {
     /// SPEC §3 settings from RMS values, generalised: R_ii = (nf·RMS a_i)² + (nf·RMS ü_g)² for
     /// relative data, (nf·RMS a_i)² for absolute data (the excitation error does not enter an
     /// absolute measurement); q_vel = dt·nf·RMS ü_g; q_r\[e\] = dt·0.05·RMS δv_e (the paper's σ_r,
-    /// independent of nf); q_disp = 1e−6. Prior [`ChainPrior::paper`], moment-matched marginal
+    /// independent of nf); q_disp = 1e−6. Prior [`ChainPriorOf::paper`], moment-matched marginal
     /// prior, forward Euler. `noise_fraction` is 0.1 in the paper. The prior has no `alpha`, so
     /// `building` has the per-storey damping form here.
     pub fn from_rms(
@@ -166,7 +171,7 @@ impl ChainSpec {
         };
         let spec = Self {
             dt,
-            prior: ChainPrior::paper(building.storeys(), hysteretic),
+            prior: ChainPriorOf::paper(building.storeys(), hysteretic),
             q_disp: 1e-6,
             q_vel: dt * nf * rms.ug,
             q_r: rms.drift_velocity.iter().map(|v| dt * 0.05 * v).collect(),

@@ -16,8 +16,9 @@
 //! (a 1.1 % shift) two sub-steps left k1 and k10 20 % low, outside their intervals, where one
 //! step held them.
 
-use super::ChainSpec;
+use super::ChainSpecOf;
 use super::MAX_SUBSTEPS;
+use crate::law::HysteresisLaw;
 use crate::priors::Prior;
 use serde::Serialize;
 
@@ -80,7 +81,7 @@ pub struct AutoSubsteps {
 /// One step when `frequency_error(ω_max·dt) ≤ SUBSTEP_ABOVE`; otherwise the smallest
 /// M ≤ [`MAX_SUBSTEPS`] with `frequency_error(ω_max·dt/M) ≤ MAX_FREQUENCY_ERROR` (M =
 /// `MAX_SUBSTEPS` when none is enough; the record then shows the error that remains).
-pub fn auto_substeps(spec: &ChainSpec) -> AutoSubsteps {
+pub fn auto_substeps<L: HysteresisLaw>(spec: &ChainSpecOf<L>) -> AutoSubsteps {
     let k: Vec<f64> = spec.prior.k.iter().map(centre).collect();
     let omega_max = highest_frequency(&k, spec.building.masses());
     let x = omega_max * spec.dt;
