@@ -160,6 +160,10 @@ pub trait HysteresisLaw:
     /// marginalised filters at the start).
     fn sample_nonlinear<G: Rng + ?Sized>(prior: &Self::Prior, rng: &mut G, out: &mut [f64]);
 
+    /// The scalar prior of nonlinear parameter `i` (φ order): its support bounds the
+    /// rejuvenation move of the sampled static parameters.
+    fn nonlinear_prior(prior: &Self::Prior, i: usize) -> &Prior;
+
     /// Means and variances of the element's parameters (θ then φ; uncorrelated): the Gaussian
     /// moment-matched to the prior, of which the marginalised filters keep the linear ones.
     fn prior_moments(prior: &Self::Prior, mean: &mut [f64], var: &mut [f64]);

@@ -239,10 +239,13 @@ impl<L: HysteresisLaw> ChainCore<L> {
             .elements
             .iter()
             .enumerate()
-            .filter_map(|(e, el)| {
-                prior_support(&el.n).map(|support| StaticParam {
-                    index: n_index(e),
-                    support,
+            .flat_map(|(e, el)| {
+                let first = n_index(e);
+                (0..L::NNONLIN).filter_map(move |i| {
+                    prior_support(L::nonlinear_prior(el, i)).map(|support| StaticParam {
+                        index: first + i,
+                        support,
+                    })
                 })
             })
             .collect()

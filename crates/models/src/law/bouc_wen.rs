@@ -187,6 +187,11 @@ impl HysteresisLaw for BoucWenLaw {
         out[0] = prior.n.sample(rng);
     }
 
+    fn nonlinear_prior(prior: &BoucWenPrior, i: usize) -> &Prior {
+        debug_assert_eq!(i, 0, "one nonlinear parameter");
+        &prior.n
+    }
+
     fn prior_moments(prior: &BoucWenPrior, mean: &mut [f64], var: &mut [f64]) {
         let (mb, mg, vb, vg) = prior.beta_gamma.moments();
         let (m, v) = prior.n.moments();

@@ -161,6 +161,11 @@ impl HysteresisLaw for PlasticLaw {
         out[0] = prior.m.sample(rng);
     }
 
+    fn nonlinear_prior(prior: &PlasticPrior, i: usize) -> &Prior {
+        debug_assert_eq!(i, 0, "one nonlinear parameter");
+        &prior.m
+    }
+
     fn prior_moments(prior: &PlasticPrior, mean: &mut [f64], var: &mut [f64]) {
         for (i, p) in [prior.rho, prior.m].iter().enumerate() {
             (mean[i], var[i]) = p.moments();
