@@ -121,8 +121,9 @@ loop_every = {loops}
 # the building has 10 storeys or more (docs/calibration.md).
 marginal_prior = {{ kind = "moment_matched" }}
 # Rejuvenation of the sampled Bouc–Wen exponents n (MLN-RBPF, Storvik, MPF-EKF2): after every
-# resampling the Liu–West kernel with discount δ in [1/3, 1] moves them; absent: no move.
-# rejuvenation = 0.98
+# resampling the Liu–West kernel with discount δ in [1/3, 1] moves them; absent (or 1): no move.
+# Without --config the MPF-EKF2 takes {mpf_rejuvenation} and the others none (docs/calibration.md).
+# rejuvenation = {mpf_rejuvenation}
 
 # Point-mass priors: parameter name = value (k1..kN, c1..cN, alpha with the storey+mass damping
 # form, beta, gamma, n; with several hysteretic elements beta4, gamma4, n4 for the element at
@@ -169,6 +170,7 @@ marginal_prior = {{ kind = "moment_matched" }}
         trace = d.trace_every,
         validate = d.validate,
         loops = d.loop_every,
+        mpf_rejuvenation = crate::pipeline::MPF_REJUVENATION,
     )
 }
 
@@ -463,6 +465,10 @@ pub fn settle(
     // What the sensors cannot see, and the size of the building, decide the MPF-EKF2's default
     // prior Gaussian (`FilterSettings::recommended_for`).
     if algorithm == Algorithm::MpfEkf2 {
+        // Without a config (and without --rejuvenation) the MPF-EKF2 moves its exponents n.
+        if config.is_none() && settings.rejuvenation.is_none() {
+            settings.rejuvenation = FilterSettings::recommended_for(algorithm, 1, &[]).rejuvenation;
+        }
         // Settings first, so that their refusal names the key as it does in every other run.
         crate::limits::check_filter_settings(&settings)?;
         // A data set the spec refuses is refused by the run itself, with its own message.

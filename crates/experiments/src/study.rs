@@ -6,9 +6,10 @@
 //! fingerprint ([`Study::job_fingerprint`]) is the one its record will carry, so a resumed sweep
 //! can tell whether an existing record is this job's result.
 
+use std::collections::BTreeMap;
 use std::path::Path;
 
-use crate::error::{bail, Context, Result};
+use crate::error::{bail, invalid, Context, Result};
 use core_filters::resampling::Scheme;
 use models::dataset::{generate, DatasetConfig, LoadedDataset};
 use models::filtering::Discretisation;
@@ -203,6 +204,10 @@ pub struct Study {
     pub sweep: SweepSection,
     #[serde(default)]
     pub filter: FilterSettings,
+    /// Keys of `filter` that one algorithm takes differently (`[filter_for.mpf-ekf2]`, e.g. the
+    /// MPF-EKF2's own defaults), laid over `filter` for that algorithm's runs only.
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub filter_for: BTreeMap<String, toml::Table>,
     pub quick: Option<QuickSection>,
     /// The statements the study's report decides (`[[verdicts]]`, see
     /// [`crate::verdict::declared`]).
@@ -254,6 +259,16 @@ impl Study {
         crate::limits::check_count(self.sweep.runs as usize, 1, MAX_RUNS)
             .context("field `sweep.runs`")?;
         crate::limits::check_filter_settings(&self.filter).context("table `filter`")?;
+        for name in self.filter_for.keys() {
+            let algorithm: Algorithm = name
+                .parse()
+                .map_err(|e: String| invalid!("table `filter_for.{name}`: {e}"))?;
+            let settings = self
+                .filter_of(algorithm)
+                .with_context(|| format!("table `filter_for.{name}`"))?;
+            crate::limits::check_filter_settings(&settings)
+                .with_context(|| format!("table `filter_for.{name}`"))?;
+        }
         if self
             .sweep
             .discretisations
@@ -462,11 +477,30 @@ impl Study {
     /// The filter settings of a job: the study's, with the job's particles, resampling and
     /// discretisation.
     pub fn settings(&self, job: &Job) -> FilterSettings {
-        let mut settings = self.filter.clone();
+        // Checked when the study was loaded ([`Study::check`]).
+        let mut settings = self
+            .filter_of(job.algorithm)
+            .unwrap_or_else(|_| self.filter.clone());
         settings.particles = job.particles;
         settings.resampling = job.resampling;
         settings.discretisation = job.discretisation;
         settings
+    }
+
+    /// The study's filter settings for `algorithm`: `filter` with the keys of
+    /// `filter_for.<algorithm>` laid over it.
+    pub fn filter_of(&self, algorithm: Algorithm) -> Result<FilterSettings> {
+        let Some(keys) = self.filter_for.get(algorithm.name()) else {
+            return Ok(self.filter.clone());
+        };
+        let mut table = toml::Table::try_from(&self.filter)
+            .map_err(|e| invalid!("the filter settings as a table: {e}"))?;
+        for (k, v) in keys {
+            table.insert(k.clone(), v.clone());
+        }
+        table
+            .try_into()
+            .map_err(|e| invalid!("table `filter_for.{}`: {e}", algorithm.name()))
     }
 
     /// The data set of run `run` as the filters see it (decimated when the study says so), with

@@ -269,3 +269,114 @@ fn a_bad_discount_is_refused_by_name() {
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(err.contains("`rejuvenation`"), "{err}");
 }
+
+/// A study's `[filter_for.<algorithm>]` keys reach that algorithm's runs only, take part in
+/// their fingerprints, and are checked when the study is loaded: an unknown algorithm, an unknown
+/// key and a bad value are refused by the table's name.
+#[test]
+fn a_study_gives_one_algorithm_its_own_keys() {
+    let text = |extra: &str| {
+        format!(
+            r#"
+name = "per-algorithm"
+description = "per-algorithm keys"
+[data]
+preset = "paper-3dof"
+duration = 1.0
+[sweep]
+algorithms = ["mln-rbpf", "mpf-ekf2"]
+runs = 1
+master_seed = 7
+particles = [20]
+[filter]
+trace_every = 0
+{extra}
+"#
+        )
+    };
+    let dir = temp_dir("filter-for");
+    let path = dir.join("s.toml");
+    std::fs::write(
+        &path,
+        text("[filter_for.mpf-ekf2]\nrejuvenation = 0.97\npool = 2"),
+    )
+    .unwrap();
+    let study = Study::load(&path).unwrap();
+    let plain: Study = toml::from_str(&text("")).unwrap();
+    for job in study.jobs() {
+        let s = study.settings(&job);
+        let base = plain.settings(&job);
+        if job.algorithm == Algorithm::MpfEkf2 {
+            assert_eq!((s.rejuvenation, s.pool), (Some(0.97), 2));
+            assert_eq!(
+                s,
+                FilterSettings {
+                    rejuvenation: Some(0.97),
+                    pool: 2,
+                    ..base
+                }
+            );
+            assert_ne!(
+                study.job_fingerprint(&job).unwrap(),
+                plain.job_fingerprint(&job).unwrap()
+            );
+        } else {
+            assert_eq!(s, base);
+            assert_eq!(
+                study.job_fingerprint(&job).unwrap(),
+                plain.job_fingerprint(&job).unwrap()
+            );
+        }
+    }
+    for (extra, expect) in [
+        ("[filter_for.kalman]\npool = 2", "filter_for.kalman"),
+        ("[filter_for.mpf-ekf2]\nno_such_key = 1", "no_such_key"),
+        ("[filter_for.storvik]\nrejuvenation = 0.2", "`rejuvenation`"),
+    ] {
+        std::fs::write(&path, text(extra)).unwrap();
+        let e = format!("{:#}", Study::load(&path).unwrap_err());
+        assert!(e.contains(expect) && e.contains("s.toml"), "{extra}: {e}");
+    }
+}
+
+/// Without a config `sysid filter` gives the MPF-EKF2 the recommended rejuvenation and the other
+/// filters none; `--rejuvenation 1` (no move) and a config without the key keep the MPF-EKF2
+/// without one.
+#[test]
+fn the_mpf_ekf2_rejuvenates_by_default() {
+    let dir = temp_dir("default");
+    let data_dir = dir.join("d");
+    data(0.5).write_dir(&data_dir).unwrap();
+    let config = dir.join("c.toml");
+    std::fs::write(&config, "particles = 20\n").unwrap();
+    let mut n = 0;
+    let mut rejuvenation = |alg: &str, extra: &[&str]| {
+        n += 1;
+        let out = dir.join(format!("{alg}-{n}.json"));
+        let o = Command::new(env!("CARGO_BIN_EXE_sysid"))
+            .args(["filter", "--algorithm", alg, "--particles", "20", "--data"])
+            .arg(&data_dir)
+            .args(extra)
+            .arg("--out")
+            .arg(&out)
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let r: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
+        r["config"]["filter"]["rejuvenation"].as_f64()
+    };
+    assert_eq!(
+        rejuvenation("mpf-ekf2", &[]),
+        Some(experiments::pipeline::MPF_REJUVENATION)
+    );
+    for alg in ["mln-rbpf", "storvik", "bootstrap"] {
+        assert_eq!(rejuvenation(alg, &[]), None, "{alg}");
+    }
+    assert_eq!(
+        rejuvenation("mpf-ekf2", &["--rejuvenation", "1"]),
+        Some(1.0)
+    );
+    let c = config.to_str().unwrap();
+    assert_eq!(rejuvenation("mpf-ekf2", &["--config", c]), None);
+}

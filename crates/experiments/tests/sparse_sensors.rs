@@ -9,7 +9,7 @@ use std::process::Command;
 
 use experiments::pipeline::{
     chain_spec, per_particle_reason, unmeasured_storeys, Algorithm, FilterSettings,
-    PER_PARTICLE_MIN_STOREYS, SPARSE_REL_SD,
+    MPF_REJUVENATION, PER_PARTICLE_MIN_STOREYS, SPARSE_REL_SD,
 };
 use models::dataset::{generate, DatasetConfig};
 use models::filtering::MarginalPrior;
@@ -52,19 +52,29 @@ fn unmeasured_storeys_come_from_the_layout() {
 fn only_the_mpf_ekf2_on_a_sparse_layout_or_a_tall_building_leaves_the_recommended_settings() {
     let recommended = FilterSettings::recommended();
     assert_eq!(recommended.marginal_prior, MarginalPrior::MomentMatched);
+    assert_eq!(recommended.rejuvenation, None);
+    // The MPF-EKF2 rejuvenates its exponents n on every building; the others never.
+    let mpf = FilterSettings {
+        rejuvenation: Some(MPF_REJUVENATION),
+        ..recommended.clone()
+    };
     let per_particle = FilterSettings {
         marginal_prior: MarginalPrior::PerParticle {
             rel_sd: SPARSE_REL_SD,
         },
-        ..recommended.clone()
+        ..mpf.clone()
     };
     let below = PER_PARTICLE_MIN_STOREYS - 1;
     for algorithm in Algorithm::ALL {
-        // Every storey of a building below the threshold measured: the recommended settings,
-        // whatever the algorithm.
+        // Every storey of a building below the threshold measured: the recommended settings
+        // (with the MPF-EKF2's rejuvenation).
         assert_eq!(
             FilterSettings::recommended_for(algorithm, below, &[]),
-            recommended
+            if algorithm == Algorithm::MpfEkf2 {
+                mpf.clone()
+            } else {
+                recommended.clone()
+            }
         );
         for (storeys, unmeasured) in [(5, &[1, 2][..]), (PER_PARTICLE_MIN_STOREYS, &[][..])] {
             let s = FilterSettings::recommended_for(algorithm, storeys, unmeasured);
