@@ -12,6 +12,7 @@
 
 use std::collections::BTreeMap;
 
+use models::filtering::Discretisation;
 use serde::Serialize;
 
 use crate::markdown::{cell, header, row};
@@ -215,6 +216,11 @@ pub fn validation_nrmse(r: &RunRecord) -> f64 {
         .as_ref()
         .filter(|v| v.error.is_none())
         .map_or(f64::NAN, |v| v.states.mean_nrmse())
+}
+
+/// The discretisation a record was computed with (its configuration's `filter.discretisation`).
+pub fn scheme(r: &RunRecord) -> Option<Discretisation> {
+    serde_json::from_value(r.config.pointer("/filter/discretisation")?.clone()).ok()
 }
 
 /// Largest number of distinct values of a sampled static parameter at the end of one run.
