@@ -241,6 +241,9 @@ pub struct Finding {
     pub test: String,
     pub verdict: Verdict,
     pub evidence: String,
+    /// The estimates behind the verdict by label (`differs-from-first`: each difference).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub parts: Vec<(String, Estimate)>,
 }
 
 /// Writes findings as a Markdown table under the column names `columns` (statement, verdict,

@@ -300,11 +300,14 @@ fn a_declaration_needs_its_fields_and_refuses_others() {
         ("test = \"above\"\nmetric = \"k-error\"\nparams = [\"k1\"]\nalgorithms = [\"mpf-ekf2\"]\nthreshold = 1.0", "`params` is used by metric `ratio` only"),
         ("test = \"within\"\nmetric = \"c-error\"\nalgorithms = [\"mpf-ekf2\"]\nband = [0.3, 0.1]", "lo < hi"),
         ("test = \"below\"\nmetric = \"k-error\"\nalgorithms = []\nthreshold = 0.05", "`algorithms` is empty"),
-        // The arms of a sweep.
+        // The arms of a sweep and the comparison of structures.
         (&format!("{below}\nscheme = \"symplectic\""), "discretisation `symplectic` is not one of the sweep's"),
         (&format!("{below}\nschemes = [\"euler\", \"euler\"]"), "field `schemes` names two different discretisations"),
         (&format!("{below}\nschemes = [\"euler\", \"symplectic\"]\nagainst = \"other\""), "without `scheme` or `against`"),
         ("test = \"lower\"\nmetric = \"k-error\"\nalgorithms = [\"mpf-ekf2\"]\nthan = [\"storvik\"]\nscheme = \"euler\"", "used by the tests below, above, within and outside only"),
+        ("test = \"differs-from-first\"\nmetric = \"k-error\"\nalgorithms = [\"mpf-ekf2\", \"storvik\"]\nthreshold = 0.01", "one algorithm"),
+        ("test = \"differs-from-first\"\nmetric = \"online-nrmse\"\nalgorithms = [\"mpf-ekf2\"]\nthreshold = 0.01", "metric `k-error` or `c-error`"),
+        ("test = \"differs-from-first\"\nmetric = \"k-error\"\nalgorithms = [\"mpf-ekf2\"]", "needs field `threshold`"),
     ];
     for (body, message) in cases {
         let d = declared(&format!("statement = \"s\"\n{body}"));
@@ -446,4 +449,95 @@ meaning = \"half to 1.5 times dt·k/c\"",
     // Without the other study's runs the statement is left out.
     assert!(against.decide(&lo, &[]).is_none());
     assert!(against.decide(&lo, &lo).is_none());
+}
+
+/// Runs of one structure: stiffness ratios `k` + `amplitude` × w (errors k − 1 where k > 1).
+fn structure(n: u64, k: f64, amplitude: f64, seed: u64) -> Vec<RunRecord> {
+    (0..n)
+        .map(|run| {
+            let ratio = k + amplitude * wiggle(run, seed);
+            record("mln-rbpf", run, ratios(ratio, [1.2; 3], 1.5), 0.1)
+        })
+        .collect()
+}
+
+/// The excitations study's test on constructed structures whose answer is known.
+#[test]
+fn differs_from_first_on_constructed_structures() {
+    let d = declared(
+        "statement = \"the mean stiffness error differs\"\ntest = \"differs-from-first\"\nmetric = \"k-error\"\nalgorithms = [\"mln-rbpf\"]\nthreshold = 0.01",
+    );
+    let decide = |other: Vec<RunRecord>| {
+        let control = structure(RUNS, 1.04, 0.02, 1);
+        let groups = [
+            ("control", control.iter().collect::<Vec<_>>()),
+            ("other", other.iter().collect()),
+        ];
+        d.decide_structures(&groups, "ground motion").unwrap()
+    };
+    // 3 points apart with s.e. 0.2 points: resolved apart.
+    let f = decide(structure(RUNS, 1.07, 0.02, 2));
+    assert_eq!(f.verdict, Verdict::Holds, "{}", f.evidence);
+    assert_eq!(f.parts.len(), 1);
+    assert!((f.parts[0].1.mean - 0.03).abs() < 0.002, "{:?}", f.parts);
+    let d0 = f.parts[0].1;
+    let shown = format!("`other` {:+.2} ± {:.2} pp", 100.0 * d0.mean, 100.0 * d0.se);
+    assert_eq!(f.evidence, shown);
+    assert!(
+        f.test.contains("Bonferroni z = 1.96 of the 1 comparisons"),
+        "{}",
+        f.test
+    );
+    assert!(f.test.contains("within ±1 percentage point"), "{}", f.test);
+    // 0.1 point apart with s.e. 0.2 points (the same spread in both): within ±1 point.
+    assert_eq!(
+        decide(structure(RUNS, 1.041, 0.02, 1)).verdict,
+        Verdict::DoesNotHold
+    );
+    // 1 point apart with s.e. 1.2 points (errors 0.10 and 0 in alternate runs): neither.
+    let alternating = (0..RUNS)
+        .map(|run| {
+            record(
+                "mln-rbpf",
+                run,
+                ratios(1.0 + 0.1 * (run % 2) as f64, [1.2; 3], 1.5),
+                0.1,
+            )
+        })
+        .collect();
+    let f = decide(alternating);
+    assert_eq!(f.verdict, Verdict::NotResolved, "{}", f.evidence);
+    // Far apart but only 3 runs: no verdict.
+    assert_eq!(
+        decide(structure(3, 1.20, 0.004, 2)).verdict,
+        Verdict::NotResolved
+    );
+    // Four structures against the control: the Bonferroni z of four comparisons.
+    let (c, o) = (
+        structure(RUNS, 1.04, 0.02, 1),
+        structure(RUNS, 1.041, 0.02, 1),
+    );
+    let four: Vec<(&str, Vec<&RunRecord>)> = ["control", "a", "b", "c", "e"]
+        .iter()
+        .enumerate()
+        .map(|(i, l)| (*l, if i == 0 { &c } else { &o }.iter().collect()))
+        .collect();
+    let f = d.decide_structures(&four, "ground motion").unwrap();
+    assert!(
+        f.test.contains("z = 2.50 of the 4 comparisons"),
+        "{}",
+        f.test
+    );
+    assert_eq!(f.verdict, Verdict::DoesNotHold);
+    // Not the test of `decide`, and nothing without runs of the algorithm.
+    assert!(d.decide(&c.iter().collect::<Vec<_>>(), &[]).is_none());
+    let storvik = structure(RUNS, 1.04, 0.004, 1)
+        .into_iter()
+        .map(|mut r| {
+            r.algorithm = "storvik".into();
+            r
+        })
+        .collect::<Vec<_>>();
+    let none = [("control", storvik.iter().collect::<Vec<_>>())];
+    assert!(d.decide_structures(&none, "ground motion").is_none());
 }

@@ -21,23 +21,28 @@
 //! `scheme` if named. Their words are short — the estimate, the threshold in the metric's own
 //! units, studies named by data rate — and the table showing them states the ±2 s.e. rule.
 //!
-//! Two tests are code rather than a declaration because their statistic is their own:
+//! Three tests are code rather than a declaration because their statistic is their own:
 //! `bootstrap-collapse` (the distinct particle values of the sampled parameters, over this study
-//! and the runs given beside it) and `lower-spread` (run-to-run s.d. of θ_val on k and c, through
-//! the s.e. of a log s.d.). A statement whose algorithms have no records is left out.
+//! and the runs given beside it), `lower-spread` (run-to-run s.d. of θ_val on k and c, through
+//! the s.e. of a log s.d.) and `differs-from-first` (each structure of a structure axis against
+//! the first, [`Declared::decide_structures`]). A statement whose algorithms have no records is
+//! left out.
 
 use serde::{Deserialize, Serialize};
 
 use models::filtering::Discretisation;
 
 use super::{
-    above, below, group_error, group_names, in_group, label, max_distinct, online_nrmse,
-    paired_difference, per_run, ratio, scheme, validation_nrmse, within, Estimate, Finding,
-    Verdict,
+    above, below, bonferroni_z, group_error, group_names, in_group, label, max_distinct,
+    online_nrmse, paired_difference, per_run, ratio, scheme, validation_nrmse, within, Estimate,
+    Finding, Verdict,
 };
 use crate::error::{bail, Result};
 use crate::metrics::mean_sd;
 use crate::record::RunRecord;
+
+/// Fewest completed runs on both sides for a difference to count in `differs-from-first`.
+pub const MIN_RUNS: usize = 5;
 
 /// The per-run quantity a statement is about.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -165,6 +170,12 @@ pub enum Test {
     /// The algorithms' run-to-run s.d. of θ_val is lower than each of `than`'s, for every k and
     /// c (Fig. 7).
     LowerSpread,
+    /// One algorithm's mean error (`k-error`, `c-error`) under some structure of a structure axis
+    /// differs from the first structure's: each difference of independent means (s.e.
+    /// √(s.e.₁² + s.e.₂²)) is judged at the Bonferroni z of the comparisons; holds when some ±z
+    /// s.e. interval excludes 0, does not hold when every one lies within ±`threshold`
+    /// (counting only differences with [`MIN_RUNS`] completed runs on both sides).
+    DiffersFromFirst,
 }
 
 impl Test {
@@ -179,6 +190,7 @@ impl Test {
             Test::NoFailures => "no-failures",
             Test::BootstrapCollapse => "bootstrap-collapse",
             Test::LowerSpread => "lower-spread",
+            Test::DiffersFromFirst => "differs-from-first",
         }
     }
 }
@@ -244,7 +256,7 @@ impl Declared {
             bail!("{at}: algorithm `{a}` is in both `algorithms` and `than`");
         }
         let (metric, than, threshold, band) = match self.test {
-            Test::Below | Test::Above => (true, false, true, false),
+            Test::Below | Test::Above | Test::DiffersFromFirst => (true, false, true, false),
             Test::Within | Test::Outside => (true, false, false, true),
             Test::Lower => (true, true, false, false),
             Test::PairedBelow => (true, true, true, false),
@@ -269,6 +281,12 @@ impl Declared {
             (Some(Metric::Ratio), true) => bail!("{at}: metric `ratio` needs field `params`"),
             (Some(Metric::Ratio), false) | (_, true) => {}
             (_, false) => bail!("{at}: field `params` is used by metric `ratio` only"),
+        }
+        if self.test == Test::DiffersFromFirst
+            && (self.algorithms.len() > 1
+                || !matches!(self.metric, Some(Metric::KError | Metric::CError)))
+        {
+            bail!("{at}: the test compares one algorithm's mean errors: one algorithm, metric `k-error` or `c-error`");
         }
         if self.on_arms()
             && !matches!(
@@ -310,8 +328,8 @@ impl Declared {
 
     /// The finding on `records` (the study's); `beside` are runs of other studies, which the
     /// `bootstrap-collapse` test counts too and an `against` test compares with. `None` when the
-    /// statement's algorithms have no records (or the study it is `against` none), or the records
-    /// lack a parameter of `params`.
+    /// statement's algorithms have no records (or the study it is `against` none), the records
+    /// lack a parameter of `params`, or the test is `differs-from-first`.
     pub fn decide(&self, records: &[&RunRecord], beside: &[&RunRecord]) -> Option<Finding> {
         let present: Vec<&str> = self
             .algorithms
@@ -337,12 +355,14 @@ impl Declared {
             Test::NoFailures => no_failures(records, &present),
             Test::BootstrapCollapse => self.collapse(records, beside)?,
             Test::LowerSpread => self.spread(records, &present)?,
+            Test::DiffersFromFirst => return None,
         };
         Some(Finding {
             statement: self.statement.clone(),
             test,
             verdict,
             evidence,
+            parts: Vec::new(),
         })
     }
 
@@ -503,6 +523,74 @@ impl Declared {
         };
         let test = self.test.name();
         format!("{estimate} of {of} {test} {cmp}{}{every}", self.meaning())
+    }
+
+    /// [`Test::DiffersFromFirst`] on the runs of each structure (label and runs, the first the
+    /// control; a structure is a `noun` in words, "ground motion"); `parts` holds the
+    /// differences. `None` for another test or without runs of the algorithm.
+    pub fn decide_structures(
+        &self,
+        structures: &[(&str, Vec<&RunRecord>)],
+        noun: &str,
+    ) -> Option<Finding> {
+        let ((_, control), others) = structures.split_first()?;
+        let a = self.algorithms.first()?;
+        let ran = structures.iter().any(|(_, r)| !of(r, a).is_empty());
+        if self.test != Test::DiffersFromFirst || !ran {
+            return None;
+        }
+        let (metric, margin) = (self.metric?, self.threshold?);
+        let (scale, decimals, _) = metric.display();
+        let mean = |recs: &[&RunRecord]| {
+            let done = of(recs, a).into_iter().filter(|r| !r.is_failure());
+            Estimate::of(&done.map(|r| metric.of(r, "")).collect::<Vec<_>>())
+        };
+        // Several structures are compared with the first at once: each difference is judged at
+        // the Bonferroni z of the family, so that "some differ" has a 5 % chance of a false
+        // alarm when none does. A difference with too few runs decides nothing.
+        let z = bonferroni_z(others.len());
+        let base = mean(control);
+        let (mut differs, mut same, mut parts) = (false, !others.is_empty(), Vec::new());
+        for (structure, recs) in others {
+            let e = mean(recs);
+            let d = Estimate {
+                mean: e.mean - base.mean,
+                se: (e.se.powi(2) + base.se.powi(2)).sqrt(),
+                n: e.n.min(base.n),
+            };
+            let (lo, hi) = (d.mean - z * d.se, d.mean + z * d.se);
+            let counts = d.n >= MIN_RUNS && lo.is_finite() && hi.is_finite();
+            differs |= counts && (lo > 0.0 || hi < 0.0);
+            same &= counts && lo >= -margin && hi <= margin;
+            parts.push((structure.to_string(), d));
+        }
+        let evidence: Vec<String> = (parts.iter())
+            .map(|(s, d)| {
+                let (m, se) = (scale * d.mean, scale * d.se);
+                format!("`{s}` {m:+.decimals$} ± {se:.decimals$} pp")
+            })
+            .collect();
+        Some(Finding {
+            statement: self.statement.clone(),
+            test: format!(
+                "for each {noun} the difference of the mean errors with its standard error \
+                 √(s.e.₁² + s.e.₂²) (independent data sets), judged at the Bonferroni z = {z:.2} \
+                 of the {} comparisons (family-wise 5 %); **holds** when some difference's ±z \
+                 s.e. interval excludes 0, **does not hold** when every difference's ±z s.e. \
+                 interval lies within ±{} percentage point, otherwise **not resolved** (a \
+                 difference counts only with at least {MIN_RUNS} completed runs on both sides){}",
+                others.len(),
+                trimmed(scale * margin),
+                self.meaning()
+            ),
+            verdict: match (differs, same) {
+                (true, _) => Verdict::Holds,
+                (false, true) => Verdict::DoesNotHold,
+                (false, false) => Verdict::NotResolved,
+            },
+            evidence: evidence.join("; "),
+            parts,
+        })
     }
 
     /// `lower` and `paired-below`: paired differences over the runs both algorithms completed.
