@@ -8,8 +8,9 @@
 //! scaling study ([`crate::scaling::run_with`]: resumable, shardable, CPU time per run). This
 //! module writes its outputs: per ground motion and algorithm the stiffness and damping errors,
 //! θ_val ratios of the Bouc–Wen parameters, the coverage of the 95 % intervals of k and c and
-//! the failures; a figure; and one verdict per algorithm on "the accuracy varies with the
-//! excitation", decided by the test stated in the report.
+//! the failures; a figure; and the verdicts the study file declares (`[[verdicts]]`, test
+//! `differs-from-first`: "the accuracy varies with the excitation", one per algorithm), decided
+//! by [`crate::verdict::Declared::decide_structures`] on the records of each ground motion.
 
 use std::fmt::Write as _;
 use std::path::Path;
@@ -26,14 +27,8 @@ use crate::scaling::structures::{structure_values, StructureValues};
 use crate::scaling::{self, Cell, Options};
 use crate::study::{Job, Study};
 use crate::sweep::write_bytes_atomic;
-use crate::verdict::{bonferroni_z, group_error, ratio, Estimate, Verdict};
-
-/// Equivalence margin of the verdict: two mean stiffness errors are "the same" when their
-/// difference is resolved inside ±1 percentage point.
-pub const SAME_MARGIN: f64 = 0.01;
-
-/// Fewest completed runs per cell for a difference to count in a verdict.
-pub const MIN_RUNS: usize = 5;
+use crate::verdict::declared::Metric;
+use crate::verdict::{group_error, ratio, Declared, Estimate, Finding};
 
 /// Runs the study and writes its outputs. Returns the cells.
 pub fn run(opts: &Options) -> Result<Vec<Cell>> {
@@ -57,16 +52,6 @@ pub struct Row {
     /// Fraction of (run, parameter) pairs of the k's and c's whose 95 % interval holds the truth.
     pub coverage95_kc: f64,
     pub coverage_pairs: usize,
-}
-
-/// The verdict of one algorithm: each ground motion's mean stiffness error against the
-/// control's (the first structure of the study).
-#[derive(Debug, Clone, Serialize)]
-pub struct AlgorithmVerdict {
-    pub algorithm: String,
-    /// (ground motion, difference of mean k error from the control's, with its s.e.).
-    pub differences: Vec<(String, Estimate)>,
-    pub verdict: Verdict,
 }
 
 fn first_element(name: &str, base: &str) -> bool {
@@ -121,81 +106,32 @@ fn row(label: &str, a: Algorithm, recs: &[&RunRecord]) -> Row {
     }
 }
 
-/// Per algorithm: "the mean stiffness error under some ground motion differs from the
-/// control's" — holds when some difference is resolved away from 0 (its ±z s.e. interval
-/// excludes 0, z the Bonferroni value of the comparisons), does not hold when every difference's
-/// ±z s.e. interval lies inside ±[`SAME_MARGIN`], otherwise not resolved. Independent data sets
-/// per ground motion, so the s.e. of a difference is √(s.e.₁² + s.e.₂²).
-pub fn verdicts(study: &Study, rows: &[Row]) -> Vec<AlgorithmVerdict> {
-    let Some(control) = study.sweep.structures.first() else {
-        return Vec::new();
-    };
-    let mut out = Vec::new();
-    for a in &study.sweep.algorithms {
-        let Some(base) = rows
-            .iter()
-            .find(|r| r.structure == control.label && r.algorithm == a.name())
-        else {
-            continue;
-        };
-        let others: Vec<&Row> = rows
-            .iter()
-            .filter(|r| r.algorithm == a.name() && r.structure != control.label)
-            .collect();
-        // Several ground motions are compared with the control at once: each difference is
-        // judged at the Bonferroni z of the family (2.50 for four), so that the statement
-        // "some differ" has a 5 % chance of a false alarm when none does.
-        let z = bonferroni_z(others.len());
-        let mut differences = Vec::new();
-        let mut parts = Vec::new();
-        let mut any_differs = false;
-        for r in others {
-            let d = Estimate {
-                mean: r.k_error.mean - base.k_error.mean,
-                se: (r.k_error.se.powi(2) + base.k_error.se.powi(2)).sqrt(),
-                n: r.k_error.n.min(base.k_error.n),
-            };
-            let (lo, hi) = (d.mean - z * d.se, d.mean + z * d.se);
-            if d.n < MIN_RUNS || !(lo.is_finite() && hi.is_finite()) {
-                // Too few runs for a standard error to decide anything.
-                parts.push(Verdict::NotResolved);
-            } else {
-                if lo > 0.0 || hi < 0.0 {
-                    any_differs = true;
-                }
-                parts.push(if lo >= -SAME_MARGIN && hi <= SAME_MARGIN {
-                    Verdict::Holds
-                } else {
-                    Verdict::NotResolved
-                });
-            }
-            differences.push((r.structure.clone(), d));
-        }
-        let verdict = if any_differs {
-            Verdict::Holds
-        } else if !parts.is_empty() && parts.iter().all(|v| *v == Verdict::Holds) {
-            Verdict::DoesNotHold
-        } else {
-            Verdict::NotResolved
-        };
-        out.push(AlgorithmVerdict {
-            algorithm: a.name().to_string(),
-            differences,
-            verdict,
-        });
-    }
-    out
+/// The study's declared verdicts decided on the records of each ground motion (the first the
+/// control), each with its declaration.
+pub fn verdicts<'a>(
+    study: &'a Study,
+    jobs: &[Job],
+    records: &'a [RunRecord],
+) -> Vec<(&'a Declared, Finding)> {
+    let structures: Vec<(&str, Vec<&RunRecord>)> = (study.sweep.structures.iter().enumerate())
+        .map(|(i, st)| {
+            let runs = jobs
+                .iter()
+                .zip(records)
+                .filter(|(j, _)| j.structure == Some(i));
+            (st.label.as_str(), runs.map(|(_, r)| r).collect())
+        })
+        .collect();
+    (study.verdicts.iter())
+        .filter_map(|d| Some((d, d.decide_structures(&structures, "ground motion")?)))
+        .collect()
 }
 
 fn pct(e: &Estimate) -> String {
-    if e.mean.is_finite() {
-        if e.se.is_finite() {
-            format!("{:.2}% ± {:.2}%", 100.0 * e.mean, 100.0 * e.se)
-        } else {
-            format!("{:.2}%", 100.0 * e.mean)
-        }
-    } else {
-        "–".into()
+    match (e.mean.is_finite(), e.se.is_finite()) {
+        (false, _) => "–".into(),
+        (true, false) => format!("{:.2}%", 100.0 * e.mean),
+        (true, true) => format!("{:.2}% ± {:.2}%", 100.0 * e.mean, 100.0 * e.se),
     }
 }
 
@@ -209,7 +145,13 @@ fn write_outputs(
     let out = &opts.out;
     let values = structure_values(study)?;
     let rows = rows(study, jobs, records);
-    let verdicts = verdicts(study, &rows);
+    let verdicts = verdicts(study, jobs, records);
+    let decided: Vec<serde_json::Value> = (verdicts.iter())
+        .map(|(d, f)| {
+            let a = d.algorithms.join(", ");
+            serde_json::json!({ "algorithm": a, "differences": f.parts, "verdict": f.verdict })
+        })
+        .collect();
     figure(study, &rows, &out.join("errors_by_excitation.svg"))?;
     scaling::write_summary(
         opts,
@@ -217,7 +159,7 @@ fn write_outputs(
         &values,
         serde_json::json!({
             "rows": rows,
-            "verdicts": verdicts,
+            "verdicts": decided,
         }),
     )?;
     let text = report(study, &values, &rows, &verdicts, opts.quick);
@@ -280,7 +222,7 @@ pub fn report(
     study: &Study,
     values: &[StructureValues],
     rows: &[Row],
-    verdicts: &[AlgorithmVerdict],
+    verdicts: &[(&Declared, Finding)],
     quick: bool,
 ) -> String {
     let mut o = String::new();
@@ -300,18 +242,15 @@ pub fn report(
         joined(&study.sweep.particles, ", "),
         study.filter.discretisation.name(),
     );
-    let _ = writeln!(o, "## Beyond the paper: other ground motions\n");
     let _ = writeln!(
         o,
-        "**The paper's remark** (Olivier & Smyth 2016, Section 5): the structure is identified \
-         under El Centro only, and the results \"would most likely vary with the excitation\".\n"
-    );
-    let _ = writeln!(
-        o,
-        "**The ground motions.** Each record is scaled so that the Bouc–Wen element reaches the \
-         same fraction of its saturation (β + γ)^(−1/n) as under the paper's El Centro × 3.0 \
-         (0.65): the structure yields as much under every record, so what differs is the \
-         frequency content and the duration. The first row is the paper's data (the control).\n"
+        "## Beyond the paper: other ground motions\n\n**The paper's remark** (Olivier & Smyth \
+         2016, Section 5): the structure is identified under El Centro only, and the results \
+         \"would most likely vary with the excitation\".\n\n**The ground motions.** Each \
+         record is scaled so that the Bouc–Wen element reaches the same fraction of its \
+         saturation (β + γ)^(−1/n) as under the paper's El Centro × 3.0 (0.65): the structure \
+         yields as much under every record, so what differs is the frequency content and the \
+         duration. The first row is the paper's data (the control).\n"
     );
     compact_header(
         &mut o,
@@ -372,39 +311,27 @@ pub fn report(
         );
     }
     let _ = writeln!(o, "\n![errors](errors_by_excitation.svg)\n");
-    let _ = writeln!(
-        o,
-        "**The verdict.** Statement, per algorithm: *the mean stiffness error under some ground \
-         motion differs from the one under the paper's El Centro*. Test: for each ground motion \
-         the difference of the mean errors with its standard error √(s.e.₁² + s.e.₂²) \
-         (independent data sets), judged at the Bonferroni z = {:.2} of the {} comparisons \
-         (family-wise 5 %); **holds** when some difference's ±z s.e. interval excludes 0, \
-         **does not hold** when every difference's ±z s.e. interval lies within ±{:.0} \
-         percentage point, otherwise **not resolved** (a difference counts only with at least {} \
-         completed runs on both sides).\n",
-        bonferroni_z(study.sweep.structures.len().saturating_sub(1)),
-        study.sweep.structures.len().saturating_sub(1),
-        100.0 * SAME_MARGIN,
-        MIN_RUNS
-    );
-    compact_header(
-        &mut o,
-        &[
-            "algorithm",
-            "differences from the control (k error)",
-            "verdict",
-        ],
-        "lll",
-    );
-    for v in verdicts {
-        let d = joined(
-            v.differences
-                .iter()
-                .map(|(s, e)| format!("`{s}` {:+.2} ± {:.2} pp", 100.0 * e.mean, 100.0 * e.se)),
-            "; ",
+    // One paragraph and table per statement and test (the file declares one, per algorithm).
+    for group in
+        verdicts.chunk_by(|(_, f), (_, g)| (&f.statement, &f.test) == (&g.statement, &g.test))
+    {
+        let (d, first) = &group[0];
+        let _ = writeln!(
+            o,
+            "**The verdict.** Statement, per algorithm: *{}*. Test: {}.\n",
+            first.statement, first.test
         );
-        let _ = writeln!(o, "| {} | {} | **{}** |", v.algorithm, d, v.verdict.label());
+        let k = d
+            .metric
+            .filter(|m| *m == Metric::CError)
+            .map_or("k", |_| "c");
+        let columns = format!("differences from the control ({k} error)");
+        compact_header(&mut o, &["algorithm", &columns, "verdict"], "lll");
+        for (d, f) in group {
+            let a = d.algorithms.join(", ");
+            let _ = writeln!(o, "| {a} | {} | **{}** |", f.evidence, f.verdict.label());
+        }
+        let _ = writeln!(o);
     }
-    let _ = writeln!(o);
     o
 }

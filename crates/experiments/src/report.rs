@@ -324,7 +324,7 @@ pub fn write_report(
     );
     let _ = writeln!(o, "\nWhere a statement does not hold we have not tuned towards it. Known causes of differences: the paper does not name its excitation record, noise realisation, priors' hyper-parameters or Q for displacements (SPEC fixes them, see each record's `config`); forward-Euler discretisation inside the filters biases damping and β (the paper's own explanation). The thresholds for \"good\" (|θ_val/θ_true − 1| < 0.1), \"fair\" (< 0.3), \"accurate\" stiffness (mean error < 5%) and a validation that matches \"very well\" (NRMSE < 0.1) are ours: the paper gives none.\n");
 
-    crate::discretisation::report_section(&mut o, records);
+    crate::discretisation::report_section(&mut o, studies, records);
 
     // Performance
     let _ = writeln!(

@@ -301,6 +301,12 @@ pub fn sweep_jobs(study: &Study) -> Vec<Job> {
 /// Runs the study's sweep (the structures this build can generate), then, unless sharded,
 /// writes the cells, figures and report. Returns the cells.
 pub fn run(opts: &Options) -> Result<Vec<Cell>> {
+    if !load(&opts.config, opts.quick)?.verdicts.is_empty() {
+        bail!(
+            "{}: the scaling study does not decide `[[verdicts]]`; `sysid study` does",
+            opts.config.display()
+        );
+    }
     run_with(opts, &|opts, study, cells, _jobs, _records| {
         write_outputs(opts, study, cells)
     })
@@ -325,13 +331,6 @@ pub fn run_with(opts: &Options, write: &Writer<'_>) -> Result<Vec<Cell>> {
         resume: opts.resume,
     };
     let study = load(&opts.config, opts.quick)?;
-    if !study.verdicts.is_empty() {
-        bail!(
-            "{}: the scaling and excitations studies do not decide `[[verdicts]]`; `sysid study` \
-             does",
-            opts.config.display()
-        );
-    }
     let jobs = sweep_jobs(&study);
     let records_dir = opts.out.join("records");
     let cpu_of = |jobs: &[Job]| -> Vec<Option<f64>> {

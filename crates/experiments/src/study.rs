@@ -310,22 +310,18 @@ impl Study {
             }
         }
         if !self.verdicts.is_empty()
-            && (self.sweep.particles.len() > 1
-                || self.sweep.resampling.len() > 1
-                || self.discretisations().len() > 1)
+            && (self.sweep.particles.len() > 1 || self.sweep.resampling.len() > 1)
         {
             bail!(
                 "table `verdicts`: a verdict compares the algorithms run by run, so the sweep may \
-                 have one particle count, one resampling scheme and one discretisation; it has \
-                 {}, {} and {}",
+                 have one particle count and one resampling scheme; it has {} and {}",
                 self.sweep.particles.len(),
-                self.sweep.resampling.len(),
-                self.discretisations().len()
+                self.sweep.resampling.len()
             );
         }
         let algorithms: Vec<&str> = self.sweep.algorithms.iter().map(|a| a.name()).collect();
         for v in &self.verdicts {
-            v.check(&algorithms)?;
+            v.check(&algorithms, &self.discretisations())?;
         }
         let mut labels = std::collections::BTreeSet::new();
         for (i, st) in self.sweep.structures.iter().enumerate() {

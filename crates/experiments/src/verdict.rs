@@ -12,6 +12,7 @@
 
 use std::collections::BTreeMap;
 
+use models::filtering::Discretisation;
 use serde::Serialize;
 
 use crate::markdown::{cell, header, row};
@@ -217,6 +218,11 @@ pub fn validation_nrmse(r: &RunRecord) -> f64 {
         .map_or(f64::NAN, |v| v.states.mean_nrmse())
 }
 
+/// The discretisation a record was computed with (its configuration's `filter.discretisation`).
+pub fn scheme(r: &RunRecord) -> Option<Discretisation> {
+    serde_json::from_value(r.config.pointer("/filter/discretisation")?.clone()).ok()
+}
+
 /// Largest number of distinct values of a sampled static parameter at the end of one run.
 pub fn max_distinct(r: &RunRecord) -> f64 {
     r.distinct_sampled
@@ -235,6 +241,9 @@ pub struct Finding {
     pub test: String,
     pub verdict: Verdict,
     pub evidence: String,
+    /// The estimates behind the verdict by label (`differs-from-first`: each difference).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub parts: Vec<(String, Estimate)>,
 }
 
 /// Writes findings as a Markdown table under the column names `columns` (statement, verdict,

@@ -1,9 +1,10 @@
-//! The discretisation study's machinery: the sweep's discretisation axis, the decimated data and
-//! the take-over of records only for the same job (same fingerprint).
+//! The discretisation study's machinery: the sweep's discretisation axis, the decimated data,
+//! the take-over of records only for the same job (same fingerprint) and the statements the
+//! study files declare.
 
-use experiments::discretisation::scheme;
 use experiments::engine::Reuse;
 use experiments::study::Study;
+use experiments::verdict::scheme;
 use models::filtering::Discretisation;
 
 fn study(extra_data: &str, schemes: &str) -> Study {
@@ -121,4 +122,25 @@ fn the_symplectic_regression_file_checks_the_symplectic_scheme() {
         .iter()
         .all(|j| file.study.settings(j).discretisation == Discretisation::Symplectic));
     assert_eq!(file.thresholds.len(), 3);
+}
+
+#[test]
+fn the_study_files_declare_the_section_statements() {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../experiments");
+    let at_200 = Study::load(&dir.join("discretisation.toml")).unwrap();
+    let at_100 = Study::load(&dir.join("discretisation-100hz.toml")).unwrap();
+    // Five per algorithm and the two goals; at 100 Hz two more per algorithm against 200 Hz.
+    assert_eq!(at_200.verdicts.len(), 17);
+    assert_eq!(at_100.verdicts.len(), 23);
+    let against: Vec<_> = at_100
+        .verdicts
+        .iter()
+        .filter_map(|v| v.against.as_deref())
+        .collect();
+    assert_eq!(against, ["discretisation"; 6]);
+    assert!(at_200.verdicts.iter().all(|v| v.against.is_none()));
+    // The dt·k/c band: half to 1.5 times dt·32 at each rate.
+    let band = |s: &Study| s.verdicts[1].band.unwrap();
+    assert_eq!(band(&at_200), [0.08, 0.24]);
+    assert_eq!(band(&at_100), [0.16, 0.48]);
 }

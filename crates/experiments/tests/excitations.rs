@@ -1,17 +1,17 @@
 //! The excitations study: the `excitation` and `scale` fields of a structure (parsing,
 //! refusals, the data configuration they make), the committed `experiments/excitations.toml`
-//! (every record yields the paper's structure as much as the paper's El Centro), a small study
-//! end to end, and the report's verdict on constructed rows where it is known.
+//! (every record yields the paper's structure as much as the paper's El Centro, and its
+//! verdicts are declared), and a small study end to end. The verdict's test on constructed
+//! structures is in `tests/verdict.rs`.
 
 use std::path::{Path, PathBuf};
 
-use experiments::excitations::{self, Row};
+use experiments::excitations;
 use experiments::figures::validate_svg;
 use experiments::scaling::structures::structure_values;
 use experiments::scaling::Options;
 use experiments::study::Study;
 use experiments::sweep::Shard;
-use experiments::verdict::{Estimate, Verdict};
 use models::dataset::ExcitationSource;
 
 fn temp_dir(tag: &str) -> PathBuf {
@@ -40,6 +40,20 @@ particles = [30]
 trace_every = 0
 loop_every = 0
 validate = false
+
+[[verdicts]]
+statement = "the stiffness error varies"
+test = "differs-from-first"
+metric = "k-error"
+algorithms = ["mln-rbpf"]
+threshold = 0.01
+
+[[verdicts]]
+statement = "the stiffness error varies"
+test = "differs-from-first"
+metric = "k-error"
+algorithms = ["mpf-ekf2"]
+threshold = 0.01
 
 [[sweep.structures]]
 label = "control"
@@ -111,6 +125,8 @@ fn the_committed_study_yields_every_record_like_the_paper() {
     let study = Study::load(&workspace().join("experiments/excitations.toml")).unwrap();
     assert_eq!(study.data.preset, "paper-3dof");
     assert!(study.sweep.runs >= 20);
+    assert_eq!(study.verdicts.len(), 3);
+    assert!(study.verdicts.iter().all(|v| v.threshold == Some(0.01)));
     let values = structure_values(&study).unwrap();
     assert_eq!(values.len(), 5);
     let control = values[0].yielding[0].1;
@@ -148,50 +164,32 @@ fn small_study_end_to_end() {
     let report = std::fs::read_to_string(out.join("REPORT.md")).unwrap();
     assert!(report.contains("## Beyond the paper: other ground motions"));
     assert!(report.contains("loma-prieta-1989"));
-    // Two runs per cell: too few for a verdict.
-    assert!(report.contains("| **not resolved** |"), "{report}");
-    assert!(!report.contains("| **holds** |") && !report.contains("| **does not hold** |"));
+    // Two runs per cell: too few for a verdict; one paragraph for the statement, a row for
+    // each algorithm.
+    assert_eq!(
+        report.matches("| **not resolved** |").count(),
+        2,
+        "{report}"
+    );
+    assert_eq!(
+        report
+            .matches("Statement, per algorithm: *the stiffness error varies*")
+            .count(),
+        1
+    );
+    assert!(
+        report.contains("Bonferroni z = 1.96 of the 1 comparisons"),
+        "{report}"
+    );
     let summary: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
     assert_eq!(summary["rows"].as_array().unwrap().len(), 4);
-    std::fs::remove_dir_all(&dir).unwrap();
-}
-
-fn row(structure: &str, mean: f64, se: f64, n: usize) -> Row {
-    let e = Estimate { mean, se, n };
-    Row {
-        structure: structure.into(),
-        algorithm: "mln-rbpf".into(),
-        runs: n,
-        failed: 0,
-        k_error: e,
-        c_error: e,
-        beta_ratio: 1.0,
-        gamma_ratio: 1.0,
-        n_ratio: 1.0,
-        coverage95_kc: 0.9,
-        coverage_pairs: 6 * n,
-    }
-}
-
-#[test]
-fn verdicts_on_constructed_rows() {
-    let dir = temp_dir("verdict");
-    let text = SMALL.replace(
-        "algorithms = [\"mln-rbpf\", \"mpf-ekf2\"]",
-        "algorithms = [\"mln-rbpf\"]",
+    let verdict = &summary["verdicts"][1];
+    assert_eq!(
+        (&verdict["algorithm"], &verdict["verdict"]),
+        (&"mpf-ekf2".into(), &"NotResolved".into())
     );
-    let study = Study::load(&write_study(&dir, &text)).unwrap();
-    let decide = |other: Row| {
-        excitations::verdicts(&study, &[row("control", 0.04, 0.002, 20), other])[0].verdict
-    };
-    // 3 points apart with s.e. 0.3 points: resolved apart.
-    assert_eq!(decide(row("loma", 0.07, 0.002, 20)), Verdict::Holds);
-    // 0.1 point apart, resolved within ±1 point: the same.
-    assert_eq!(decide(row("loma", 0.041, 0.002, 20)), Verdict::DoesNotHold);
-    // 1 point apart with s.e. 1 point: neither.
-    assert_eq!(decide(row("loma", 0.05, 0.01, 20)), Verdict::NotResolved);
-    // Far apart but only 3 runs: no verdict.
-    assert_eq!(decide(row("loma", 0.20, 0.002, 3)), Verdict::NotResolved);
+    assert_eq!(verdict["differences"][0][0], "loma");
+    assert_eq!(verdict["differences"][0][1]["n"], 2);
     std::fs::remove_dir_all(&dir).unwrap();
 }

@@ -241,6 +241,7 @@ fn quick_reproduction_draws_every_figure_and_the_report() {
         "What matches",
         "Provenance",
         "Beyond the paper: discretisation",
+        "### 100 Hz against 200 Hz",
     ] {
         assert!(report.contains(needle), "REPORT.md lacks {needle}");
     }

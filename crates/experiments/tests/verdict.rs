@@ -276,3 +276,268 @@ threshold = 0.07
     );
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+fn declared(text: &str) -> Declared {
+    toml::from_str(text).expect("parses")
+}
+
+#[test]
+fn a_declaration_needs_its_fields_and_refuses_others() {
+    use models::filtering::Discretisation::{Euler, Symplectic};
+    const SWEEP: [&str; 3] = ["mln-rbpf", "storvik", "mpf-ekf2"];
+    let below =
+        "test = \"below\"\nmetric = \"k-error\"\nalgorithms = [\"mpf-ekf2\"]\nthreshold = 0.05";
+    declared(&format!("statement = \"s\"\n{below}"))
+        .check(&SWEEP, &[Euler])
+        .unwrap();
+    let cases = [
+        ("test = \"below\"\nmetric = \"k-error\"\nalgorithms = [\"mpf-ekf2\"]", "needs field `threshold`"),
+        ("test = \"within\"\nmetric = \"k-error\"\nalgorithms = [\"mpf-ekf2\"]\nthreshold = 0.1\nband = [0.1, 0.3]", "field `threshold` is not used"),
+        ("test = \"lower\"\nmetric = \"k-error\"\nalgorithms = [\"mpf-ekf2\"]", "needs field `than`"),
+        ("test = \"lower\"\nmetric = \"k-error\"\nalgorithms = [\"mpf-ekf2\"]\nthan = [\"bootstrap\"]", "`bootstrap` is not one of the sweep's"),
+        ("test = \"lower\"\nmetric = \"k-error\"\nalgorithms = [\"mpf-ekf2\"]\nthan = [\"mpf-ekf2\"]", "in both `algorithms` and `than`"),
+        ("test = \"above\"\nmetric = \"ratio\"\nalgorithms = [\"mpf-ekf2\"]\nthreshold = 1.0", "needs field `params`"),
+        ("test = \"above\"\nmetric = \"k-error\"\nparams = [\"k1\"]\nalgorithms = [\"mpf-ekf2\"]\nthreshold = 1.0", "`params` is used by metric `ratio` only"),
+        ("test = \"within\"\nmetric = \"c-error\"\nalgorithms = [\"mpf-ekf2\"]\nband = [0.3, 0.1]", "lo < hi"),
+        ("test = \"below\"\nmetric = \"k-error\"\nalgorithms = []\nthreshold = 0.05", "`algorithms` is empty"),
+        // The arms of a sweep and the comparison of structures.
+        (&format!("{below}\nscheme = \"symplectic\""), "discretisation `symplectic` is not one of the sweep's"),
+        (&format!("{below}\nschemes = [\"euler\", \"euler\"]"), "field `schemes` names two different discretisations"),
+        (&format!("{below}\nschemes = [\"euler\", \"symplectic\"]\nagainst = \"other\""), "without `scheme` or `against`"),
+        ("test = \"lower\"\nmetric = \"k-error\"\nalgorithms = [\"mpf-ekf2\"]\nthan = [\"storvik\"]\nscheme = \"euler\"", "used by the tests below, above, within and outside only"),
+        ("test = \"differs-from-first\"\nmetric = \"k-error\"\nalgorithms = [\"mpf-ekf2\", \"storvik\"]\nthreshold = 0.01", "one algorithm"),
+        ("test = \"differs-from-first\"\nmetric = \"online-nrmse\"\nalgorithms = [\"mpf-ekf2\"]\nthreshold = 0.01", "metric `k-error` or `c-error`"),
+        ("test = \"differs-from-first\"\nmetric = \"k-error\"\nalgorithms = [\"mpf-ekf2\"]", "needs field `threshold`"),
+    ];
+    for (body, message) in cases {
+        let d = declared(&format!("statement = \"s\"\n{body}"));
+        let e = d.check(&SWEEP, &[Euler]).expect_err(body).to_string();
+        assert!(e.contains(message), "{body}: `{e}` lacks `{message}`");
+    }
+    // A sweep of two discretisations: every verdict names the runs it is about.
+    let two = [Euler, Symplectic];
+    let e = declared(&format!("statement = \"s\"\n{below}"))
+        .check(&SWEEP, &two)
+        .unwrap_err();
+    assert!(e.to_string().contains("several discretisations"), "{e}");
+    declared(&format!(
+        "statement = \"s\"\n{below}\nscheme = \"symplectic\""
+    ))
+    .check(&SWEEP, &two)
+    .unwrap();
+    let unknown: Result<Declared, _> = toml::from_str(
+        "statement = \"s\"\ntest = \"below\"\nmetric = \"k-errors\"\nalgorithms = [\"mpf-ekf2\"]\nthreshold = 0.05",
+    );
+    assert!(unknown.unwrap_err().to_string().contains("k-errors"));
+}
+
+/// A run of `study` with the discretisation `scheme` at filter step `dt`: dampings
+/// `c` × θ_true, β `beta` × θ_true, online state NRMSE `nrmse`.
+fn arm_record(study: &str, scheme: &str, dt: f64, run: u64, c: f64, beta: f64) -> RunRecord {
+    let mut r = record("mpf-ekf2", run, ratios(1.0, [c; 3], beta), 0.05);
+    r.experiment = study.into();
+    r.config["filter"]["discretisation"] = scheme.into();
+    r.config["spec"] = serde_json::json!({ "dt": dt });
+    r
+}
+
+/// `RUNS` runs of each scheme at 200 Hz: the Euler damping ratio `shift` above the symplectic
+/// one, a symplectic ratio of 1 + 0.01 w; `alt` adds ± `alt` to the Euler ratio in alternate
+/// runs (a paired spread whose mean is exactly `shift`).
+fn schemes(shift: f64, alt: f64) -> Vec<RunRecord> {
+    let mut out = Vec::new();
+    for run in 0..RUNS {
+        let c = 1.0 + 0.01 * wiggle(run, 1);
+        let sign = if run % 2 == 0 { 1.0 } else { -1.0 };
+        out.push(arm_record("s", "symplectic", 0.005, run, c, 1.8));
+        out.push(arm_record(
+            "s",
+            "euler",
+            0.005,
+            run,
+            c + shift + alt * sign,
+            1.9,
+        ));
+    }
+    out
+}
+
+/// The paired Euler − symplectic band of the discretisation study, the symplectic damping's
+/// band, and the paired difference against another study: each with a verdict known by
+/// construction, and the short words of a test on arms.
+#[test]
+fn tests_on_the_arms_of_a_sweep() {
+    let band = declared(
+        "statement = \"the Euler damping exceeds the symplectic one by about dt·k/c\"
+test = \"within\"
+metric = \"c-ratio\"
+algorithms = [\"mpf-ekf2\"]
+schemes = [\"euler\", \"symplectic\"]
+band = [0.08, 0.24]
+meaning = \"half to 1.5 times dt·k/c\"",
+    );
+    let decide = |recs: &[RunRecord]| {
+        let recs: Vec<&RunRecord> = recs.iter().collect();
+        band.decide(&recs, &[]).unwrap()
+    };
+    // 0.16 apart, paired spread 0: inside the band.
+    let f = decide(&schemes(0.16, 0.0));
+    assert_eq!(f.verdict, Verdict::Holds, "{}", f.evidence);
+    assert_eq!(
+        f.test,
+        "paired difference Euler − symplectic of mean c θ_val/θ_true within [0.08, 0.24] (half to 1.5 times dt·k/c)"
+    );
+    assert!(
+        f.evidence.starts_with("0.160 ± 0.000 (s.e., n = 20)"),
+        "{}",
+        f.evidence
+    );
+    // 0.5 apart: entirely outside.
+    assert_eq!(decide(&schemes(0.5, 0.0)).verdict, Verdict::DoesNotHold);
+    // 0.24 apart, ± 0.05 run to run (s.e. ≈ 0.011): straddles the edge.
+    assert_eq!(decide(&schemes(0.24, 0.05)).verdict, Verdict::NotResolved);
+    // Symplectic runs of the even run indices only: the pairs are the runs both arms completed.
+    let halves: Vec<RunRecord> = schemes(0.16, 0.0)
+        .into_iter()
+        .filter(|r| r.run % 2 == 0 || r.config["filter"]["discretisation"] == "euler")
+        .collect();
+    let f = decide(&halves);
+    assert_eq!(f.evidence, "0.160 ± 0.000 (s.e., n = 10)");
+
+    // One scheme's runs: the symplectic damping within 5% (1 ± 0.003), β's error above 0.
+    let unbiased = declared(
+        "statement = \"s\"\ntest = \"within\"\nmetric = \"c-ratio\"\nalgorithms = [\"mpf-ekf2\"]\nscheme = \"symplectic\"\nband = [0.95, 1.05]",
+    );
+    let recs = schemes(0.5, 0.0);
+    let refs: Vec<&RunRecord> = recs.iter().collect();
+    let f = unbiased.decide(&refs, &[]).unwrap();
+    assert_eq!(f.verdict, Verdict::Holds);
+    assert_eq!(
+        f.test,
+        "mean over runs of the symplectic mean c θ_val/θ_true within [0.95, 1.05]"
+    );
+    let beta = declared(
+        "statement = \"s\"\ntest = \"above\"\nmetric = \"beta-error\"\nalgorithms = [\"mpf-ekf2\"]\nschemes = [\"euler\", \"symplectic\"]\nthreshold = 0",
+    );
+    let f = beta.decide(&refs, &[]).unwrap();
+    // |1.9 − 1| − |1.8 − 1| = 0.1 in every run.
+    assert_eq!(
+        (f.verdict, f.evidence.as_str()),
+        (Verdict::Holds, "0.100 ± 0.000 (s.e., n = 20)")
+    );
+
+    // Against another study, run by run: the 100 Hz Euler ratio 0.16 above the 200 Hz one.
+    let against = declared(
+        "statement = \"s\"\ntest = \"within\"\nmetric = \"c-ratio\"\nalgorithms = [\"mpf-ekf2\"]\nscheme = \"euler\"\nagainst = \"hi\"\nband = [-0.05, 0.05]",
+    );
+    let (hi, lo): (Vec<RunRecord>, Vec<RunRecord>) = (0..RUNS)
+        .map(|run| {
+            let c = 1.2 + 0.02 * wiggle(run, 2);
+            (
+                arm_record("hi", "euler", 0.005, run, c, 1.8),
+                arm_record("lo", "euler", 0.01, run, c + 0.16, 1.8),
+            )
+        })
+        .unzip();
+    let (hi, lo): (Vec<&RunRecord>, Vec<&RunRecord>) = (hi.iter().collect(), lo.iter().collect());
+    let f = against.decide(&lo, &hi).unwrap();
+    assert_eq!(f.verdict, Verdict::DoesNotHold, "{}", f.evidence);
+    assert_eq!(
+        f.test,
+        "paired difference (100 Hz − 200 Hz, same run) of the Euler mean c θ_val/θ_true within [−0.05, 0.05]"
+    );
+    // Without the other study's runs the statement is left out.
+    assert!(against.decide(&lo, &[]).is_none());
+    assert!(against.decide(&lo, &lo).is_none());
+}
+
+/// Runs of one structure: stiffness ratios `k` + `amplitude` × w (errors k − 1 where k > 1).
+fn structure(n: u64, k: f64, amplitude: f64, seed: u64) -> Vec<RunRecord> {
+    (0..n)
+        .map(|run| {
+            let ratio = k + amplitude * wiggle(run, seed);
+            record("mln-rbpf", run, ratios(ratio, [1.2; 3], 1.5), 0.1)
+        })
+        .collect()
+}
+
+/// The excitations study's test on constructed structures whose answer is known.
+#[test]
+fn differs_from_first_on_constructed_structures() {
+    let d = declared(
+        "statement = \"the mean stiffness error differs\"\ntest = \"differs-from-first\"\nmetric = \"k-error\"\nalgorithms = [\"mln-rbpf\"]\nthreshold = 0.01",
+    );
+    let decide = |other: Vec<RunRecord>| {
+        let control = structure(RUNS, 1.04, 0.02, 1);
+        let groups = [
+            ("control", control.iter().collect::<Vec<_>>()),
+            ("other", other.iter().collect()),
+        ];
+        d.decide_structures(&groups, "ground motion").unwrap()
+    };
+    // 3 points apart with s.e. 0.2 points: resolved apart.
+    let f = decide(structure(RUNS, 1.07, 0.02, 2));
+    assert_eq!(f.verdict, Verdict::Holds, "{}", f.evidence);
+    assert_eq!(f.parts.len(), 1);
+    assert!((f.parts[0].1.mean - 0.03).abs() < 0.002, "{:?}", f.parts);
+    let d0 = f.parts[0].1;
+    let shown = format!("`other` {:+.2} ± {:.2} pp", 100.0 * d0.mean, 100.0 * d0.se);
+    assert_eq!(f.evidence, shown);
+    assert!(
+        f.test.contains("Bonferroni z = 1.96 of the 1 comparisons"),
+        "{}",
+        f.test
+    );
+    assert!(f.test.contains("within ±1 percentage point"), "{}", f.test);
+    // 0.1 point apart with s.e. 0.2 points (the same spread in both): within ±1 point.
+    assert_eq!(
+        decide(structure(RUNS, 1.041, 0.02, 1)).verdict,
+        Verdict::DoesNotHold
+    );
+    // 1 point apart with s.e. 1.2 points (errors 0.10 and 0 in alternate runs): neither.
+    let alternating = (0..RUNS)
+        .map(|run| {
+            record(
+                "mln-rbpf",
+                run,
+                ratios(1.0 + 0.1 * (run % 2) as f64, [1.2; 3], 1.5),
+                0.1,
+            )
+        })
+        .collect();
+    let f = decide(alternating);
+    assert_eq!(f.verdict, Verdict::NotResolved, "{}", f.evidence);
+    // Far apart but only 3 runs: no verdict.
+    assert_eq!(
+        decide(structure(3, 1.20, 0.004, 2)).verdict,
+        Verdict::NotResolved
+    );
+    // Four structures against the control: the Bonferroni z of four comparisons.
+    let (c, o) = (
+        structure(RUNS, 1.04, 0.02, 1),
+        structure(RUNS, 1.041, 0.02, 1),
+    );
+    let four: Vec<(&str, Vec<&RunRecord>)> = ["control", "a", "b", "c", "e"]
+        .iter()
+        .enumerate()
+        .map(|(i, l)| (*l, if i == 0 { &c } else { &o }.iter().collect()))
+        .collect();
+    let f = d.decide_structures(&four, "ground motion").unwrap();
+    assert!(
+        f.test.contains("z = 2.50 of the 4 comparisons"),
+        "{}",
+        f.test
+    );
+    assert_eq!(f.verdict, Verdict::DoesNotHold);
+    // Not the test of `decide`, and nothing without runs of the algorithm.
+    assert!(d.decide(&c.iter().collect::<Vec<_>>(), &[]).is_none());
+    let storvik = structure(RUNS, 1.04, 0.004, 1)
+        .into_iter()
+        .map(|mut r| {
+            r.algorithm = "storvik".into();
+            r
+        })
+        .collect::<Vec<_>>();
+    let none = [("control", storvik.iter().collect::<Vec<_>>())];
+    assert!(d.decide_structures(&none, "ground motion").is_none());
+}
