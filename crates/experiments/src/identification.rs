@@ -122,7 +122,8 @@ loop_every = {loops}
 marginal_prior = {{ kind = "moment_matched" }}
 # Rejuvenation of the sampled Bouc–Wen exponents n (MLN-RBPF, Storvik, MPF-EKF2): after every
 # resampling the Liu–West kernel with discount δ in [1/3, 1] moves them; absent (or 1): no move.
-# Without --config the MPF-EKF2 takes {mpf_rejuvenation} and the others none (docs/calibration.md).
+# Without --config the MPF-EKF2 takes {mpf_rejuvenation} (not with per-particle prior means) and the
+# others none (docs/calibration.md).
 # rejuvenation = {mpf_rejuvenation}
 
 # Point-mass priors: parameter name = value (k1..kN, c1..cN, alpha with the storey+mass damping
@@ -465,10 +466,6 @@ pub fn settle(
     // What the sensors cannot see, and the size of the building, decide the MPF-EKF2's default
     // prior Gaussian (`FilterSettings::recommended_for`).
     if algorithm == Algorithm::MpfEkf2 {
-        // Without a config (and without --rejuvenation) the MPF-EKF2 moves its exponents n.
-        if config.is_none() && settings.rejuvenation.is_none() {
-            settings.rejuvenation = FilterSettings::recommended_for(algorithm, 1, &[]).rejuvenation;
-        }
         // Settings first, so that their refusal names the key as it does in every other run.
         crate::limits::check_filter_settings(&settings)?;
         // A data set the spec refuses is refused by the run itself, with its own message.
@@ -476,6 +473,12 @@ pub fn settle(
             return Ok(settings);
         };
         let (storeys, unmeasured) = (spec.n_storeys(), unmeasured_storeys(&spec));
+        // Without a config (and without --rejuvenation) the MPF-EKF2 with the shared prior
+        // Gaussian moves its exponents n ([`FilterSettings::recommended_for`]).
+        if config.is_none() && settings.rejuvenation.is_none() {
+            settings.rejuvenation =
+                FilterSettings::recommended_for(algorithm, storeys, &unmeasured).rejuvenation;
+        }
         if let Some(reason) = per_particle_reason(storeys, &unmeasured) {
             if config.is_none() {
                 settings.marginal_prior =

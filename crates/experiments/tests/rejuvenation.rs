@@ -339,8 +339,8 @@ trace_every = 0
     }
 }
 
-/// Without a config `sysid filter` gives the MPF-EKF2 the recommended rejuvenation and the other
-/// filters none; `--rejuvenation 1` (no move) and a config without the key keep the MPF-EKF2
+/// Without a config `sysid filter` gives the MPF-EKF2 with the shared prior Gaussian the
+/// recommended rejuvenation and the other filters none; `--rejuvenation 1` (no move) and a config without the key keep the MPF-EKF2
 /// without one.
 #[test]
 fn the_mpf_ekf2_rejuvenates_by_default() {
@@ -379,4 +379,36 @@ fn the_mpf_ekf2_rejuvenates_by_default() {
     );
     let c = config.to_str().unwrap();
     assert_eq!(rejuvenation("mpf-ekf2", &["--config", c]), None);
+    // On 10 storeys the MPF-EKF2's prior means are per particle and it does not rejuvenate.
+    let mut tall = DatasetConfig::from_preset("building-chain", 1).unwrap();
+    tall.storeys = Some(10);
+    tall.duration = Some(0.1);
+    let tall_dir = dir.join("tall");
+    generate(&tall).unwrap().write_dir(&tall_dir).unwrap();
+    let out = dir.join("tall.json");
+    let o = Command::new(env!("CARGO_BIN_EXE_sysid"))
+        .args([
+            "filter",
+            "--algorithm",
+            "mpf-ekf2",
+            "--particles",
+            "20",
+            "--data",
+        ])
+        .arg(&tall_dir)
+        .arg("--out")
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let r: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
+    assert_eq!(
+        r["config"]["filter"]["rejuvenation"],
+        serde_json::Value::Null
+    );
+    assert_eq!(
+        r["config"]["filter"]["marginal_prior"]["kind"],
+        "per_particle"
+    );
 }

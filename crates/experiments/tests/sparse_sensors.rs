@@ -53,16 +53,17 @@ fn only_the_mpf_ekf2_on_a_sparse_layout_or_a_tall_building_leaves_the_recommende
     let recommended = FilterSettings::recommended();
     assert_eq!(recommended.marginal_prior, MarginalPrior::MomentMatched);
     assert_eq!(recommended.rejuvenation, None);
-    // The MPF-EKF2 rejuvenates its exponents n on every building; the others never.
+    // The MPF-EKF2 rejuvenates its exponents n with the shared prior Gaussian; the others never.
     let mpf = FilterSettings {
         rejuvenation: Some(MPF_REJUVENATION),
         ..recommended.clone()
     };
+    // Per-particle prior means, without the rejuvenation.
     let per_particle = FilterSettings {
         marginal_prior: MarginalPrior::PerParticle {
             rel_sd: SPARSE_REL_SD,
         },
-        ..mpf.clone()
+        ..recommended.clone()
     };
     let below = PER_PARTICLE_MIN_STOREYS - 1;
     for algorithm in Algorithm::ALL {
