@@ -12,7 +12,7 @@
 //! - RK4: one classical RK4 step of the continuous equations (`ü_g` linear inside the step, as
 //!   `crate::integrate::simulate_rk4`), then the same additive noise.
 //!
-//! With `substeps = M > 1` ([`ChainSpec::substeps`]) one transition between two samples is `M`
+//! With `substeps = M > 1` ([`ChainSpecOf::substeps`]) one transition between two samples is `M`
 //! of these steps with `dt/M` on the interpolated `ü_g`, each with its own draws
 //! (`noise_dim = M (2N + E)`), and the measurement at sample k reads the grid at `kM`.
 

@@ -540,7 +540,7 @@ impl<L: HysteresisLaw> ConditionallyQuadratic for MpfChainOf<L> {
         &self.observation_hessians
     }
 
-    /// [`ChainSpec::substeps`]: the model's grid is `dt/substeps`.
+    /// [`ChainSpecOf::substeps`]: the model's grid is `dt/substeps`.
     fn substeps(&self) -> usize {
         self.core.substeps
     }
