@@ -54,6 +54,18 @@ pub enum LawError {
     },
 }
 
+/// What a law's element record and prior are: small values, shared between threads, written
+/// to and read from JSON.
+pub trait LawData:
+    std::fmt::Debug + Clone + Copy + PartialEq + Send + Sync + Serialize + DeserializeOwned
+{
+}
+
+impl<T> LawData for T where
+    T: std::fmt::Debug + Clone + Copy + PartialEq + Send + Sync + Serialize + DeserializeOwned
+{
+}
+
 /// A hysteresis law of one element, written so that the filter partitions can see which
 /// parameters enter linearly:
 ///
@@ -89,24 +101,10 @@ pub trait HysteresisLaw:
 
     /// One element's parameter record (its 0-based storey and its parameter values), as the
     /// truth simulator holds it; its JSON form is the record's serde form.
-    type Element: std::fmt::Debug
-        + Clone
-        + Copy
-        + PartialEq
-        + Send
-        + Sync
-        + Serialize
-        + DeserializeOwned;
+    type Element: LawData;
     /// The prior of one element's parameters (its 0-based storey and the distributions); its
     /// JSON form is that of a filter configuration's `prior.elements` entries.
-    type Prior: std::fmt::Debug
-        + Clone
-        + Copy
-        + PartialEq
-        + Send
-        + Sync
-        + Serialize
-        + DeserializeOwned;
+    type Prior: LawData;
 
     /// `g[0] = g₀`, `g[1 + i] = g_i` (`g.len() == 1 + NLIN`).
     fn basis<T: Real>(&self, dv: T, r: T, phi: &[T], g: &mut [T]);
