@@ -454,6 +454,8 @@ fn identify(
                 )))
             }
         },
+        // Set through `config`/`config_json` (`rejuvenation = δ`); the default is `settle`'s.
+        rejuvenation: None,
         fix: match &fix {
             Some(f) => {
                 let text: Vec<String> = f.iter().map(|(k, v)| format!("{k}={v:e}")).collect();

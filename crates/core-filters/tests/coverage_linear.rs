@@ -74,6 +74,7 @@ fn coverage(model: &Linked, filter: &mut dyn Filter, name: &str) -> ([usize; 3],
     let config = SmcConfig {
         particles: PARTICLES,
         resampling: ResamplePolicy::default(),
+        rejuvenation: None,
     };
     for r in 0..REPLICATES {
         let (z, ys, (m, s)) = replicate(model, r);

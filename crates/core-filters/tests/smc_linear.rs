@@ -25,6 +25,7 @@ fn config(np: usize) -> SmcConfig {
     SmcConfig {
         particles: np,
         resampling: ResamplePolicy::default(),
+        rejuvenation: None,
     }
 }
 
@@ -122,6 +123,7 @@ fn lanes_equal_scalar<F: Filter>(make: impl Fn(bool) -> F, ys: &[f64], ny: usize
                     ess_threshold: threshold,
                     ..ResamplePolicy::default()
                 },
+                rejuvenation: None,
             };
             let mut traces = Vec::new();
             for lanes in [false, true] {

@@ -22,6 +22,7 @@ fn config(np: usize) -> SmcConfig {
     SmcConfig {
         particles: np,
         resampling: ResamplePolicy::default(),
+        rejuvenation: None,
     }
 }
 

@@ -77,6 +77,7 @@ fn allocations(filter: &mut dyn Filter, ys: &[f64], ny: usize, threshold: Option
                 scheme,
                 ess_threshold: threshold,
             },
+            rejuvenation: None,
         };
         let mut arm = Arm(0);
         let s = run(filter, &cfg, ys, ny, &mut stream(1, 0, "alloc"), &mut arm);

@@ -362,6 +362,8 @@ pub struct Overrides {
     pub discretisation: Option<models::filtering::Discretisation>,
     pub substeps: Option<crate::settings::Substeps>,
     pub storvik_update: Option<StorvikUpdate>,
+    /// Liu–West discount of the rejuvenation move.
+    pub rejuvenation: Option<f64>,
     /// Fixed parameters, added to the settings' own.
     pub fix: BTreeMap<String, f64>,
 }
@@ -377,6 +379,9 @@ impl Overrides {
         }
         if self.ess_threshold.is_some() {
             settings.ess_threshold = self.ess_threshold;
+        }
+        if self.rejuvenation.is_some() {
+            settings.rejuvenation = self.rejuvenation;
         }
         if let Some(d) = self.discretisation {
             settings.discretisation = d;
@@ -406,16 +411,13 @@ fn request_settings(req: &FilterRequest) -> Result<FilterSettings> {
         discretisation: req.discretisation,
         substeps: req.substeps,
         storvik_update: req.storvik_update,
+        rejuvenation: req.rejuvenation,
         fix: match &req.fix {
             Some(f) => parse_fix(f)?,
             None => BTreeMap::new(),
         },
     };
-    let mut settings = overrides.apply(settings);
-    if req.rejuvenation.is_some() {
-        settings.rejuvenation = req.rejuvenation;
-    }
-    Ok(settings)
+    Ok(overrides.apply(settings))
 }
 
 /// A run to settle ([`settle`]): its algorithm, its data set (and `measured.csv` path), the

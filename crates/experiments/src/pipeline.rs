@@ -15,7 +15,7 @@ use core_filters::smc::bootstrap::BootstrapPf;
 use core_filters::smc::mlnrbpf::MlnRbpf;
 use core_filters::smc::mpf::MpfEkf2;
 use core_filters::smc::storvik::Storvik;
-use core_filters::smc::{run_with_rejuvenation, Filter, LiuWest, SmcConfig};
+use core_filters::smc::{run, Filter, SmcConfig};
 use models::dataset::LoadedDataset;
 use models::filtering::{AugmentedChain, ChainPrior, ChainSpec, MlnChain, MpfChain, RmsLevels};
 use models::integrate::{simulate_adaptive, Tolerance};
@@ -452,16 +452,13 @@ struct Member<'a> {
 }
 
 /// Runs filter `member.index` of a pool (0: the only filter of an unpooled run, on the stream
-/// `filter/<algorithm>`; member m > 0 on `filter/<algorithm>/pool<m>`), with the rejuvenation
-/// move of the settings (`rejuvenation`, [`FilterSettings::liu_west`]) if any.
-#[allow(clippy::too_many_arguments)]
+/// `filter/<algorithm>`; member m > 0 on `filter/<algorithm>/pool<m>`).
 fn drive(
     filter: &mut dyn Filter,
     input: &RunInput,
     s: &FilterSettings,
     algorithm: Algorithm,
     pc: &SmcConfig,
-    rejuvenation: Option<LiuWest>,
     member: Member<'_>,
     predictor: Option<crate::residuals::Predictor>,
 ) -> Driven {
@@ -529,7 +526,7 @@ fn drive(
     };
     let mut rng = stream(input.seed, input.run, &name);
     let start = Instant::now();
-    let summary = run_with_rejuvenation(filter, pc, rejuvenation, &ys, ny, &mut rng, &mut recorder);
+    let summary = run(filter, pc, &ys, ny, &mut rng, &mut recorder);
     let wall_s = start.elapsed().as_secs_f64();
     if let Some(bar) = &recorder.progress {
         bar.finish_and_clear();
@@ -622,8 +619,8 @@ pub fn identify_stoppable(
             scheme: s.resampling,
             ess_threshold: s.ess_threshold,
         },
+        rejuvenation: s.liu_west()?,
     };
-    let rejuvenation = s.liu_west()?;
     let mut filter = build_filter(algorithm, spec.clone(), s)?;
     // One-step-ahead prediction errors when asked for (`sysid filter`), from the first filter
     // of a pool.
@@ -670,16 +667,7 @@ pub fn identify_stoppable(
                     stop,
                 };
                 interrupted(
-                    drive(
-                        filter.as_mut(),
-                        input,
-                        s,
-                        algorithm,
-                        &member,
-                        rejuvenation,
-                        who,
-                        p,
-                    ),
+                    drive(filter.as_mut(), input, s, algorithm, &member, who, p),
                     data.len() - 1,
                 )
             })
@@ -695,16 +683,7 @@ pub fn identify_stoppable(
             stop,
         };
         interrupted(
-            drive(
-                filter.as_mut(),
-                input,
-                s,
-                algorithm,
-                &pc,
-                rejuvenation,
-                who,
-                predictor()?,
-            ),
+            drive(filter.as_mut(), input, s, algorithm, &pc, who, predictor()?),
             data.len() - 1,
         )?
     };

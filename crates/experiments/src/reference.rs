@@ -271,6 +271,7 @@ impl FilterLikelihood {
                 scheme: Scheme::Systematic,
                 ess_threshold: Some(0.5),
             },
+            rejuvenation: None,
         };
         let summary = run(
             filter.as_mut(),

@@ -470,17 +470,15 @@ impl Study {
         Ok(c)
     }
 
-    /// The filter settings of a job: the study's, with the job's particles, resampling and
-    /// discretisation.
-    pub fn settings(&self, job: &Job) -> FilterSettings {
-        // Checked when the study was loaded ([`Study::check`]).
-        let mut settings = self
-            .filter_of(job.algorithm)
-            .unwrap_or_else(|_| self.filter.clone());
+    /// The filter settings of a job: the study's (with its algorithm's `filter_for` keys), with
+    /// the job's particles, resampling and discretisation. An error only for a `filter_for`
+    /// table that does not apply (refused already by [`Study::load`]).
+    pub fn settings(&self, job: &Job) -> Result<FilterSettings> {
+        let mut settings = self.filter_of(job.algorithm)?;
         settings.particles = job.particles;
         settings.resampling = job.resampling;
         settings.discretisation = job.discretisation;
-        settings
+        Ok(settings)
     }
 
     /// The study's filter settings for `algorithm`: `filter` with the keys of
@@ -532,7 +530,7 @@ impl Study {
             job.algorithm.name(),
             self.sweep.master_seed,
             job.run,
-            &self.settings(job),
+            &self.settings(job)?,
             &data,
         )
         .sha256)
@@ -551,6 +549,6 @@ impl Study {
             progress: false,
             residuals: false,
         };
-        identify(&input, job.algorithm, &self.settings(job))
+        identify(&input, job.algorithm, &self.settings(job)?)
     }
 }

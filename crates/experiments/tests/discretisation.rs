@@ -45,7 +45,7 @@ fn the_axis_multiplies_the_jobs_and_reaches_the_settings() {
     assert!(ids.contains(&"mln-rbpf-np20-systematic-run000".to_string()));
     assert!(ids.contains(&"mpf-ekf2-np20-systematic-symplectic-run001".to_string()));
     for j in &jobs {
-        assert_eq!(s.settings(j).discretisation, j.discretisation);
+        assert_eq!(s.settings(j).unwrap().discretisation, j.discretisation);
     }
     // Without the axis: the [filter] table's scheme, and the fingerprint of an Euler job is the
     // one of the same job in a study that names the axis.
@@ -120,7 +120,7 @@ fn the_symplectic_regression_file_checks_the_symplectic_scheme() {
         .study
         .jobs()
         .iter()
-        .all(|j| file.study.settings(j).discretisation == Discretisation::Symplectic));
+        .all(|j| file.study.settings(j).unwrap().discretisation == Discretisation::Symplectic));
     assert_eq!(file.thresholds.len(), 3);
 }
 

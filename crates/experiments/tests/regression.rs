@@ -169,7 +169,12 @@ fn the_defaults_regression_file_runs_the_settings_of_sysid_filter() {
         expected.trace_every = 0;
         expected.loop_every = 0;
         expected.validate = false;
-        assert_eq!(f.study.settings(&job), expected, "{}", job.algorithm.name());
+        assert_eq!(
+            f.study.settings(&job).unwrap(),
+            expected,
+            "{}",
+            job.algorithm.name()
+        );
     }
     // The three marginalised filters never fail and have a coverage bound.
     for alg in ["mln-rbpf", "storvik", "mpf-ekf2"] {

@@ -304,8 +304,8 @@ trace_every = 0
     let study = Study::load(&path).unwrap();
     let plain: Study = toml::from_str(&text("")).unwrap();
     for job in study.jobs() {
-        let s = study.settings(&job);
-        let base = plain.settings(&job);
+        let s = study.settings(&job).unwrap();
+        let base = plain.settings(&job).unwrap();
         if job.algorithm == Algorithm::MpfEkf2 {
             assert_eq!((s.rejuvenation, s.pool), (Some(0.97), 2));
             assert_eq!(

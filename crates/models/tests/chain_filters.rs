@@ -104,6 +104,7 @@ fn config(np: usize) -> SmcConfig {
     SmcConfig {
         particles: np,
         resampling: Default::default(),
+        rejuvenation: None,
     }
 }
 

@@ -13,9 +13,7 @@ use core_filters::rng::stream;
 use core_filters::smc::mlnrbpf::MlnRbpf;
 use core_filters::smc::mpf::MpfEkf2;
 use core_filters::smc::runner::WeightedParticles;
-use core_filters::smc::{
-    run_with_rejuvenation, Filter, LiuWest, Observer, Posterior, SmcConfig, StepInfo,
-};
+use core_filters::smc::{run, Filter, LiuWest, Observer, Posterior, SmcConfig, StepInfo};
 use models::building::{Building, Damping};
 use models::filtering::{ChainSpec, MlnChain, MpfChain, RmsLevels};
 use models::sensors::{MeasurementKind, SensorLayout};
@@ -107,13 +105,14 @@ fn measure(
             ess_threshold: threshold,
             ..ResamplePolicy::default()
         },
+        rejuvenation: move_,
     };
     let mut arm = Arm {
         steps: 0,
         distinct_n: 0,
     };
     let mut rng = stream(1, 0, "alloc");
-    let s = run_with_rejuvenation(filter, &cfg, move_, &ys, 3, &mut rng, &mut arm);
+    let s = run(filter, &cfg, &ys, 3, &mut rng, &mut arm);
     assert!(s.failure.is_none(), "{:?}", s.failure);
     assert_eq!(arm.steps, 60);
     (COUNT.with(|c| c.get()), arm.distinct_n)

@@ -25,7 +25,6 @@ pub mod storvik;
 
 pub use rejuvenation::{LiuWest, StaticParam, Support};
 pub use runner::{
-    run, run_with_rejuvenation, Filter, Observer, Posterior, RunSummary, SmcConfig, StepInfo,
-    StepInput, StepOutput,
+    run, Filter, Observer, Posterior, RunSummary, SmcConfig, StepInfo, StepInput, StepOutput,
 };
 pub use store::{Particles, Shape};

@@ -5,7 +5,7 @@
 //! One step `k`:
 //! 1. if the previous step decided to resample, draw ancestors (from the filter's stream) and
 //!    reset the weights to uniform; otherwise every particle is its own ancestor. With a
-//!    rejuvenation move ([`run_with_rejuvenation`]) the resampled particles are then copied into
+//!    rejuvenation move ([`SmcConfig::rejuvenation`]) the resampled particles are then copied into
 //!    place, their static parameters moved by the Liu–West kernel ([`super::rejuvenation`], draws
 //!    from the same stream) and every particle becomes its own ancestor;
 //! 2. the filter advances particle `i` from its ancestor's slot of the current store into slot `i`
@@ -38,6 +38,10 @@ pub struct SmcConfig {
     pub particles: usize,
     /// Resampling scheme and ESS threshold.
     pub resampling: ResamplePolicy,
+    /// The Liu–West move of the filter's static parameters after every resampling
+    /// ([`super::rejuvenation`]); `None`: no move, no copy, no extra draw.
+    #[serde(skip)]
+    pub rejuvenation: Option<LiuWest>,
 }
 
 impl Default for SmcConfig {
@@ -45,6 +49,7 @@ impl Default for SmcConfig {
         Self {
             particles: 500,
             resampling: ResamplePolicy::default(),
+            rejuvenation: None,
         }
     }
 }
@@ -287,26 +292,13 @@ pub fn fill_posterior(layout: &Layout, w: &[f64], p: &Particles, out: &mut Poste
 
 /// Runs `filter` on `ys` (row `k−1` holds `y_k`, `ny` values per row): initialises, then steps
 /// through every measurement. A step failure ends the run and is returned; the runner never
-/// panics on numerical failure. No rejuvenation move ([`run_with_rejuvenation`] with `None`).
+/// panics on numerical failure. With [`SmcConfig::rejuvenation`] the filter's static parameters
+/// ([`Filter::static_params`]) are moved after every resampling (module docs, step 1); without
+/// one, with a kernel that does not move (`δ = 1`) or with a filter that declares no static
+/// parameter, nothing is copied and no extra draw taken.
 pub fn run(
     filter: &mut dyn Filter,
     config: &SmcConfig,
-    ys: &[f64],
-    ny: usize,
-    rng: &mut StreamRng,
-    observer: &mut dyn Observer,
-) -> RunSummary {
-    run_with_rejuvenation(filter, config, None, ys, ny, rng, observer)
-}
-
-/// [`run`], moving the filter's static parameters ([`Filter::static_params`]) with the Liu–West
-/// kernel `rejuvenation` after every resampling (module docs, step 1). With `None`, with a
-/// kernel that does not move (`δ = 1`) or with a filter that declares no static parameter, the
-/// run is [`run`]'s to the bit: no copy, no extra draw.
-pub fn run_with_rejuvenation(
-    filter: &mut dyn Filter,
-    config: &SmcConfig,
-    rejuvenation: Option<LiuWest>,
     ys: &[f64],
     ny: usize,
     rng: &mut StreamRng,
@@ -327,8 +319,9 @@ pub fn run_with_rejuvenation(
     let mut ancestors: Vec<usize> = (0..np).collect();
     let mut resampler = Resampler::new(config.resampling.scheme, np);
     let mut post = Posterior::for_layout(&layout);
-    let mut rejuvenation =
-        rejuvenation.and_then(|k| Rejuvenation::new(k, filter.static_params(), np));
+    let mut rejuvenation = config
+        .rejuvenation
+        .and_then(|k| Rejuvenation::new(k, filter.static_params(), np));
     filter.initialise(rng, &mut front);
     reset_uniform(&mut log_w, &mut w);
     observer.on_start(&layout, np);
