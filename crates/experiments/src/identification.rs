@@ -476,8 +476,10 @@ pub fn settle(
         };
         let (storeys, unmeasured) = (spec.n_storeys(), unmeasured_storeys(&spec));
         // Without a config (and without --rejuvenation) the MPF-EKF2 with the shared prior
-        // Gaussian moves its exponents n ([`FilterSettings::recommended_for`]).
-        if config.is_none() && settings.rejuvenation.is_none() {
+        // Gaussian moves its exponents n ([`FilterSettings::recommended_for`]); a linear building
+        // has none, and its settings do not claim a move.
+        let has_exponents = !spec.building.hysteretic().is_empty();
+        if config.is_none() && settings.rejuvenation.is_none() && has_exponents {
             settings.rejuvenation =
                 FilterSettings::recommended_for(algorithm, storeys, &unmeasured).rejuvenation;
         }

@@ -379,6 +379,34 @@ fn the_mpf_ekf2_rejuvenates_by_default() {
     );
     let c = config.to_str().unwrap();
     assert_eq!(rejuvenation("mpf-ekf2", &["--config", c]), None);
+    // A linear building has no exponent to move, and its settings say so.
+    let mut linear = DatasetConfig::from_preset("paper-3dof", 3).unwrap();
+    linear.duration = Some(0.5);
+    linear.hysteretic = Some(vec![]);
+    let linear_dir = dir.join("linear");
+    generate(&linear).unwrap().write_dir(&linear_dir).unwrap();
+    let out = dir.join("linear.json");
+    let o = Command::new(env!("CARGO_BIN_EXE_sysid"))
+        .args([
+            "filter",
+            "--algorithm",
+            "mpf-ekf2",
+            "--particles",
+            "20",
+            "--data",
+        ])
+        .arg(&linear_dir)
+        .arg("--out")
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let r: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
+    assert_eq!(
+        r["config"]["filter"]["rejuvenation"],
+        serde_json::Value::Null
+    );
     // On 10 storeys the MPF-EKF2's prior means are per particle and it does not rejuvenate.
     let mut tall = DatasetConfig::from_preset("building-chain", 1).unwrap();
     tall.storeys = Some(10);
