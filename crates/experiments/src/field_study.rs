@@ -82,7 +82,8 @@ pub struct Variant {
     pub name: String,
     pub label: String,
     pub algorithm: Algorithm,
-    /// Arguments of `sysid filter` after the part's `common` ones.
+    /// Arguments of `sysid filter` after the part's `common` ones; a flag given here replaces the
+    /// same flag of `common`.
     #[serde(default)]
     pub args: Vec<String>,
     /// Variants of one group are candidates of the [`Selection`].
@@ -314,6 +315,33 @@ pub fn plan_identify(part: &Part, dirs: &PartDirs) -> Vec<Step> {
     steps
 }
 
+/// The part's `common` flags followed by a variant's `args`, a flag of `args` replacing the
+/// same flag of `common` with its values (`--particles 2000` in a variant overrides the part's
+/// `--particles 500`: `sysid filter` takes each flag once).
+fn with_overrides(common: &[String], args: &[String]) -> Vec<String> {
+    // Groups of a flag and the values after it, up to the next flag.
+    fn groups(a: &[String]) -> Vec<&[String]> {
+        let mut out = Vec::new();
+        let mut start = 0;
+        for i in 1..=a.len() {
+            if i == a.len() || a[i].starts_with("--") {
+                out.push(&a[start..i]);
+                start = i;
+            }
+        }
+        out.retain(|g| !g.is_empty());
+        out
+    }
+    let overridden: Vec<&String> = groups(args).iter().map(|g| &g[0]).collect();
+    groups(common)
+        .into_iter()
+        .filter(|g| !overridden.contains(&&g[0]))
+        .flatten()
+        .chain(args)
+        .cloned()
+        .collect()
+}
+
 #[allow(clippy::too_many_arguments)]
 fn filter_step(
     part: &Part,
@@ -332,8 +360,7 @@ fn filter_step(
         "--data".into(),
         s(&dirs.data(record)),
     ];
-    a.extend(part.common.iter().cloned());
-    a.extend(args.iter().cloned());
+    a.extend(with_overrides(&part.common, args));
     a.extend(["--out".into(), s(out)]);
     if let Some(p) = plot {
         a.extend(["--plot".into(), s(p)]);
@@ -724,6 +751,46 @@ group = "g"
             sel[0].writes,
             Path::new("out/frame/records/selected--sine-2.0.json")
         );
+    }
+
+    #[test]
+    fn a_variants_flag_replaces_the_parts_common_one() {
+        let v = |a: &[&str]| a.iter().map(|s| s.to_string()).collect::<Vec<_>>();
+        let common = v(&[
+            "--storeys",
+            "3",
+            "--particles",
+            "500",
+            "--masses",
+            "1",
+            "2",
+            "3",
+        ]);
+        assert_eq!(
+            with_overrides(&common, &v(&["--particles", "2000", "--substeps", "1"])),
+            v(&[
+                "--storeys",
+                "3",
+                "--masses",
+                "1",
+                "2",
+                "3",
+                "--particles",
+                "2000",
+                "--substeps",
+                "1"
+            ])
+        );
+        assert_eq!(with_overrides(&common, &[]), common);
+        let s = load(&STUDY.replacen(
+            "args = [\"--masses\", \"1\"]",
+            "args = [\"--storeys\", \"4\"]",
+            1,
+        ))
+        .unwrap();
+        let f = &plan_identify(&s.part[0], &PartDirs::new(Path::new("out"), &s.part[0]))[2].args;
+        assert_eq!(f.iter().filter(|a| *a == "--storeys").count(), 1);
+        assert!(f.windows(2).any(|w| w == ["--storeys", "4"]));
     }
 
     #[test]
