@@ -652,9 +652,16 @@ pub fn run(study: &FieldStudy, opts: &RunOptions) -> Result<()> {
                 part.name,
                 baseline.display()
             ));
-        } else if part.baseline {
+        } else if part.baseline && baseline.exists() {
             notes.push(format!(
                 "{}: baseline as committed in {} (not recomputed: no Python with mdof given)",
+                part.name,
+                baseline.display()
+            ));
+        } else if part.baseline {
+            notes.push(format!(
+                "{}: no baseline: {} is absent and no Python with mdof was given (--python), so \
+                 the report compares with none (copy a computed srim.json there, or pass --python)",
                 part.name,
                 baseline.display()
             ));
