@@ -10,7 +10,8 @@
 //!   distinct particle values at the end (resampling a static, noise-free parameter at every step
 //!   leaves copies of a few values; its posterior s.d. then says nothing about the real
 //!   uncertainty), or a tiny effective sample size;
-//! - a **failed** run (the filter stopped early).
+//! - a **failed** run (the filter stopped early), or filters of a pool **left out** of its
+//!   answer because they failed or lost track of the record (module `pool`).
 //!
 //! `sysid filter` prints every warning on stderr, writes them into the record's `warnings`, and
 //! exits non-zero when the answer is impossible or the run failed.
@@ -91,6 +92,25 @@ pub fn check(r: &RunRecord) -> Vec<Warning> {
                     window_done.min(r.window)
                 )
             },
+        });
+    }
+    let pool = pooled_filters(r);
+    for l in &r.pool_left_out {
+        out.push(Warning {
+            kind: WarningKind::LeftOut,
+            parameter: None,
+            message: format!(
+                "filter {} of the pool's {pool} was left out of the answer ({}): {}; the answer \
+                 rests on {} filters",
+                l.filter,
+                match l.reason {
+                    crate::record::diagnostics::LeftOutReason::Failed => "it failed",
+                    crate::record::diagnostics::LeftOutReason::Lost =>
+                        "it lost track of the record",
+                },
+                l.message,
+                pool.saturating_sub(r.pool_left_out.len())
+            ),
         });
     }
     let mass_form = r

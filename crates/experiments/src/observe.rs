@@ -75,6 +75,17 @@ pub struct Recorder<'a> {
     pub predictor: Option<crate::residuals::Predictor>,
     /// Asked before every step whether to stop the run (a user's interruption); `None`: never.
     pub stop: Option<&'a dyn Fn() -> bool>,
+    /// Σ log p̂(y_k | y_1:k−1) over the record's tail (the steps after `tail_from`): how well the
+    /// filter predicts the measurements once it has settled (module `pool` compares it
+    /// between pooled filters).
+    pub tail_loglik: f64,
+    pub tail_steps: usize,
+    tail_from: usize,
+}
+
+/// The steps of a run's tail: the last tenth of the record, and at least the averaging window.
+pub fn tail_steps(total_steps: usize, window: usize) -> usize {
+    (total_steps / 10).max(window).min(total_steps)
 }
 
 impl<'a> Recorder<'a> {
@@ -110,6 +121,9 @@ impl<'a> Recorder<'a> {
             final_particles: None,
             predictor: None,
             stop: None,
+            tail_loglik: 0.0,
+            tail_steps: 0,
+            tail_from: total_steps.saturating_sub(tail_steps(total_steps, window)),
         }
     }
 
@@ -157,6 +171,10 @@ impl Observer for Recorder<'_> {
 
     fn on_step(&mut self, info: &StepInfo, post: &Posterior) {
         let k = info.k;
+        if k > self.tail_from {
+            self.tail_loglik += info.loglik_increment;
+            self.tail_steps += 1;
+        }
         if k + self.window > self.total_steps {
             for (s, m) in self.window_sum.iter_mut().zip(&post.param_mean) {
                 *s += m;

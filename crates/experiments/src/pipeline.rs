@@ -542,6 +542,9 @@ fn drive(
             .map(|_| StateErrors::from_sums(&layout.state_names, &recorder.state_sums)),
         final_particles: recorder.final_particles.take(),
         residuals: recorder.predictor.take().map(|p| p.finish()),
+        tail_loglik: recorder.tail_loglik,
+        tail_steps: recorder.tail_steps,
+        left_out: Vec::new(),
         trace: recorder.trace,
         summary,
         wall_s,
@@ -672,7 +675,7 @@ pub fn identify_stoppable(
                 )
             })
             .collect::<Result<_>>()?;
-        crate::pool::combine(&layout, members)
+        crate::pool::combine(&layout, members, data.channels)
     } else {
         if s.pool == 0 {
             bail!("field `pool`: 0 filters (1 runs one filter)");
@@ -710,6 +713,12 @@ pub fn identify_stoppable(
     let mut failures = BTreeMap::new();
     if let Some(f) = &d.summary.failure {
         failures.insert(f.kind().to_string(), 1);
+    }
+    // A pooled filter's failure is counted even when the pool's answer stands without it.
+    if d.summary.failure.is_none() {
+        for kind in d.left_out.iter().filter_map(|l| l.failure_kind.clone()) {
+            *failures.entry(kind).or_insert(0) += 1;
+        }
     }
     let mut config = serde_json::json!({
         "algorithm": algorithm.name(),
@@ -789,6 +798,7 @@ pub fn identify_stoppable(
         residuals: d.residuals,
         free_run: None,
         modal: None,
+        pool_left_out: d.left_out,
     };
     // A result that is physically impossible or rests on few particles says so (issue 16).
     record.warnings = crate::checks::check(&record);

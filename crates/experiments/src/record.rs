@@ -185,6 +185,10 @@ pub struct RunRecord {
     /// functions ([`crate::validation`]); field-data runs of `sysid filter`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub modal: Option<validation::ModalComparison>,
+    /// Filters of a pool left out of its answer because they failed or lost track of the record
+    /// (module `pool`); absent when every filter was kept, and in unpooled runs.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub pool_left_out: Vec<diagnostics::LeftOutFilter>,
 }
 
 impl RunRecord {

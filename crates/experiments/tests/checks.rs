@@ -157,3 +157,44 @@ fn records_without_warnings_still_load() {
     let r: RunRecord = serde_json::from_value(v).expect("warnings default to none");
     assert!(r.warnings.is_empty());
 }
+
+#[test]
+fn a_filter_left_out_of_its_pool_is_a_warning_written_into_the_record_and_not_fatal() {
+    use experiments::record::diagnostics::{LeftOutFilter, LeftOutReason};
+    let mut r = healthy();
+    // Eight pooled filters: the settings and their fingerprint (as `common::sealed` makes them).
+    let filter = serde_json::json!({ "particles": r.particles, "window": r.window, "pool": 8 });
+    r.config = serde_json::json!({ "filter": filter });
+    r.fingerprint = Some(experiments::record::Fingerprint::new(serde_json::json!({
+        "algorithm": r.algorithm,
+        "seed": r.seed,
+        "run": r.run,
+        "numerics": r.versions.numerics,
+        "filter": filter,
+        "data": { "sha256": "constructed", "meta": null },
+    })));
+    r.pool_left_out = vec![LeftOutFilter {
+        filter: 3,
+        reason: LeftOutReason::Lost,
+        failure_kind: None,
+        tail_loglik: Some(-1.0e5),
+        median_tail_loglik: Some(-3.0),
+        message: "it predicted the measurements far worse".into(),
+    }];
+    let w = check(&r);
+    assert_eq!(w.len(), 1, "{w:?}");
+    assert_eq!(w[0].kind, WarningKind::LeftOut);
+    assert!(
+        w[0].message.contains("filter 3 of the pool's 8")
+            && w[0].message.contains("lost track of the record")
+            && w[0].message.contains("rests on 7 filters"),
+        "{}",
+        w[0].message
+    );
+    let path = out_path("left-out");
+    finish_run(r, &path).expect("a pool that kept a majority answers");
+    let back = written(&path);
+    assert_eq!(back.pool_left_out.len(), 1);
+    assert_eq!(back.pool_left_out[0].reason, LeftOutReason::Lost);
+    assert_eq!(back.warnings[0].kind, WarningKind::LeftOut);
+}

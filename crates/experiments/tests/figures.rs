@@ -122,6 +122,7 @@ fn record(algorithm: &str, run: u64, bias: f64) -> RunRecord {
         residuals: None,
         free_run: None,
         modal: None,
+        pool_left_out: vec![],
     }
 }
 

@@ -17,6 +17,8 @@ pub enum WarningKind {
     FewDistinct,
     /// A tiny effective sample size.
     TinyEss,
+    /// Filters of a pool left out of the pooled answer (they failed or lost track of the record).
+    LeftOut,
 }
 
 impl WarningKind {
@@ -34,6 +36,34 @@ impl WarningKind {
 pub struct Warning {
     pub kind: WarningKind,
     pub parameter: Option<String>,
+    pub message: String,
+}
+
+/// Why a filter of a pool was left out of the pooled answer (module `pool`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum LeftOutReason {
+    /// It ended early with a numerical failure.
+    Failed,
+    /// It completed, but over the last steps it predicted the measurements far worse than the
+    /// pool's median filter: it lost track of the record.
+    Lost,
+}
+
+/// One filter of a pool left out of the pooled answer, with the evidence.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct LeftOutFilter {
+    /// Its index in the pool (0: the filter on the unpooled run's stream).
+    pub filter: usize,
+    pub reason: LeftOutReason,
+    /// The failure's kind (the key of the record's `failures` counts) for a failed filter.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub failure_kind: Option<String>,
+    /// Its mean log-likelihood increment per step and channel over the record's last steps
+    /// (null for a failed filter), and the pool's median of the same.
+    pub tail_loglik: Option<f64>,
+    pub median_tail_loglik: Option<f64>,
+    /// The reason in words (the failure's message for a failed filter).
     pub message: String,
 }
 

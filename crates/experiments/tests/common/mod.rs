@@ -73,6 +73,7 @@ pub fn record(algorithm: &str, run: u64, ratios: [f64; 9], nrmse: f64) -> RunRec
         residuals: None,
         free_run: None,
         modal: None,
+        pool_left_out: vec![],
     })
 }
 
