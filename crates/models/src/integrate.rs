@@ -295,9 +295,9 @@ const E: [f64; 7] = [
 #[inline]
 fn weighted(w: &[f64], k: &[Vec<f64>; 7], i: usize) -> f64 {
     let mut acc = 0.0;
-    for (j, &wj) in w.iter().enumerate() {
+    for (&wj, kj) in w.iter().zip(k) {
         if wj != 0.0 {
-            acc += wj * k[j][i];
+            acc += wj * kj[i];
         }
     }
     acc
