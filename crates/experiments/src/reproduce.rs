@@ -68,19 +68,38 @@ fn by_algorithm<'a>(
         .collect()
 }
 
+/// Locks the output directory `out` for the whole run (until the lock is dropped) and gives the
+/// engine that runs a study's sweeps into it: how every study command starts.
+pub(crate) fn open(
+    out: &Path,
+    threads: usize,
+    shard: Shard,
+    progress: bool,
+    resume: bool,
+) -> Result<(DirLock, Engine<'_>)> {
+    let lock = DirLock::acquire(out)?;
+    let engine = Engine {
+        out,
+        threads,
+        shard,
+        progress,
+        resume,
+    };
+    Ok((lock, engine))
+}
+
 /// Runs the reproduction. With a shard other than `0/1`, only runs this shard's records (no
 /// figures, no report): merge the shards' `records/` and run again without `--shard` (with
 /// `--resume`) to draw. Returns what was done.
 pub fn reproduce(opts: &Options) -> Result<Done> {
     let start = Instant::now();
-    let _lock = DirLock::acquire(&opts.out)?;
-    let engine = Engine {
-        out: &opts.out,
-        threads: opts.threads,
-        shard: opts.shard,
-        progress: opts.progress,
-        resume: opts.resume,
-    };
+    let (_lock, engine) = open(
+        &opts.out,
+        opts.threads,
+        opts.shard,
+        opts.progress,
+        opts.resume,
+    )?;
     let mut studies = BTreeMap::new();
     let mut records = BTreeMap::new();
     let mut done = Done::default();

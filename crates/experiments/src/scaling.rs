@@ -29,8 +29,8 @@ use crate::engine::{load, write_json, Engine};
 use crate::metrics::{mean_sd, mean_spread};
 use crate::pipeline::Algorithm;
 use crate::record::RunRecord;
+use crate::reproduce::open;
 use crate::study::{Job, Study};
-use crate::sweep::lock::DirLock;
 use crate::sweep::progress::clock;
 use crate::sweep::{read_record, record_path, write_bytes_atomic, Shard};
 use crate::verdict::group_mean_error;
@@ -322,14 +322,13 @@ pub type Writer<'a> = dyn Fn(&Options, &Study, &[Cell], &[Job], &[RunRecord]) ->
 /// the excitations studies).
 pub fn run_with(opts: &Options, write: &Writer<'_>) -> Result<Vec<Cell>> {
     let start = Instant::now();
-    let _lock = DirLock::acquire(&opts.out)?;
-    let engine = Engine {
-        out: &opts.out,
-        threads: opts.threads,
-        shard: opts.shard,
-        progress: opts.progress,
-        resume: opts.resume,
-    };
+    let (_lock, engine) = open(
+        &opts.out,
+        opts.threads,
+        opts.shard,
+        opts.progress,
+        opts.resume,
+    )?;
     let study = load(&opts.config, opts.quick)?;
     let jobs = sweep_jobs(&study);
     let records_dir = opts.out.join("records");

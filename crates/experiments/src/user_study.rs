@@ -14,12 +14,12 @@ use std::time::Instant;
 
 use crate::error::{Context, Result};
 
-use crate::engine::{load, write_json, Engine};
+use crate::engine::{load, write_json};
 use crate::markdown::compact_header;
 use crate::metrics::mean_spread;
 use crate::record::RunRecord;
+use crate::reproduce::open;
 use crate::stats::{completed, truth};
-use crate::sweep::lock::DirLock;
 use crate::sweep::{write_bytes_atomic, Shard};
 use crate::verdict::{findings_table, Finding};
 
@@ -283,14 +283,7 @@ pub fn run(args: &Options) -> Result<()> {
     let study = load(&args.config, args.quick)?;
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("creating {}", args.out.display()))?;
-    let _lock = DirLock::acquire(&args.out)?;
-    let engine = Engine {
-        out: &args.out,
-        threads: args.threads,
-        shard: args.shard,
-        progress: true,
-        resume: args.resume,
-    };
+    let (_lock, engine) = open(&args.out, args.threads, args.shard, true, args.resume)?;
     let outcome = engine.sweep(
         &study,
         &study.jobs(),
