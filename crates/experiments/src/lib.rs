@@ -54,6 +54,7 @@ pub mod regression;
 pub mod report;
 pub mod reproduce;
 pub mod residuals;
+mod run_dir;
 pub mod scaled_prior;
 pub mod scaling;
 pub mod settings;

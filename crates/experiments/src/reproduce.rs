@@ -12,12 +12,12 @@ use std::time::Instant;
 
 use crate::error::{bail, Result};
 
-use crate::engine::{load, write_json, Engine, Reuse};
+use crate::engine::{load, write_json, Reuse};
 use crate::figures;
 use crate::pipeline::Algorithm;
 use crate::record::RunRecord;
+use crate::run_dir::open;
 use crate::study::Study;
-use crate::sweep::lock::DirLock;
 use crate::sweep::progress::clock;
 use crate::sweep::{write_bytes_atomic, Shard};
 
@@ -66,26 +66,6 @@ fn by_algorithm<'a>(
             )
         })
         .collect()
-}
-
-/// Locks the output directory `out` for the whole run (until the lock is dropped) and gives the
-/// engine that runs a study's sweeps into it: how every study command starts.
-pub(crate) fn open(
-    out: &Path,
-    threads: usize,
-    shard: Shard,
-    progress: bool,
-    resume: bool,
-) -> Result<(DirLock, Engine<'_>)> {
-    let lock = DirLock::acquire(out)?;
-    let engine = Engine {
-        out,
-        threads,
-        shard,
-        progress,
-        resume,
-    };
-    Ok((lock, engine))
 }
 
 /// Runs the reproduction. With a shard other than `0/1`, only runs this shard's records (no

@@ -29,7 +29,7 @@ use crate::engine::{load, write_json, Engine};
 use crate::metrics::{mean_sd, mean_spread};
 use crate::pipeline::Algorithm;
 use crate::record::RunRecord;
-use crate::reproduce::open;
+use crate::run_dir::open;
 use crate::study::{Job, Study};
 use crate::sweep::progress::clock;
 use crate::sweep::{read_record, record_path, write_bytes_atomic, Shard};

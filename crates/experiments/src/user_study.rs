@@ -18,7 +18,7 @@ use crate::engine::{load, write_json};
 use crate::markdown::compact_header;
 use crate::metrics::mean_spread;
 use crate::record::RunRecord;
-use crate::reproduce::open;
+use crate::run_dir::open;
 use crate::stats::{completed, truth};
 use crate::sweep::{write_bytes_atomic, Shard};
 use crate::verdict::{findings_table, Finding};
