@@ -295,9 +295,9 @@ const E: [f64; 7] = [
 #[inline]
 fn weighted(w: &[f64], k: &[Vec<f64>; 7], i: usize) -> f64 {
     let mut acc = 0.0;
-    for (&wj, kj) in w.iter().zip(k) {
+    for (j, &wj) in w.iter().enumerate() {
         if wj != 0.0 {
-            acc += wj * kj[i];
+            acc += wj * k[j][i];
         }
     }
     acc
