@@ -55,6 +55,21 @@ impl StateErrors {
     }
 }
 
+/// The median of the finite values of `v` (None when there are none).
+pub(crate) fn median(v: &[f64]) -> Option<f64> {
+    let mut v: Vec<f64> = v.iter().copied().filter(|x| x.is_finite()).collect();
+    if v.is_empty() {
+        return None;
+    }
+    v.sort_by(f64::total_cmp);
+    let m = v.len() / 2;
+    Some(if v.len() % 2 == 1 {
+        v[m]
+    } else {
+        0.5 * (v[m - 1] + v[m])
+    })
+}
+
 /// Mean and sample standard deviation (n − 1) of a slice; NaN entries are skipped.
 pub fn mean_sd(values: &[f64]) -> (f64, f64, usize) {
     let finite: Vec<f64> = values.iter().copied().filter(|v| v.is_finite()).collect();

@@ -38,7 +38,7 @@ use core_filters::Health;
 
 use core_filters::model::Layout;
 
-use crate::metrics::{mean_sd, StateErrors};
+use crate::metrics::{mean_sd, median, StateErrors};
 use crate::observe::final_intervals;
 use crate::record::diagnostics::{LeftOutFilter, LeftOutReason};
 
@@ -84,11 +84,10 @@ pub(crate) fn left_out(members: &[Driven], channels: usize) -> Vec<LeftOutFilter
         .filter(|d| d.summary.failure.is_none())
         .map(per_step)
         .collect();
-    let median = median(&completed);
-    let spread = median.map(|m| {
-        1.4826
-            * self::median(&completed.iter().map(|v| (v - m).abs()).collect::<Vec<_>>())
-                .unwrap_or(0.0)
+    // Median and robust s.d. of the finite tails (a non-finite one is lost by itself, below).
+    let centre = median(&completed);
+    let spread = centre.map(|m| {
+        1.4826 * median(&completed.iter().map(|v| (v - m).abs()).collect::<Vec<_>>()).unwrap_or(0.0)
     });
     let mut out = Vec::new();
     for (i, d) in members.iter().enumerate() {
@@ -98,12 +97,12 @@ pub(crate) fn left_out(members: &[Driven], channels: usize) -> Vec<LeftOutFilter
                 reason: LeftOutReason::Failed,
                 failure_kind: Some(f.kind().to_string()),
                 tail_loglik: None,
-                median_tail_loglik: median,
+                median_tail_loglik: centre,
                 message: f.to_string(),
             });
             continue;
         }
-        let (Some(m), Some(sd)) = (median, spread) else {
+        let (Some(m), Some(sd)) = (centre, spread) else {
             continue;
         };
         let v = per_step(d);
@@ -126,21 +125,6 @@ pub(crate) fn left_out(members: &[Driven], channels: usize) -> Vec<LeftOutFilter
         }
     }
     out
-}
-
-/// The median of `v` (None when empty; non-finite values sort below every finite one).
-fn median(v: &[f64]) -> Option<f64> {
-    if v.is_empty() {
-        return None;
-    }
-    let mut v = v.to_vec();
-    v.sort_by(f64::total_cmp);
-    let n = v.len();
-    Some(if n % 2 == 1 {
-        v[n / 2]
-    } else {
-        0.5 * (v[n / 2 - 1] + v[n / 2])
-    })
 }
 
 /// Pools the runs of `members` (all of the same filter, in stream order, on data of `channels`

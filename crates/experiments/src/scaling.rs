@@ -26,7 +26,7 @@ use crate::error::{bail, Context, Result};
 use serde::Serialize;
 
 use crate::engine::{load, write_json, Engine};
-use crate::metrics::{mean_sd, mean_spread};
+use crate::metrics::{mean_sd, mean_spread, median};
 use crate::pipeline::Algorithm;
 use crate::record::RunRecord;
 use crate::run_dir::open;
@@ -156,20 +156,6 @@ pub fn read_cpu(records: &Path, id: &str) -> Option<f64> {
         .filter(|v| v.is_finite() && *v > 0.0)
 }
 
-fn median(mut v: Vec<f64>) -> f64 {
-    v.retain(|x| x.is_finite());
-    if v.is_empty() {
-        return f64::NAN;
-    }
-    v.sort_by(f64::total_cmp);
-    let m = v.len() / 2;
-    if v.len() % 2 == 1 {
-        v[m]
-    } else {
-        0.5 * (v[m - 1] + v[m])
-    }
-}
-
 /// The statistics of `records` (the runs of one algorithm on one structure).
 #[allow(clippy::too_many_arguments)]
 pub fn cell(
@@ -242,23 +228,25 @@ pub fn cell(
         ess_fraction: avg(&|r| Some(r.ess_mean / r.particles as f64)),
         // Every run's cost, failed or not, up to where it stopped: timings of all records.
         us_per_particle_step: median(
-            records
+            &records
                 .iter()
                 .map(|r| 1e6 / r.timing.particle_steps_per_s)
-                .collect(),
-        ),
+                .collect::<Vec<_>>(),
+        )
+        .unwrap_or(f64::NAN),
         wall_s_mean: mean_sd(&records.iter().map(|r| r.timing.wall_s).collect::<Vec<_>>()).0,
         cpu_us_per_particle_step: if !records.is_empty() && cpu_s.iter().all(Option::is_some) {
             median(
-                records
+                &records
                     .iter()
                     .zip(cpu_s)
                     .map(|(r, c)| {
                         1e6 * c.unwrap_or(f64::NAN)
                             / (r.particles * r.steps_completed.max(1)) as f64
                     })
-                    .collect(),
+                    .collect::<Vec<_>>(),
             )
+            .unwrap_or(f64::NAN)
         } else {
             f64::NAN
         },

@@ -161,18 +161,10 @@ fn records_without_warnings_still_load() {
 #[test]
 fn a_filter_left_out_of_its_pool_is_a_warning_written_into_the_record_and_not_fatal() {
     use experiments::record::diagnostics::{LeftOutFilter, LeftOutReason};
-    let mut r = healthy();
-    // Eight pooled filters: the settings and their fingerprint (as `common::sealed` makes them).
+    let r = healthy();
+    // Eight pooled filters: the settings and their fingerprint.
     let filter = serde_json::json!({ "particles": r.particles, "window": r.window, "pool": 8 });
-    r.config = serde_json::json!({ "filter": filter });
-    r.fingerprint = Some(experiments::record::Fingerprint::new(serde_json::json!({
-        "algorithm": r.algorithm,
-        "seed": r.seed,
-        "run": r.run,
-        "numerics": r.versions.numerics,
-        "filter": filter,
-        "data": { "sha256": "constructed", "meta": null },
-    })));
+    let mut r = common::sealed_with(r, filter);
     r.pool_left_out = vec![LeftOutFilter {
         filter: 3,
         reason: LeftOutReason::Lost,

@@ -80,8 +80,14 @@ pub fn record(algorithm: &str, run: u64, ratios: [f64; 9], nrmse: f64) -> RunRec
 /// `r` with filter settings in its config and the fingerprint of its own algorithm, seed, run
 /// and settings, so that it passes the checks of the record reader (call it again after changing
 /// any of them).
-pub fn sealed(mut r: RunRecord) -> RunRecord {
+pub fn sealed(r: RunRecord) -> RunRecord {
     let filter = serde_json::json!({ "particles": r.particles, "window": r.window });
+    sealed_with(r, filter)
+}
+
+/// [`sealed`] with the filter settings `filter` (which must hold the record's `particles` and
+/// `window`).
+pub fn sealed_with(mut r: RunRecord, filter: serde_json::Value) -> RunRecord {
     r.config = serde_json::json!({ "filter": filter });
     r.fingerprint = Some(Fingerprint::new(serde_json::json!({
         "algorithm": r.algorithm,
