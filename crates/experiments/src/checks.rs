@@ -39,6 +39,16 @@ pub fn pooled_filters(r: &RunRecord) -> usize {
         .map_or(1, |p| p.max(1) as usize)
 }
 
+/// Whether θ entry `name` was fixed by the run's settings (`[fix]`, `--fix`): a point-mass prior,
+/// whose single particle value is the user's choice, not a collapse of the filter.
+fn is_fixed(r: &RunRecord, name: &str) -> bool {
+    r.config
+        .get("filter")
+        .and_then(|f| f.get("fix"))
+        .and_then(|f| f.get(name))
+        .is_some()
+}
+
 /// Particles of one filter of the run: the ESS is that of one filter.
 fn particles_per_filter(r: &RunRecord) -> usize {
     r.particles / pooled_filters(r)
@@ -141,7 +151,7 @@ pub fn check(r: &RunRecord) -> Vec<Warning> {
         }
     }
     for (name, &d) in &r.distinct_sampled {
-        if d < FEW_DISTINCT {
+        if d < FEW_DISTINCT && !is_fixed(r, name) {
             out.push(Warning {
                 kind: WarningKind::FewDistinct,
                 parameter: Some(name.clone()),
@@ -216,6 +226,14 @@ pub fn summary_table(r: &RunRecord) -> String {
                 format!("*[{:.4}, {:.4}]", v - 1.96 * sd, v + 1.96 * sd)
             }
         };
+        if is_fixed(r, name) {
+            let _ = writeln!(
+                o,
+                "{name:<name_w$}  {v:>12.4}  {:>27}  fixed (point-mass prior)",
+                "–"
+            );
+            continue;
+        }
         let mut reliability = match r.distinct_sampled.get(name) {
             Some(&d) if d < FEW_DISTINCT => {
                 format!("sampled, {d} distinct value(s): RESTS ON FEW PARTICLES")

@@ -105,6 +105,23 @@ fn few_distinct_values_and_tiny_ess_warn_without_failing() {
 }
 
 #[test]
+fn a_fixed_parameter_is_shown_as_fixed_not_as_a_collapse() {
+    // `--fix n=2`: one particle value of n is the user's choice, not a filter that lost it.
+    let mut r = healthy();
+    r.distinct_sampled.insert("n".into(), 1);
+    r.config = serde_json::json!({ "filter": { "fix": { "n": 2.0, "beta": 2.0 } } });
+    assert!(check(&r).is_empty(), "{:?}", check(&r));
+    let table = summary_table(&r);
+    assert!(!table.contains("RESTS ON FEW PARTICLES"), "{table}");
+    let fixed: Vec<&str> = table
+        .lines()
+        .filter(|l| l.ends_with("fixed (point-mass prior)"))
+        .map(|l| l.split_whitespace().next().unwrap())
+        .collect();
+    assert_eq!(fixed, ["beta", "n"], "{table}");
+}
+
+#[test]
 fn a_failed_run_warns_and_exits_non_zero() {
     let mut r = healthy();
     r.failure = Some("all weights zero at step 412".into());
