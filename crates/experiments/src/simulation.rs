@@ -45,7 +45,7 @@ crate::error::domain_error!(SimulationError);
 /// What to simulate: every flag of `sysid simulate` but `--out`.
 #[derive(Debug, Clone)]
 pub struct SimulationRequest {
-    /// Structure preset: paper-3dof, paper-3dof-harmonic or shear-chain.
+    /// Structure preset: paper-3dof, paper-3dof-harmonic, shear-chain (the paper's storey values, any --storeys) or building-chain (k = 2000 per storey, the scaling study's buildings: docs/scaling.md)
     pub preset: String,
     /// Master seed of the random streams.
     pub seed: u64,

@@ -26,7 +26,7 @@ pub enum UnitsArg {
 /// Arguments of `sysid simulate`.
 #[derive(Debug, clap::Args)]
 pub struct Args {
-    /// Structure preset: paper-3dof, paper-3dof-harmonic or shear-chain.
+    /// Structure preset: paper-3dof, paper-3dof-harmonic, shear-chain (the paper's storey values, any --storeys) or building-chain (k = 2000 per storey, the scaling study's buildings: docs/scaling.md)
     #[arg(long, default_value = "paper-3dof")]
     pub preset: String,
     /// Master seed of the random streams.
