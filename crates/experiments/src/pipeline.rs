@@ -625,8 +625,9 @@ pub fn identify_stoppable(
         rejuvenation: s.liu_west()?,
     };
     let mut filter = build_filter(algorithm, spec.clone(), s)?;
-    // One-step-ahead prediction errors when asked for (`sysid filter`), from the first filter
-    // of a pool.
+    // One-step-ahead prediction errors when asked for (`sysid filter`): every filter of a pool
+    // computes its own (one noise-free step per time step), and the record keeps those of the
+    // first filter the pool keeps (`pool::combine`).
     let predictor = || -> Result<Option<crate::residuals::Predictor>> {
         if !input.residuals {
             return Ok(None);
@@ -663,7 +664,7 @@ pub fn identify_stoppable(
                     particles: each + usize::from(m < extra),
                     ..pc
                 };
-                let p = if m == 0 { predictor()? } else { None };
+                let p = predictor()?;
                 let who = Member {
                     index: m,
                     started,

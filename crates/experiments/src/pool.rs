@@ -143,7 +143,6 @@ pub(crate) fn combine(layout: &Layout, members: Vec<Driven>, channels: usize) ->
             return failed;
         }
     }
-    let first_kept_is_first = left.first().is_none_or(|l| l.filter != 0);
     // Repairs and resampling events of every filter, the left-out ones included.
     let mut health = Health::default();
     for d in &members {
@@ -235,8 +234,8 @@ pub(crate) fn combine(layout: &Layout, members: Vec<Driven>, channels: usize) ->
         online: first.online,
         wall_s,
         final_particles: None,
-        // The prediction errors are computed by filter 0 only: none when it was left out.
-        residuals: first.residuals.filter(|_| first_kept_is_first),
+        // The prediction errors of the first kept filter (every filter computes its own).
+        residuals: first.residuals,
         tail_loglik,
         tail_steps,
         left_out: left,
@@ -367,13 +366,23 @@ mod tests {
         let mut members = pool(10.0);
         members[0] = member(10.0, -1.0, true);
         members[3] = member(10.0, -1.0, true);
+        for (i, m) in members.iter_mut().enumerate() {
+            m.residuals = Some(crate::checks::Residuals {
+                channels: vec![format!("from {i}")],
+                ..Default::default()
+            });
+        }
         let d = combine(&layout(), members, 3);
         assert!(d.summary.failure.is_none());
         let failed: Vec<usize> = d.left_out.iter().map(|l| l.filter).collect();
         assert_eq!(failed, vec![0, 3]);
         assert!(d.left_out.iter().all(|l| l.reason == LeftOutReason::Failed
             && l.failure_kind.as_deref() == Some("all_weights_zero")));
-        assert!(d.residuals.is_none());
+        // The prediction errors are the first kept filter's (filter 1), not the left-out 0's.
+        assert_eq!(
+            d.residuals.map(|r| r.channels),
+            Some(vec!["from 1".to_string()])
+        );
         // Four failed of eight: no majority, the run fails.
         let mut members = pool(10.0);
         for i in [1, 2, 5, 7] {
