@@ -214,7 +214,7 @@ impl Whiteness {
 
 /// 95% quantile of χ² with `dof` degrees of freedom (Wilson–Hilferty; relative error below 1%
 /// from 3 degrees of freedom up).
-fn chi2_95(dof: usize) -> f64 {
+pub(crate) fn chi2_95(dof: usize) -> f64 {
     let k = dof as f64;
     let z = 1.644_853_626_951_472_2;
     k * (1.0 - 2.0 / (9.0 * k) + z * (2.0 / (9.0 * k)).sqrt()).powi(3)

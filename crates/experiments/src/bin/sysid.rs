@@ -53,6 +53,9 @@ enum Command {
     Study(cli::study::Args),
     /// Compare online filters' final posteriors (run records) with a reference posterior.
     CompareReference(cli::reference::CompareArgs),
+    /// Which answers a record supports: the log-likelihood of a data set at the θ_val of run
+    /// records (and its true θ), each inside or outside the record's 95 % likelihood region.
+    Loglik(cli::loglik::Args),
     /// Draw the figures of one run record (convergence, ESS, hysteresis loop, residuals).
     Plot(cli::plot::Args),
     /// A study of one real structure from its recordings: import, identify model variants,
@@ -99,6 +102,7 @@ fn run(cli: Cli) -> experiments::error::Result<()> {
         Command::Excitations(args) => cli::scaling::run_excitations(args),
         Command::Regression(args) => cli::regression::run(args),
         Command::Plot(args) => cli::plot::run(args),
+        Command::Loglik(args) => cli::loglik::run(args),
         Command::Validate(args) => cli::validate::run(args),
         Command::FieldStudy(args) => cli::field_study::run(args),
     }

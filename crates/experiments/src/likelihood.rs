@@ -1,0 +1,393 @@
+//! How well a record supports fixed parameter values, without the truth: the log-likelihood
+//! `log p(y | θ)` of a data set at each of several answers (run records of different algorithms,
+//! settings or seeds, or the data set's true θ), and which of them lie outside the record's 95 %
+//! likelihood region.
+//!
+//! The estimate is the one the reference posterior uses (docs/reference-posterior.md): the
+//! MPF-EKF2 with every parameter fixed at θ is an exact Rao–Blackwellised particle filter of the
+//! filters' own model, so its log-likelihood is the log of an unbiased estimate of `p(y | θ)`.
+//! Every θ is evaluated under one model, the one `sysid filter --algorithm mpf-ekf2` builds for
+//! these data (its discretisation, sub-steps, noise levels and building; a config file's when
+//! one is given), by one filter of `particles` particles resampling when ESS < Np/2, with
+//! `seeds` independent estimates whose spread is reported.
+//!
+//! The test of a verdict: the record's 95 % likelihood region of the p free parameters holds the
+//! θ within χ²_p(0.95)/2 nats of the maximum, and the maximum is at least the best candidate's.
+//! A candidate whose mean estimate is below the best one's by more than that, plus twice the
+//! standard error of the difference, lies outside the region: the record itself says that answer
+//! is wrong, whatever the algorithm's intervals claim.
+
+use std::path::{Path, PathBuf};
+
+use crate::error::{bail, Context, Result};
+use crate::field::StructureSettings;
+use crate::identification::{settle, Target};
+use crate::pipeline::{identify, Algorithm, RunInput};
+use crate::settings::FilterSettings;
+use models::dataset::{load_dir, LoadedDataset, MEASURED};
+
+/// One θ to score: a label (the record's path, or `truth`) and its values by name.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Candidate {
+    pub label: String,
+    pub names: Vec<String>,
+    pub theta: Vec<f64>,
+}
+
+impl Candidate {
+    /// The answer (θ_val) of a run record.
+    pub fn from_record(path: &Path) -> Result<Self> {
+        let r: crate::record::RunRecord = crate::sweep::read_record(path)?;
+        if r.theta_val.iter().any(|v| !v.is_finite()) {
+            bail!(
+                "{}: the run gives no finite θ_val (it failed before its averaging window?)",
+                path.display()
+            );
+        }
+        Ok(Self {
+            label: path.display().to_string(),
+            names: r.param_names,
+            theta: r.theta_val,
+        })
+    }
+}
+
+/// What to score and how.
+#[derive(Debug, Clone)]
+pub struct LikelihoodRequest {
+    /// Data-set directory.
+    pub data: PathBuf,
+    /// Filter settings (as `sysid filter --config`); `None`: `sysid filter`'s recommended ones.
+    pub config: Option<PathBuf>,
+    /// Particles of the one filter of each estimate.
+    pub particles: usize,
+    /// Independent estimates per candidate (filter master seeds 1..=seeds).
+    pub seeds: u64,
+    /// Also score the data set's true θ (simulated data only).
+    pub truth: bool,
+}
+
+/// The estimates of one candidate.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Scored {
+    pub label: String,
+    /// `log p̂(y | θ)`, one per seed (−∞ for a failed estimate).
+    pub estimates: Vec<f64>,
+}
+
+impl Scored {
+    /// Mean of the estimates.
+    pub fn mean(&self) -> f64 {
+        self.estimates.iter().sum::<f64>() / self.estimates.len() as f64
+    }
+
+    /// Standard error of the mean (NaN with one estimate).
+    pub fn se(&self) -> f64 {
+        let n = self.estimates.len() as f64;
+        let m = self.mean();
+        let var = self.estimates.iter().map(|e| (e - m).powi(2)).sum::<f64>() / (n - 1.0);
+        (var / n).sqrt()
+    }
+}
+
+/// The scores of every candidate and the half-width of the record's 95 % likelihood region.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Comparison {
+    pub scored: Vec<Scored>,
+    /// Free parameters (the candidates' θ length).
+    pub params: usize,
+    /// χ²_p(0.95)/2 in nats.
+    pub region_nats: f64,
+}
+
+/// The verdict on one candidate against the best.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Verdict {
+    /// The best mean estimate.
+    Best,
+    /// Below the best by less than the region's half-width plus two standard errors.
+    Inside,
+    /// Below the best by more: outside the record's 95 % likelihood region.
+    Outside,
+    /// Not resolved: a single estimate per candidate gives no standard error.
+    Unresolved,
+}
+
+impl Comparison {
+    /// Index of the best (largest mean) candidate.
+    pub fn best(&self) -> usize {
+        (0..self.scored.len())
+            .max_by(|&a, &b| self.scored[a].mean().total_cmp(&self.scored[b].mean()))
+            .expect("at least one candidate")
+    }
+
+    /// Each candidate's verdict (see the module documentation for the test).
+    pub fn verdicts(&self) -> Vec<Verdict> {
+        let b = self.best();
+        let best = &self.scored[b];
+        self.scored
+            .iter()
+            .enumerate()
+            .map(|(i, s)| {
+                if i == b {
+                    return Verdict::Best;
+                }
+                let gap = best.mean() - s.mean();
+                let se = (best.se().powi(2) + s.se().powi(2)).sqrt();
+                if !gap.is_finite() && gap > 0.0 {
+                    // A candidate whose every estimate failed: the record gives it no support.
+                    Verdict::Outside
+                } else if !se.is_finite() {
+                    Verdict::Unresolved
+                } else if gap > self.region_nats + 2.0 * se {
+                    Verdict::Outside
+                } else {
+                    Verdict::Inside
+                }
+            })
+            .collect()
+    }
+}
+
+/// The settings of every estimate: the base settings (a config's or the recommended ones) as
+/// `sysid filter` settles them for the MPF-EKF2 on these data, then one filter of `particles`
+/// without traces, validation or moves, every parameter fixed at `c`.
+fn fixed_at(base: &FilterSettings, c: &Candidate, particles: usize) -> FilterSettings {
+    let mut s = base.clone();
+    s.particles = particles;
+    s.pool = 1;
+    s.ess_threshold = Some(0.5);
+    s.trace_every = 0;
+    s.loop_every = 0;
+    s.validate = false;
+    s.rejuvenation = None;
+    s.fix = c
+        .names
+        .iter()
+        .cloned()
+        .zip(c.theta.iter().copied())
+        .collect();
+    s
+}
+
+/// Scores every candidate (and the truth when asked) on the request's data set; `progress` hears
+/// one line per finished estimate.
+pub fn score(
+    req: &LikelihoodRequest,
+    candidates: &[Candidate],
+    progress: &mut dyn FnMut(&str),
+) -> Result<Comparison> {
+    if req.seeds == 0 {
+        bail!("--seeds: at least one estimate per candidate");
+    }
+    crate::limits::check_particle_cloud(req.particles, 1)?;
+    let data: LoadedDataset =
+        load_dir(&req.data).with_context(|| format!("loading data set {}", req.data.display()))?;
+    let chain = data
+        .true_chain()
+        .context("rebuilding the data set's structure")?;
+    let mut all = candidates.to_vec();
+    if req.truth {
+        let Some(meta) = &data.meta else {
+            bail!(
+                "--truth: {} has no dataset.json, so its true θ is unknown",
+                req.data.display()
+            );
+        };
+        let names = all.first().map(|c| c.names.clone()).unwrap_or_default();
+        if names.len() != meta.theta_true.len() {
+            bail!(
+                "--truth: the data set's θ has {} entries, the records' {}",
+                meta.theta_true.len(),
+                names.len()
+            );
+        }
+        all.push(Candidate {
+            label: "truth".into(),
+            names,
+            theta: meta.theta_true.clone(),
+        });
+    }
+    let Some(first) = all.first() else {
+        bail!("no record to score (give run records, or --truth)");
+    };
+    for c in &all {
+        if c.names != first.names {
+            bail!(
+                "{}: its parameters ({}) are not those of {} ({}): every answer must be of the \
+                 same building",
+                c.label,
+                c.names.join(", "),
+                first.label,
+                first.names.join(", ")
+            );
+        }
+    }
+    if data.meta.is_none() && chain.is_none() && req.config.is_none() {
+        bail!(
+            "{}: field data (no dataset.json): give --config with the [structure] table of the \
+             building the answers were identified on",
+            req.data.display()
+        );
+    }
+    let base = match &req.config {
+        Some(path) => crate::limits::load_filter_settings(path)?,
+        None => FilterSettings::recommended(),
+    };
+    let config_name = req.config.as_ref().map(|p| p.display().to_string());
+    let measured = req.data.join(MEASURED);
+    let flags = StructureSettings::default();
+    let target = Target {
+        algorithm: Algorithm::MpfEkf2,
+        data: &data,
+        chain: chain.as_ref(),
+        measured: &measured,
+        flags: &flags,
+        config: config_name.as_deref(),
+    };
+    let base = settle(&target, base, &mut |_| {})?;
+    let mut scored = Vec::with_capacity(all.len());
+    for c in &all {
+        let settings = fixed_at(&base, c, req.particles);
+        let mut estimates = Vec::with_capacity(req.seeds as usize);
+        for seed in 1..=req.seeds {
+            let input = RunInput {
+                data: &data,
+                chain: chain.as_ref(),
+                experiment: "loglik",
+                seed,
+                run: 0,
+                progress: false,
+                residuals: false,
+            };
+            let r = identify(&input, Algorithm::MpfEkf2, &settings)
+                .with_context(|| format!("{}: the likelihood at its θ", c.label))?;
+            let l = if r.failure.is_some() || !r.loglik.is_finite() {
+                f64::NEG_INFINITY
+            } else {
+                r.loglik
+            };
+            progress(&format!("{}: seed {seed}: log p̂(y | θ) = {l:.2}", c.label));
+            estimates.push(l);
+        }
+        scored.push(Scored {
+            label: c.label.clone(),
+            estimates,
+        });
+    }
+    let params = first.names.len() - first_fixed(&base, &first.names);
+    Ok(Comparison {
+        scored,
+        params,
+        region_nats: crate::residuals::chi2_95(params.max(1)) / 2.0,
+    })
+}
+
+/// Parameters that the base settings already fix: the same in every candidate, not free.
+fn first_fixed(base: &FilterSettings, names: &[String]) -> usize {
+    names.iter().filter(|n| base.fix.contains_key(*n)).count()
+}
+
+/// The comparison as a table, best first, with each verdict.
+pub fn table(c: &Comparison) -> String {
+    use std::fmt::Write as _;
+    let b = c.best();
+    let best_mean = c.scored[b].mean();
+    let verdicts = c.verdicts();
+    let mut order: Vec<usize> = (0..c.scored.len()).collect();
+    order.sort_by(|&x, &y| c.scored[y].mean().total_cmp(&c.scored[x].mean()));
+    let mut o = String::new();
+    let w = c
+        .scored
+        .iter()
+        .map(|s| s.label.chars().count())
+        .max()
+        .unwrap_or(0)
+        .max("answer".len());
+    let _ = writeln!(
+        o,
+        "{:<w$}  {:>16}  {:>8}  {:>12}  verdict",
+        "answer", "log p̂(y | θ)", "s.e.", "below best"
+    );
+    for i in order {
+        let s = &c.scored[i];
+        let verdict = match verdicts[i] {
+            Verdict::Best => "best".to_string(),
+            Verdict::Inside => "inside the 95 % likelihood region".to_string(),
+            Verdict::Outside => "OUTSIDE the 95 % likelihood region".to_string(),
+            Verdict::Unresolved => {
+                "not resolved (one estimate: no s.e.; use --seeds 2 or more)".to_string()
+            }
+        };
+        let _ = writeln!(
+            o,
+            "{:<w$}  {:>16.2}  {:>8.2}  {:>12.2}  {verdict}",
+            s.label,
+            s.mean(),
+            s.se(),
+            best_mean - s.mean()
+        );
+    }
+    let _ = writeln!(
+        o,
+        "95 % likelihood region of {} free parameters: within χ²_{}(0.95)/2 = {:.1} nats of the \
+         maximum (at least the best answer's); outside means below the best by more than that \
+         plus 2 s.e. of the difference.",
+        c.params, c.params, c.region_nats
+    );
+    o
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn comparison(estimates: &[&[f64]], params: usize) -> Comparison {
+        Comparison {
+            scored: estimates
+                .iter()
+                .enumerate()
+                .map(|(i, e)| Scored {
+                    label: format!("r{i}"),
+                    estimates: e.to_vec(),
+                })
+                .collect(),
+            params,
+            region_nats: crate::residuals::chi2_95(params) / 2.0,
+        }
+    }
+
+    #[test]
+    fn the_verdicts_follow_the_region_and_the_standard_error() {
+        // 9 parameters: region 8.46 nats. r1 is 5 below (inside), r2 30 below (outside), r3 10
+        // below with s.e.s of 2 (10 < 8.46 + 2·2.83: inside), r4 every estimate failed.
+        let c = comparison(
+            &[
+                &[-100.0, -100.0],
+                &[-105.0, -105.0],
+                &[-130.0, -130.0],
+                &[-108.0, -112.0],
+                &[f64::NEG_INFINITY, f64::NEG_INFINITY],
+            ],
+            9,
+        );
+        assert!((c.region_nats - 8.46).abs() < 0.05, "{}", c.region_nats);
+        assert_eq!(c.best(), 0);
+        assert_eq!(
+            c.verdicts(),
+            vec![
+                Verdict::Best,
+                Verdict::Inside,
+                Verdict::Outside,
+                Verdict::Inside,
+                Verdict::Outside
+            ]
+        );
+        let t = table(&c);
+        assert!(t.lines().nth(1).unwrap().starts_with("r0"), "{t}");
+        assert!(t.contains("OUTSIDE"), "{t}");
+        // One estimate each: no standard error, no verdict.
+        let c = comparison(&[&[-100.0], &[-130.0]], 9);
+        assert_eq!(c.verdicts(), vec![Verdict::Best, Verdict::Unresolved]);
+    }
+}
