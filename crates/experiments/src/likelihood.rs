@@ -180,7 +180,10 @@ pub fn score(
     if req.seeds == 0 {
         bail!("--seeds: at least one estimate per candidate");
     }
-    crate::limits::check_particle_cloud(req.particles, 1)?;
+    if req.particles == 0 {
+        bail!("--particles: at least one particle per estimate");
+    }
+    crate::limits::check_particle_cloud(req.particles, 1).context("--particles")?;
     let data: LoadedDataset =
         load_dir(&req.data).with_context(|| format!("loading data set {}", req.data.display()))?;
     let chain = data

@@ -99,6 +99,16 @@ fn bad_requests_are_refused_by_name() {
     )
     .unwrap_err();
     assert!(e.to_string().contains("--seeds"), "{e}");
+    let e = score(
+        &LikelihoodRequest {
+            particles: 0,
+            ..request(data.clone())
+        },
+        &one,
+        &mut |_| {},
+    )
+    .unwrap_err();
+    assert!(e.to_string().contains("--particles"), "{e}");
     // Answers of different buildings are not compared.
     let mut other = one[0].clone();
     other.label = "other".into();
