@@ -18,7 +18,7 @@ pub struct Args {
     /// Also score the data set's true θ (simulated data with dataset.json).
     #[arg(long)]
     pub truth: bool,
-    /// Filter settings of the model (as `sysid filter --config`; field data: its [structure]
+    /// Filter settings of the model (as `sysid filter --config`; field data: its `[structure]`
     /// table). Default: the model `sysid filter --algorithm mpf-ekf2` builds for these data.
     #[arg(long)]
     pub config: Option<PathBuf>,
