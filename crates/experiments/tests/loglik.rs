@@ -84,43 +84,39 @@ fn a_wrong_answer_lies_outside_the_region_and_the_truth_inside() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// The message of the error `score` refuses `req` with.
+fn refusal(req: &LikelihoodRequest, candidates: &[Candidate]) -> String {
+    score(req, candidates, &mut |_| {}).unwrap_err().to_string()
+}
+
 #[test]
 fn bad_requests_are_refused_by_name() {
     let dir = temp_dir("refused");
     let data = data_dir(&dir);
     let one = [Candidate::from_record(&answer(&dir, "a", [1.0; 9])).unwrap()];
-    let e = score(
+    let e = refusal(
         &LikelihoodRequest {
             seeds: 0,
             ..request(data.clone())
         },
         &one,
-        &mut |_| {},
-    )
-    .unwrap_err();
-    assert!(e.to_string().contains("--seeds"), "{e}");
-    let e = score(
+    );
+    assert!(e.contains("--seeds"), "{e}");
+    let e = refusal(
         &LikelihoodRequest {
             particles: 0,
             ..request(data.clone())
         },
         &one,
-        &mut |_| {},
-    )
-    .unwrap_err();
-    assert!(e.to_string().contains("--particles"), "{e}");
+    );
+    assert!(e.contains("--particles"), "{e}");
     // Answers of different buildings are not compared.
     let mut other = one[0].clone();
     other.label = "other".into();
     other.names.pop();
     other.theta.pop();
-    let e = score(
-        &request(data.clone()),
-        &[one[0].clone(), other],
-        &mut |_| {},
-    )
-    .unwrap_err();
-    assert!(e.to_string().contains("same building"), "{e}");
+    let e = refusal(&request(data.clone()), &[one[0].clone(), other]);
+    assert!(e.contains("same building"), "{e}");
     // A failed run has no answer to score.
     let mut r = common::record("mpf-ekf2", 0, [1.0; 9], 0.05);
     r.theta_val = vec![f64::NAN; 9];
@@ -132,15 +128,13 @@ fn bad_requests_are_refused_by_name() {
     let field = dir.join("field");
     std::fs::create_dir_all(&field).unwrap();
     std::fs::copy(data.join("measured.csv"), field.join("measured.csv")).unwrap();
-    let e = score(
+    let e = refusal(
         &LikelihoodRequest {
             truth: false,
             ..request(field)
         },
         &one,
-        &mut |_| {},
-    )
-    .unwrap_err();
-    assert!(e.to_string().contains("--config"), "{e}");
+    );
+    assert!(e.contains("--config"), "{e}");
     let _ = std::fs::remove_dir_all(&dir);
 }
