@@ -94,22 +94,14 @@ fn bad_requests_are_refused_by_name() {
     let dir = temp_dir("refused");
     let data = data_dir(&dir);
     let one = [Candidate::from_record(&answer(&dir, "a", [1.0; 9])).unwrap()];
-    let e = refusal(
-        &LikelihoodRequest {
-            seeds: 0,
-            ..request(data.clone())
-        },
-        &one,
-    );
-    assert!(e.contains("--seeds"), "{e}");
-    let e = refusal(
-        &LikelihoodRequest {
-            particles: 0,
-            ..request(data.clone())
-        },
-        &one,
-    );
-    assert!(e.contains("--particles"), "{e}");
+    let mut no_seeds = request(data.clone());
+    no_seeds.seeds = 0;
+    let mut no_particles = request(data.clone());
+    no_particles.particles = 0;
+    for (req, flag) in [(no_seeds, "--seeds"), (no_particles, "--particles")] {
+        let e = refusal(&req, &one);
+        assert!(e.contains(flag), "{e}");
+    }
     // Answers of different buildings are not compared.
     let mut other = one[0].clone();
     other.label = "other".into();
