@@ -189,43 +189,6 @@ pub fn score(
     let chain = data
         .true_chain()
         .context("rebuilding the data set's structure")?;
-    let mut all = candidates.to_vec();
-    if req.truth {
-        let Some(meta) = &data.meta else {
-            bail!(
-                "--truth: {} has no dataset.json, so its true θ is unknown",
-                req.data.display()
-            );
-        };
-        let names = all.first().map(|c| c.names.clone()).unwrap_or_default();
-        if names.len() != meta.theta_true.len() {
-            bail!(
-                "--truth: the data set's θ has {} entries, the records' {}",
-                meta.theta_true.len(),
-                names.len()
-            );
-        }
-        all.push(Candidate {
-            label: "truth".into(),
-            names,
-            theta: meta.theta_true.clone(),
-        });
-    }
-    let Some(first) = all.first() else {
-        bail!("no record to score (give run records, or --truth)");
-    };
-    for c in &all {
-        if c.names != first.names {
-            bail!(
-                "{}: its parameters ({}) are not those of {} ({}): every answer must be of the \
-                 same building",
-                c.label,
-                c.names.join(", "),
-                first.label,
-                first.names.join(", ")
-            );
-        }
-    }
     if data.meta.is_none() && chain.is_none() && req.config.is_none() {
         bail!(
             "{}: field data (no dataset.json): give --config with the [structure] table of the \
@@ -249,6 +212,39 @@ pub fn score(
         config: config_name.as_deref(),
     };
     let base = settle(&target, base, &mut |_| {})?;
+    // The parameters of the model on these data: every answer must give exactly these.
+    let names = crate::pipeline::chain_spec(&data, chain.as_ref(), &base)?
+        .prior
+        .names();
+    let mut all = candidates.to_vec();
+    if req.truth {
+        let Some(meta) = &data.meta else {
+            bail!(
+                "--truth: {} has no dataset.json, so its true θ is unknown",
+                req.data.display()
+            );
+        };
+        all.push(Candidate {
+            label: "truth".into(),
+            names: names.clone(),
+            theta: meta.theta_true.clone(),
+        });
+    }
+    if all.is_empty() {
+        bail!("no record to score (give run records, or --truth)");
+    }
+    for c in &all {
+        if c.names != names || c.theta.len() != names.len() {
+            bail!(
+                "{}: its parameters ({}) are not those of the building of {} ({}): every answer \
+                 must be of that building",
+                c.label,
+                c.names.join(", "),
+                req.data.display(),
+                names.join(", ")
+            );
+        }
+    }
     let mut scored = Vec::with_capacity(all.len());
     for c in &all {
         let settings = fixed_at(&base, c, req.particles);
@@ -278,7 +274,7 @@ pub fn score(
             estimates,
         });
     }
-    let params = first.names.len() - first_fixed(&base, &first.names);
+    let params = names.len() - fixed_by_settings(&base, &names);
     Ok(Comparison {
         scored,
         params,
@@ -287,7 +283,7 @@ pub fn score(
 }
 
 /// Parameters that the base settings already fix: the same in every candidate, not free.
-fn first_fixed(base: &FilterSettings, names: &[String]) -> usize {
+fn fixed_by_settings(base: &FilterSettings, names: &[String]) -> usize {
     names.iter().filter(|n| base.fix.contains_key(*n)).count()
 }
 

@@ -102,13 +102,18 @@ fn bad_requests_are_refused_by_name() {
         let e = refusal(&req, &one);
         assert!(e.contains(flag), "{e}");
     }
-    // Answers of different buildings are not compared.
+    // An answer of another building is refused.
     let mut other = one[0].clone();
     other.label = "other".into();
     other.names.pop();
     other.theta.pop();
     let e = refusal(&request(data.clone()), &[one[0].clone(), other]);
-    assert!(e.contains("same building"), "{e}");
+    assert!(e.contains("must be of that building"), "{e}");
+    // --truth alone scores the truth (one answer: the best).
+    let truth = score(&request(data.clone()), &[], &mut |_| {}).unwrap();
+    assert_eq!(truth.scored.len(), 1);
+    assert_eq!(truth.scored[0].label, "truth");
+    assert!(truth.scored[0].mean().is_finite());
     // A failed run has no answer to score.
     let mut r = common::record("mpf-ekf2", 0, [1.0; 9], 0.05);
     r.theta_val = vec![f64::NAN; 9];
