@@ -105,8 +105,9 @@ pub struct Comparison {
 pub enum Verdict {
     /// The best mean estimate.
     Best,
-    /// Below the best by less than the region's half-width plus two standard errors.
-    Inside,
+    /// Below the best by less than the region's half-width plus two standard errors: not shown
+    /// outside. Not shown inside either — the maximum may lie above every answer scored.
+    NotShownOutside,
     /// Below the best by more: outside the record's 95 % likelihood region.
     Outside,
     /// Not resolved: a single estimate per candidate gives no standard error.
@@ -142,7 +143,7 @@ impl Comparison {
                 } else if gap > self.region_nats + 2.0 * se {
                     Verdict::Outside
                 } else {
-                    Verdict::Inside
+                    Verdict::NotShownOutside
                 }
             })
             .collect()
@@ -312,7 +313,9 @@ pub fn table(c: &Comparison) -> String {
         let s = &c.scored[i];
         let verdict = match verdicts[i] {
             Verdict::Best => "best".to_string(),
-            Verdict::Inside => "inside the 95 % likelihood region".to_string(),
+            Verdict::NotShownOutside => {
+                "not shown outside (within the region's width of the best)".to_string()
+            }
             Verdict::Outside => "OUTSIDE the 95 % likelihood region".to_string(),
             Verdict::Unresolved => {
                 "not resolved (one estimate: no s.e.; use --seeds 2 or more)".to_string()
@@ -358,8 +361,8 @@ mod tests {
 
     #[test]
     fn the_verdicts_follow_the_region_and_the_standard_error() {
-        // 9 parameters: region 8.46 nats. r1 is 5 below (inside), r2 30 below (outside), r3 10
-        // below with s.e.s of 2 (10 < 8.46 + 2·2.83: inside), r4 every estimate failed.
+        // 9 parameters: region 8.46 nats. r1 is 5 below (not shown outside), r2 30 below (outside), r3 10
+        // below with s.e.s of 2 (10 < 8.46 + 2·2.83: not shown outside), r4 every estimate failed.
         let c = comparison(
             &[
                 &[-100.0, -100.0],
@@ -376,9 +379,9 @@ mod tests {
             c.verdicts(),
             vec![
                 Verdict::Best,
-                Verdict::Inside,
+                Verdict::NotShownOutside,
                 Verdict::Outside,
-                Verdict::Inside,
+                Verdict::NotShownOutside,
                 Verdict::Outside
             ]
         );

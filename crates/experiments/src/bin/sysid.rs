@@ -54,7 +54,7 @@ enum Command {
     /// Compare online filters' final posteriors (run records) with a reference posterior.
     CompareReference(cli::reference::CompareArgs),
     /// Which answers a record supports: the log-likelihood of a data set at the θ_val of run
-    /// records (and its true θ), each inside or outside the record's 95 % likelihood region.
+    /// records (and its true θ), each shown outside the record's 95 % likelihood region or not.
     Loglik(cli::loglik::Args),
     /// Draw the figures of one run record (convergence, ESS, hysteresis loop, residuals).
     Plot(cli::plot::Args),

@@ -1,5 +1,5 @@
 //! `sysid loglik`: which answers a record supports — the log-likelihood of a data set at the
-//! θ_val of run records (and its true θ), and whether each lies inside the record's 95 %
+//! θ_val of run records (and its true θ), and whether each lies outside the record's 95 %
 //! likelihood region ([`crate::likelihood`]).
 
 use std::path::PathBuf;
