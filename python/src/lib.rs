@@ -19,6 +19,7 @@ use core_filters::smc::storvik::StorvikUpdate;
 use experiments::error::{Context, Error};
 use experiments::field::StructureSettings;
 use experiments::identification::{settle, Overrides, Target};
+use experiments::likelihood::{score_on, table, Candidate, ScoredData, Scoring, Verdict};
 use experiments::pipeline::{identify_stoppable, Algorithm, FilterSettings, RunInput};
 use experiments::record::RunRecord;
 use models::dataset::{Dataset, LoadedDataset, MEASURED};
@@ -414,23 +415,9 @@ fn identify(
     // The settings as `sysid filter` builds them: a config file (or its JSON form) over the
     // SPEC's defaults, else the recommended settings; options over both; then settled on the
     // data set by the same function (`identification::settle`).
-    let settings = match (&config, &config_json) {
-        (Some(_), Some(_)) => {
-            return Err(SysidError::new_err(
-                "config: give a file or a dict, not both",
-            ))
-        }
-        (Some(path), None) => experiments::limits::load_filter_settings(path).map_err(err)?,
-        (None, Some(text)) => {
-            let s: FilterSettings = serde_json::from_str(text)
-                .context("parsing config (dict)")
-                .map_err(err)?;
-            experiments::limits::check_filter_settings(&s)
-                .context("config (dict)")
-                .map_err(err)?;
-            s
-        }
-        (None, None) => FilterSettings::recommended_with(particles),
+    let settings = match given_settings(&config, &config_json)? {
+        Some(s) => s,
+        None => FilterSettings::recommended_with(particles),
     };
     let overrides = Overrides {
         particles,
@@ -464,25 +451,9 @@ fn identify(
             None => Default::default(),
         },
     };
-    let flags = StructureSettings {
-        storeys,
-        hysteretic,
-        masses,
-        measurement: measurement
-            .as_deref()
-            .map(|m| parse::<MeasurementKind>("measurement", m))
-            .transpose()?,
-        damping: damping
-            .as_deref()
-            .map(|d| parse::<models::structure::Damping>("damping", d))
-            .transpose()?,
-    };
+    let flags = structure_flags(storeys, hysteretic, masses, measurement, damping)?;
     let d = &data.loaded;
-    let config_name = match (&config, &config_json) {
-        (Some(p), _) => Some(p.display().to_string()),
-        (None, Some(_)) => Some("config (dict)".to_string()),
-        (None, None) => None,
-    };
+    let config_name = config_name(&config, &config_json);
     let target = Target {
         algorithm,
         data: d,
@@ -501,8 +472,24 @@ fn identify(
         progress: false,
         residuals: true,
     };
-    // Ctrl-C: the run looks for a pending signal every 50 ms (with the GIL, briefly); one stops
-    // it before its next step and is raised here.
+    let record = stoppable(py, |stop| {
+        let record = identify_stoppable(&input, algorithm, &settings, stop)?;
+        if let Some(out) = &out {
+            // Written as `sysid filter` writes it: a temporary file renamed into place.
+            experiments::sweep::write_atomic(out, &record)?;
+        }
+        Ok(record)
+    })?;
+    Ok(PyRecord { r: record })
+}
+
+/// Runs `work` without the GIL, handing it a `stop` that looks for a pending Ctrl-C every 50 ms
+/// (with the GIL, briefly); a Ctrl-C stops the work before its next filter step and is raised
+/// here as the signal's own exception.
+fn stoppable<T: Send>(
+    py: Python<'_>,
+    work: impl FnOnce(&dyn Fn() -> bool) -> experiments::error::Result<T> + Send,
+) -> PyResult<T> {
     let pending: Mutex<Option<PyErr>> = Mutex::new(None);
     let outcome = py.allow_threads(|| {
         let last = Cell::new(Instant::now());
@@ -519,15 +506,10 @@ fn identify(
                 }
             })
         };
-        let record = identify_stoppable(&input, algorithm, &settings, &stop)?;
-        if let Some(out) = &out {
-            // Written as `sysid filter` writes it: a temporary file renamed into place.
-            experiments::sweep::write_atomic(out, &record)?;
-        }
-        Ok::<_, experiments::error::Error>(record)
+        work(&stop)
     });
     match outcome {
-        Ok(record) => Ok(PyRecord { r: record }),
+        Ok(v) => Ok(v),
         Err(e) if e.interrupted().is_some() => Err(pending
             .lock()
             .expect("not poisoned")
@@ -535,6 +517,151 @@ fn identify(
             .unwrap_or_else(|| pyo3::exceptions::PyKeyboardInterrupt::new_err(e.to_string()))),
         Err(e) => Err(err(e)),
     }
+}
+
+/// The settings of a config file or of its JSON form (a dict on the Python side), checked as
+/// `sysid filter --config` checks them; `None` when neither is given.
+fn given_settings(
+    config: &Option<PathBuf>,
+    config_json: &Option<String>,
+) -> PyResult<Option<FilterSettings>> {
+    Ok(match (config, config_json) {
+        (Some(_), Some(_)) => {
+            return Err(SysidError::new_err(
+                "config: give a file or a dict, not both",
+            ))
+        }
+        (Some(path), None) => Some(experiments::limits::load_filter_settings(path).map_err(err)?),
+        (None, Some(text)) => {
+            let s: FilterSettings = serde_json::from_str(text)
+                .context("parsing config (dict)")
+                .map_err(err)?;
+            experiments::limits::check_filter_settings(&s)
+                .context("config (dict)")
+                .map_err(err)?;
+            Some(s)
+        }
+        (None, None) => None,
+    })
+}
+
+/// How messages name the settings' source.
+fn config_name(config: &Option<PathBuf>, config_json: &Option<String>) -> Option<String> {
+    match (config, config_json) {
+        (Some(p), _) => Some(p.display().to_string()),
+        (None, Some(_)) => Some("config (dict)".to_string()),
+        (None, None) => None,
+    }
+}
+
+/// The building given beside the data, as `sysid filter`'s structure flags.
+fn structure_flags(
+    storeys: Option<usize>,
+    hysteretic: Option<Vec<usize>>,
+    masses: Option<Vec<f64>>,
+    measurement: Option<String>,
+    damping: Option<String>,
+) -> PyResult<StructureSettings> {
+    Ok(StructureSettings {
+        storeys,
+        hysteretic,
+        masses,
+        measurement: measurement
+            .as_deref()
+            .map(|m| parse::<MeasurementKind>("measurement", m))
+            .transpose()?,
+        damping: damping
+            .as_deref()
+            .map(|d| parse::<models::structure::Damping>("damping", d))
+            .transpose()?,
+    })
+}
+
+/// How well the record supports each answer: `sysid loglik` in memory. The log-likelihood of
+/// the data set at each record's θ_val (and at its true θ with `truth`), `seeds` estimates each
+/// by one MPF-EKF2 of `particles` particles with every parameter fixed, and each answer's verdict
+/// against the record's 95 % likelihood region (`experiments::likelihood`).
+#[pyfunction]
+#[pyo3(signature = (data, answers, labels, *, truth, config, config_json, particles, seeds, storeys, hysteretic, masses, measurement, damping))]
+#[allow(clippy::too_many_arguments)]
+fn loglik(
+    py: Python<'_>,
+    data: &PyDataset,
+    answers: Vec<PyRef<'_, PyRecord>>,
+    labels: Vec<String>,
+    truth: bool,
+    config: Option<PathBuf>,
+    config_json: Option<String>,
+    particles: usize,
+    seeds: u64,
+    storeys: Option<usize>,
+    hysteretic: Option<Vec<usize>>,
+    masses: Option<Vec<f64>>,
+    measurement: Option<String>,
+    damping: Option<String>,
+) -> PyResult<PyObject> {
+    if labels.len() != answers.len() {
+        return Err(SysidError::new_err(format!(
+            "loglik: {} labels for {} answers",
+            labels.len(),
+            answers.len()
+        )));
+    }
+    let candidates = answers
+        .iter()
+        .zip(labels)
+        .map(|(a, label)| Candidate::of(label, &a.r))
+        .collect::<experiments::error::Result<Vec<_>>>()
+        .map_err(err)?;
+    let settings = given_settings(&config, &config_json)?;
+    let config_name = config_name(&config, &config_json);
+    let flags = structure_flags(storeys, hysteretic, masses, measurement, damping)?;
+    let name = data.measured.display().to_string();
+    let on = ScoredData {
+        data: &data.loaded,
+        chain: data.chain.as_ref(),
+        measured: &data.measured,
+        name: &name,
+        flags: &flags,
+        settings,
+        config: config_name.as_deref(),
+    };
+    let req = Scoring {
+        particles,
+        seeds,
+        truth,
+    };
+    let c = stoppable(py, |stop| {
+        score_on(&on, req, &candidates, &mut |_| {}, stop)
+    })?;
+    let best = c.best();
+    let verdicts = c.verdicts();
+    let out = PyDict::new(py);
+    out.set_item("params", c.params)?;
+    out.set_item("region_nats", c.region_nats)?;
+    out.set_item("best", &c.scored[best].label)?;
+    let rows = PyList::empty(py);
+    for (s, v) in c.scored.iter().zip(&verdicts) {
+        let d = PyDict::new(py);
+        d.set_item("label", &s.label)?;
+        d.set_item("estimates", s.estimates.clone())?;
+        d.set_item("mean", s.mean())?;
+        d.set_item("se", s.se())?;
+        d.set_item("below_best", c.scored[best].mean() - s.mean())?;
+        d.set_item(
+            "verdict",
+            match v {
+                Verdict::Best => "best",
+                Verdict::NotShownOutside => "not shown outside",
+                Verdict::Outside => "outside",
+                Verdict::Unresolved => "not resolved",
+            },
+        )?;
+        rows.append(d)?;
+    }
+    out.set_item("answers", rows)?;
+    out.set_item("table", table(&c))?;
+    Ok(out.into_any().unbind())
 }
 
 /// A run record: what `sysid filter` writes, with its numbers as numpy arrays.
@@ -809,6 +936,7 @@ fn core_module(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(load_dataset, m)?)?;
     m.add_function(wrap_pyfunction!(field_data, m)?)?;
     m.add_function(wrap_pyfunction!(identify, m)?)?;
+    m.add_function(wrap_pyfunction!(loglik, m)?)?;
     m.add_function(wrap_pyfunction!(read_record, m)?)?;
     m.add_function(wrap_pyfunction!(parse_record, m)?)?;
     m.add_function(wrap_pyfunction!(table1, m)?)?;

@@ -47,6 +47,7 @@ __all__ = [
     "field_data",
     "identify",
     "load_dataset",
+    "loglik",
     "parse_record",
     "read_record",
     "simulate",
@@ -265,5 +266,71 @@ def identify(
         measurement=b.measurement,
         experiment=experiment,
         out=None if out is None else os.fspath(out),
+        damping=b.damping,
+    )
+
+
+def loglik(
+    data: Dataset,
+    answers: Union[Sequence[Record], Mapping[str, Record]] = (),
+    building: Optional[Building] = None,
+    *,
+    truth: bool = False,
+    config: Union[None, PathLike, Mapping[str, Any]] = None,
+    particles: int = 250,
+    seeds: int = 2,
+) -> dict[str, Any]:
+    """Which answers the record supports: ``sysid loglik`` in memory, same numbers.
+
+    For each answer (a :class:`Record`'s θ_val; a dict gives them labels, a list labels them
+    ``"<index>: <algorithm> seed <seed>"``) and, with ``truth=True``, the data set's true θ: the
+    log-likelihood log p̂(y | θ) of ``data``, ``seeds`` estimates by one MPF-EKF2 of
+    ``particles`` particles with every parameter fixed at θ, under the model ``identify(data,
+    algorithm="mpf-ekf2")`` builds (``config``: a file or dict, as :func:`identify`; field data
+    need ``building`` or a config's ``[structure]``).
+
+    Returns a dict: ``answers`` (per answer: ``label``, ``estimates``, ``mean``, ``se``,
+    ``below_best``, ``verdict``), ``best``, ``params`` (free parameters), ``region_nats``
+    (χ²_p(0.95)/2) and ``table`` (what ``sysid loglik`` prints). A verdict is ``"best"``, ``"not
+    shown outside"``, ``"outside"`` (below the best by more than the record's 95 % likelihood
+    region plus 2 s.e.: the record itself says that answer is wrong) or ``"not resolved"`` (one
+    seed gives no s.e.). Ctrl-C stops it (``KeyboardInterrupt``).
+    """
+    if not isinstance(data, Dataset):
+        raise SysidError("loglik(data, ...): data must be a Dataset (simulate, load_dataset, field_data)")
+    if isinstance(answers, Mapping):
+        labels = [str(k) for k in answers.keys()]
+        records = list(answers.values())
+    else:
+        records = list(answers)
+        labels = [str(i) for i in range(len(records))]
+    for label, r in zip(labels, records):
+        if not isinstance(r, Record):
+            raise SysidError(f"loglik: answer {label!r} is not a Record")
+    if not isinstance(answers, Mapping):
+        labels = [f"{i}: {r.algorithm} seed {r.seed}" for i, r in enumerate(records)]
+    if int(particles) < 1:
+        raise SysidError("--particles: at least one particle per estimate")
+    if int(seeds) < 1:
+        raise SysidError("--seeds: at least one estimate per candidate")
+    b = building or Building()
+    config_path = config_json = None
+    if isinstance(config, Mapping):
+        config_json = json.dumps(dict(config), allow_nan=False)
+    elif config is not None:
+        config_path = os.fspath(config)
+    return _core.loglik(
+        data,
+        records,
+        labels,
+        truth=bool(truth),
+        config=config_path,
+        config_json=config_json,
+        particles=int(particles),
+        seeds=int(seeds),
+        storeys=None if b.storeys is None else int(b.storeys),
+        hysteretic=None if b.hysteretic is None else [int(h) for h in b.hysteretic],
+        masses=b._masses(),
+        measurement=b.measurement,
         damping=b.damping,
     )

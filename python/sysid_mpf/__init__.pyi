@@ -59,3 +59,13 @@ def identify(
     experiment: str = ...,
     out: Optional[PathLike] = ...,
 ) -> Record: ...
+def loglik(
+    data: Dataset,
+    answers: Union[Sequence[Record], Mapping[str, Record]] = ...,
+    building: Optional[Building] = ...,
+    *,
+    truth: bool = ...,
+    config: Union[None, PathLike, Mapping[str, Any]] = ...,
+    particles: int = ...,
+    seeds: int = ...,
+) -> dict[str, Any]: ...

@@ -151,6 +151,22 @@ def identify(
     experiment: str,
     out: Optional[str],
 ) -> Record: ...
+def loglik(
+    data: Dataset,
+    answers: Sequence[Record],
+    labels: Sequence[str],
+    *,
+    truth: bool,
+    config: Optional[str],
+    config_json: Optional[str],
+    particles: int,
+    seeds: int,
+    storeys: Optional[int],
+    hysteretic: Optional[Sequence[int]],
+    masses: Optional[Sequence[float]],
+    measurement: Optional[str],
+    damping: Optional[str],
+) -> dict[str, Any]: ...
 def read_record(path: Union[str, os.PathLike[str]]) -> Record: ...
 def parse_record(text: str) -> Record: ...
 def table1() -> list[dict[str, Any]]: ...

@@ -98,3 +98,45 @@ def test_same_seed_same_bits_other_seed_other_bits(short_data):
     s1 = sm.simulate(duration=1.0, seed=5)
     s2 = sm.simulate(duration=1.0, seed=5)
     assert bits(s1.acc) == bits(s2.acc) and bits(s1.ug) == bits(s2.ug)
+
+
+def test_loglik_same_numbers_as_cli(sysid, tmp_path, short_data, short_dir):
+    # `sysid loglik` and `loglik` score the same answers (a run's θ_val and the truth) with the
+    # same estimates; a 40 %-low k1 is outside the record's 95 % likelihood region in both.
+    _, rec = cli_record(sysid, tmp_path, short_dir, "mpf-ekf2")
+    low = dict(rec.to_dict())
+    i = low["param_names"].index("k1")
+    low["theta_val"][i] *= 0.6
+    low_path = tmp_path / "low.json"
+    low_path.write_text(json.dumps(low))
+    low_rec = sm.read_record(low_path)
+    p = sysid(
+        "loglik", "--data", short_dir, "--truth", "--particles", 60, "--seeds", 2,
+        tmp_path / "mpf-ekf2.json", low_path,
+    )
+    cli_rows = {}
+    for line in p.stdout.splitlines()[1:-1]:
+        label, mean, se = line.split()[:3]
+        cli_rows[label] = (mean, se)
+    got = sm.loglik(
+        short_data, {"run": rec, "low": low_rec}, truth=True, particles=60, seeds=2
+    )
+    rows = {a["label"]: a for a in got["answers"]}
+    for mine, theirs in [
+        ("run", str(tmp_path / "mpf-ekf2.json")),
+        ("low", str(low_path)),
+        ("truth", "truth"),
+    ]:
+        assert (f"{rows[mine]['mean']:.2f}", f"{rows[mine]['se']:.2f}") == cli_rows[theirs]
+        assert len(rows[mine]["estimates"]) == 2
+    assert rows["low"]["verdict"] == "outside"
+    assert "OUTSIDE" in got["table"]
+    assert got["params"] == len(rec.param_names)
+    # Bad requests are refused by name, never run.
+    with pytest.raises(sm.SysidError, match="--seeds"):
+        sm.loglik(short_data, [rec], seeds=0)
+    with pytest.raises(sm.SysidError, match="not a Record"):
+        sm.loglik(short_data, [rec.to_dict()])
+    other = sm.simulate(sm.Building(storeys=2, hysteretic=[1]), duration=1.0, seed=3)
+    with pytest.raises(sm.SysidError, match="not those of the building"):
+        sm.loglik(other, [rec])

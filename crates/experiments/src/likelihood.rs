@@ -22,9 +22,11 @@ use std::path::{Path, PathBuf};
 use crate::error::{bail, Context, Result};
 use crate::field::StructureSettings;
 use crate::identification::{settle, Target};
-use crate::pipeline::{identify, Algorithm, RunInput};
+use crate::pipeline::{identify_stoppable, Algorithm, RunInput};
+use crate::record::RunRecord;
 use crate::settings::FilterSettings;
 use models::dataset::{load_dir, LoadedDataset, MEASURED};
+use models::structure::ShearChain;
 
 /// One θ to score: a label (the record's path, or `truth`) and its values by name.
 #[derive(Debug, Clone, PartialEq)]
@@ -37,17 +39,21 @@ pub struct Candidate {
 impl Candidate {
     /// The answer (θ_val) of a run record.
     pub fn from_record(path: &Path) -> Result<Self> {
-        let r: crate::record::RunRecord = crate::sweep::read_record(path)?;
+        let r: RunRecord = crate::sweep::read_record(path)?;
+        Self::of(path.display().to_string(), &r)
+    }
+
+    /// The answer (θ_val) of a record in memory, under `label`.
+    pub fn of(label: String, r: &RunRecord) -> Result<Self> {
         if r.theta_val.iter().any(|v| !v.is_finite()) {
             bail!(
-                "{}: the run gives no finite θ_val (it failed before its averaging window?)",
-                path.display()
+                "{label}: the run gives no finite θ_val (it failed before its averaging window?)"
             );
         }
         Ok(Self {
-            label: path.display().to_string(),
-            names: r.param_names,
-            theta: r.theta_val,
+            label,
+            names: r.param_names.clone(),
+            theta: r.theta_val.clone(),
         })
     }
 }
@@ -65,6 +71,29 @@ pub struct LikelihoodRequest {
     pub seeds: u64,
     /// Also score the data set's true θ (simulated data only).
     pub truth: bool,
+}
+
+/// How each candidate is scored: the part of a [`LikelihoodRequest`] that is not where the data
+/// and the settings come from.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Scoring {
+    /// Particles of the one filter of each estimate.
+    pub particles: usize,
+    /// Independent estimates per candidate (filter master seeds 1..=seeds).
+    pub seeds: u64,
+    /// Also score the data set's true θ (simulated data only).
+    pub truth: bool,
+}
+
+impl LikelihoodRequest {
+    /// How each candidate is scored.
+    pub fn scoring(&self) -> Scoring {
+        Scoring {
+            particles: self.particles,
+            seeds: self.seeds,
+            truth: self.truth,
+        }
+    }
 }
 
 /// The estimates of one candidate.
@@ -171,12 +200,63 @@ fn fixed_at(base: &FilterSettings, c: &Candidate, particles: usize) -> FilterSet
     s
 }
 
-/// Scores every candidate (and the truth when asked) on the request's data set; `progress` hears
-/// one line per finished estimate.
+/// Scores every candidate (and the truth when asked) on the request's data-set directory;
+/// `progress` hears one line per finished estimate.
 pub fn score(
     req: &LikelihoodRequest,
     candidates: &[Candidate],
     progress: &mut dyn FnMut(&str),
+) -> Result<Comparison> {
+    let data: LoadedDataset =
+        load_dir(&req.data).with_context(|| format!("loading data set {}", req.data.display()))?;
+    let chain = data
+        .true_chain()
+        .context("rebuilding the data set's structure")?;
+    let base = match &req.config {
+        Some(path) => Some(crate::limits::load_filter_settings(path)?),
+        None => None,
+    };
+    let config_name = req.config.as_ref().map(|p| p.display().to_string());
+    let measured = req.data.join(MEASURED);
+    let on = ScoredData {
+        data: &data,
+        chain: chain.as_ref(),
+        measured: &measured,
+        name: &req.data.display().to_string(),
+        flags: &StructureSettings::default(),
+        settings: base,
+        config: config_name.as_deref(),
+    };
+    score_on(&on, req.scoring(), candidates, progress, &|| false)
+}
+
+/// A data set already in memory and the model to score it under (what [`score`] builds from a
+/// directory; the Python package builds it from its `Dataset`).
+pub struct ScoredData<'a> {
+    pub data: &'a LoadedDataset,
+    /// The true structure (simulated data).
+    pub chain: Option<&'a ShearChain>,
+    /// The measured file, for messages.
+    pub measured: &'a Path,
+    /// How messages name the data set.
+    pub name: &'a str,
+    /// Structure given beside the data (as `sysid filter`'s flags).
+    pub flags: &'a StructureSettings,
+    /// Filter settings of the model; `None`: `sysid filter`'s recommended ones.
+    pub settings: Option<FilterSettings>,
+    /// How messages name the settings' source.
+    pub config: Option<&'a str>,
+}
+
+/// Scores every candidate (and the truth when asked) on `on` as `req` says. `stop` is asked before every filter step
+/// whether to stop (an interactive caller's Ctrl-C); a stop ends the scoring with
+/// [`crate::error::Error::interrupted`].
+pub fn score_on(
+    on: &ScoredData<'_>,
+    req: Scoring,
+    candidates: &[Candidate],
+    progress: &mut dyn FnMut(&str),
+    stop: &dyn Fn() -> bool,
 ) -> Result<Comparison> {
     if req.seeds == 0 {
         bail!("--seeds: at least one estimate per candidate");
@@ -185,36 +265,33 @@ pub fn score(
         bail!("--particles: at least one particle per estimate");
     }
     crate::limits::check_particle_cloud(req.particles, 1).context("--particles")?;
-    let data: LoadedDataset =
-        load_dir(&req.data).with_context(|| format!("loading data set {}", req.data.display()))?;
-    let chain = data
-        .true_chain()
-        .context("rebuilding the data set's structure")?;
-    if data.meta.is_none() && chain.is_none() && req.config.is_none() {
+    let data = on.data;
+    if data.meta.is_none()
+        && on.chain.is_none()
+        && on.settings.is_none()
+        && on.flags.storeys.is_none()
+    {
         bail!(
             "{}: field data (no dataset.json): give --config with the [structure] table of the \
              building the answers were identified on",
-            req.data.display()
+            on.name
         );
     }
-    let base = match &req.config {
-        Some(path) => crate::limits::load_filter_settings(path)?,
-        None => FilterSettings::recommended(),
-    };
-    let config_name = req.config.as_ref().map(|p| p.display().to_string());
-    let measured = req.data.join(MEASURED);
-    let flags = StructureSettings::default();
+    let base = on
+        .settings
+        .clone()
+        .unwrap_or_else(FilterSettings::recommended);
     let target = Target {
         algorithm: Algorithm::MpfEkf2,
-        data: &data,
-        chain: chain.as_ref(),
-        measured: &measured,
-        flags: &flags,
-        config: config_name.as_deref(),
+        data,
+        chain: on.chain,
+        measured: on.measured,
+        flags: on.flags,
+        config: on.config,
     };
     let base = settle(&target, base, &mut |_| {})?;
     // The parameters of the model on these data: every answer must give exactly these.
-    let names = crate::pipeline::chain_spec(&data, chain.as_ref(), &base)?
+    let names = crate::pipeline::chain_spec(data, on.chain, &base)?
         .prior
         .names();
     let mut all = candidates.to_vec();
@@ -222,7 +299,7 @@ pub fn score(
         let Some(meta) = &data.meta else {
             bail!(
                 "--truth: {} has no dataset.json, so its true θ is unknown",
-                req.data.display()
+                on.name
             );
         };
         all.push(Candidate {
@@ -241,7 +318,7 @@ pub fn score(
                  must be of that building",
                 c.label,
                 c.names.join(", "),
-                req.data.display(),
+                on.name,
                 names.join(", ")
             );
         }
@@ -252,15 +329,15 @@ pub fn score(
         let mut estimates = Vec::with_capacity(req.seeds as usize);
         for seed in 1..=req.seeds {
             let input = RunInput {
-                data: &data,
-                chain: chain.as_ref(),
+                data,
+                chain: on.chain,
                 experiment: "loglik",
                 seed,
                 run: 0,
                 progress: false,
                 residuals: false,
             };
-            let r = identify(&input, Algorithm::MpfEkf2, &settings)
+            let r = identify_stoppable(&input, Algorithm::MpfEkf2, &settings, stop)
                 .with_context(|| format!("{}: the likelihood at its θ", c.label))?;
             let l = if r.failure.is_some() || !r.loglik.is_finite() {
                 f64::NEG_INFINITY
