@@ -19,6 +19,7 @@ use crate::settings::FilterSettings;
 /// - `particles` in `1..=MAX_PARTICLES`;
 /// - `window` (θ_val averaging, SPEC eq. 26) in `1..=MAX_SAMPLES`: 0 has no mean;
 /// - `noise_fraction` in `[MIN_FILTER_NOISE_FRACTION, MAX_FILTER_NOISE_FRACTION]`;
+/// - `r_noise_fraction` in `[MIN_R_NOISE_FRACTION, MAX_R_NOISE_FRACTION]`;
 /// - `ess_threshold` in `(0, 1]`;
 /// - `rejuvenation` (the Liu–West discount) in `[1/3, 1]`;
 /// - `substeps` in `1..=MAX_SUBSTEPS`;
@@ -28,6 +29,7 @@ pub fn check_filter_settings(s: &FilterSettings) -> Result<()> {
     check_count(s.particles, 1, MAX_PARTICLES).context("field `particles`")?;
     check_window(s.window).context("field `window`")?;
     check_filter_noise_fraction(s.noise_fraction).context("field `noise_fraction`")?;
+    check_r_noise_fraction(s.r_noise_fraction).context("field `r_noise_fraction`")?;
     if let Some(t) = s.ess_threshold {
         if !(t > 0.0 && t <= 1.0) {
             bail!("field `ess_threshold`: {t} is not in (0, 1]");
@@ -105,6 +107,11 @@ mod tests {
         assert!(err(&s).contains("`noise_fraction`"));
         s.noise_fraction = 1e308;
         assert!(err(&s).contains("`noise_fraction`"));
+        s.noise_fraction = 0.1;
+        for bad in [0.0, -0.05, f64::NAN, 1e9] {
+            s.r_noise_fraction = bad;
+            assert!(err(&s).contains("`r_noise_fraction`"), "{bad}");
+        }
         let mut s = ok.clone();
         s.substeps = crate::settings::Substeps::Fixed(0);
         assert!(err(&s).contains("`substeps`"), "{}", err(&s));

@@ -66,6 +66,13 @@ pub struct FilterSettings {
     /// PF is never moved. Each filter of a pool moves its own particles.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub rejuvenation: Option<f64>,
+    /// Process noise of each hysteretic variable r: its s.d. per step is this fraction of dt ×
+    /// the RMS drift velocity of its element (SPEC §3: 0.05, the paper's σ_r). The simulated
+    /// truth has no such noise; a smaller value removes most of the bias of k and c where r is
+    /// sampled ([`models::filtering::ChainSpec::set_r_noise_fraction`], docs/calibration.md).
+    /// Absent from a record's settings when the SPEC's.
+    #[serde(skip_serializing_if = "is_spec_r_noise")]
+    pub r_noise_fraction: f64,
 }
 
 /// Transitions per sample interval: a number, or chosen by the rule of
@@ -145,6 +152,10 @@ fn is_one(v: &usize) -> bool {
     *v == 1
 }
 
+fn is_spec_r_noise(v: &f64) -> bool {
+    *v == models::filtering::SPEC_R_NOISE_FRACTION
+}
+
 impl Default for FilterSettings {
     fn default() -> Self {
         Self {
@@ -165,6 +176,7 @@ impl Default for FilterSettings {
             loop_every: 4,
             pool: 1,
             rejuvenation: None,
+            r_noise_fraction: models::filtering::SPEC_R_NOISE_FRACTION,
         }
     }
 }

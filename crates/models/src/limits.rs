@@ -50,6 +50,11 @@ pub const MAX_NOISE_FRACTION: f64 = 10.0;
 pub const MIN_FILTER_NOISE_FRACTION: f64 = 1e-3;
 pub const MAX_FILTER_NOISE_FRACTION: f64 = 10.0;
 
+/// Smallest and largest process noise of a hysteretic variable a filter assumes, as a fraction
+/// of dt × RMS drift velocity (SPEC §3: 0.05).
+pub const MIN_R_NOISE_FRACTION: f64 = 1e-4;
+pub const MAX_R_NOISE_FRACTION: f64 = 10.0;
+
 /// Most particles of one filter run (10⁷; SPEC §3 uses 500).
 pub const MAX_PARTICLES: usize = 10_000_000;
 
@@ -150,6 +155,12 @@ pub fn check_noise_fraction(f: f64) -> Result<f64, LimitError> {
 /// MAX_FILTER_NOISE_FRACTION]`.
 pub fn check_filter_noise_fraction(f: f64) -> Result<f64, LimitError> {
     check_range(f, MIN_FILTER_NOISE_FRACTION, MAX_FILTER_NOISE_FRACTION)
+}
+
+/// The process noise fraction of a hysteretic variable, in `[MIN_R_NOISE_FRACTION,
+/// MAX_R_NOISE_FRACTION]`.
+pub fn check_r_noise_fraction(f: f64) -> Result<f64, LimitError> {
+    check_range(f, MIN_R_NOISE_FRACTION, MAX_R_NOISE_FRACTION)
 }
 
 /// An amplitude scale with `|scale| ≤ MAX_ABS_SCALE` (negative scales flip the sign).

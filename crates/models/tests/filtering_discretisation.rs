@@ -15,6 +15,7 @@ use filtering_support::*;
 use models::building::{Building, Damping};
 use models::filtering::{
     AugmentedChain, ChainSpec, Discretisation, MlnChain, MpfChain, RmsLevels, SpecError,
+    SPEC_R_NOISE_FRACTION,
 };
 use models::integrate::simulate_rk4;
 use models::sensors::{MeasurementKind, SensorError, SensorLayout};
@@ -267,6 +268,16 @@ fn from_rms_follows_spec_section_3_for_both_measurement_kinds() {
         assert_eq!(s.q_disp, 1e-6);
         close(s.q_vel, 0.005 * 0.1 * 5.0, 1e-15, "q_vel");
         close(s.q_r[0], 0.005 * 0.05 * 0.6, 1e-15, "q_r");
+        // The process noise of r as another fraction: the SPEC's leaves it bit for bit, a tenth
+        // scales it by a tenth, a non-positive or non-finite fraction is refused by name.
+        let mut t = s.clone();
+        t.set_r_noise_fraction(SPEC_R_NOISE_FRACTION).unwrap();
+        assert_eq!(t.q_r[0].to_bits(), s.q_r[0].to_bits());
+        t.set_r_noise_fraction(0.005).unwrap();
+        close(t.q_r[0], 0.005 * 0.005 * 0.6, 1e-16, "q_r at 0.005");
+        for bad in [0.0, -0.05, f64::NAN, f64::INFINITY] {
+            names_field(t.set_r_noise_fraction(bad).unwrap_err(), "r_noise_fraction");
+        }
         let excitation = if kind == MeasurementKind::Relative {
             0.25
         } else {

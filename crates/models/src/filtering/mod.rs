@@ -51,7 +51,7 @@ pub use discretisation::Discretisation;
 pub use mln::{MlnChain, MlnChainOf};
 pub use mpf::{MpfChain, MpfChainOf};
 pub use prior::{ChainPrior, ChainPriorOf, ElementPrior, MarginalPrior};
-pub use spec::{ChainSpec, ChainSpecOf, RmsLevels, SpecError, MAX_SUBSTEPS};
+pub use spec::{ChainSpec, ChainSpecOf, RmsLevels, SpecError, MAX_SUBSTEPS, SPEC_R_NOISE_FRACTION};
 
 use crate::law::{HysteresisLaw, MAX_LINEAR};
 use crate::structure::{state_names, theta_names_damped, ChainView};

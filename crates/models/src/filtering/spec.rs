@@ -98,6 +98,10 @@ pub struct ChainSpecOf<L: HysteresisLaw> {
 /// The spec of a chain with Bouc–Wen elements.
 pub type ChainSpec = ChainSpecOf<BoucWenLaw>;
 
+/// The paper's process noise of a hysteretic variable (SPEC §3): s.d. per step
+/// 0.05 × dt × RMS of its element's drift velocity.
+pub const SPEC_R_NOISE_FRACTION: f64 = 0.05;
+
 /// Largest accepted [`ChainSpecOf::substeps`].
 pub const MAX_SUBSTEPS: usize = 64;
 
@@ -174,7 +178,11 @@ impl<L: HysteresisLaw> ChainSpecOf<L> {
             prior: ChainPriorOf::paper(building.storeys(), hysteretic),
             q_disp: 1e-6,
             q_vel: dt * nf * rms.ug,
-            q_r: rms.drift_velocity.iter().map(|v| dt * 0.05 * v).collect(),
+            q_r: rms
+                .drift_velocity
+                .iter()
+                .map(|v| dt * SPEC_R_NOISE_FRACTION * v)
+                .collect(),
             r_diag: rms
                 .acc
                 .iter()
@@ -189,6 +197,24 @@ impl<L: HysteresisLaw> ChainSpecOf<L> {
         };
         spec.validate()?;
         Ok(spec)
+    }
+
+    /// Sets the process noise of every hysteretic variable to `fraction` × dt × its element's
+    /// RMS drift velocity, in place of [`SPEC_R_NOISE_FRACTION`] (the value [`Self::from_rms`]
+    /// sets): `q_r[e]` is scaled by `fraction / SPEC_R_NOISE_FRACTION`, so the SPEC's fraction
+    /// leaves it bit for bit. A non-positive or non-finite fraction is refused.
+    pub fn set_r_noise_fraction(&mut self, fraction: f64) -> Result<(), SpecError> {
+        if !(fraction.is_finite() && fraction > 0.0) {
+            return Err(invalid(
+                "r_noise_fraction",
+                format!("{fraction} is not a positive number"),
+            ));
+        }
+        if fraction != SPEC_R_NOISE_FRACTION {
+            let scale = fraction / SPEC_R_NOISE_FRACTION;
+            self.q_r.iter_mut().for_each(|q| *q *= scale);
+        }
+        Ok(())
     }
 
     /// Number of storeys N.
