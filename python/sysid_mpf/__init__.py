@@ -92,6 +92,16 @@ class Building:
             return [float(self.masses)]
         return [float(m) for m in self.masses]
 
+    def _flags(self) -> dict:
+        """The building as the keyword arguments of ``sysid filter``'s structure flags."""
+        return dict(
+            storeys=None if self.storeys is None else int(self.storeys),
+            hysteretic=None if self.hysteretic is None else [int(h) for h in self.hysteretic],
+            masses=self._masses(),
+            measurement=self.measurement,
+            damping=self.damping,
+        )
+
     def _sensors(self) -> list:
         if self.sensors is not None:
             return [int(s) for s in self.sensors]
@@ -101,6 +111,15 @@ class Building:
                 "(Building(storeys=N) measures every storey)"
             )
         return list(range(1, int(self.storeys) + 1))
+
+
+def _config_args(config: Union[None, PathLike, Mapping[str, Any]]) -> tuple:
+    """``config`` as the binding takes it: (file path, None), (None, JSON text) or (None, None)."""
+    if isinstance(config, Mapping):
+        return None, json.dumps(dict(config), allow_nan=False)
+    if config is not None:
+        return os.fspath(config), None
+    return None, None
 
 
 def _storey_list(values: Optional[Sequence[int]]) -> Optional[str]:
@@ -241,11 +260,7 @@ def identify(
             f"--measurement: unknown measurement kind `{b.measurement}` "
             "(expected absolute or relative)"
         )
-    config_path = config_json = None
-    if isinstance(config, Mapping):
-        config_json = json.dumps(dict(config), allow_nan=False)
-    elif config is not None:
-        config_path = os.fspath(config)
+    config_path, config_json = _config_args(config)
     return _core.identify(
         data,
         algorithm,
@@ -260,13 +275,9 @@ def identify(
         discretisation=discretisation,
         substeps=None if substeps is None else int(substeps),
         storvik_update=storvik_update,
-        storeys=None if b.storeys is None else int(b.storeys),
-        hysteretic=None if b.hysteretic is None else [int(h) for h in b.hysteretic],
-        masses=b._masses(),
-        measurement=b.measurement,
         experiment=experiment,
         out=None if out is None else os.fspath(out),
-        damping=b.damping,
+        **b._flags(),
     )
 
 
@@ -314,11 +325,7 @@ def loglik(
     if int(seeds) < 1:
         raise SysidError("--seeds: at least one estimate per candidate")
     b = building or Building()
-    config_path = config_json = None
-    if isinstance(config, Mapping):
-        config_json = json.dumps(dict(config), allow_nan=False)
-    elif config is not None:
-        config_path = os.fspath(config)
+    config_path, config_json = _config_args(config)
     return _core.loglik(
         data,
         records,
@@ -328,9 +335,5 @@ def loglik(
         config_json=config_json,
         particles=int(particles),
         seeds=int(seeds),
-        storeys=None if b.storeys is None else int(b.storeys),
-        hysteretic=None if b.hysteretic is None else [int(h) for h in b.hysteretic],
-        masses=b._masses(),
-        measurement=b.measurement,
-        damping=b.damping,
+        **b._flags(),
     )

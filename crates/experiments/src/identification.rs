@@ -101,9 +101,9 @@ storvik_update = {storvik}
 # Noise fraction nf: R and Q are set from nf × RMS of the signals (SPEC §3).
 noise_fraction = {nf}
 # Process noise of each hysteretic variable r: s.d. per step r_noise_fraction × dt × RMS drift
-# velocity of its element (SPEC §3: {spec_rnf}, the paper's σ_r; the simulated truth has none).
-# Without --config the MPF-EKF2 takes {large_rnf} from 10 storeys on with every storey measured
-# (with {spec_rnf} its sampled paths of r bias k1 low there, docs/calibration.md).
+# velocity of its element (SPEC §3: 0.05, the paper's σ_r; the simulated truth has none). A tenth
+# of it removes most of the MPF-EKF2's k1 bias at 10 storeys but made 20 storeys less accurate
+# (docs/calibration.md, "The process noise of r").
 r_noise_fraction = {rnf}
 # Discretisation inside the filters: "euler" (the paper's), "symplectic", "rk4" (bootstrap only).
 discretisation = {disc}
@@ -171,8 +171,6 @@ marginal_prior = {{ kind = "moment_matched" }}
         storvik = q(&d.storvik_update),
         nf = q(&d.noise_fraction),
         rnf = q(&d.r_noise_fraction),
-        spec_rnf = q(&paper.r_noise_fraction),
-        large_rnf = q(&crate::pipeline::LARGE_R_NOISE_FRACTION),
         disc = q(&d.discretisation),
         substeps = d.substeps,
         window = d.window,
@@ -277,9 +275,8 @@ pub enum Note<'a> {
     /// [`describe`]: crate::scaled_prior::ScaledPrior::describe
     Prior(String),
     /// A layout that leaves storeys unmeasured, or a building of at least
-    /// [`PER_PARTICLE_MIN_STOREYS`] storeys: the MPF-EKF2's default prior Gaussian and process
-    /// noise of r ([`FilterSettings::recommended_for`]), or a warning when a config keeps the
-    /// shared Gaussian.
+    /// [`PER_PARTICLE_MIN_STOREYS`] storeys: the MPF-EKF2's default prior Gaussian
+    /// ([`FilterSettings::recommended_for`]), or a warning when a config keeps the shared one.
     Sparse(String),
 }
 
@@ -491,16 +488,6 @@ pub fn settle(
         if config.is_none() && settings.rejuvenation.is_none() && has_exponents {
             settings.rejuvenation =
                 FilterSettings::recommended_for(algorithm, storeys, &unmeasured).rejuvenation;
-        }
-        let large = FilterSettings::recommended_for(algorithm, storeys, &unmeasured);
-        if config.is_none() && has_exponents && large.r_noise_fraction != settings.r_noise_fraction
-        {
-            settings.r_noise_fraction = large.r_noise_fraction;
-            note(Note::Sparse(format!(
-                "note: {storeys} storeys (at least {PER_PARTICLE_MIN_STOREYS}): the MPF-EKF2 gives each hysteretic variable a tenth of the SPEC's process noise (r_noise_fraction = {}; with the SPEC's {} its sampled paths bias k1 low, by 7 % on average at 10 storeys, docs/calibration.md)",
-                large.r_noise_fraction,
-                crate::settings::FilterSettings::default().r_noise_fraction
-            )));
         }
         if let Some(reason) = per_particle_reason(storeys, &unmeasured) {
             if config.is_none() {

@@ -93,17 +93,9 @@ impl FilterSettings {
     ///
     /// With the shared Gaussian the MPF-EKF2 also rejuvenates its sampled exponents n with the
     /// Liu–West discount [`MPF_REJUVENATION`] (measured to help there; with per-particle prior
-    /// means on 10 storeys it did not, see the constant). From [`PER_PARTICLE_MIN_STOREYS`]
-    /// storeys on, with every storey measured, it gives each hysteretic variable the process
-    /// noise [`LARGE_R_NOISE_FRACTION`] instead of the SPEC's (see the constant).
+    /// means on 10 storeys it did not, see the constant).
     pub fn recommended_for(algorithm: Algorithm, storeys: usize, unmeasured: &[usize]) -> Self {
         let mut s = Self::recommended();
-        if algorithm == Algorithm::MpfEkf2
-            && storeys >= PER_PARTICLE_MIN_STOREYS
-            && unmeasured.is_empty()
-        {
-            s.r_noise_fraction = LARGE_R_NOISE_FRACTION;
-        }
         if algorithm == Algorithm::MpfEkf2 {
             if per_particle_reason(storeys, unmeasured).is_some() {
                 s.marginal_prior = models::filtering::MarginalPrior::PerParticle {
@@ -129,20 +121,6 @@ impl FilterSettings {
 /// 3.7 → 4.7 %, |c error| 31.5 → 48.2 %, paired +1.0 ± 0.9 and +16.7 ± 11.0 points), so where
 /// its prior is per particle ([`per_particle_reason`]) it does not rejuvenate by default.
 pub const MPF_REJUVENATION: f64 = 0.98;
-
-/// Process-noise fraction of the hysteretic variables (`FilterSettings::r_noise_fraction`) that
-/// [`FilterSettings::recommended_for`] gives the MPF-EKF2 from [`PER_PARTICLE_MIN_STOREYS`]
-/// storeys on when every storey carries a sensor: a tenth of the SPEC's 0.05 (the simulated truth has no such noise). The MPF-EKF2
-/// samples r; with the SPEC's noise each sampled path of r is a noisy regressor of the
-/// stiffness k1 and damping c1 that multiply it, and k1 came out low (errors in variables,
-/// `docs/calibration.md`, "Why k1 is biased at 10 storeys"). Measured on the six 10-storey data
-/// sets of `n10-per-particle-8x125.toml`: mean k1 error −7.2 % → −0.9 %, 95 % coverage of k and
-/// c 0.917 → 0.983, mean |k error| 3.6 → 3.5 %, mean |c error| 29.3 → 31.8 %. On the paper's 3
-/// storeys it made no clear difference (20 runs on the four reference data sets: |k| 1.27 →
-/// 1.39 %, |c| 6.91 → 6.57 %), so the SPEC's value stays the default there; with sensors on
-/// every third storey (20 storeys) one run's k19 interval missed the truth with it, none with the
-/// SPEC's, and that layout was not measured further, so sparse layouts keep the SPEC's value.
-pub const LARGE_R_NOISE_FRACTION: f64 = 0.005;
 
 /// From this many storeys on, the MPF-EKF2's default prior is per particle even with every
 /// storey measured. Measured with `sysid filter`'s settings otherwise (`docs/calibration.md`,
@@ -332,7 +310,6 @@ pub fn chain_spec(
         s.noise_fraction,
     )?;
     spec.marginal_prior = s.marginal_prior;
-    spec.set_r_noise_fraction(s.r_noise_fraction)?;
     spec.discretisation = s.discretisation;
     spec.substeps = match s.substeps {
         Substeps::Fixed(m) => m,

@@ -9,7 +9,7 @@ use std::process::Command;
 
 use experiments::pipeline::{
     chain_spec, per_particle_reason, unmeasured_storeys, Algorithm, FilterSettings,
-    LARGE_R_NOISE_FRACTION, MPF_REJUVENATION, PER_PARTICLE_MIN_STOREYS, SPARSE_REL_SD,
+    MPF_REJUVENATION, PER_PARTICLE_MIN_STOREYS, SPARSE_REL_SD,
 };
 use models::dataset::{generate, DatasetConfig};
 use models::filtering::MarginalPrior;
@@ -77,24 +77,13 @@ fn only_the_mpf_ekf2_on_a_sparse_layout_or_a_tall_building_leaves_the_recommende
                 recommended.clone()
             }
         );
-        for (storeys, unmeasured) in [
-            (5, &[1, 2][..]),
-            (PER_PARTICLE_MIN_STOREYS, &[][..]),
-            (PER_PARTICLE_MIN_STOREYS, &[2][..]),
-        ] {
+        for (storeys, unmeasured) in [(5, &[1, 2][..]), (PER_PARTICLE_MIN_STOREYS, &[][..])] {
             let s = FilterSettings::recommended_for(algorithm, storeys, unmeasured);
             if algorithm == Algorithm::MpfEkf2 {
-                // From the threshold on with every storey measured, also a tenth of the SPEC's
-                // process noise of r.
-                let expected = if storeys >= PER_PARTICLE_MIN_STOREYS && unmeasured.is_empty() {
-                    FilterSettings {
-                        r_noise_fraction: LARGE_R_NOISE_FRACTION,
-                        ..per_particle.clone()
-                    }
-                } else {
-                    per_particle.clone()
-                };
-                assert_eq!(s, expected, "{storeys} storeys, unmeasured {unmeasured:?}");
+                assert_eq!(
+                    s, per_particle,
+                    "{storeys} storeys, unmeasured {unmeasured:?}"
+                );
             } else {
                 assert_eq!(s, recommended);
             }
