@@ -310,6 +310,7 @@ pub fn chain_spec(
         s.noise_fraction,
     )?;
     spec.marginal_prior = s.marginal_prior;
+    spec.set_r_noise_fraction(s.r_noise_fraction)?;
     spec.discretisation = s.discretisation;
     spec.substeps = match s.substeps {
         Substeps::Fixed(m) => m,

@@ -199,7 +199,8 @@ fn env<T: std::str::FromStr>(name: &str, default: T) -> T {
 /// `STIFF_FILTER_SEED` (1), `STIFF_PARTICLES`, `STIFF_POOL`, `STIFF_SUBSTEPS` (a number or
 /// `auto`), `STIFF_DISC` (the defaults of `sysid filter`), `STIFF_SETTINGS=spec` (SPEC §3's
 /// settings instead), `STIFF_K_MEDIAN_AT=f` (the prior's k medians at f × the true k),
-/// `STIFF_TRUTH=zoh` (ü_g held over each sample in the simulation). Run with
+/// `STIFF_TRUTH=zoh` (ü_g held over each sample in the simulation), `STIFF_R_NOISE`
+/// (`r_noise_fraction`). Run with
 /// `cargo test --release -p experiments --test field_scaled_prior -- --ignored --nocapture`.
 #[test]
 #[ignore = "a measurement (minutes), not a check"]
@@ -221,6 +222,7 @@ fn stiff_sweep() {
         settings.discretisation = v.parse().unwrap();
     }
     settings.pool = env("STIFF_POOL", settings.pool);
+    settings.r_noise_fraction = env("STIFF_R_NOISE", settings.r_noise_fraction);
     settings.validate = false;
     settings.trace_every = 0;
     settings.structure = structure();

@@ -145,6 +145,35 @@ fn field_data_structures_are_checked_against_the_header_in_the_library() {
     assert_eq!(spec.sensors.kind(), MeasurementKind::Absolute);
 }
 
+/// `r_noise_fraction` reaches the partitions' q_r for field and simulated data alike: a tenth of
+/// the SPEC's fraction gives a tenth of its q_r, element by element; the SPEC's leaves it bit for
+/// bit.
+#[test]
+fn the_process_noise_of_r_follows_its_setting_for_field_and_simulated_data() {
+    let dir = temp_dir("rnoise");
+    field_dir(&dir.join("f"), "t,ug,a1,a3,a5");
+    let field = load_dir(&dir.join("f")).unwrap();
+    let set = generate(&config(4, &[1, 3], &[1, 2, 3, 4])).unwrap();
+    let simulated = set.to_loaded();
+    let cases = [
+        (&field, None, stated(6, &[1, 4], &[2.0])),
+        (&simulated, Some(&set.chain), FilterSettings::default()),
+    ];
+    for (data, chain, spec_settings) in cases {
+        let spec = chain_spec(data, chain, &spec_settings).unwrap();
+        assert_eq!(spec.q_r.len(), 2);
+        let tenth = FilterSettings {
+            r_noise_fraction: spec_settings.r_noise_fraction / 10.0,
+            ..spec_settings.clone()
+        };
+        let smaller = chain_spec(data, chain, &tenth).unwrap();
+        for (a, b) in smaller.q_r.iter().zip(&spec.q_r) {
+            assert!((a / b - 0.1).abs() < 1e-12, "{a} against {b}");
+        }
+        assert_eq!(smaller.q_vel.to_bits(), spec.q_vel.to_bits());
+    }
+}
+
 #[test]
 fn malformed_descriptions_are_refused_by_flag_in_the_binary() {
     let dir = temp_dir("bin");
