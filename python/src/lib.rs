@@ -19,7 +19,7 @@ use core_filters::smc::storvik::StorvikUpdate;
 use experiments::error::{Context, Error};
 use experiments::field::StructureSettings;
 use experiments::identification::{settle, Overrides, Target};
-use experiments::likelihood::{score_on, table, Candidate, ScoredData, Scoring, Verdict};
+use experiments::likelihood::{score_on, table, Candidate, ScoredData, Scoring};
 use experiments::pipeline::{identify_stoppable, Algorithm, FilterSettings, RunInput};
 use experiments::record::RunRecord;
 use models::dataset::{Dataset, LoadedDataset, MEASURED};
@@ -648,15 +648,7 @@ fn loglik(
         d.set_item("mean", s.mean())?;
         d.set_item("se", s.se())?;
         d.set_item("below_best", c.scored[best].mean() - s.mean())?;
-        d.set_item(
-            "verdict",
-            match v {
-                Verdict::Best => "best",
-                Verdict::NotShownOutside => "not shown outside",
-                Verdict::Outside => "outside",
-                Verdict::Unresolved => "not resolved",
-            },
-        )?;
+        d.set_item("verdict", v.name())?;
         rows.append(d)?;
     }
     out.set_item("answers", rows)?;

@@ -150,6 +150,7 @@ def identify(
     measurement: Optional[str],
     experiment: str,
     out: Optional[str],
+    damping: Optional[str] = ...,
 ) -> Record: ...
 def loglik(
     data: Dataset,

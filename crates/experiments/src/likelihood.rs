@@ -143,6 +143,18 @@ pub enum Verdict {
     Unresolved,
 }
 
+impl Verdict {
+    /// Short name of the verdict (what the Python package returns).
+    pub fn name(self) -> &'static str {
+        match self {
+            Verdict::Best => "best",
+            Verdict::NotShownOutside => "not shown outside",
+            Verdict::Outside => "outside",
+            Verdict::Unresolved => "not resolved",
+        }
+    }
+}
+
 impl Comparison {
     /// Index of the best (largest mean) candidate.
     pub fn best(&self) -> usize {
@@ -248,9 +260,9 @@ pub struct ScoredData<'a> {
     pub config: Option<&'a str>,
 }
 
-/// Scores every candidate (and the truth when asked) on `on` as `req` says. `stop` is asked before every filter step
-/// whether to stop (an interactive caller's Ctrl-C); a stop ends the scoring with
-/// [`crate::error::Error::interrupted`].
+/// Scores every candidate (and the truth when asked) on `on` as `req` says. `stop` is asked
+/// before every filter step whether to stop (an interactive caller's Ctrl-C); a stop ends the
+/// scoring with [`crate::error::Error::interrupted`].
 pub fn score_on(
     on: &ScoredData<'_>,
     req: Scoring,
@@ -272,8 +284,8 @@ pub fn score_on(
         && on.flags.storeys.is_none()
     {
         bail!(
-            "{}: field data (no dataset.json): give --config with the [structure] table of the \
-             building the answers were identified on",
+            "{}: field data (no dataset.json): state the building the answers were identified \
+             on (--config with its [structure] table; in Python, a config or building=)",
             on.name
         );
     }

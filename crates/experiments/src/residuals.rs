@@ -212,9 +212,15 @@ impl Whiteness {
     }
 }
 
-/// 95% quantile of χ² with `dof` degrees of freedom (Wilson–Hilferty; relative error below 1%
-/// from 3 degrees of freedom up).
+/// 95% quantile of χ² with `dof` degrees of freedom: exact for 1 and 2 (1.96² and −2 ln 0.05),
+/// Wilson–Hilferty from 3 up (relative error below 1%; 2.4 % at 1 degree, where the likelihood
+/// region of one free parameter needs it).
 pub(crate) fn chi2_95(dof: usize) -> f64 {
+    match dof {
+        1 => return 3.841_458_820_694_124,
+        2 => return -2.0 * 0.05_f64.ln(),
+        _ => {}
+    }
     let k = dof as f64;
     let z = 1.644_853_626_951_472_2;
     k * (1.0 - 2.0 / (9.0 * k) + z * (2.0 / (9.0 * k)).sqrt()).powi(3)
@@ -270,6 +276,9 @@ mod tests {
     #[test]
     fn chi_square_quantiles() {
         // Tables: χ²_0.95 with 10 and 20 degrees of freedom.
+        assert!((chi2_95(1) - 3.8415).abs() < 1e-4, "{}", chi2_95(1));
+        assert!((chi2_95(2) - 5.9915).abs() < 1e-4, "{}", chi2_95(2));
+        assert!((chi2_95(3) - 7.8147).abs() < 0.08, "{}", chi2_95(3));
         assert!((chi2_95(10) - 18.307).abs() < 0.05, "{}", chi2_95(10));
         assert!((chi2_95(20) - 31.410).abs() < 0.05, "{}", chi2_95(20));
     }
