@@ -410,6 +410,7 @@ pub fn resolve_substeps(
     if !sub_steps {
         a.substeps = 1;
         a.error_chosen = a.error_one;
+        a.lag_chosen = a.lag_one;
     }
     spec.substeps = a.substeps;
     let hysteretic = match scaled {
@@ -614,6 +615,18 @@ pub fn identify_stoppable(
                 100.0 * a.error_one,
                 a.substeps,
                 100.0 * a.error_chosen
+            );
+        }
+        if a.lag_chosen > models::filtering::substeps::LAG_NOTED_ABOVE {
+            eprintln!(
+                "note: with {} step(s) per sample the model favours stiffnesses up to {:.1} % \
+                 low (with the prior's central dashpots and springs), most at the top storeys \
+                 (the semi-implicit step's velocity lag; docs/calibration.md, \"The top \
+                 storeys' bias\"). --substeps M divides it by M at a higher cost; on the scaling \
+                 study's buildings 4 took most of it off the top storeys at 10 storeys without \
+                 lowering the mean stiffness error, and raised that error at 20",
+                spec.substeps,
+                100.0 * a.lag_chosen
             );
         }
     }

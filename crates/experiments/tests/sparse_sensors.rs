@@ -248,6 +248,19 @@ fn a_tall_fully_measured_building_gets_per_particle_prior_means_by_default() {
                 stderr.contains("note: 10 storeys (at least 10): the MPF-EKF2 starts every particle from its own prior mean"),
                 "{stderr}"
             );
+            // `substeps = "auto"` keeps one step here and says what its velocity lag costs
+            // the stiffnesses (11.7 % with the building's dashpots; the prior's are its own).
+            let auto = &r["config"]["substeps_auto"];
+            assert_eq!(auto["substeps"], 1, "{auto}");
+            let lag = auto["lag_one"].as_f64().unwrap();
+            assert!(lag > models::filtering::substeps::LAG_NOTED_ABOVE, "{auto}");
+            assert!(
+                stderr.contains(&format!(
+                    "note: with 1 step(s) per sample the model favours stiffnesses up to {:.1} % low",
+                    100.0 * lag
+                )),
+                "{stderr}"
+            );
         }
     }
 }
