@@ -29,7 +29,7 @@
 //! 10.4 % too soft with one step per sample and at the truth with four sub-steps
 //! (`docs/calibration.md`, "The top storeys' bias"). The MPF-EKF2 with four sub-steps lost that
 //! bias at the roof but did not lower its mean stiffness error at 10 storeys, was less accurate
-//! at 20 and cost 1.9 and 3.2 times as much; so the rule does not sub-step for it. Every
+//! at 20 and cost 2.8 and 3.1 times as much; so the rule does not sub-step for it. Every
 //! automatic choice records it ([`AutoSubsteps::lag_one`]) and `sysid filter` notes it above
 //! [`LAG_NOTED_ABOVE`]. Forward Euler's velocity is not staggered (0 there); its own damping
 //! bias is in `docs/discretisation.md`.
