@@ -220,7 +220,13 @@ mod tests {
             0.1,
         )
         .unwrap();
-        spec.prior.k = vec![Prior::LogNormal { median: 2000.0, log_sd: 0.3 }; n];
+        spec.prior.k = vec![
+            Prior::LogNormal {
+                median: 2000.0,
+                log_sd: 0.3
+            };
+            n
+        ];
         spec.prior.c = vec![
             Prior::LogNormal {
                 median: 11.968768511784665,
@@ -243,12 +249,19 @@ mod tests {
         assert!(a.lag_one > LAG_NOTED_ABOVE);
         // Forward Euler's velocity is not staggered.
         let e = auto_substeps(&spec_of(10, Discretisation::Euler));
-        assert_eq!((e.substeps, e.lag_one, e.lag_chosen), (1, 0.0, 0.0), "{e:?}");
+        assert_eq!(
+            (e.substeps, e.lag_one, e.lag_chosen),
+            (1, 0.0, 0.0),
+            "{e:?}"
+        );
         // Where the frequency rule sub-steps, the lag left is that of the chosen step.
         let mut coarse = spec_of(10, Discretisation::Symplectic);
         coarse.dt = 0.02;
         let c = auto_substeps(&coarse);
         assert!(c.substeps > 1, "{c:?}");
-        assert!((c.lag_chosen - c.lag_one / c.substeps as f64).abs() < 1e-12, "{c:?}");
+        assert!(
+            (c.lag_chosen - c.lag_one / c.substeps as f64).abs() < 1e-12,
+            "{c:?}"
+        );
     }
 }
