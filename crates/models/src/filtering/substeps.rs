@@ -185,7 +185,7 @@ mod tests {
         // The scaling study's 10-storey building: k = 2000, c = 11.97 per unit mass (2 %
         // first-mode damping), dt = 0.005: (c/k)·ω_max²·dt/2 = 11.7 %, a tenth at ten sub-steps.
         let (k, c) = (vec![2000.0; 10], vec![11.968768511784665; 10]);
-        let w = highest_frequency(&k, &vec![1.0; 10]);
+        let w = highest_frequency(&k, &[1.0; 10]);
         let e = damping_lag_error(&k, &c, w, 0.005);
         assert!((e - 0.117029).abs() < 1e-5, "{e}");
         assert!((damping_lag_error(&k, &c, w, 0.0005) - 0.1 * e).abs() < 1e-15);
