@@ -26,7 +26,7 @@
 //! On the scaling study's buildings (2 % first-mode damping from storey dashpots, so the
 //! highest mode is damped 26 % at 10 storeys and 50 % at 20) it is 11.7 % and 23 % at
 //! dt = 0.005 s, and the exact likelihood of a linear 10-storey record peaks at a roof storey
-//! 10.4 % too soft with one step per sample and at the truth with four sub-steps
+//! 9.5 % too soft with one step per sample and at the truth with four sub-steps
 //! (`docs/calibration.md`, "The top storeys' bias"). The MPF-EKF2 with four sub-steps lost that
 //! bias at the roof but did not lower its mean stiffness error at 10 storeys, was less accurate
 //! at 20 and cost 2.8 and 3.1 times as much; so the rule does not sub-step for it. Every
