@@ -410,7 +410,6 @@ pub fn resolve_substeps(
     if !sub_steps {
         a.substeps = 1;
         a.error_chosen = a.error_one;
-        a.lag_chosen = a.lag_one;
     }
     spec.substeps = a.substeps;
     let hysteretic = match scaled {
@@ -617,7 +616,8 @@ pub fn identify_stoppable(
                 100.0 * a.error_chosen
             );
         }
-        // The lag of the run's step: the Bouc–Wen rule may have raised the sub-steps further.
+        // The lag of the run's step (proportional to it): the Bouc–Wen rule may have raised
+        // the sub-steps beyond the linear rule's.
         let lag = a.lag_one / spec.substeps as f64;
         if lag > models::filtering::substeps::LAG_NOTED_ABOVE {
             eprintln!(
