@@ -15,12 +15,14 @@ use crate::record::RunRecord;
 use crate::study::{Job, Study};
 use crate::sweep::{run_sweep, write_bytes_atomic, Shard, SweepOptions, SweepOutcome};
 
-/// How a study is run: where its results go, with how many threads, which part of the sweep,
-/// whether existing records are reused.
-#[derive(Debug, Clone, Copy)]
-pub struct Engine<'a> {
-    /// The study's output directory (records below it, summary and report in it).
-    pub out: &'a Path,
+/// How a study command runs, whatever the study: its `[quick]` form or the full one, with how
+/// many threads, which part of the sweep, with progress on stderr or not, and whether existing
+/// records are reused. Every study command takes one (`sysid reproduce`, `scaling`,
+/// `excitations`, `study`, and the cluster path's final report).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct RunMode {
+    /// The study's `[quick]` form: fewer runs and particles, a shorter record.
+    pub quick: bool,
     /// Worker threads (0: one per core).
     pub threads: usize,
     pub shard: Shard,
@@ -28,6 +30,27 @@ pub struct Engine<'a> {
     pub progress: bool,
     /// Reuse the records whose fingerprint matches (otherwise every run is computed).
     pub resume: bool,
+}
+
+impl RunMode {
+    /// The report of merged shards: every record reused, nothing computed.
+    pub fn report_merged(quick: bool) -> Self {
+        Self {
+            quick,
+            threads: 1,
+            shard: Shard::default(),
+            progress: true,
+            resume: true,
+        }
+    }
+}
+
+/// How a study is run: where its results go and the [`RunMode`].
+#[derive(Debug, Clone, Copy)]
+pub struct Engine<'a> {
+    /// The study's output directory (records below it, summary and report in it).
+    pub out: &'a Path,
+    pub mode: RunMode,
 }
 
 /// Reads a study file, in its `[quick]` form when asked.
@@ -56,11 +79,11 @@ impl Engine<'_> {
         compute: impl Fn(&Job) -> Result<RunRecord> + Sync,
     ) -> Result<SweepOutcome<RunRecord>> {
         let options = SweepOptions {
-            threads: self.threads,
-            shard: self.shard,
-            progress: self.progress,
+            threads: self.mode.threads,
+            shard: self.mode.shard,
+            progress: self.mode.progress,
             label: study.name.clone(),
-            resume: self.resume,
+            resume: self.mode.resume,
         };
         run_sweep(
             jobs,
@@ -75,7 +98,7 @@ impl Engine<'_> {
     /// Whether this is one part of a sharded sweep: then only records are written, and the
     /// summary and report wait for the merged records ([`Engine::shard_note`]).
     pub fn sharded(&self) -> bool {
-        self.shard != Shard::default()
+        self.mode.shard != Shard::default()
     }
 
     /// Says on stderr what a shard did and how its records become a report.
@@ -83,13 +106,13 @@ impl Engine<'_> {
         eprintln!(
             "shard {}/{}: {did}; merge the shards' records (`sysid merge`) and run the same \
              command without `--shard` and with `--resume` to write the report",
-            self.shard.index, self.shard.count
+            self.mode.shard.index, self.mode.shard.count
         );
     }
 
     /// Writes `last-run.json` (not committed) with the study's `facts` (wall times, runs).
     pub fn last_run(&self, facts: serde_json::Value) -> Result<()> {
-        crate::sweep::last_run::write(self.out, self.threads, facts)
+        crate::sweep::last_run::write(self.out, self.mode.threads, facts)
     }
 }
 

@@ -162,7 +162,7 @@ fn write_outputs(
             "verdicts": decided,
         }),
     )?;
-    let text = report(study, &values, &rows, &verdicts, opts.quick);
+    let text = report(study, &values, &rows, &verdicts, opts.mode.quick);
     write_bytes_atomic(&out.join("REPORT.md"), text.as_bytes())
 }
 

@@ -12,29 +12,24 @@ use std::time::Instant;
 
 use crate::error::{bail, Result};
 
-use crate::engine::{load, write_json, Reuse};
+use crate::engine::{load, write_json, Reuse, RunMode};
 use crate::figures;
 use crate::pipeline::Algorithm;
 use crate::record::RunRecord;
 use crate::run_dir::open;
 use crate::study::Study;
 use crate::sweep::progress::clock;
-use crate::sweep::{write_bytes_atomic, Shard};
+use crate::sweep::write_bytes_atomic;
 
 pub use crate::stats::{algorithm_stats, AlgorithmStats, ParamStats, PAPER_EQ31, STUDIES};
 
 /// Options of a reproduction.
 #[derive(Debug, Clone)]
 pub struct Options {
+    /// Directory of the study configs.
     pub experiments: PathBuf,
     pub out: PathBuf,
-    pub quick: bool,
-    pub threads: usize,
-    pub shard: Shard,
-    /// Show progress and the summary of each sweep on stderr.
-    pub progress: bool,
-    /// Reuse records whose fingerprint matches (otherwise every run is computed).
-    pub resume: bool,
+    pub mode: RunMode,
 }
 
 /// What a reproduction did.
@@ -73,13 +68,7 @@ fn by_algorithm<'a>(
 /// `--resume`) to draw. Returns what was done.
 pub fn reproduce(opts: &Options) -> Result<Done> {
     let start = Instant::now();
-    let (_lock, engine) = open(
-        &opts.out,
-        opts.threads,
-        opts.shard,
-        opts.progress,
-        opts.resume,
-    )?;
+    let (_lock, engine) = open(&opts.out, opts.mode)?;
     let mut studies = BTreeMap::new();
     let mut records = BTreeMap::new();
     let mut done = Done::default();
@@ -89,7 +78,7 @@ pub fn reproduce(opts: &Options) -> Result<Done> {
         if crate::discretisation::STUDIES.contains(&name) && !path.exists() {
             continue;
         }
-        let study = load(&path, opts.quick)?;
+        let study = load(&path, opts.mode.quick)?;
         let decided = name == "fig7" || crate::discretisation::STUDIES.contains(&name);
         if !decided && !study.verdicts.is_empty() {
             bail!(
@@ -115,7 +104,7 @@ pub fn reproduce(opts: &Options) -> Result<Done> {
             Study::job_id,
             |job| reuse.run(&study, job),
         )?;
-        if opts.progress && reuse.taken() > 0 {
+        if opts.mode.progress && reuse.taken() > 0 {
             eprintln!(
                 "{name}: {} records taken over from {} (same fingerprint)",
                 reuse.taken(),
@@ -176,7 +165,7 @@ pub fn reproduce(opts: &Options) -> Result<Done> {
     write_json(
         &opts.out.join("summary.json"),
         &serde_json::json!({
-            "quick": opts.quick,
+            "quick": opts.mode.quick,
             "studies": summary,
             "coverage": coverage,
         }),
@@ -184,7 +173,7 @@ pub fn reproduce(opts: &Options) -> Result<Done> {
     let report = crate::report::write_report(
         &crate::report::Target {
             out: &opts.out,
-            quick: opts.quick,
+            quick: opts.mode.quick,
         },
         &studies,
         &records,

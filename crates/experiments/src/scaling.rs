@@ -25,14 +25,14 @@ use std::time::Instant;
 use crate::error::{bail, Context, Result};
 use serde::Serialize;
 
-use crate::engine::{load, write_json, Engine};
+use crate::engine::{load, write_json, Engine, RunMode};
 use crate::metrics::{mean_sd, mean_spread, median};
 use crate::pipeline::Algorithm;
 use crate::record::RunRecord;
 use crate::run_dir::open;
 use crate::study::{Job, Study};
 use crate::sweep::progress::clock;
-use crate::sweep::{read_record, record_path, write_bytes_atomic, Shard};
+use crate::sweep::{read_record, record_path, write_bytes_atomic};
 use crate::verdict::group_mean_error;
 
 mod figures;
@@ -45,11 +45,7 @@ pub struct Options {
     /// The study file (`experiments/scaling.toml`).
     pub config: PathBuf,
     pub out: PathBuf,
-    pub quick: bool,
-    pub threads: usize,
-    pub shard: Shard,
-    pub progress: bool,
-    pub resume: bool,
+    pub mode: RunMode,
     /// Compute nothing: write the report from the records already in `out/records` whose
     /// fingerprint matches their job (the runs without one are reported as not run).
     pub report_only: bool,
@@ -289,7 +285,7 @@ pub fn sweep_jobs(study: &Study) -> Vec<Job> {
 /// Runs the study's sweep (the structures this build can generate), then, unless sharded,
 /// writes the cells, figures and report. Returns the cells.
 pub fn run(opts: &Options) -> Result<Vec<Cell>> {
-    if !load(&opts.config, opts.quick)?.verdicts.is_empty() {
+    if !load(&opts.config, opts.mode.quick)?.verdicts.is_empty() {
         bail!(
             "{}: the scaling study does not decide `[[verdicts]]`; `sysid study` does",
             opts.config.display()
@@ -310,14 +306,8 @@ pub type Writer<'a> = dyn Fn(&Options, &Study, &[Cell], &[Job], &[RunRecord]) ->
 /// the excitations studies).
 pub fn run_with(opts: &Options, write: &Writer<'_>) -> Result<Vec<Cell>> {
     let start = Instant::now();
-    let (_lock, engine) = open(
-        &opts.out,
-        opts.threads,
-        opts.shard,
-        opts.progress,
-        opts.resume,
-    )?;
-    let study = load(&opts.config, opts.quick)?;
+    let (_lock, engine) = open(&opts.out, opts.mode)?;
+    let study = load(&opts.config, opts.mode.quick)?;
     let jobs = sweep_jobs(&study);
     let records_dir = opts.out.join("records");
     let cpu_of = |jobs: &[Job]| -> Vec<Option<f64>> {
@@ -389,7 +379,7 @@ pub fn write_summary(
 ) -> Result<()> {
     let mut summary = serde_json::json!({
         "study": study.name,
-        "quick": opts.quick,
+        "quick": opts.mode.quick,
         "structures": values,
     });
     if let (Some(s), serde_json::Value::Object(r)) = (summary.as_object_mut(), results) {
@@ -620,7 +610,7 @@ fn write_outputs(opts: &Options, study: &Study, cells: &[Cell]) -> Result<()> {
             "not_run": unsupported,
         }),
     )?;
-    let text = report::write(study, &values, cells, &fits, &unsupported, opts.quick);
+    let text = report::write(study, &values, cells, &fits, &unsupported, opts.mode.quick);
     write_bytes_atomic(&out.join("REPORT.md"), text.as_bytes())
 }
 

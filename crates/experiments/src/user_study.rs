@@ -14,13 +14,13 @@ use std::time::Instant;
 
 use crate::error::{Context, Result};
 
-use crate::engine::{load, write_json};
+use crate::engine::{load, write_json, RunMode};
 use crate::markdown::compact_header;
 use crate::metrics::mean_spread;
 use crate::record::RunRecord;
 use crate::run_dir::open;
 use crate::stats::{completed, truth};
-use crate::sweep::{write_bytes_atomic, Shard};
+use crate::sweep::write_bytes_atomic;
 use crate::verdict::{findings_table, Finding};
 
 /// One algorithm's statistics of one parameter over the runs of a study.
@@ -265,14 +265,8 @@ pub struct Options {
     pub config: PathBuf,
     /// Output directory (records/, summary.json, REPORT.md).
     pub out: PathBuf,
-    /// Worker threads (0: one per core).
-    pub threads: usize,
-    /// Reuse the records whose fingerprint matches instead of recomputing them.
-    pub resume: bool,
-    /// The study's `[quick]` form.
-    pub quick: bool,
-    /// Run only this part of the sweep (then merge and run again with `resume`).
-    pub shard: Shard,
+    /// How it runs.
+    pub mode: RunMode,
 }
 
 /// Runs a study file and writes its records, `summary.json` and `REPORT.md` (per algorithm and
@@ -280,10 +274,10 @@ pub struct Options {
 /// records.
 pub fn run(args: &Options) -> Result<()> {
     let start = Instant::now();
-    let study = load(&args.config, args.quick)?;
+    let study = load(&args.config, args.mode.quick)?;
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("creating {}", args.out.display()))?;
-    let (_lock, engine) = open(&args.out, args.threads, args.shard, true, args.resume)?;
+    let (_lock, engine) = open(&args.out, args.mode)?;
     let outcome = engine.sweep(
         &study,
         &study.jobs(),

@@ -6,6 +6,7 @@
 
 use std::path::{Path, PathBuf};
 
+use experiments::engine::RunMode;
 use experiments::excitations;
 use experiments::figures::validate_svg;
 use experiments::scaling::structures::structure_values;
@@ -148,11 +149,13 @@ fn small_study_end_to_end() {
     let opts = Options {
         config: write_study(&dir, SMALL),
         out: out.clone(),
-        quick: false,
-        threads: 2,
-        shard: Shard::default(),
-        progress: false,
-        resume: false,
+        mode: RunMode {
+            quick: false,
+            threads: 2,
+            shard: Shard::default(),
+            progress: false,
+            resume: false,
+        },
         report_only: false,
     };
     let cells = excitations::run(&opts).unwrap();

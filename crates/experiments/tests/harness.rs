@@ -5,6 +5,7 @@
 
 use std::path::{Path, PathBuf};
 
+use experiments::engine::RunMode;
 use experiments::record::RunRecord;
 use experiments::reproduce::{figure_files, reproduce, Done, Options};
 use experiments::study::Study;
@@ -208,11 +209,13 @@ fn quick(experiments: &Path, out: &Path, resume: bool) -> Done {
     reproduce(&Options {
         experiments: experiments.to_path_buf(),
         out: out.to_path_buf(),
-        quick: true,
-        threads: 0,
-        shard: Shard::default(),
-        progress: false,
-        resume,
+        mode: RunMode {
+            quick: true,
+            threads: 0,
+            shard: Shard::default(),
+            progress: false,
+            resume,
+        },
     })
     .unwrap()
 }

@@ -6,6 +6,7 @@
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
+use experiments::engine::RunMode;
 use experiments::pipeline::{identify, Algorithm, FilterSettings, RunInput};
 use experiments::record::{Fingerprint, RunRecord, RECORD_SCHEMA};
 use experiments::reproduce::{figure_files, reproduce, Options, STUDIES};
@@ -297,11 +298,13 @@ fn the_draw_after_merge_reads_failed_runs() {
         reproduce(&Options {
             experiments: experiments.clone(),
             out: out.to_path_buf(),
-            quick: true,
-            threads: 2,
-            shard,
-            progress: false,
-            resume,
+            mode: RunMode {
+                quick: true,
+                threads: 2,
+                shard,
+                progress: false,
+                resume,
+            },
         })
         .unwrap()
     };

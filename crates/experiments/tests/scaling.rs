@@ -4,6 +4,7 @@
 
 use std::path::{Path, PathBuf};
 
+use experiments::engine::RunMode;
 use experiments::figures::validate_svg;
 use experiments::pipeline::Algorithm;
 use experiments::scaling::{self, Options};
@@ -202,11 +203,13 @@ fn small_study_end_to_end_and_resumed() {
     let opts = Options {
         config,
         out: out.clone(),
-        quick: false,
-        threads: 2,
-        shard: Shard::default(),
-        progress: false,
-        resume: false,
+        mode: RunMode {
+            quick: false,
+            threads: 2,
+            shard: Shard::default(),
+            progress: false,
+            resume: false,
+        },
         report_only: false,
     };
     let cells = scaling::run(&opts).unwrap();
@@ -247,7 +250,10 @@ fn small_study_end_to_end_and_resumed() {
     assert_eq!(summary["cells"].as_array().unwrap().len(), 8);
     // Resumed: every record is reused, the cells are the same but for the timings.
     let again = scaling::run(&Options {
-        resume: true,
+        mode: RunMode {
+            resume: true,
+            ..opts.mode
+        },
         ..opts.clone()
     })
     .unwrap();
@@ -262,7 +268,6 @@ fn small_study_end_to_end_and_resumed() {
     std::fs::remove_file(&gone).unwrap();
     let partial = scaling::run(&Options {
         report_only: true,
-        resume: false,
         ..opts.clone()
     })
     .unwrap();

@@ -4,7 +4,6 @@
 use std::path::PathBuf;
 
 use crate::reproduce::{reproduce, Options};
-use crate::sweep::Shard;
 
 /// Arguments of `sysid reproduce`.
 #[derive(Debug, clap::Args)]
@@ -15,21 +14,8 @@ pub struct Args {
     /// Output directory (records, figures, summary.json, REPORT.md).
     #[arg(long, default_value = "results/paper")]
     pub out: PathBuf,
-    /// Few runs, fewer particles: a fast look.
-    #[arg(long)]
-    pub quick: bool,
-    /// Worker threads (0: one per core).
-    #[arg(long, default_value_t = 0)]
-    pub threads: usize,
-    /// Run only part i of n of every sweep (e.g. one task of a Slurm job array); merge the
-    /// shards' records with `sysid merge`, then run without `--shard` and with `--resume` to
-    /// draw and report.
-    #[arg(long, default_value = "0/1")]
-    pub shard: Shard,
-    /// Reuse the records of the output directory whose fingerprint (configuration, data, seed,
-    /// numerics version) matches the run's; without it, every run is computed.
-    #[arg(long)]
-    pub resume: bool,
+    #[command(flatten)]
+    pub run: super::RunArgs,
 }
 
 /// Runs `sysid reproduce`.
@@ -37,11 +23,7 @@ pub fn run(args: Args) -> crate::error::Result<()> {
     reproduce(&Options {
         experiments: args.experiments,
         out: args.out,
-        quick: args.quick,
-        threads: args.threads,
-        shard: args.shard,
-        progress: true,
-        resume: args.resume,
+        mode: args.run.mode(),
     })?;
     Ok(())
 }

@@ -6,7 +6,6 @@
 use std::path::PathBuf;
 
 use crate::scaling::{run as run_study, Options};
-use crate::sweep::Shard;
 
 /// Arguments of `sysid scaling` and `sysid excitations`.
 #[derive(Debug, clap::Args)]
@@ -18,20 +17,8 @@ pub struct Args {
     /// results/scaling, or results/excitations].
     #[arg(long)]
     pub out: Option<PathBuf>,
-    /// The study's `[quick]` form: fewer runs and particles, a shorter record.
-    #[arg(long)]
-    pub quick: bool,
-    /// Worker threads (0: one per core).
-    #[arg(long, default_value_t = 0)]
-    pub threads: usize,
-    /// Run only part i of n of the sweep; merge the shards' records with `sysid merge`, then
-    /// run without `--shard` and with `--resume` to write the report.
-    #[arg(long, default_value = "0/1")]
-    pub shard: Shard,
-    /// Reuse the records of the output directory whose fingerprint matches the run's; without
-    /// it, every run is computed.
-    #[arg(long)]
-    pub resume: bool,
+    #[command(flatten)]
+    pub run: super::RunArgs,
     /// Compute nothing: write the report from the records already in the output directory
     /// whose fingerprint matches (e.g. after stopping a sweep that does not fit the time).
     #[arg(long, conflicts_with_all = ["resume", "shard"])]
@@ -47,11 +34,7 @@ impl Args {
             out: self
                 .out
                 .unwrap_or_else(|| PathBuf::from(format!("results/{study}"))),
-            quick: self.quick,
-            threads: self.threads,
-            shard: self.shard,
-            progress: true,
-            resume: self.resume,
+            mode: self.run.mode(),
             report_only: self.report_only,
         }
     }

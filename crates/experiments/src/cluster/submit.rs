@@ -7,9 +7,10 @@ use super::scheduler::{self, Submission};
 use super::script::{finish_script, shard_script};
 use super::status::status;
 use super::ClusterError;
+use crate::engine::RunMode;
 use crate::record::RunRecord;
 use crate::sweep::lock::{utc_now, DirLock};
-use crate::sweep::{merge, study_pairs, write_bytes_atomic, Shard};
+use crate::sweep::{merge, study_pairs, write_bytes_atomic};
 
 /// What `submit` or `resubmit` will do or did.
 #[derive(Debug, Clone)]
@@ -298,22 +299,14 @@ fn report(plan: &Plan) -> crate::error::Result<()> {
             crate::reproduce::reproduce(&crate::reproduce::Options {
                 experiments: config,
                 out,
-                quick: plan.quick,
-                threads: 1,
-                shard: Shard::default(),
-                progress: true,
-                resume: true,
+                mode: RunMode::report_merged(plan.quick),
             })?;
         }
         super::Kind::Scaling | super::Kind::Excitations => {
             let opts = crate::scaling::Options {
                 config,
                 out,
-                quick: plan.quick,
-                threads: 1,
-                shard: Shard::default(),
-                progress: true,
-                resume: true,
+                mode: RunMode::report_merged(plan.quick),
                 report_only: false,
             };
             match plan.kind {
@@ -324,10 +317,7 @@ fn report(plan: &Plan) -> crate::error::Result<()> {
         super::Kind::Study => crate::user_study::run(&crate::user_study::Options {
             config,
             out,
-            threads: 1,
-            resume: true,
-            quick: plan.quick,
-            shard: Shard::default(),
+            mode: RunMode::report_merged(plan.quick),
         })?,
     }
     Ok(())
