@@ -304,12 +304,14 @@ pub fn plan_identify(part: &Part, dirs: &PartDirs) -> Vec<Step> {
         steps.push(filter_step(
             part,
             dirs,
-            v.algorithm,
-            &v.args,
-            &train.name,
-            &dirs.record(&v.name),
-            Some(&dirs.figures(&v.name)),
-            &v.name,
+            FilterCall {
+                algorithm: v.algorithm,
+                args: &v.args,
+                record: &train.name,
+                out: &dirs.record(&v.name),
+                plot: Some(&dirs.figures(&v.name)),
+                log: &v.name,
+            },
         ));
     }
     steps
@@ -342,17 +344,26 @@ fn with_overrides(common: &[String], args: &[String]) -> Vec<String> {
         .collect()
 }
 
-#[allow(clippy::too_many_arguments)]
-fn filter_step(
-    part: &Part,
-    dirs: &PartDirs,
+/// One `sysid filter` call of a part: the algorithm and its flags (laid over the part's
+/// `common` ones), the record it identifies, where its run record (and figures) go, its log.
+struct FilterCall<'a> {
     algorithm: Algorithm,
-    args: &[String],
-    record: &str,
-    out: &Path,
-    plot: Option<&Path>,
-    log: &str,
-) -> Step {
+    args: &'a [String],
+    record: &'a str,
+    out: &'a Path,
+    plot: Option<&'a Path>,
+    log: &'a str,
+}
+
+fn filter_step(part: &Part, dirs: &PartDirs, call: FilterCall) -> Step {
+    let FilterCall {
+        algorithm,
+        args,
+        record,
+        out,
+        plot,
+        log,
+    } = call;
     let mut a: Vec<String> = vec![
         "filter".into(),
         "--algorithm".into(),
@@ -470,12 +481,14 @@ pub fn plan_selected(part: &Part, dirs: &PartDirs, chosen: &Variant) -> Vec<Step
             filter_step(
                 part,
                 dirs,
-                chosen.algorithm,
-                &args,
-                &r.name,
-                &out,
-                None,
-                &format!("selected--{}", r.name),
+                FilterCall {
+                    algorithm: chosen.algorithm,
+                    args: &args,
+                    record: &r.name,
+                    out: &out,
+                    plot: None,
+                    log: &format!("selected--{}", r.name),
+                },
             )
         })
         .collect()

@@ -152,20 +152,33 @@ pub fn read_cpu(records: &Path, id: &str) -> Option<f64> {
         .filter(|v| v.is_finite() && *v > 0.0)
 }
 
-/// The statistics of `records` (the runs of one algorithm on one structure).
-#[allow(clippy::too_many_arguments)]
-pub fn cell(
-    structure: &str,
-    storeys: usize,
-    hysteretic: &[usize],
-    sensors: &[usize],
-    steps: usize,
-    algorithm: Algorithm,
-    particles: usize,
-    runs_planned: usize,
-    records: &[&RunRecord],
-    cpu_s: &[Option<f64>],
-) -> Cell {
+/// What a cell is of: one algorithm on one structure of the study's axis, as planned.
+pub struct CellOf<'a> {
+    pub structure: &'a str,
+    pub storeys: usize,
+    /// 1-based hysteretic storeys and measured storeys.
+    pub hysteretic: &'a [usize],
+    pub sensors: &'a [usize],
+    /// Filter steps per run.
+    pub steps: usize,
+    pub algorithm: Algorithm,
+    pub particles: usize,
+    pub runs_planned: usize,
+}
+
+/// The statistics of `records` (the runs of one algorithm on one structure) and their CPU
+/// times.
+pub fn cell(of: &CellOf, records: &[&RunRecord], cpu_s: &[Option<f64>]) -> Cell {
+    let &CellOf {
+        structure,
+        storeys,
+        hysteretic,
+        sensors,
+        steps,
+        algorithm,
+        particles,
+        runs_planned,
+    } = of;
     let ok: Vec<&RunRecord> = records
         .iter()
         .copied()
@@ -454,18 +467,17 @@ pub fn cells(
         };
         for &a in algorithms {
             let (recs, cpu) = by_key.get(&(i, a)).cloned().unwrap_or_default();
-            out.push(cell(
-                &st.label,
-                st.storeys,
-                &hysteretic,
-                &sensors,
+            let of = CellOf {
+                structure: &st.label,
+                storeys: st.storeys,
+                hysteretic: &hysteretic,
+                sensors: &sensors,
                 steps,
-                a,
+                algorithm: a,
                 particles,
                 runs_planned,
-                &recs,
-                &cpu,
-            ));
+            };
+            out.push(cell(&of, &recs, &cpu));
         }
     }
     Ok(out)

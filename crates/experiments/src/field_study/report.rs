@@ -560,7 +560,6 @@ fn agreement(s: &mut String, on: &[(String, RunRecord)]) -> Result<()> {
 }
 
 /// The goals, each decided by a stated test on the records.
-#[allow(clippy::too_many_arguments)]
 fn goals(
     s: &mut String,
     part: &Part,
