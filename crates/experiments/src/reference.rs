@@ -604,6 +604,130 @@ pub fn information_limit(
     out
 }
 
+/// The margin of the accuracy goal against the information limit: the online filter's mean
+/// |error| of the storeys' stiffnesses (or dampings) at most 10 % above the reference
+/// posterior's own.
+pub const GOAL_MARGIN: f64 = 0.10;
+
+/// The goal "the online mean |error| of a group of parameters is within [`GOAL_MARGIN`] of the
+/// reference's", for one algorithm, decided by a stated test ([`crate::verdict::below`]): the
+/// difference online − reference, paired over (data set, parameter) — per pair the online
+/// |error| is the mean over that data set's completed runs — must lie below
+/// `GOAL_MARGIN × reference` with its ±2 s.e. interval (holds), above it (does not hold), or the
+/// goal is not resolved. The s.e. is over the pairs, which treats the parameters of one data set
+/// as independent; the margin takes the reference's measured error as exact.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct GoalRow {
+    pub algorithm: String,
+    /// `k` (the storeys' stiffnesses) or `c` (their dampings).
+    pub group: char,
+    /// Mean over the pairs of the reference's |mean / truth − 1|.
+    pub reference: f64,
+    /// Mean over the pairs of the online |θ_val / truth − 1|.
+    pub online: f64,
+    /// Online − reference, paired.
+    pub difference: crate::verdict::Estimate,
+    pub verdict: crate::verdict::Verdict,
+}
+
+/// [`GoalRow`]s of every algorithm of `groups` (as [`information_limit`]) for the stiffnesses and
+/// the dampings.
+pub fn goal_rows(groups: &[(Vec<ParamSummary>, Vec<crate::record::RunRecord>)]) -> Vec<GoalRow> {
+    use crate::verdict::{below, in_group, Estimate};
+    let mut algorithms: Vec<&str> = groups
+        .iter()
+        .flat_map(|(_, rs)| rs.iter().map(|r| r.algorithm.as_str()))
+        .collect();
+    algorithms.sort();
+    algorithms.dedup();
+    let mut out = Vec::new();
+    for alg in algorithms {
+        for group in ['k', 'c'] {
+            let (mut reference, mut online) = (Vec::new(), Vec::new());
+            for (summaries, records) in groups {
+                for p in summaries.iter().filter(|p| in_group(&p.name, group)) {
+                    let Some(t) = p.truth.filter(|t| *t != 0.0) else {
+                        continue;
+                    };
+                    let errors: Vec<f64> = records
+                        .iter()
+                        .filter(|r| r.algorithm == alg && !r.is_failure())
+                        .filter_map(|r| {
+                            let j = r.param_names.iter().position(|n| *n == p.name)?;
+                            Some((r.theta_val.get(j)? / t - 1.0).abs())
+                        })
+                        .collect();
+                    if !errors.is_empty() {
+                        reference.push((p.mean / t - 1.0).abs());
+                        online.push(crate::metrics::mean_sd(&errors).0);
+                    }
+                }
+            }
+            if reference.is_empty() {
+                continue;
+            }
+            let mean = |x: &[f64]| crate::metrics::mean_sd(x).0;
+            let difference = Estimate::of(
+                &online
+                    .iter()
+                    .zip(&reference)
+                    .map(|(o, r)| o - r)
+                    .collect::<Vec<_>>(),
+            );
+            out.push(GoalRow {
+                algorithm: alg.to_string(),
+                group,
+                reference: mean(&reference),
+                online: mean(&online),
+                verdict: below(&difference, GOAL_MARGIN * mean(&reference)),
+                difference,
+            });
+        }
+    }
+    out
+}
+
+/// The goal rows as a markdown table.
+pub fn goal_markdown(rows: &[GoalRow]) -> String {
+    use crate::markdown::{compact_header, num, row};
+    let mut o = String::new();
+    compact_header(
+        &mut o,
+        &[
+            "algorithm",
+            "parameters",
+            "pairs (data set, parameter)",
+            "reference: mean \\|error\\|",
+            "online: mean \\|error\\|",
+            "online − reference (± s.e.)",
+            "margin: 10 % of the reference's",
+            "online within the margin",
+        ],
+        "llrrrrrl",
+    );
+    for r in rows {
+        let pct = |v: f64| format!("{} %", num(100.0 * v, 2));
+        row(
+            &mut o,
+            &[
+                r.algorithm.clone(),
+                format!("all {}", r.group),
+                r.difference.n.to_string(),
+                pct(r.reference),
+                pct(r.online),
+                format!(
+                    "{} ± {} points",
+                    num(100.0 * r.difference.mean, 2),
+                    num(100.0 * r.difference.se, 2)
+                ),
+                format!("{} points", num(100.0 * GOAL_MARGIN * r.reference, 2)),
+                r.verdict.label().to_string(),
+            ],
+        );
+    }
+    o
+}
+
 /// The information limit as a markdown table ("–" where a ratio has no finite value, e.g. a
 /// reference error of exactly zero).
 pub fn limit_markdown(rows: &[LimitRow]) -> String {

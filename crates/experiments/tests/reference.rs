@@ -7,9 +7,10 @@ mod common;
 use core_filters::rng::stream;
 use experiments::pipeline::{chain_spec, Algorithm, FilterSettings};
 use experiments::reference::{
-    compare, information_limit, pool_chains, reference_covers, FilterLikelihood, ParamSummary,
-    ThetaMap,
+    compare, goal_rows, information_limit, pool_chains, reference_covers, FilterLikelihood,
+    ParamSummary, ThetaMap, GOAL_MARGIN,
 };
+use experiments::verdict::Verdict;
 use models::dataset::{generate, DatasetConfig};
 
 /// `log mean exp` of independent log-likelihood estimates (an estimate of log p(y | θ) whose
@@ -193,4 +194,55 @@ fn information_limit_on_constructed_records() {
     assert!((r.online_rel_error - 0.015).abs() < 1e-12);
     assert_eq!((r.online_covered, r.intervals), (1, 2));
     assert!((r.sd_ratio - 6.0).abs() < 1e-9);
+}
+
+/// The goal "online within 10 % of the reference's error" is decided by its stated test: the
+/// paired difference over (data set, parameter) below the margin with its ±2 s.e. interval
+/// holds, above it does not, across it is not resolved; only the parameters the reference has
+/// (here the stiffnesses) get a row, and failed runs are left out.
+#[test]
+fn the_goal_against_the_limit_is_decided_by_its_stated_test() {
+    // Two data sets whose reference means of k1..k3 are 10 % off their truth (8): error 0.10.
+    let summaries = || -> Vec<ParamSummary> {
+        ["k1", "k2", "k3"]
+            .iter()
+            .map(|n| ParamSummary {
+                name: n.to_string(),
+                mean: 8.8,
+                sd: 0.2,
+                quantiles: [f64::NAN; 5],
+                ess: 500.0,
+                truth: Some(8.0),
+            })
+            .collect()
+    };
+    // One online run per data set with the given stiffness ratios (dampings exact).
+    let online = |run: u64, k: [f64; 3]| {
+        let mut ratios = [1.0; 9];
+        ratios[..3].copy_from_slice(&k);
+        common::record("mpf-ekf2", run, ratios, 0.1)
+    };
+    let verdict = |a: [f64; 3], b: [f64; 3]| {
+        let mut failed = online(9, [3.0; 3]);
+        failed.failure = Some("constructed".into());
+        let rows = goal_rows(&[
+            (summaries(), vec![online(0, a), failed]),
+            (summaries(), vec![online(1, b)]),
+        ]);
+        assert_eq!(rows.len(), 1, "no damping row without a damping reference");
+        let r = &rows[0];
+        assert_eq!((r.group, r.difference.n), ('k', 6));
+        assert!((r.reference - 0.10).abs() < 1e-12);
+        r.verdict
+    };
+    // As far from the truth as the reference: a difference of 0 ± 0.
+    assert_eq!(verdict([1.1; 3], [0.9; 3]), Verdict::Holds);
+    // Twice as far: 0.10 ± 0, above the margin of 0.01.
+    assert_eq!(verdict([1.2; 3], [0.8; 3]), Verdict::DoesNotHold);
+    // Differences −0.05, +0.07, … : mean 0.01 (the margin) with a non-zero s.e.
+    assert_eq!(
+        verdict([1.05, 1.17, 1.05], [1.17, 1.05, 1.17]),
+        Verdict::NotResolved
+    );
+    assert!((GOAL_MARGIN - 0.10).abs() < 1e-15);
 }

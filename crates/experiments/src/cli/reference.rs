@@ -223,6 +223,17 @@ pub fn compare(args: CompareArgs) -> Result<()> {
         md.push_str(&crate::reference::limit_markdown(
             &crate::reference::information_limit(&compared),
         ));
+        md.push_str(&format!(
+            "\n## The goal against the limit\n\nThe online mean |error| of the storeys' \
+             stiffnesses and dampings within {:.0} % of the reference posterior's: the paired \
+             difference online − reference over (data set, parameter) must lie below the margin \
+             with its ±2 s.e. interval (holds), above it (does not hold), or the goal is not \
+             resolved.\n\n",
+            100.0 * crate::reference::GOAL_MARGIN
+        ));
+        md.push_str(&crate::reference::goal_markdown(
+            &crate::reference::goal_rows(&compared),
+        ));
     }
     if !chain_notes.is_empty() {
         md.push_str(&format!(
