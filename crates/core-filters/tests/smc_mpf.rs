@@ -10,7 +10,7 @@ use core_filters::model::{Layout, Slot, SparseHessians};
 use core_filters::real::Real;
 use core_filters::resampling::ResamplePolicy;
 use core_filters::rng::{stream, StreamRng};
-use core_filters::smc::model::{ConditionallyQuadratic, Partition, QuadraticDims};
+use core_filters::smc::model::{ConditionallyQuadratic, Marginalised, Partition, QuadraticDims};
 use core_filters::smc::mpf::MpfEkf2;
 use core_filters::smc::runner::NoObserver;
 use core_filters::smc::{run, Filter, Observer, Posterior, SmcConfig, StepInfo};
@@ -152,10 +152,6 @@ impl ConditionallyQuadratic for Decoupled {
     fn sampled_stages(&self) -> &[Vec<usize>] {
         &self.stages
     }
-    fn marginal_prior(&self, _rng: &mut StreamRng, mean: &mut [f64], cov: &mut [f64]) {
-        mean.copy_from_slice(self.m0.as_slice());
-        cov.copy_from_slice(self.p0.as_slice());
-    }
     fn sampled_dynamics<T: Real>(
         &self,
         _stage: usize,
@@ -220,6 +216,13 @@ impl ConditionallyQuadratic for Decoupled {
     }
     fn observation_hessians(&self) -> &SparseHessians {
         &self.empty
+    }
+}
+
+impl Marginalised for Decoupled {
+    fn marginal_prior(&self, _rng: &mut StreamRng, mean: &mut [f64], cov: &mut [f64]) {
+        mean.copy_from_slice(self.m0.as_slice());
+        cov.copy_from_slice(self.p0.as_slice());
     }
 }
 
@@ -365,10 +368,6 @@ impl ConditionallyQuadratic for Coupled {
     fn sampled_stages(&self) -> &[Vec<usize>] {
         &self.stages
     }
-    fn marginal_prior(&self, _rng: &mut StreamRng, mean: &mut [f64], cov: &mut [f64]) {
-        mean.copy_from_slice(self.m0.as_slice());
-        cov.copy_from_slice(self.p0.as_slice());
-    }
     fn sampled_dynamics<T: Real>(
         &self,
         _stage: usize,
@@ -430,6 +429,13 @@ impl ConditionallyQuadratic for Coupled {
     }
     fn observation_hessians(&self) -> &SparseHessians {
         &self.empty
+    }
+}
+
+impl Marginalised for Coupled {
+    fn marginal_prior(&self, _rng: &mut StreamRng, mean: &mut [f64], cov: &mut [f64]) {
+        mean.copy_from_slice(self.m0.as_slice());
+        cov.copy_from_slice(self.p0.as_slice());
     }
 }
 
@@ -550,10 +556,6 @@ impl ConditionallyQuadratic for Bilinear {
     fn sampled_stages(&self) -> &[Vec<usize>] {
         &self.stages
     }
-    fn marginal_prior(&self, _rng: &mut StreamRng, mean: &mut [f64], cov: &mut [f64]) {
-        mean.copy_from_slice(&self.m0);
-        cov.copy_from_slice(self.p0.as_slice());
-    }
     fn sampled_dynamics<T: Real>(
         &self,
         _stage: usize,
@@ -609,6 +611,13 @@ impl ConditionallyQuadratic for Bilinear {
     }
     fn observation_hessians(&self) -> &SparseHessians {
         &self.empty
+    }
+}
+
+impl Marginalised for Bilinear {
+    fn marginal_prior(&self, _rng: &mut StreamRng, mean: &mut [f64], cov: &mut [f64]) {
+        mean.copy_from_slice(&self.m0);
+        cov.copy_from_slice(self.p0.as_slice());
     }
 }
 

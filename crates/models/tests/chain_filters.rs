@@ -7,7 +7,7 @@
 use core_filters::rng::stream;
 use core_filters::smc::bootstrap::BootstrapPf;
 use core_filters::smc::mlnrbpf::MlnRbpf;
-use core_filters::smc::model::ConditionallyLinear;
+use core_filters::smc::model::{ConditionallyLinear, Marginalised};
 use core_filters::smc::mpf::MpfEkf2;
 use core_filters::smc::storvik::{Storvik, StorvikUpdate};
 use core_filters::smc::{run, Filter, Observer, Posterior, SmcConfig, StepInfo};

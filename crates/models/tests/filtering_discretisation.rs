@@ -296,7 +296,7 @@ fn from_rms_follows_spec_section_3_for_both_measurement_kinds() {
 
 #[test]
 fn marginal_priors_follow_spec_section_3_for_every_partition() {
-    use core_filters::smc::model::{ConditionallyLinear, ConditionallyQuadratic};
+    use core_filters::smc::model::{ConditionallyLinear, ConditionallyQuadratic, Marginalised};
     use models::filtering::MarginalPrior;
     let case = &cases()[0];
     let mut s = spec(case, Discretisation::Euler);

@@ -26,6 +26,7 @@ use crate::model::Layout;
 use crate::real::{Pack, Real, PACK_LANES};
 use crate::rng::StreamRng;
 
+use super::model::{Marginalised, Partition};
 use super::rejuvenation::StaticParam;
 use super::runner::{Filter, StepInput, StepOutput};
 use super::store::{Particles, Shape};
@@ -58,21 +59,29 @@ pub struct Ancestry<'a, T> {
 pub trait ParticleStep: Sync + Send {
     /// Short algorithm name (`mln-rbpf`, `storvik`, `mpf-ekf2`).
     fn name(&self) -> &'static str;
-    /// Where θ and the physical states live in a particle.
-    fn layout(&self) -> Layout;
-    /// The static entries of the sampled block and their supports (the model's,
-    /// [`super::model::Partition::static_params`]); none by default.
-    fn static_params(&self) -> Vec<StaticParam> {
-        Vec::new()
+    /// The model the step reads.
+    type Model: Marginalised;
+    fn model(&self) -> &Self::Model;
+    /// Where θ and the physical states live in a particle (the model's).
+    fn layout(&self) -> Layout {
+        self.model().layout()
     }
-    /// Draws one particle's sampled block and Gaussian from the prior.
+    /// The static entries of the sampled block and their supports (the model's,
+    /// [`super::model::Partition::static_params`]).
+    fn static_params(&self) -> Vec<StaticParam> {
+        self.model().static_params()
+    }
+    /// Draws one particle's sampled block and Gaussian from the model's prior.
     fn initialise(
         &self,
         rng: &mut StreamRng,
         sampled: &mut [f64],
         mean: &mut [f64],
         cov: &mut [f64],
-    );
+    ) {
+        self.model().sample_initial(rng, sampled);
+        self.model().marginal_prior(rng, mean, cov);
+    }
     /// A failure of the whole step, before any particle moves (e.g. an `R` that could not be
     /// factorised); none by default.
     fn check(&self, _k: usize) -> Result<(), FilterError> {

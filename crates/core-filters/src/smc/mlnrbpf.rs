@@ -26,14 +26,11 @@
 
 use crate::health::Health;
 use crate::linalg::gauss::factorise;
-use crate::model::Layout;
 use crate::real::Real;
-use crate::rng::StreamRng;
 
 use super::batch::{Ancestry, Marginalized, ParticleStep, Slots};
 use super::linear_plan::{LinearPlan, LinearScratch};
 use super::model::{ConditionallyLinear, LinearDims};
-use super::rejuvenation::StaticParam;
 use super::store::Shape;
 
 /// The per-particle step of the MLN-RBPF (SPEC §5.2) and what it needs from the model, read once.
@@ -93,10 +90,6 @@ impl<M: ConditionallyLinear> MlnStep<M> {
             draws,
         }
     }
-
-    pub fn model(&self) -> &M {
-        &self.model
-    }
 }
 
 impl<M: ConditionallyLinear> ParticleStep for MlnStep<M> {
@@ -106,17 +99,10 @@ impl<M: ConditionallyLinear> ParticleStep for MlnStep<M> {
         "mln-rbpf"
     }
 
-    fn layout(&self) -> Layout {
-        self.model.layout()
-    }
+    type Model = M;
 
-    fn static_params(&self) -> Vec<StaticParam> {
-        self.model.static_params()
-    }
-
-    fn initialise(&self, rng: &mut StreamRng, u: &mut [f64], mu: &mut [f64], cov: &mut [f64]) {
-        self.model.sample_initial(rng, u);
-        self.model.marginal_prior(rng, mu, cov);
+    fn model(&self) -> &M {
+        &self.model
     }
 
     fn broken_pattern<T: Real>(s: &MlnScratch<T>) -> Option<&'static str> {

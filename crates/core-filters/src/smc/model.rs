@@ -53,6 +53,16 @@ pub trait Partition: Send + Sync {
     }
 }
 
+/// A model with a marginalised Gaussian block (the MLN-RBPF's and Storvik's `z`, the MPF-EKF2's
+/// `x^bl`): what [`ConditionallyLinear`] and [`ConditionallyQuadratic`] share besides
+/// [`Partition`], so that their filters draw a particle's initial state in one way.
+pub trait Marginalised: Partition {
+    /// Mean and covariance (column-major, the block's dimension squared) of the Gaussian prior of
+    /// the marginalised block for one particle (deterministic for the moment-matched prior,
+    /// SPEC §3; a per-particle prior draws).
+    fn marginal_prior(&self, rng: &mut StreamRng, mean: &mut [f64], cov: &mut [f64]);
+}
+
 /// A general state-space model with an augmented state (bootstrap PF, SPEC §5.1):
 /// `x_k = propagate(k, x_{k−1}, ξ_k)` with standard normal `ξ_k` (the model applies its own noise
 /// structure), `y_k ~ N(measure(k, x_k), R)`.
@@ -125,15 +135,12 @@ impl Stage {
 ///
 /// Rows of `u` set by no stage are static and copied (e.g. the Bouc–Wen exponent `n`).
 #[allow(non_snake_case)]
-pub trait ConditionallyLinear: Partition {
+pub trait ConditionallyLinear: Marginalised {
     fn dims(&self) -> LinearDims;
     /// The stages of the transition, in order.
     fn stages(&self) -> &[Stage];
     /// Standard deviations of the process noise of every row of `u` (zero for copied rows).
     fn process_noise_sd(&self) -> &[f64];
-    /// Mean and covariance (`nz × nz`) of the Gaussian prior of `z` for one particle
-    /// (deterministic for the moment-matched prior, SPEC §3; a per-particle prior draws).
-    fn marginal_prior(&self, rng: &mut StreamRng, mean: &mut [f64], cov: &mut [f64]);
     /// Stage `stage` of the transition to step `k`: `f[i]` for row `rows[i]` of the stage, and
     /// `F` (`linked.len() × nz`, row `l` for `linked[l]`). `u_new` holds the rows set by earlier
     /// stages (other entries are unspecified).
@@ -181,12 +188,10 @@ pub struct QuadraticDims {
 /// static and copied. Maps are returned as their value and Jacobian with respect to `x^bl` at the
 /// point `m`; their Hessians with respect to `x^bl` are constant (they depend on the structure and
 /// the time step only) and are supplied once as sparse entry lists.
-pub trait ConditionallyQuadratic: Partition {
+pub trait ConditionallyQuadratic: Marginalised {
     fn dims(&self) -> QuadraticDims;
     /// Per stage, the indices into `xⁿ` of the dynamic entries it sets.
     fn sampled_stages(&self) -> &[Vec<usize>];
-    /// Mean and covariance (`nbl × nbl`) of the Gaussian prior of `x^bl` for one particle.
-    fn marginal_prior(&self, rng: &mut StreamRng, mean: &mut [f64], cov: &mut [f64]);
     /// `ψ` of stage `stage` at `(xⁿ_{k−1}, xⁿ_k rows of earlier stages, x^bl = m)`: `value[i]`
     /// for entry `stages[stage][i]` (without noise), `jac` its Jacobian w.r.t. `x^bl`.
     #[allow(clippy::too_many_arguments)]

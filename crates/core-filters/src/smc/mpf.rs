@@ -36,13 +36,10 @@ use crate::linalg::gauss::factorise;
 use crate::linalg::{
     ekf2_propagate_near_identity, Factor, PropagateScratch, Propagation, SecondOrder, Sparse,
 };
-use crate::model::Layout;
 use crate::real::Real;
-use crate::rng::StreamRng;
 
 use super::batch::{Ancestry, Marginalized, ParticleStep, Slots};
 use super::model::{ConditionallyQuadratic, QuadraticDims};
-use super::rejuvenation::StaticParam;
 use super::store::Shape;
 
 /// What one sampled stage needs, read once from the model.
@@ -175,10 +172,6 @@ impl<M: ConditionallyQuadratic> MpfStep<M> {
         }
     }
 
-    pub fn model(&self) -> &M {
-        &self.model
-    }
-
     /// SPEC §5.4 (a) on its own, for tests and diagnostics: the mean and covariance (`q × q`,
     /// column-major) of the proposal of stage `stage` for a particle at `(xⁿ_{k−1}, N(m, P))`,
     /// computed by the same kernels as the step.
@@ -274,17 +267,10 @@ impl<M: ConditionallyQuadratic> ParticleStep for MpfStep<M> {
         "mpf-ekf2"
     }
 
-    fn layout(&self) -> Layout {
-        self.model.layout()
-    }
+    type Model = M;
 
-    fn static_params(&self) -> Vec<StaticParam> {
-        self.model.static_params()
-    }
-
-    fn initialise(&self, rng: &mut StreamRng, xn: &mut [f64], m: &mut [f64], p: &mut [f64]) {
-        self.model.sample_initial(rng, xn);
-        self.model.marginal_prior(rng, m, p);
+    fn model(&self) -> &M {
+        &self.model
     }
 
     fn broken_pattern<T: Real>(s: &MpfScratch<T>) -> Option<&'static str> {

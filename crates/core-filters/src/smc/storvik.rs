@@ -28,14 +28,11 @@ use crate::error::FilterError;
 use crate::health::Health;
 use crate::linalg::gauss::{factorise, lower_mul, psd_cholesky};
 use crate::linalg::{FactoredNoise, Sparse};
-use crate::model::Layout;
 use crate::real::Real;
-use crate::rng::StreamRng;
 
 use super::batch::{Ancestry, Marginalized, ParticleStep, Slots};
 use super::linear_plan::{LinearPlan, LinearScratch};
 use super::model::{ConditionallyLinear, LinearDims};
-use super::rejuvenation::StaticParam;
 use super::store::Shape;
 
 /// How Storvik's step (iii) treats the measurement `y_k` (SPEC §5.3).
@@ -123,10 +120,6 @@ impl<M: ConditionallyLinear> StorvikStep<M> {
             draws,
         }
     }
-
-    pub fn model(&self) -> &M {
-        &self.model
-    }
 }
 
 impl<M: ConditionallyLinear> ParticleStep for StorvikStep<M> {
@@ -136,17 +129,10 @@ impl<M: ConditionallyLinear> ParticleStep for StorvikStep<M> {
         "storvik"
     }
 
-    fn layout(&self) -> Layout {
-        self.model.layout()
-    }
+    type Model = M;
 
-    fn static_params(&self) -> Vec<StaticParam> {
-        self.model.static_params()
-    }
-
-    fn initialise(&self, rng: &mut StreamRng, u: &mut [f64], mu: &mut [f64], cov: &mut [f64]) {
-        self.model.sample_initial(rng, u);
-        self.model.marginal_prior(rng, mu, cov);
+    fn model(&self) -> &M {
+        &self.model
     }
 
     /// `R` is factorised once; if it could not be, every step fails with that error.

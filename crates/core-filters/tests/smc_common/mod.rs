@@ -13,7 +13,9 @@ use core_filters::linalg::Sparse;
 use core_filters::model::{Layout, Slot};
 use core_filters::real::Real;
 use core_filters::rng::StreamRng;
-use core_filters::smc::model::{ConditionallyLinear, LinearDims, Partition, Stage, StateSpace};
+use core_filters::smc::model::{
+    ConditionallyLinear, LinearDims, Marginalised, Partition, Stage, StateSpace,
+};
 use nalgebra::{Matrix1, Matrix2, SMatrix, Vector1, Vector2};
 use rand::Rng;
 use rand_distr::{Distribution, StandardNormal};
@@ -185,10 +187,6 @@ impl ConditionallyLinear for Linked {
     fn process_noise_sd(&self) -> &[f64] {
         &self.sd
     }
-    fn marginal_prior(&self, _rng: &mut StreamRng, mean: &mut [f64], cov: &mut [f64]) {
-        mean[0] = self.z_mean;
-        cov[0] = self.z_sd * self.z_sd;
-    }
     fn transition<T: Real>(
         &self,
         _stage: usize,
@@ -222,6 +220,13 @@ impl ConditionallyLinear for Linked {
         S: &mut Sparse<T>,
     ) {
         S.add(0, 0, T::splat(self.b));
+    }
+}
+
+impl Marginalised for Linked {
+    fn marginal_prior(&self, _rng: &mut StreamRng, mean: &mut [f64], cov: &mut [f64]) {
+        mean[0] = self.z_mean;
+        cov[0] = self.z_sd * self.z_sd;
     }
 }
 
@@ -311,10 +316,6 @@ impl ConditionallyLinear for StaticOnly {
     fn process_noise_sd(&self) -> &[f64] {
         &self.sd
     }
-    fn marginal_prior(&self, _rng: &mut StreamRng, mean: &mut [f64], cov: &mut [f64]) {
-        mean.copy_from_slice(self.z_mean.as_slice());
-        cov.copy_from_slice(self.z_cov.as_slice());
-    }
     fn transition<T: Real>(
         &self,
         _stage: usize,
@@ -348,6 +349,13 @@ impl ConditionallyLinear for StaticOnly {
         S: &mut Sparse<T>,
     ) {
         S.add(0, 0, T::splat(0.0));
+    }
+}
+
+impl Marginalised for StaticOnly {
+    fn marginal_prior(&self, _rng: &mut StreamRng, mean: &mut [f64], cov: &mut [f64]) {
+        mean.copy_from_slice(self.z_mean.as_slice());
+        cov.copy_from_slice(self.z_cov.as_slice());
     }
 }
 

@@ -28,7 +28,7 @@ use core_filters::linalg::Sparse;
 use core_filters::model::{Layout, Slot};
 use core_filters::real::Real;
 use core_filters::rng::StreamRng;
-use core_filters::smc::model::{ConditionallyLinear, LinearDims, Partition, Stage};
+use core_filters::smc::model::{ConditionallyLinear, LinearDims, Marginalised, Partition, Stage};
 use core_filters::smc::rejuvenation::StaticParam;
 
 /// The chain partitioned for MLN-RBPF / Storvik, its elements following the law `L`.
@@ -284,25 +284,6 @@ impl<L: HysteresisLaw> ConditionallyLinear for MlnChainOf<L> {
         &self.noise_sd
     }
 
-    /// θ's prior without the n's (z is θ with every nonlinear parameter removed), diagonal.
-    fn marginal_prior(&self, rng: &mut StreamRng, mean: &mut [f64], cov: &mut [f64]) {
-        let (n, ne) = (self.core.n, self.core.ne);
-        let (m, v) = self.core.theta_prior(rng);
-        let nz = 2 * n + L::NLIN * ne;
-        cov.fill(0.0);
-        let mut i = 0;
-        for t in 0..m.len() {
-            // Per element θ holds its linear parameters, then its nonlinear ones (n).
-            let is_n = t >= 2 * n && (t - 2 * n) % L::NPARAMS >= L::NLIN;
-            if !is_n {
-                mean[i] = m[t];
-                cov[i + i * nz] = v[t];
-                i += 1;
-            }
-        }
-        debug_assert_eq!(i, nz);
-    }
-
     /// SPEC §5.2: stage `stage` of the transition to k (module docs).
     fn transition<T: Real>(
         &self,
@@ -417,5 +398,26 @@ impl<L: HysteresisLaw> ConditionallyLinear for MlnChainOf<L> {
                 write_rate_row(S, 2 * n + e, b, dt, &g, L::NLIN);
             }
         }
+    }
+}
+
+impl<L: HysteresisLaw> Marginalised for MlnChainOf<L> {
+    /// θ's prior without the n's (z is θ with every nonlinear parameter removed), diagonal.
+    fn marginal_prior(&self, rng: &mut StreamRng, mean: &mut [f64], cov: &mut [f64]) {
+        let (n, ne) = (self.core.n, self.core.ne);
+        let (m, v) = self.core.theta_prior(rng);
+        let nz = 2 * n + L::NLIN * ne;
+        cov.fill(0.0);
+        let mut i = 0;
+        for t in 0..m.len() {
+            // Per element θ holds its linear parameters, then its nonlinear ones (n).
+            let is_n = t >= 2 * n && (t - 2 * n) % L::NPARAMS >= L::NLIN;
+            if !is_n {
+                mean[i] = m[t];
+                cov[i + i * nz] = v[t];
+                i += 1;
+            }
+        }
+        debug_assert_eq!(i, nz);
     }
 }

@@ -40,7 +40,7 @@ use core_filters::linalg::{Sparse, SymEntries};
 use core_filters::model::{Layout, Slot, SparseHessians};
 use core_filters::real::Real;
 use core_filters::rng::StreamRng;
-use core_filters::smc::model::{ConditionallyQuadratic, Partition, QuadraticDims};
+use core_filters::smc::model::{ConditionallyQuadratic, Marginalised, Partition, QuadraticDims};
 use core_filters::smc::rejuvenation::StaticParam;
 
 /// Where a storey's velocity lives.
@@ -386,32 +386,6 @@ impl<L: HysteresisLaw> ConditionallyQuadratic for MpfChainOf<L> {
         &self.stages
     }
 
-    /// States exactly zero (variance 0); k, c, (α), β, γ from θ's Gaussian prior (SPEC §3).
-    fn marginal_prior(&self, rng: &mut StreamRng, mean: &mut [f64], cov: &mut [f64]) {
-        let n = self.core.n;
-        let nbl = self.dims().nbl;
-        let (m, v) = self.core.theta_prior(rng);
-        mean.fill(0.0);
-        cov.fill(0.0);
-        let mut set = |i: usize, t: usize| {
-            mean[i] = m[t];
-            cov[i + i * nbl] = v[t];
-        };
-        for j in 0..n {
-            set(self.k0 + j, j);
-            set(self.c0 + j, n + j);
-        }
-        if let Some(t) = self.core.theta_alpha() {
-            set(self.a0, t);
-        }
-        for e in 0..self.core.ne {
-            let t = self.core.theta_element(e);
-            for i in 0..L::NLIN {
-                set(self.beta_index(e) + i, t + i);
-            }
-        }
-    }
-
     /// ψ of stage `stage` (module docs) at `(xⁿ_{k−1}, m)` with ü_g,meas(k−1).
     fn sampled_dynamics<T: Real>(
         &self,
@@ -543,5 +517,33 @@ impl<L: HysteresisLaw> ConditionallyQuadratic for MpfChainOf<L> {
     /// [`ChainSpecOf::substeps`]: the model's grid is `dt/substeps`.
     fn substeps(&self) -> usize {
         self.core.substeps
+    }
+}
+
+impl<L: HysteresisLaw> Marginalised for MpfChainOf<L> {
+    /// States exactly zero (variance 0); k, c, (α), β, γ from θ's Gaussian prior (SPEC §3).
+    fn marginal_prior(&self, rng: &mut StreamRng, mean: &mut [f64], cov: &mut [f64]) {
+        let n = self.core.n;
+        let nbl = self.dims().nbl;
+        let (m, v) = self.core.theta_prior(rng);
+        mean.fill(0.0);
+        cov.fill(0.0);
+        let mut set = |i: usize, t: usize| {
+            mean[i] = m[t];
+            cov[i + i * nbl] = v[t];
+        };
+        for j in 0..n {
+            set(self.k0 + j, j);
+            set(self.c0 + j, n + j);
+        }
+        if let Some(t) = self.core.theta_alpha() {
+            set(self.a0, t);
+        }
+        for e in 0..self.core.ne {
+            let t = self.core.theta_element(e);
+            for i in 0..L::NLIN {
+                set(self.beta_index(e) + i, t + i);
+            }
+        }
     }
 }
