@@ -3,11 +3,10 @@
 
 use std::path::PathBuf;
 
-use crate::error::{bail, Context, Result};
+use crate::error::{Context, Result};
 
 use crate::pipeline::Algorithm;
 use crate::reference::posterior::{reference_posterior, write_reference, ReferenceRequest};
-use crate::reference::{chain_warnings, ReferenceRecord};
 
 /// Arguments of `sysid reference`.
 #[derive(Debug, clap::Args)]
@@ -121,126 +120,11 @@ pub struct CompareArgs {
     pub out: Option<PathBuf>,
 }
 
-/// The data set a run record was computed on (`data.sha256` of its fingerprint).
-fn record_data_sha(r: &crate::record::RunRecord) -> Option<&str> {
-    r.fingerprint
-        .as_ref()?
-        .inputs
-        .get("data")?
-        .get("sha256")?
-        .as_str()
-}
-
-/// The chains of one data set and the online records computed on it.
-struct DataSetGroup {
-    data: String,
-    sha: Option<String>,
-    chains: Vec<Vec<crate::reference::ParamSummary>>,
-    records: Vec<crate::record::RunRecord>,
-}
-
-/// `sysid compare-reference`: the online filters' final posteriors against the reference; with
-/// references of several data sets, each online record against the reference of its own data
-/// set, and the information limit across them.
+/// `sysid compare-reference`.
 pub fn compare(args: CompareArgs) -> Result<()> {
-    let mut groups: Vec<DataSetGroup> = Vec::new();
-    // The chains' warnings go into the table's file as well, so that a reference resting on few
-    // effective samples is not read as exact.
-    let mut chain_notes = Vec::new();
-    for path in &args.reference {
-        let r: ReferenceRecord = crate::record::read::read(path)?;
-        // Older records carry no warnings: recompute them from what they hold.
-        let warnings = chain_warnings(r.acceptance, &r.params, r.failed_estimates, r.evaluations);
-        if r.acceptance == 0.0 {
-            bail!(
-                "{}: the chain did not move after the burn-in; it is not a posterior to compare with",
-                path.display()
-            );
-        }
-        for w in &warnings {
-            eprintln!("warning: {}: {w}", path.display());
-            chain_notes.push(format!("- {}: {w}", path.display()));
-        }
-        match groups.iter_mut().find(|g| g.sha == r.data_sha256) {
-            Some(g) => g.chains.push(r.params),
-            None => groups.push(DataSetGroup {
-                data: r.data,
-                sha: r.data_sha256,
-                chains: vec![r.params],
-                records: Vec::new(),
-            }),
-        }
-    }
-    if groups.len() > 1 && groups.iter().any(|g| g.sha.is_none()) {
-        bail!(
-            "the references name different data sets, and some were written before references \
-             recorded their data set: compare those one data set at a time"
-        );
-    }
-    for p in &args.records {
-        let r: crate::record::RunRecord = crate::sweep::read_record(p)?;
-        let sha = record_data_sha(&r);
-        let group = match groups.as_mut_slice() {
-            // A reference that does not name its data set is compared with every record, as
-            // before references recorded it.
-            [g] if g.sha.is_none() => g,
-            gs => gs
-                .iter_mut()
-                .find(|g| g.sha.as_deref() == sha)
-                .ok_or_else(|| {
-                    crate::error::invalid!(
-                        "{}: its data set (sha256 {}) is not that of any reference given",
-                        p.display(),
-                        sha.unwrap_or("unknown")
-                    )
-                })?,
-        };
-        group.records.push(r);
-    }
-    let several = groups.len() > 1;
-    let mut md = String::new();
-    let mut compared = Vec::new();
-    for g in groups {
-        let pooled = crate::reference::pool_chains(&g.chains)?;
-        if several {
-            md.push_str(&format!(
-                "## Data set {} (sha256 {})\n\n",
-                g.data,
-                g.sha.as_deref().map_or("?", |s| &s[..s.len().min(12)])
-            ));
-        }
-        md.push_str(&crate::reference::compare_markdown(&pooled, &g.records));
-        if several {
-            md.push('\n');
-        }
-        compared.push((pooled, g.records));
-    }
-    if several {
-        md.push_str(&format!(
-            "## Across the {} data sets: the information limit\n\n",
-            compared.len()
-        ));
-        md.push_str(&crate::reference::limit_markdown(
-            &crate::reference::information_limit(&compared),
-        ));
-        md.push_str(&format!(
-            "\n## The goal against the limit\n\nThe online mean |error| of the storeys' \
-             stiffnesses and dampings within {:.0} % of the reference posterior's: the paired \
-             difference online − reference over (data set, parameter) must lie below the margin \
-             with its ±2 s.e. interval (holds), above it (does not hold), or the goal is not \
-             resolved.\n\n",
-            100.0 * crate::reference::GOAL_MARGIN
-        ));
-        md.push_str(&crate::reference::goal_markdown(
-            &crate::reference::goal_rows(&compared),
-        ));
-    }
-    if !chain_notes.is_empty() {
-        md.push_str(&format!(
-            "\nWarnings on the reference chains:\n\n{}\n",
-            chain_notes.join("\n")
-        ));
-    }
+    let md = crate::reference::compare_files(&args.reference, &args.records, &mut |w| {
+        eprintln!("warning: {w}")
+    })?;
     print!("{md}");
     if let Some(out) = &args.out {
         std::fs::write(out, &md).with_context(|| format!("writing {}", out.display()))?;
