@@ -40,7 +40,7 @@ pub mod posterior;
 mod record;
 pub use comparison::{
     compare, compare_files, compare_markdown, goal_markdown, goal_rows, information_limit,
-    limit_markdown, reference_covers, Comparison, GoalRow, LimitRow, GOAL_MARGIN,
+    limit_markdown, reference_covers, Comparison, DataSetRuns, GoalRow, LimitRow, GOAL_MARGIN,
 };
 pub use record::{chain_warnings, ReferenceRecord, MIN_ACCEPTANCE, MIN_CHAIN_ESS};
 

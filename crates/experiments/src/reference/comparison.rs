@@ -140,18 +140,25 @@ pub struct LimitRow {
     pub sd_ratio: f64,
 }
 
-/// The information limit over several data sets: `groups` holds, per data set, the (pooled)
-/// reference and the online records of that data set. Rows per algorithm and parameter (in the
-/// reference's order); failed runs are left out, as in [`compare`].
-pub fn information_limit(
-    groups: &[(Vec<ParamSummary>, Vec<crate::record::RunRecord>)],
-) -> Vec<LimitRow> {
+/// One data set: its (pooled) reference and the online records computed on it.
+pub type DataSetRuns = (Vec<ParamSummary>, Vec<crate::record::RunRecord>);
+
+/// The algorithms of the online records of `groups`, sorted, once each.
+fn algorithms_of(groups: &[DataSetRuns]) -> Vec<&str> {
     let mut algorithms: Vec<&str> = groups
         .iter()
         .flat_map(|(_, rs)| rs.iter().map(|r| r.algorithm.as_str()))
         .collect();
     algorithms.sort();
     algorithms.dedup();
+    algorithms
+}
+
+/// The information limit over several data sets: `groups` holds, per data set, the (pooled)
+/// reference and the online records of that data set. Rows per algorithm and parameter (in the
+/// reference's order); failed runs are left out, as in [`compare`].
+pub fn information_limit(groups: &[DataSetRuns]) -> Vec<LimitRow> {
+    let algorithms = algorithms_of(groups);
     let Some((first, _)) = groups.first() else {
         return Vec::new();
     };
@@ -243,14 +250,9 @@ pub struct GoalRow {
 
 /// [`GoalRow`]s of every algorithm of `groups` (as [`information_limit`]) for the stiffnesses and
 /// the dampings.
-pub fn goal_rows(groups: &[(Vec<ParamSummary>, Vec<crate::record::RunRecord>)]) -> Vec<GoalRow> {
+pub fn goal_rows(groups: &[DataSetRuns]) -> Vec<GoalRow> {
     use crate::verdict::{below, in_group, Estimate};
-    let mut algorithms: Vec<&str> = groups
-        .iter()
-        .flat_map(|(_, rs)| rs.iter().map(|r| r.algorithm.as_str()))
-        .collect();
-    algorithms.sort();
-    algorithms.dedup();
+    let algorithms = algorithms_of(groups);
     let mut out = Vec::new();
     for alg in algorithms {
         for group in ['k', 'c'] {
