@@ -355,6 +355,10 @@ impl<L: HysteresisLaw> ConditionallyLinear for MlnChainOf<L> {
 
     /// `∂u_k/∂z` along the sampled path at z. Euler: the linked rows of F. Symplectic: v rows
     /// `F_v`; x rows `dt·F_v`; r rows `F_r + dt·∂ṙ/∂δv·(F_v[j] − F_v[j−1])`.
+    // Always inlined into Storvik's step: left to the optimiser, it stopped being inlined
+    // after unrelated edits elsewhere and Storvik ran 5.9 % (s.e. 0.9 %) slower
+    // (docs/performance.md, "Speed across builds").
+    #[inline(always)]
     fn transition_sensitivity<T: Real>(
         &self,
         _k: usize,
