@@ -33,6 +33,18 @@ pub struct RunMode {
 }
 
 impl RunMode {
+    /// The full study on `threads` threads (0: one per core), every run computed, nothing
+    /// printed: how a program or a test embeds a study.
+    pub fn quiet(threads: usize) -> Self {
+        Self {
+            quick: false,
+            threads,
+            shard: Shard::default(),
+            progress: false,
+            resume: false,
+        }
+    }
+
     /// The report of merged shards: every record reused, nothing computed.
     pub fn report_merged(quick: bool) -> Self {
         Self {

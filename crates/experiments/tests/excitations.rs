@@ -12,7 +12,6 @@ use experiments::figures::validate_svg;
 use experiments::scaling::structures::structure_values;
 use experiments::scaling::Options;
 use experiments::study::Study;
-use experiments::sweep::Shard;
 use models::dataset::ExcitationSource;
 
 fn temp_dir(tag: &str) -> PathBuf {
@@ -149,13 +148,7 @@ fn small_study_end_to_end() {
     let opts = Options {
         config: write_study(&dir, SMALL),
         out: out.clone(),
-        mode: RunMode {
-            quick: false,
-            threads: 2,
-            shard: Shard::default(),
-            progress: false,
-            resume: false,
-        },
+        mode: RunMode::quiet(2),
         report_only: false,
     };
     let cells = excitations::run(&opts).unwrap();

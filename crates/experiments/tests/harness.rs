@@ -211,10 +211,8 @@ fn quick(experiments: &Path, out: &Path, resume: bool) -> Done {
         out: out.to_path_buf(),
         mode: RunMode {
             quick: true,
-            threads: 0,
-            shard: Shard::default(),
-            progress: false,
             resume,
+            ..RunMode::quiet(0)
         },
     })
     .unwrap()

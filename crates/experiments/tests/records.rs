@@ -300,10 +300,9 @@ fn the_draw_after_merge_reads_failed_runs() {
             out: out.to_path_buf(),
             mode: RunMode {
                 quick: true,
-                threads: 2,
                 shard,
-                progress: false,
                 resume,
+                ..RunMode::quiet(2)
             },
         })
         .unwrap()

@@ -9,7 +9,6 @@ use experiments::figures::validate_svg;
 use experiments::pipeline::Algorithm;
 use experiments::scaling::{self, Options};
 use experiments::study::Study;
-use experiments::sweep::Shard;
 
 fn temp_dir(tag: &str) -> PathBuf {
     let d = std::env::temp_dir().join(format!("sysid-scaling-{tag}-{}", std::process::id()));
@@ -203,13 +202,7 @@ fn small_study_end_to_end_and_resumed() {
     let opts = Options {
         config,
         out: out.clone(),
-        mode: RunMode {
-            quick: false,
-            threads: 2,
-            shard: Shard::default(),
-            progress: false,
-            resume: false,
-        },
+        mode: RunMode::quiet(2),
         report_only: false,
     };
     let cells = scaling::run(&opts).unwrap();
