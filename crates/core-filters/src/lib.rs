@@ -20,6 +20,8 @@
 //!   runner and its observers;
 //! - [`credible`] and [`pmmh`]: credible intervals and the reference posterior by particle
 //!   marginal Metropolis–Hastings;
+//! - [`laplace`]: the mode and Gaussian approximation of a smooth log-density from its values
+//!   (the information limit of a linear record);
 //! - [`real`]: one particle (`f64`) or a pack of particles in SIMD lanes behind one type;
 //! - [`rng`]: reproducible random streams derived from (master seed, run, purpose);
 //! - [`health`] and [`error`]: counted repairs and typed failures.
@@ -28,6 +30,7 @@ pub mod credible;
 pub mod error;
 pub mod health;
 pub mod kalman;
+pub mod laplace;
 pub mod linalg;
 pub mod model;
 pub mod pmmh;

@@ -80,6 +80,8 @@ error_type! {
     Interrupted(Interrupted),
     /// A filter failed numerically.
     Filter(core_filters::error::FilterError),
+    /// A likelihood's maximum or its curvature could not be found.
+    Laplace(core_filters::laplace::LaplaceError),
     /// A building (masses, hysteretic storeys, damping) is not valid.
     Building(models::building::BuildingError),
     /// A data set could not be read or is not valid.

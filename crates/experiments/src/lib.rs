@@ -40,6 +40,7 @@ pub mod field_study;
 pub mod figures;
 pub mod headline;
 pub mod identification;
+pub mod information;
 pub mod likelihood;
 pub mod limits;
 mod markdown;

@@ -260,6 +260,118 @@ pub struct ScoredData<'a> {
     pub config: Option<&'a str>,
 }
 
+/// The model every θ is scored under on one data set: the base settings as `sysid filter`
+/// settles them for the MPF-EKF2 on these data, and the names of the model's parameters (every
+/// θ must give exactly these). Built once, then asked for `log p̂(y | θ)` at any θ.
+pub struct LikelihoodModel<'a> {
+    on: &'a ScoredData<'a>,
+    base: FilterSettings,
+    /// The parameters of the model on these data, in θ's order.
+    pub names: Vec<String>,
+}
+
+impl<'a> LikelihoodModel<'a> {
+    /// Settles the model of `on` (errors: field data without a building, settings the data
+    /// refuse).
+    pub fn settle(on: &'a ScoredData<'a>) -> Result<Self> {
+        let data = on.data;
+        if data.meta.is_none()
+            && on.chain.is_none()
+            && on.settings.is_none()
+            && on.flags.storeys.is_none()
+        {
+            bail!(
+                "{}: field data (no dataset.json): state the building the answers were \
+                 identified on (--config with its [structure] table; in Python, a config or \
+                 building=)",
+                on.name
+            );
+        }
+        let base = on
+            .settings
+            .clone()
+            .unwrap_or_else(FilterSettings::recommended);
+        let target = Target {
+            algorithm: Algorithm::MpfEkf2,
+            data,
+            chain: on.chain,
+            measured: on.measured,
+            flags: on.flags,
+            config: on.config,
+        };
+        let base = settle(&target, base, &mut |_| {})?;
+        let names = crate::pipeline::chain_spec(data, on.chain, &base)?
+            .prior
+            .names();
+        Ok(Self { on, base, names })
+    }
+
+    /// The settled settings (before θ is fixed).
+    pub fn settings(&self) -> &FilterSettings {
+        &self.base
+    }
+
+    /// Whether the model samples nothing once θ is fixed — a building without hysteretic
+    /// storeys — so that `log p̂(y | θ)` is the Kalman filter's exact log-likelihood, the same
+    /// for every seed and particle count.
+    pub fn is_exact(&self) -> Result<bool> {
+        let spec = crate::pipeline::chain_spec(self.on.data, self.on.chain, &self.base)?;
+        Ok(spec.building.hysteretic().is_empty())
+    }
+
+    /// Parameters that the base settings already fix: the same in every candidate, not free.
+    pub fn fixed_by_settings(&self) -> usize {
+        self.names
+            .iter()
+            .filter(|n| self.base.fix.contains_key(*n))
+            .count()
+    }
+
+    /// Errors unless `c` gives exactly the model's parameters.
+    pub fn check(&self, c: &Candidate) -> Result<()> {
+        if c.names != self.names || c.theta.len() != self.names.len() {
+            bail!(
+                "{}: its parameters ({}) are not those of the building of {} ({}): every answer \
+                 must be of that building",
+                c.label,
+                c.names.join(", "),
+                self.on.name,
+                self.names.join(", ")
+            );
+        }
+        Ok(())
+    }
+
+    /// One estimate of `log p(y | θ)` at `c` (checked with [`Self::check`] first): one filter
+    /// of `particles` with filter master seed `seed`; −∞ when the filter fails. `stop` is asked
+    /// before every filter step whether to stop.
+    pub fn loglik(
+        &self,
+        c: &Candidate,
+        particles: usize,
+        seed: u64,
+        stop: &dyn Fn() -> bool,
+    ) -> Result<f64> {
+        let settings = fixed_at(&self.base, c, particles);
+        let input = RunInput {
+            data: self.on.data,
+            chain: self.on.chain,
+            experiment: "loglik",
+            seed,
+            run: 0,
+            progress: false,
+            residuals: false,
+        };
+        let r = identify_stoppable(&input, Algorithm::MpfEkf2, &settings, stop)
+            .with_context(|| format!("{}: the likelihood at its θ", c.label))?;
+        Ok(if r.failure.is_some() || !r.loglik.is_finite() {
+            f64::NEG_INFINITY
+        } else {
+            r.loglik
+        })
+    }
+}
+
 /// Scores every candidate (and the truth when asked) on `on` as `req` says. `stop` is asked
 /// before every filter step whether to stop (an interactive caller's Ctrl-C); a stop ends the
 /// scoring with [`crate::error::Error::interrupted`].
@@ -277,38 +389,10 @@ pub fn score_on(
         bail!("--particles: at least one particle per estimate");
     }
     crate::limits::check_particle_cloud(req.particles, 1).context("--particles")?;
-    let data = on.data;
-    if data.meta.is_none()
-        && on.chain.is_none()
-        && on.settings.is_none()
-        && on.flags.storeys.is_none()
-    {
-        bail!(
-            "{}: field data (no dataset.json): state the building the answers were identified \
-             on (--config with its [structure] table; in Python, a config or building=)",
-            on.name
-        );
-    }
-    let base = on
-        .settings
-        .clone()
-        .unwrap_or_else(FilterSettings::recommended);
-    let target = Target {
-        algorithm: Algorithm::MpfEkf2,
-        data,
-        chain: on.chain,
-        measured: on.measured,
-        flags: on.flags,
-        config: on.config,
-    };
-    let base = settle(&target, base, &mut |_| {})?;
-    // The parameters of the model on these data: every answer must give exactly these.
-    let names = crate::pipeline::chain_spec(data, on.chain, &base)?
-        .prior
-        .names();
+    let model = LikelihoodModel::settle(on)?;
     let mut all = candidates.to_vec();
     if req.truth {
-        let Some(meta) = &data.meta else {
+        let Some(meta) = &on.data.meta else {
             bail!(
                 "--truth: {} has no dataset.json, so its true θ is unknown",
                 on.name
@@ -316,7 +400,7 @@ pub fn score_on(
         };
         all.push(Candidate {
             label: "truth".into(),
-            names: names.clone(),
+            names: model.names.clone(),
             theta: meta.theta_true.clone(),
         });
     }
@@ -324,38 +408,13 @@ pub fn score_on(
         bail!("no record to score (give run records, or --truth)");
     }
     for c in &all {
-        if c.names != names || c.theta.len() != names.len() {
-            bail!(
-                "{}: its parameters ({}) are not those of the building of {} ({}): every answer \
-                 must be of that building",
-                c.label,
-                c.names.join(", "),
-                on.name,
-                names.join(", ")
-            );
-        }
+        model.check(c)?;
     }
     let mut scored = Vec::with_capacity(all.len());
     for c in &all {
-        let settings = fixed_at(&base, c, req.particles);
         let mut estimates = Vec::with_capacity(req.seeds as usize);
         for seed in 1..=req.seeds {
-            let input = RunInput {
-                data,
-                chain: on.chain,
-                experiment: "loglik",
-                seed,
-                run: 0,
-                progress: false,
-                residuals: false,
-            };
-            let r = identify_stoppable(&input, Algorithm::MpfEkf2, &settings, stop)
-                .with_context(|| format!("{}: the likelihood at its θ", c.label))?;
-            let l = if r.failure.is_some() || !r.loglik.is_finite() {
-                f64::NEG_INFINITY
-            } else {
-                r.loglik
-            };
+            let l = model.loglik(c, req.particles, seed, stop)?;
             progress(&format!("{}: seed {seed}: log p̂(y | θ) = {l:.2}", c.label));
             estimates.push(l);
         }
@@ -364,17 +423,12 @@ pub fn score_on(
             estimates,
         });
     }
-    let params = names.len() - fixed_by_settings(&base, &names);
+    let params = model.names.len() - model.fixed_by_settings();
     Ok(Comparison {
         scored,
         params,
         region_nats: crate::residuals::chi2_95(params.max(1)) / 2.0,
     })
-}
-
-/// Parameters that the base settings already fix: the same in every candidate, not free.
-fn fixed_by_settings(base: &FilterSettings, names: &[String]) -> usize {
-    names.iter().filter(|n| base.fix.contains_key(*n)).count()
 }
 
 /// The comparison as a table, best first, with each verdict.

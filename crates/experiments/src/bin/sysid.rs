@@ -56,6 +56,9 @@ enum Command {
     /// Which answers a record supports: the log-likelihood of a data set at the θ_val of run
     /// records (and its true θ), each shown outside the record's 95 % likelihood region or not.
     Loglik(cli::loglik::Args),
+    /// The information limit of a linear record: the maximum-likelihood θ, its error and the
+    /// Cramér–Rao s.d. of every parameter (exact Kalman likelihood), beside run records' answers.
+    Information(cli::information::Args),
     /// Draw the figures of one run record (convergence, ESS, hysteresis loop, residuals).
     Plot(cli::plot::Args),
     /// A study of one real structure from its recordings: import, identify model variants,
@@ -103,6 +106,7 @@ fn run(cli: Cli) -> experiments::error::Result<()> {
         Command::Regression(args) => cli::regression::run(args),
         Command::Plot(args) => cli::plot::run(args),
         Command::Loglik(args) => cli::loglik::run(args),
+        Command::Information(args) => cli::information::run(args),
         Command::Validate(args) => cli::validate::run(args),
         Command::FieldStudy(args) => cli::field_study::run(args),
     }

@@ -4,6 +4,7 @@ pub mod cluster;
 pub mod field_study;
 pub mod filter;
 pub mod import;
+pub mod information;
 pub mod loglik;
 pub mod merge;
 pub mod plot;

@@ -1,0 +1,411 @@
+//! The information limit of a linear record: the answer the record itself supports best and how
+//! closely it can pin θ down, computed exactly, beside what the online filters reach on it.
+//!
+//! For a building without hysteretic storeys the filters' model is linear given θ, so with θ
+//! fixed the MPF-EKF2 samples nothing and its log-likelihood is the Kalman filter's, exact and
+//! smooth in θ ([`crate::likelihood::LikelihoodModel::is_exact`]). Its maximum, the
+//! maximum-likelihood θ̂, is found by Newton's ascent from the truth (or a given start) with
+//! central-difference derivatives ([`core_filters::laplace`]), and `(−H)⁻¹` at θ̂ gives each
+//! parameter's standard deviation: the Cramér–Rao bound of an unbiased answer, which is also the
+//! width of the posterior when the prior is wide against the data. θ̂'s error against the truth
+//! is the error the record allows; an online filter whose error is far above it loses
+//! information the record holds, one near it does not.
+//!
+//! Hysteretic records are refused: their likelihood is a particle estimate, not smooth in θ;
+//! their reference posterior is `sysid reference` (particle marginal Metropolis–Hastings).
+
+use std::fmt::Write as _;
+
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+
+use crate::error::{bail, Context, Result};
+use crate::likelihood::{Candidate, LikelihoodModel, ScoredData};
+use crate::record::{RunRecord, Versions};
+use core_filters::laplace::{maximise, NewtonOptions};
+
+/// Default central-difference step, relative to each parameter's start value.
+pub const REL_STEP: f64 = 1e-3;
+
+/// The information limit of one data set (`sysid information` writes it as JSON).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct InformationLimit {
+    /// The data set, as named on the command line.
+    pub data: String,
+    /// Its identity (`record::fingerprint::data_identity`'s digest): run records of these data
+    /// carry the same one.
+    pub data_sha256: String,
+    pub names: Vec<String>,
+    /// The true θ (simulated data).
+    pub truth: Option<Vec<f64>>,
+    /// Where Newton's ascent started: `truth` or a run record's path.
+    pub start: String,
+    /// The maximum-likelihood θ̂.
+    pub mle: Vec<f64>,
+    /// Cramér–Rao standard deviation of each parameter: √diag((−H)⁻¹) at θ̂.
+    pub sd: Vec<f64>,
+    /// log p(y | θ) at the start and at θ̂.
+    pub loglik_start: f64,
+    pub loglik_mle: f64,
+    /// Central-difference step relative to the start's values.
+    pub rel_step: f64,
+    pub newton_steps: usize,
+    /// Kalman-filter runs asked for.
+    pub evaluations: usize,
+    /// Wall time of the computation (s).
+    pub seconds: f64,
+    pub versions: Versions,
+}
+
+impl InformationLimit {
+    /// θ̂'s error relative to the truth, per parameter (None without a truth).
+    pub fn mle_error(&self) -> Option<Vec<f64>> {
+        let t = self.truth.as_ref()?;
+        Some(self.mle.iter().zip(t).map(|(m, t)| m / t - 1.0).collect())
+    }
+}
+
+/// Computes the information limit of the data of `on` (a linear building), starting Newton's
+/// ascent at `start` (the truth when `None`; a data set without one needs a start).
+/// `progress` hears one line per stencil.
+pub fn information_limit(
+    on: &ScoredData<'_>,
+    start: Option<&Candidate>,
+    rel_step: f64,
+    progress: &mut dyn FnMut(&str),
+) -> Result<InformationLimit> {
+    if !(rel_step.is_finite() && rel_step > 0.0 && rel_step < 0.1) {
+        bail!("--step: the relative step must be in (0, 0.1), got {rel_step}");
+    }
+    let clock = std::time::Instant::now();
+    let model = LikelihoodModel::settle(on)?;
+    if !model.is_exact()? {
+        bail!(
+            "{}: the building has hysteretic storeys, so its likelihood is a particle estimate, \
+             not smooth in θ: the information limit needs a linear building (the reference \
+             posterior of hysteretic data is `sysid reference`)",
+            on.name
+        );
+    }
+    let truth = on.data.meta.as_ref().map(|m| m.theta_true.clone());
+    let start = match (start, &truth) {
+        (Some(c), _) => c.clone(),
+        (None, Some(t)) => Candidate {
+            label: "truth".into(),
+            names: model.names.clone(),
+            theta: t.clone(),
+        },
+        (None, None) => bail!(
+            "{}: no dataset.json, so no true θ to start from: give --start with a run record",
+            on.name
+        ),
+    };
+    model.check(&start)?;
+    if let Some(i) = start.theta.iter().position(|v| *v == 0.0) {
+        bail!(
+            "{}: {} is 0 at the start, so a relative step cannot be taken",
+            start.label,
+            start.names[i]
+        );
+    }
+    let h: Vec<f64> = start.theta.iter().map(|v| rel_step * v.abs()).collect();
+    let names = model.names.clone();
+    let eval = |pts: &[Vec<f64>]| -> Result<Vec<f64>> {
+        progress(&format!("{}: {} Kalman-filter runs", on.name, pts.len()));
+        pts.par_iter()
+            .map(|theta| {
+                let c = Candidate {
+                    label: "θ".into(),
+                    names: names.clone(),
+                    theta: theta.clone(),
+                };
+                // Nothing is sampled: one particle is the exact filter (seed irrelevant).
+                model.loglik(&c, 1, 1, &|| false)
+            })
+            .collect()
+    };
+    let l = maximise(&start.theta, &h, NewtonOptions::default(), eval)
+        .with_context(|| format!("{}: the maximum of the likelihood", on.name))?;
+    let data_sha256 = crate::record::fingerprint::data_identity(on.data)["sha256"]
+        .as_str()
+        .unwrap_or_default()
+        .to_string();
+    Ok(InformationLimit {
+        data: on.name.to_string(),
+        data_sha256,
+        names: model.names.clone(),
+        truth,
+        start: start.label.clone(),
+        sd: l.sd(),
+        mle: l.mode,
+        loglik_start: l.value_at_start,
+        loglik_mle: l.value,
+        rel_step,
+        newton_steps: l.steps,
+        evaluations: l.evaluations,
+        seconds: clock.elapsed().as_secs_f64(),
+        versions: Versions::current(),
+    })
+}
+
+/// Whether a parameter is a storey's stiffness (`k3`) or damping (`c3`), and which.
+fn storey_kind(name: &str) -> Option<char> {
+    let c = name.chars().next()?;
+    (matches!(c, 'k' | 'c') && name.len() > 1 && name[1..].chars().all(|d| d.is_ascii_digit()))
+        .then_some(c)
+}
+
+/// One run record's answer on the data of a limit: the relative error of θ_val per parameter
+/// and whether its 95 % interval holds the truth (None where the record has none).
+struct Answer {
+    error: Vec<f64>,
+    covers: Vec<Option<bool>>,
+}
+
+/// Whether run record `r` was identified on the data set of `limit` (its fingerprint names the
+/// same data identity).
+pub fn on_data(r: &RunRecord, limit: &InformationLimit) -> bool {
+    r.fingerprint
+        .as_ref()
+        .and_then(|f| f.inputs["data"]["sha256"].as_str())
+        == Some(limit.data_sha256.as_str())
+}
+
+fn answer(limit: &InformationLimit, truth: &[f64], r: &RunRecord) -> Result<Answer> {
+    if r.param_names != limit.names {
+        bail!(
+            "run {} of {}: its parameters are not those of {}",
+            r.run,
+            r.algorithm,
+            limit.data
+        );
+    }
+    if !on_data(r, limit) {
+        bail!(
+            "run {} of {} was not identified on {} (another data set, or a record without a \
+             fingerprint)",
+            r.run,
+            r.algorithm,
+            limit.data
+        );
+    }
+    let error = r
+        .theta_val
+        .iter()
+        .zip(truth)
+        .map(|(v, t)| v / t - 1.0)
+        .collect();
+    let covers = (0..truth.len())
+        .map(|j| {
+            let ci = r
+                .credible
+                .iter()
+                .find(|p| p.parameter == limit.names[j])
+                .and_then(|p| p.at(0.95))?;
+            Some(ci.lo <= truth[j] && truth[j] <= ci.hi)
+        })
+        .collect();
+    Ok(Answer { error, covers })
+}
+
+fn mean(xs: impl Iterator<Item = f64>) -> f64 {
+    let (s, n) = xs.fold((0.0, 0usize), |(s, n), x| (s + x, n + 1));
+    s / n as f64
+}
+
+/// The limit of one data set as a table, one row per parameter: the truth, θ̂, θ̂'s error, the
+/// Cramér–Rao s.d., and for each record its θ_val's error and whether its 95 % interval holds
+/// the truth.
+pub fn table(limit: &InformationLimit, records: &[RunRecord]) -> Result<String> {
+    let mut o = String::new();
+    let Some(truth) = &limit.truth else {
+        writeln!(o, "| parameter | θ̂ | s.d. |")?;
+        writeln!(o, "|---|---:|---:|")?;
+        for (j, n) in limit.names.iter().enumerate() {
+            writeln!(o, "| {n} | {:.6} | {:.6} |", limit.mle[j], limit.sd[j])?;
+        }
+        return Ok(o);
+    };
+    let answers = records
+        .iter()
+        .map(|r| answer(limit, truth, r))
+        .collect::<Result<Vec<_>>>()?;
+    let err = limit.mle_error().unwrap_or_default();
+    write!(o, "| parameter | truth | θ̂ | θ̂ error | s.d. |")?;
+    for r in records {
+        write!(o, " {} run {} error | covers |", r.algorithm, r.run)?;
+    }
+    writeln!(o)?;
+    writeln!(
+        o,
+        "|---|---:|---:|---:|---:|{}",
+        "---:|---|".repeat(records.len())
+    )?;
+    for (j, n) in limit.names.iter().enumerate() {
+        write!(
+            o,
+            "| {n} | {:.6} | {:.6} | {:+.2} % | {:.2} % |",
+            truth[j],
+            limit.mle[j],
+            100.0 * err[j],
+            100.0 * limit.sd[j] / truth[j].abs()
+        )?;
+        for a in &answers {
+            let covers = match a.covers[j] {
+                Some(true) => "yes",
+                Some(false) => "**no**",
+                None => "–",
+            };
+            write!(o, " {:+.2} % | {covers} |", 100.0 * a.error[j])?;
+        }
+        writeln!(o)?;
+    }
+    let gain = limit.loglik_mle - limit.loglik_start;
+    writeln!(
+        o,
+        "\nθ̂ lies {gain:.2} nats above the start ({}; {} Newton steps, {} Kalman-filter runs, \
+         {:.0} s); 2 × that gain is χ²-distributed with {} degrees of freedom when the start is \
+         the truth (95 % point {:.1}).",
+        limit.start,
+        limit.newton_steps,
+        limit.evaluations,
+        limit.seconds,
+        limit.names.len(),
+        crate::residuals::chi2_95(limit.names.len())
+    )?;
+    Ok(o)
+}
+
+/// Several data sets' limits beside the online filters' answers on them, one row per data set
+/// and a mean: θ̂'s and each algorithm's mean |error| of the stiffnesses and of the dampings,
+/// the mean Cramér–Rao s.d.s, and the fraction of the records' 95 % intervals of k and c that
+/// hold the truth. Records are matched to limits by the data set's identity; every record must
+/// belong to one of the limits.
+pub fn summary(limits: &[InformationLimit], records: &[RunRecord]) -> Result<String> {
+    let mut algorithms: Vec<String> = records.iter().map(|r| r.algorithm.clone()).collect();
+    algorithms.sort();
+    algorithms.dedup();
+    let mut used = vec![false; records.len()];
+    let mut o = String::new();
+    write!(
+        o,
+        "| data set | θ̂ \\|k error\\| | θ̂ \\|c error\\| | s.d. of k | s.d. of c |"
+    )?;
+    for a in &algorithms {
+        write!(o, " {a} \\|k\\| | {a} \\|c\\| | {a} k, c covered |")?;
+    }
+    writeln!(o)?;
+    writeln!(
+        o,
+        "|---|---:|---:|---:|---:|{}",
+        "---:|---:|---:|".repeat(algorithms.len())
+    )?;
+    // Per column: the values of every data set, for the mean row.
+    let mut cols: Vec<Vec<f64>> = vec![Vec::new(); 4 + 2 * algorithms.len()];
+    let mut covered = vec![(0usize, 0usize); algorithms.len()];
+    for l in limits {
+        let Some(truth) = &l.truth else {
+            bail!("{}: no truth, so no error to summarise", l.data);
+        };
+        let err = l.mle_error().unwrap_or_default();
+        let of = |kind: char, xs: &[f64]| {
+            mean(
+                l.names
+                    .iter()
+                    .zip(xs)
+                    .filter(|(n, _)| storey_kind(n) == Some(kind))
+                    .map(|(_, x)| x.abs()),
+            )
+        };
+        let rel_sd: Vec<f64> = l.sd.iter().zip(truth).map(|(s, t)| s / t.abs()).collect();
+        let row = [
+            of('k', &err),
+            of('c', &err),
+            of('k', &rel_sd),
+            of('c', &rel_sd),
+        ];
+        write!(o, "| {} |", l.data)?;
+        for (c, v) in row.iter().enumerate() {
+            cols[c].push(*v);
+            write!(o, " {:.2} % |", 100.0 * v)?;
+        }
+        for (ai, a) in algorithms.iter().enumerate() {
+            let mut errs = (Vec::new(), Vec::new());
+            let (mut cov, mut pairs) = (0usize, 0usize);
+            for (ri, r) in records.iter().enumerate() {
+                if &r.algorithm != a || r.is_failure() {
+                    continue;
+                }
+                if !on_data(r, l) {
+                    continue;
+                }
+                used[ri] = true;
+                let ans = answer(l, truth, r)?;
+                errs.0.push(of('k', &ans.error));
+                errs.1.push(of('c', &ans.error));
+                for (j, c) in ans.covers.iter().enumerate() {
+                    if let (Some(c), Some(_)) = (c, storey_kind(&l.names[j])) {
+                        pairs += 1;
+                        cov += usize::from(*c);
+                    }
+                }
+            }
+            let (k, c) = (mean(errs.0.into_iter()), mean(errs.1.into_iter()));
+            cols[4 + 2 * ai].push(k);
+            cols[5 + 2 * ai].push(c);
+            covered[ai].0 += cov;
+            covered[ai].1 += pairs;
+            write!(
+                o,
+                " {:.2} % | {:.2} % | {cov}/{pairs} |",
+                100.0 * k,
+                100.0 * c
+            )?;
+        }
+        writeln!(o)?;
+    }
+    if let Some(i) = used.iter().position(|u| !u) {
+        let r = &records[i];
+        if !r.is_failure() {
+            bail!(
+                "run {} of {} belongs to none of the data sets summarised",
+                r.run,
+                r.algorithm
+            );
+        }
+    }
+    write!(o, "| mean of {} |", limits.len())?;
+    for c in &cols[..4] {
+        write!(o, " {:.2} % |", 100.0 * mean(c.iter().copied()))?;
+    }
+    for (ai, _) in algorithms.iter().enumerate() {
+        let (cov, pairs) = covered[ai];
+        write!(
+            o,
+            " {:.2} % | {:.2} % | {cov}/{pairs} = {:.3} |",
+            100.0 * mean(cols[4 + 2 * ai].iter().copied()),
+            100.0 * mean(cols[5 + 2 * ai].iter().copied()),
+            cov as f64 / pairs as f64
+        )?;
+    }
+    writeln!(o)?;
+    let failed = records.iter().filter(|r| r.is_failure()).count();
+    if failed > 0 {
+        writeln!(o, "\n{failed} failed runs left out.")?;
+    }
+    Ok(o)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn storey_parameters_are_told_apart_from_the_others() {
+        assert_eq!(storey_kind("k12"), Some('k'));
+        assert_eq!(storey_kind("c1"), Some('c'));
+        assert_eq!(storey_kind("k"), None);
+        assert_eq!(storey_kind("beta1"), None);
+        assert_eq!(storey_kind("ka"), None);
+    }
+}

@@ -1,0 +1,129 @@
+//! `sysid information` ([`experiments::information`]): on a linear building the limit's θ̂ is the
+//! likelihood's maximum and its s.d.s are the likelihood's curvature there (checked against the
+//! exact likelihood itself), the same request gives the same numbers, and a hysteretic record or
+//! another data set's run record is refused by name.
+
+mod common;
+
+use std::path::{Path, PathBuf};
+
+use experiments::field::StructureSettings;
+use experiments::information::{information_limit, table, REL_STEP};
+use experiments::likelihood::{Candidate, LikelihoodModel, ScoredData};
+use models::dataset::{generate, load_dir, DatasetConfig, LoadedDataset, MEASURED};
+
+fn temp_dir(tag: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("sysid-information-{tag}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+/// 4 s of a 3-storey building-chain data set (seed 7), linear or with its preset's Bouc–Wen
+/// storey, in `dir/name`.
+fn data_dir(dir: &Path, name: &str, linear: bool) -> PathBuf {
+    let mut config = DatasetConfig::from_preset("building-chain", 7).unwrap();
+    config.storeys = Some(3);
+    config.duration = Some(4.0);
+    if linear {
+        config.hysteretic = Some(vec![]);
+    }
+    let d = dir.join(name);
+    generate(&config).unwrap().write_dir(&d).unwrap();
+    d
+}
+
+fn on<'a>(data: &'a LoadedDataset, measured: &'a Path, name: &'a str) -> ScoredData<'a> {
+    static FLAGS: std::sync::OnceLock<StructureSettings> = std::sync::OnceLock::new();
+    ScoredData {
+        data,
+        chain: None,
+        measured,
+        name,
+        flags: FLAGS.get_or_init(StructureSettings::default),
+        settings: None,
+        config: None,
+    }
+}
+
+#[test]
+fn the_limit_is_the_likelihoods_maximum_and_its_curvature() {
+    let dir = temp_dir("maximum");
+    let d = data_dir(&dir, "linear", true);
+    let data = load_dir(&d).unwrap();
+    let chain = data.true_chain().unwrap();
+    let measured = d.join(MEASURED);
+    let mut scored = on(&data, &measured, "linear");
+    scored.chain = chain.as_ref();
+    let mut lines = 0;
+    let limit = information_limit(&scored, None, REL_STEP, &mut |_| lines += 1).unwrap();
+    assert!(lines >= 3, "a line per stencil: {lines}");
+    assert_eq!(limit.names.len(), 6);
+    assert!(limit.loglik_mle >= limit.loglik_start);
+    // Half an s.d. either side of θ̂ along each axis, the exact log-likelihood falls by
+    // ½·(½)²/ρ where ρ = 1 − R² of that axis on the others; the s.d.s are the marginal ones
+    // (√diag of the inverse), so the fall along one axis is at least 0.125 nats. θ̂ is the
+    // maximum: no point of the test is above it.
+    let model = LikelihoodModel::settle(&scored).unwrap();
+    let at = |theta: Vec<f64>| {
+        let c = Candidate {
+            label: "probe".into(),
+            names: limit.names.clone(),
+            theta,
+        };
+        model.loglik(&c, 1, 1, &|| false).unwrap()
+    };
+    let top = at(limit.mle.clone());
+    assert!(
+        (top - limit.loglik_mle).abs() < 1e-9,
+        "{top} {}",
+        limit.loglik_mle
+    );
+    for j in 0..6 {
+        for s in [0.5, -0.5] {
+            let mut th = limit.mle.clone();
+            th[j] += s * limit.sd[j];
+            let fall = top - at(th);
+            assert!(
+                fall > 0.125 * 0.9 && fall < 0.125 * 60.0,
+                "{}: a fall of {fall} nats half an s.d. from θ̂",
+                limit.names[j]
+            );
+        }
+    }
+    // The same request, the same numbers.
+    let again = information_limit(&scored, None, REL_STEP, &mut |_| {}).unwrap();
+    assert_eq!(again.mle, limit.mle);
+    assert_eq!(again.sd, limit.sd);
+    // A run record of another data set is refused by name.
+    let r = common::record("mpf-ekf2", 0, [1.0; 9], 0.05);
+    let e = table(&limit, &[r]).unwrap_err().to_string();
+    assert!(
+        e.contains("not those of") || e.contains("not identified on"),
+        "{e}"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn a_hysteretic_record_and_bad_steps_are_refused() {
+    let dir = temp_dir("refused");
+    let d = data_dir(&dir, "hysteretic", false);
+    let data = load_dir(&d).unwrap();
+    let measured = d.join(MEASURED);
+    let scored = on(&data, &measured, "hysteretic");
+    let e = format!(
+        "{:#}",
+        information_limit(&scored, None, REL_STEP, &mut |_| {}).unwrap_err()
+    );
+    assert!(
+        e.contains("hysteretic storeys") && e.contains("sysid reference"),
+        "{e}"
+    );
+    let e = format!(
+        "{:#}",
+        information_limit(&scored, None, 0.5, &mut |_| {}).unwrap_err()
+    );
+    assert!(e.contains("--step"), "{e}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
