@@ -5,7 +5,8 @@
 
 use core_filters::kalman::{
     ekf2_moments, ekf2_propagate, ekf2_update, gaussian_update, kalman_filter, kf_propagate,
-    kf_update, second_order_terms, table1, table1_rows, LinearGaussian, UtParams,
+    kf_update, second_order_terms, table1, table1_rows, Expansion, LinearGaussian, StepLog,
+    UtParams,
 };
 use core_filters::linalg::gauss::cholesky_repaired;
 use core_filters::model::SparseHessians;
@@ -224,21 +225,22 @@ fn ekf_and_ekf2_equal_kf_on_a_linear_model() {
         let mut health = Health::default();
         let mut ll = 0.0;
         for (idx, y) in ys.iter().enumerate() {
-            let value = model.g_mat * m + model.g_off;
-            ekf2_propagate(&mut m, &mut p, &value, &model.g_mat, hd, &model.q);
-            let value = model.h_mat * m + model.h_off;
-            let inn = ekf2_update(
-                &mut m,
-                &mut p,
-                y,
-                &value,
-                &model.h_mat,
-                ho,
-                &model.r,
-                idx + 1,
-                &mut health,
-            )
-            .unwrap();
+            let phi = Expansion {
+                value: model.g_mat * m + model.g_off,
+                jac: model.g_mat,
+                hess: hd,
+            };
+            ekf2_propagate(&mut m, &mut p, &phi, &model.q);
+            let psi = Expansion {
+                value: model.h_mat * m + model.h_off,
+                jac: model.h_mat,
+                hess: ho,
+            };
+            let log = StepLog {
+                step: idx + 1,
+                health: &mut health,
+            };
+            let inn = ekf2_update(&mut m, &mut p, y, &psi, &model.r, log).unwrap();
             ll += inn.loglik;
             assert!((m - run.means[idx]).abs().max() < 1e-12);
             assert!((p - run.covs[idx]).abs().max() < 1e-12);
@@ -286,13 +288,12 @@ fn ekf2_moments_of_a_quadratic_map_are_exact() {
     let mu = SVector::<f64, 3>::new(0.4, -0.8, 1.1);
     let p = SMatrix::<f64, 3, 3>::new(0.5, 0.1, -0.2, 0.1, 0.3, 0.05, -0.2, 0.05, 0.4);
     let hess = quad_hessians();
-    let (mean, cov) = ekf2_moments(
-        &p,
-        &quad_map(&mu),
-        &quad_jacobian(&mu),
-        &hess,
-        &SMatrix::zeros(),
-    );
+    let psi = Expansion {
+        value: quad_map(&mu),
+        jac: quad_jacobian(&mu),
+        hess: &hess,
+    };
+    let (mean, cov) = ekf2_moments(&p, &psi, &SMatrix::zeros());
 
     // Closed form: y_i = f_i(μ) + g_iᵀ δ + ½ δᵀ A_i δ with δ ~ N(0, P), g_i the gradient at μ:
     // E y_i = f_i(μ) + ½ tr(A_i P), Cov = g_iᵀ P g_j + ½ tr(A_i P A_j P).
@@ -448,8 +449,10 @@ fn nearly_singular_innovation_covariance_is_repaired_and_counted() {
         &jac,
         &SVector::zeros(),
         &r,
-        5,
-        &mut health,
+        StepLog {
+            step: 5,
+            health: &mut health,
+        },
     )
     .unwrap();
     assert_eq!(health.jitter_added, 1);
@@ -489,8 +492,10 @@ fn slightly_indefinite_covariance_is_repaired_clearly_indefinite_is_an_error() {
         &SVector::zeros(),
         &SMatrix::identity(),
         &SMatrix::zeros(),
-        9,
-        &mut health,
+        StepLog {
+            step: 9,
+            health: &mut health,
+        },
     );
     assert!(res.is_ok());
     assert_eq!(health.jitter_added, 1);
@@ -509,8 +514,10 @@ fn slightly_indefinite_covariance_is_repaired_clearly_indefinite_is_an_error() {
         &SVector::zeros(),
         &SMatrix::identity(),
         &SMatrix::zeros(),
-        9,
-        &mut health,
+        StepLog {
+            step: 9,
+            health: &mut health,
+        },
     )
     .unwrap_err();
     assert_eq!(
@@ -553,8 +560,10 @@ fn non_finite_input_is_a_typed_error() {
             &hm,
             &Vector1::zeros(),
             &r,
-            2,
-            &mut health,
+            StepLog {
+                step: 2,
+                health: &mut health,
+            },
         )
         .unwrap_err();
         assert_eq!(err.kind(), "non_finite", "{err}");
@@ -575,18 +584,16 @@ fn non_finite_input_is_a_typed_error() {
     let mut hess = SparseHessians::new();
     hess.push(0, 0, 1, 1.0);
     let mut health = Health::default();
-    let err = ekf2_update(
-        &mut m,
-        &mut p,
-        &Vector1::new(1.0),
-        &Vector1::new(0.12),
-        &hm,
-        &hess,
-        &r,
-        3,
-        &mut health,
-    )
-    .unwrap_err();
+    let psi = Expansion {
+        value: Vector1::new(0.12),
+        jac: hm,
+        hess: &hess,
+    };
+    let log = StepLog {
+        step: 3,
+        health: &mut health,
+    };
+    let err = ekf2_update(&mut m, &mut p, &Vector1::new(1.0), &psi, &r, log).unwrap_err();
     assert_eq!(err.kind(), "non_finite");
     assert_eq!(m, m0);
 }

@@ -1,17 +1,29 @@
 //! Second-order extended Kalman filter steps (EKF2, SPEC §4); EKF1 is the special case of empty
 //! Hessians. The caller evaluates the map and its Jacobian at the current mean (the model knows
-//! how); the constant Hessians come as sparse entry lists ([`SparseHessians`]).
+//! how); the constant Hessians come as sparse entry lists ([`SparseHessians`]). The three are
+//! handed over together as the map's [`Expansion`] at the mean.
 //!
 //! For a map that is at most quadratic in the state (the MPF-EKF2 partition of SPEC §5.4, §6),
 //! these moments are exact.
 
 use nalgebra::{SMatrix, SVector};
 
-use super::kf::{gaussian_update, sandwich_plus, Innovation};
+use super::kf::{gaussian_update, sandwich_plus, Innovation, StepLog};
 use crate::error::FilterError;
-use crate::health::Health;
 use crate::linalg::SecondOrder;
 use crate::model::SparseHessians;
+
+/// The second-order expansion of a map `f: ℝᴺ → ℝ^NO` at the current mean `m`, as the EKF2 steps
+/// use it: `f(x) ≈ f(m) + J (x − m) + ½ Σ_i e_i (x − m)ᵀ 𝓗ⁱ (x − m)`.
+#[derive(Debug, Clone, Copy)]
+pub struct Expansion<'a, const N: usize, const NO: usize> {
+    /// `f(m)`.
+    pub value: SVector<f64, NO>,
+    /// The Jacobian `J = ∂f/∂x` at `m` (NO×N).
+    pub jac: SMatrix<f64, NO, N>,
+    /// The (constant) Hessians `𝓗ⁱ` as a sparse entry list; empty for EKF1.
+    pub hess: &'a SparseHessians,
+}
 
 /// The EKF2 terms `½ tr(𝓗ⁱ P)` (a vector over the `NO` outputs) and `½ tr(𝓗ⁱ P 𝓗^{i'} P)`
 /// (`NO × NO`) by [`SecondOrder`], which computes them for the outputs that have Hessian entries
@@ -36,23 +48,22 @@ pub fn second_order_terms<const N: usize, const NO: usize>(
     (mean, cov)
 }
 
-/// EKF2 propagate, SPEC §4 (EKF1 when `hess` is empty):
+/// EKF2 propagate, SPEC §4 (EKF1 when `phi.hess` is empty):
 /// `m ← φ(m) + ½ Σ_i e_i tr(𝓗ⁱ P)`, `P ← J P Jᵀ + ½ Σ_{i,i'} e_i e_{i'}ᵀ tr(𝓗ⁱ P 𝓗^{i'} P) + Q`.
 ///
-/// `value` = φ(m) and `jac` = ∂φ/∂x at the current `m`; the Hessian terms use the current `P`.
-/// Like [`super::kf_propagate`] it does not check for non-finite input: the next update does.
+/// `phi` is the expansion of φ at the current `m` (`value` = φ(m), `jac` = ∂φ/∂x); the Hessian
+/// terms use the current `P`. Like [`super::kf_propagate`] it does not check for non-finite
+/// input: the next update does.
 pub fn ekf2_propagate<const N: usize>(
     m: &mut SVector<f64, N>,
     p: &mut SMatrix<f64, N, N>,
-    value: &SVector<f64, N>,
-    jac: &SMatrix<f64, N, N>,
-    hess: &SparseHessians,
+    phi: &Expansion<'_, N, N>,
     q: &SMatrix<f64, N, N>,
 ) {
-    let mut new_p = sandwich_plus(jac, p, q);
-    *m = *value;
-    if !hess.is_empty() {
-        let (mean2, cov2) = second_order_terms(hess, p);
+    let mut new_p = sandwich_plus(&phi.jac, p, q);
+    *m = phi.value;
+    if !phi.hess.is_empty() {
+        let (mean2, cov2) = second_order_terms(phi.hess, p);
         *m += mean2;
         new_p += cov2;
     }
@@ -63,18 +74,17 @@ pub fn ekf2_propagate<const N: usize>(
 /// updating, SPEC §4 and §5.4 (a), (d):
 /// `ŷ = ψ(m) + ½ Σ_i e_i tr(𝓗ⁱ P)` and `L = J P Jᵀ + ½ Σ_{i,i'} e_i e_{i'}ᵀ tr(𝓗ⁱ P 𝓗^{i'} P) + S`.
 ///
-/// `value` = ψ(m), `jac` = ∂ψ/∂x at `m`, `s_add` the additive noise covariance.
+/// `psi` is the expansion of ψ at `m` (`value` = ψ(m), `jac` = ∂ψ/∂x), `s_add` the additive
+/// noise covariance.
 pub fn ekf2_moments<const N: usize, const NY: usize>(
     p: &SMatrix<f64, N, N>,
-    value: &SVector<f64, NY>,
-    jac: &SMatrix<f64, NY, N>,
-    hess: &SparseHessians,
+    psi: &Expansion<'_, N, NY>,
     s_add: &SMatrix<f64, NY, NY>,
 ) -> (SVector<f64, NY>, SMatrix<f64, NY, NY>) {
-    let mut cov = sandwich_plus(jac, p, s_add);
-    let mut mean = *value;
-    if !hess.is_empty() {
-        let (mean2, cov2) = second_order_terms(hess, p);
+    let mut cov = sandwich_plus(&psi.jac, p, s_add);
+    let mut mean = psi.value;
+    if !psi.hess.is_empty() {
+        let (mean2, cov2) = second_order_terms(psi.hess, p);
         mean += mean2;
         cov += cov2;
     }
@@ -83,26 +93,23 @@ pub fn ekf2_moments<const N: usize, const NY: usize>(
 
 /// EKF2 update, SPEC §4: `ŷ = ψ(m) + ½ tr(𝓗ⁱ P)`,
 /// `L = J P Jᵀ + ½ tr(𝓗ⁱ P 𝓗^{i'} P) + R`, then as [`gaussian_update`] (whose additive covariance
-/// is `R` plus the Hessian term). `value` = ψ(m), `jac` = ∂ψ/∂x at the current `m`.
-#[allow(clippy::too_many_arguments)]
+/// is `R` plus the Hessian term). `psi` is the expansion of ψ at the current `m` (`value` = ψ(m),
+/// `jac` = ∂ψ/∂x).
 pub fn ekf2_update<const N: usize, const NY: usize>(
     m: &mut SVector<f64, N>,
     p: &mut SMatrix<f64, N, N>,
     y: &SVector<f64, NY>,
-    value: &SVector<f64, NY>,
-    jac: &SMatrix<f64, NY, N>,
-    hess: &SparseHessians,
+    psi: &Expansion<'_, N, NY>,
     r: &SMatrix<f64, NY, NY>,
-    step: usize,
-    health: &mut Health,
+    log: StepLog<'_>,
 ) -> Result<Innovation<NY>, FilterError> {
-    if hess.is_empty() {
-        return gaussian_update(m, p, y, value, jac, r, step, health);
+    if psi.hess.is_empty() {
+        return gaussian_update(m, p, y, &psi.value, &psi.jac, r, log);
     }
-    let (mean2, cov2) = second_order_terms(hess, p);
-    let y_hat = value + mean2;
+    let (mean2, cov2) = second_order_terms(psi.hess, p);
+    let y_hat = psi.value + mean2;
     let s_add = cov2 + r;
-    gaussian_update(m, p, y, &y_hat, jac, &s_add, step, health)
+    gaussian_update(m, p, y, &y_hat, &psi.jac, &s_add, log)
 }
 
 #[cfg(test)]
@@ -120,7 +127,12 @@ mod tests {
         h.push(0, 0, 1, 1.0);
         let value = Vector1::new(mu[0] * mu[1]);
         let jac = Matrix1x2::new(mu[1], mu[0]);
-        let (mean, cov) = ekf2_moments(&p, &value, &jac, &h, &Matrix1::zeros());
+        let psi = Expansion {
+            value,
+            jac,
+            hess: &h,
+        };
+        let (mean, cov) = ekf2_moments(&p, &psi, &Matrix1::zeros());
         let exact_mean = mu[0] * mu[1] + p[(0, 1)];
         let exact_var = mu[1].powi(2) * p[(0, 0)]
             + mu[0].powi(2) * p[(1, 1)]
@@ -139,7 +151,12 @@ mod tests {
         let value = Vector2::new(3.0, 4.0);
         let q = Matrix2::identity() * 0.01;
         let expected_p = jac * p * jac.transpose() + q;
-        ekf2_propagate(&mut m, &mut p, &value, &jac, &SparseHessians::new(), &q);
+        let phi = Expansion {
+            value,
+            jac,
+            hess: &SparseHessians::new(),
+        };
+        ekf2_propagate(&mut m, &mut p, &phi, &q);
         assert_eq!(m, value);
         assert!((p - expected_p).abs().max() < 1e-15);
     }

@@ -27,6 +27,27 @@ pub struct Innovation<const NY: usize> {
     pub loglik: f64,
 }
 
+/// Where a step reports to: its time index `k` (carried by every [`FilterError`] it returns) and
+/// the [`Health`] counters its repairs are added to. Handed by value to each step function;
+/// [`StepLog::reborrow`] lends it to a sub-step.
+#[derive(Debug)]
+pub struct StepLog<'a> {
+    /// The time step `k`.
+    pub step: usize,
+    /// Repair counters of the run.
+    pub health: &'a mut Health,
+}
+
+impl StepLog<'_> {
+    /// The same log for a shorter borrow, so that one step can hand it to several sub-steps.
+    pub fn reborrow(&mut self) -> StepLog<'_> {
+        StepLog {
+            step: self.step,
+            health: self.health,
+        }
+    }
+}
+
 /// The non-zero entries of `J`, the form in which [`crate::linalg`] takes a Jacobian.
 fn entries<const R: usize, const C: usize>(jac: &SMatrix<f64, R, C>) -> Sparse<f64> {
     Sparse::nonzeros_of(jac.as_slice(), R, C)
@@ -70,8 +91,7 @@ pub fn kf_propagate<const N: usize>(
 /// computed by [`Factor`] (whitened gain, no inverse) with the documented repair of
 /// [`factorise`]. On error (`NonFinite` for a non-finite residual, innovation covariance or
 /// result, `NotPositiveDefinite` if `L` cannot be factorised even after repair) `m` and `p` are
-/// left unchanged.
-#[allow(clippy::too_many_arguments)]
+/// left unchanged; the error carries `log.step` and repairs are counted in `log.health`.
 pub fn gaussian_update<const N: usize, const NY: usize>(
     m: &mut SVector<f64, N>,
     p: &mut SMatrix<f64, N, N>,
@@ -79,9 +99,9 @@ pub fn gaussian_update<const N: usize, const NY: usize>(
     y_hat: &SVector<f64, NY>,
     jac: &SMatrix<f64, NY, N>,
     s_add: &SMatrix<f64, NY, NY>,
-    step: usize,
-    health: &mut Health,
+    log: StepLog<'_>,
 ) -> Result<Innovation<NY>, FilterError> {
+    let StepLog { step, health } = log;
     let residual = y - y_hat;
     if residual.iter().any(|v| !v.is_finite()) {
         return Err(FilterError::NonFinite {
@@ -127,7 +147,6 @@ pub fn gaussian_update<const N: usize, const NY: usize>(
 }
 
 /// KF update, SPEC §4: `ŷ = H m + h`, then [`gaussian_update`] with `J = H`, `S = R`.
-#[allow(clippy::too_many_arguments)]
 pub fn kf_update<const N: usize, const NY: usize>(
     m: &mut SVector<f64, N>,
     p: &mut SMatrix<f64, N, N>,
@@ -135,11 +154,10 @@ pub fn kf_update<const N: usize, const NY: usize>(
     h_mat: &SMatrix<f64, NY, N>,
     h_off: &SVector<f64, NY>,
     r: &SMatrix<f64, NY, NY>,
-    step: usize,
-    health: &mut Health,
+    log: StepLog<'_>,
 ) -> Result<Innovation<NY>, FilterError> {
     let y_hat = h_mat * *m + h_off;
-    gaussian_update(m, p, y, &y_hat, h_mat, r, step, health)
+    gaussian_update(m, p, y, &y_hat, h_mat, r, log)
 }
 
 #[cfg(test)]
@@ -161,8 +179,10 @@ mod tests {
             &hm,
             &Vector1::zeros(),
             &nalgebra::Matrix1::new(1.0),
-            4,
-            &mut h,
+            StepLog {
+                step: 4,
+                health: &mut h,
+            },
         )
         .unwrap_err();
         assert_eq!(err.kind(), "non_finite");
@@ -191,7 +211,19 @@ mod tests {
         let y = Vector2::new(0.8, -1.3);
         let mut h = Health::default();
         let (mut m1, mut p1) = (m0, p0);
-        let inn = gaussian_update(&mut m1, &mut p1, &y, &y_hat, &jac, &s, 0, &mut h).unwrap();
+        let inn = gaussian_update(
+            &mut m1,
+            &mut p1,
+            &y,
+            &y_hat,
+            &jac,
+            &s,
+            StepLog {
+                step: 0,
+                health: &mut h,
+            },
+        )
+        .unwrap();
         let l = jac * p0 * jac.transpose() + s;
         let k = p0 * jac.transpose() * l.try_inverse().unwrap();
         assert!((m1 - (m0 + k * (y - y_hat))).abs().max() < 1e-12);

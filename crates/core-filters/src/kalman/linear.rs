@@ -4,7 +4,7 @@
 
 use nalgebra::{SMatrix, SVector};
 
-use super::kf::{kf_propagate, kf_update};
+use super::kf::{kf_propagate, kf_update, StepLog};
 use crate::error::FilterError;
 use crate::health::Health;
 
@@ -71,8 +71,10 @@ pub fn kalman_filter<const N: usize, const NY: usize>(
             &model.h_mat,
             &model.h_off,
             &model.r,
-            k,
-            &mut health,
+            StepLog {
+                step: k,
+                health: &mut health,
+            },
         )?;
         run.loglik += inn.loglik;
         run.loglik_increments.push(inn.loglik);

@@ -8,7 +8,8 @@
 use nalgebra::{SMatrix, SVector};
 use serde::Serialize;
 
-use super::ekf2::ekf2_moments;
+use super::ekf2::{ekf2_moments, Expansion};
+use super::kf::StepLog;
 use super::ukf::{unscented_transform, UtParams};
 use crate::error::FilterError;
 use crate::health::Health;
@@ -43,14 +44,24 @@ pub fn table1_rows<const NX: usize>(ut: &UtParams) -> Result<[Table1Row; 4], Fil
     let value = f(&m);
     let jac = m.transpose() * 2.0;
     let zero_noise = SMatrix::<f64, 1, 1>::zeros();
-    let (t1_mean, t1_cov) = ekf2_moments(&p, &value, &jac, &SparseHessians::new(), &zero_noise);
+    let t1 = Expansion {
+        value,
+        jac,
+        hess: &SparseHessians::new(),
+    };
+    let (t1_mean, t1_cov) = ekf2_moments(&p, &t1, &zero_noise);
     let mut hess = SparseHessians::new();
     for j in 0..NX {
         hess.push(0, j, j, 2.0);
     }
-    let (t2_mean, t2_cov) = ekf2_moments(&p, &value, &jac, &hess, &zero_noise);
+    let t2 = Expansion { hess: &hess, ..t1 };
+    let (t2_mean, t2_cov) = ekf2_moments(&p, &t2, &zero_noise);
     let mut health = Health::default();
-    let ut_m = unscented_transform(&m, &p, f, ut, 0, &mut health)?;
+    let log = StepLog {
+        step: 0,
+        health: &mut health,
+    };
+    let ut_m = unscented_transform(&m, &p, f, ut, log)?;
     let row = |method, mean, variance| Table1Row {
         nx: NX,
         method,

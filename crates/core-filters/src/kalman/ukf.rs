@@ -11,19 +11,17 @@
 use nalgebra::{SMatrix, SVector};
 use serde::{Deserialize, Serialize};
 
-use super::kf::Innovation;
+use super::kf::{Innovation, StepLog};
 use crate::error::FilterError;
-use crate::health::Health;
 use crate::linalg::gauss::{cholesky_repaired, solve_lower, whitened_loglik};
 
 /// Lower Cholesky factor of `a` by [`cholesky_repaired`] (repairs counted, failures typed).
 fn factor<const N: usize>(
     a: &SMatrix<f64, N, N>,
-    step: usize,
     which: &'static str,
-    health: &mut Health,
+    log: StepLog<'_>,
 ) -> Result<SMatrix<f64, N, N>, FilterError> {
-    let l = cholesky_repaired(a.as_slice(), N, step, which, health)?;
+    let l = cholesky_repaired(a.as_slice(), N, log.step, which, log.health)?;
     Ok(SMatrix::from_column_slice(&l))
 }
 
@@ -71,16 +69,15 @@ pub struct UtMoments<const N: usize, const M: usize> {
 /// `cov = Σᵢ Wᵢ eᵢ eᵢᵀ + (β − α²) ē ēᵀ`, `cross = Σⱼ Wⱼ sⱼ (eⱼ⁺ − eⱼ⁻)ᵀ`, which avoids the
 /// cancellation of the weights `W⁰ ≈ −1/α²` for small α.
 ///
-/// `P` is factorised by [`cholesky_repaired`] (repairs counted in `health`; a failure is an
-/// error). `α²(N + κ) ≤ 0` is a programmer error (assert).
+/// `P` is factorised by [`cholesky_repaired`] (repairs counted in `log.health`; a failure is an
+/// error at `log.step`). `α²(N + κ) ≤ 0` is a programmer error (assert).
 #[track_caller]
 pub fn unscented_transform<const N: usize, const M: usize, F>(
     m: &SVector<f64, N>,
     p: &SMatrix<f64, N, N>,
     f: F,
     params: &UtParams,
-    step: usize,
-    health: &mut Health,
+    log: StepLog<'_>,
 ) -> Result<UtMoments<N, M>, FilterError>
 where
     F: Fn(&SVector<f64, N>) -> SVector<f64, M>,
@@ -90,7 +87,8 @@ where
         spread2 > 0.0 && spread2.is_finite(),
         "unscented transform needs α²(N + κ) > 0, got {spread2}"
     );
-    let chol = factor(p, step, "unscented transform covariance", health)?;
+    let step = log.step;
+    let chol = factor(p, "unscented transform covariance", log)?;
     let scale = spread2.sqrt();
     let w = 0.5 / spread2;
     let y0 = f(m);
@@ -136,13 +134,12 @@ pub fn ukf_propagate<const N: usize, F>(
     phi: F,
     q: &SMatrix<f64, N, N>,
     params: &UtParams,
-    step: usize,
-    health: &mut Health,
+    log: StepLog<'_>,
 ) -> Result<(), FilterError>
 where
     F: Fn(&SVector<f64, N>) -> SVector<f64, N>,
 {
-    let ut = unscented_transform(m, p, phi, params, step, health)?;
+    let ut = unscented_transform(m, p, phi, params, log)?;
     *m = ut.mean;
     *p = ut.cov + q;
     Ok(())
@@ -151,7 +148,6 @@ where
 /// UKF update with `y = ψ(x) + η`, `η ~ N(0, R)`: `ŷ`, `S_yy`, `C_xy` by the UT,
 /// `L = S_yy + R`, `K = C_xy L⁻¹` (Cholesky solves), `m ← m + K (y − ŷ)`, `P ← P − K L Kᵀ`.
 /// On error `m` and `p` are unchanged.
-#[allow(clippy::too_many_arguments)]
 pub fn ukf_update<const N: usize, const NY: usize, F>(
     m: &mut SVector<f64, N>,
     p: &mut SMatrix<f64, N, N>,
@@ -159,13 +155,13 @@ pub fn ukf_update<const N: usize, const NY: usize, F>(
     psi: F,
     r: &SMatrix<f64, NY, NY>,
     params: &UtParams,
-    step: usize,
-    health: &mut Health,
+    mut log: StepLog<'_>,
 ) -> Result<Innovation<NY>, FilterError>
 where
     F: Fn(&SVector<f64, N>) -> SVector<f64, NY>,
 {
-    let ut = unscented_transform(m, p, psi, params, step, health)?;
+    let step = log.step;
+    let ut = unscented_transform(m, p, psi, params, log.reborrow())?;
     let residual = y - ut.mean;
     if residual.iter().any(|v| !v.is_finite()) {
         return Err(FilterError::NonFinite {
@@ -173,7 +169,7 @@ where
             which: "innovation",
         });
     }
-    let chol = factor(&(ut.cov + r), step, "innovation covariance", health)?;
+    let chol = factor(&(ut.cov + r), "innovation covariance", log)?;
     // W = C⁻¹ C_xyᵀ, so K L Kᵀ = Wᵀ W and K r = Wᵀ C⁻¹ r.
     let mut wm = ut.cross.transpose();
     for column in wm.as_mut_slice().chunks_exact_mut(NY) {
@@ -201,6 +197,7 @@ where
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::health::Health;
     use nalgebra::{Matrix2, Vector1, Vector2};
 
     #[test]
@@ -215,7 +212,11 @@ mod tests {
                 kappa: 0.0,
             };
             let mut h = Health::default();
-            let ut = unscented_transform(&m, &p, |x| a * x, &params, 0, &mut h).unwrap();
+            let log = StepLog {
+                step: 0,
+                health: &mut h,
+            };
+            let ut = unscented_transform(&m, &p, |x| a * x, &params, log).unwrap();
             // Rounding of the sigma points `m ± s` (ε |m|) is amplified by the weights 1/(2α²N)
             // in the mean: allow 64 ε ‖a‖₁ max|m| / α².
             let tol = 64.0 * f64::EPSILON * 3.5 * 1.0 / (alpha * alpha);
@@ -241,14 +242,19 @@ mod tests {
             |x| hm * x,
             &r,
             &UtParams::default(),
-            1,
-            &mut h,
+            StepLog {
+                step: 1,
+                health: &mut h,
+            },
         )
         .unwrap();
         let (mut m2, mut p2) = (m0, p0);
-        let i2 =
-            crate::kalman::kf_update(&mut m2, &mut p2, &y, &hm, &Vector1::zeros(), &r, 1, &mut h)
-                .unwrap();
+        let log = StepLog {
+            step: 1,
+            health: &mut h,
+        };
+        let i2 = crate::kalman::kf_update(&mut m2, &mut p2, &y, &hm, &Vector1::zeros(), &r, log)
+            .unwrap();
         assert!((m1 - m2).abs().max() < 1e-8);
         assert!((p1 - p2).abs().max() < 1e-8);
         assert!((i1.loglik - i2.loglik).abs() < 1e-8);
