@@ -22,6 +22,11 @@ use serde::{Deserialize, Serialize};
 use crate::error::{bail, Context, Result};
 use crate::likelihood::{Candidate, LikelihoodModel, ScoredData};
 use crate::record::{RunRecord, Versions};
+use crate::reference::comparison::{
+    goal_markdown, goal_rows, information_limit as limit_rows, limit_markdown, record_data_sha,
+    DataSetRuns,
+};
+use crate::reference::ParamSummary;
 use core_filters::laplace::{maximise, NewtonOptions};
 
 /// Default central-difference step, relative to each parameter's start value.
@@ -58,6 +63,29 @@ pub struct InformationLimit {
 }
 
 impl InformationLimit {
+    /// The limit as a reference posterior's summary: mean θ̂, s.d. the Cramér–Rao one, the
+    /// Gaussian quantiles; so the comparisons of `sysid compare-reference` apply to it.
+    pub fn summaries(&self) -> Vec<ParamSummary> {
+        const Z: [f64; 5] = [
+            -1.959_963_984_540_054,
+            -0.674_489_750_196_081_7,
+            0.0,
+            0.674_489_750_196_081_7,
+            1.959_963_984_540_054,
+        ];
+        (0..self.names.len())
+            .map(|j| ParamSummary {
+                name: self.names[j].clone(),
+                mean: self.mle[j],
+                sd: self.sd[j],
+                quantiles: Z.map(|z| self.mle[j] + z * self.sd[j]),
+                // Exact, not sampled.
+                ess: f64::INFINITY,
+                truth: self.truth.as_ref().map(|t| t[j]),
+            })
+            .collect()
+    }
+
     /// θ̂'s error relative to the truth, per parameter (None without a truth).
     pub fn mle_error(&self) -> Option<Vec<f64>> {
         let t = self.truth.as_ref()?;
@@ -165,10 +193,7 @@ struct Answer {
 /// Whether run record `r` was identified on the data set of `limit` (its fingerprint names the
 /// same data identity).
 pub fn on_data(r: &RunRecord, limit: &InformationLimit) -> bool {
-    r.fingerprint
-        .as_ref()
-        .and_then(|f| f.inputs["data"]["sha256"].as_str())
-        == Some(limit.data_sha256.as_str())
+    record_data_sha(r) == Some(limit.data_sha256.as_str())
 }
 
 fn answer(limit: &InformationLimit, truth: &[f64], r: &RunRecord) -> Result<Answer> {
@@ -393,6 +418,25 @@ pub fn summary(limits: &[InformationLimit], records: &[RunRecord]) -> Result<Str
     if failed > 0 {
         writeln!(o, "\n{failed} failed runs left out.")?;
     }
+    let groups: Vec<DataSetRuns> = limits
+        .iter()
+        .map(|l| {
+            let mine = records.iter().filter(|r| on_data(r, l)).cloned().collect();
+            (l.summaries(), mine)
+        })
+        .collect();
+    writeln!(
+        o,
+        "\nAgainst the limit, per parameter (the limit's s.d. is the Cramér–Rao one; its \
+         \"intervals\" are θ̂ ± 1.96 s.d.):\n\n{}",
+        limit_markdown(&limit_rows(&groups))
+    )?;
+    writeln!(
+        o,
+        "The goal \"online mean |error| within 10 % of the limit's\", paired over (data set, \
+         parameter), decided by the difference's ±2 s.e. interval against the margin:\n\n{}",
+        goal_markdown(&goal_rows(&groups))
+    )?;
     Ok(o)
 }
 

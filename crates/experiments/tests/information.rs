@@ -8,8 +8,10 @@ mod common;
 use std::path::{Path, PathBuf};
 
 use experiments::field::StructureSettings;
-use experiments::information::{information_limit, table, REL_STEP};
+use experiments::information::{information_limit, summary, table, REL_STEP};
 use experiments::likelihood::{Candidate, LikelihoodModel, ScoredData};
+use experiments::pipeline::{identify, Algorithm, RunInput};
+use experiments::settings::FilterSettings;
 use models::dataset::{generate, load_dir, DatasetConfig, LoadedDataset, MEASURED};
 
 fn temp_dir(tag: &str) -> PathBuf {
@@ -95,13 +97,44 @@ fn the_limit_is_the_likelihoods_maximum_and_its_curvature() {
     let again = information_limit(&scored, None, REL_STEP, &mut |_| {}).unwrap();
     assert_eq!(again.mle, limit.mle);
     assert_eq!(again.sd, limit.sd);
-    // A run record of another data set is refused by name.
-    let r = common::record("mpf-ekf2", 0, [1.0; 9], 0.05);
-    let e = table(&limit, &[r]).unwrap_err().to_string();
+    // An online run on the same data is matched to the limit by the data set's identity and put
+    // beside it: its errors in the per-parameter table, and the summary's goal rows.
+    let input = RunInput {
+        data: &data,
+        chain: chain.as_ref(),
+        experiment: "information",
+        seed: 3,
+        run: 0,
+        progress: false,
+        residuals: false,
+    };
+    let s = FilterSettings {
+        particles: 100,
+        pool: 1,
+        trace_every: 0,
+        loop_every: 0,
+        validate: false,
+        ..FilterSettings::recommended()
+    };
+    let run = identify(&input, Algorithm::MpfEkf2, &s).unwrap();
+    let t = table(&limit, std::slice::from_ref(&run)).unwrap();
+    assert!(t.contains("mpf-ekf2 run 0 error"), "{t}");
+    let text = summary(std::slice::from_ref(&limit), std::slice::from_ref(&run)).unwrap();
+    assert!(text.contains("| mpf-ekf2 | all k | 3 |"), "{text}");
+    assert!(text.contains("| k3 | mpf-ekf2 | 1 |"), "{text}");
+    // A run record of another data set is refused by name, in the table and the summary.
+    let other = common::record("mpf-ekf2", 0, [1.0; 9], 0.05);
+    let e = table(&limit, std::slice::from_ref(&other))
+        .unwrap_err()
+        .to_string();
     assert!(
         e.contains("not those of") || e.contains("not identified on"),
         "{e}"
     );
+    let e = summary(std::slice::from_ref(&limit), &[run, other])
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("belongs to none"), "{e}");
     let _ = std::fs::remove_dir_all(&dir);
 }
 

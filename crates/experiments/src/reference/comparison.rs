@@ -390,7 +390,7 @@ pub fn limit_markdown(rows: &[LimitRow]) -> String {
 }
 
 /// The data set a run record was computed on (`data.sha256` of its fingerprint).
-fn record_data_sha(r: &crate::record::RunRecord) -> Option<&str> {
+pub fn record_data_sha(r: &crate::record::RunRecord) -> Option<&str> {
     r.fingerprint
         .as_ref()?
         .inputs
