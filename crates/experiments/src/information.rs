@@ -86,6 +86,14 @@ impl InformationLimit {
             .collect()
     }
 
+    /// Reads a limit written by `sysid information --out`.
+    pub fn read(path: &std::path::Path) -> Result<Self> {
+        let text =
+            std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+        serde_json::from_str(&text)
+            .with_context(|| format!("{}: not an information limit", path.display()))
+    }
+
     /// θ̂'s error relative to the truth, per parameter (None without a truth).
     pub fn mle_error(&self) -> Option<Vec<f64>> {
         let t = self.truth.as_ref()?;
@@ -438,6 +446,17 @@ pub fn summary(limits: &[InformationLimit], records: &[RunRecord]) -> Result<Str
         goal_markdown(&goal_rows(&groups))
     )?;
     Ok(o)
+}
+
+/// [`summary`] of several limits and the run records on their data, then each limit's
+/// [`table`] with its own records.
+pub fn report(limits: &[InformationLimit], records: &[RunRecord]) -> Result<String> {
+    let mut text = summary(limits, records)?;
+    for l in limits {
+        let mine: Vec<RunRecord> = records.iter().filter(|r| on_data(r, l)).cloned().collect();
+        write!(text, "\n### {}\n\n{}", l.data, table(l, &mine)?)?;
+    }
+    Ok(text)
 }
 
 #[cfg(test)]

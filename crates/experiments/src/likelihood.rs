@@ -219,27 +219,57 @@ pub fn score(
     candidates: &[Candidate],
     progress: &mut dyn FnMut(&str),
 ) -> Result<Comparison> {
-    let data: LoadedDataset =
-        load_dir(&req.data).with_context(|| format!("loading data set {}", req.data.display()))?;
-    let chain = data
-        .true_chain()
-        .context("rebuilding the data set's structure")?;
-    let base = match &req.config {
-        Some(path) => Some(crate::limits::load_filter_settings(path)?),
-        None => None,
-    };
-    let config_name = req.config.as_ref().map(|p| p.display().to_string());
-    let measured = req.data.join(MEASURED);
-    let on = ScoredData {
-        data: &data,
-        chain: chain.as_ref(),
-        measured: &measured,
-        name: &req.data.display().to_string(),
-        flags: &StructureSettings::default(),
-        settings: base,
-        config: config_name.as_deref(),
-    };
-    score_on(&on, req.scoring(), candidates, progress, &|| false)
+    let dir = DataDir::load(&req.data, req.config.as_deref())?;
+    score_on(&dir.scored(), req.scoring(), candidates, progress, &|| {
+        false
+    })
+}
+
+/// A data-set directory loaded with the settings of its model (a config file's, or `None` for
+/// `sysid filter`'s recommended ones): what [`ScoredData`] borrows from.
+pub struct DataDir {
+    pub data: LoadedDataset,
+    pub chain: Option<ShearChain>,
+    measured: PathBuf,
+    name: String,
+    flags: StructureSettings,
+    settings: Option<FilterSettings>,
+    config: Option<String>,
+}
+
+impl DataDir {
+    /// Loads `dir` (its true structure when it has one) and `config`.
+    pub fn load(dir: &Path, config: Option<&Path>) -> Result<Self> {
+        let data = load_dir(dir).with_context(|| format!("loading data set {}", dir.display()))?;
+        let chain = data
+            .true_chain()
+            .context("rebuilding the data set's structure")?;
+        let settings = config
+            .map(crate::limits::load_filter_settings)
+            .transpose()?;
+        Ok(Self {
+            data,
+            chain,
+            measured: dir.join(MEASURED),
+            name: dir.display().to_string(),
+            flags: StructureSettings::default(),
+            settings,
+            config: config.map(|p| p.display().to_string()),
+        })
+    }
+
+    /// The data and model to score.
+    pub fn scored(&self) -> ScoredData<'_> {
+        ScoredData {
+            data: &self.data,
+            chain: self.chain.as_ref(),
+            measured: &self.measured,
+            name: &self.name,
+            flags: &self.flags,
+            settings: self.settings.clone(),
+            config: self.config.as_deref(),
+        }
+    }
 }
 
 /// A data set already in memory and the model to score it under (what [`score`] builds from a

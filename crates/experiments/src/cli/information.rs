@@ -5,12 +5,10 @@
 
 use std::path::PathBuf;
 
-use crate::error::{bail, Context, Result};
-use crate::field::StructureSettings;
-use crate::information::{information_limit, on_data, summary, table, InformationLimit, REL_STEP};
-use crate::likelihood::{Candidate, ScoredData};
+use crate::error::{bail, Result};
+use crate::information::{information_limit, report, table, InformationLimit, REL_STEP};
+use crate::likelihood::{Candidate, DataDir};
 use crate::record::RunRecord;
-use models::dataset::{load_dir, MEASURED};
 
 /// Arguments of `sysid information`.
 #[derive(Debug, clap::Args)]
@@ -53,43 +51,15 @@ pub fn run(args: Args) -> Result<()> {
         let limits = args
             .limit
             .iter()
-            .map(|p| {
-                let text = std::fs::read_to_string(p)
-                    .with_context(|| format!("reading {}", p.display()))?;
-                serde_json::from_str::<InformationLimit>(&text)
-                    .with_context(|| format!("{}: not an information limit", p.display()))
-            })
+            .map(|p| InformationLimit::read(p))
             .collect::<Result<Vec<_>>>()?;
-        let mut text = summary(&limits, &records)?;
-        for l in &limits {
-            let mine: Vec<RunRecord> = records.iter().filter(|r| on_data(r, l)).cloned().collect();
-            text.push_str(&format!("\n### {}\n\n", l.data));
-            text.push_str(&table(l, &mine)?);
-        }
-        text
+        report(&limits, &records)?
     } else {
         let Some(dir) = &args.data else {
             bail!("--data: the data set to compute the limit of");
         };
-        let data = load_dir(dir).with_context(|| format!("loading data set {}", dir.display()))?;
-        let chain = data
-            .true_chain()
-            .context("rebuilding the data set's structure")?;
-        let settings = match &args.config {
-            Some(path) => Some(crate::limits::load_filter_settings(path)?),
-            None => None,
-        };
-        let config_name = args.config.as_ref().map(|p| p.display().to_string());
-        let measured = dir.join(MEASURED);
-        let on = ScoredData {
-            data: &data,
-            chain: chain.as_ref(),
-            measured: &measured,
-            name: &dir.display().to_string(),
-            flags: &StructureSettings::default(),
-            settings,
-            config: config_name.as_deref(),
-        };
+        let dir = DataDir::load(dir, args.config.as_deref())?;
+        let on = dir.scored();
         let start = args
             .start
             .as_ref()
