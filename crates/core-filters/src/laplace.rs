@@ -50,6 +50,9 @@ pub struct NewtonOptions {
     /// Find the mode by quasi-Newton steps and evaluate the Hessian again near it (otherwise
     /// Newton's steps use the start's Hessian, which is then the one reported).
     pub hessian_at_mode: bool,
+    /// When set, no step moves a coordinate by more than this fraction of its absolute value
+    /// (for parameters on a ratio scale, such as stiffnesses, which must stay positive).
+    pub max_rel_step: Option<f64>,
 }
 
 impl Default for NewtonOptions {
@@ -58,6 +61,7 @@ impl Default for NewtonOptions {
             max_steps: 100,
             tolerance: 1e-6,
             hessian_at_mode: true,
+            max_rel_step: None,
         }
     }
 }
@@ -207,13 +211,16 @@ fn repaired(neg_h: &DMatrix<f64>) -> DMatrix<f64> {
     DMatrix::from_fn(p, p, |i, j| fixed[(i, j)] * d[i] * d[j])
 }
 
-/// Values at a gradient stencil around a trial point along `delta` from `x`, halving the step
-/// until the value does not fall below `f` (at most `HALVINGS` times).
+/// A trial point along `delta` from `x` and the values at its gradient stencil. The step is first
+/// shortened so that no coordinate moves by more than `max_rel` of its absolute value (when
+/// set), then halved until the value at the trial point is finite and not below `f` (at most
+/// `HALVINGS` times); only then is the rest of its stencil evaluated.
 fn ascend<E, F>(
     x: &DVector<f64>,
     f: f64,
     delta: &DVector<f64>,
     h: &[f64],
+    max_rel: Option<f64>,
     eval: &mut F,
     count: &mut usize,
 ) -> Result<(DVector<f64>, Vec<f64>), E>
@@ -222,11 +229,23 @@ where
     E: From<LaplaceError>,
 {
     const HALVINGS: usize = 10;
-    let mut t = 1.0;
+    let mut t: f64 = 1.0;
+    if let Some(m) = max_rel {
+        for (xi, di) in x.iter().zip(delta.iter()) {
+            if di.abs() > 0.0 {
+                t = t.min(m * xi.abs() / di.abs());
+            }
+        }
+    }
     for _ in 0..=HALVINGS {
         let xn = x + t * delta;
-        let vn = values(&gradient_points(xn.as_slice(), h), eval, count)?;
-        if vn[0] >= f {
+        let centre = eval(&[xn.as_slice().to_vec()])?;
+        *count += 1;
+        if centre[0].is_finite() && centre[0] >= f {
+            let mut pts = gradient_points(xn.as_slice(), h);
+            pts.remove(0);
+            let mut vn = centre;
+            vn.extend(values(&pts, eval, count)?);
             return Ok((xn, vn));
         }
         t *= 0.5;
@@ -248,7 +267,8 @@ where
 /// [`LaplaceError::NotConcave`]: the record does not identify some direction), and Newton's
 /// steps with it until the predicted gain `½ gᵀ(−H)⁻¹g` is below the tolerance. Every step is
 /// halved until the value does not fall. With `hessian_at_mode` false the second phase uses
-/// the start's Hessian (for a log-density known to be concave and near-quadratic).
+/// the start's Hessian (for a log-density known to be concave and near-quadratic). A trial
+/// point where the log-density is not finite (outside its support) counts as a fall.
 pub fn maximise<E, F>(
     start: &[f64],
     h: &[f64],
@@ -304,7 +324,7 @@ where
             if steps == opts.max_steps {
                 return Err(LaplaceError::NoConvergence { steps, gain }.into());
             }
-            let (xn, vn) = ascend(&x, f, &delta, h, &mut eval, &mut evaluations)?;
+            let (xn, vn) = ascend(&x, f, &delta, h, opts.max_rel_step, &mut eval, &mut evaluations)?;
             let gn = gradient_from(&vn, h);
             let s = &xn - &x;
             let y = &g - &gn;
@@ -341,7 +361,7 @@ where
         if steps == opts.max_steps {
             return Err(LaplaceError::NoConvergence { steps, gain }.into());
         }
-        let (xn, vn) = ascend(&x, f, &delta, h, &mut eval, &mut evaluations)?;
+        let (xn, vn) = ascend(&x, f, &delta, h, opts.max_rel_step, &mut eval, &mut evaluations)?;
         x = xn;
         f = vn[0];
         g = gradient_from(&vn, h);
@@ -457,6 +477,24 @@ mod tests {
             "{}",
             l.covariance
         );
+    }
+
+    #[test]
+    fn a_step_out_of_the_support_is_shortened() {
+        // 3 ln x − x from x = 20: the first Newton step (−113) leaves the support; halving finds
+        // a finite, higher value, and the ascent ends at the mode 3 with s.d. √3.
+        let f = |x: &[f64]| 3.0 * x[0].ln() - x[0];
+        let l = maximise(&[20.0], &[1e-3], NewtonOptions::default(), serial(f)).unwrap();
+        assert!((l.mode[0] - 3.0).abs() < 0.01, "{:?}", l.mode);
+        assert!((l.sd()[0] / 3f64.sqrt() - 1.0).abs() < 0.01, "{:?}", l.sd());
+        // With steps of at most a fifth of the value, the same mode.
+        let opts = NewtonOptions {
+            max_rel_step: Some(0.2),
+            ..NewtonOptions::default()
+        };
+        let l2 = maximise(&[20.0], &[1e-3], opts, serial(f)).unwrap();
+        assert!((l2.mode[0] - 3.0).abs() < 0.01, "{:?}", l2.mode);
+        assert!(l2.steps > l.steps, "{} {}", l2.steps, l.steps);
     }
 
     #[test]

@@ -32,6 +32,9 @@ use core_filters::laplace::{maximise, NewtonOptions};
 /// Default central-difference step, relative to each parameter's start value.
 pub const REL_STEP: f64 = 1e-3;
 
+/// Largest move of a parameter in one step of the ascent, relative to its value.
+pub const MAX_REL_STEP: f64 = 0.2;
+
 /// The information limit of one data set (`sysid information` writes it as JSON).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct InformationLimit {
@@ -160,7 +163,13 @@ pub fn information_limit(
             })
             .collect()
     };
-    let l = maximise(&start.theta, &h, NewtonOptions::default(), eval)
+    // Stiffnesses and dampings are positive: no step moves one by more than a fifth of itself
+    // (far from the mode the start's curvature can point a long way out of the support).
+    let opts = NewtonOptions {
+        max_rel_step: Some(MAX_REL_STEP),
+        ..NewtonOptions::default()
+    };
+    let l = maximise(&start.theta, &h, opts, eval)
         .with_context(|| format!("{}: the maximum of the likelihood", on.name))?;
     let data_sha256 = crate::record::fingerprint::data_identity(on.data)["sha256"]
         .as_str()
