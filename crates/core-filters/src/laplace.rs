@@ -324,7 +324,15 @@ where
             if steps == opts.max_steps {
                 return Err(LaplaceError::NoConvergence { steps, gain }.into());
             }
-            let (xn, vn) = ascend(&x, f, &delta, h, opts.max_rel_step, &mut eval, &mut evaluations)?;
+            let (xn, vn) = ascend(
+                &x,
+                f,
+                &delta,
+                h,
+                opts.max_rel_step,
+                &mut eval,
+                &mut evaluations,
+            )?;
             let gn = gradient_from(&vn, h);
             let s = &xn - &x;
             let y = &g - &gn;
@@ -361,7 +369,15 @@ where
         if steps == opts.max_steps {
             return Err(LaplaceError::NoConvergence { steps, gain }.into());
         }
-        let (xn, vn) = ascend(&x, f, &delta, h, opts.max_rel_step, &mut eval, &mut evaluations)?;
+        let (xn, vn) = ascend(
+            &x,
+            f,
+            &delta,
+            h,
+            opts.max_rel_step,
+            &mut eval,
+            &mut evaluations,
+        )?;
         x = xn;
         f = vn[0];
         g = gradient_from(&vn, h);

@@ -150,7 +150,10 @@ pub fn information_limit(
     let h: Vec<f64> = start.theta.iter().map(|v| rel_step * v.abs()).collect();
     let names = model.names.clone();
     let eval = |pts: &[Vec<f64>]| -> Result<Vec<f64>> {
-        progress(&format!("{}: {} Kalman-filter runs", on.name, pts.len()));
+        progress(&match pts.len() {
+            1 => format!("{}: a trial step", on.name),
+            n => format!("{}: a stencil of {n} Kalman-filter runs", on.name),
+        });
         pts.par_iter()
             .map(|theta| {
                 let c = Candidate {
