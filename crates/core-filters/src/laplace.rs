@@ -165,27 +165,6 @@ pub fn hessian_from(values: &[f64], h: &[f64]) -> DMatrix<f64> {
     m
 }
 
-/// Asks `eval` for the values at `pts` and checks them (one per point, all finite).
-fn values<E, F>(pts: &[Vec<f64>], eval: &mut F, count: &mut usize) -> Result<Vec<f64>, E>
-where
-    F: FnMut(&[Vec<f64>]) -> Result<Vec<f64>, E>,
-    E: From<LaplaceError>,
-{
-    let v = eval(pts)?;
-    *count += pts.len();
-    assert_eq!(v.len(), pts.len(), "one value per point");
-    if let Some(i) = v.iter().position(|f| !f.is_finite()) {
-        return Err(LaplaceError::NonFinite { at: pts[i].clone() }.into());
-    }
-    Ok(v)
-}
-
-/// The Cholesky factor of `−H`, or [`LaplaceError::NotConcave`].
-fn neg_factor(h: &DMatrix<f64>, at: &[f64]) -> Result<Cholesky<f64, Dyn>, LaplaceError> {
-    (-h).cholesky()
-        .ok_or_else(|| LaplaceError::NotConcave { at: at.to_vec() })
-}
-
 /// A positive definite stand-in for `−H` where `−H` is not one (far from the mode the
 /// log-density may curve upwards in some direction): in the metric that makes the diagonal of
 /// `−H` one in absolute value, its eigenvalues are replaced by their absolute values, floored at
@@ -211,50 +190,136 @@ fn repaired(neg_h: &DMatrix<f64>) -> DMatrix<f64> {
     DMatrix::from_fn(p, p, |i, j| fixed[(i, j)] * d[i] * d[j])
 }
 
-/// A trial point along `delta` from `x` and the values at its gradient stencil. The step is first
-/// shortened so that no coordinate moves by more than `max_rel` of its absolute value (when
-/// set), then halved until the value at the trial point is finite and not below `f` (at most
-/// `HALVINGS` times); only then is the rest of its stencil evaluated.
-fn ascend<E, F>(
-    x: &DVector<f64>,
+/// Where the ascent stands: the point, the log-density and its gradient there.
+struct Point {
+    x: DVector<f64>,
     f: f64,
-    delta: &DVector<f64>,
-    h: &[f64],
-    max_rel: Option<f64>,
-    eval: &mut F,
-    count: &mut usize,
-) -> Result<(DVector<f64>, Vec<f64>), E>
+    g: DVector<f64>,
+}
+
+/// One ascent: the log-density's evaluator, the steps and options, and what it has cost.
+struct Ascent<'a, F> {
+    eval: F,
+    h: &'a [f64],
+    opts: NewtonOptions,
+    steps: usize,
+    evaluations: usize,
+}
+
+impl<F, E> Ascent<'_, F>
 where
     F: FnMut(&[Vec<f64>]) -> Result<Vec<f64>, E>,
     E: From<LaplaceError>,
 {
-    const HALVINGS: usize = 10;
-    let mut t: f64 = 1.0;
-    if let Some(m) = max_rel {
-        for (xi, di) in x.iter().zip(delta.iter()) {
-            if di.abs() > 0.0 {
-                t = t.min(m * xi.abs() / di.abs());
+    /// The values at `pts`, checked (one per point, all finite).
+    fn values(&mut self, pts: &[Vec<f64>]) -> Result<Vec<f64>, E> {
+        let v = (self.eval)(pts)?;
+        self.evaluations += pts.len();
+        assert_eq!(v.len(), pts.len(), "one value per point");
+        if let Some(i) = v.iter().position(|f| !f.is_finite()) {
+            return Err(LaplaceError::NonFinite { at: pts[i].clone() }.into());
+        }
+        Ok(v)
+    }
+
+    /// The point `x` with the Hessian there.
+    fn curvature(&mut self, x: DVector<f64>) -> Result<(Point, DMatrix<f64>), E> {
+        let v = self.values(&hessian_points(x.as_slice(), self.h))?;
+        let at = Point {
+            x,
+            f: v[0],
+            g: gradient_from(&v, self.h),
+        };
+        Ok((at, hessian_from(&v, self.h)))
+    }
+
+    /// A trial point along `delta` from `at`, with the gradient there. The step is first
+    /// shortened so that no coordinate moves by more than `max_rel_step` of its absolute value
+    /// (when set), then halved until the value at the trial point is finite and not below
+    /// `at.f` (at most `HALVINGS` times); only then is the rest of its stencil evaluated.
+    fn trial(&mut self, at: &Point, delta: &DVector<f64>) -> Result<Point, E> {
+        const HALVINGS: usize = 10;
+        let mut t: f64 = 1.0;
+        if let Some(m) = self.opts.max_rel_step {
+            for (xi, di) in at.x.iter().zip(delta.iter()) {
+                if di.abs() > 0.0 {
+                    t = t.min(m * xi.abs() / di.abs());
+                }
             }
         }
-    }
-    for _ in 0..=HALVINGS {
-        let xn = x + t * delta;
-        let centre = eval(&[xn.as_slice().to_vec()])?;
-        *count += 1;
-        if centre[0].is_finite() && centre[0] >= f {
-            let mut pts = gradient_points(xn.as_slice(), h);
-            pts.remove(0);
-            let mut vn = centre;
-            vn.extend(values(&pts, eval, count)?);
-            return Ok((xn, vn));
+        for _ in 0..=HALVINGS {
+            let x = &at.x + t * delta;
+            let centre = (self.eval)(&[x.as_slice().to_vec()])?;
+            self.evaluations += 1;
+            if centre[0].is_finite() && centre[0] >= at.f {
+                let mut pts = gradient_points(x.as_slice(), self.h);
+                pts.remove(0);
+                let mut v = centre;
+                v.extend(self.values(&pts)?);
+                let g = gradient_from(&v, self.h);
+                return Ok(Point { x, f: v[0], g });
+            }
+            t *= 0.5;
         }
-        t *= 0.5;
+        Err(LaplaceError::NoAscent {
+            at: at.x.as_slice().to_vec(),
+            halvings: HALVINGS,
+        }
+        .into())
     }
-    Err(LaplaceError::NoAscent {
-        at: x.as_slice().to_vec(),
-        halvings: HALVINGS,
+
+    /// Steps `δ = B⁻¹g` from `at` until the predicted gain `½ gᵀδ` is below the tolerance;
+    /// returns the factor of `B` there and that gain. With `bfgs` (the quasi-Newton phase) `B`
+    /// ≈ −H is updated by BFGS after each step and [`repaired`] when it is not positive
+    /// definite; without it `B` is −H, fixed, and must be positive definite
+    /// ([`LaplaceError::NotConcave`]).
+    fn climb(
+        &mut self,
+        at: &mut Point,
+        b: &mut DMatrix<f64>,
+        bfgs: bool,
+    ) -> Result<(Cholesky<f64, Dyn>, f64), E> {
+        loop {
+            let factor = match b.clone().cholesky() {
+                Some(c) => Some(c),
+                None if bfgs => {
+                    *b = repaired(b);
+                    b.clone().cholesky()
+                }
+                None => None,
+            };
+            let Some(chol) = factor else {
+                return Err(LaplaceError::NotConcave {
+                    at: at.x.as_slice().to_vec(),
+                }
+                .into());
+            };
+            let delta = chol.solve(&at.g);
+            let gain = 0.5 * at.g.dot(&delta);
+            if gain < self.opts.tolerance {
+                return Ok((chol, gain));
+            }
+            if self.steps == self.opts.max_steps {
+                return Err(LaplaceError::NoConvergence {
+                    steps: self.steps,
+                    gain,
+                }
+                .into());
+            }
+            let next = self.trial(at, &delta)?;
+            if bfgs {
+                let s = &next.x - &at.x;
+                let y = &at.g - &next.g;
+                let sy = s.dot(&y);
+                if sy > 0.0 {
+                    let bs = &*b * &s;
+                    *b += &y * y.transpose() / sy - &bs * bs.transpose() / s.dot(&bs);
+                }
+            }
+            *at = next;
+            self.steps += 1;
+        }
     }
-    .into())
 }
 
 /// The mode of a log-density from `start` with central-difference steps `h`, and its Laplace
@@ -269,12 +334,7 @@ where
 /// halved until the value does not fall. With `hessian_at_mode` false the second phase uses
 /// the start's Hessian (for a log-density known to be concave and near-quadratic). A trial
 /// point where the log-density is not finite (outside its support) counts as a fall.
-pub fn maximise<E, F>(
-    start: &[f64],
-    h: &[f64],
-    opts: NewtonOptions,
-    mut eval: F,
-) -> Result<Laplace, E>
+pub fn maximise<E, F>(start: &[f64], h: &[f64], opts: NewtonOptions, eval: F) -> Result<Laplace, E>
 where
     F: FnMut(&[Vec<f64>]) -> Result<Vec<f64>, E>,
     E: From<LaplaceError>,
@@ -293,97 +353,30 @@ where
         }
         .into());
     }
-    let mut evaluations = 0;
-    let v = values(&hessian_points(start, h), &mut eval, &mut evaluations)?;
-    let mut hessian = hessian_from(&v, h);
-    let value_at_start = v[0];
-    let mut x = DVector::from_column_slice(start);
-    let mut f = v[0];
-    let mut g = gradient_from(&v, h);
-    let mut steps = 0;
-    // Phase 1: BFGS on −f, B ≈ −H.
+    let mut ascent = Ascent {
+        eval,
+        h,
+        opts,
+        steps: 0,
+        evaluations: 0,
+    };
+    let (mut at, mut hessian) = ascent.curvature(DVector::from_column_slice(start))?;
+    let value_at_start = at.f;
+    // Phase 1: BFGS on −f from the start's curvature, made positive definite.
     if opts.hessian_at_mode {
         let mut b = repaired(&-&hessian);
-        loop {
-            let chol = match b.clone().cholesky() {
-                Some(c) => c,
-                None => {
-                    b = repaired(&b);
-                    b.clone().cholesky().ok_or_else(|| {
-                        E::from(LaplaceError::NotConcave {
-                            at: x.as_slice().to_vec(),
-                        })
-                    })?
-                }
-            };
-            let delta = chol.solve(&g);
-            let gain = 0.5 * g.dot(&delta);
-            if gain < opts.tolerance {
-                break;
-            }
-            if steps == opts.max_steps {
-                return Err(LaplaceError::NoConvergence { steps, gain }.into());
-            }
-            let (xn, vn) = ascend(
-                &x,
-                f,
-                &delta,
-                h,
-                opts.max_rel_step,
-                &mut eval,
-                &mut evaluations,
-            )?;
-            let gn = gradient_from(&vn, h);
-            let s = &xn - &x;
-            let y = &g - &gn;
-            let sy = s.dot(&y);
-            if sy > 0.0 {
-                let bs = &b * &s;
-                b += &y * y.transpose() / sy - &bs * bs.transpose() / s.dot(&bs);
-            }
-            x = xn;
-            f = vn[0];
-            g = gn;
-            steps += 1;
-        }
-        if steps > 0 {
-            let v = values(
-                &hessian_points(x.as_slice(), h),
-                &mut eval,
-                &mut evaluations,
-            )?;
-            hessian = hessian_from(&v, h);
-            f = v[0];
-            g = gradient_from(&v, h);
+        ascent.climb(&mut at, &mut b, true)?;
+        if ascent.steps > 0 {
+            (at, hessian) = ascent.curvature(at.x)?;
         }
     }
-    // Phase 2: Newton with the Hessian near the mode.
-    let chol = neg_factor(&hessian, x.as_slice())?;
-    let mut gain;
-    loop {
-        let delta = chol.solve(&g);
-        gain = 0.5 * g.dot(&delta);
-        if gain < opts.tolerance {
-            break;
-        }
-        if steps == opts.max_steps {
-            return Err(LaplaceError::NoConvergence { steps, gain }.into());
-        }
-        let (xn, vn) = ascend(
-            &x,
-            f,
-            &delta,
-            h,
-            opts.max_rel_step,
-            &mut eval,
-            &mut evaluations,
-        )?;
-        x = xn;
-        f = vn[0];
-        g = gradient_from(&vn, h);
-        steps += 1;
-    }
+    // Phase 2: Newton with the Hessian near the mode, which must be negative definite.
+    let (chol, gain) = ascent.climb(&mut at, &mut -&hessian, false)?;
     let covariance = chol.inverse();
+    let Ascent {
+        steps, evaluations, ..
+    } = ascent;
+    let Point { x, f, .. } = at;
     Ok(Laplace {
         start: start.to_vec(),
         value_at_start,
