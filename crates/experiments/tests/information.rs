@@ -119,6 +119,11 @@ fn the_limit_is_the_likelihoods_maximum_and_its_curvature() {
     let run = identify(&input, Algorithm::MpfEkf2, &s).unwrap();
     let t = table(&limit, std::slice::from_ref(&run)).unwrap();
     assert!(t.contains("mpf-ekf2 run 0 error"), "{t}");
+    // Started at the truth, the table says whether the model puts it inside the region.
+    assert!(
+        t.contains("The truth is") && t.contains("χ²_6(0.95)"),
+        "{t}"
+    );
     let text = summary(std::slice::from_ref(&limit), std::slice::from_ref(&run)).unwrap();
     assert!(text.contains("| mpf-ekf2 | all k | 3 |"), "{text}");
     assert!(text.contains("| k3 | mpf-ekf2 | 1 |"), "{text}");
