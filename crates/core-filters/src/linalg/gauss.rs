@@ -26,8 +26,6 @@
 //! jitter, counted in [`Health`]); a pack lane whose straight path fails is redone by that scalar
 //! code. [`cholesky_repaired`] is the same repair with typed errors for one-off factorisations.
 
-#![allow(clippy::needless_range_loop)]
-// index loops spell out the order of operations
 // `v − v` is the finiteness test itself (+0 for a finite v, NaN otherwise), not a mistake.
 #![allow(clippy::eq_op)]
 

@@ -10,8 +10,6 @@
 //! definite (even after the documented repair) every step returns that typed error. A non-finite
 //! particle log-likelihood is mapped to −∞ (and counted) by the weight routine.
 
-#![allow(clippy::needless_range_loop)] // index loops over measurement channels read like the SPEC
-
 use rand_distr::{Distribution, StandardNormal};
 
 use crate::error::FilterError;

@@ -19,7 +19,6 @@
 //! Failure policy as the MLN-RBPF: a particle whose factorisation or update fails gets a NaN
 //! log-weight; `R` is factorised once, and if it cannot be every step fails.
 
-#![allow(clippy::needless_range_loop)] // index loops over measurement channels read like the SPEC
 #![allow(non_snake_case)]
 
 use serde::{Deserialize, Serialize};
