@@ -10,7 +10,9 @@ use core_filters::model::{Layout, Slot, SparseHessians};
 use core_filters::real::Real;
 use core_filters::resampling::ResamplePolicy;
 use core_filters::rng::{stream, StreamRng};
-use core_filters::smc::model::{ConditionallyQuadratic, Marginalised, Partition, QuadraticDims};
+use core_filters::smc::model::{
+    ConditionallyQuadratic, Marginalised, Partition, QuadraticDims, SampledAt,
+};
 use core_filters::smc::mpf::MpfEkf2;
 use core_filters::smc::runner::NoObserver;
 use core_filters::smc::{run, Filter, Observer, Posterior, SmcConfig, StepInfo};
@@ -154,14 +156,11 @@ impl ConditionallyQuadratic for Decoupled {
     }
     fn sampled_dynamics<T: Real>(
         &self,
-        _stage: usize,
-        _k: usize,
-        xn_prev: &[T],
-        _xn_new: &[T],
-        _m: &[T],
+        at: SampledAt<'_, T>,
         value: &mut [T],
         jac: &mut Sparse<T>,
     ) {
+        let xn_prev = at.prev;
         let [s] = T::per_lane([xn_prev[1]], |[x]| [x.sin()]);
         value[0] = T::splat(0.8) * xn_prev[0] + s;
         jac.add(0, 0, T::splat(0.0));
@@ -370,14 +369,11 @@ impl ConditionallyQuadratic for Coupled {
     }
     fn sampled_dynamics<T: Real>(
         &self,
-        _stage: usize,
-        _k: usize,
-        xn_prev: &[T],
-        _xn_new: &[T],
-        m: &[T],
+        at: SampledAt<'_, T>,
         value: &mut [T],
         jac: &mut Sparse<T>,
     ) {
+        let (xn_prev, m) = (at.prev, at.m);
         value[0] =
             T::splat(self.a) * xn_prev[0] + T::splat(self.c[0]) * m[0] + T::splat(self.c[1]) * m[1];
         jac.add(0, 0, T::splat(self.c[0]));
@@ -558,14 +554,11 @@ impl ConditionallyQuadratic for Bilinear {
     }
     fn sampled_dynamics<T: Real>(
         &self,
-        _stage: usize,
-        _k: usize,
-        xn: &[T],
-        _xn_new: &[T],
-        m: &[T],
+        at: SampledAt<'_, T>,
         value: &mut [T],
         jac: &mut Sparse<T>,
     ) {
+        let (xn, m) = (at.prev, at.m);
         let c = T::splat;
         value[0] = xn[0] + c(0.1) * m[0] + m[0] * m[1];
         value[1] = c(0.5) * xn[1] + m[1] * m[2] - c(0.3) * m[2] * m[2] + xn[2] * m[0];

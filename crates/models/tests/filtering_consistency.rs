@@ -10,7 +10,7 @@ use core_filters::model::Slot;
 use core_filters::real::{Pack, Real};
 use core_filters::rng::stream;
 use core_filters::smc::model::{
-    ConditionallyLinear, ConditionallyQuadratic, Partition, StateSpace,
+    ConditionallyLinear, ConditionallyQuadratic, Partition, SampledAt, StateSpace,
 };
 use filtering_support::*;
 use models::filtering::{AugmentedChain, Discretisation, MlnChain, MpfChain};
@@ -229,12 +229,26 @@ fn pack_evaluation_is_the_scalar_evaluation_of_each_lane() {
             for (s, entries) in mpf.sampled_stages().iter().enumerate() {
                 let mut vp = vec![Pack::splat(0.0); entries.len()];
                 let mut jp = Sparse::<Pack>::recording(entries.len(), qd.nbl);
-                mpf.sampled_dynamics(s, K, &xp, &xnp, &mp, &mut vp, &mut jp);
+                let at = SampledAt {
+                    stage: s,
+                    k: K,
+                    prev: &xp,
+                    new: &xnp,
+                    m: &mp,
+                };
+                mpf.sampled_dynamics(at, &mut vp, &mut jp);
                 let (mut vs, mut jss) = (vec![], vec![]);
                 for b in 0..4 {
                     let mut v = vec![0.0; entries.len()];
                     let mut j = Sparse::<f64>::recording(entries.len(), qd.nbl);
-                    mpf.sampled_dynamics(s, K, &xns[b], &xn_new[b], &ms[b], &mut v, &mut j);
+                    let at = SampledAt {
+                        stage: s,
+                        k: K,
+                        prev: &xns[b],
+                        new: &xn_new[b],
+                        m: &ms[b],
+                    };
+                    mpf.sampled_dynamics(at, &mut v, &mut j);
                     vs.push(v);
                     jss.push(j.values().to_vec());
                 }

@@ -17,7 +17,7 @@ use core_filters::linalg::Sparse;
 use core_filters::model::Slot;
 use core_filters::rng::stream;
 use core_filters::smc::model::{
-    ConditionallyLinear, ConditionallyQuadratic, Partition, StateSpace,
+    ConditionallyLinear, ConditionallyQuadratic, Partition, SampledAt, StateSpace,
 };
 use filtering_support::*;
 use models::filtering::{AugmentedChain, Discretisation, MlnChain, MpfChain};
@@ -186,7 +186,14 @@ fn mpf_stage(
     let nbl = mpf.dims().nbl;
     let mut value = vec![0.0; rows];
     let mut jac = Sparse::recording(rows, nbl);
-    mpf.sampled_dynamics(stage, K, xn_prev, xn_new, m, &mut value, &mut jac);
+    let at = SampledAt {
+        stage,
+        k: K,
+        prev: xn_prev,
+        new: xn_new,
+        m,
+    };
+    mpf.sampled_dynamics(at, &mut value, &mut jac);
     (value, jac.to_dense())
 }
 

@@ -19,7 +19,7 @@ mod filtering_support;
 use core_filters::linalg::Sparse;
 use core_filters::rng::{stream, StreamRng};
 use core_filters::smc::model::{
-    ConditionallyLinear, ConditionallyQuadratic, Partition, StateSpace,
+    ConditionallyLinear, ConditionallyQuadratic, Partition, SampledAt, StateSpace,
 };
 use filtering_support::*;
 use models::filtering::{
@@ -224,7 +224,14 @@ fn mpf_stage<L: HysteresisLaw>(
     let rows = mpf.sampled_stages()[stage].len();
     let mut value = vec![0.0; rows];
     let mut jac = Sparse::recording(rows, mpf.dims().nbl);
-    mpf.sampled_dynamics(stage, K, xn_prev, xn_new, m, &mut value, &mut jac);
+    let at = SampledAt {
+        stage,
+        k: K,
+        prev: xn_prev,
+        new: xn_new,
+        m,
+    };
+    mpf.sampled_dynamics(at, &mut value, &mut jac);
     (value, jac.to_dense())
 }
 

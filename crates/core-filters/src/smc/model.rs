@@ -181,6 +181,23 @@ pub struct QuadraticDims {
     pub ny: usize,
 }
 
+/// Where stage `stage` of ψ is evaluated (SPEC §5.4): the transition to step `k`, the particle's
+/// xⁿ_{k−1} (`prev`), the rows of xⁿ_k set by earlier stages (`new`; other entries unspecified)
+/// and the marginalised block at `x^bl = m`.
+#[derive(Debug, Clone, Copy)]
+pub struct SampledAt<'a, T> {
+    /// Index of the stage (into [`ConditionallyQuadratic::sampled_stages`]).
+    pub stage: usize,
+    /// Step of the transition (`k − 1 → k`).
+    pub k: usize,
+    /// xⁿ_{k−1}.
+    pub prev: &'a [T],
+    /// xⁿ_k: the rows of earlier stages are set, the others unspecified.
+    pub new: &'a [T],
+    /// The point `x^bl = m`.
+    pub m: &'a [T],
+}
+
 /// A model that, given a small sampled block `xⁿ`, is at most quadratic (in practice bilinear) in
 /// the marginalised block `x^bl`, so that EKF2 moments are exact (MPF-EKF2, SPEC §5.4 and §6).
 ///
@@ -192,19 +209,10 @@ pub trait ConditionallyQuadratic: Marginalised {
     fn dims(&self) -> QuadraticDims;
     /// Per stage, the indices into `xⁿ` of the dynamic entries it sets.
     fn sampled_stages(&self) -> &[Vec<usize>];
-    /// `ψ` of stage `stage` at `(xⁿ_{k−1}, xⁿ_k rows of earlier stages, x^bl = m)`: `value[i]`
-    /// for entry `stages[stage][i]` (without noise), `jac` its Jacobian w.r.t. `x^bl`.
-    #[allow(clippy::too_many_arguments)]
-    fn sampled_dynamics<T: Real>(
-        &self,
-        stage: usize,
-        k: usize,
-        xn_prev: &[T],
-        xn_new: &[T],
-        m: &[T],
-        value: &mut [T],
-        jac: &mut Sparse<T>,
-    );
+    /// `ψ` of stage `at.stage` at `(xⁿ_{k−1}, xⁿ_k rows of earlier stages, x^bl = m)` (see
+    /// [`SampledAt`]): `value[i]` for entry `stages[at.stage][i]` (without noise), `jac` its
+    /// Jacobian w.r.t. `x^bl`.
+    fn sampled_dynamics<T: Real>(&self, at: SampledAt<'_, T>, value: &mut [T], jac: &mut Sparse<T>);
     /// Constant Hessians of stage `stage`'s `ψ` w.r.t. `x^bl` (outputs index the stage's rows).
     fn sampled_hessians(&self, stage: usize) -> &SparseHessians;
     /// Process-noise s.d. of stage `stage`'s entries (`Qₙ`, diagonal).

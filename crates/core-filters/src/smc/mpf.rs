@@ -39,7 +39,7 @@ use crate::linalg::{
 use crate::real::Real;
 
 use super::batch::{Ancestry, Marginalized, ParticleStep, Slots};
-use super::model::{ConditionallyQuadratic, QuadraticDims};
+use super::model::{ConditionallyQuadratic, QuadraticDims, SampledAt};
 use super::store::Shape;
 
 /// What one sampled stage needs, read once from the model.
@@ -135,7 +135,16 @@ impl<M: ConditionallyQuadratic> MpfStep<M> {
                 );
                 let mut jac = Sparse::recording(rows.len(), nbl);
                 let mut value = vec![0.0; rows.len()];
-                jac.evaluate(|j| model.sampled_dynamics(s, 1, &zn, &zn, &zbl, &mut value, j));
+                jac.evaluate(|j| {
+                    let at = SampledAt {
+                        stage: s,
+                        k: 1,
+                        prev: &zn,
+                        new: &zn,
+                        m: &zbl,
+                    };
+                    model.sampled_dynamics(at, &mut value, j)
+                });
                 draws += rows.len();
                 StagePlan {
                     rows: rows.clone(),
@@ -189,8 +198,14 @@ impl<M: ConditionallyQuadratic> MpfStep<M> {
         let mut s = self.scratch::<f64>();
         let ss = &mut s.stages[stage];
         ss.jac.evaluate(|j| {
-            self.model
-                .sampled_dynamics(stage, k, xn_prev, xn_prev, m, &mut ss.value, j)
+            let at = SampledAt {
+                stage,
+                k,
+                prev: xn_prev,
+                new: xn_prev,
+                m,
+            };
+            self.model.sampled_dynamics(at, &mut ss.value, j)
         });
         let mut mean = ss.value.clone();
         if !plan.hess.is_empty() {
@@ -225,8 +240,14 @@ impl<M: ConditionallyQuadratic> MpfStep<M> {
             let q = plan.rows.len();
             // (a) the EKF2 moments of ψ: mean ψ(m) + ½tr(𝓗ⁱP), covariance J P Jᵀ + cov2 + Qₙ.
             ss.jac.evaluate(|j| {
-                self.model
-                    .sampled_dynamics(st, k, xn_prev, xn, m, &mut ss.value, j)
+                let at = SampledAt {
+                    stage: st,
+                    k,
+                    prev: xn_prev,
+                    new: xn,
+                    m,
+                };
+                self.model.sampled_dynamics(at, &mut ss.value, j)
             });
             ss.pred.copy_from_slice(&ss.value);
             if !plan.hess.is_empty() {

@@ -40,7 +40,9 @@ use core_filters::linalg::{Sparse, SymEntries};
 use core_filters::model::{Layout, Slot, SparseHessians};
 use core_filters::real::Real;
 use core_filters::rng::StreamRng;
-use core_filters::smc::model::{ConditionallyQuadratic, Marginalised, Partition, QuadraticDims};
+use core_filters::smc::model::{
+    ConditionallyQuadratic, Marginalised, Partition, QuadraticDims, SampledAt,
+};
 use core_filters::smc::rejuvenation::StaticParam;
 
 /// Where a storey's velocity lives.
@@ -386,17 +388,20 @@ impl<L: HysteresisLaw> ConditionallyQuadratic for MpfChainOf<L> {
         &self.stages
     }
 
-    /// ψ of stage `stage` (module docs) at `(xⁿ_{k−1}, m)` with ü_g,meas(k−1).
+    /// ψ of stage `at.stage` (module docs) at `(xⁿ_{k−1}, m)` with ü_g,meas(k−1).
     fn sampled_dynamics<T: Real>(
         &self,
-        stage: usize,
-        k: usize,
-        xn_prev: &[T],
-        xn_new: &[T],
-        m: &[T],
+        at: SampledAt<'_, T>,
         value: &mut [T],
         jac: &mut Sparse<T>,
     ) {
+        let SampledAt {
+            stage,
+            k,
+            prev: xn_prev,
+            new: xn_new,
+            m,
+        } = at;
         let dt = T::splat(self.core.dt);
         let ground = T::splat(self.core.transition_ground(k));
         let p = View {
