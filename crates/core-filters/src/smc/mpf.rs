@@ -29,8 +29,6 @@
 //! gets a NaN log-weight (mapped to −∞ and counted by the weight routine); the run fails only if
 //! every particle fails.
 
-#![allow(clippy::needless_range_loop)] // index loops over measurement channels read like the SPEC
-
 use crate::health::Health;
 use crate::linalg::gauss::factorise;
 use crate::linalg::{
