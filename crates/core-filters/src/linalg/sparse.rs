@@ -122,7 +122,10 @@ impl<T: Real> Sparse<T> {
     /// Writes the next entry (inside [`Sparse::evaluate`]). While recording, appends
     /// `(row, col)`; afterwards an entry that is not the next one of the pattern is not written
     /// and marks the matrix as broken.
-    #[inline]
+    // Always inlined: the models call it once per Jacobian entry in every particle's step; as a
+    // call (with the pattern check of every build) it was part of the MLN-RBPF's slowdown
+    // across the renovation (docs/performance.md, "Speed across builds").
+    #[inline(always)]
     #[track_caller]
     pub fn add(&mut self, row: usize, col: usize, value: T) {
         let p = self.pos;

@@ -146,6 +146,9 @@ impl<T: Real> LinearScratch<T> {
     }
 
     /// `resid = y − h − H μ`: the innovation of `y_k` given `(h, H) = observation(k, u_k)`.
+    // Always inlined into the MLN-RBPF's and Storvik's steps (docs/performance.md, "Speed
+    // across builds").
+    #[inline(always)]
     pub fn innovation(&mut self, y: &[f64], mu: &[T]) {
         for (j, r) in self.resid.iter_mut().enumerate() {
             *r = T::splat(y[j]) - self.h[j];

@@ -179,7 +179,7 @@ impl<L: HysteresisLaw> MlnChainOf<L> {
     }
 
     /// Writes `scale · ∂a_j/∂z` at `u` into row `row` (`∂F_j/∂k_j = d_j`, `∂F_j/∂c_j = δv_j`).
-    #[inline]
+    #[inline(always)]
     fn write_acceleration_row<T: Real>(
         &self,
         out: &mut Sparse<T>,

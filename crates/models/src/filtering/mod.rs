@@ -265,7 +265,10 @@ impl<L: HysteresisLaw> ChainCore<L> {
     /// force gradient of the partitions. The entries come in a fixed order (θ, deformation,
     /// velocities) that depends on `j` and `vars` only, so the pattern is the same at every call;
     /// a quantity that is not needed is not read (`p` may lack θ or the states).
-    #[inline]
+    // Always inlined: the partitions' transitions call it once per row, and left to the
+    // optimiser it stayed a call whose branches on the declared columns ran every time
+    // (docs/performance.md, "Speed across builds").
+    #[inline(always)]
     pub fn write_force_gradient<T: Real>(
         &self,
         out: &mut Sparse<T>,
@@ -305,7 +308,10 @@ impl<L: HysteresisLaw> ChainCore<L> {
 
     /// Writes `scale · ∂a_j/∂w` (`a_j = ground + (F_{j+1} − F_j)/m_j`, `− α v_j` with mass
     /// damping) into row `row`.
-    #[inline]
+    // Always inlined: the partitions' transitions call it once per row, and left to the
+    // optimiser it stayed a call whose branches on the declared columns ran every time
+    // (docs/performance.md, "Speed across builds").
+    #[inline(always)]
     pub fn write_acceleration_gradient<T: Real>(
         &self,
         out: &mut Sparse<T>,
