@@ -115,6 +115,21 @@ pub trait HysteresisLaw:
     /// `(∂ṙ/∂δv, ∂ṙ/∂r)` at (θ, φ).
     fn rate_partials<T: Real>(&self, dv: T, r: T, theta: &[T], phi: &[T]) -> (T, T);
 
+    /// [`HysteresisLaw::basis`] into `g` and [`HysteresisLaw::rate_partials`] at one point, for a
+    /// caller that needs both (Storvik's linearisation); a law may share their common terms.
+    #[inline]
+    fn basis_and_partials<T: Real>(
+        &self,
+        dv: T,
+        r: T,
+        theta: &[T],
+        phi: &[T],
+        g: &mut [T],
+    ) -> (T, T) {
+        self.basis(dv, r, phi, g);
+        self.rate_partials(dv, r, theta, phi)
+    }
+
     /// The record of an element at `storey` with parameters `params` (θ then φ, `NPARAMS`
     /// values), not validated.
     fn element(storey: usize, params: &[f64]) -> Self::Element;

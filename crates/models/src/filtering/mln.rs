@@ -377,15 +377,18 @@ impl<L: HysteresisLaw> ConditionallyLinear for MlnChainOf<L> {
             }
             for (e, &j) in hyst.iter().enumerate() {
                 let dv = self.drift_velocity(u_new, j);
-                let g = self.basis(e, dv, u_prev);
                 let b = self.beta_col(e);
                 let row = 2 * n + e;
+                // The basis and ∂ṙ/∂δv at one point: the law computes their common terms once.
+                let mut g = zero_basis();
+                let (d_dv, _) = self.core.law.basis_and_partials(
+                    dv,
+                    u_prev[row],
+                    &z[b..b + L::NLIN],
+                    self.phi(e, u_prev),
+                    &mut g[..1 + nlin::<L>()],
+                );
                 write_rate_row(S, row, b, dt, &g, L::NLIN);
-                let phi = self.phi(e, u_prev);
-                let (d_dv, _) =
-                    self.core
-                        .law
-                        .rate_partials(dv, u_prev[row], &z[b..b + L::NLIN], phi);
                 let coef = dt * d_dv;
                 self.write_acceleration_row(S, row, j, u_prev, coef * dt);
                 if j > 0 {

@@ -40,9 +40,16 @@ pub struct BoucWenPrior {
 /// finite and zero at `r = 0`, including `n = 1` where `0^0 = 1` multiplies `r = 0`).
 #[inline]
 fn bw_terms(r: f64, n: f64) -> (f64, f64) {
+    let (t1, t2, _) = bw_powers(r, n);
+    (t1, t2)
+}
+
+/// [`bw_terms`] and `|r|^(n−1)` itself, from one power (what the partials need as well).
+#[inline]
+fn bw_powers(r: f64, n: f64) -> (f64, f64, f64) {
     let a = r.abs();
     let pow_nm1 = a.powf(n - 1.0);
-    (pow_nm1 * r, pow_nm1 * a)
+    (pow_nm1 * r, pow_nm1 * a, pow_nm1)
 }
 
 /// Bouc–Wen rate `ṙ = δv − β|δv||r|^(n−1) r − γ δv |r|^n` (SPEC eq. 22), through
@@ -66,6 +73,26 @@ impl BoucWenLaw {
             [a, b]
         });
         (a, b)
+    }
+}
+
+impl BoucWenLaw {
+    /// `[|r|^(n−1) r, |r|^n, n|r|^(n−1), sgn δv, sgn r]`, lane by lane, from one power.
+    #[inline]
+    fn partial_terms<T: Real>(dv: T, r: T, n: T) -> [T; 5] {
+        T::per_lane([dv, r, n], |[dv, r, n]| {
+            let (t1, t2, pow_nm1) = bw_powers(r, n);
+            [t1, t2, n * pow_nm1, sgn(dv), sgn(r)]
+        })
+    }
+
+    /// [`HysteresisLaw::rate_partials`] from [`BoucWenLaw::partial_terms`].
+    #[inline]
+    fn partials_of<T: Real>(dv: T, theta: &[T], [t1, t2, np, sdv, sr]: [T; 5]) -> (T, T) {
+        let (beta, gamma) = (theta[0], theta[1]);
+        let d_dv = T::splat(1.0) - beta * sdv * t1 - gamma * t2;
+        let d_r = -(beta * dv.abs() * np) - gamma * dv * np * sr;
+        (d_dv, d_r)
     }
 }
 
@@ -96,14 +123,25 @@ impl HysteresisLaw for BoucWenLaw {
     /// `n ≥ 1`; `sgn(0) = 0`, the derivative of `|·|` at its kink taken as 0).
     #[inline]
     fn rate_partials<T: Real>(&self, dv: T, r: T, theta: &[T], phi: &[T]) -> (T, T) {
-        let [t1, t2, np, sdv, sr] = T::per_lane([dv, r, phi[0]], |[dv, r, n]| {
-            let (t1, t2) = bw_terms(r, n);
-            [t1, t2, n * r.abs().powf(n - 1.0), sgn(dv), sgn(r)]
-        });
-        let (beta, gamma) = (theta[0], theta[1]);
-        let d_dv = T::splat(1.0) - beta * sdv * t1 - gamma * t2;
-        let d_r = -(beta * dv.abs() * np) - gamma * dv * np * sr;
-        (d_dv, d_r)
+        let [t1, t2, np, sdv, sr] = Self::partial_terms(dv, r, phi[0]);
+        Self::partials_of(dv, theta, [t1, t2, np, sdv, sr])
+    }
+
+    /// One power of |r| for both (Storvik's linearisation asks for both at one point).
+    #[inline]
+    fn basis_and_partials<T: Real>(
+        &self,
+        dv: T,
+        r: T,
+        theta: &[T],
+        phi: &[T],
+        g: &mut [T],
+    ) -> (T, T) {
+        let terms = Self::partial_terms(dv, r, phi[0]);
+        g[0] = dv;
+        g[1] = -(dv.abs() * terms[0]);
+        g[2] = -(dv * terms[1]);
+        Self::partials_of(dv, theta, terms)
     }
 
     fn element(storey: usize, params: &[f64]) -> BoucWen {
@@ -249,6 +287,14 @@ mod tests {
                 / (2.0 * h);
             assert!((d_dv - fd_dv).abs() < 1e-7, "{d_dv} vs {fd_dv}");
             assert!((d_r - fd_r).abs() < 1e-7, "{d_r} vs {fd_r}");
+            // Both at once (one power of |r|): bit for bit what the two calls give.
+            let mut both = [0.0; 3];
+            let (a_dv, a_r) = law.basis_and_partials(dv, r, &[b, g], &[n], &mut both);
+            assert_eq!(both.map(f64::to_bits), basis.map(f64::to_bits));
+            assert_eq!(
+                (a_dv.to_bits(), a_r.to_bits()),
+                (d_dv.to_bits(), d_r.to_bits())
+            );
         }
         // A pack of the four points is the scalar evaluation of each lane, bit for bit.
         let lane = |f: fn(&(f64, f64, f64, f64, f64)) -> f64| Pack::from_lanes(|i| f(&pts[i]));
@@ -263,7 +309,18 @@ mod tests {
         law.basis(dv, r, &[n], &mut basis);
         let rate = law.rate(dv, r, &[b, g], &[n]);
         let (d_dv, d_r) = law.rate_partials(dv, r, &[b, g], &[n]);
+        let mut both = [Pack::splat(0.0); 3];
+        let (b_dv, b_r) = law.basis_and_partials(dv, r, &[b, g], &[n], &mut both);
         for (i, &(dv, r, b, g, n)) in pts.iter().enumerate() {
+            let pairs = [
+                (both[1], basis[1]),
+                (both[2], basis[2]),
+                (b_dv, d_dv),
+                (b_r, d_r),
+            ];
+            for (x, y) in pairs {
+                assert_eq!(x.lane(i).to_bits(), y.lane(i).to_bits());
+            }
             let mut s = [0.0; 3];
             law.basis(dv, r, &[n], &mut s);
             let (sd, sr) = law.rate_partials(dv, r, &[b, g], &[n]);
