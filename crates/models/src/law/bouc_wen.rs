@@ -74,9 +74,7 @@ impl BoucWenLaw {
         });
         (a, b)
     }
-}
 
-impl BoucWenLaw {
     /// `[|r|^(n−1) r, |r|^n, n|r|^(n−1), sgn δv, sgn r]`, lane by lane, from one power.
     #[inline]
     fn partial_terms<T: Real>(dv: T, r: T, n: T) -> [T; 5] {
@@ -123,8 +121,7 @@ impl HysteresisLaw for BoucWenLaw {
     /// `n ≥ 1`; `sgn(0) = 0`, the derivative of `|·|` at its kink taken as 0).
     #[inline]
     fn rate_partials<T: Real>(&self, dv: T, r: T, theta: &[T], phi: &[T]) -> (T, T) {
-        let [t1, t2, np, sdv, sr] = Self::partial_terms(dv, r, phi[0]);
-        Self::partials_of(dv, theta, [t1, t2, np, sdv, sr])
+        Self::partials_of(dv, theta, Self::partial_terms(dv, r, phi[0]))
     }
 
     /// One power of |r| for both (Storvik's linearisation asks for both at one point).
