@@ -309,17 +309,20 @@ pub fn table(limit: &InformationLimit, records: &[RunRecord]) -> Result<String> 
     if limit.start == "truth" {
         // The likelihood-ratio test of the model at the truth: 2 × gain ~ χ²_p when the filters'
         // model is the one that made the data.
-        let verdict = if 2.0 * gain > chi2 {
-            "OUTSIDE the record's 95 % likelihood region under this model: the model is biased \
-             against the data (e.g. its discretisation), and θ̂'s error includes that bias"
-        } else {
-            "inside the record's 95 % likelihood region under this model"
-        };
+        let outside = 2.0 * gain > chi2;
         writeln!(
             o,
-            "The truth is {verdict} (2 × {gain:.2} = {:.1} against χ²_{}(0.95) = {chi2:.1}).",
+            "The truth lies {} the record's 95 % likelihood region under this model (2 × {gain:.2} \
+             = {:.1} against χ²_{}(0.95) = {chi2:.1}, a test at the 5 % level){}",
+            if outside { "OUTSIDE" } else { "inside" },
             2.0 * gain,
-            limit.names.len()
+            limit.names.len(),
+            if outside {
+                ": a sign that the model differs from what made the data (e.g. by its \
+                 discretisation), and θ̂'s error then includes that difference."
+            } else {
+                "."
+            }
         )?;
     }
     Ok(o)

@@ -8,7 +8,7 @@ mod common;
 use std::path::{Path, PathBuf};
 
 use experiments::field::StructureSettings;
-use experiments::information::{information_limit, summary, table, REL_STEP};
+use experiments::information::{information_limit, summary, table, InformationLimit, REL_STEP};
 use experiments::likelihood::{Candidate, LikelihoodModel, ScoredData};
 use experiments::pipeline::{identify, Algorithm, RunInput};
 use experiments::settings::FilterSettings;
@@ -119,11 +119,22 @@ fn the_limit_is_the_likelihoods_maximum_and_its_curvature() {
     let run = identify(&input, Algorithm::MpfEkf2, &s).unwrap();
     let t = table(&limit, std::slice::from_ref(&run)).unwrap();
     assert!(t.contains("mpf-ekf2 run 0 error"), "{t}");
-    // Started at the truth, the table says whether the model puts it inside the region.
-    assert!(
-        t.contains("The truth is") && t.contains("χ²_6(0.95)"),
-        "{t}"
-    );
+    // Started at the truth, the table says whether the model puts it inside the region, and
+    // the verdict is the one the numbers give (2 × gain against χ²_6(0.95) = 12.59); a limit
+    // started elsewhere states none.
+    let outside = 2.0 * (limit.loglik_mle - limit.loglik_start) > 12.59;
+    let verdict = if outside {
+        "The truth lies OUTSIDE"
+    } else {
+        "The truth lies inside"
+    };
+    assert!(t.contains(verdict) && t.contains("χ²_6(0.95)"), "{t}");
+    let elsewhere = InformationLimit {
+        start: "online".into(),
+        ..limit.clone()
+    };
+    let t2 = table(&elsewhere, std::slice::from_ref(&run)).unwrap();
+    assert!(!t2.contains("The truth lies"), "{t2}");
     let text = summary(std::slice::from_ref(&limit), std::slice::from_ref(&run)).unwrap();
     assert!(text.contains("| mpf-ekf2 | all k | 3 |"), "{text}");
     assert!(text.contains("| k3 | mpf-ekf2 | 1 |"), "{text}");
