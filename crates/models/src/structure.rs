@@ -164,6 +164,23 @@ impl Building {
     /// Every storey's acceleration, each element force evaluated once; `out` has length N.
     #[inline]
     pub fn accelerations<T: Real>(&self, p: &impl ChainView<T>, ground: T, out: &mut [T]) {
+        // The damping form is decided once, not per storey: the loop without the mass term is
+        // the bootstrap PF's hot path and stays free of a branch it never takes.
+        if self.damping().has_mass_term() {
+            self.accelerations_of::<T, true>(p, ground, out)
+        } else {
+            self.accelerations_of::<T, false>(p, ground, out)
+        }
+    }
+
+    /// [`Self::accelerations`] with the mass term `− α v_j` present or not (`MASS`).
+    #[inline(always)]
+    fn accelerations_of<T: Real, const MASS: bool>(
+        &self,
+        p: &impl ChainView<T>,
+        ground: T,
+        out: &mut [T],
+    ) {
         let n = self.storeys();
         let mut f = self.force(p, 0);
         for (j, (o, &m)) in out.iter_mut().zip(self.masses()).enumerate() {
@@ -172,7 +189,8 @@ impl Building {
             } else {
                 T::splat(0.0)
             };
-            *o = self.mass_damped(p, j, ground + (f_next - f) / T::splat(m));
+            let a = ground + (f_next - f) / T::splat(m);
+            *o = if MASS { a - p.alpha() * p.v(j) } else { a };
             f = f_next;
         }
     }
