@@ -155,10 +155,16 @@ impl Building {
     #[inline(always)]
     fn mass_damped<T: Real>(&self, p: &impl ChainView<T>, j: usize, a: T) -> T {
         if self.damping().has_mass_term() {
-            a - p.alpha() * p.v(j)
+            Self::minus_mass_term(p, j, a)
         } else {
             a
         }
+    }
+
+    /// `a − α v_j`: storey j's mass-proportional damping force −α m_j v_j over m_j.
+    #[inline(always)]
+    fn minus_mass_term<T: Real>(p: &impl ChainView<T>, j: usize, a: T) -> T {
+        a - p.alpha() * p.v(j)
     }
 
     /// Every storey's acceleration, each element force evaluated once; `out` has length N.
@@ -190,7 +196,11 @@ impl Building {
                 T::splat(0.0)
             };
             let a = ground + (f_next - f) / T::splat(m);
-            *o = if MASS { a - p.alpha() * p.v(j) } else { a };
+            *o = if MASS {
+                Self::minus_mass_term(p, j, a)
+            } else {
+                a
+            };
             f = f_next;
         }
     }
