@@ -34,10 +34,11 @@
 //! resolvably (`docs/calibration.md`, "Five and forty storeys with today's defaults"). So the
 //! rule does not sub-step for it: a lag of the same size (9.3 % at 5 storeys, 11.7 % at 10)
 //! was worth removing in one case and not in the other. At 5 storeys with the 10-storey
-//! settings (per-particle prior means) the gain was −0.3 ± 0.7 points against −1.4 ± 0.4 with
-//! the shared Gaussian on the same 12 data sets: the measurements lean towards the prior as what
-//! decides it, without establishing it (the difference, 1.1 ± 0.6, is under two standard
-//! errors). Every automatic choice records the lag ([`AutoSubsteps::lag_one`]) and
+//! settings (per-particle prior means) the gain was −0.34 ± 0.37 points against −1.50 ± 0.29
+//! with the shared Gaussian on the same 24 data sets (difference 1.16 ± 0.44): what decides it
+//! is the prior, not the size (`docs/calibration.md`, "The prior or the size?"); the rule that
+//! follows (four sub-steps with the shared Gaussian below 10 storeys) changes results and is
+//! not applied yet. Every automatic choice records the lag ([`AutoSubsteps::lag_one`]) and
 //! `sysid filter` notes the lag of the run's step above [`LAG_NOTED_ABOVE`]. Forward Euler's
 //! velocity is not staggered (0 there); its own damping bias is in `docs/discretisation.md`.
 
