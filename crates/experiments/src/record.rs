@@ -42,7 +42,11 @@ pub const RECORD_SCHEMA: u32 = 2;
 /// a Kalman step, the data generation, a metric, the order of floating-point operations). It is
 /// part of every record's fingerprint, so that a resumed sweep never reuses a record computed by
 /// code that gives other numbers.
-pub const NUMERICS_VERSION: u32 = 2;
+///
+/// History: 2 — the run-time filters' draws (2026-11-23); 3 — `substeps = "auto"` sub-steps the
+/// MPF-EKF2 with one shared prior Gaussian against the velocity lag below 10 storeys
+/// ([`crate::pipeline::LAG_SUBSTEPS`], 2026-11-27; every other run gives the numbers of 2).
+pub const NUMERICS_VERSION: u32 = 3;
 
 /// Versions and provenance written into every record.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

@@ -78,7 +78,8 @@ pub struct FilterSettings {
 
 /// Transitions per sample interval: a number, or chosen by the rule of
 /// [`models::filtering::substeps`] (`"auto"`; on field data with Bouc–Wen elements also by the
-/// data-scaled ω₁·dt, `scaled_prior::hysteretic_substeps`).
+/// data-scaled ω₁·dt, `scaled_prior::hysteretic_substeps`; for the MPF-EKF2 with one shared prior
+/// Gaussian below 10 storeys also by the velocity lag, `pipeline::LAG_SUBSTEPS`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Substeps {
     Fixed(usize),

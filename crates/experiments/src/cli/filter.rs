@@ -58,8 +58,10 @@ pub struct Args {
     /// sampled coarsely relative to the structure's highest modes: a number, or `auto` (the
     /// default without --config: where one step per sample would shift the highest mode of the
     /// prior's building by more than 2 %, enough sub-steps to bring that shift under 0.5 %
-    /// (docs/real-frame.md); and on field data with Bouc–Wen elements whose data-scaled ω₁·dt
-    /// exceeds 0.01, enough to bring it to 0.0035, at most 8 (docs/structures.md)).
+    /// (docs/real-frame.md); on field data with Bouc–Wen elements whose data-scaled ω₁·dt
+    /// exceeds 0.01, enough to bring it to 0.0035, at most 8 (docs/structures.md); and for the
+    /// MPF-EKF2 with one shared prior Gaussian on a Bouc–Wen building below 10 storeys whose
+    /// velocity lag exceeds 3 %, 4 (docs/calibration.md, "The prior or the size?")).
     #[arg(long)]
     pub substeps: Option<crate::settings::Substeps>,
     /// Move the sampled Bouc–Wen exponents n (MLN-RBPF, Storvik, MPF-EKF2) after every

@@ -31,16 +31,18 @@
 //! bias at the roof but did not lower its mean stiffness error at 10 storeys, was less accurate
 //! at 20 and cost 2.8 and 3.1 times as much; at 5 storeys (one shared prior Gaussian) it did
 //! lower it, 2.8 → 1.6 % on 12 fresh data sets at 3 times the cost, and at 3 storeys not
-//! resolvably (`docs/calibration.md`, "Five and forty storeys with today's defaults"). So the
-//! rule does not sub-step for it: a lag of the same size (9.3 % at 5 storeys, 11.7 % at 10)
-//! was worth removing in one case and not in the other. At 5 storeys with the 10-storey
+//! resolvably (`docs/calibration.md`, "Five and forty storeys with today's defaults"). So this
+//! module's rule does not sub-step for it: a lag of the same size (9.3 % at 5 storeys, 11.7 %
+//! at 10) was worth removing in one case and not in the other. At 5 storeys with the 10-storey
 //! settings (per-particle prior means) the gain was −0.34 ± 0.37 points against −1.50 ± 0.29
 //! with the shared Gaussian on the same 24 data sets (difference 1.16 ± 0.44): what decides it
-//! is the prior, not the size (`docs/calibration.md`, "The prior or the size?"); the rule that
-//! follows (four sub-steps with the shared Gaussian below 10 storeys) changes results and is
-//! not applied yet. Every automatic choice records the lag ([`AutoSubsteps::lag_one`]) and
-//! `sysid filter` notes the lag of the run's step above [`LAG_NOTED_ABOVE`]. Forward Euler's
-//! velocity is not staggered (0 there); its own damping bias is in `docs/discretisation.md`.
+//! is the prior, not the size (`docs/calibration.md`, "The prior or the size?"). The lag rule
+//! therefore lives where the prior is known, with the filter settings
+//! (`experiments::pipeline::LAG_SUBSTEPS`: four sub-steps for the MPF-EKF2 with one shared
+//! prior Gaussian below 10 storeys). Every automatic choice records the lag
+//! ([`AutoSubsteps::lag_one`]) and `sysid filter` notes the lag of the run's step above
+//! [`LAG_NOTED_ABOVE`]. Forward Euler's velocity is not staggered (0 there); its own damping
+//! bias is in `docs/discretisation.md`.
 
 use super::ChainSpecOf;
 use super::Discretisation;
