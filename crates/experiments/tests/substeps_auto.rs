@@ -126,3 +126,84 @@ fn the_papers_data_need_no_sub_step() {
         .unwrap();
     assert_eq!(a.substeps, 1, "{a:?}");
 }
+
+/// The velocity-lag rule (`pipeline::LAG_SUBSTEPS`): four sub-steps for the MPF-EKF2 with one
+/// shared prior Gaussian on the scaling study's 5-storey building (lag 9.3 % with one step),
+/// and nothing where it was not measured to pay: per-particle prior means, another filter, a
+/// linear building, ten storeys, a fixed number of sub-steps, the paper's building.
+#[test]
+fn the_shared_prior_gaussian_below_ten_storeys_is_sub_stepped_against_the_velocity_lag() {
+    use experiments::pipeline::LAG_SUBSTEPS;
+    use models::filtering::MarginalPrior;
+    let building = |storeys: usize, hysteretic: bool| {
+        let mut c = DatasetConfig::from_preset("building-chain", 1).unwrap();
+        c.storeys = Some(storeys);
+        c.duration = Some(0.5);
+        if !hysteretic {
+            c.hysteretic = Some(vec![]);
+        }
+        generate(&c).unwrap().to_loaded()
+    };
+    let choose = |data: &models::dataset::LoadedDataset, alg: Algorithm, s: &FilterSettings| {
+        let chain = data.true_chain().unwrap();
+        let mut spec = chain_spec(data, chain.as_ref(), s).unwrap();
+        let auto = resolve_substeps(alg, &mut spec, s, None);
+        (auto, spec.substeps)
+    };
+    let shared = FilterSettings::recommended();
+    assert_eq!(shared.marginal_prior, MarginalPrior::MomentMatched);
+    let five = building(5, true);
+    let (auto, m) = choose(&five, Algorithm::MpfEkf2, &shared);
+    let lag = auto.lag.expect("the rule applies");
+    assert_eq!((m, lag.substeps), (LAG_SUBSTEPS, 4));
+    assert!((lag.lag_one - 0.0926).abs() < 0.001, "{lag:?}");
+    assert_eq!(lag.lag_one, auto.linear.unwrap().lag_one);
+    // Not where it did not pay or was not measured.
+    let per_particle = FilterSettings {
+        marginal_prior: MarginalPrior::PerParticle { rel_sd: 0.1 },
+        ..shared.clone()
+    };
+    let (auto, m) = choose(&five, Algorithm::MpfEkf2, &per_particle);
+    assert_eq!((auto.lag.is_none(), m), (true, 1));
+    for alg in [Algorithm::Bootstrap, Algorithm::MlnRbpf, Algorithm::Storvik] {
+        let (auto, m) = choose(&five, alg, &shared);
+        assert_eq!((auto.lag.is_none(), m), (true, 1), "{alg:?}");
+    }
+    let (auto, m) = choose(&building(5, false), Algorithm::MpfEkf2, &shared);
+    assert_eq!((auto.lag.is_none(), m), (true, 1), "linear building");
+    let (auto, _) = choose(&building(10, true), Algorithm::MpfEkf2, &shared);
+    assert!(auto.lag.is_none(), "ten storeys");
+    let one = FilterSettings {
+        substeps: Substeps::Fixed(1),
+        ..shared.clone()
+    };
+    let (auto, m) = choose(&five, Algorithm::MpfEkf2, &one);
+    assert_eq!((auto.lag.is_none(), m), (true, 1), "--substeps 1");
+    let paper = generate(&DatasetConfig::from_preset("paper-3dof", 1).unwrap())
+        .unwrap()
+        .to_loaded();
+    let (auto, m) = choose(&paper, Algorithm::MpfEkf2, &shared);
+    assert_eq!((auto.lag.is_none(), m), (true, 1), "the paper's building");
+    // The run records the choice.
+    let truth = five.true_chain().unwrap();
+    let input = RunInput {
+        data: &five,
+        chain: truth.as_ref(),
+        experiment: "lag",
+        seed: 1,
+        run: 0,
+        progress: false,
+        residuals: false,
+    };
+    let s = FilterSettings {
+        particles: 16,
+        pool: 1,
+        trace_every: 0,
+        loop_every: 0,
+        validate: false,
+        ..shared
+    };
+    let r = identify(&input, Algorithm::MpfEkf2, &s).unwrap();
+    assert_eq!(r.config["spec"]["substeps"], 4);
+    assert_eq!(r.config["substeps_lag"]["substeps"], 4);
+}
