@@ -193,7 +193,9 @@ impl FilterSettings {
     /// fresh data sets of the paper's structure, against 0.81–0.84 with 4 filters of 125, at
     /// twice the cost), and semi-implicit Euler inside the filters (forward Euler biases the
     /// dampings, SPEC §9), and as many transitions per sample as the prior's building needs for
-    /// its highest mode ([`Substeps::Auto`]; one on the paper's data). The paper's studies keep
+    /// its highest mode ([`Substeps::Auto`]; one on the paper's data; for the MPF-EKF2 with one
+    /// shared prior Gaussian below 10 storeys also four against a velocity lag above 3 %,
+    /// [`crate::pipeline::LAG_SUBSTEPS`]). The paper's studies keep
     /// [`FilterSettings::default`].
     pub fn recommended() -> Self {
         Self {
