@@ -84,6 +84,15 @@ impl BoucWenLaw {
         })
     }
 
+    /// `g = (δv, −|δv| t₁, −δv t₂)` from `t₁ = |r|^(n−1) r`, `t₂ = |r|^n` (the basis, written
+    /// once for [`HysteresisLaw::basis`] and [`HysteresisLaw::basis_and_partials`]).
+    #[inline(always)]
+    fn write_basis<T: Real>(dv: T, t1: T, t2: T, g: &mut [T]) {
+        g[0] = dv;
+        g[1] = -(dv.abs() * t1);
+        g[2] = -(dv * t2);
+    }
+
     /// [`HysteresisLaw::rate_partials`] from [`BoucWenLaw::partial_terms`].
     #[inline]
     fn partials_of<T: Real>(dv: T, theta: &[T], [t1, t2, np, sdv, sr]: [T; 5]) -> (T, T) {
@@ -105,9 +114,7 @@ impl HysteresisLaw for BoucWenLaw {
     #[inline]
     fn basis<T: Real>(&self, dv: T, r: T, phi: &[T], g: &mut [T]) {
         let (t1, t2) = Self::terms(r, phi[0]);
-        g[0] = dv;
-        g[1] = -(dv.abs() * t1);
-        g[2] = -(dv * t2);
+        Self::write_basis(dv, t1, t2, g);
     }
 
     #[inline]
@@ -135,9 +142,7 @@ impl HysteresisLaw for BoucWenLaw {
         g: &mut [T],
     ) -> (T, T) {
         let terms = Self::partial_terms(dv, r, phi[0]);
-        g[0] = dv;
-        g[1] = -(dv.abs() * terms[0]);
-        g[2] = -(dv * terms[1]);
+        Self::write_basis(dv, terms[0], terms[1], g);
         Self::partials_of(dv, theta, terms)
     }
 
