@@ -461,6 +461,7 @@ fn identify(
         measured: &data.measured,
         flags: &flags,
         config: config_name.as_deref(),
+        particles_asked: particles.is_some(),
     };
     let settings = settle(&target, overrides.apply(settings), &mut |_| {}).map_err(err)?;
     let input = RunInput {

@@ -22,9 +22,11 @@ use crate::checks;
 use crate::field::{self, StructureSettings};
 use crate::pipeline::{
     chain_spec, identify, per_particle_reason, unmeasured_storeys, Algorithm, FilterSettings,
-    RunInput, PER_PARTICLE_MIN_STOREYS, SPARSE_REL_SD,
+    RunInput, HYSTERETIC_PARTICLES, PER_PARTICLE_MIN_STOREYS, SPARSE_REL_SD,
 };
 use crate::record::RunRecord;
+use crate::scaled_prior::HystereticSubsteps;
+use crate::settings::{recommended_pool, Substeps, RECOMMENDED_PARTICLES};
 use crate::simulation::parse_storeys;
 
 /// A malformed `--fix` list (`name=value,name=value`).
@@ -278,6 +280,9 @@ pub enum Note<'a> {
     /// [`PER_PARTICLE_MIN_STOREYS`] storeys: the MPF-EKF2's default prior Gaussian
     /// ([`FilterSettings::recommended_for`]), or a warning when a config keeps the shared one.
     Sparse(String),
+    /// Field data of a building with Bouc–Wen elements sampled coarsely for its first mode: the
+    /// MPF-EKF2's default particle count ([`HYSTERETIC_PARTICLES`]).
+    Particles(String),
 }
 
 impl fmt::Display for Note<'_> {
@@ -288,7 +293,7 @@ impl fmt::Display for Note<'_> {
                 "field data: {} storeys, masses {:?}, hysteretic storeys {:?}, {} accelerations at storeys {:?}, {} damping (no {META})",
                 d.storeys, d.masses, d.hysteretic, d.measurement, d.sensors, d.damping
             ),
-            Note::Prior(p) | Note::Sparse(p) => f.write_str(p),
+            Note::Prior(p) | Note::Sparse(p) | Note::Particles(p) => f.write_str(p),
         }
     }
 }
@@ -438,6 +443,9 @@ pub struct Target<'a> {
     /// The config's name (a file, or how else it was given); `None` when the run has no config
     /// and takes the recommended settings.
     pub config: Option<&'a str>,
+    /// Whether the run asked for its particle count (`--particles`); if not, and without a
+    /// config, [`settle`] may choose it ([`HYSTERETIC_PARTICLES`]).
+    pub particles_asked: bool,
 }
 
 /// Settles the settings of a run before it starts: the building — simulated data carry theirs
@@ -458,6 +466,7 @@ pub fn settle(
         measured,
         flags,
         config,
+        particles_asked,
     } = *t;
     let config_name = config.unwrap_or_default();
     let table_name = |key: &str| format!("[structure] `{key}` in {config_name}");
@@ -489,7 +498,32 @@ pub fn settle(
             settings.rejuvenation =
                 FilterSettings::recommended_for(algorithm, storeys, &unmeasured).rejuvenation;
         }
-        if let Some(reason) = per_particle_reason(storeys, &unmeasured) {
+        let per_particle = per_particle_reason(storeys, &unmeasured);
+        if config.is_none()
+            && !particles_asked
+            && has_exponents
+            && per_particle.is_none()
+            && settings.substeps == Substeps::Auto
+        {
+            if let Ok(Some(p)) = crate::pipeline::prior_from_data(data, chain, &settings) {
+                let h = HystereticSubsteps::new(p.omega1, spec.dt);
+                if h.substeps > 1 {
+                    settings.particles = HYSTERETIC_PARTICLES;
+                    settings.pool = recommended_pool(HYSTERETIC_PARTICLES);
+                    note(Note::Particles(format!(
+                        "note: Bouc–Wen elements sampled at ω₁·dt = {:.4} of the data-scaled ω₁ (above {}): the MPF-EKF2 takes {} particles as {} filters of {} (with {} k1 came out up to 7.7 % low on a stiff building, with these at most 4.1 %; about 4 times the cost; docs/structures.md, \"Stiff buildings\"); --particles {} keeps the usual count",
+                        h.omega1_dt,
+                        h.above,
+                        settings.particles,
+                        settings.pool,
+                        settings.particles / settings.pool,
+                        RECOMMENDED_PARTICLES,
+                        RECOMMENDED_PARTICLES,
+                    )));
+                }
+            }
+        }
+        if let Some(reason) = per_particle {
             if config.is_none() {
                 settings.marginal_prior =
                     FilterSettings::recommended_for(algorithm, storeys, &unmeasured).marginal_prior;
@@ -529,6 +563,7 @@ pub fn identify_request(req: &FilterRequest, note: &mut dyn FnMut(Note)) -> Resu
         measured: &measured,
         flags: &flags,
         config: config_name.as_deref(),
+        particles_asked: req.particles.is_some(),
     };
     let settings = settle(&target, settings, note)?;
     let input = RunInput {

@@ -328,6 +328,8 @@ impl<'a> LikelihoodModel<'a> {
             measured: on.measured,
             flags: on.flags,
             config: on.config,
+            // Every score sets its own particle count (`fixed_at`).
+            particles_asked: true,
         };
         let base = settle(&target, base, &mut |_| {})?;
         let names = crate::pipeline::chain_spec(data, on.chain, &base)?

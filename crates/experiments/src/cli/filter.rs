@@ -21,8 +21,10 @@ pub struct Args {
     /// `dataset.json` optional).
     #[arg(long, required_unless_present = "print_config")]
     pub data: Option<PathBuf>,
-    /// Number of particles (the config file's value; without a config 1000, as 8 pooled filters,
-    /// and P given here is pooled as one filter per 125 particles, 1 to 8).
+    /// Number of particles (the config file's value; without a config 1000, as 8 pooled filters
+    /// — for the MPF-EKF2 on field data of a hysteretic building sampled coarsely for its first
+    /// mode, 4000 as 8 × 500, docs/structures.md, "Stiff buildings" — and P given here is
+    /// pooled as one filter per 125 particles, 1 to 8).
     #[arg(long)]
     pub particles: Option<usize>,
     /// Master seed of the filter's random stream.
