@@ -452,7 +452,9 @@ pub struct Target<'a> {
 /// and a stated key (flag or the config's `[structure]` table) must agree with it; field data
 /// take the flags over the table and are refused by name when incomplete — and, for the
 /// MPF-EKF2 without a config, the prior Gaussian the building asks for
-/// ([`FilterSettings::recommended_for`]). `note` hears what there is to say, in order. One
+/// ([`FilterSettings::recommended_for`]) and, unless the run asked for a count, the particles
+/// field data of a coarsely sampled hysteretic building ask for ([`HYSTERETIC_PARTICLES`]).
+/// `note` hears what there is to say, in order. One
 /// function for `sysid filter` and the Python `identify`, so they settle a run alike.
 pub fn settle(
     t: &Target,
@@ -505,6 +507,8 @@ pub fn settle(
             && per_particle.is_none()
             && settings.substeps == Substeps::Auto
         {
+            // A data set whose prior cannot be scaled is refused by the run itself, which
+            // scales it again (`pipeline::identify`).
             if let Ok(Some(p)) = crate::pipeline::prior_from_data(data, chain, &settings) {
                 let h = HystereticSubsteps::new(p.omega1, spec.dt);
                 if h.substeps > 1 {
