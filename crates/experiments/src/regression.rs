@@ -68,12 +68,20 @@ impl RegressionFile {
         Ok(file)
     }
 
-    /// Reads and checks a regression file; errors name the file.
+    /// Reads and checks a regression file against the parameters of its study's structure
+    /// ([`Study::param_names`]: the paper's [`PAPER_PARAMS`] for `paper-3dof`, `k1..kN`,
+    /// `c1..cN` and the elements' for one structure of a building preset); errors name the file.
     pub fn load(path: &Path) -> Result<Self> {
         let text =
             std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
-        Self::parse(&text, &PAPER_PARAMS)
-            .with_context(|| format!("regression file {}", path.display()))
+        let parse = || -> Result<Self> {
+            let file: RegressionFile = toml::from_str(&text)?;
+            let names = file.study.param_names()?;
+            let names: Vec<&str> = names.iter().map(String::as_str).collect();
+            file.check(&names)?;
+            Ok(file)
+        };
+        parse().with_context(|| format!("regression file {}", path.display()))
     }
 
     /// Every algorithm of the sweep has a bound on both statistics of every parameter, every

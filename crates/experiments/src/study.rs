@@ -245,6 +245,21 @@ impl Study {
         Ok(s)
     }
 
+    /// Names of θ of the structure every run of a study on one simulated structure identifies
+    /// (run 0's; the generated structures of one study differ only in their data). A study on a
+    /// data directory, or with more than one structure on its axis, has no single list.
+    pub fn param_names(&self) -> Result<Vec<String>> {
+        if self.data.dir.is_some() {
+            bail!("a study on a data directory: its parameters are those of the directory's building");
+        }
+        let structure = match self.sweep.structures.len() {
+            0 => None,
+            1 => Some(0),
+            n => bail!("{n} structures on the axis `sweep.structures`: one list of parameters needs one"),
+        };
+        Ok(self.structure_config(structure, 0)?.chain()?.theta_names())
+    }
+
     fn check(&self) -> Result<()> {
         if self.sweep.algorithms.is_empty() || self.sweep.runs == 0 {
             bail!("the sweep needs at least one algorithm and one run");
