@@ -250,12 +250,16 @@ impl Study {
     /// data directory, or with more than one structure on its axis, has no single list.
     pub fn param_names(&self) -> Result<Vec<String>> {
         if self.data.dir.is_some() {
-            bail!("a study on a data directory: its parameters are those of the directory's building");
+            bail!(
+                "a study on a data directory: its parameters are those of the directory's building"
+            );
         }
         let structure = match self.sweep.structures.len() {
             0 => None,
             1 => Some(0),
-            n => bail!("{n} structures on the axis `sweep.structures`: one list of parameters needs one"),
+            n => bail!(
+                "{n} structures on the axis `sweep.structures`: one list of parameters needs one"
+            ),
         };
         Ok(self.structure_config(structure, 0)?.chain()?.theta_names())
     }

@@ -205,7 +205,10 @@ fn the_five_storey_regression_file_runs_the_settings_of_sysid_filter() {
     let t = &f.thresholds["mpf-ekf2"];
     assert_eq!(t.max_failed, 0);
     for p in &names {
-        assert!(t.rel_error_mean.contains_key(p) && t.ratio_sd.contains_key(p), "{p}");
+        assert!(
+            t.rel_error_mean.contains_key(p) && t.ratio_sd.contains_key(p),
+            "{p}"
+        );
     }
     // The roof, whose bias the sub-steps remove: with one step per sample its mean error was
     // 5.3 % on the same data sets (docs/calibration.md, "Regression bounds of the default
