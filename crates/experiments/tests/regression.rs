@@ -204,6 +204,7 @@ fn the_five_storey_regression_file_runs_the_settings_of_sysid_filter() {
     }
     let t = &f.thresholds["mpf-ekf2"];
     assert_eq!(t.max_failed, 0);
+    assert!(t.min_coverage95_kc.is_some_and(|c| c > 0.5));
     for p in &names {
         assert!(
             t.rel_error_mean.contains_key(p) && t.ratio_sd.contains_key(p),
