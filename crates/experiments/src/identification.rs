@@ -501,31 +501,27 @@ pub fn settle(
                 FilterSettings::recommended_for(algorithm, storeys, &unmeasured).rejuvenation;
         }
         let per_particle = per_particle_reason(storeys, &unmeasured);
-        if config.is_none()
+        let rule_may_apply = config.is_none()
             && !particles_asked
             && has_exponents
             && per_particle.is_none()
-            && settings.substeps == Substeps::Auto
+            && settings.substeps == Substeps::Auto;
+        if let Some(h) = rule_may_apply
+            .then(|| coarsely_sampled_hysteresis(data, chain, &settings, spec.dt))
+            .flatten()
         {
-            // A data set whose prior cannot be scaled is refused by the run itself, which
-            // scales it again (`pipeline::identify`).
-            if let Ok(Some(p)) = crate::pipeline::prior_from_data(data, chain, &settings) {
-                let h = HystereticSubsteps::new(p.omega1, spec.dt);
-                if h.substeps > 1 {
-                    settings.particles = HYSTERETIC_PARTICLES;
-                    settings.pool = recommended_pool(HYSTERETIC_PARTICLES);
-                    note(Note::Particles(format!(
-                        "note: Bouc–Wen elements sampled at ω₁·dt = {:.4} of the data-scaled ω₁ (above {}): the MPF-EKF2 takes {} particles as {} filters of {} (with {} k1 came out up to 7.7 % low on a stiff building, with these at most 4.1 %; about 4 times the cost; docs/structures.md, \"Stiff buildings\"); --particles {} keeps the usual count",
-                        h.omega1_dt,
-                        h.above,
-                        settings.particles,
-                        settings.pool,
-                        settings.particles / settings.pool,
-                        RECOMMENDED_PARTICLES,
-                        RECOMMENDED_PARTICLES,
-                    )));
-                }
-            }
+            settings.particles = HYSTERETIC_PARTICLES;
+            settings.pool = recommended_pool(HYSTERETIC_PARTICLES);
+            note(Note::Particles(format!(
+                "note: Bouc–Wen elements sampled at ω₁·dt = {:.4} of the data-scaled ω₁ (above {}): the MPF-EKF2 takes {} particles as {} filters of {} (with {} k1 came out up to 7.7 % low on a stiff building, with these at most 4.1 %; about 4 times the cost; docs/structures.md, \"Stiff buildings\"); --particles {} keeps the usual count",
+                h.omega1_dt,
+                h.above,
+                settings.particles,
+                settings.pool,
+                settings.particles / settings.pool,
+                RECOMMENDED_PARTICLES,
+                RECOMMENDED_PARTICLES,
+            )));
         }
         if let Some(reason) = per_particle {
             if config.is_none() {
@@ -542,6 +538,20 @@ pub fn settle(
         }
     }
     Ok(settings)
+}
+
+/// The Bouc–Wen sub-step rule's choice on field data whose data-scaled ω₁·dt asks for sub-steps
+/// ([`HystereticSubsteps`]), or `None` (simulated data, or one step enough). A data set whose
+/// prior cannot be scaled gives `None` here and is refused by the run itself, which scales it
+/// again (`pipeline::identify`).
+fn coarsely_sampled_hysteresis(
+    data: &LoadedDataset,
+    chain: Option<&models::structure::ShearChain>,
+    settings: &FilterSettings,
+    dt: f64,
+) -> Option<HystereticSubsteps> {
+    let p = crate::pipeline::prior_from_data(data, chain, settings).ok()??;
+    Some(HystereticSubsteps::new(p.omega1, dt)).filter(|h| h.substeps > 1)
 }
 
 /// Runs the identification a request asks for: settings, the building (simulated data carry
