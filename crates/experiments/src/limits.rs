@@ -28,6 +28,8 @@ use crate::settings::FilterSettings;
 pub fn check_filter_settings(s: &FilterSettings) -> Result<()> {
     check_count(s.particles, 1, MAX_PARTICLES).context("field `particles`")?;
     check_window(s.window).context("field `window`")?;
+    // One filter at least; more than the particles is refused when the run knows its count.
+    check_count(s.pool, 1, MAX_PARTICLES).context("field `pool`")?;
     check_filter_noise_fraction(s.noise_fraction).context("field `noise_fraction`")?;
     check_r_noise_fraction(s.r_noise_fraction).context("field `r_noise_fraction`")?;
     if let Some(t) = s.ess_threshold {

@@ -91,6 +91,11 @@ pub struct Structure {
     pub algorithms: Option<Vec<Algorithm>>,
     /// Runs 0..runs on this structure (at most the sweep's); absent: the sweep's.
     pub runs: Option<u64>,
+    /// Keys of `[filter]` this structure's runs take differently (`filter = { … }`), laid over
+    /// the study's settings and its algorithm's `filter_for` keys: settings that depend on the
+    /// building, such as the MPF-EKF2's per-particle prior from ten storeys on.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub filter: Option<toml::Table>,
 }
 
 impl Structure {
@@ -287,6 +292,23 @@ impl Study {
                 .with_context(|| format!("table `filter_for.{name}`"))?;
             crate::limits::check_filter_settings(&settings)
                 .with_context(|| format!("table `filter_for.{name}`"))?;
+        }
+        for (i, st) in self.sweep.structures.iter().enumerate() {
+            if st.filter.is_none() {
+                continue;
+            }
+            let algorithms = st.algorithms.as_ref().unwrap_or(&self.sweep.algorithms);
+            for &algorithm in algorithms {
+                let ctx = || {
+                    format!(
+                        "structure `{}` of `sweep.structures`: field `filter` ({})",
+                        st.label,
+                        algorithm.name()
+                    )
+                };
+                let settings = self.filter_for_structure(Some(i), algorithm).with_context(ctx)?;
+                crate::limits::check_filter_settings(&settings).with_context(ctx)?;
+            }
         }
         if self
             .sweep
@@ -489,15 +511,36 @@ impl Study {
         Ok(c)
     }
 
-    /// The filter settings of a job: the study's (with its algorithm's `filter_for` keys), with
+    /// The filter settings of a job: the study's (with its algorithm's `filter_for` keys and its
+    /// structure's `filter` keys), with
     /// the job's particles, resampling and discretisation. An error only for a `filter_for`
     /// table that does not apply (refused already by [`Study::load`]).
     pub fn settings(&self, job: &Job) -> Result<FilterSettings> {
-        let mut settings = self.filter_of(job.algorithm)?;
+        let mut settings = self.filter_for_structure(job.structure, job.algorithm)?;
         settings.particles = job.particles;
         settings.resampling = job.resampling;
         settings.discretisation = job.discretisation;
         Ok(settings)
+    }
+
+    /// The filter settings of `algorithm`'s runs on structure `structure` (an index into the
+    /// sweep's structures; `None`: no structure axis): [`Study::filter_of`] with the structure's
+    /// `filter` keys laid over it.
+    pub fn filter_for_structure(
+        &self,
+        structure: Option<usize>,
+        algorithm: Algorithm,
+    ) -> Result<FilterSettings> {
+        let settings = self.filter_of(algorithm)?;
+        let Some(keys) = structure.and_then(|i| self.sweep.structures[i].filter.as_ref()) else {
+            return Ok(settings);
+        };
+        let mut table = toml::Table::try_from(&settings)
+            .map_err(|e| invalid!("the filter settings as a table: {e}"))?;
+        for (k, v) in keys {
+            table.insert(k.clone(), v.clone());
+        }
+        table.try_into().map_err(|e| invalid!("{e}"))
     }
 
     /// The study's filter settings for `algorithm`: `filter` with the keys of

@@ -125,6 +125,95 @@ fn bad_structures_are_named() {
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
+/// A structure's `filter` keys reach its runs only, over the study's `[filter]`; a key the
+/// settings do not know, or a value out of range, is an error naming the structure.
+#[test]
+fn a_structure_takes_its_own_filter_keys() {
+    let dir = temp_dir("structure-filter");
+    let text = SMALL.replace(
+        "label = \"n4\"\n",
+        "label = \"n4\"\nfilter = { pool = 2, marginal_prior = { kind = \"per_particle\", rel_sd = 0.2 } }\n",
+    );
+    let study = Study::load(&write_study(&dir, &text)).unwrap();
+    for job in study.jobs() {
+        let s = study.settings(&job).unwrap();
+        if job.structure == Some(1) {
+            assert_eq!(s.pool, 2);
+            assert_eq!(
+                s.marginal_prior,
+                models::filtering::MarginalPrior::PerParticle { rel_sd: 0.2 }
+            );
+        } else {
+            let mut e = study.filter_of(job.algorithm).unwrap();
+            e.particles = job.particles;
+            e.resampling = job.resampling;
+            e.discretisation = job.discretisation;
+            assert_eq!(s, e);
+        }
+        // The trace settings of the study's table stay.
+        assert_eq!((s.trace_every, s.validate), (0, false));
+    }
+    // The fingerprints of the structure's runs see its settings.
+    let plain = Study::load(&write_study(&dir, SMALL)).unwrap();
+    let j = study.jobs()[3].clone();
+    assert_eq!(j.structure, Some(1));
+    assert_ne!(
+        study.job_fingerprint(&j).unwrap(),
+        plain.job_fingerprint(&j).unwrap()
+    );
+    for (bad, needle) in [
+        ("filter = { pools = 2 }", "pools"),
+        ("filter = { pool = 0 }", "pool"),
+        ("filter = { ess_threshold = 2.0 }", "ess_threshold"),
+    ] {
+        let text = SMALL.replace("label = \"n4\"\n", &format!("label = \"n4\"\n{bad}\n"));
+        let err = format!("{:#}", Study::load(&write_study(&dir, &text)).unwrap_err());
+        assert!(
+            err.contains(needle) && err.contains("`n4`") && err.contains("field `filter`"),
+            "{bad}: {err}"
+        );
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// `experiments/scaling-defaults.toml` runs, on every building, what `sysid filter` uses there
+/// without a config, on the data sets of `experiments/scaling.toml`.
+#[test]
+fn the_defaults_study_runs_the_settings_of_sysid_filter() {
+    use experiments::pipeline::FilterSettings;
+    let study = Study::load(&workspace().join("experiments/scaling-defaults.toml")).unwrap();
+    let scaling = Study::load(&workspace().join("experiments/scaling.toml")).unwrap();
+    assert_eq!(study.sweep.algorithms, vec![Algorithm::MpfEkf2]);
+    let jobs = study.jobs();
+    for n in [3, 5, 10, 20, 40] {
+        assert!(
+            jobs.iter().any(|j| study.sweep.structures[j.structure.unwrap()].storeys == n),
+            "{n} storeys"
+        );
+    }
+    for job in &jobs {
+        let st = &study.sweep.structures[job.structure.unwrap()];
+        let mut expected = FilterSettings::recommended_for(job.algorithm, st.storeys, &[]);
+        expected.trace_every = 0;
+        expected.loop_every = 0;
+        expected.validate = false;
+        assert_eq!(study.settings(job).unwrap(), expected, "{}", st.label);
+        // The same data set as the scaling study's run of that building.
+        let i = scaling
+            .sweep
+            .structures
+            .iter()
+            .position(|s| s.label == st.label)
+            .unwrap();
+        assert_eq!(
+            study.structure_config(job.structure, job.run).unwrap(),
+            scaling.structure_config(Some(i), job.run).unwrap(),
+            "{}",
+            st.label
+        );
+    }
+}
+
 #[test]
 fn the_committed_study_loads() {
     let study = Study::load(&workspace().join("experiments/scaling.toml")).unwrap();
