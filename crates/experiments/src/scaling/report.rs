@@ -509,9 +509,19 @@ fn goals(o: &mut String, reference: &[&Cell], fits: &[CostFit]) {
                     num(c.wall_s_mean / 60.0, 2)
                 )
             } else {
+                // The goal is stated for 500 particles; a study that runs another count (or
+                // pools its filters) measured the cost of a particle-step with that count.
+                let measured_with = if c.particles == 500 {
+                    String::new()
+                } else {
+                    format!(
+                        "; a particle-step's cost as measured with this study's {} particles",
+                        c.particles
+                    )
+                };
                 format!(
                     "from the {}-step runs' {clock} time: {} µs × 500 particles × {} steps = {} \
-                     min",
+                     min{measured_with}",
                     c.steps,
                     num(cost_of(c), 1),
                     FULL_RECORD_STEPS,
