@@ -20,7 +20,9 @@
 //!   `experiments/regression-defaults.toml` (`sysid filter`'s default settings, with bounds on
 //!   the 95 % coverage of k and c, into `results/regression-defaults/`) and
 //!   `experiments/regression-defaults-n5.toml` (the same on the 5-storey building, where they
-//!   sub-step against the velocity lag, into `results/regression-defaults-n5/`); fails when a
+//!   sub-step against the velocity lag, into `results/regression-defaults-n5/`) and
+//!   `experiments/regression-defaults-n10.toml` (on the 10-storey building, where the
+//!   MPF-EKF2's prior is per particle, into `results/regression-defaults-n10/`); fails when a
 //!   bound is breached.
 //!   Every run is computed unless `--resume` is given.
 //! - `docs`: regenerates the README's headline table (from the paper's Fig. 7 records),
@@ -99,7 +101,8 @@ enum Task {
         resume: bool,
     },
     /// Identification-accuracy regression checks (experiments/regression.toml,
-    /// regression-symplectic.toml, regression-defaults.toml and regression-defaults-n5.toml).
+    /// regression-symplectic.toml, regression-defaults.toml, regression-defaults-n5.toml and
+    /// regression-defaults-n10.toml).
     Regression {
         /// Worker threads (0: one per core).
         #[arg(long, default_value_t = 0)]
@@ -280,7 +283,8 @@ fn main() -> Result<()> {
             let sysid = build_sysid(&root)?;
             // The paper's (forward Euler) filters, the symplectic scheme's bounds, then the
             // default settings of `sysid filter` (with coverage bounds) on the paper's structure
-            // and on the 5-storey building (its velocity-lag sub-steps).
+            // and on the 5-storey building (its velocity-lag sub-steps) and the 10-storey one (its
+            // per-particle prior).
             for (config, out) in [
                 ("experiments/regression.toml", "results/regression"),
                 (
@@ -294,6 +298,10 @@ fn main() -> Result<()> {
                 (
                     "experiments/regression-defaults-n5.toml",
                     "results/regression-defaults-n5",
+                ),
+                (
+                    "experiments/regression-defaults-n10.toml",
+                    "results/regression-defaults-n10",
                 ),
             ] {
                 let mut cmd = Command::new(&sysid);

@@ -217,6 +217,43 @@ fn the_five_storey_regression_file_runs_the_settings_of_sysid_filter() {
     assert!(t.rel_error_mean["k5"] < 0.05, "{}", t.rel_error_mean["k5"]);
 }
 
+/// The 10-storey file runs what `sysid filter` uses without --config there (a prior mean per
+/// particle, no rejuvenation, `substeps = "auto"`, which takes one step from ten storeys on),
+/// and bounds every parameter of the 10-storey model and the coverage of k and c.
+#[test]
+fn the_ten_storey_regression_file_runs_the_settings_of_sysid_filter() {
+    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../../experiments/regression-defaults-n10.toml");
+    let f = RegressionFile::load(&path).expect("experiments/regression-defaults-n10.toml");
+    let names = f.study.param_names().unwrap();
+    assert_eq!(names.len(), 23, "{names:?}");
+    assert_eq!(f.study.sweep.structures[0].storeys, 10);
+    for job in f.study.jobs() {
+        let mut expected = FilterSettings::recommended_for(job.algorithm, 10, &[]);
+        expected.trace_every = 0;
+        expected.loop_every = 0;
+        expected.validate = false;
+        assert_eq!(f.study.settings(&job).unwrap(), expected);
+    }
+    let t = &f.thresholds["mpf-ekf2"];
+    assert_eq!(t.max_failed, 0);
+    for p in &names {
+        assert!(
+            t.rel_error_mean.contains_key(p) && t.ratio_sd.contains_key(p),
+            "{p}"
+        );
+    }
+    // One shared prior Gaussian in its place (what a change that lost the 10-storey rule would
+    // run) covered 88/120 = 0.73 of k and c on the same data sets, below the bound, and breached
+    // 43 of the file's 47 bounds (docs/calibration.md, "Regression bounds of the default
+    // settings").
+    assert!(
+        t.min_coverage95_kc.is_some_and(|c| c > 0.8),
+        "{:?}",
+        t.min_coverage95_kc
+    );
+}
+
 /// Run `i` of one algorithm: every parameter's 95 % interval is θ_true ± 5 %, shifted off the
 /// truth for the first `missed` of k1, k2, k3, c1, c2, c3.
 fn covering(i: u64, missed: usize) -> RunRecord {
