@@ -306,7 +306,9 @@ impl Study {
                         algorithm.name()
                     )
                 };
-                let settings = self.filter_for_structure(Some(i), algorithm).with_context(ctx)?;
+                let settings = self
+                    .filter_for_structure(Some(i), algorithm)
+                    .with_context(ctx)?;
                 crate::limits::check_filter_settings(&settings).with_context(ctx)?;
             }
         }

@@ -187,7 +187,8 @@ fn the_defaults_study_runs_the_settings_of_sysid_filter() {
     let jobs = study.jobs();
     for n in [3, 5, 10, 20, 40] {
         assert!(
-            jobs.iter().any(|j| study.sweep.structures[j.structure.unwrap()].storeys == n),
+            jobs.iter()
+                .any(|j| study.sweep.structures[j.structure.unwrap()].storeys == n),
             "{n} storeys"
         );
     }
