@@ -179,6 +179,17 @@ impl Structure {
     }
 }
 
+/// `settings` with `keys` (a table of `[filter]` keys) laid over them; an unknown key or a value
+/// of the wrong type is an error.
+fn laid_over(settings: &FilterSettings, keys: &toml::Table) -> Result<FilterSettings> {
+    let mut table = toml::Table::try_from(settings)
+        .map_err(|e| invalid!("the filter settings as a table: {e}"))?;
+    for (k, v) in keys {
+        table.insert(k.clone(), v.clone());
+    }
+    table.try_into().map_err(|e| invalid!("{e}"))
+}
+
 fn default_particles() -> Vec<usize> {
     vec![500]
 }
@@ -534,31 +545,20 @@ impl Study {
         algorithm: Algorithm,
     ) -> Result<FilterSettings> {
         let settings = self.filter_of(algorithm)?;
-        let Some(keys) = structure.and_then(|i| self.sweep.structures[i].filter.as_ref()) else {
-            return Ok(settings);
-        };
-        let mut table = toml::Table::try_from(&settings)
-            .map_err(|e| invalid!("the filter settings as a table: {e}"))?;
-        for (k, v) in keys {
-            table.insert(k.clone(), v.clone());
+        match structure.and_then(|i| self.sweep.structures[i].filter.as_ref()) {
+            Some(keys) => laid_over(&settings, keys),
+            None => Ok(settings),
         }
-        table.try_into().map_err(|e| invalid!("{e}"))
     }
 
     /// The study's filter settings for `algorithm`: `filter` with the keys of
     /// `filter_for.<algorithm>` laid over it.
     pub fn filter_of(&self, algorithm: Algorithm) -> Result<FilterSettings> {
-        let Some(keys) = self.filter_for.get(algorithm.name()) else {
-            return Ok(self.filter.clone());
-        };
-        let mut table = toml::Table::try_from(&self.filter)
-            .map_err(|e| invalid!("the filter settings as a table: {e}"))?;
-        for (k, v) in keys {
-            table.insert(k.clone(), v.clone());
+        match self.filter_for.get(algorithm.name()) {
+            Some(keys) => laid_over(&self.filter, keys)
+                .with_context(|| format!("table `filter_for.{}`", algorithm.name())),
+            None => Ok(self.filter.clone()),
         }
-        table
-            .try_into()
-            .map_err(|e| invalid!("table `filter_for.{}`: {e}", algorithm.name()))
     }
 
     /// The data set of run `run` as the filters see it (decimated when the study says so), with
