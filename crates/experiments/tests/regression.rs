@@ -184,19 +184,19 @@ fn the_defaults_regression_file_runs_the_settings_of_sysid_filter() {
     }
 }
 
-/// The 5-storey file runs what `sysid filter` uses without --config there (one shared prior
-/// Gaussian, the rejuvenation of n, `substeps = "auto"`, which takes four sub-steps on this
-/// building against the velocity lag), and bounds every parameter of the 5-storey model.
-#[test]
-fn the_five_storey_regression_file_runs_the_settings_of_sysid_filter() {
+/// The regression file `experiments/<file>` of the MPF-EKF2 on the `storeys`-storey building:
+/// every job runs what `sysid filter` uses there without --config (but keeps no trace, loops or
+/// validation), no run may fail, and every parameter of the model has both bounds.
+fn building_defaults_file(file: &str, storeys: usize, parameters: usize) -> RegressionFile {
     let path = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("../../experiments/regression-defaults-n5.toml");
-    let f = RegressionFile::load(&path).expect("experiments/regression-defaults-n5.toml");
+        .join("../../experiments")
+        .join(file);
+    let f = RegressionFile::load(&path).expect(file);
     let names = f.study.param_names().unwrap();
-    assert_eq!(names.len(), 13, "{names:?}");
-    assert_eq!(f.study.sweep.structures[0].storeys, 5);
+    assert_eq!(names.len(), parameters, "{names:?}");
+    assert_eq!(f.study.sweep.structures[0].storeys, storeys);
     for job in f.study.jobs() {
-        let mut expected = FilterSettings::recommended_for(job.algorithm, 5, &[]);
+        let mut expected = FilterSettings::recommended_for(job.algorithm, storeys, &[]);
         expected.trace_every = 0;
         expected.loop_every = 0;
         expected.validate = false;
@@ -204,13 +204,23 @@ fn the_five_storey_regression_file_runs_the_settings_of_sysid_filter() {
     }
     let t = &f.thresholds["mpf-ekf2"];
     assert_eq!(t.max_failed, 0);
-    assert!(t.min_coverage95_kc.is_some_and(|c| c > 0.5));
     for p in &names {
         assert!(
             t.rel_error_mean.contains_key(p) && t.ratio_sd.contains_key(p),
             "{p}"
         );
     }
+    f
+}
+
+/// The 5-storey file runs what `sysid filter` uses without --config there (one shared prior
+/// Gaussian, the rejuvenation of n, `substeps = "auto"`, which takes four sub-steps on this
+/// building against the velocity lag), and bounds every parameter of the 5-storey model.
+#[test]
+fn the_five_storey_regression_file_runs_the_settings_of_sysid_filter() {
+    let f = building_defaults_file("regression-defaults-n5.toml", 5, 13);
+    let t = &f.thresholds["mpf-ekf2"];
+    assert!(t.min_coverage95_kc.is_some_and(|c| c > 0.5));
     // The roof, whose bias the sub-steps remove: with one step per sample its mean error was
     // 5.3 % on the same data sets (docs/calibration.md, "Regression bounds of the default
     // settings"), above its bound.
@@ -222,27 +232,8 @@ fn the_five_storey_regression_file_runs_the_settings_of_sysid_filter() {
 /// and bounds every parameter of the 10-storey model and the coverage of k and c.
 #[test]
 fn the_ten_storey_regression_file_runs_the_settings_of_sysid_filter() {
-    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("../../experiments/regression-defaults-n10.toml");
-    let f = RegressionFile::load(&path).expect("experiments/regression-defaults-n10.toml");
-    let names = f.study.param_names().unwrap();
-    assert_eq!(names.len(), 23, "{names:?}");
-    assert_eq!(f.study.sweep.structures[0].storeys, 10);
-    for job in f.study.jobs() {
-        let mut expected = FilterSettings::recommended_for(job.algorithm, 10, &[]);
-        expected.trace_every = 0;
-        expected.loop_every = 0;
-        expected.validate = false;
-        assert_eq!(f.study.settings(&job).unwrap(), expected);
-    }
+    let f = building_defaults_file("regression-defaults-n10.toml", 10, 23);
     let t = &f.thresholds["mpf-ekf2"];
-    assert_eq!(t.max_failed, 0);
-    for p in &names {
-        assert!(
-            t.rel_error_mean.contains_key(p) && t.ratio_sd.contains_key(p),
-            "{p}"
-        );
-    }
     // One shared prior Gaussian in its place (what a change that lost the 10-storey rule would
     // run) covered 88/120 = 0.73 of k and c on the same data sets, below the bound, and breached
     // 43 of the file's 47 bounds (docs/calibration.md, "Regression bounds of the default
