@@ -662,21 +662,25 @@ mod tests {
             .to_path_buf()
     }
 
-    /// A fresh directory under the target directory holding `files` (path → text).
-    fn tree(name: &str, files: &[(&str, &str)]) -> PathBuf {
-        let dir = std::env::temp_dir().join(format!("xtask-imports-{name}-{}", std::process::id()));
-        let _ = fs::remove_dir_all(&dir);
+    /// A fresh directory under the system temp dir holding `files` (path → text), and the guard
+    /// that removes it when dropped (also when the test panics).
+    fn tree(name: &str, files: &[(&str, &str)]) -> (tempfile::TempDir, PathBuf) {
+        let tmp = tempfile::Builder::new()
+            .prefix(&format!("xtask-imports-{name}-"))
+            .tempdir()
+            .unwrap();
+        let dir = tmp.path().to_path_buf();
         for (path, text) in files {
             let p = dir.join(path);
             fs::create_dir_all(p.parent().unwrap()).unwrap();
             fs::write(p, text).unwrap();
         }
-        dir
+        (tmp, dir)
     }
 
     #[test]
     fn a_cycle_is_found_with_its_edges() {
-        let src = tree(
+        let (_tmp, src) = tree(
             "cycle",
             &[
                 ("lib.rs", "pub mod a; pub mod b; pub mod c; pub mod d;"),
@@ -700,12 +704,11 @@ mod tests {
         assert!(text.contains("inner.rs:1"), "{text}");
         // Comments, doc links and strings in `d` name `a` but are no imports.
         assert!(graph.edges["d"].is_empty());
-        fs::remove_dir_all(src).unwrap();
     }
 
     #[test]
     fn an_acyclic_tree_passes_with_its_layers() {
-        let src = tree(
+        let (_tmp, src) = tree(
             "acyclic",
             &[
                 ("lib.rs", "pub mod a; pub mod b; pub mod c;"),
@@ -727,7 +730,6 @@ mod tests {
                 vec!["a".to_string()]
             ]
         );
-        fs::remove_dir_all(src).unwrap();
     }
 
     #[test]
@@ -856,7 +858,7 @@ mod tests {
             None
         );
         assert_eq!(names_cli_layer("use my_experiments::cli::x;"), None);
-        let src = tree(
+        let (_tmp, src) = tree(
             "cli-layer",
             &[
                 ("lib.rs", "pub mod a; pub mod cli;"),
@@ -867,7 +869,6 @@ mod tests {
         );
         let graph = crate_graph(&src).unwrap();
         assert!(graph.edges["a"].contains_key("cli"));
-        fs::remove_dir_all(src).unwrap();
     }
 
     /// Every module the SPEC table of `docs/architecture.md` names exists.

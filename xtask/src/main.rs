@@ -711,9 +711,11 @@ mod tests {
 
     #[test]
     fn history_appends_and_compares() {
-        let dir = std::env::temp_dir().join(format!("xtask-history-{}", std::process::id()));
-        let path = dir.join("history.csv");
-        let _ = fs::remove_file(&path);
+        let dir = tempfile::Builder::new()
+            .prefix("xtask-history-")
+            .tempdir()
+            .unwrap();
+        let path = dir.path().join("history.csv");
         let m = |ns| Measured {
             name: "a, b".into(),
             median_ns: ns,
@@ -726,6 +728,5 @@ mod tests {
         assert_eq!(lines[0], HISTORY_HEADER);
         assert_eq!(lines[1], "2024-01-01,r1,\"a, b\",1000.0,500000000");
         assert_eq!(lines[2], "2024-01-02,r2,\"a, b\",2000.0,250000000");
-        fs::remove_dir_all(&dir).unwrap();
     }
 }

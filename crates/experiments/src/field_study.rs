@@ -724,12 +724,10 @@ group = "g"
 "#;
 
     fn load(text: &str) -> Result<FieldStudy> {
-        // One file per call: the tests run in parallel threads of one process.
-        static CALLS: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
-        let call = CALLS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-        let dir = std::env::temp_dir().join(format!("field-study-{}-{call}", std::process::id()));
-        std::fs::create_dir_all(&dir)?;
-        let path = dir.join("study.toml");
+        // One directory per call (the tests run in parallel threads of one process), removed
+        // when the study is loaded: loading reads no other file.
+        let dir = tempfile::Builder::new().prefix("field-study-").tempdir()?;
+        let path = dir.path().join("study.toml");
         std::fs::write(&path, text)?;
         FieldStudy::load(&path)
     }

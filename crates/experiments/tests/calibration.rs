@@ -285,15 +285,21 @@ fn summary_json_round_trips() {
     assert_eq!(back, s);
 }
 
-fn out_dir(test: &str) -> PathBuf {
-    std::env::temp_dir()
-        .join(format!("calibration-test-{}", std::process::id()))
-        .join(test)
+/// An output directory for `test`, not yet created, in a fresh directory under the system temp
+/// dir, and the guard that removes them when dropped (also when the test panics).
+fn out_dir(test: &str) -> (tempfile::TempDir, PathBuf) {
+    let tmp = tempfile::Builder::new()
+        .prefix("calibration-test-")
+        .tempdir()
+        .unwrap();
+    let dir = tmp.path().join(test);
+    (tmp, dir)
 }
 
 #[test]
 fn coverage_figure_is_well_formed() {
-    let path = out_dir("figure").join("coverage.svg");
+    let (_tmp, dir) = out_dir("figure");
+    let path = dir.join("coverage.svg");
     coverage_figure(&sweep(), &path, "Coverage — fig7 sweep").unwrap();
     validate_svg(&path).unwrap();
     let svg = std::fs::read_to_string(&path).unwrap();
@@ -318,10 +324,9 @@ fn coverage_figure_is_well_formed() {
     // A parameter without runs is drawn without points and without panicking.
     let mut s = sweep();
     s.algorithms[0].params[0] = calibrate_parameter("k1", &[], &STANDARD_LEVELS).unwrap();
-    let path = out_dir("figure").join("no-runs.svg");
+    let path = dir.join("no-runs.svg");
     coverage_figure(&s, &path, "no runs").unwrap();
     validate_svg(&path).unwrap();
-    let _ = std::fs::remove_dir_all(out_dir("figure"));
 }
 
 /// A standard normal draw (Box–Muller; the test needs no distribution crate).

@@ -15,11 +15,15 @@ fn finish_run(r: RunRecord, path: &std::path::Path) -> Result<(), Rejected> {
     finish(r, path).expect("the record is written").verdict()
 }
 
-fn out_path(test: &str) -> std::path::PathBuf {
-    let d = std::env::temp_dir().join(format!("checks-test-{}-{test}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d.join("run.json")
+/// `run.json` in a fresh directory under the system temp dir, and the guard that removes the
+/// directory when dropped (also when the test panics).
+fn out_path(test: &str) -> (tempfile::TempDir, std::path::PathBuf) {
+    let tmp = tempfile::Builder::new()
+        .prefix(&format!("checks-test-{test}-"))
+        .tempdir()
+        .unwrap();
+    let path = tmp.path().join("run.json");
+    (tmp, path)
 }
 
 fn healthy() -> RunRecord {
@@ -35,7 +39,7 @@ fn written(path: &std::path::Path) -> RunRecord {
 fn a_healthy_run_has_no_warnings_and_succeeds() {
     let r = healthy();
     assert!(check(&r).is_empty(), "{:?}", check(&r));
-    let path = out_path("healthy");
+    let (_tmp, path) = out_path("healthy");
     finish_run(r, &path).expect("a healthy run exits successfully");
     assert!(written(&path).warnings.is_empty());
 }
@@ -54,7 +58,7 @@ fn a_negative_stiffness_is_impossible_and_exits_non_zero() {
         "{}",
         w[0].message
     );
-    let path = out_path("negative");
+    let (_tmp, path) = out_path("negative");
     let err = finish_run(r, &path).expect_err("an impossible result must not exit successfully");
     assert!(err.to_string().contains("physically impossible"), "{err}");
     assert!(err.to_string().contains("k3"), "{err}");
@@ -74,7 +78,7 @@ fn a_zero_damping_and_a_nan_are_impossible() {
         kinds,
         vec![WarningKind::NonPositive, WarningKind::NonFinite]
     );
-    assert!(finish_run(r, &out_path("zero")).is_err());
+    assert!(finish_run(r, &out_path("zero").1).is_err());
 }
 
 #[test]
@@ -99,7 +103,7 @@ fn few_distinct_values_and_tiny_ess_warn_without_failing() {
     assert!(table.contains("RESTS ON FEW PARTICLES"), "{table}");
     assert!(table.contains("250 distinct values"), "{table}");
     assert!(table.contains("(TINY)"), "{table}");
-    let path = out_path("few");
+    let (_tmp, path) = out_path("few");
     finish_run(r, &path).expect("unreliable but possible: warn, exit 0");
     assert_eq!(written(&path).warnings, w);
 }
@@ -128,7 +132,7 @@ fn a_failed_run_warns_and_exits_non_zero() {
     r.steps_completed = 411;
     let w = check(&r);
     assert_eq!(w[0].kind, WarningKind::Failed);
-    let err = finish_run(r, &out_path("failed")).unwrap_err();
+    let err = finish_run(r, &out_path("failed").1).unwrap_err();
     assert!(matches!(err, Rejected::Failed { step: 412, .. }), "{err:?}");
     assert!(err.to_string().contains("failed at step 412"), "{err}");
 }
@@ -200,7 +204,7 @@ fn a_filter_left_out_of_its_pool_is_a_warning_written_into_the_record_and_not_fa
         "{}",
         w[0].message
     );
-    let path = out_path("left-out");
+    let (_tmp, path) = out_path("left-out");
     finish_run(r, &path).expect("a pool that kept a majority answers");
     let back = written(&path);
     assert_eq!(back.pool_left_out.len(), 1);

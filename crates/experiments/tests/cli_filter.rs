@@ -7,11 +7,15 @@ fn sysid() -> Command {
     Command::new(env!("CARGO_BIN_EXE_sysid"))
 }
 
-fn temp_dir(tag: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("sysid-cli-{tag}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
+/// A fresh directory under the system temp dir, unique per test, and the guard that removes it
+/// when dropped (also when the test panics).
+fn temp_dir(tag: &str) -> (tempfile::TempDir, PathBuf) {
+    let tmp = tempfile::Builder::new()
+        .prefix(&format!("sysid-cli-{tag}-"))
+        .tempdir()
+        .unwrap();
+    let d = tmp.path().to_path_buf();
+    (tmp, d)
 }
 
 fn simulate(dir: &std::path::Path) {
@@ -41,7 +45,7 @@ fn record_without_timing(path: &std::path::Path) -> serde_json::Value {
 
 #[test]
 fn filter_writes_a_complete_deterministic_record() {
-    let dir = temp_dir("ok");
+    let (_tmp, dir) = temp_dir("ok");
     let data = dir.join("d");
     simulate(&data);
     for alg in ["bootstrap", "mln-rbpf", "storvik", "mpf-ekf2"] {
@@ -92,7 +96,7 @@ fn filter_writes_a_complete_deterministic_record() {
 
 #[test]
 fn a_hopeless_measurement_is_a_recorded_failure_and_a_nonzero_exit() {
-    let dir = temp_dir("fail");
+    let (_tmp, dir) = temp_dir("fail");
     let data = dir.join("d");
     simulate(&data);
     // Replace one measured acceleration by 1e11 (within the limits on data values): every
@@ -136,7 +140,7 @@ fn a_hopeless_measurement_is_a_recorded_failure_and_a_nonzero_exit() {
 
 #[test]
 fn bad_input_is_a_clear_error_not_a_panic() {
-    let dir = temp_dir("bad");
+    let (_tmp, dir) = temp_dir("bad");
     let o = sysid()
         .args(["filter", "--algorithm", "mpf-ekf2", "--data"])
         .arg(dir.join("missing"))
@@ -176,7 +180,7 @@ fn bad_input_is_a_clear_error_not_a_panic() {
 /// out-of-range count is refused naming the field.
 #[test]
 fn substeps_run_where_offered_and_are_refused_by_name_elsewhere() {
-    let dir = temp_dir("substeps");
+    let (_tmp, dir) = temp_dir("substeps");
     let data = dir.join("d");
     simulate(&data);
     let filter = |alg: &str, m: &str, out: &std::path::Path| {

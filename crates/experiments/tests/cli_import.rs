@@ -12,11 +12,15 @@ fn root() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
 }
 
-fn temp_dir(tag: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("sysid-import-{tag}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
+/// A fresh directory under the system temp dir, unique per test, and the guard that removes it
+/// when dropped (also when the test panics).
+fn temp_dir(tag: &str) -> (tempfile::TempDir, PathBuf) {
+    let tmp = tempfile::Builder::new()
+        .prefix(&format!("sysid-import-{tag}-"))
+        .tempdir()
+        .unwrap();
+    let d = tmp.path().to_path_buf();
+    (tmp, d)
 }
 
 fn import(map: &str, out: &Path) -> Output {
@@ -38,7 +42,7 @@ fn text(o: &Output) -> String {
 
 #[test]
 fn import_then_filter_the_overpass() {
-    let dir = temp_dir("overpass");
+    let (_tmp, dir) = temp_dir("overpass");
     let data = dir.join("overpass-bent");
     let o = import("experiments/real/overpass-bent.toml", &data);
     let t = text(&o);
@@ -92,7 +96,7 @@ fn import_then_filter_the_overpass() {
 
 #[test]
 fn import_then_filter_the_frame_runs_and_says_what_it_repaired() {
-    let dir = temp_dir("frame");
+    let (_tmp, dir) = temp_dir("frame");
     let data = dir.join("sine-1.0");
     let o = import("experiments/real/frame-sine-1.0.toml", &data);
     let t = text(&o);
@@ -137,7 +141,7 @@ fn import_then_filter_the_frame_runs_and_says_what_it_repaired() {
 
 #[test]
 fn a_bad_map_or_output_is_refused_by_name_and_nothing_is_written() {
-    let dir = temp_dir("refuse");
+    let (_tmp, dir) = temp_dir("refuse");
     let map = dir.join("bad.toml");
     std::fs::write(
         &map,

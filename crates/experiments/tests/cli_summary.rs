@@ -5,8 +5,11 @@ use std::process::Command;
 
 #[test]
 fn filter_prints_a_summary_table_and_records_its_warnings() {
-    let dir = std::env::temp_dir().join(format!("sysid-summary-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
+    let tmp = tempfile::Builder::new()
+        .prefix("sysid-summary-")
+        .tempdir()
+        .unwrap();
+    let dir = tmp.path();
     let data = dir.join("d");
     let st = Command::new(env!("CARGO_BIN_EXE_sysid"))
         .args(["simulate", "--preset", "paper-3dof", "--seed", "1"])

@@ -10,11 +10,15 @@ fn sysid() -> Command {
     Command::new(env!("CARGO_BIN_EXE_sysid"))
 }
 
-fn temp_dir(tag: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("sysid-validate-{tag}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
+/// A fresh directory under the system temp dir, unique per test, and the guard that removes it
+/// when dropped (also when the test panics).
+fn temp_dir(tag: &str) -> (tempfile::TempDir, PathBuf) {
+    let tmp = tempfile::Builder::new()
+        .prefix(&format!("sysid-validate-{tag}-"))
+        .tempdir()
+        .unwrap();
+    let d = tmp.path().to_path_buf();
+    (tmp, d)
 }
 
 fn run(args: &[&str], paths: &[&Path]) -> Output {
@@ -63,7 +67,7 @@ fn json(path: &Path) -> serde_json::Value {
 
 #[test]
 fn cross_validation_end_to_end() {
-    let dir = temp_dir("e2e");
+    let (_tmp, dir) = temp_dir("e2e");
     let (d1, d2, d4) = (dir.join("d1"), dir.join("d2"), dir.join("d4"));
     field_data(&d1, "1", "elcentro", "3");
     field_data(&d2, "2", "kanai-tajimi", "3");
@@ -208,5 +212,4 @@ fn cross_validation_end_to_end() {
         .unwrap();
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(!out.status.success() && err.contains("--draws"), "{err}");
-    let _ = std::fs::remove_dir_all(&dir);
 }

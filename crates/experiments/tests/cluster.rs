@@ -12,11 +12,15 @@ use experiments::cluster::status::status;
 use experiments::cluster::submit::{finish, submit};
 use experiments::cluster::{ClusterError, Kind, Plan, SlurmOptions};
 
-fn temp_dir(tag: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("sysid-cluster-{tag}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
+/// A fresh directory under the system temp dir, unique per test, and the guard that removes it
+/// when dropped (also when the test panics).
+fn temp_dir(tag: &str) -> (tempfile::TempDir, PathBuf) {
+    let tmp = tempfile::Builder::new()
+        .prefix(&format!("sysid-cluster-{tag}-"))
+        .tempdir()
+        .unwrap();
+    let d = tmp.path().to_path_buf();
+    (tmp, d)
 }
 
 /// A study with a structure axis: its records go flat into `records/`, each with a `.cpu`
@@ -80,7 +84,7 @@ fn run_shard(plan: &Plan, i: usize) {
 
 #[test]
 fn a_structure_study_run_as_shards_and_finished_equals_the_study_run_whole() {
-    let root = temp_dir("structures");
+    let (_tmp, root) = temp_dir("structures");
     let config = root.join("study.toml");
     std::fs::write(&config, STRUCTURES).unwrap();
     let plan = plan(&root, Kind::Scaling, &config, 4);
@@ -135,12 +139,11 @@ fn a_structure_study_run_as_shards_and_finished_equals_the_study_run_whole() {
     assert_ne!(changed, text);
     std::fs::write(&one, changed).unwrap();
     assert_eq!(compare(&local, &plan.out).unwrap().len(), 1);
-    std::fs::remove_dir_all(&root).unwrap();
 }
 
 #[test]
 fn a_missing_shard_stops_the_finish_before_the_report_and_is_named() {
-    let root = temp_dir("missing");
+    let (_tmp, root) = temp_dir("missing");
     let config = root.join("study.toml");
     std::fs::write(&config, STRUCTURES).unwrap();
     let plan = plan(&root, Kind::Study, &config, 3);
@@ -168,12 +171,11 @@ fn a_missing_shard_stops_the_finish_before_the_report_and_is_named() {
     run_shard(&plan, 1);
     finish(&plan).unwrap();
     assert!(plan.out.join("REPORT.md").is_file());
-    std::fs::remove_dir_all(&root).unwrap();
 }
 
 #[test]
 fn a_dry_run_writes_nothing_and_too_many_tasks_are_refused() {
-    let root = temp_dir("dry");
+    let (_tmp, root) = temp_dir("dry");
     let config = root.join("study.toml");
     std::fs::write(&config, STRUCTURES).unwrap();
     let p = plan(&root, Kind::Study, &config, 4);
@@ -191,5 +193,4 @@ fn a_dry_run_writes_nothing_and_too_many_tasks_are_refused() {
         .unwrap_err()
         .to_string();
     assert!(e.contains("bad.toml"), "{e}");
-    std::fs::remove_dir_all(&root).unwrap();
 }

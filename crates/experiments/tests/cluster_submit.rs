@@ -27,11 +27,15 @@ loop_every = 0
 validate = false
 "#;
 
-fn temp_dir(tag: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("sysid-cluster-{tag}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
+/// A fresh directory under the system temp dir, unique per test, and the guard that removes it
+/// when dropped (also when the test panics).
+fn temp_dir(tag: &str) -> (tempfile::TempDir, PathBuf) {
+    let tmp = tempfile::Builder::new()
+        .prefix(&format!("sysid-cluster-{tag}-"))
+        .tempdir()
+        .unwrap();
+    let d = tmp.path().to_path_buf();
+    (tmp, d)
 }
 
 fn script(path: &Path, body: &str) {
@@ -101,7 +105,7 @@ fn submissions(out: &Path) -> Vec<serde_json::Value> {
 
 #[test]
 fn submissions_chain_the_finish_job_to_the_arrays_real_ids() {
-    let root = temp_dir("submit");
+    let (_tmp, root) = temp_dir("submit");
     let bin = fake_slurm(&root);
     let config = root.join("study.toml");
     std::fs::write(&config, STUDY).unwrap();
@@ -180,5 +184,4 @@ fn submissions_chain_the_finish_job_to_the_arrays_real_ids() {
             format!("sbatch --parsable --dependency=afterany:103:101 {finish}"),
         ]
     );
-    std::fs::remove_dir_all(&root).unwrap();
 }

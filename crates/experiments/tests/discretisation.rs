@@ -28,10 +28,12 @@ loop_every = 0
 validate = false
 "#
     );
-    let dir =
-        std::env::temp_dir().join(format!("sysid-disc-{}-{}", std::process::id(), text.len()));
-    std::fs::create_dir_all(&dir).unwrap();
-    let path = dir.join("t.toml");
+    // The study names no file beside it: its directory can go once it is loaded.
+    let dir = tempfile::Builder::new()
+        .prefix("sysid-disc-")
+        .tempdir()
+        .unwrap();
+    let path = dir.path().join("t.toml");
     std::fs::write(&path, text).unwrap();
     Study::load(&path).unwrap()
 }

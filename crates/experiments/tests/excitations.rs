@@ -14,11 +14,15 @@ use experiments::scaling::Options;
 use experiments::study::Study;
 use models::dataset::ExcitationSource;
 
-fn temp_dir(tag: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("sysid-excitations-{tag}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
+/// A fresh directory under the system temp dir, unique per test, and the guard that removes it
+/// when dropped (also when the test panics).
+fn temp_dir(tag: &str) -> (tempfile::TempDir, PathBuf) {
+    let tmp = tempfile::Builder::new()
+        .prefix(&format!("sysid-excitations-{tag}-"))
+        .tempdir()
+        .unwrap();
+    let d = tmp.path().to_path_buf();
+    (tmp, d)
 }
 
 fn workspace() -> PathBuf {
@@ -74,7 +78,7 @@ fn write_study(dir: &Path, text: &str) -> PathBuf {
 
 #[test]
 fn excitation_field_reaches_the_data_and_bad_ones_are_named() {
-    let dir = temp_dir("field");
+    let (_tmp, dir) = temp_dir("field");
     let study = Study::load(&write_study(&dir, SMALL)).unwrap();
     let control = study.structure_config(Some(0), 0).unwrap();
     assert_eq!(control.excitation, ExcitationSource::ElCentro);
@@ -117,7 +121,6 @@ fn excitation_field_reaches_the_data_and_bad_ones_are_named() {
             );
         }
     }
-    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 #[test]
@@ -143,7 +146,7 @@ fn the_committed_study_yields_every_record_like_the_paper() {
 
 #[test]
 fn small_study_end_to_end() {
-    let dir = temp_dir("e2e");
+    let (_tmp, dir) = temp_dir("e2e");
     let out = dir.join("out");
     let opts = Options {
         config: write_study(&dir, SMALL),
@@ -187,5 +190,4 @@ fn small_study_end_to_end() {
     );
     assert_eq!(verdict["differences"][0][0], "loma");
     assert_eq!(verdict["differences"][0][1]["n"], 2);
-    std::fs::remove_dir_all(&dir).unwrap();
 }

@@ -131,10 +131,20 @@ fn assert_every_k_within_5_percent(
     }
 }
 
+/// A data-set directory, not yet created, inside a fresh directory under the system temp dir,
+/// and the guard that removes them when dropped (also when the test panics).
+fn scratch(tag: &str) -> (tempfile::TempDir, std::path::PathBuf) {
+    let tmp = tempfile::Builder::new()
+        .prefix(&format!("sysid-{tag}-"))
+        .tempdir()
+        .unwrap();
+    let dir = tmp.path().join("data");
+    (tmp, dir)
+}
+
 #[test]
 fn a_stiff_building_is_identified_with_data_scaled_priors() {
-    let dir = std::env::temp_dir().join(format!("sysid-stiff-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
+    let (_tmp, dir) = scratch("stiff");
     let scale = 5.0;
     let k_true = write_stiff_field_data(&dir, scale, 0.005 / scale, 7);
     let data = load_dir(&dir).unwrap();
@@ -159,7 +169,6 @@ fn a_stiff_building_is_identified_with_data_scaled_priors() {
     assert!(r.config["prior_from_data"]["k_median"].as_f64().is_some());
     // "Within a few percent": the paper's MPF-EKF2 errors on k are 1–3% (SPEC §8).
     assert_every_k_within_5_percent(&r, &k_true, &scaled.describe());
-    let _ = std::fs::remove_dir_all(&dir);
 }
 
 /// The realistic case: the chain time-scaled ×4 (k = 128, c = 1) sampled at 200 Hz — a stiff
@@ -169,8 +178,7 @@ fn a_stiff_building_is_identified_with_data_scaled_priors() {
 /// data set (noise seed 104, filter seed 1) gave k1 5.4 % low; with the rule 1.3 %.
 #[test]
 fn a_stiff_building_sampled_at_200_hz_is_sub_stepped_for_its_bouc_wen_element() {
-    let dir = std::env::temp_dir().join(format!("sysid-stiff-200-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
+    let (_tmp, dir) = scratch("stiff-200");
     let k_true = write_stiff_field_data(&dir, 4.0, 0.005, 104);
     let data = load_dir(&dir).unwrap();
     let settings = FilterSettings {
@@ -186,7 +194,6 @@ fn a_stiff_building_sampled_at_200_hz_is_sub_stepped_for_its_bouc_wen_element() 
     assert!((omega1_dt - 0.0277).abs() < 0.001, "{h}");
     assert_eq!(r.config["spec"]["substeps"].as_u64(), Some(8), "{h}");
     assert_every_k_within_5_percent(&r, &k_true, &h.to_string());
-    let _ = std::fs::remove_dir_all(&dir);
 }
 
 /// How `sysid filter` settles the MPF-EKF2's settings on the stiff building's data in `dir`
@@ -224,8 +231,7 @@ fn settled(
 /// the rule's 4000 bring every k within 5 %.
 #[test]
 fn a_coarsely_sampled_hysteretic_building_takes_more_particles() {
-    let dir = std::env::temp_dir().join(format!("sysid-stiff-particles-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
+    let (_tmp_dir, dir) = scratch("stiff-particles");
     let k_true = write_stiff_field_data(&dir, 4.0, 0.005, 304);
     let data = load_dir(&dir).unwrap();
     let flags = structure();
@@ -267,17 +273,13 @@ fn a_coarsely_sampled_hysteretic_building_takes_more_particles() {
     assert!(r.failure.is_none(), "{:?}", r.failure);
     assert_eq!(r.particles, HYSTERETIC_PARTICLES);
     assert_every_k_within_5_percent(&r, &k_true, "settled by the rule");
-    let _ = std::fs::remove_dir_all(&dir);
     // The same data at the paper's rate scaled with the building (800 Hz, ω₁·dt ≈ 0.007): no
     // sub-steps, the usual count.
-    let dir800 =
-        std::env::temp_dir().join(format!("sysid-stiff-particles-800-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir800);
+    let (_tmp_dir800, dir800) = scratch("stiff-particles-800");
     write_stiff_field_data(&dir800, 4.0, 0.00125, 304);
     let data800 = load_dir(&dir800).unwrap();
     let (s, _) = settled(&data800, &dir800, Algorithm::MpfEkf2, &flags, None, false);
     assert_eq!(s.particles, RECOMMENDED_PARTICLES);
-    let _ = std::fs::remove_dir_all(&dir800);
 }
 
 fn env<T: std::str::FromStr>(name: &str, default: T) -> T {
@@ -330,7 +332,7 @@ fn stiff_sweep() {
         settings.structure = structure();
         settings
     };
-    let dir = std::env::temp_dir().join(format!("sysid-stiff-sweep-{}", std::process::id()));
+    let (_tmp, dir) = scratch("stiff-sweep");
     let (mut sum, mut worst, mut count) = (0.0_f64, 0.0_f64, 0);
     for noise in first..first + seeds {
         let _ = std::fs::remove_dir_all(&dir);
@@ -398,7 +400,6 @@ fn stiff_sweep() {
                 .unwrap_or_default()
         );
     }
-    let _ = std::fs::remove_dir_all(&dir);
     println!(
         "scale {scale} {hz} Hz: mean |k error| {:.1} %, worst {:.1} % over {seeds} data sets",
         100.0 * sum / count as f64,

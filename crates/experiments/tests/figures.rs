@@ -16,11 +16,15 @@ use experiments::record::{Loop, RunRecord, Timing, Validation, Versions};
 const NAMES: [&str; 9] = ["k1", "k2", "k3", "c1", "c2", "c3", "beta", "gamma", "n"];
 const THETA_TRUE: [f64; 9] = [8.0, 8.0, 8.0, 0.25, 0.25, 0.25, 2.0, 1.0, 2.0];
 
-/// A fresh output directory per test (tests of this file run in parallel).
-fn out_dir(test: &str) -> PathBuf {
-    std::env::temp_dir()
-        .join(format!("figures-test-{}", std::process::id()))
-        .join(test)
+/// A fresh output directory per test (tests of this file run in parallel), not yet created, in
+/// a temporary directory whose guard removes it when dropped (also when the test panics).
+fn out_dir(test: &str) -> (tempfile::TempDir, PathBuf) {
+    let tmp = tempfile::Builder::new()
+        .prefix("figures-test-")
+        .tempdir()
+        .unwrap();
+    let dir = tmp.path().join(test);
+    (tmp, dir)
 }
 
 /// A synthetic run: posterior means relax from 1.5 × truth towards (1 + bias) × truth with s.d.s
@@ -138,7 +142,7 @@ fn has_label(svg: &str, label: &str) -> bool {
 
 #[test]
 fn convergence_figure_has_panels_legend_and_truth() {
-    let dir = out_dir("convergence");
+    let (_tmp, dir) = out_dir("convergence");
     let a = record("MLN-RBPF", 0, 0.02);
     let b = record("Storvik", 0, -0.1);
     let path = dir.join("nested/fig5.svg");
@@ -173,7 +177,7 @@ fn convergence_figure_has_panels_legend_and_truth() {
 
 #[test]
 fn convergence_survives_nan_and_missing_truth() {
-    let dir = out_dir("convergence-nan");
+    let (_tmp, dir) = out_dir("convergence-nan");
     let mut a = record("Bootstrap", 0, 0.3);
     a.theta_true = None;
     a.rel_error = None;
@@ -209,7 +213,7 @@ fn convergence_survives_nan_and_missing_truth() {
 
 #[test]
 fn convergence_rejects_bad_input_with_errors() {
-    let dir = out_dir("convergence-bad");
+    let (_tmp, dir) = out_dir("convergence-bad");
     assert!(convergence(&[], &dir.join("none.svg"), "none").is_err());
     let a = record("A", 0, 0.0);
     let mut b = record("B", 0, 0.0);
@@ -219,7 +223,7 @@ fn convergence_rejects_bad_input_with_errors() {
 
 #[test]
 fn convergence_grid_adapts_to_parameter_count() {
-    let dir = out_dir("convergence-grid");
+    let (_tmp, dir) = out_dir("convergence-grid");
     let mut a = record("A", 0, 0.0);
     a.param_names.truncate(2);
     a.theta_true.as_mut().unwrap().truncate(2);
@@ -237,7 +241,7 @@ fn convergence_grid_adapts_to_parameter_count() {
 
 #[test]
 fn hysteresis_figure_with_and_without_loops() {
-    let dir = out_dir("hysteresis");
+    let (_tmp, dir) = out_dir("hysteresis");
     let a = record("MPF-EKF2", 0, 0.05);
     let path = dir.join("fig8b.svg");
     hysteresis(&a, &path, "Fig. 8 — validation loop").unwrap();
@@ -272,7 +276,7 @@ fn hysteresis_figure_with_and_without_loops() {
 
 #[test]
 fn crosses_figure_counts_runs_and_skips_failures() {
-    let dir = out_dir("crosses");
+    let (_tmp, dir) = out_dir("crosses");
     let mlnrbpf: Vec<RunRecord> = (0..5)
         .map(|i| record("MLN-RBPF", i, 0.02 * i as f64))
         .collect();
@@ -315,7 +319,7 @@ fn crosses_figure_counts_runs_and_skips_failures() {
 
 #[test]
 fn state_error_figure_has_states_and_algorithms() {
-    let dir = out_dir("states");
+    let (_tmp, dir) = out_dir("states");
     let a: Vec<RunRecord> = (0..3).map(|i| record("MLN-RBPF", i, 0.1)).collect();
     let mut b: Vec<RunRecord> = (0..3).map(|i| record("MPF-EKF2", i, -0.3)).collect();
     b[2].online_states = None;
@@ -346,7 +350,7 @@ fn state_error_figure_has_states_and_algorithms() {
 
 #[test]
 fn validate_svg_rejects_non_svg() {
-    let dir = out_dir("validate");
+    let (_tmp, dir) = out_dir("validate");
     std::fs::create_dir_all(&dir).unwrap();
     let cases = [
         ("empty.svg", ""),
@@ -378,7 +382,7 @@ fn numbers_between(svg: &str, start: &str, end: &str) -> Vec<f64> {
 
 #[test]
 fn convergence_axes_include_every_mean() {
-    let dir = out_dir("convergence-negative");
+    let (_tmp, dir) = out_dir("convergence-negative");
     // γ's posterior mean runs off to −2.6 although the truth (1) is positive (Fig. 4 (a)).
     let mut a = record("Bootstrap", 0, 0.0);
     for row in a.trace.param_mean.iter_mut().skip(5) {
@@ -408,7 +412,7 @@ fn convergence_axes_include_every_mean() {
 
 #[test]
 fn crosses_panels_have_their_own_scales() {
-    let dir = out_dir("crosses-scales");
+    let (_tmp, dir) = out_dir("crosses-scales");
     // Stiffness ratios within ±2%, β at 3 × its truth.
     let runs: Vec<RunRecord> = (0..6)
         .map(|i| {
@@ -445,7 +449,7 @@ fn crosses_panels_have_their_own_scales() {
 
 #[test]
 fn state_errors_draw_the_distribution_of_every_run() {
-    let dir = out_dir("states-distribution");
+    let (_tmp, dir) = out_dir("states-distribution");
     let a: Vec<RunRecord> = (0..50)
         .map(|i| record("MLN-RBPF", i, 0.01 * i as f64))
         .collect();

@@ -74,7 +74,7 @@ fn filter_seeds() -> Vec<Vec<u8>> {
 
 #[test]
 fn fuzz_study_files() {
-    let dir = scratch("study");
+    let (_tmp, dir) = scratch("study");
     let seeds = study_seeds();
     run(
         "study",
@@ -88,7 +88,7 @@ fn fuzz_study_files() {
 
 #[test]
 fn fuzz_filter_configs() {
-    let dir = scratch("filter");
+    let (_tmp, dir) = scratch("filter");
     let seeds = filter_seeds();
     // The seeds themselves are valid.
     for s in &seeds {
@@ -108,7 +108,7 @@ fn fuzz_filter_configs() {
 /// Every input of the corpus is handled.
 #[test]
 fn corpus_inputs_are_handled() {
-    let dir = scratch("config-corpus");
+    let (_tmp, dir) = scratch("config-corpus");
     let mut count = 0;
     for target in ["study", "filter"] {
         let corpus = Path::new(env!("CARGO_MANIFEST_DIR"))

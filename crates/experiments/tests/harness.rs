@@ -11,11 +11,15 @@ use experiments::reproduce::{figure_files, reproduce, Done, Options};
 use experiments::study::Study;
 use experiments::sweep::{merge, run_sweep, Recompute, Shard, SweepOptions, SweepOutcome};
 
-fn temp_dir(tag: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("sysid-harness-{tag}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
+/// A fresh directory under the system temp dir, unique per test, and the guard that removes it
+/// when dropped (also when the test panics).
+fn temp_dir(tag: &str) -> (tempfile::TempDir, PathBuf) {
+    let tmp = tempfile::Builder::new()
+        .prefix(&format!("sysid-harness-{tag}-"))
+        .tempdir()
+        .unwrap();
+    let d = tmp.path().to_path_buf();
+    (tmp, d)
 }
 
 /// A small study: 2 s of the paper preset, all four algorithms, 3 runs, 40 particles.
@@ -90,8 +94,8 @@ fn read_dir_records(dir: &Path) -> Vec<String> {
 #[test]
 fn sweeps_are_thread_count_invariant_resumable_and_shardable() {
     let study = small_study();
-    let one = temp_dir("t1");
-    let two = temp_dir("t2");
+    let (_tmp_one, one) = temp_dir("t1");
+    let (_tmp_two, two) = temp_dir("t2");
     let a = sweep(&study, &one, 1, Shard::default());
     let b = sweep(&study, &two, 2, Shard::default());
     assert_eq!(a.len(), 12);
@@ -111,7 +115,7 @@ fn sweeps_are_thread_count_invariant_resumable_and_shardable() {
     }
 
     // Resume: drop some records (as if the sweep was interrupted) and run again.
-    let resumed = temp_dir("resume");
+    let (_tmp_resumed, resumed) = temp_dir("resume");
     sweep(&study, &resumed, 2, Shard::default());
     let mut removed = 0;
     for (i, job) in study.jobs().iter().enumerate() {
@@ -164,12 +168,12 @@ fn sweeps_are_thread_count_invariant_resumable_and_shardable() {
     assert_eq!(read_dir_records(&resumed), read_dir_records(&one));
 
     // Shards 0/2 and 1/2 into separate directories, merged, equal the unsharded sweep.
-    let s0 = temp_dir("shard0");
-    let s1 = temp_dir("shard1");
+    let (_tmp_s0, s0) = temp_dir("shard0");
+    let (_tmp_s1, s1) = temp_dir("shard1");
     let r0 = sweep(&study, &s0, 1, Shard { index: 0, count: 2 });
     let r1 = sweep(&study, &s1, 1, Shard { index: 1, count: 2 });
     assert_eq!(r0.len() + r1.len(), 12);
-    let merged = temp_dir("merged");
+    let (_tmp_merged, merged) = temp_dir("merged");
     let pairs = |parts: &[&PathBuf]| -> Vec<(PathBuf, PathBuf)> {
         parts
             .iter()
@@ -220,7 +224,7 @@ fn quick(experiments: &Path, out: &Path, resume: bool) -> Done {
 
 #[test]
 fn quick_reproduction_draws_every_figure_and_the_report() {
-    let out = temp_dir("quick");
+    let (_tmp_out, out) = temp_dir("quick");
     let experiments = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../experiments");
     // A fresh output directory: every run is executed.
     let done = quick(&experiments, &out, false);
@@ -279,7 +283,7 @@ fn quick_reproduction_draws_every_figure_and_the_report() {
 
     // Changed configs (fig7's master seed, fig4's quick duration) with --resume: the records of
     // those studies are computed again, the others reused.
-    let changed = temp_dir("quick-changed-configs");
+    let (_tmp_changed, changed) = temp_dir("quick-changed-configs");
     for name in experiments::reproduce::STUDIES {
         let file = format!("{name}.toml");
         let mut text = std::fs::read_to_string(experiments.join(&file)).unwrap();

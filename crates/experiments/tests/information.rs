@@ -14,11 +14,15 @@ use experiments::pipeline::{identify, Algorithm, RunInput};
 use experiments::settings::FilterSettings;
 use models::dataset::{generate, load_dir, DatasetConfig, LoadedDataset, MEASURED};
 
-fn temp_dir(tag: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("sysid-information-{tag}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
+/// A fresh directory under the system temp dir, unique per test, and the guard that removes it
+/// when dropped (also when the test panics).
+fn temp_dir(tag: &str) -> (tempfile::TempDir, PathBuf) {
+    let tmp = tempfile::Builder::new()
+        .prefix(&format!("sysid-information-{tag}-"))
+        .tempdir()
+        .unwrap();
+    let d = tmp.path().to_path_buf();
+    (tmp, d)
 }
 
 /// 4 s of a 3-storey building-chain data set (seed 7), linear or with its preset's Bouc–Wen
@@ -50,7 +54,7 @@ fn on<'a>(data: &'a LoadedDataset, measured: &'a Path, name: &'a str) -> ScoredD
 
 #[test]
 fn the_limit_is_the_likelihoods_maximum_and_its_curvature() {
-    let dir = temp_dir("maximum");
+    let (_tmp, dir) = temp_dir("maximum");
     let d = data_dir(&dir, "linear", true);
     let data = load_dir(&d).unwrap();
     let chain = data.true_chain().unwrap();
@@ -151,12 +155,11 @@ fn the_limit_is_the_likelihoods_maximum_and_its_curvature() {
         .unwrap_err()
         .to_string();
     assert!(e.contains("belongs to none"), "{e}");
-    let _ = std::fs::remove_dir_all(&dir);
 }
 
 #[test]
 fn a_hysteretic_record_and_bad_steps_are_refused() {
-    let dir = temp_dir("refused");
+    let (_tmp, dir) = temp_dir("refused");
     let d = data_dir(&dir, "hysteretic", false);
     let data = load_dir(&d).unwrap();
     let measured = d.join(MEASURED);
@@ -174,5 +177,4 @@ fn a_hysteretic_record_and_bad_steps_are_refused() {
         information_limit(&scored, None, 0.5, &mut |_| {}).unwrap_err()
     );
     assert!(e.contains("--step"), "{e}");
-    let _ = std::fs::remove_dir_all(&dir);
 }

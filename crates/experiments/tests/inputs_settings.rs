@@ -6,11 +6,15 @@ use experiments::limits::{check_particle_cloud, load_filter_settings, MAX_PARTIC
 use experiments::study::Study;
 use std::path::{Path, PathBuf};
 
-fn temp_dir(tag: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("sysid-settings-{tag}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
+/// A fresh directory under the system temp dir, unique per test, and the guard that removes it
+/// when dropped (also when the test panics).
+fn temp_dir(tag: &str) -> (tempfile::TempDir, PathBuf) {
+    let tmp = tempfile::Builder::new()
+        .prefix(&format!("sysid-settings-{tag}-"))
+        .tempdir()
+        .unwrap();
+    let d = tmp.path().to_path_buf();
+    (tmp, d)
 }
 
 fn load_err(dir: &Path, text: &str) -> (PathBuf, String) {
@@ -22,7 +26,7 @@ fn load_err(dir: &Path, text: &str) -> (PathBuf, String) {
 
 #[test]
 fn filter_settings_out_of_range_are_named() {
-    let dir = temp_dir("filter");
+    let (_tmp, dir) = temp_dir("filter");
     for (text, field) in [
         ("window = 0\n", "`window`"),
         ("noise_fraction = 1e-9\n", "`noise_fraction`"),
@@ -56,7 +60,7 @@ fn filter_settings_out_of_range_are_named() {
 
 #[test]
 fn huge_study_data_sizes_are_refused_when_the_study_is_read() {
-    let dir = temp_dir("study");
+    let (_tmp, dir) = temp_dir("study");
     let fig4 = std::fs::read_to_string(
         Path::new(env!("CARGO_MANIFEST_DIR")).join("../../experiments/fig4.toml"),
     )

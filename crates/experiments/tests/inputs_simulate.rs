@@ -13,11 +13,15 @@ fn sysid() -> Command {
     c
 }
 
-fn temp_dir(tag: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("sysid-inputs-{tag}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
+/// A fresh directory under the system temp dir, unique per test, and the guard that removes it
+/// when dropped (also when the test panics).
+fn temp_dir(tag: &str) -> (tempfile::TempDir, PathBuf) {
+    let tmp = tempfile::Builder::new()
+        .prefix(&format!("sysid-inputs-{tag}-"))
+        .tempdir()
+        .unwrap();
+    let d = tmp.path().to_path_buf();
+    (tmp, d)
 }
 
 fn run(args: &[&str]) -> Output {
@@ -76,7 +80,7 @@ fn simulate_args(seed: u64, out: &Path) -> Vec<String> {
 /// and loadable: never a mix of the two and never nothing.
 #[test]
 fn simulate_killed_at_random_points_leaves_the_old_or_the_new_data_set() {
-    let dir = temp_dir("kill");
+    let (_tmp, dir) = temp_dir("kill");
     let ds = dir.join("ds");
     let sets = [expected(1), expected(2)];
     let st = sysid().args(simulate_args(1, &ds)).status().unwrap();
@@ -148,12 +152,11 @@ fn simulate_killed_at_random_points_leaves_the_old_or_the_new_data_set() {
         .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
         .collect();
     assert_eq!(names, vec!["ds".to_string()]);
-    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 #[test]
 fn negative_numbers_are_values() {
-    let dir = temp_dir("negative");
+    let (_tmp, dir) = temp_dir("negative");
     let out = dir.join("flipped");
     let o = run(&[
         "simulate",
@@ -179,7 +182,7 @@ fn negative_numbers_are_values() {
 
 #[test]
 fn simulate_flags_are_bounded_and_named() {
-    let dir = temp_dir("flags");
+    let (_tmp, dir) = temp_dir("flags");
     let ds = dir.join("ds");
     let o = run(&["simulate", "--duration", "1", "--out", ds.to_str().unwrap()]);
     assert!(o.status.success());
@@ -231,7 +234,7 @@ fn simulate_flags_are_bounded_and_named() {
 
 #[test]
 fn filter_refuses_files_of_different_data_sets() {
-    let dir = temp_dir("mixed");
+    let (_tmp, dir) = temp_dir("mixed");
     let (one, two, mixed) = (dir.join("s1"), dir.join("s2"), dir.join("mixed"));
     for (seed, out) in [("1", &one), ("2", &two)] {
         let o = run(&[

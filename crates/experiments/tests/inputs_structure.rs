@@ -17,11 +17,15 @@ fn sysid() -> Command {
     c
 }
 
-fn temp_dir(tag: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("sysid-structure-{tag}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
+/// A fresh directory under the system temp dir, unique per test, and the guard that removes it
+/// when dropped (also when the test panics).
+fn temp_dir(tag: &str) -> (tempfile::TempDir, PathBuf) {
+    let tmp = tempfile::Builder::new()
+        .prefix(&format!("sysid-structure-{tag}-"))
+        .tempdir()
+        .unwrap();
+    let d = tmp.path().to_path_buf();
+    (tmp, d)
 }
 
 fn run(args: &[&str]) -> Output {
@@ -113,7 +117,7 @@ fn stated(storeys: usize, hysteretic: &[usize], masses: &[f64]) -> FilterSetting
 
 #[test]
 fn field_data_structures_are_checked_against_the_header_in_the_library() {
-    let dir = temp_dir("lib");
+    let (_tmp, dir) = temp_dir("lib");
     field_dir(&dir.join("f"), "t,ug,a1,a3,a5");
     let data = load_dir(&dir.join("f")).unwrap();
     assert_eq!(data.sensors, [1, 3, 5]);
@@ -150,7 +154,7 @@ fn field_data_structures_are_checked_against_the_header_in_the_library() {
 /// bit.
 #[test]
 fn the_process_noise_of_r_follows_its_setting_for_field_and_simulated_data() {
-    let dir = temp_dir("rnoise");
+    let (_tmp, dir) = temp_dir("rnoise");
     field_dir(&dir.join("f"), "t,ug,a1,a3,a5");
     let field = load_dir(&dir.join("f")).unwrap();
     let set = generate(&config(4, &[1, 3], &[1, 2, 3, 4])).unwrap();
@@ -176,7 +180,7 @@ fn the_process_noise_of_r_follows_its_setting_for_field_and_simulated_data() {
 
 #[test]
 fn malformed_descriptions_are_refused_by_flag_in_the_binary() {
-    let dir = temp_dir("bin");
+    let (_tmp, dir) = temp_dir("bin");
     let out = dir.join("d");
     let o = out.to_str().unwrap();
     let sim = |extra: &[&str]| {
@@ -297,7 +301,7 @@ fn record(path: &Path) -> serde_json::Value {
 
 #[test]
 fn sparse_sensors_and_two_hysteretic_storeys_round_trip_through_every_algorithm() {
-    let dir = temp_dir("trip");
+    let (_tmp, dir) = temp_dir("trip");
     let data = dir.join("d");
     let st = sysid()
         .args([

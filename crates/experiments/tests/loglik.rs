@@ -10,11 +10,15 @@ use std::path::{Path, PathBuf};
 use experiments::likelihood::{score, Candidate, LikelihoodRequest, Verdict};
 use models::dataset::{generate, DatasetConfig};
 
-fn temp_dir(tag: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("sysid-loglik-{tag}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
+/// A fresh directory under the system temp dir, unique per test, and the guard that removes it
+/// when dropped (also when the test panics).
+fn temp_dir(tag: &str) -> (tempfile::TempDir, PathBuf) {
+    let tmp = tempfile::Builder::new()
+        .prefix(&format!("sysid-loglik-{tag}-"))
+        .tempdir()
+        .unwrap();
+    let d = tmp.path().to_path_buf();
+    (tmp, d)
 }
 
 /// 3 s of the paper's data set (seed 5) in `dir/data`.
@@ -46,7 +50,7 @@ fn request(data: PathBuf) -> LikelihoodRequest {
 
 #[test]
 fn a_wrong_answer_lies_outside_the_region_and_the_truth_does_not() {
-    let dir = temp_dir("verdicts");
+    let (_tmp, dir) = temp_dir("verdicts");
     let data = data_dir(&dir);
     let mut low_k1 = [1.0; 9];
     low_k1[0] = 0.6;
@@ -84,7 +88,6 @@ fn a_wrong_answer_lies_outside_the_region_and_the_truth_does_not() {
     // The same request again: the same numbers.
     let again = score(&request(data), &candidates, &mut |_| {}).unwrap();
     assert_eq!(again, c);
-    let _ = std::fs::remove_dir_all(&dir);
 }
 
 /// The message of the error `score` refuses `req` with.
@@ -94,7 +97,7 @@ fn refusal(req: &LikelihoodRequest, candidates: &[Candidate]) -> String {
 
 #[test]
 fn bad_requests_are_refused_by_name() {
-    let dir = temp_dir("refused");
+    let (_tmp, dir) = temp_dir("refused");
     let data = data_dir(&dir);
     let one = [Candidate::from_record(&answer(&dir, "a", [1.0; 9])).unwrap()];
     let mut no_seeds = request(data.clone());
@@ -136,5 +139,4 @@ fn bad_requests_are_refused_by_name() {
         &one,
     );
     assert!(e.contains("--config"), "{e}");
-    let _ = std::fs::remove_dir_all(&dir);
 }

@@ -74,7 +74,11 @@ fn mpf_ekf2_recovers_alpha_and_the_stiffnesses_of_a_mass_damped_chain() {
 #[test]
 fn field_data_take_the_form_from_the_structure_table_and_validate_with_it() {
     let set = generate(&config()).unwrap();
-    let dir = std::env::temp_dir().join(format!("sysid-mass-damping-{}", std::process::id()));
+    let tmp = tempfile::Builder::new()
+        .prefix("sysid-mass-damping-")
+        .tempdir()
+        .unwrap();
+    let dir = tmp.path().join("data");
     set.to_loaded().write_measured_dir(&dir).unwrap();
     let data = models::dataset::load_dir(&dir).unwrap();
     assert!(data.meta.is_none());
@@ -128,5 +132,4 @@ fn field_data_take_the_form_from_the_structure_table_and_validate_with_it() {
     // A bad value of the key is an error naming it.
     let err = toml::from_str::<StructureSettings>("damping = \"rayleigh\"").unwrap_err();
     assert!(err.to_string().contains("rayleigh"), "{err}");
-    std::fs::remove_dir_all(&dir).ok();
 }

@@ -16,11 +16,15 @@ fn sysid() -> Command {
     Command::new(env!("CARGO_BIN_EXE_sysid"))
 }
 
-fn temp_dir(tag: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("sysid-merge-{tag}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
+/// A fresh directory under the system temp dir, unique per test, and the guard that removes it
+/// when dropped (also when the test panics).
+fn temp_dir(tag: &str) -> (tempfile::TempDir, PathBuf) {
+    let tmp = tempfile::Builder::new()
+        .prefix(&format!("sysid-merge-{tag}-"))
+        .tempdir()
+        .unwrap();
+    let d = tmp.path().to_path_buf();
+    (tmp, d)
 }
 
 /// Two shard outputs (`part0/records/s/`, `part1/records/s/`) of a study of `runs` runs × 2
@@ -101,7 +105,7 @@ impl SplitMix {
 
 #[test]
 fn merge_killed_at_random_points_never_leaves_an_unreadable_record() {
-    let root = temp_dir("kill");
+    let (_tmp, root) = temp_dir("kill");
     let parts = shards(&root, 120);
     let sources: Vec<PathBuf> = parts
         .iter()
@@ -218,7 +222,7 @@ fn merge_killed_at_random_points_never_leaves_an_unreadable_record() {
 
 #[test]
 fn a_truncated_target_record_is_replaced_and_a_corrupt_source_is_named() {
-    let root = temp_dir("corrupt");
+    let (_tmp, root) = temp_dir("corrupt");
     let parts = shards(&root, 3);
     let target = root.join("target");
     let dst = target.join("records/s");
@@ -248,7 +252,7 @@ fn a_truncated_target_record_is_replaced_and_a_corrupt_source_is_named() {
 
 #[test]
 fn a_second_writer_is_refused_with_the_holder_named() {
-    let root = temp_dir("lock");
+    let (_tmp, root) = temp_dir("lock");
     let parts = shards(&root, 1);
     let target = root.join("target");
 

@@ -11,16 +11,20 @@ fn sysid(args: &[&str]) -> std::process::Output {
         .unwrap()
 }
 
-fn temp_dir(tag: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("sysid-named-{tag}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
+/// A fresh directory under the system temp dir, unique per test, and the guard that removes it
+/// when dropped (also when the test panics).
+fn temp_dir(tag: &str) -> (tempfile::TempDir, PathBuf) {
+    let tmp = tempfile::Builder::new()
+        .prefix(&format!("sysid-named-{tag}-"))
+        .tempdir()
+        .unwrap();
+    let d = tmp.path().to_path_buf();
+    (tmp, d)
 }
 
 #[test]
 fn a_named_record_simulates_and_filters() {
-    let dir = temp_dir("ok");
+    let (_tmp, dir) = temp_dir("ok");
     let d = dir.join("d");
     let d = d.to_str().unwrap();
     let o = sysid(&[
@@ -68,12 +72,11 @@ fn a_named_record_simulates_and_filters() {
         String::from_utf8_lossy(&o.stderr)
     );
     assert!(r.exists());
-    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 #[test]
 fn an_unknown_name_is_not_a_record() {
-    let dir = temp_dir("bad");
+    let (_tmp, dir) = temp_dir("bad");
     let d = dir.join("d");
     let o = sysid(&[
         "simulate",
@@ -86,5 +89,4 @@ fn an_unknown_name_is_not_a_record() {
     let err = String::from_utf8_lossy(&o.stderr);
     // Not a vendored name: read as a CSV path, which does not exist, and the error names it.
     assert!(err.contains("kobe-1995"), "{err}");
-    std::fs::remove_dir_all(&dir).unwrap();
 }

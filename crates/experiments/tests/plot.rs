@@ -12,11 +12,15 @@ use experiments::figures::validate_svg;
 use experiments::plot::plot;
 use experiments::record::Validation;
 
-fn dir(test: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("plot-test-{}-{test}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
+/// A fresh directory under the system temp dir, unique per test, and the guard that removes it
+/// when dropped (also when the test panics).
+fn dir(test: &str) -> (tempfile::TempDir, PathBuf) {
+    let tmp = tempfile::Builder::new()
+        .prefix(&format!("plot-test-{test}-"))
+        .tempdir()
+        .unwrap();
+    let d = tmp.path().to_path_buf();
+    (tmp, d)
 }
 
 /// Residuals of a model that fits (white innovations) over `n` steps, three channels.
@@ -54,7 +58,7 @@ fn texts(path: &Path) -> String {
 
 #[test]
 fn a_record_with_truth_gives_every_panel() {
-    let d = dir("truth");
+    let (_tmp, d) = dir("truth");
     let mut r = record("mpf-ekf2", 0, [1.0; 9], 0.05);
     r.trace = trace(&THETA_TRUE, &THETA_TRUE, 60);
     if let Some(v) = r.validation.as_mut() {
@@ -111,7 +115,7 @@ fn a_record_with_truth_gives_every_panel() {
 
 #[test]
 fn a_field_record_draws_what_it_has_through_the_binary() {
-    let d = dir("field");
+    let (_tmp, d) = dir("field");
     let mut r = record("mln-rbpf", 0, [1.0; 9], 0.05);
     r.theta_true = None;
     r.rel_error = None;
@@ -160,7 +164,7 @@ fn a_field_record_draws_what_it_has_through_the_binary() {
 
 #[test]
 fn bad_records_are_refused_with_the_file_named() {
-    let d = dir("bad");
+    let (_tmp, d) = dir("bad");
     let rec = d.join("broken.json");
     std::fs::write(&rec, "{\"algorithm\": 3}").unwrap();
     let err = plot(&rec, &d.join("figs")).unwrap_err();

@@ -24,11 +24,15 @@ use experiments::residuals::ChannelCheck;
 use proptest::prelude::*;
 use proptest::test_runner::{Config, RngAlgorithm, TestRng, TestRunner};
 
-fn temp_dir(tag: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("sysid-numbers-{tag}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
+/// A fresh directory under the system temp dir, unique per test, and the guard that removes it
+/// when dropped (also when the test panics).
+fn temp_dir(tag: &str) -> (tempfile::TempDir, PathBuf) {
+    let tmp = tempfile::Builder::new()
+        .prefix(&format!("sysid-numbers-{tag}-"))
+        .tempdir()
+        .unwrap();
+    let d = tmp.path().to_path_buf();
+    (tmp, d)
 }
 
 /// A number of a record: finite (with a fractional part, so that JSON writes it as a float) or
@@ -224,7 +228,7 @@ fn text<T: serde::Serialize>(x: &T) -> String {
 
 #[test]
 fn records_with_non_finite_numbers_in_every_field_read_back_through_every_reader() {
-    let dir = temp_dir("run");
+    let (_tmp, dir) = temp_dir("run");
     let mut runner = TestRunner::new_with_rng(
         Config {
             cases: 64,
@@ -275,7 +279,7 @@ fn records_with_non_finite_numbers_in_every_field_read_back_through_every_reader
 
 #[test]
 fn reference_records_with_non_finite_numbers_read_back() {
-    let dir = temp_dir("reference");
+    let (_tmp, dir) = temp_dir("reference");
     let mut runner = TestRunner::new_with_rng(
         Config {
             cases: 200,

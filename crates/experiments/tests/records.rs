@@ -16,11 +16,15 @@ use experiments::sweep::{
 };
 use models::dataset::{generate, DatasetConfig};
 
-fn temp_dir(tag: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("sysid-records-{tag}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
+/// A fresh directory under the system temp dir, unique per test, and the guard that removes it
+/// when dropped (also when the test panics).
+fn temp_dir(tag: &str) -> (tempfile::TempDir, PathBuf) {
+    let tmp = tempfile::Builder::new()
+        .prefix(&format!("sysid-records-{tag}-"))
+        .tempdir()
+        .unwrap();
+    let d = tmp.path().to_path_buf();
+    (tmp, d)
 }
 
 /// 2 s of the paper preset whose marginalised prior has infinite variance (a per-particle prior
@@ -71,7 +75,7 @@ fn sweep(study: &Study, dir: &Path, shard: Shard, resume: bool) -> (usize, usize
 #[test]
 fn a_run_failing_at_step_1_is_written_readably_and_resumed() {
     let study = failing_study();
-    let dir = temp_dir("step1");
+    let (_tmp_dir, dir) = temp_dir("step1");
     assert_eq!(sweep(&study, &dir, Shard::default(), false), (6, 0));
     let mln = dir.join("mln-rbpf-np20-systematic-run000.json");
     let text = std::fs::read_to_string(&mln).unwrap();
@@ -100,11 +104,9 @@ fn a_run_failing_at_step_1_is_written_readably_and_resumed() {
     assert_eq!(sweep(&study, &dir, Shard::default(), true), (0, 6));
 
     // Shards, merged, then resumed: nothing aborts, nothing is recomputed.
-    let (p0, p1, merged) = (
-        temp_dir("step1-p0"),
-        temp_dir("step1-p1"),
-        temp_dir("step1-m"),
-    );
+    let (_tmp_p0, p0) = temp_dir("step1-p0");
+    let (_tmp_p1, p1) = temp_dir("step1-p1");
+    let (_tmp_merged, merged) = temp_dir("step1-m");
     sweep(&study, &p0, Shard { index: 0, count: 2 }, false);
     sweep(&study, &p1, Shard { index: 1, count: 2 }, false);
     let report = merge::<RunRecord>(&[(p0, merged.clone()), (p1, merged.clone())]).unwrap();
@@ -165,7 +167,7 @@ fn a_true_value_of_zero_gives_a_readable_relative_error() {
     let record = identify(&input, Algorithm::MpfEkf2, &settings).unwrap();
     let e = record.rel_error.as_ref().unwrap()[7];
     assert!(!e.is_finite(), "relative error against 0 is {e}");
-    let dir = temp_dir("zero");
+    let (_tmp, dir) = temp_dir("zero");
     let path = dir.join("r.json");
     write_atomic(&path, &record).unwrap();
     let text = std::fs::read_to_string(&path).unwrap();
@@ -177,7 +179,7 @@ fn a_true_value_of_zero_gives_a_readable_relative_error() {
 
 #[test]
 fn sysid_filter_failing_at_step_1_writes_a_readable_record() {
-    let dir = temp_dir("cli");
+    let (_tmp, dir) = temp_dir("cli");
     let data = dir.join("d");
     let sysid = env!("CARGO_BIN_EXE_sysid");
     let st = Command::new(sysid)
@@ -227,7 +229,7 @@ fn records_of_schema_1_are_read_and_bad_records_are_named() {
 
     // A fresh record, and damaged versions of it.
     let study = failing_study();
-    let dir = temp_dir("bad");
+    let (_tmp, dir) = temp_dir("bad");
     sweep(&study, &dir, Shard::default(), false);
     let good = dir.join("mpf-ekf2-np20-systematic-run001.json");
     let text = std::fs::read_to_string(&good).unwrap();
@@ -274,7 +276,7 @@ fn records_of_schema_1_are_read_and_bad_records_are_named() {
 /// The draw after a sharded reproduction with failing runs: shards, merge, `--resume`.
 #[test]
 fn the_draw_after_merge_reads_failed_runs() {
-    let root = temp_dir("draw");
+    let (_tmp, root) = temp_dir("draw");
     let experiments = root.join("experiments");
     std::fs::create_dir_all(&experiments).unwrap();
     let real = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../experiments");

@@ -13,11 +13,15 @@ use experiments::study::Study;
 use experiments::sweep::{run_sweep, Shard, SweepOptions};
 use models::dataset::{generate, Dataset, DatasetConfig};
 
-fn temp_dir(tag: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("sysid-rejuv-{tag}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
+/// A fresh directory under the system temp dir, unique per test, and the guard that removes it
+/// when dropped (also when the test panics).
+fn temp_dir(tag: &str) -> (tempfile::TempDir, PathBuf) {
+    let tmp = tempfile::Builder::new()
+        .prefix(&format!("sysid-rejuv-{tag}-"))
+        .tempdir()
+        .unwrap();
+    let d = tmp.path().to_path_buf();
+    (tmp, d)
 }
 
 /// `duration` s of the paper's data set (seed 3).
@@ -189,7 +193,7 @@ rejuvenation = 0.97
 "#;
     let study: Study = toml::from_str(text).unwrap();
     let records = |threads: usize| {
-        let dir = temp_dir(&format!("t{threads}"));
+        let (_tmp, dir) = temp_dir(&format!("t{threads}"));
         let opts = SweepOptions {
             threads,
             shard: Shard::default(),
@@ -244,7 +248,7 @@ fn a_bad_discount_is_refused_by_name() {
         );
         assert!(e.contains("field `rejuvenation`"), "{e}");
     }
-    let dir = temp_dir("bad");
+    let (_tmp, dir) = temp_dir("bad");
     let config = dir.join("bad.toml");
     std::fs::write(&config, "rejuvenation = 2.0\n").unwrap();
     let e = format!(
@@ -294,7 +298,7 @@ trace_every = 0
 "#
         )
     };
-    let dir = temp_dir("filter-for");
+    let (_tmp, dir) = temp_dir("filter-for");
     let path = dir.join("s.toml");
     std::fs::write(
         &path,
@@ -344,7 +348,7 @@ trace_every = 0
 /// without one.
 #[test]
 fn the_mpf_ekf2_rejuvenates_by_default() {
-    let dir = temp_dir("default");
+    let (_tmp, dir) = temp_dir("default");
     let data_dir = dir.join("d");
     data(0.5).write_dir(&data_dir).unwrap();
     let config = dir.join("c.toml");

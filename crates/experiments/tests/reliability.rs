@@ -9,11 +9,15 @@ fn sysid() -> Command {
     Command::new(env!("CARGO_BIN_EXE_sysid"))
 }
 
-fn temp_dir(tag: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("sysid-rel-{tag}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
+/// A fresh directory under the system temp dir, unique per test, and the guard that removes it
+/// when dropped (also when the test panics).
+fn temp_dir(tag: &str) -> (tempfile::TempDir, PathBuf) {
+    let tmp = tempfile::Builder::new()
+        .prefix(&format!("sysid-rel-{tag}-"))
+        .tempdir()
+        .unwrap();
+    let d = tmp.path().to_path_buf();
+    (tmp, d)
 }
 
 fn run(args: &[&str], cwd: &Path) -> Output {
@@ -52,7 +56,7 @@ fn small_data(dir: &Path) -> PathBuf {
 
 #[test]
 fn reference_refuses_counts_beyond_its_limits_by_flag() {
-    let dir = temp_dir("reference");
+    let (_tmp, dir) = temp_dir("reference");
     let d = small_data(&dir);
     let data = d.to_str().unwrap();
     let out = dir.join("ref.json");
@@ -81,7 +85,7 @@ fn reference_refuses_counts_beyond_its_limits_by_flag() {
 
 #[test]
 fn reference_takes_the_structure_of_field_data_from_a_config() {
-    let dir = temp_dir("reference-field");
+    let (_tmp, dir) = temp_dir("reference-field");
     let d = small_data(&dir);
     let field = dir.join("field");
     std::fs::create_dir_all(&field).unwrap();
@@ -127,7 +131,7 @@ fn reference_takes_the_structure_of_field_data_from_a_config() {
 /// constant field record) writes a record that `plot` and `compare-reference` read back.
 #[test]
 fn records_with_non_finite_residuals_read_back_through_every_reader() {
-    let dir = temp_dir("residuals");
+    let (_tmp, dir) = temp_dir("residuals");
     let d = small_data(&dir);
     std::fs::write(
         dir.join("wide.toml"),
@@ -210,7 +214,7 @@ elements = [{ storey = 0, beta_gamma = { kind = "triangle", beta_max = 5.0 }, n 
 /// `compare-reference` before it is read.
 #[test]
 fn every_reader_makes_the_same_checks() {
-    let dir = temp_dir("checks");
+    let (_tmp, dir) = temp_dir("checks");
     let d = small_data(&dir);
     let o = run(
         &[
@@ -370,7 +374,7 @@ fn write_reference(path: &Path) {
 
 #[test]
 fn fix_refuses_a_parameter_given_twice() {
-    let dir = temp_dir("fix");
+    let (_tmp, dir) = temp_dir("fix");
     let d = small_data(&dir);
     let o = run(
         &[
@@ -391,7 +395,7 @@ fn fix_refuses_a_parameter_given_twice() {
 
 #[test]
 fn a_dataset_json_listing_a_file_it_does_not_hold_is_refused() {
-    let dir = temp_dir("listing");
+    let (_tmp, dir) = temp_dir("listing");
     let d = small_data(&dir);
     let meta = d.join("dataset.json");
     let mut v: serde_json::Value =
@@ -405,7 +409,7 @@ fn a_dataset_json_listing_a_file_it_does_not_hold_is_refused() {
 
 #[test]
 fn sweeps_refuse_more_threads_than_the_limit() {
-    let dir = temp_dir("threads");
+    let (_tmp, dir) = temp_dir("threads");
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
     let o = sysid()
         .args(["reproduce", "--quick", "--threads", "100000", "--out"])
@@ -419,7 +423,7 @@ fn sweeps_refuse_more_threads_than_the_limit() {
 
 #[test]
 fn building_chains_simulate_across_the_documented_range() {
-    let dir = temp_dir("building");
+    let (_tmp, dir) = temp_dir("building");
     for n in ["150", "200"] {
         let out = format!("b{n}");
         let o = run(
@@ -448,7 +452,7 @@ fn building_chains_simulate_across_the_documented_range() {
 /// refused, naming its file.
 #[test]
 fn compare_reference_groups_records_by_their_data_set() {
-    let dir = temp_dir("groups");
+    let (_tmp, dir) = temp_dir("groups");
     for (name, seed) in [("a", "1"), ("b", "2"), ("c", "3")] {
         let o = run(
             &["simulate", "--duration", "1", "--seed", seed, "--out", name],

@@ -76,8 +76,11 @@ fn predictions_from_the_truth_leave_only_the_noise() {
 
 #[test]
 fn filter_records_prediction_errors_and_plot_draws_them() {
-    let d = std::env::temp_dir().join(format!("sysid-residuals-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
+    let tmp = tempfile::Builder::new()
+        .prefix("sysid-residuals-")
+        .tempdir()
+        .unwrap();
+    let d = tmp.path();
     let sysid = env!("CARGO_BIN_EXE_sysid");
     let ok = |args: &[&str]| {
         let o = Command::new(sysid).args(args).output().unwrap();
@@ -144,14 +147,16 @@ fn filter_records_prediction_errors_and_plot_draws_them() {
     ] {
         experiments::figures::validate_svg(&figs.join(f)).unwrap();
     }
-    std::fs::remove_dir_all(&d).unwrap();
 }
 
 #[test]
 fn field_data_in_one_command_prints_and_plots() {
     // The newcomer's case: only `measured.csv` of a 3-storey building, one command.
-    let d = std::env::temp_dir().join(format!("sysid-field-one-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
+    let tmp = tempfile::Builder::new()
+        .prefix("sysid-field-one-")
+        .tempdir()
+        .unwrap();
+    let d = tmp.path();
     let sysid = env!("CARGO_BIN_EXE_sysid");
     let data = d.join("data");
     let field = d.join("field");
@@ -206,5 +211,4 @@ fn field_data_in_one_command_prints_and_plots() {
     // No truth, no validation run: the loop is skipped with a note, not drawn.
     assert!(!figs.join("hysteresis.svg").exists());
     assert!(out.contains("note:"), "{out}");
-    std::fs::remove_dir_all(&d).unwrap();
 }

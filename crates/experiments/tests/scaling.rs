@@ -10,11 +10,15 @@ use experiments::pipeline::Algorithm;
 use experiments::scaling::{self, Options};
 use experiments::study::Study;
 
-fn temp_dir(tag: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("sysid-scaling-{tag}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
+/// A fresh directory under the system temp dir, unique per test, and the guard that removes it
+/// when dropped (also when the test panics).
+fn temp_dir(tag: &str) -> (tempfile::TempDir, PathBuf) {
+    let tmp = tempfile::Builder::new()
+        .prefix(&format!("sysid-scaling-{tag}-"))
+        .tempdir()
+        .unwrap();
+    let d = tmp.path().to_path_buf();
+    (tmp, d)
 }
 
 fn workspace() -> PathBuf {
@@ -66,7 +70,7 @@ fn write_study(dir: &Path, text: &str) -> PathBuf {
 
 #[test]
 fn structure_axis_jobs_ids_and_configs() {
-    let dir = temp_dir("axis");
+    let (_tmp, dir) = temp_dir("axis");
     let study = Study::load(&write_study(&dir, SMALL)).unwrap();
     let jobs = study.jobs();
     // Run 0: n2 × 3 algorithms, n4 × 2, n4-sparse × 3; run 1: n2 × 3, n4-sparse × 3.
@@ -94,12 +98,11 @@ fn structure_axis_jobs_ids_and_configs() {
     assert!(q.sweep.structures.iter().all(|s| s.runs == Some(1)));
     assert!(q.sweep.structures.iter().all(|s| s.duration == Some(0.5)));
     assert_eq!(q.jobs().len(), 3 + 2 + 3);
-    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 #[test]
 fn bad_structures_are_named() {
-    let dir = temp_dir("bad");
+    let (_tmp, dir) = temp_dir("bad");
     for (bad, needle) in [
         ("sensors = [0, 4]", "field `sensors`: storey 0"),
         ("sensors = [4, 4]", "field `sensors` repeats"),
@@ -122,14 +125,13 @@ fn bad_structures_are_named() {
     let label = SMALL.replace("label = \"n4\"", "label = \"n 4\"");
     let err = format!("{:#}", Study::load(&write_study(&dir, &label)).unwrap_err());
     assert!(err.contains("label"), "{err}");
-    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 /// A structure's `filter` keys reach its runs only, over the study's `[filter]`; a key the
 /// settings do not know, or a value out of range, is an error naming the structure.
 #[test]
 fn a_structure_takes_its_own_filter_keys() {
-    let dir = temp_dir("structure-filter");
+    let (_tmp, dir) = temp_dir("structure-filter");
     let text = SMALL.replace(
         "label = \"n4\"\n",
         "label = \"n4\"\nfilter = { pool = 2, marginal_prior = { kind = \"per_particle\", rel_sd = 0.2 } }\n",
@@ -173,7 +175,6 @@ fn a_structure_takes_its_own_filter_keys() {
             "{bad}: {err}"
         );
     }
-    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 /// `experiments/scaling-defaults.toml` runs, on every building, what `sysid filter` uses there
@@ -286,7 +287,7 @@ fn the_committed_study_loads() {
 
 #[test]
 fn small_study_end_to_end_and_resumed() {
-    let dir = temp_dir("e2e");
+    let (_tmp, dir) = temp_dir("e2e");
     let config = write_study(&dir, SMALL);
     let out = dir.join("out");
     let opts = Options {
@@ -370,5 +371,4 @@ fn small_study_end_to_end_and_resumed() {
         report.contains("**Incomplete: 13 of the 14 planned runs have a record.**"),
         "{report}"
     );
-    std::fs::remove_dir_all(&dir).unwrap();
 }

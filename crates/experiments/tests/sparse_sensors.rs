@@ -116,11 +116,15 @@ fn sysid() -> Command {
     Command::new(env!("CARGO_BIN_EXE_sysid"))
 }
 
-fn temp_dir(tag: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("sysid-sparse-{tag}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
+/// A fresh directory under the system temp dir, unique per test, and the guard that removes it
+/// when dropped (also when the test panics).
+fn temp_dir(tag: &str) -> (tempfile::TempDir, PathBuf) {
+    let tmp = tempfile::Builder::new()
+        .prefix(&format!("sysid-sparse-{tag}-"))
+        .tempdir()
+        .unwrap();
+    let d = tmp.path().to_path_buf();
+    (tmp, d)
 }
 
 /// The scaling study's `n20-base-sparse` building (El Centro × 36, Bouc–Wen at storey 1, sensors
@@ -132,7 +136,7 @@ fn temp_dir(tag: &str) -> PathBuf {
 /// completes, and each stiffness's 95 % interval — the run's own posterior — holds the truth.
 #[test]
 fn a_sparse_twenty_storey_run_completes_with_intervals_that_hold_the_unmeasured_stiffnesses() {
-    let dir = temp_dir("n20");
+    let (_tmp, dir) = temp_dir("n20");
     let data = dir.join("d");
     let sensors: Vec<String> = SPARSE_20.iter().map(|s| s.to_string()).collect();
     let sensors = sensors.join(",");
@@ -205,7 +209,6 @@ fn a_sparse_twenty_storey_run_completes_with_intervals_that_hold_the_unmeasured_
         missed.is_empty(),
         "95 % intervals without the truth: {missed:?}"
     );
-    let _ = std::fs::remove_dir_all(&dir);
 }
 
 /// A building of [`PER_PARTICLE_MIN_STOREYS`] storeys with every storey measured: `sysid filter`
@@ -213,7 +216,7 @@ fn a_sparse_twenty_storey_run_completes_with_intervals_that_hold_the_unmeasured_
 /// that keeps the shared Gaussian it warns and keeps it.
 #[test]
 fn a_tall_fully_measured_building_gets_per_particle_prior_means_by_default() {
-    let dir = temp_dir("tall");
+    let (_tmp, dir) = temp_dir("tall");
     let data = dir.join("d");
     let storeys = PER_PARTICLE_MIN_STOREYS.to_string();
     simulate_building_chain(&data, &["--storeys", &storeys, "--duration", "0.5"]);

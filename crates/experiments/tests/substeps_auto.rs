@@ -54,8 +54,11 @@ fn frame_settings() -> FilterSettings {
 
 #[test]
 fn a_stiff_record_is_sub_stepped_until_its_highest_mode_is_represented() {
-    let dir = std::env::temp_dir().join(format!("sysid-auto-substeps-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
+    let tmp = tempfile::Builder::new()
+        .prefix("sysid-auto-substeps-")
+        .tempdir()
+        .unwrap();
+    let dir = tmp.path().join("data");
     write_frame_like(&dir);
     let data = load_dir(&dir).unwrap();
     let s = frame_settings();
@@ -110,7 +113,6 @@ fn a_stiff_record_is_sub_stepped_until_its_highest_mode_is_represented() {
     assert_eq!(r.config["filter"]["substeps"], "auto");
     assert_eq!(r.config["spec"]["substeps"], a.substeps);
     assert_eq!(r.config["substeps_auto"]["substeps"], a.substeps);
-    let _ = std::fs::remove_dir_all(&dir);
 }
 
 #[test]

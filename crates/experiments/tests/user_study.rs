@@ -7,19 +7,23 @@ use std::process::Command;
 
 use models::dataset::{generate, DatasetConfig};
 
-fn temp_dir(tag: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("sysid-user-study-{tag}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
+/// A fresh directory under the system temp dir, unique per test, and the guard that removes it
+/// when dropped (also when the test panics).
+fn temp_dir(tag: &str) -> (tempfile::TempDir, PathBuf) {
+    let tmp = tempfile::Builder::new()
+        .prefix(&format!("sysid-user-study-{tag}-"))
+        .tempdir()
+        .unwrap();
+    let d = tmp.path().to_path_buf();
+    (tmp, d)
 }
 
-/// A fresh directory holding the study file `s.toml` with `text`: (directory, file).
-fn study_file(tag: &str, text: &str) -> (PathBuf, PathBuf) {
-    let dir = temp_dir(tag);
+/// A fresh directory holding the study file `s.toml` with `text`: (guard, directory, file).
+fn study_file(tag: &str, text: &str) -> (tempfile::TempDir, PathBuf, PathBuf) {
+    let (tmp, dir) = temp_dir(tag);
     let config = dir.join("s.toml");
     std::fs::write(&config, text).unwrap();
-    (dir, config)
+    (tmp, dir, config)
 }
 
 const STUDY: &str = r#"
@@ -43,7 +47,7 @@ validate = false
 
 #[test]
 fn a_study_on_a_data_directory_runs_every_seed_on_the_same_record() {
-    let dir = temp_dir("ok");
+    let (_tmp, dir) = temp_dir("ok");
     let mut c = DatasetConfig::from_preset("paper-3dof", 3).unwrap();
     c.duration = Some(1.0);
     generate(&c).unwrap().write_dir(&dir.join("d")).unwrap();
@@ -96,12 +100,11 @@ fn a_study_on_a_data_directory_runs_every_seed_on_the_same_record() {
     assert!(std::fs::read_to_string(out.join("theta_val.svg"))
         .unwrap()
         .contains("θ_val / truth"));
-    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 #[test]
 fn a_study_names_its_data_once() {
-    let dir = temp_dir("bad");
+    let (_tmp, dir) = temp_dir("bad");
     let both = STUDY.replace("dir = \"d\"", "dir = \"d\"\npreset = \"paper-3dof\"");
     std::fs::write(dir.join("both.toml"), both).unwrap();
     let err = experiments::study::Study::load(&dir.join("both.toml"))
@@ -115,7 +118,6 @@ fn a_study_names_its_data_once() {
     std::fs::write(dir.join("missing.toml"), STUDY).unwrap();
     let e = experiments::study::Study::load(&dir.join("missing.toml")).unwrap_err();
     assert!(format!("{e:#}").contains("field `dir`"), "{e:#}");
-    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 /// The report says what the spread over runs is: the Monte-Carlo error alone when every run
@@ -141,7 +143,7 @@ fn the_report_says_what_the_spread_over_runs_measures() {
 /// counted from the records; and it decides the statements its file declares, on its records.
 #[test]
 fn a_preset_study_reports_the_coverage_of_its_intervals() {
-    let (dir, config) = study_file(
+    let (_tmp, dir, config) = study_file(
         "preset",
         r#"
 name = "tiny"
@@ -265,14 +267,13 @@ threshold = 0
             .starts_with(&shown),
         "{shown}: {findings:#?}"
     );
-    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 /// A verdict compares algorithms run by run: a sweep with two particle counts has two records
 /// per run and algorithm, and its file is refused with the reason.
 #[test]
 fn verdicts_need_one_record_per_run_and_algorithm() {
-    let (dir, config) = study_file(
+    let (_tmp, _, config) = study_file(
         "verdict-arms",
         r#"
 name = "arms"
@@ -300,5 +301,4 @@ than = ["storvik"]
         e.contains("s.toml") && e.contains("one particle count"),
         "{e}"
     );
-    std::fs::remove_dir_all(&dir).unwrap();
 }

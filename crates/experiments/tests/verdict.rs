@@ -258,9 +258,11 @@ metric = "online-nrmse"
 algorithms = ["storvik"]
 threshold = 0.07
 "#;
-    let dir = std::env::temp_dir().join(format!("sysid-verdict-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    let path = dir.join("declared.toml");
+    let dir = tempfile::Builder::new()
+        .prefix("sysid-verdict-")
+        .tempdir()
+        .unwrap();
+    let path = dir.path().join("declared.toml");
     std::fs::write(&path, text).unwrap();
     let study = Study::load(&path).unwrap();
     let f = paper_findings(&study.verdicts, &[], &clear());
@@ -274,7 +276,6 @@ threshold = 0.07
         e.contains("Storvik tracks") && e.contains("`mln-rbpf` is not one of the sweep's"),
         "{e}"
     );
-    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 fn declared(text: &str) -> Declared {

@@ -161,7 +161,7 @@ fn v2_seeds() -> Vec<Vec<u8>> {
 
 #[test]
 fn fuzz_sensor_csv() {
-    let dir = scratch("sensor-csv");
+    let (_tmp, dir) = scratch("sensor-csv");
     let seeds = sensor_seeds();
     run(
         "sensor-csv",
@@ -175,7 +175,7 @@ fn fuzz_sensor_csv() {
 
 #[test]
 fn fuzz_csmip_v2() {
-    let dir = scratch("v2");
+    let (_tmp, dir) = scratch("v2");
     let seeds = v2_seeds();
     run(
         "v2",
@@ -189,7 +189,7 @@ fn fuzz_csmip_v2() {
 
 #[test]
 fn fuzz_channel_map() {
-    let dir = scratch("channel-map");
+    let (_tmp, dir) = scratch("channel-map");
     setup(&dir);
     let seed = map_text().into_bytes();
     run(
@@ -204,7 +204,7 @@ fn fuzz_channel_map() {
 
 #[test]
 fn fuzz_import_of_a_mutated_recording() {
-    let dir = scratch("import");
+    let (_tmp, dir) = scratch("import");
     setup(&dir);
     std::fs::write(dir.join("channels.toml"), map_text()).unwrap();
     let seed = std::fs::read(fixture("xsens-sine-1.0-floor-2.csv")).unwrap();
@@ -221,7 +221,7 @@ fn fuzz_import_of_a_mutated_recording() {
 /// Every input of the corpus (inputs that once crashed the import) is handled.
 #[test]
 fn import_corpus_inputs_are_handled() {
-    let dir = scratch("import-corpus");
+    let (_tmp, dir) = scratch("import-corpus");
     setup(&dir);
     std::fs::write(dir.join("channels.toml"), map_text()).unwrap();
     let mut count = 0;

@@ -170,7 +170,7 @@ fn check_dir(dir: &Path, files: &[&str]) -> Result<(), TestCaseError> {
 fn template() -> (Vec<u8>, Vec<u8>, serde_json::Value) {
     let mut c = DatasetConfig::from_preset("paper-3dof", 7).unwrap();
     c.duration = Some(0.1);
-    let dir = scratch("template");
+    let (_tmp, dir) = scratch("template");
     generate(&c).unwrap().write_dir(&dir.join("ds")).unwrap();
     let read = |f: &str| std::fs::read(dir.join("ds").join(f)).unwrap();
     let mut meta: serde_json::Value = serde_json::from_slice(&read("dataset.json")).unwrap();
@@ -257,7 +257,7 @@ fn seeded(n: usize) -> impl Strategy<Value = (usize, Vec<fuzz_common::Mutation>)
 
 #[test]
 fn fuzz_excitation_csv() {
-    let dir = scratch("csv");
+    let (_tmp, dir) = scratch("csv");
     let seeds = csv_seeds();
     run(
         "csv",
@@ -271,7 +271,7 @@ fn fuzz_excitation_csv() {
 
 #[test]
 fn fuzz_at2() {
-    let dir = scratch("at2");
+    let (_tmp, dir) = scratch("at2");
     let seeds = at2_seeds();
     run(
         "at2",
@@ -285,7 +285,7 @@ fn fuzz_at2() {
 
 #[test]
 fn fuzz_field_measured_csv() {
-    let dir = scratch("field");
+    let (_tmp, dir) = scratch("field");
     let t = template();
     run(
         "measured",
@@ -299,7 +299,7 @@ fn fuzz_field_measured_csv() {
 
 #[test]
 fn fuzz_dataset_csv_files() {
-    let dir = scratch("dataset");
+    let (_tmp, dir) = scratch("dataset");
     let t = template();
     let which = |i: usize| ALL[i % 2];
     let seed = |i: usize| if which(i) == ALL[0] { &t.0 } else { &t.1 };
@@ -315,7 +315,7 @@ fn fuzz_dataset_csv_files() {
 
 #[test]
 fn fuzz_dataset_json() {
-    let dir = scratch("meta");
+    let (_tmp, dir) = scratch("meta");
     let t = template();
     let seed = serde_json::to_vec_pretty(&t.2).unwrap();
     run(
@@ -331,7 +331,7 @@ fn fuzz_dataset_json() {
 /// Every input of the corpus (inputs that once crashed a reader) is handled.
 #[test]
 fn corpus_inputs_are_handled() {
-    let dir = scratch("corpus");
+    let (_tmp, dir) = scratch("corpus");
     let t = template();
     let mut count = 0;
     for target in [

@@ -19,11 +19,15 @@ fn fixture(name: &str) -> PathBuf {
         .join(name)
 }
 
-fn scratch(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("import-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
+/// A fresh directory under the system temp dir, unique per test, and the guard that removes it
+/// when dropped (also when the test panics).
+fn scratch(name: &str) -> (tempfile::TempDir, PathBuf) {
+    let tmp = tempfile::Builder::new()
+        .prefix(&format!("import-{name}-"))
+        .tempdir()
+        .unwrap();
+    let dir = tmp.path().to_path_buf();
+    (tmp, dir)
 }
 
 /// Writes a map into `dir` and imports it.
@@ -94,7 +98,7 @@ fn actions(r: &ImportRecord) -> String {
 
 #[test]
 fn real_sensor_excerpts_are_matched_by_time_stamp_not_row() {
-    let dir = scratch("excerpt");
+    let (_tmp, dir) = scratch("excerpt");
     let m = format!(
         "{}{}",
         channel(
@@ -187,7 +191,7 @@ fn real_v2_excerpts_read_by_column() {
 
 #[test]
 fn v2_channels_are_imported_and_their_direction_checked() {
-    let dir = scratch("v2");
+    let (_tmp, dir) = scratch("v2");
     let f3 = fixture("CHAN003-excerpt.V2").display().to_string();
     let f7 = fixture("CHAN007-excerpt.V2").display().to_string();
     let m = format!(
@@ -214,7 +218,7 @@ fn v2_channels_are_imported_and_their_direction_checked() {
 
 #[test]
 fn clock_offsets_shift_or_resample_by_time_stamp() {
-    let dir = scratch("clocks");
+    let (_tmp, dir) = scratch("clocks");
     let g = clock(1_000_000, 200);
     sensor_file(
         &dir,
@@ -283,7 +287,7 @@ fn clock_offsets_shift_or_resample_by_time_stamp() {
 
 #[test]
 fn an_offset_under_the_clock_tolerance_pairs_rows_and_is_logged() {
-    let dir = scratch("tolerance");
+    let (_tmp, dir) = scratch("tolerance");
     let g = clock(0, 50);
     sensor_file(
         &dir,
@@ -324,7 +328,7 @@ fn an_offset_under_the_clock_tolerance_pairs_rows_and_is_logged() {
 
 #[test]
 fn clocks_that_do_not_overlap_are_refused_unless_the_starts_are_declared_simultaneous() {
-    let dir = scratch("disagree");
+    let (_tmp, dir) = scratch("disagree");
     let g = clock(848_402_848, 100);
     let s = clock(1_045_181_031, 120);
     sensor_file(&dir, "g.csv", &g, &vec![0.5; 100]);
@@ -345,7 +349,7 @@ fn clocks_that_do_not_overlap_are_refused_unless_the_starts_are_declared_simulta
 
 #[test]
 fn gaps_short_ones_interpolated_long_ones_refused_with_the_line() {
-    let dir = scratch("gaps");
+    let (_tmp, dir) = scratch("gaps");
     let g = clock(0, 100);
     sensor_file(
         &dir,
@@ -396,7 +400,7 @@ fn gaps_short_ones_interpolated_long_ones_refused_with_the_line() {
 
 #[test]
 fn zero_rows_units_sign_scale_gravity_and_drift() {
-    let dir = scratch("units");
+    let (_tmp, dir) = scratch("units");
     let g = clock(0, 60);
     let mut ga: Vec<f64> = g.iter().map(|&t| signal(t)).collect();
     ga[0] = 0.0;
@@ -493,7 +497,7 @@ fn zero_rows_units_sign_scale_gravity_and_drift() {
 
 #[test]
 fn swapped_columns_missing_channels_and_bad_values() {
-    let dir = scratch("columns");
+    let (_tmp, dir) = scratch("columns");
     let g = clock(0, 50);
     sensor_file(
         &dir,
@@ -550,7 +554,7 @@ fn swapped_columns_missing_channels_and_bad_values() {
 
 #[test]
 fn malformed_channel_maps_are_refused_naming_the_key() {
-    let dir = scratch("maps");
+    let (_tmp, dir) = scratch("maps");
     let good = map("", "g.csv", &["s.csv"]);
     let cases: Vec<(String, &str)> = vec![
         (
@@ -633,7 +637,7 @@ fn malformed_channel_maps_are_refused_naming_the_key() {
 
 #[test]
 fn the_written_set_loads_and_records_every_source_and_repair() {
-    let dir = scratch("write");
+    let (_tmp, dir) = scratch("write");
     let m = format!(
         "{}{}",
         channel(

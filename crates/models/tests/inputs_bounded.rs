@@ -7,12 +7,15 @@ use models::limits;
 use models::readers::{read_at2, read_csv, ReadError, Units};
 use std::path::{Path, PathBuf};
 
-/// A fresh directory under the system temp dir, unique per test and process.
-fn scratch(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("models-inputs-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
+/// A fresh directory under the system temp dir, unique per test, and the guard that removes it
+/// when dropped (also when the test panics).
+fn scratch(name: &str) -> (tempfile::TempDir, PathBuf) {
+    let tmp = tempfile::Builder::new()
+        .prefix(&format!("models-inputs-{name}-"))
+        .tempdir()
+        .unwrap();
+    let dir = tmp.path().to_path_buf();
+    (tmp, dir)
 }
 
 fn write(dir: &Path, name: &str, text: &str) -> PathBuf {
@@ -38,7 +41,7 @@ const AT2_HEAD: &str = "PEER\nEVENT\nACCELERATION TIME SERIES IN UNITS OF G\n";
 
 #[test]
 fn at2_huge_npts_and_dt_are_errors() {
-    let d = scratch("at2");
+    let (_tmp, d) = scratch("at2");
     // NPTS= 1e30 once overflowed a capacity (panic), NPTS= 1e12 asked for 8 TB (abort).
     for npts in ["1e30", "1e12", "10000001"] {
         let p = write(
@@ -84,7 +87,7 @@ fn at2_huge_npts_and_dt_are_errors() {
 
 #[test]
 fn excitation_csv_times_are_bounded() {
-    let d = scratch("csvtimes");
+    let (_tmp, d) = scratch("csvtimes");
     // A time of 1e300 or 1e7 once made the resampling allocate without bound.
     for (name, text, line) in [
         ("t1e300.csv", "t,acc\n0,0.1\n1e300,0.2\n", 3),
@@ -117,7 +120,7 @@ fn excitation_csv_times_are_bounded() {
 
 #[test]
 fn a_resampled_record_is_bounded_before_allocation() {
-    let d = scratch("resample");
+    let (_tmp, d) = scratch("resample");
     // 2 samples 1 s apart are valid; resampled at dt = 1e-5 s with a 1e5 s duration... the
     // record spans 1 s, so ask for a record spanning the maximum at the coarsest step.
     let n = 60_000;
@@ -195,7 +198,7 @@ fn short(seed: u64) -> dataset::Dataset {
 
 #[test]
 fn measured_values_beyond_the_limit_name_file_line_and_column() {
-    let d = scratch("huge-values");
+    let (_tmp, d) = scratch("huge-values");
     let m = write(&d, "measured.csv", "t,ug,a1\n0,0,0\n0.005,1,1e308\n");
     // Once reported downstream as "rms_v1: inf" with no file.
     let e = load_dir(&d).unwrap_err().to_string();
@@ -206,7 +209,7 @@ fn measured_values_beyond_the_limit_name_file_line_and_column() {
 
 #[test]
 fn a_byte_order_mark_is_accepted() {
-    let d = scratch("bom");
+    let (_tmp, d) = scratch("bom");
     short(3).write_dir(&d.join("ds")).unwrap();
     let ds = d.join("ds");
     let want = load_dir(&ds).unwrap();
@@ -241,7 +244,7 @@ fn set_json(text: &str, key: &str, value: &str) -> String {
 
 #[test]
 fn malformed_metadata_is_a_clear_error() {
-    let d = scratch("meta");
+    let (_tmp, d) = scratch("meta");
     let ds = d.join("ds");
     short(4).write_dir(&ds).unwrap();
     let j = ds.join("dataset.json");
@@ -284,7 +287,7 @@ fn malformed_metadata_is_a_clear_error() {
 
 #[test]
 fn files_of_different_data_sets_are_refused_by_name() {
-    let d = scratch("mixed");
+    let (_tmp, d) = scratch("mixed");
     let (one, two) = (d.join("seed1"), d.join("seed2"));
     short(1).write_dir(&one).unwrap();
     short(2).write_dir(&two).unwrap();
@@ -326,7 +329,7 @@ fn files_of_different_data_sets_are_refused_by_name() {
 
 #[test]
 fn data_sets_without_digests_and_field_data_still_load() {
-    let d = scratch("older");
+    let (_tmp, d) = scratch("older");
     let ds = d.join("ds");
     short(5).write_dir(&ds).unwrap();
     let j = ds.join("dataset.json");
@@ -345,7 +348,7 @@ fn data_sets_without_digests_and_field_data_still_load() {
 
 #[test]
 fn rewriting_replaces_a_data_set_and_never_deletes_other_files() {
-    let d = scratch("rewrite");
+    let (_tmp, d) = scratch("rewrite");
     let ds = d.join("ds");
     short(1).write_dir(&ds).unwrap();
     short(2).write_dir(&ds).unwrap();
@@ -383,7 +386,7 @@ fn rewriting_replaces_a_data_set_and_never_deletes_other_files() {
 
 #[test]
 fn leftovers_of_killed_writers_are_removed() {
-    let d = scratch("leftovers");
+    let (_tmp, d) = scratch("leftovers");
     let ds = d.join("ds");
     short(1).write_dir(&ds).unwrap();
     // A process id above the kernel's maximum (2^22) is never alive.

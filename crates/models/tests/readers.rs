@@ -12,12 +12,15 @@ fn fixture(name: &str) -> PathBuf {
         .join(name)
 }
 
-/// A fresh directory under the system temp dir, unique per test and process.
-fn scratch(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("models-readers-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
+/// A fresh directory under the system temp dir, unique per test, and the guard that removes it
+/// when dropped (also when the test panics).
+fn scratch(name: &str) -> (tempfile::TempDir, PathBuf) {
+    let tmp = tempfile::Builder::new()
+        .prefix(&format!("models-readers-{name}-"))
+        .tempdir()
+        .unwrap();
+    let dir = tmp.path().to_path_buf();
+    (tmp, dir)
 }
 
 fn write(dir: &Path, name: &str, text: &str) -> PathBuf {
@@ -56,7 +59,7 @@ fn fixtures_parse_to_the_same_record() {
 
 #[test]
 fn csv_reader_rejects_malformed_input() {
-    let d = scratch("csv");
+    let (_tmp, d) = scratch("csv");
     let missing = d.join("absent.csv");
     let e = read_csv(&missing, Units::G).unwrap_err();
     assert!(matches!(e, ReadError::Io { .. }));
@@ -106,7 +109,7 @@ fn csv_reader_rejects_malformed_input() {
 
 #[test]
 fn at2_reader_rejects_malformed_input() {
-    let d = scratch("at2");
+    let (_tmp, d) = scratch("at2");
     let missing = d.join("absent.AT2");
     assert!(read_at2(&missing)
         .unwrap_err()
@@ -162,7 +165,7 @@ fn short_dataset(seed: u64) -> dataset::Dataset {
 #[test]
 fn dataset_directory_round_trips_bit_exactly() {
     let ds = short_dataset(11);
-    let d = scratch("roundtrip");
+    let (_tmp, d) = scratch("roundtrip");
     ds.write_dir(&d).unwrap();
     let header = std::fs::read_to_string(d.join("measured.csv")).unwrap();
     assert!(header.starts_with("t,ug,a1,a2,a3\n"));
@@ -192,7 +195,7 @@ fn dataset_directory_round_trips_bit_exactly() {
 
 #[test]
 fn dataset_loader_rejects_malformed_directories() {
-    let d = scratch("badload");
+    let (_tmp, d) = scratch("badload");
     let e = load_dir(&d).unwrap_err();
     assert!(e.to_string().contains("measured.csv"), "{e}");
     let m = write(&d, "measured.csv", "t,ug,a1\n0,0,0\n0.005,1,abc\n");

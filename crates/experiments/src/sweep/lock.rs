@@ -281,15 +281,20 @@ fn civil_from_days(z: i64) -> (i64, u32, u32) {
 mod tests {
     use super::*;
 
-    fn temp(tag: &str) -> PathBuf {
-        let d = std::env::temp_dir().join(format!("sysid-lock-{tag}-{}", std::process::id()));
-        let _ = fs::remove_dir_all(&d);
-        d
+    /// A directory, not yet created, inside a fresh directory under the system temp dir, and
+    /// the guard that removes them when dropped (also when the test panics).
+    fn temp(tag: &str) -> (tempfile::TempDir, PathBuf) {
+        let tmp = tempfile::Builder::new()
+            .prefix(&format!("sysid-lock-{tag}-"))
+            .tempdir()
+            .unwrap();
+        let d = tmp.path().join("out");
+        (tmp, d)
     }
 
     #[test]
     fn a_second_writer_is_refused_with_the_holder_named() {
-        let dir = temp("held");
+        let (_tmp, dir) = temp("held");
         let lock = DirLock::acquire(&dir).unwrap();
         let e = DirLock::acquire(&dir).unwrap_err().to_string();
         assert!(e.contains(&format!("pid {}", std::process::id())), "{e}");
@@ -297,12 +302,11 @@ mod tests {
         drop(lock);
         assert!(!dir.join(LOCK_FILE).exists(), "released lock left behind");
         DirLock::acquire(&dir).unwrap();
-        fs::remove_dir_all(&dir).unwrap();
     }
 
     #[test]
     fn a_stale_lock_is_taken_over() {
-        let dir = temp("stale");
+        let (_tmp, dir) = temp("stale");
         fs::create_dir_all(&dir).unwrap();
         // A holder on this host whose process has ended: this process's id with another start
         // time.
@@ -323,12 +327,11 @@ mod tests {
             "a dead writer's temporary lock file was kept"
         );
         drop(lock);
-        fs::remove_dir_all(&dir).unwrap();
     }
 
     #[test]
     fn a_lock_from_another_host_is_kept() {
-        let dir = temp("host");
+        let (_tmp, dir) = temp("host");
         fs::create_dir_all(&dir).unwrap();
         let mut other = Holder::me();
         other.host = "some-other-host".into();
@@ -336,7 +339,6 @@ mod tests {
         let e = DirLock::acquire(&dir).unwrap_err().to_string();
         assert!(e.contains("some-other-host"), "{e}");
         assert!(dir.join(LOCK_FILE).exists());
-        fs::remove_dir_all(&dir).unwrap();
     }
 
     #[test]

@@ -297,11 +297,15 @@ impl Staging {
 mod tests {
     use super::*;
 
-    fn scratch(name: &str) -> PathBuf {
-        let d = std::env::temp_dir().join(format!("replace-{}-{name}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&d);
-        std::fs::create_dir_all(&d).unwrap();
-        d
+    /// A fresh directory under the system temp dir, unique per test, and the guard that removes
+    /// it when dropped (also when the test panics).
+    fn scratch(name: &str) -> (tempfile::TempDir, PathBuf) {
+        let tmp = tempfile::Builder::new()
+            .prefix(&format!("replace-{name}-"))
+            .tempdir()
+            .unwrap();
+        let d = tmp.path().to_path_buf();
+        (tmp, d)
     }
 
     fn write_set(target: &Path, content: &str, try_exchange: bool) {
@@ -322,7 +326,7 @@ mod tests {
     #[test]
     fn both_paths_replace_the_set_and_leave_nothing_beside_it() {
         for try_exchange in [true, false] {
-            let d = scratch(&format!("paths-{try_exchange}"));
+            let (_tmp, d) = scratch(&format!("paths-{try_exchange}"));
             let target = d.join("ds");
             write_set(&target, "one", try_exchange);
             write_set(&target, "two", try_exchange);
@@ -337,7 +341,7 @@ mod tests {
 
     #[test]
     fn an_abandoned_staging_leaves_the_old_set() {
-        let d = scratch("abandon");
+        let (_tmp, d) = scratch("abandon");
         let target = d.join("ds");
         write_set(&target, "one", true);
         let s = stage(&target).unwrap();
@@ -353,7 +357,7 @@ mod tests {
     #[cfg(unix)]
     #[test]
     fn a_symbolic_link_is_kept_and_its_target_replaced() {
-        let d = scratch("link");
+        let (_tmp, d) = scratch("link");
         let real = d.join("real");
         write_set(&real, "one", true);
         let link = d.join("link");
