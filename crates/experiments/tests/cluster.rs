@@ -4,6 +4,8 @@
 //! finish before the report and is named; a dry run writes nothing. The same path against a
 //! real Slurm, with a cancelled and resubmitted task: `tests/cluster/run.sh`.
 
+mod common;
+
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
@@ -15,12 +17,7 @@ use experiments::cluster::{ClusterError, Kind, Plan, SlurmOptions};
 /// A fresh directory under the system temp dir, unique per test, and the guard that removes it
 /// when dropped (also when the test panics).
 fn temp_dir(tag: &str) -> (tempfile::TempDir, PathBuf) {
-    let tmp = tempfile::Builder::new()
-        .prefix(&format!("sysid-cluster-{tag}-"))
-        .tempdir()
-        .unwrap();
-    let d = tmp.path().to_path_buf();
-    (tmp, d)
+    common::temp_dir(&format!("sysid-cluster-{tag}-"))
 }
 
 /// A study with a structure axis: its records go flat into `records/`, each with a `.cpu`

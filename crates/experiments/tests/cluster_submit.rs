@@ -6,6 +6,8 @@
 //! finish job wait for the new array and for the earlier one that still has a queued shard.
 #![cfg(unix)]
 
+mod common;
+
 use std::os::unix::fs::PermissionsExt;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
@@ -30,12 +32,7 @@ validate = false
 /// A fresh directory under the system temp dir, unique per test, and the guard that removes it
 /// when dropped (also when the test panics).
 fn temp_dir(tag: &str) -> (tempfile::TempDir, PathBuf) {
-    let tmp = tempfile::Builder::new()
-        .prefix(&format!("sysid-cluster-{tag}-"))
-        .tempdir()
-        .unwrap();
-    let d = tmp.path().to_path_buf();
-    (tmp, d)
+    common::temp_dir(&format!("sysid-cluster-{tag}-"))
 }
 
 fn script(path: &Path, body: &str) {

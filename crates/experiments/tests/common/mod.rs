@@ -9,6 +9,14 @@ use experiments::metrics::{SignalError, StateErrors};
 use experiments::observe::Trace;
 use experiments::record::{Fingerprint, Loop, RunRecord, Timing, Validation, Versions};
 
+/// A fresh directory under the system temp dir whose name starts with `prefix`, and the guard
+/// that removes it when dropped (also when the test panics).
+pub fn temp_dir(prefix: &str) -> (tempfile::TempDir, std::path::PathBuf) {
+    let tmp = tempfile::Builder::new().prefix(prefix).tempdir().unwrap();
+    let d = tmp.path().to_path_buf();
+    (tmp, d)
+}
+
 pub const NAMES: [&str; 9] = ["k1", "k2", "k3", "c1", "c2", "c3", "beta", "gamma", "n"];
 pub const THETA_TRUE: [f64; 9] = [8.0, 8.0, 8.0, 0.25, 0.25, 0.25, 2.0, 1.0, 2.0];
 
