@@ -42,7 +42,7 @@ if ! command -v slurmctld >/dev/null || ! command -v slurmd >/dev/null ||
 fi
 
 # The binary under test: $SYSID if given, else this checkout's release build (a no-op build
-# after `cargo test --workspace --release`).
+# after `cargo test --release`).
 if [ -z "${SYSID:-}" ]; then
     step "building sysid"
     cargo build --release -p experiments --bin sysid

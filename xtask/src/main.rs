@@ -1,7 +1,7 @@
 //! `cargo xtask <task>`: project tasks written as plain Rust (the cargo-xtask pattern).
 //!
 //! - `reproduce-paper [--quick] [--resume] [--threads N] [--shard i/n]`: builds `sysid` in release
-//!   (the libraries it builds are the ones `cargo test --workspace --release` links) and runs `sysid reproduce` from the workspace root into `results/paper/` (or
+//!   (the libraries it builds are the ones `cargo test --release` links) and runs `sysid reproduce` from the workspace root into `results/paper/` (or
 //!   `results/paper-quick/`). Every run is computed unless `--resume` is given; then records whose
 //!   fingerprint matches are reused.
 //! - `reproduce-scaling [--quick] [--resume] [--report-only] [--threads N] [--shard i/n]`: builds `sysid` in
