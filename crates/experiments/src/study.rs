@@ -180,8 +180,18 @@ impl Structure {
 }
 
 /// `settings` with `keys` (a table of `[filter]` keys) laid over them; an unknown key or a value
-/// of the wrong type is an error.
+/// of the wrong type is an error, and so is a key every job sets from the sweep's axes (it would
+/// be overwritten without a word).
 fn laid_over(settings: &FilterSettings, keys: &toml::Table) -> Result<FilterSettings> {
+    for (key, axis) in [
+        ("particles", "sweep.particles"),
+        ("resampling", "sweep.resampling"),
+        ("discretisation", "sweep.discretisations"),
+    ] {
+        if keys.contains_key(key) {
+            bail!("`{key}` is set for every job by `{axis}` (or `[filter]`), not here");
+        }
+    }
     let mut table = toml::Table::try_from(settings)
         .map_err(|e| invalid!("the filter settings as a table: {e}"))?;
     for (k, v) in keys {
@@ -526,8 +536,8 @@ impl Study {
 
     /// The filter settings of a job: the study's (with its algorithm's `filter_for` keys and its
     /// structure's `filter` keys), with
-    /// the job's particles, resampling and discretisation. An error only for a `filter_for`
-    /// table that does not apply (refused already by [`Study::load`]).
+    /// the job's particles, resampling and discretisation. An error only for a `filter_for` or
+    /// structure `filter` table that does not apply (refused already by [`Study::load`]).
     pub fn settings(&self, job: &Job) -> Result<FilterSettings> {
         let mut settings = self.filter_for_structure(job.structure, job.algorithm)?;
         settings.particles = job.particles;

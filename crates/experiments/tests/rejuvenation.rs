@@ -336,6 +336,7 @@ trace_every = 0
         ("[filter_for.kalman]\npool = 2", "filter_for.kalman"),
         ("[filter_for.mpf-ekf2]\nno_such_key = 1", "no_such_key"),
         ("[filter_for.storvik]\nrejuvenation = 0.2", "`rejuvenation`"),
+        ("[filter_for.storvik]\nparticles = 100", "sweep.particles"),
     ] {
         std::fs::write(&path, text(extra)).unwrap();
         let e = format!("{:#}", Study::load(&path).unwrap_err());

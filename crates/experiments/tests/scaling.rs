@@ -167,6 +167,12 @@ fn a_structure_takes_its_own_filter_keys() {
         ("filter = { pools = 2 }", "pools"),
         ("filter = { pool = 0 }", "pool"),
         ("filter = { ess_threshold = 2.0 }", "ess_threshold"),
+        // Set for every job by the sweep's axes: refused, not silently overwritten.
+        ("filter = { particles = 4000 }", "sweep.particles"),
+        (
+            "filter = { discretisation = \"euler\" }",
+            "sweep.discretisations",
+        ),
     ] {
         let text = SMALL.replace("label = \"n4\"\n", &format!("label = \"n4\"\n{bad}\n"));
         let err = format!("{:#}", Study::load(&write_study(&dir, &text)).unwrap_err());
