@@ -158,6 +158,7 @@ pub fn resolve(
     measured_file: &Path,
     name: KeyName,
 ) -> Result<StructureDescription> {
+    RESOLUTIONS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
     if let Some(meta) = &data.meta {
         let recorded = meta.structure()?;
         let meta_file = measured_file.with_file_name(META);
@@ -229,6 +230,14 @@ pub fn resolve(
         .map_err(|e| crate::error::invalid!("{}: {}", measured_file.display(), e))?;
     Ok(d)
 }
+
+/// How many times this process has resolved a building ([`resolve`]; the plan of a run
+/// resolves it once: tested).
+pub fn resolutions() -> usize {
+    RESOLUTIONS.load(std::sync::atomic::Ordering::Relaxed)
+}
+
+static RESOLUTIONS: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
 
 /// [`resolve`] as the library uses it (keys named as in the `[structure]` table).
 pub fn resolve_for_run(

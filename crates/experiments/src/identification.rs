@@ -13,20 +13,14 @@ use std::path::{Path, PathBuf};
 use crate::error::{Context, Result};
 use core_filters::resampling::Scheme;
 use core_filters::smc::storvik::StorvikUpdate;
-use models::dataset::{load_dir, LoadedDataset, MEASURED, META};
-use models::description::StructureDescription;
-use models::filtering::{ChainSpec, MarginalPrior};
+use models::dataset::{load_dir, LoadedDataset, MEASURED};
 use models::sensors::MeasurementKind;
 
 use crate::checks;
-use crate::field::{self, StructureSettings};
-use crate::pipeline::{
-    chain_spec, identify, per_particle_reason, unmeasured_storeys, Algorithm, FilterSettings,
-    RunInput, HYSTERETIC_PARTICLES, PER_PARTICLE_MIN_STOREYS, SPARSE_REL_SD,
-};
+use crate::field::StructureSettings;
+use crate::pipeline::{Algorithm, FilterSettings, RunInput};
+use crate::plan::{Asked, Decision, PlanRequest, RunPlan};
 use crate::record::RunRecord;
-use crate::scaled_prior::HystereticSubsteps;
-use crate::settings::{recommended_pool, Substeps, RECOMMENDED_PARTICLES};
 use crate::simulation::parse_storeys;
 
 /// A malformed `--fix` list (`name=value,name=value`).
@@ -262,44 +256,8 @@ fn structure_flags(args: &FilterRequest) -> Result<StructureSettings> {
     })
 }
 
-/// A flag's name for a key of the `[structure]` table.
-fn flag_name(key: &str) -> String {
-    format!("--{key}")
-}
-
-/// What [`identify_request`] has to say before its run ends, in order.
-#[derive(Debug)]
-pub enum Note<'a> {
-    /// Field data: the building resolved from the flags and the config's `[structure]` table.
-    Field(&'a StructureDescription),
-    /// Field data: the data-scaled default prior (its [`describe`] line).
-    ///
-    /// [`describe`]: crate::scaled_prior::ScaledPrior::describe
-    Prior(String),
-    /// A layout that leaves storeys unmeasured, or a building of at least
-    /// [`PER_PARTICLE_MIN_STOREYS`] storeys: the MPF-EKF2's default prior Gaussian
-    /// ([`FilterSettings::recommended_for`]), or a warning when a config keeps the shared one.
-    Sparse(String),
-    /// Field data of a building with Bouc–Wen elements sampled coarsely for its first mode: the
-    /// MPF-EKF2's default particle count ([`HYSTERETIC_PARTICLES`]).
-    Particles(String),
-}
-
-impl fmt::Display for Note<'_> {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        match self {
-            Note::Field(d) => write!(
-                f,
-                "field data: {} storeys, masses {:?}, hysteretic storeys {:?}, {} accelerations at storeys {:?}, {} damping (no {META})",
-                d.storeys, d.masses, d.hysteretic, d.measurement, d.sensors, d.damping
-            ),
-            Note::Prior(p) | Note::Sparse(p) | Note::Particles(p) => f.write_str(p),
-        }
-    }
-}
-
 /// The noise levels of a field-data run, chosen from the measured signals (SPEC §3): the
-/// [`ChainSpec`] the run used.
+/// plan's [`crate::plan::Model`].
 #[derive(Debug, Clone, PartialEq)]
 pub struct NoiseLevels {
     pub noise_fraction: f64,
@@ -314,13 +272,13 @@ pub struct NoiseLevels {
 }
 
 impl NoiseLevels {
-    fn of(spec: &ChainSpec, noise_fraction: f64) -> Self {
+    fn of(plan: &RunPlan) -> Self {
         NoiseLevels {
-            noise_fraction,
-            r_diag: spec.r_diag.clone(),
-            q_disp: spec.q_disp,
-            q_vel: spec.q_vel,
-            q_r: spec.q_r.clone(),
+            noise_fraction: plan.settings.noise_fraction,
+            r_diag: plan.model.r_diag.clone(),
+            q_disp: plan.model.q_disp,
+            q_vel: plan.model.q_vel,
+            q_r: plan.model.q_r.clone(),
         }
     }
 }
@@ -444,166 +402,127 @@ pub struct Target<'a> {
     /// and takes the recommended settings.
     pub config: Option<&'a str>,
     /// Whether the run asked for its particle count (`--particles`); if not, and without a
-    /// config, [`settle`] may choose it ([`HYSTERETIC_PARTICLES`]).
+    /// config, the plan may choose it ([`crate::rules::HYSTERETIC_PARTICLES`]).
     pub particles_asked: bool,
 }
 
-/// Settles the settings of a run before it starts: the building — simulated data carry theirs
-/// and a stated key (flag or the config's `[structure]` table) must agree with it; field data
-/// take the flags over the table and are refused by name when incomplete — and, for the
-/// MPF-EKF2 without a config, the prior Gaussian the building asks for
-/// ([`FilterSettings::recommended_for`]) and, unless the run asked for a count, the particles
-/// field data of a coarsely sampled hysteretic building ask for ([`HYSTERETIC_PARTICLES`]).
-/// `note` hears what there is to say, in order. One
-/// function for `sysid filter` and the Python `identify`, so they settle a run alike.
+impl Target<'_> {
+    /// The plan request of this target with `settings`, seed, run and experiment.
+    pub fn request<'a>(
+        &'a self,
+        settings: FilterSettings,
+        seed: u64,
+        run: u64,
+        experiment: &'a str,
+    ) -> PlanRequest<'a> {
+        PlanRequest {
+            algorithm: self.algorithm,
+            data: self.data,
+            chain: self.chain,
+            settings,
+            seed,
+            run,
+            experiment,
+            asked: Some(Asked {
+                measured: self.measured,
+                flags: self.flags,
+                config: self.config,
+                particles_asked: self.particles_asked,
+            }),
+        }
+    }
+}
+
+/// The settings [`crate::plan::settle`] settles for `t` (seed 0, run 0), and its decisions, in
+/// order, to `note`.
 pub fn settle(
     t: &Target,
-    mut settings: FilterSettings,
-    note: &mut dyn FnMut(Note),
+    settings: FilterSettings,
+    note: &mut dyn FnMut(&Decision),
 ) -> Result<FilterSettings> {
-    let Target {
-        algorithm,
-        data,
-        chain,
-        measured,
-        flags,
-        config,
-        particles_asked,
-    } = *t;
-    let config_name = config.unwrap_or_default();
-    let table_name = |key: &str| format!("[structure] `{key}` in {config_name}");
-    let both_name = |key: &str| format!("{} (or {})", flag_name(key), field::table_key(key));
-    if data.meta.is_some() {
-        field::resolve(data, None, flags, measured, &flag_name)?;
-        field::resolve(data, None, &settings.structure, measured, &table_name)?;
-        settings.structure = StructureSettings::default();
-    } else if chain.is_none() {
-        settings.structure.overlay(flags);
-        let d = field::resolve(data, None, &settings.structure, measured, &both_name)?;
-        note(Note::Field(&d));
-    }
-    // What the sensors cannot see, and the size of the building, decide the MPF-EKF2's default
-    // prior Gaussian (`FilterSettings::recommended_for`).
-    if algorithm == Algorithm::MpfEkf2 {
-        // Settings first, so that their refusal names the key as it does in every other run.
-        crate::limits::check_filter_settings(&settings)?;
-        // A data set the spec refuses is refused by the run itself, with its own message.
-        let Ok(spec) = chain_spec(data, chain, &settings) else {
-            return Ok(settings);
-        };
-        let (storeys, unmeasured) = (spec.n_storeys(), unmeasured_storeys(&spec));
-        // Without a config (and without --rejuvenation) the MPF-EKF2 with the shared prior
-        // Gaussian moves its exponents n ([`FilterSettings::recommended_for`]); a linear building
-        // has none, and its settings do not claim a move.
-        let has_exponents = !spec.building.hysteretic().is_empty();
-        if config.is_none() && settings.rejuvenation.is_none() && has_exponents {
-            settings.rejuvenation =
-                FilterSettings::recommended_for(algorithm, storeys, &unmeasured).rejuvenation;
-        }
-        let per_particle = per_particle_reason(storeys, &unmeasured);
-        let rule_may_apply = config.is_none()
-            && !particles_asked
-            && has_exponents
-            && per_particle.is_none()
-            && settings.substeps == Substeps::Auto;
-        if let Some(h) = rule_may_apply
-            .then(|| coarsely_sampled_hysteresis(data, chain, &settings, spec.dt))
-            .flatten()
-        {
-            settings.particles = HYSTERETIC_PARTICLES;
-            settings.pool = recommended_pool(HYSTERETIC_PARTICLES);
-            note(Note::Particles(format!(
-                "note: Bouc–Wen elements sampled at ω₁·dt = {:.4} of the data-scaled ω₁ (above {}): the MPF-EKF2 takes {} particles as {} filters of {} (with {} k1 came out up to 7.7 % low on a stiff building, with these at most 4.1 %; about 4 times the cost; docs/structures.md, \"Stiff buildings\"); --particles {} keeps the usual count",
-                h.omega1_dt,
-                h.above,
-                settings.particles,
-                settings.pool,
-                settings.particles / settings.pool,
-                RECOMMENDED_PARTICLES,
-                RECOMMENDED_PARTICLES,
-            )));
-        }
-        if let Some(reason) = per_particle {
-            if config.is_none() {
-                settings.marginal_prior =
-                    FilterSettings::recommended_for(algorithm, storeys, &unmeasured).marginal_prior;
-                note(Note::Sparse(format!(
-                    "note: {reason}: the MPF-EKF2 starts every particle from its own prior mean (marginal_prior = {{ kind = \"per_particle\", rel_sd = {SPARSE_REL_SD} }}; with one shared prior Gaussian it loses its particles where storeys carry no sensor, docs/scaling.md, and is less accurate from {PER_PARTICLE_MIN_STOREYS} storeys on, docs/calibration.md)"
-                )));
-            } else if settings.marginal_prior == MarginalPrior::MomentMatched {
-                note(Note::Sparse(format!(
-                    "warning: {reason} and the MPF-EKF2 starts from one moment-matched prior Gaussian (marginal_prior = {{ kind = \"moment_matched\" }}): where storeys carry no sensor it drives their stiffnesses below zero and loses all its particles in most runs at 20 and 40 storeys (docs/scaling.md), and at 10 storeys its mean stiffness error was 16 % against 4 % (docs/calibration.md); set marginal_prior = {{ kind = \"per_particle\", rel_sd = {SPARSE_REL_SD} }}"
-                )));
-            }
-        }
-    }
-    Ok(settings)
+    let plan = crate::plan::settle(t.request(settings, 0, 0, ""))?;
+    plan.decisions.iter().for_each(|d| note(d));
+    Ok(plan.settings)
 }
 
-/// The Bouc–Wen sub-step rule's choice on field data whose data-scaled ω₁·dt asks for sub-steps
-/// ([`HystereticSubsteps`]), or `None` (simulated data, or one step enough). A data set whose
-/// prior cannot be scaled gives `None` here and is refused by the run itself, which scales it
-/// again (`pipeline::identify`).
-fn coarsely_sampled_hysteresis(
-    data: &LoadedDataset,
-    chain: Option<&models::structure::ShearChain>,
-    settings: &FilterSettings,
-    dt: f64,
-) -> Option<HystereticSubsteps> {
-    let p = crate::pipeline::prior_from_data(data, chain, settings).ok()??;
-    Some(HystereticSubsteps::new(p.omega1, dt)).filter(|h| h.substeps > 1)
-}
-
-/// Runs the identification a request asks for: settings, the building (simulated data carry
-/// theirs and a stated key must agree with it; field data take the flags over the config's
-/// `[structure]` table and are refused by name when incomplete), the run, and for field data the
-/// validation without the truth (free run, modes; docs/validation.md). `note` hears, in order,
-/// what there is to say before the run ends.
-pub fn identify_request(req: &FilterRequest, note: &mut dyn FnMut(Note)) -> Result<Identified> {
-    let settings = request_settings(req)?;
-    let flags = structure_flags(req)?;
+/// The data of a request, loaded, with the true structure when the data set says what it is.
+pub fn load_request_data(
+    dir: &Path,
+) -> Result<(LoadedDataset, Option<models::structure::ShearChain>)> {
     let data: LoadedDataset =
-        load_dir(&req.data).with_context(|| format!("loading data set {}", req.data.display()))?;
-    let measured = req.data.join(MEASURED);
-    // The true structure, for the validation run, when the data set says what it is.
+        load_dir(dir).with_context(|| format!("loading data set {}", dir.display()))?;
     let chain = data
         .true_chain()
         .context("rebuilding the data set's structure")?;
+    Ok((data, chain))
+}
+
+/// Settles the plan of a request ([`crate::plan::settle`]) on its loaded data: the settings
+/// (the config's or the recommended ones under the flags), the building (simulated data carry
+/// theirs and a stated key must agree with it; field data take the flags over the config's
+/// `[structure]` table and are refused by name when incomplete) and every default rule.
+pub fn plan_request(
+    req: &FilterRequest,
+    data: &LoadedDataset,
+    chain: Option<&models::structure::ShearChain>,
+) -> Result<RunPlan> {
+    let settings = request_settings(req)?;
+    let flags = structure_flags(req)?;
+    let measured = req.data.join(MEASURED);
     let config_name = req.config.as_ref().map(|p| p.display().to_string());
     let target = Target {
         algorithm: req.algorithm,
-        data: &data,
-        chain: chain.as_ref(),
+        data,
+        chain,
         measured: &measured,
         flags: &flags,
         config: config_name.as_deref(),
         particles_asked: req.particles.is_some(),
     };
-    let settings = settle(&target, settings, note)?;
+    crate::plan::settle(target.request(settings, req.seed, req.run, &req.experiment))
+}
+
+/// Runs a settled plan as `sysid filter` does: the run (progress shown, prediction errors
+/// kept), the plan written into the record, and for field data the validation without the
+/// truth (free run, modes; docs/validation.md).
+pub fn identify_plan(
+    plan: &RunPlan,
+    data: &LoadedDataset,
+    chain: Option<&models::structure::ShearChain>,
+    stop: &dyn Fn() -> bool,
+    progress: bool,
+) -> Result<Identified> {
     let input = RunInput {
-        data: &data,
-        chain: chain.as_ref(),
-        experiment: &req.experiment,
-        seed: req.seed,
-        run: req.run,
-        progress: true,
+        data,
+        chain,
+        experiment: &plan.experiment,
+        seed: plan.seed,
+        run: plan.run,
+        progress,
         residuals: true,
     };
-    if let Some(p) = crate::pipeline::prior_from_data(&data, chain.as_ref(), &settings)? {
-        note(Note::Prior(p.describe()));
-    }
-    let mut record = identify(&input, req.algorithm, &settings)?;
+    let mut record = crate::pipeline::execute(plan, &input, stop)?;
+    record.plan = Some(serde_json::to_value(plan).context("recording the plan")?);
     let mut noise = None;
     if data.meta.is_none() {
         // Field data: validation without the truth (free run, modes; docs/validation.md).
-        let d = field::resolve_for_run(&data, chain.as_ref(), &settings.structure)?;
-        crate::validation::attach(&mut record, &data, &d);
-        // The noise levels were chosen from the measured signals (SPEC §3): the spec the run
-        // used, built again from the same data and settings.
-        let spec = crate::pipeline::chain_spec(&data, chain.as_ref(), &settings)?;
-        noise = Some(NoiseLevels::of(&spec, settings.noise_fraction));
+        crate::validation::attach(&mut record, data, &plan.building);
+        // The noise levels were chosen from the measured signals (SPEC §3).
+        noise = Some(NoiseLevels::of(plan));
     }
     Ok(Identified { record, noise })
+}
+
+/// Runs the identification a request asks for: its plan ([`plan_request`]), whose decisions
+/// `note` hears in order before the run starts, then [`identify_plan`].
+pub fn identify_request(
+    req: &FilterRequest,
+    note: &mut dyn FnMut(&Decision),
+) -> Result<Identified> {
+    let (data, chain) = load_request_data(&req.data)?;
+    let plan = plan_request(req, &data, chain.as_ref())?;
+    plan.decisions.iter().for_each(|d| note(d));
+    identify_plan(&plan, &data, chain.as_ref(), &|| false, true)
 }
 
 /// Why a finished run is not an identification to use.

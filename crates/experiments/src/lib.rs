@@ -24,6 +24,7 @@
 //! - [`cluster`]: any study as a Slurm job array (submit, status, resubmit, finish);
 //! - [`calibration`] and [`coverage`]: coverage of credible intervals over a sweep with known truth.
 
+pub mod algorithm;
 pub mod calibration;
 pub mod checks;
 pub mod cli;
@@ -48,6 +49,7 @@ pub mod metrics;
 pub mod observe;
 pub mod pace;
 pub mod pipeline;
+pub mod plan;
 pub mod plot;
 mod pool;
 pub mod record;
@@ -56,6 +58,7 @@ pub mod regression;
 pub mod report;
 pub mod reproduce;
 pub mod residuals;
+pub mod rules;
 mod run_dir;
 pub mod scaled_prior;
 pub mod scaling;

@@ -9,7 +9,7 @@
 
 use std::path::Path;
 
-use crate::error::{bail, Context, Result};
+use crate::error::{bail, invalid, Context, Result};
 pub use models::limits::*;
 
 use crate::settings::FilterSettings;
@@ -63,23 +63,53 @@ pub fn check_particle_cloud(particles: usize, per_particle: usize) -> Result<()>
     Ok(())
 }
 
-/// Reads a filter config file (TOML, [`FilterSettings`]) and checks it; every error names the
-/// file.
-pub fn load_filter_settings(path: &Path) -> Result<FilterSettings> {
-    let bytes = std::fs::metadata(path)
-        .with_context(|| format!("reading config {}", path.display()))?
-        .len();
-    if bytes > MAX_FILE_BYTES {
+/// Reads a small text file a user gives (a config, a run plan): a regular file of at most
+/// [`MAX_FILE_BYTES`] bytes, read no further than that (a FIFO, a device or a directory is
+/// refused before reading), UTF-8, its byte-order mark dropped; `what` names it in errors.
+pub fn read_text_file(path: &Path, what: &str) -> Result<String> {
+    use std::io::Read;
+    let meta =
+        std::fs::metadata(path).with_context(|| format!("reading {what} {}", path.display()))?;
+    if !meta.is_file() {
         bail!(
-            "config {}: {bytes} bytes, more than the {MAX_FILE_BYTES} bytes a config may have",
+            "{what} {}: not a regular file (a {what} is read from a file)",
             path.display()
         );
     }
-    let text = std::fs::read_to_string(path)
-        .with_context(|| format!("reading config {}", path.display()))?;
-    let text = text.strip_prefix('\u{feff}').unwrap_or(&text);
+    if meta.len() > MAX_FILE_BYTES {
+        bail!(
+            "{what} {}: {} bytes, more than the {MAX_FILE_BYTES} bytes a {what} may have",
+            path.display(),
+            meta.len()
+        );
+    }
+    let mut bytes = Vec::new();
+    std::fs::File::open(path)
+        .and_then(|f| f.take(MAX_FILE_BYTES + 1).read_to_end(&mut bytes))
+        .with_context(|| format!("reading {what} {}", path.display()))?;
+    if bytes.len() as u64 > MAX_FILE_BYTES {
+        bail!(
+            "{what} {}: more than the {MAX_FILE_BYTES} bytes a {what} may have",
+            path.display()
+        );
+    }
+    let text = String::from_utf8(bytes).map_err(|e| {
+        let upto = &e.as_bytes()[..e.utf8_error().valid_up_to()];
+        let line = upto.iter().filter(|&&b| b == b'\n').count() + 1;
+        invalid!("{what} {}: line {line}: not UTF-8 text", path.display())
+    })?;
+    Ok(match text.strip_prefix('\u{feff}') {
+        Some(t) => t.to_string(),
+        None => text,
+    })
+}
+
+/// Reads a filter config file (TOML, [`FilterSettings`]) and checks it; every error names the
+/// file.
+pub fn load_filter_settings(path: &Path) -> Result<FilterSettings> {
+    let text = read_text_file(path, "config")?;
     let s: FilterSettings =
-        toml::from_str(text).with_context(|| format!("parsing config {}", path.display()))?;
+        toml::from_str(&text).with_context(|| format!("parsing config {}", path.display()))?;
     check_filter_settings(&s).with_context(|| format!("config {}", path.display()))?;
     Ok(s)
 }

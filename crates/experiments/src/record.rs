@@ -193,6 +193,11 @@ pub struct RunRecord {
     /// (module `pool`); absent when every filter was kept, and in unpooled runs.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub pool_left_out: Vec<diagnostics::LeftOutFilter>,
+    /// The plan the run executed (`plan::RunPlan`, read with `RunPlan::of_record`): written by
+    /// `sysid filter` and the Python `identify`; absent in a study's records, whose plan is
+    /// their study description and fingerprint.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub plan: Option<serde_json::Value>,
 }
 
 impl RunRecord {

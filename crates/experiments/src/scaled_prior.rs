@@ -42,7 +42,7 @@ pub const K_LOG_SD: f64 = 0.5;
 pub const C_LOG_SD: f64 = 0.7;
 
 /// A prior scaled from the data, with what it was read from (printed and recorded).
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, serde::Deserialize)]
 pub struct ScaledPrior {
     /// 1-based storey whose response was analysed.
     pub storey: usize,
@@ -58,8 +58,20 @@ pub struct ScaledPrior {
     /// Median of α (storey+mass damping form only): 2·ζ_α·ω₁.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub alpha_median: Option<f64>,
-    #[serde(skip)]
+    /// The prior itself (not written: a run's plan holds the prior it runs,
+    /// `plan::Model::prior`; read back empty).
+    #[serde(skip, default = "no_prior")]
     pub prior: ChainPrior,
+}
+
+/// The empty prior a read-back [`ScaledPrior`] holds.
+fn no_prior() -> ChainPrior {
+    ChainPrior {
+        k: Vec::new(),
+        c: Vec::new(),
+        alpha: None,
+        elements: Vec::new(),
+    }
 }
 
 impl ScaledPrior {
@@ -123,7 +135,7 @@ pub fn hysteretic_substeps(omega1: f64, dt: f64) -> usize {
 
 /// What [`hysteretic_substeps`] chose for a run (printed and recorded under
 /// `config.substeps_hysteretic`).
-#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, serde::Deserialize)]
 pub struct HystereticSubsteps {
     /// ω₁·dt of the data-scaled ω₁ and the sample interval.
     pub omega1_dt: f64,
@@ -185,8 +197,17 @@ fn power(x: &[f64], dt: f64, w: f64) -> f64 {
     re * re + im * im
 }
 
+/// How many times this process has scanned a data set's spectra for [`scaled_prior`] (the
+/// plan of a run scans at most once: tested).
+pub fn scans() -> usize {
+    SCANS.load(std::sync::atomic::Ordering::Relaxed)
+}
+
+static SCANS: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
+
 /// The prior of field data with structure `d`, scaled from the measured response.
 pub fn scaled_prior(data: &LoadedDataset, d: &StructureDescription) -> Result<ScaledPrior> {
+    SCANS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
     let k = data.len();
     let dt = data.dt;
     let channel = data.channels - 1;

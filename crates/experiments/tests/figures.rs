@@ -127,6 +127,7 @@ fn record(algorithm: &str, run: u64, bias: f64) -> RunRecord {
         free_run: None,
         modal: None,
         pool_left_out: vec![],
+        plan: None,
     }
 }
 

@@ -7,15 +7,18 @@ use core_filters::resampling::Scheme;
 use core_filters::smc::storvik::StorvikUpdate;
 use models::sensors::MeasurementKind;
 
-use crate::identification::{commented_defaults, finish, identify_request, FilterRequest};
+use crate::identification::{
+    commented_defaults, finish, identify_plan, load_request_data, plan_request, FilterRequest,
+};
 use crate::pipeline::Algorithm;
+use crate::plan::RunPlan;
 use crate::record::RunRecord;
 
 /// Arguments of `sysid filter`.
 #[derive(Debug, clap::Args)]
 pub struct Args {
     /// Algorithm: bootstrap, mln-rbpf, storvik or mpf-ekf2.
-    #[arg(long, required_unless_present = "print_config")]
+    #[arg(long, required_unless_present_any = ["print_config", "plan"])]
     pub algorithm: Option<Algorithm>,
     /// Data-set directory as written by `sysid simulate` (`measured.csv`; `truth.csv` and
     /// `dataset.json` optional).
@@ -27,15 +30,33 @@ pub struct Args {
     /// pooled as one filter per 125 particles, 1 to 8).
     #[arg(long)]
     pub particles: Option<usize>,
-    /// Master seed of the filter's random stream.
-    #[arg(long, default_value_t = 1)]
-    pub seed: u64,
-    /// Run index (with the seed, selects the filter's stream).
-    #[arg(long, default_value_t = 0)]
-    pub run: u64,
+    /// Master seed of the filter's random stream (default 1).
+    #[arg(long)]
+    pub seed: Option<u64>,
+    /// Run index (with the seed, selects the filter's stream; default 0).
+    #[arg(long)]
+    pub run: Option<u64>,
     /// Where to write the run record (JSON).
-    #[arg(long, required_unless_present = "print_config")]
+    #[arg(long, required_unless_present_any = ["print_config", "plan_only", "print_plan"])]
     pub out: Option<PathBuf>,
+    /// Settle the run's plan — building, prior, noise levels, particles and pooling, sub-steps,
+    /// rejuvenation, seeds, and every choice a default rule made with its reason — print it,
+    /// and exit without running.
+    #[arg(long, conflicts_with_all = ["print_plan", "plan"])]
+    pub plan_only: bool,
+    /// Settle the run's plan and print it as TOML (for `--plan FILE`), and exit without running.
+    #[arg(long, conflicts_with = "plan")]
+    pub print_plan: bool,
+    /// Run exactly the plan in this TOML file (as `--print-plan` writes it) on `--data`, the
+    /// data it was settled on: its record equals the record of the run it was printed for. The
+    /// options that settle a plan (algorithm, particles, config, structure, …) are refused
+    /// beside it.
+    #[arg(long, value_name = "FILE", conflicts_with_all = [
+        "algorithm", "particles", "seed", "run", "resampling", "ess_threshold", "storvik_update",
+        "discretisation", "substeps", "rejuvenation", "config", "fix", "experiment", "storeys",
+        "hysteretic", "masses", "measurement", "damping",
+    ])]
+    pub plan: Option<PathBuf>,
     /// Also draw the run's figures into this directory (as `sysid plot RECORD --out DIR`).
     #[arg(long)]
     pub plot: Option<PathBuf>,
@@ -79,9 +100,9 @@ pub struct Args {
     /// Fix parameters at values, e.g. `k1=8,n=2`.
     #[arg(long)]
     pub fix: Option<String>,
-    /// Experiment name written into the record.
-    #[arg(long, default_value = "cli")]
-    pub experiment: String,
+    /// Experiment name written into the record (default `cli`).
+    #[arg(long)]
+    pub experiment: Option<String>,
     /// Field data (no dataset.json): number of storeys N.
     #[arg(long)]
     pub storeys: Option<usize>,
@@ -123,33 +144,40 @@ pub fn run(args: Args) -> Result<()> {
         print!("{}", commented_defaults());
         return Ok(());
     }
-    let (Some(algorithm), Some(data), Some(out)) =
-        (args.algorithm, args.data.clone(), args.out.clone())
-    else {
-        bail!("--algorithm, --data and --out are required");
+    let Some(data_dir) = args.data.clone() else {
+        bail!("--data is required");
     };
-    let request = FilterRequest {
-        algorithm,
-        data,
-        config: args.config,
-        particles: args.particles,
-        resampling: args.resampling,
-        ess_threshold: args.ess_threshold,
-        storvik_update: args.storvik_update,
-        discretisation: args.discretisation,
-        substeps: args.substeps,
-        rejuvenation: args.rejuvenation,
-        fix: args.fix,
-        experiment: args.experiment,
-        seed: args.seed,
-        run: args.run,
-        storeys: args.storeys,
-        hysteretic: args.hysteretic,
-        masses: args.masses,
-        measurement: args.measurement,
-        damping: args.damping,
+    let (data, chain) = load_request_data(&data_dir)?;
+    let plan = match &args.plan {
+        Some(file) => {
+            let name = file.display().to_string();
+            let text = crate::limits::read_text_file(file, "run plan")?;
+            let plan = RunPlan::from_toml(&text, &name)?;
+            plan.check_data(&data, &name)?;
+            plan
+        }
+        None => {
+            let Some(algorithm) = args.algorithm else {
+                bail!("--algorithm is required (or --plan FILE)");
+            };
+            plan_request(&request(&args, algorithm, data_dir), &data, chain.as_ref())?
+        }
     };
-    let identified = identify_request(&request, &mut |note| eprintln!("{note}"))?;
+    if args.plan_only {
+        print!("{}", plan.describe());
+        return Ok(());
+    }
+    if args.print_plan {
+        print!("{}", plan.to_toml()?);
+        return Ok(());
+    }
+    let Some(out) = args.out.clone() else {
+        bail!("--out is required");
+    };
+    for d in &plan.decisions {
+        eprintln!("{d}");
+    }
+    let identified = identify_plan(&plan, &data, chain.as_ref(), &|| false, true)?;
     if let Some(noise) = &identified.noise {
         eprintln!("{noise}");
     }
@@ -163,6 +191,31 @@ pub fn run(args: Args) -> Result<()> {
         eprintln!("{} figures in {}", drawn.written.len(), dir.display());
     }
     outcome
+}
+
+/// The request the flags make.
+fn request(args: &Args, algorithm: Algorithm, data: PathBuf) -> FilterRequest {
+    FilterRequest {
+        algorithm,
+        data,
+        config: args.config.clone(),
+        particles: args.particles,
+        resampling: args.resampling,
+        ess_threshold: args.ess_threshold,
+        storvik_update: args.storvik_update,
+        discretisation: args.discretisation,
+        substeps: args.substeps,
+        rejuvenation: args.rejuvenation,
+        fix: args.fix.clone(),
+        experiment: args.experiment.clone().unwrap_or_else(|| "cli".into()),
+        seed: args.seed.unwrap_or(1),
+        run: args.run.unwrap_or(0),
+        storeys: args.storeys,
+        hysteretic: args.hysteretic.clone(),
+        masses: args.masses.clone(),
+        measurement: args.measurement,
+        damping: args.damping,
+    }
 }
 
 /// Finishes a run ([`finish`]: warnings attached, record written), prints the summary table on

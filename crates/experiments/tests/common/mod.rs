@@ -82,6 +82,7 @@ pub fn record(algorithm: &str, run: u64, ratios: [f64; 9], nrmse: f64) -> RunRec
         free_run: None,
         modal: None,
         pool_left_out: vec![],
+        plan: None,
     })
 }
 

@@ -111,7 +111,7 @@ fn centre(p: &Prior) -> f64 {
 }
 
 /// The choice and what it rests on (written into the run record).
-#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, serde::Deserialize)]
 pub struct AutoSubsteps {
     pub substeps: usize,
     /// The highest undamped mode of the prior's building (rad/s).

@@ -1,0 +1,948 @@
+//! The plan of one run ([`RunPlan`]): settled once, before anything runs, from the data, what
+//! the user stated of the building, the settings (a config's or the recommended ones) and the
+//! command line — the building, the prior, the noise levels, the sub-steps, the particles and
+//! pooling, the rejuvenation and the seeds — with every choice a default rule made and why
+//! ([`Decision`]). A run executes its plan and nothing else (`pipeline::execute`); `sysid
+//! filter --plan-only` prints it, `--print-plan` writes it as TOML and `--plan FILE` runs
+//! exactly that plan.
+//!
+//! [`settle`] is the one place where a run's defaults are decided: the building is resolved
+//! once, the data-scaled prior scanned at most once, and the rules of [`crate::rules`] applied
+//! in a fixed order.
+
+use std::fmt;
+use std::path::Path;
+
+use crate::error::{bail, invalid, Context, Result};
+use models::dataset::{LoadedDataset, META};
+use models::description::StructureDescription;
+use models::filtering::{ChainPrior, ChainSpec, MarginalPrior, RmsLevels};
+use models::sensors::MeasurementKind;
+use models::structure::{Damping, ShearChain};
+use serde::{Deserialize, Serialize};
+
+use crate::algorithm::Algorithm;
+use crate::field::{self, resolve_for_run, StructureSettings};
+use crate::rules::{
+    per_particle_reason, unmeasured_storeys, LagSubsteps, HYSTERETIC_PARTICLES, LAG_SUBSTEPS,
+    PER_PARTICLE_MIN_STOREYS, SPARSE_REL_SD,
+};
+use crate::scaled_prior::{HystereticSubsteps, ScaledPrior};
+use crate::settings::{recommended_pool, FilterSettings, Substeps, RECOMMENDED_PARTICLES};
+
+/// The version of the plan's layout, written into every plan (a plan file of another version
+/// is refused by name).
+pub const PLAN_VERSION: u32 = 1;
+
+/// Everything one run does, settled before it starts ([`settle`]).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RunPlan {
+    /// [`PLAN_VERSION`].
+    pub plan_version: u32,
+    pub algorithm: Algorithm,
+    /// Master seed and run index: the filter's random streams are derived from them.
+    pub seed: u64,
+    pub run: u64,
+    /// Experiment name written into the record.
+    pub experiment: String,
+    /// SHA-256 of the data the plan was settled on (`record::fingerprint::data_identity`); a
+    /// plan is refused on other data.
+    pub data_sha256: String,
+    /// The filter settings after the default rules (`particles`, `pool`, `rejuvenation`,
+    /// `marginal_prior` as the rules set them; `substeps` as asked, the number run in
+    /// [`Model::substeps`]).
+    pub settings: FilterSettings,
+    /// The building identified: storeys, masses, hysteretic storeys, sensors, measurement kind
+    /// and damping form.
+    pub building: StructureDescription,
+    /// The model the filter runs: prior, noise levels, sub-steps.
+    pub model: Model,
+    /// What the automatic choices rest on (recorded, not needed to run).
+    #[serde(default)]
+    pub evidence: Evidence,
+    /// Every choice a default rule made, in the order made.
+    #[serde(default)]
+    pub decisions: Vec<Decision>,
+}
+
+/// The model a plan runs: the prior of θ (with its fixed parameters), the noise levels and the
+/// transitions per sample interval.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Model {
+    pub prior: ChainPrior,
+    /// Measurement-noise variances, one per channel (m²/s⁴).
+    pub r_diag: Vec<f64>,
+    /// Process-noise s.d. of the displacements, of the velocities and of each hysteretic
+    /// variable, per step.
+    pub q_disp: f64,
+    pub q_vel: f64,
+    pub q_r: Vec<f64>,
+    /// Transitions inside the filter per sample interval.
+    pub substeps: usize,
+}
+
+/// What the automatic choices of a plan rest on.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Evidence {
+    /// Field data with the default prior: what the prior was scaled from.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub prior_from_data: Option<ScaledPrior>,
+    /// `substeps = "auto"`: what each sub-step rule found.
+    #[serde(default)]
+    pub substeps: AutoChoice,
+}
+
+/// How much a decision asks of the reader.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Level {
+    /// What was found or resolved (the building of field data, the data-scaled prior).
+    Info,
+    /// A default a rule chose.
+    Note,
+    /// A setting kept against a rule's advice, or a bias the run cannot remove.
+    Warning,
+}
+
+/// One choice of [`settle`]: which rule, what it set, and why.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Decision {
+    /// The rule: a function or constant of [`crate::rules`], [`crate::scaled_prior`],
+    /// [`crate::field`] or `models::filtering::substeps`.
+    pub rule: String,
+    /// What it set (`key = value`), or empty when it only informs.
+    pub set: String,
+    pub level: Level,
+    /// Why, with the measurement behind it.
+    pub why: String,
+}
+
+impl fmt::Display for Decision {
+    /// The line `sysid filter` prints.
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self.level {
+            Level::Info => f.write_str(&self.why),
+            Level::Note => write!(f, "note: {}", self.why),
+            Level::Warning => write!(f, "warning: {}", self.why),
+        }
+    }
+}
+
+/// How a person asked for a run (`sysid filter`, the Python `identify`, `loglik`): the
+/// structure flags, whether a config was given, whether a particle count was asked for. A
+/// study's job has none: its settings are final but for the prior and `substeps = "auto"`.
+#[derive(Clone, Copy)]
+pub struct Asked<'a> {
+    /// `measured.csv` of the data set (named in messages).
+    pub measured: &'a Path,
+    /// The structure flags (`--storeys`, …), over the config's `[structure]` table.
+    pub flags: &'a StructureSettings,
+    /// The config's name (a file, or how else it was given); `None`: no config, the
+    /// recommended settings and the default rules.
+    pub config: Option<&'a str>,
+    /// Whether the run asked for its particle count; if not, and without a config, the
+    /// particle rule ([`HYSTERETIC_PARTICLES`]) may choose it.
+    pub particles_asked: bool,
+}
+
+/// What [`settle`] settles.
+pub struct PlanRequest<'a> {
+    pub algorithm: Algorithm,
+    pub data: &'a LoadedDataset,
+    /// The true structure, when the data set says what it is.
+    pub chain: Option<&'a ShearChain>,
+    /// The settings the run starts from (a config's or the recommended ones, under the command
+    /// line's overrides).
+    pub settings: FilterSettings,
+    pub seed: u64,
+    pub run: u64,
+    pub experiment: &'a str,
+    pub asked: Option<Asked<'a>>,
+}
+
+/// A flag's name for a key of the `[structure]` table.
+fn flag_name(key: &str) -> String {
+    format!("--{key}")
+}
+
+/// Settles the plan of a run. In order: the building — simulated data carry theirs and a
+/// stated key (flag or the config's `[structure]` table) must agree with it; field data take
+/// the flags over the table and are refused by name when incomplete — the settings' limits, the
+/// prior (given, the preset's, or scaled from the data) and the noise levels; for the MPF-EKF2
+/// asked for without a config the rules of [`crate::rules`] (per-particle prior, rejuvenation,
+/// particle count); then `substeps = "auto"`.
+pub fn settle(req: PlanRequest) -> Result<RunPlan> {
+    let PlanRequest {
+        algorithm,
+        data,
+        chain,
+        settings: mut s,
+        seed,
+        run,
+        experiment,
+        asked,
+    } = req;
+    if data.len() < 2 {
+        bail!(
+            "the data set has {} samples; at least 2 are needed",
+            data.len()
+        );
+    }
+    let mut decisions = Vec::new();
+    let structure = settle_building(data, chain, &mut s, asked, &mut decisions)?;
+    crate::limits::check_filter_settings(&s)?;
+    let mut scan = None;
+    let mut spec = assemble_spec(data, chain, &structure, &s, &mut scan)?;
+    // The data-scaled prior the run uses (none when a prior is given or the data are
+    // simulated).
+    let scaled = (s.prior.is_none() && is_field_data(data, chain))
+        .then_some(scan)
+        .flatten();
+    if let Some(p) = &scaled {
+        decisions.push(Decision {
+            rule: "scaled_prior::scaled_prior".into(),
+            set: "prior".into(),
+            level: Level::Info,
+            why: p.describe(),
+        });
+    }
+    if let (Algorithm::MpfEkf2, Some(asked)) = (algorithm, asked) {
+        mpf_rules(&spec, &mut s, asked, scaled.as_ref(), &mut decisions);
+        spec.marginal_prior = s.marginal_prior;
+    }
+    let auto = resolve_substeps(algorithm, &mut spec, &s, scaled.as_ref());
+    decisions.extend(substep_decisions(&auto, algorithm, &spec));
+    s.liu_west()?;
+    spec.validate()?;
+    Ok(RunPlan {
+        plan_version: PLAN_VERSION,
+        algorithm,
+        seed,
+        run,
+        experiment: experiment.to_string(),
+        data_sha256: data_sha256(data),
+        settings: s,
+        building: structure,
+        model: Model {
+            prior: spec.prior,
+            r_diag: spec.r_diag,
+            q_disp: spec.q_disp,
+            q_vel: spec.q_vel,
+            q_r: spec.q_r,
+            substeps: spec.substeps,
+        },
+        evidence: Evidence {
+            prior_from_data: scaled,
+            substeps: auto,
+        },
+        decisions,
+    })
+}
+
+/// The SHA-256 of a data set as run records identify it.
+pub fn data_sha256(data: &LoadedDataset) -> String {
+    crate::record::fingerprint::data_identity(data)["sha256"]
+        .as_str()
+        .unwrap_or_default()
+        .to_string()
+}
+
+/// The building of a run, resolved once (`field::resolve`): `dataset.json`'s, checked against
+/// the flags and the config's table; field data's from the flags over the table (recorded in
+/// `s.structure`); an in-memory simulation's from its chain.
+fn settle_building(
+    data: &LoadedDataset,
+    chain: Option<&ShearChain>,
+    s: &mut FilterSettings,
+    asked: Option<Asked>,
+    decisions: &mut Vec<Decision>,
+) -> Result<StructureDescription> {
+    let Some(asked) = asked else {
+        return resolve_for_run(data, chain, &s.structure);
+    };
+    let config_name = asked.config.unwrap_or_default();
+    let table_name = |key: &str| format!("[structure] `{key}` in {config_name}");
+    let both_name = |key: &str| format!("{} (or {})", flag_name(key), field::table_key(key));
+    if let Some(meta) = &data.meta {
+        let recorded = meta.structure()?;
+        let meta_file = asked.measured.with_file_name(META);
+        field::check_agrees(&recorded, asked.flags, &flag_name, &meta_file)?;
+        field::check_agrees(&recorded, &s.structure, &table_name, &meta_file)?;
+        s.structure = StructureSettings::default();
+        return Ok(recorded);
+    }
+    if chain.is_some() {
+        return resolve_for_run(data, chain, &s.structure);
+    }
+    s.structure.overlay(asked.flags);
+    let d = field::resolve(data, None, &s.structure, asked.measured, &both_name)?;
+    decisions.push(Decision {
+        rule: "field::resolve".into(),
+        set: "building".into(),
+        level: Level::Info,
+        why: format!(
+            "field data: {} storeys, masses {:?}, hysteretic storeys {:?}, {} accelerations at \
+             storeys {:?}, {} damping (no {META})",
+            d.storeys, d.masses, d.hysteretic, d.measurement, d.sensors, d.damping
+        ),
+    });
+    Ok(d)
+}
+
+/// The MPF-EKF2's rules for a run asked for by a person: without a config, the rejuvenation of
+/// the exponents ([`crate::rules::MPF_REJUVENATION`]), the particle count of coarsely sampled
+/// hysteretic field data ([`HYSTERETIC_PARTICLES`]) and the per-particle prior
+/// ([`per_particle_reason`]); with a config that keeps the shared prior where that rule would
+/// not, a warning.
+fn mpf_rules(
+    spec: &ChainSpec,
+    s: &mut FilterSettings,
+    asked: Asked,
+    scaled: Option<&ScaledPrior>,
+    decisions: &mut Vec<Decision>,
+) {
+    let algorithm = Algorithm::MpfEkf2;
+    let (storeys, unmeasured) = (spec.n_storeys(), unmeasured_storeys(spec));
+    let recommended = FilterSettings::recommended_for(algorithm, storeys, &unmeasured);
+    let no_config = asked.config.is_none();
+    // A linear building has no exponents to move, and its settings do not claim a move.
+    let has_exponents = !spec.building.hysteretic().is_empty();
+    if no_config && s.rejuvenation.is_none() && has_exponents {
+        s.rejuvenation = recommended.rejuvenation;
+        if let Some(d) = s.rejuvenation {
+            decisions.push(Decision {
+                rule: "rules::MPF_REJUVENATION".into(),
+                set: format!("rejuvenation = {d}"),
+                level: Level::Note,
+                why: format!(
+                    "the MPF-EKF2 with one shared prior Gaussian moves its sampled exponents n \
+                     after every resampling (Liu–West, δ = {d}; measured to lower the damping \
+                     error on the paper's structure, docs/calibration.md); --rejuvenation 1 \
+                     keeps them still"
+                ),
+            });
+        }
+    }
+    let per_particle = per_particle_reason(storeys, &unmeasured);
+    let rule_may_apply = no_config
+        && !asked.particles_asked
+        && has_exponents
+        && per_particle.is_none()
+        && s.substeps == Substeps::Auto;
+    let coarse = scaled
+        .map(|p| HystereticSubsteps::new(p.omega1, spec.dt))
+        .filter(|h| h.substeps > 1);
+    if let (true, Some(h)) = (rule_may_apply, coarse) {
+        s.particles = HYSTERETIC_PARTICLES;
+        s.pool = recommended_pool(HYSTERETIC_PARTICLES);
+        decisions.push(Decision {
+            rule: "rules::HYSTERETIC_PARTICLES".into(),
+            set: format!("particles = {}, pool = {}", s.particles, s.pool),
+            level: Level::Note,
+            why: format!(
+                "Bouc–Wen elements sampled at ω₁·dt = {:.4} of the data-scaled ω₁ (above {}): \
+                 the MPF-EKF2 takes {} particles as {} filters of {} (with {} k1 came out up to \
+                 7.7 % low on a stiff building, with these at most 4.1 %; about 4 times the \
+                 cost; docs/structures.md, \"Stiff buildings\"); --particles {} keeps the usual \
+                 count",
+                h.omega1_dt,
+                h.above,
+                s.particles,
+                s.pool,
+                s.particles / s.pool,
+                RECOMMENDED_PARTICLES,
+                RECOMMENDED_PARTICLES,
+            ),
+        });
+    }
+    if let Some(reason) = per_particle {
+        if no_config {
+            s.marginal_prior = recommended.marginal_prior;
+            decisions.push(Decision {
+                rule: "rules::per_particle_reason".into(),
+                set: format!("marginal_prior = per_particle (rel_sd {SPARSE_REL_SD})"),
+                level: Level::Note,
+                why: format!(
+                    "{reason}: the MPF-EKF2 starts every particle from its own prior mean \
+                     (marginal_prior = {{ kind = \"per_particle\", rel_sd = {SPARSE_REL_SD} }}; \
+                     with one shared prior Gaussian it loses its particles where storeys carry \
+                     no sensor, docs/scaling.md, and is less accurate from \
+                     {PER_PARTICLE_MIN_STOREYS} storeys on, docs/calibration.md)"
+                ),
+            });
+        } else if s.marginal_prior == MarginalPrior::MomentMatched {
+            decisions.push(Decision {
+                rule: "rules::per_particle_reason".into(),
+                set: String::new(),
+                level: Level::Warning,
+                why: format!(
+                    "{reason} and the MPF-EKF2 starts from one moment-matched prior Gaussian \
+                     (marginal_prior = {{ kind = \"moment_matched\" }}): where storeys carry no \
+                     sensor it drives their stiffnesses below zero and loses all its particles \
+                     in most runs at 20 and 40 storeys (docs/scaling.md), and at 10 storeys its \
+                     mean stiffness error was 16 % against 4 % (docs/calibration.md); set \
+                     marginal_prior = {{ kind = \"per_particle\", rel_sd = {SPARSE_REL_SD} }}"
+                ),
+            });
+        }
+    }
+}
+
+/// What `substeps = "auto"` chose, as decisions (the lines `sysid filter` prints).
+fn substep_decisions(auto: &AutoChoice, algorithm: Algorithm, spec: &ChainSpec) -> Vec<Decision> {
+    use models::filtering::substeps::{LAG_NOTED_ABOVE, SUBSTEP_ABOVE};
+    let mut out = Vec::new();
+    if let Some(h) = auto.hysteretic.filter(|h| h.substeps > 1) {
+        out.push(Decision {
+            rule: "scaled_prior::hysteretic_substeps".into(),
+            set: format!("substeps = {}", spec.substeps),
+            level: Level::Info,
+            why: {
+                let per = h.omega1_dt / h.substeps as f64;
+                let reached = if per <= h.max_omega1_h {
+                    format!("ω₁·dt/{} = {per:.4} ≤ {}", h.substeps, h.max_omega1_h)
+                } else {
+                    format!(
+                        "ω₁·dt/{} = {per:.4}, still above {}: {} is the most this rule takes \
+                         (sample faster, or give --substeps)",
+                        h.substeps,
+                        h.max_omega1_h,
+                        crate::scaled_prior::HYSTERETIC_MAX_SUBSTEPS
+                    )
+                };
+                format!(
+                    "sub-steps: {} per sample (auto: Bouc–Wen elements and ω₁·dt = {:.4} above \
+                     {}; {reached})",
+                    spec.substeps, h.omega1_dt, h.above
+                )
+            },
+        });
+    }
+    if let Some(l) = auto.lag {
+        out.push(Decision {
+            rule: "rules::LAG_SUBSTEPS".into(),
+            set: format!("substeps = {}", spec.substeps),
+            level: Level::Info,
+            why: format!(
+                "sub-steps: {} per sample (auto: the MPF-EKF2 with one shared prior Gaussian on a \
+                 hysteretic building below {PER_PARTICLE_MIN_STOREYS} storeys, whose velocity \
+                 lag with one step, {:.1} %, is above {:.0} %; measured to lower the stiffness \
+                 error at 5 storeys at about 3 times the cost: docs/calibration.md, \"The prior \
+                 or the size?\"; --substeps 1 to keep one step)",
+                spec.substeps,
+                100.0 * l.lag_one,
+                100.0 * l.above
+            ),
+        });
+    }
+    if let Some(a) = auto.linear {
+        if a.substeps == 1 && a.error_one > SUBSTEP_ABOVE {
+            out.push(Decision {
+                rule: "models::filtering::substeps::auto_substeps".into(),
+                set: String::new(),
+                level: Level::Warning,
+                why: format!(
+                    "the prior's building has modes up to {:.2} Hz (ω·dt = {:.2}): one step per \
+                     sample shifts that mode by {:.1} %, and {} cannot sub-step; its \
+                     frequencies and stiffnesses carry that bias (MPF-EKF2 and the bootstrap \
+                     PF sub-step)",
+                    a.omega_max / std::f64::consts::TAU,
+                    a.omega_max * spec.dt,
+                    100.0 * a.error_one,
+                    algorithm.label()
+                ),
+            });
+        }
+        if a.substeps > 1 {
+            out.push(Decision {
+                rule: "models::filtering::substeps::auto_substeps".into(),
+                set: format!("substeps = {}", spec.substeps),
+                level: Level::Info,
+                why: format!(
+                    "sub-steps: {} per sample (auto: the prior's building has modes up to {:.2} \
+                     Hz, ω·dt = {:.2}; one step per sample would shift that mode by {:.1} %, {} \
+                     by {:.2} %)",
+                    a.substeps,
+                    a.omega_max / std::f64::consts::TAU,
+                    a.omega_max * spec.dt,
+                    100.0 * a.error_one,
+                    a.substeps,
+                    100.0 * a.error_chosen
+                ),
+            });
+        }
+        // The lag of the run's step (proportional to it): the Bouc–Wen rule may have raised
+        // the sub-steps beyond the linear rule's.
+        let lag = a.lag_one / spec.substeps as f64;
+        if lag > LAG_NOTED_ABOVE {
+            out.push(Decision {
+                rule: "models::filtering::substeps::damping_lag_error".into(),
+                set: String::new(),
+                level: Level::Note,
+                why: format!(
+                    "with {} step(s) per sample the model favours stiffnesses up to {:.1} % low \
+                     (with the prior's central dashpots and springs), most at the top storeys \
+                     (the semi-implicit step's velocity lag; docs/calibration.md, \"The top \
+                     storeys' bias\"). --substeps M divides it by M; on the scaling study's \
+                     buildings 4 took the MPF-EKF2's mean stiffness error from 3.5 to 2.0 % at \
+                     5 storeys with one shared prior Gaussian (which is why `auto` takes them \
+                     there) and did not pay with per-particle prior means (5 and 10 storeys; \
+                     worse at 20), at about 3 times the cost (docs/calibration.md, \"The prior \
+                     or the size?\")",
+                    spec.substeps,
+                    100.0 * lag
+                ),
+            });
+        }
+    }
+    out
+}
+
+impl RunPlan {
+    /// The filter partitions' specification of this plan on `data` (the data the plan was
+    /// settled on): the building, the prior and noise levels of [`Model`], the settings'
+    /// discretisation and marginal prior, the measured ground acceleration.
+    pub fn spec(&self, data: &LoadedDataset) -> Result<ChainSpec> {
+        let spec = ChainSpec {
+            dt: data.dt,
+            building: self.building.building()?,
+            sensors: self.building.sensor_layout()?,
+            ug: data.ug_meas.clone(),
+            q_disp: self.model.q_disp,
+            q_vel: self.model.q_vel,
+            q_r: self.model.q_r.clone(),
+            r_diag: self.model.r_diag.clone(),
+            prior: self.model.prior.clone(),
+            marginal_prior: self.settings.marginal_prior,
+            discretisation: self.settings.discretisation,
+            substeps: self.model.substeps,
+        };
+        if spec.sensors.len() != data.channels {
+            bail!(
+                "{} sensors in the plan's building, {} channels in the data",
+                spec.sensors.len(),
+                data.channels
+            );
+        }
+        spec.validate()?;
+        Ok(spec)
+    }
+
+    /// The plan as a TOML file (`sysid filter --print-plan`), read back by [`RunPlan::from_toml`]
+    /// to the same plan.
+    pub fn to_toml(&self) -> Result<String> {
+        let body = toml::to_string(self).context("writing the plan as TOML")?;
+        Ok(format!(
+            "# The plan of one `sysid filter` run: `sysid filter --plan FILE --data DIR --out R` \
+             runs exactly it.\n# Every key may be edited; `decisions` and `evidence` are the \
+             record of how it was settled.\n{body}"
+        ))
+    }
+
+    /// A plan read from TOML text; `name` names the file in errors.
+    pub fn from_toml(text: &str, name: &str) -> Result<Self> {
+        let plan: RunPlan =
+            toml::from_str(text).map_err(|e| invalid!("{name}: not a run plan: {e}"))?;
+        if plan.plan_version != PLAN_VERSION {
+            bail!(
+                "{name}: field `plan_version`: {} (this build reads plans of version \
+                 {PLAN_VERSION})",
+                plan.plan_version
+            );
+        }
+        crate::limits::check_filter_settings(&plan.settings)
+            .with_context(|| format!("{name}: field `settings`"))?;
+        Ok(plan)
+    }
+
+    /// Refuses `data` when it is not the data the plan was settled on.
+    pub fn check_data(&self, data: &LoadedDataset, name: &str) -> Result<()> {
+        let sha = data_sha256(data);
+        if sha != self.data_sha256 {
+            bail!(
+                "{name}: field `data_sha256`: the plan was settled on other data ({}…, these \
+                 are {}…); settle a plan on these data with --print-plan",
+                &self.data_sha256.get(..12).unwrap_or(&self.data_sha256),
+                &sha.get(..12).unwrap_or(&sha)
+            );
+        }
+        Ok(())
+    }
+
+    /// The plan a record was run with (records of `sysid filter` and the Python `identify`
+    /// carry it); `None` for a record without one.
+    pub fn of_record(record: &crate::record::RunRecord) -> Result<Option<Self>> {
+        record
+            .plan
+            .as_ref()
+            .map(|v| {
+                serde_json::from_value(v.clone())
+                    .map_err(|e| invalid!("field `plan` of the record: {e}"))
+            })
+            .transpose()
+    }
+
+    /// What a person reads before the run: the algorithm, the building, particles and pooling,
+    /// sub-steps, prior, noise levels, and every decision.
+    pub fn describe(&self) -> String {
+        let s = &self.settings;
+        let b = &self.building;
+        let mut out = format!(
+            "plan: {} on {} storeys (masses {:?}, hysteretic storeys {:?}, {} damping), {} \
+             accelerations at storeys {:?}\n",
+            self.algorithm.label(),
+            b.storeys,
+            b.masses,
+            b.hysteretic,
+            b.damping,
+            b.measurement,
+            b.sensors,
+        );
+        out += &format!(
+            "  particles {} as {} filter(s), {} resampling{}, {} discretisation, {} \
+             transition(s) per sample, rejuvenation {}\n",
+            s.particles,
+            s.pool,
+            s.resampling.name(),
+            s.ess_threshold
+                .map(|t| format!(" when ESS < {t} × particles"))
+                .unwrap_or_else(|| " at every step".into()),
+            s.discretisation.name(),
+            self.model.substeps,
+            s.rejuvenation
+                .map(|d| format!("δ = {d}"))
+                .unwrap_or_else(|| "none".into()),
+        );
+        let names = self.model.prior.names();
+        let fixed: Vec<String> = s.fix.iter().map(|(k, v)| format!("{k} = {v}")).collect();
+        out += &format!(
+            "  θ: {} ({} parameters{}); seed {}, run {}\n",
+            names.join(", "),
+            names.len(),
+            if fixed.is_empty() {
+                String::new()
+            } else {
+                format!("; fixed {}", fixed.join(", "))
+            },
+            self.seed,
+            self.run
+        );
+        out += &format!(
+            "  noise: measurement s.d. [{}] m/s², process s.d. x {:.3e}, v {:.3e}, r [{}]\n",
+            self.model
+                .r_diag
+                .iter()
+                .map(|r| format!("{:.3e}", r.sqrt()))
+                .collect::<Vec<_>>()
+                .join(", "),
+            self.model.q_disp,
+            self.model.q_vel,
+            self.model
+                .q_r
+                .iter()
+                .map(|q| format!("{q:.3e}"))
+                .collect::<Vec<_>>()
+                .join(", "),
+        );
+        for d in &self.decisions {
+            out += &format!("  [{}] {d}\n", d.rule);
+        }
+        out
+    }
+}
+
+/// Root mean square of a signal.
+fn rms_of(v: impl Iterator<Item = f64>) -> f64 {
+    let (s, n) = v.fold((0.0, 0usize), |(s, n), x| (s + x * x, n + 1));
+    (s / n.max(1) as f64).sqrt()
+}
+
+/// RMS values that set Q and R (SPEC §3): from the data set's metadata and truth (clean signals)
+/// when present, otherwise estimated from the measured signals. `storeys` is N, `sensors` the
+/// 0-based storey of each channel, `hysteretic` the 0-based storeys of the hysteretic elements
+/// (one drift-velocity RMS each).
+fn rms_levels(
+    data: &LoadedDataset,
+    storeys: usize,
+    sensors: &[usize],
+    kind: MeasurementKind,
+    hysteretic: &[usize],
+    nf: f64,
+) -> RmsLevels {
+    let k = data.len();
+    let n = storeys;
+    if let Some(meta) = &data.meta {
+        // The drift velocity of element j is v_j − v_{j−1}: from the true states when present.
+        let drift = hysteretic
+            .iter()
+            .map(|&j| match &data.truth {
+                Some(t) => rms_of((0..t.states.len()).map(|i| {
+                    let st = t.states.state(i);
+                    st[n + j] - if j == 0 { 0.0 } else { st[n + j - 1] }
+                })),
+                None => meta.rms.vel[j],
+            })
+            .collect();
+        return RmsLevels {
+            acc: meta.rms.acc.clone(),
+            ug: meta.rms.ug,
+            drift_velocity: drift,
+        };
+    }
+    // Field data: a measured channel holds the clean signal plus noise of s.d. nf·RMS(clean),
+    // so RMS(measured) = RMS(clean)·√(1 + nf²).
+    let clean = (1.0 + nf * nf).sqrt();
+    let m = sensors.len();
+    let acc: Vec<f64> = (0..m)
+        .map(|c| rms_of((0..k).map(|i| data.y(i)[c])) / clean)
+        .collect();
+    let ug = rms_of(data.ug_meas.iter().copied()) / clean;
+    // Relative velocity of channel c: the trapezoidal integral of its relative acceleration
+    // (absolute minus ü_g for absolute data) with its linear trend removed (the drift of
+    // integrated noise).
+    let relative = |i: usize, c: usize| -> f64 {
+        let y = data.y(i)[c];
+        match kind {
+            MeasurementKind::Relative => y,
+            MeasurementKind::Absolute => y - data.ug_meas[i],
+        }
+    };
+    let velocity = |c: usize| -> Vec<f64> {
+        let mut v = vec![0.0; k];
+        for i in 1..k {
+            v[i] = v[i - 1] + 0.5 * data.dt * (relative(i - 1, c) + relative(i, c));
+        }
+        let slope = v[k - 1] / (k.max(2) - 1) as f64;
+        v.iter()
+            .enumerate()
+            .map(|(i, x)| x - slope * i as f64)
+            .collect()
+    };
+    let channel = |storey: usize| sensors.iter().position(|&s| s == storey);
+    let drift = hysteretic
+        .iter()
+        .map(|&j| {
+            match (channel(j), j.checked_sub(1).map(channel)) {
+                // The element's storey and the one below (or the ground) are measured.
+                (Some(c), None) => rms_of(velocity(c).into_iter()),
+                (Some(c), Some(Some(b))) => {
+                    let (vj, vb) = (velocity(c), velocity(b));
+                    rms_of(vj.iter().zip(&vb).map(|(a, b)| a - b))
+                }
+                // Otherwise the mean drift per storey below the nearest measured storey s
+                // (above j when there is one): RMS v_s / (s + 1). A scale only, for the
+                // hysteretic variable's process noise (q_r = 0.05·dt·RMS δv, SPEC §3).
+                _ => {
+                    let c = sensors.iter().position(|&s| s >= j).unwrap_or(m - 1);
+                    rms_of(velocity(c).into_iter()) / (sensors[c] + 1) as f64
+                }
+            }
+        })
+        .collect();
+    RmsLevels {
+        acc,
+        ug,
+        drift_velocity: drift,
+    }
+}
+
+/// Builds the specification of a run's filter partitions: the structure of the data
+/// ([`resolve_for_run`]: `dataset.json`, else the true chain, else the settings' `[structure]`
+/// for field data — refused when incomplete), the measured storeys of the header, noise levels
+/// from RMS values (SPEC §3), the prior and the discretisation.
+pub fn chain_spec(
+    data: &LoadedDataset,
+    chain: Option<&ShearChain>,
+    s: &FilterSettings,
+) -> Result<ChainSpec> {
+    let structure = resolve_for_run(data, chain, &s.structure)?;
+    assemble_spec(data, chain, &structure, s, &mut None)
+}
+
+/// [`chain_spec`] on a building already resolved; `scan` holds the data-scaled prior once it
+/// has been computed (it is computed at most once, and only where the prior needs it).
+fn assemble_spec(
+    data: &LoadedDataset,
+    chain: Option<&ShearChain>,
+    structure: &StructureDescription,
+    s: &FilterSettings,
+    scan: &mut Option<ScaledPrior>,
+) -> Result<ChainSpec> {
+    let n = structure.storeys;
+    let building = structure.building()?;
+    let hysteretic = building.hysteretic().to_vec();
+    let sensors = structure.sensor_layout()?;
+    if sensors.len() != data.channels {
+        bail!(
+            "{} sensors in the structure, {} channels in the data",
+            sensors.len(),
+            data.channels
+        );
+    }
+    let rms = rms_levels(
+        data,
+        n,
+        sensors.storeys(),
+        sensors.kind(),
+        &hysteretic,
+        s.noise_fraction,
+    );
+    let mut spec = ChainSpec::from_rms(
+        data.dt,
+        building.clone().with_damping(Damping::Storey),
+        sensors,
+        data.ug_meas.clone(),
+        &rms,
+        s.noise_fraction,
+    )?;
+    spec.marginal_prior = s.marginal_prior;
+    spec.set_r_noise_fraction(s.r_noise_fraction)?;
+    spec.discretisation = s.discretisation;
+    spec.substeps = match s.substeps {
+        Substeps::Fixed(m) => m,
+        // Chosen per algorithm once the prior is known (`resolve_substeps`).
+        Substeps::Auto => 1,
+    };
+    // The building's damping form, whose α gets its prior below.
+    spec.building = building;
+    // Default priors: SPEC §3's for simulated data (the paper's scale); for field data scaled
+    // from the measured response (`scaled_prior`).
+    let mut prior = match (&s.prior, is_field_data(data, chain)) {
+        (Some(p), _) => p.clone(),
+        (None, true) => scanned(scan, data, structure)?.prior.clone(),
+        // Simulated data: the preset's (SPEC §3's, carried to the structure's values for a
+        // preset whose storeys are not the paper's).
+        (None, false) => match (data.meta.as_ref(), chain) {
+            (Some(meta), Some(chain)) if chain.storeys() == n => {
+                models::preset::Preset::default_prior(&meta.config.preset, chain, &hysteretic)
+            }
+            _ => ChainPrior::paper(n, &hysteretic),
+        },
+    };
+    // The storey+mass form's α: a default prior centred from the structure's first mode
+    // (`models::filtering::prior::alpha_prior`) unless the prior states one. A given `[prior]`
+    // without `alpha` is refused by the spec's validation, naming `prior.alpha`.
+    if structure.damping.has_mass_term() && prior.alpha.is_none() && s.prior.is_none() {
+        prior.alpha = Some(match (is_field_data(data, chain), chain) {
+            (false, Some(chain)) => {
+                let w1 = models::modal::modes(chain)
+                    .ok()
+                    .and_then(|m| m.modes.first().map(|m| m.frequency_hz))
+                    .context(
+                        "the true structure has no under-damped mode to centre α's prior on",
+                    )?
+                    * std::f64::consts::TAU;
+                models::filtering::prior::alpha_prior(w1)
+            }
+            _ => scanned(scan, data, structure)?
+                .prior
+                .alpha
+                .clone()
+                .context("the scaled prior of the storey+mass form has α")?,
+        });
+    }
+    for (name, value) in &s.fix {
+        prior
+            .fix(name, *value)
+            .with_context(|| format!("fixing {name} = {value}"))?;
+    }
+    spec.prior = prior;
+    spec.validate()?;
+    Ok(spec)
+}
+
+/// Field data: neither `dataset.json` nor a known true structure.
+pub fn is_field_data(data: &LoadedDataset, chain: Option<&ShearChain>) -> bool {
+    data.meta.is_none() && chain.is_none()
+}
+
+/// The data-scaled default prior of a field-data run (printed by `sysid filter` and recorded
+/// under `config.prior_from_data`), `None` when the run uses another prior.
+pub fn prior_from_data(
+    data: &LoadedDataset,
+    chain: Option<&ShearChain>,
+    s: &FilterSettings,
+) -> Result<Option<crate::scaled_prior::ScaledPrior>> {
+    if s.prior.is_some() || !is_field_data(data, chain) {
+        return Ok(None);
+    }
+    let structure = resolve_for_run(data, chain, &s.structure)?;
+    Ok(Some(crate::scaled_prior::scaled_prior(data, &structure)?))
+}
+
+/// The data-scaled prior of `structure`, scanned from the data the first time it is asked for.
+fn scanned<'a>(
+    scan: &'a mut Option<ScaledPrior>,
+    data: &LoadedDataset,
+    structure: &StructureDescription,
+) -> Result<&'a ScaledPrior> {
+    if scan.is_none() {
+        *scan = Some(crate::scaled_prior::scaled_prior(data, structure)?);
+    }
+    Ok(scan.as_ref().expect("just scanned"))
+}
+
+/// What `substeps = "auto"` chose for a run: by the linear modes of the prior's building
+/// ([`models::filtering::substeps`]), on field data with Bouc–Wen elements by the data-scaled
+/// ω₁·dt ([`crate::scaled_prior::hysteretic_substeps`]) and, for the MPF-EKF2 with one shared
+/// prior Gaussian below [`PER_PARTICLE_MIN_STOREYS`] storeys, by the velocity lag
+/// ([`LagSubsteps`]); the run takes the largest.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
+pub struct AutoChoice {
+    pub linear: Option<models::filtering::substeps::AutoSubsteps>,
+    pub hysteretic: Option<crate::scaled_prior::HystereticSubsteps>,
+    pub lag: Option<LagSubsteps>,
+}
+
+/// Resolves `substeps = "auto"` for the algorithms that sub-step (MPF-EKF2, bootstrap PF);
+/// MLN-RBPF and Storvik keep one transition per sample. `scaled` is the run's data-scaled
+/// prior ([`prior_from_data`]), if it has one. Returns what was chosen automatically (nothing
+/// for a fixed number).
+pub fn resolve_substeps(
+    algorithm: Algorithm,
+    spec: &mut ChainSpec,
+    s: &FilterSettings,
+    scaled: Option<&crate::scaled_prior::ScaledPrior>,
+) -> AutoChoice {
+    if s.substeps != Substeps::Auto {
+        return AutoChoice::default();
+    }
+    let sub_steps = !matches!(algorithm, Algorithm::MlnRbpf | Algorithm::Storvik);
+    let mut a = models::filtering::substeps::auto_substeps(spec);
+    if !sub_steps {
+        a.substeps = 1;
+        a.error_chosen = a.error_one;
+    }
+    spec.substeps = a.substeps;
+    let hysteretic = match scaled {
+        Some(p) if sub_steps && !spec.building.hysteretic().is_empty() => {
+            let h = crate::scaled_prior::HystereticSubsteps::new(p.omega1, spec.dt);
+            spec.substeps = spec.substeps.max(h.substeps);
+            Some(h)
+        }
+        _ => None,
+    };
+    let above = models::filtering::substeps::LAG_NOTED_ABOVE;
+    let lag = (algorithm == Algorithm::MpfEkf2
+        && s.marginal_prior == models::filtering::MarginalPrior::MomentMatched
+        && !spec.building.hysteretic().is_empty()
+        && spec.building.storeys() < PER_PARTICLE_MIN_STOREYS
+        && a.lag_one / spec.substeps as f64 > above)
+        .then(|| {
+            spec.substeps = spec.substeps.max(LAG_SUBSTEPS);
+            LagSubsteps {
+                lag_one: a.lag_one,
+                above,
+                substeps: LAG_SUBSTEPS,
+            }
+        });
+    AutoChoice {
+        linear: Some(a),
+        hysteretic,
+        lag,
+    }
+}

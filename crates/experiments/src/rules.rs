@@ -1,0 +1,145 @@
+//! The default rules of a run: each a named constant or function with the measurement that
+//! justified it cited in its doc. [`crate::plan::settle`] applies them, in one place, and
+//! records every choice they make in the run's plan ([`crate::plan::Decision`]).
+//!
+//! The rules that depend on the building or the data:
+//! - the MPF-EKF2's prior Gaussian per particle ([`per_particle_reason`], [`SPARSE_REL_SD`],
+//!   [`PER_PARTICLE_MIN_STOREYS`]);
+//! - its rejuvenation of the exponents n with the shared Gaussian ([`MPF_REJUVENATION`]);
+//! - its particle count on coarsely sampled hysteretic field data ([`HYSTERETIC_PARTICLES`]);
+//! - the sub-steps against the velocity lag ([`LAG_SUBSTEPS`]); the sub-steps of the prior's
+//!   linear modes ([`models::filtering::substeps`]) and of the data-scaled ω₁·dt
+//!   ([`crate::scaled_prior::hysteretic_substeps`]) are stated where they are computed.
+//!
+//! The settings a run starts from (the recommended ones without a config, the config's with
+//! one, [`crate::settings::FilterSettings::recommended`]) and the data-scaled prior of field
+//! data ([`crate::scaled_prior`]) complete the list.
+
+use models::filtering::ChainSpec;
+use serde::{Deserialize, Serialize};
+
+use crate::algorithm::Algorithm;
+use crate::settings::FilterSettings;
+
+impl FilterSettings {
+    /// [`FilterSettings::recommended`] for `algorithm` on a building of `storeys` storeys whose
+    /// 1-based storeys `unmeasured` carry no sensor ([`unmeasured_storeys`]): the MPF-EKF2 starts
+    /// every particle from its own prior mean ([`models::filtering::MarginalPrior::PerParticle`]
+    /// with s.d. [`SPARSE_REL_SD`] × that mean) instead of one moment-matched Gaussian when a
+    /// storey carries no sensor or the building has at least [`PER_PARTICLE_MIN_STOREYS`]
+    /// storeys ([`per_particle_reason`]). Otherwise: the recommended settings.
+    ///
+    /// With the shared Gaussian the MPF-EKF2 also rejuvenates its sampled exponents n with the
+    /// Liu–West discount [`MPF_REJUVENATION`] (measured to help there; with per-particle prior
+    /// means on 10 storeys it did not, see the constant).
+    pub fn recommended_for(algorithm: Algorithm, storeys: usize, unmeasured: &[usize]) -> Self {
+        let mut s = Self::recommended();
+        if algorithm == Algorithm::MpfEkf2 {
+            if per_particle_reason(storeys, unmeasured).is_some() {
+                s.marginal_prior = models::filtering::MarginalPrior::PerParticle {
+                    rel_sd: SPARSE_REL_SD,
+                };
+            } else {
+                s.rejuvenation = Some(MPF_REJUVENATION);
+            }
+        }
+        s
+    }
+}
+
+/// The Liu–West discount δ of the MPF-EKF2's default rejuvenation of its sampled exponents n.
+/// Measured with the other recommended settings (`docs/calibration.md`, "Rejuvenation of the
+/// sampled exponents"): on 24 fresh paper data sets its mean |c error| went from 6.27 % to
+/// 5.37 % (paired difference −0.90 ± 0.43 points), |k error| from 1.68 % to 1.46 %, 95 %
+/// coverage of k and c from 0.903 to 0.910; on four data sets with a reference posterior k1's
+/// error went from 2.61 % to 1.84 %. The MLN-RBPF and Storvik keep no move: on the same 24 data
+/// sets Storvik's |k error| rose from 2.59 % to 3.05 % (+0.47 ± 0.23) and its coverage fell from
+/// 0.951 to 0.910, and the MLN-RBPF's |c error| rose from 13.10 % to 13.92 %. With per-particle
+/// prior means (10 storeys, six data sets) the move made the MPF-EKF2 no better (mean |k error|
+/// 3.7 → 4.7 %, |c error| 31.5 → 48.2 %, paired +1.0 ± 0.9 and +16.7 ± 11.0 points), so where
+/// its prior is per particle ([`per_particle_reason`]) it does not rejuvenate by default.
+pub const MPF_REJUVENATION: f64 = 0.98;
+
+/// The MPF-EKF2's particle count without a config or `--particles` on field data of a building
+/// with Bouc–Wen elements and one shared prior Gaussian whose data-scaled ω₁·dt asks for
+/// sub-steps ([`crate::scaled_prior::hysteretic_substeps`], `substeps = "auto"`), pooled as
+/// 8 filters of 500 (chosen in [`crate::identification::settle`]).
+///
+/// Measured (`docs/structures.md`, "Stiff buildings"): the paper's chain time-scaled ×4
+/// (k = 128) sampled at 200 Hz, absolute accelerations, data-scaled priors, 8 sub-steps. With
+/// 1000 particles k1 comes out low (the filter's bias, smaller with more particles): on 12 data
+/// sets (noise seeds 201–212) the worst k error was 6.1 %, and on 24 never used before
+/// (301–324) 7.7 % with 2 of 24 data sets beyond 5 %. With 4000: at most 4.0 % and 4.1 %,
+/// mean |k error| 1.26 → 0.81 % on the fresh 24 (paired −0.44 ± 0.11 points), k1 −2.15 →
+/// −1.40 % on average, at 4.0 times the wall time (6.1 → 24.5 s a run). Elsewhere (the paper's
+/// structure, simulated data with their own priors) four times the particles take a third off
+/// the stiffness error but decide no goal, and the default stays
+/// [`crate::settings::RECOMMENDED_PARTICLES`].
+pub const HYSTERETIC_PARTICLES: usize = 4000;
+
+/// From this many storeys on, the MPF-EKF2's default prior is per particle even with every
+/// storey measured. Measured with `sysid filter`'s settings otherwise (`docs/calibration.md`,
+/// "Coverage on fresh data sets"; 12 data sets each): at 10 storeys the mean stiffness error is
+/// 4.1 % per particle against 16.0 % with one moment-matched Gaussian (95 % coverage of k 0.87
+/// against 0.82, of c 0.67 against 0.57); at 5 storeys 5.0 % against 3.1 %, and on the paper's
+/// 3 storeys the shared Gaussian is also the better one (c error 7.2 % against 11.5 %), so below
+/// 10 storeys the default stays SPEC §3's.
+pub const PER_PARTICLE_MIN_STOREYS: usize = 10;
+
+/// Why the MPF-EKF2's default prior Gaussian is per particle on this building, or `None`: the
+/// one-shared-Gaussian EKF over the 4N + 1 marginalised values loses its particles where
+/// storeys carry no sensor (`docs/scaling.md`, "Sparse sensors at 20 and 40 storeys": it drives
+/// the unmeasured stiffnesses to zero or below within the first seconds) and is far less
+/// accurate on tall buildings ([`PER_PARTICLE_MIN_STOREYS`]).
+pub fn per_particle_reason(storeys: usize, unmeasured: &[usize]) -> Option<String> {
+    if !unmeasured.is_empty() {
+        let v: Vec<String> = unmeasured.iter().map(|s| s.to_string()).collect();
+        Some(format!("storeys {} carry no sensor", v.join(", ")))
+    } else if storeys >= PER_PARTICLE_MIN_STOREYS {
+        Some(format!(
+            "{storeys} storeys (at least {PER_PARTICLE_MIN_STOREYS})"
+        ))
+    } else {
+        None
+    }
+}
+
+/// Relative s.d. of each particle's prior Gaussian that [`FilterSettings::recommended_for`]
+/// gives the MPF-EKF2 when a storey carries no sensor (the value measured in `docs/scaling.md`).
+pub const SPARSE_REL_SD: f64 = 0.1;
+
+/// The 1-based storeys of `spec`'s building that carry no sensor, in increasing order.
+pub fn unmeasured_storeys(spec: &ChainSpec) -> Vec<usize> {
+    let measured = spec.sensors.storeys();
+    (0..spec.n_storeys())
+        .filter(|j| !measured.contains(j))
+        .map(|j| j + 1)
+        .collect()
+}
+
+/// Sub-steps the MPF-EKF2 takes against the semi-implicit step's velocity lag
+/// ([`models::filtering::substeps::damping_lag_error`]) when its prior Gaussian is one shared,
+/// moment-matched one, the building has Bouc–Wen elements and fewer than
+/// [`PER_PARTICLE_MIN_STOREYS`] storeys, and the lag left by the other rules exceeds
+/// [`models::filtering::substeps::LAG_NOTED_ABOVE`].
+///
+/// Measured (`docs/calibration.md`, "Five and forty storeys with today's defaults" and "The
+/// prior or the size?"; 8 × 125, paired by data set): on the 5-storey building (lag 9.3 %) the
+/// mean stiffness error went from 3.49 to 2.00 % on 24 data sets (−1.50 ± 0.29 points) and from
+/// 2.77 to 1.61 % on 12 fresh ones (−1.16 ± 0.20), coverage of k and c 0.85 → 0.93 and
+/// 0.88 → 0.93; on the 3-storey one (lag 5.2 %) 2.30 → 2.08 % (−0.22 ± 0.38, not resolved),
+/// coverage 0.86 → 0.93; about three times the cost. With per-particle prior means the same
+/// sub-steps did not pay (5 storeys −0.34 ± 0.37, the difference of the two gains 1.16 ± 0.44;
+/// 10 storeys −0.16 ± 0.37; 20 storeys +1.14 ± 0.23), hence the condition on the prior.
+pub const LAG_SUBSTEPS: usize = 4;
+
+/// What the velocity-lag rule ([`LAG_SUBSTEPS`]) chose (printed and recorded under
+/// `config.substeps_lag`).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct LagSubsteps {
+    /// Stiffness error of the velocity lag with one step per sample.
+    pub lag_one: f64,
+    /// Above this lag (of the step the other rules chose) the rule sub-steps.
+    pub above: f64,
+    pub substeps: usize,
+}

@@ -1,0 +1,263 @@
+//! The plan of a `sysid filter` run (`experiments::plan`): settled once, printed
+//! (`--plan-only`), written as TOML (`--print-plan`) and run again from that file (`--plan`) to
+//! the same record; refused on other data.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+use experiments::plan::RunPlan;
+use experiments::record::RunRecord;
+
+fn sysid() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_sysid"))
+}
+
+fn temp_dir(tag: &str) -> (tempfile::TempDir, PathBuf) {
+    let tmp = tempfile::Builder::new()
+        .prefix(&format!("sysid-plan-{tag}-"))
+        .tempdir()
+        .unwrap();
+    let d = tmp.path().to_path_buf();
+    (tmp, d)
+}
+
+fn ok(out: Output, what: &str) -> Output {
+    assert!(
+        out.status.success(),
+        "{what} failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    out
+}
+
+/// A filter run that finished: exit 0, or 1 for an answer `sysid filter` rejects (a 3 s record
+/// of field data can give one), its record written either way.
+fn ran(out: Output, what: &str) {
+    assert!(
+        matches!(out.status.code(), Some(0 | 1))
+            && String::from_utf8_lossy(&out.stderr).contains("; record "),
+        "{what} failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
+/// A 3-storey paper data set of `seconds` s; as field data (only `measured.csv`) when `field`.
+fn simulate(dir: &Path, seed: &str, field: bool) {
+    ok(
+        sysid()
+            .args([
+                "simulate",
+                "--preset",
+                "paper-3dof",
+                "--duration",
+                "3",
+                "--seed",
+                seed,
+            ])
+            .arg("--out")
+            .arg(dir)
+            .output()
+            .unwrap(),
+        "simulate",
+    );
+    if field {
+        for f in ["dataset.json", "truth.csv"] {
+            std::fs::remove_file(dir.join(f)).unwrap();
+        }
+    }
+}
+
+const FIELD_FLAGS: [&str; 8] = [
+    "--storeys",
+    "3",
+    "--hysteretic",
+    "1",
+    "--masses",
+    "1",
+    "--measurement",
+    "relative",
+];
+
+fn without_timing(path: &Path) -> serde_json::Value {
+    let mut v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap();
+    v.as_object_mut().unwrap().remove("timing");
+    v
+}
+
+/// For simulated and for field data (where the prior is scaled from the data and the default
+/// rules choose rejuvenation and sub-steps): the record of a run, and the record of the plan
+/// `--print-plan` wrote for the same flags, run with `--plan`, are equal in every field but the
+/// timing; the record carries that plan, and the TOML reads back to it.
+#[test]
+fn a_printed_plan_runs_to_the_same_record() {
+    let (_tmp, dir) = temp_dir("same");
+    for field in [false, true] {
+        let data = dir.join(format!("data-{field}"));
+        simulate(&data, "1", field);
+        let mut flags: Vec<&str> = vec!["filter", "--algorithm", "mpf-ekf2", "--particles", "100"];
+        if field {
+            flags.extend(FIELD_FLAGS);
+        }
+        let direct = dir.join(format!("direct-{field}.json"));
+        ran(
+            sysid()
+                .args(&flags)
+                .arg("--data")
+                .arg(&data)
+                .arg("--out")
+                .arg(&direct)
+                .output()
+                .unwrap(),
+            "filter",
+        );
+        let printed = ok(
+            sysid()
+                .args(&flags)
+                .arg("--data")
+                .arg(&data)
+                .arg("--print-plan")
+                .output()
+                .unwrap(),
+            "--print-plan",
+        );
+        let plan_file = dir.join(format!("plan-{field}.toml"));
+        std::fs::write(&plan_file, &printed.stdout).unwrap();
+        let replayed = dir.join(format!("replayed-{field}.json"));
+        ran(
+            sysid()
+                .args(["filter", "--plan"])
+                .arg(&plan_file)
+                .arg("--data")
+                .arg(&data)
+                .arg("--out")
+                .arg(&replayed)
+                .output()
+                .unwrap(),
+            "--plan",
+        );
+        assert_eq!(
+            without_timing(&direct),
+            without_timing(&replayed),
+            "field data: {field}"
+        );
+        let text = String::from_utf8(printed.stdout).unwrap();
+        let plan = RunPlan::from_toml(&text, "plan.toml").unwrap();
+        let record: RunRecord =
+            serde_json::from_str(&std::fs::read_to_string(&direct).unwrap()).unwrap();
+        assert_eq!(RunPlan::of_record(&record).unwrap().as_ref(), Some(&plan));
+        assert_eq!(
+            RunPlan::from_toml(&plan.to_toml().unwrap(), "again").unwrap(),
+            plan
+        );
+        // What the rules chose is in the plan, with its rule.
+        let rules: Vec<&str> = plan.decisions.iter().map(|d| d.rule.as_str()).collect();
+        assert!(rules.contains(&"rules::MPF_REJUVENATION"), "{rules:?}");
+        assert_eq!(
+            rules.contains(&"scaled_prior::scaled_prior"),
+            field,
+            "{rules:?}"
+        );
+        assert_eq!(plan.evidence.prior_from_data.is_some(), field);
+    }
+}
+
+/// A plan settled on one data set is refused on another, naming the file and the field; an
+/// edited plan of another version, or with a setting out of range, is refused by name.
+#[test]
+fn a_plan_is_refused_on_other_data_or_when_broken() {
+    let (_tmp, dir) = temp_dir("refused");
+    let (one, two) = (dir.join("one"), dir.join("two"));
+    simulate(&one, "1", false);
+    simulate(&two, "2", false);
+    let printed = ok(
+        sysid()
+            .args([
+                "filter",
+                "--algorithm",
+                "mln-rbpf",
+                "--print-plan",
+                "--data",
+            ])
+            .arg(&one)
+            .output()
+            .unwrap(),
+        "--print-plan",
+    );
+    let text = String::from_utf8(printed.stdout).unwrap();
+    let run = |plan: &str, data: &Path| -> String {
+        let file = dir.join("plan.toml");
+        std::fs::write(&file, plan).unwrap();
+        let out = sysid()
+            .args(["filter", "--plan"])
+            .arg(&file)
+            .arg("--data")
+            .arg(data)
+            .arg("--out")
+            .arg(dir.join("r.json"))
+            .output()
+            .unwrap();
+        assert_eq!(out.status.code(), Some(1), "{plan}");
+        String::from_utf8(out.stderr).unwrap()
+    };
+    let e = run(&text, &two);
+    assert!(
+        e.contains("plan.toml") && e.contains("`data_sha256`"),
+        "{e}"
+    );
+    let e = run(&text.replace("plan_version = 1", "plan_version = 7"), &one);
+    assert!(e.contains("`plan_version`"), "{e}");
+    let e = run(&text.replace("window = 80", "window = 0"), &one);
+    assert!(e.contains("`window`"), "{e}");
+    assert!(!dir.join("r.json").exists());
+    // Flags that settle a plan are refused beside one.
+    let out = sysid()
+        .args([
+            "filter",
+            "--plan",
+            "p.toml",
+            "--particles",
+            "5",
+            "--data",
+            "d",
+            "--out",
+            "r",
+        ])
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("--particles"));
+}
+
+/// `--plan-only` prints the plan — algorithm, building, particles, sub-steps, prior, noise
+/// levels and every decision with its rule — and runs nothing.
+#[test]
+fn plan_only_prints_the_plan_and_runs_nothing() {
+    let (_tmp, dir) = temp_dir("only");
+    let data = dir.join("d");
+    simulate(&data, "1", true);
+    let out = ok(
+        sysid()
+            .args(["filter", "--algorithm", "mpf-ekf2", "--plan-only"])
+            .args(FIELD_FLAGS)
+            .arg("--data")
+            .arg(&data)
+            .output()
+            .unwrap(),
+        "--plan-only",
+    );
+    let text = String::from_utf8(out.stdout).unwrap();
+    for needle in [
+        "plan: MPF-EKF2 on 3 storeys",
+        "particles 4000 as 8 filter(s)",
+        "[rules::HYSTERETIC_PARTICLES] note:",
+        "rejuvenation δ = 0.98",
+        "θ: k1, k2, k3, c1, c2, c3, beta, gamma, n (9 parameters)",
+        "[field::resolve] field data: 3 storeys",
+        "[scaled_prior::scaled_prior]",
+        "[rules::MPF_REJUVENATION] note:",
+    ] {
+        assert!(text.contains(needle), "`{needle}` missing from:\n{text}");
+    }
+    assert_eq!(std::fs::read_dir(&dir).unwrap().count(), 1, "only the data");
+}

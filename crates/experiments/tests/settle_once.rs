@@ -1,0 +1,71 @@
+//! A run settles its plan once: one `sysid filter` identification on field data with a Bouc–Wen
+//! element (the data-scaled prior, the MPF-EKF2's rules, `substeps = "auto"`) resolves its
+//! building once and scans the data's spectra for the prior once. Alone in its test binary: the
+//! counters are the process's.
+
+use experiments::identification::{identify_request, FilterRequest};
+use experiments::pipeline::Algorithm;
+use models::sensors::MeasurementKind;
+
+#[test]
+fn one_identification_resolves_its_building_and_scans_its_prior_once() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("d");
+    let st = std::process::Command::new(env!("CARGO_BIN_EXE_sysid"))
+        .args([
+            "simulate",
+            "--preset",
+            "paper-3dof",
+            "--duration",
+            "2",
+            "--seed",
+            "4",
+        ])
+        .arg("--out")
+        .arg(&dir)
+        .status()
+        .unwrap();
+    assert!(st.success());
+    for f in ["dataset.json", "truth.csv"] {
+        std::fs::remove_file(dir.join(f)).unwrap();
+    }
+    let req = FilterRequest {
+        algorithm: Algorithm::MpfEkf2,
+        data: dir,
+        config: None,
+        particles: None,
+        resampling: None,
+        ess_threshold: None,
+        storvik_update: None,
+        discretisation: None,
+        substeps: None,
+        rejuvenation: None,
+        fix: None,
+        experiment: "once".into(),
+        seed: 1,
+        run: 0,
+        storeys: Some(3),
+        hysteretic: Some("1".into()),
+        masses: Some("1".into()),
+        measurement: Some(MeasurementKind::Relative),
+        damping: None,
+    };
+    let (resolved, scanned) = (
+        experiments::field::resolutions(),
+        experiments::scaled_prior::scans(),
+    );
+    let mut notes = 0;
+    let identified = identify_request(&req, &mut |_| notes += 1).unwrap();
+    assert!(identified.record.failure.is_none());
+    assert!(notes >= 3, "building, prior and rules are said");
+    assert_eq!(
+        experiments::field::resolutions() - resolved,
+        1,
+        "building resolutions"
+    );
+    assert_eq!(
+        experiments::scaled_prior::scans() - scanned,
+        1,
+        "prior scans"
+    );
+}
