@@ -163,7 +163,9 @@ pub fn check(r: &RunRecord) -> Vec<Warning> {
         }
     }
     let tiny = TINY_ESS_ABS.max(TINY_ESS_FRACTION * particles_per_filter(r) as f64);
-    if r.ess_min.is_finite() && r.ess_min < tiny && r.steps_completed > 0 {
+    // One Gaussian filter has one particle, whose ESS of 1 says nothing.
+    if r.ess_min.is_finite() && r.ess_min < tiny && r.steps_completed > 0 && !r.one_gaussian_filter
+    {
         out.push(Warning {
             kind: WarningKind::TinyEss,
             parameter: None,
@@ -239,6 +241,7 @@ pub fn summary_table(r: &RunRecord) -> String {
                 format!("sampled, {d} distinct value(s): RESTS ON FEW PARTICLES")
             }
             Some(&d) => format!("sampled, {d} distinct values"),
+            None if r.one_gaussian_filter => "Gaussian (one EKF2: nothing sampled)".to_string(),
             None => "marginalised (Gaussian per particle)".to_string(),
         };
         // Pooled filters measure the Monte-Carlo error of θ_val.
@@ -254,6 +257,18 @@ pub fn summary_table(r: &RunRecord) -> String {
             o,
             "{name:<name_w$}  {v:>12.4}  {interval:>27}  {reliability}"
         );
+    }
+    if r.one_gaussian_filter {
+        let _ = writeln!(
+            o,
+            "One Gaussian filter (EKF2): the building has no hysteretic element and the prior is \
+             one Gaussian, so nothing is sampled and there is no Monte-Carlo error. Intervals: \
+             central 95 % of the last step's Gaussian posterior."
+        );
+        for line in crate::residuals::describe(&r.innovation_checks) {
+            let _ = writeln!(o, "{line}");
+        }
+        return o;
     }
     let _ = writeln!(
         o,

@@ -70,7 +70,9 @@ pub fn parse_fix(s: &str) -> Result<BTreeMap<String, f64>, FixError> {
 
 /// Every key of a filter config (`--config`) with the value `sysid filter` uses without a config
 /// ([`FilterSettings::recommended`]) and its meaning, as a TOML file that parses back to those
-/// settings: `--print-config > f.toml` then `--config f.toml` runs exactly what no config runs.
+/// settings. A config turns off the rules that depend on the building (rejuvenation, particle
+/// count, per-particle prior: [`crate::rules`]), so `--config` of this file does not run what no
+/// config runs; `--print-plan` and `--plan` do (the printed text says so).
 pub fn commented_defaults() -> String {
     let d = FilterSettings::recommended();
     let paper = FilterSettings::default();
@@ -80,7 +82,10 @@ pub fn commented_defaults() -> String {
 # Shown with the values `sysid filter` uses without --config (the recommended settings, whose
 # interval coverage is measured in docs/calibration.md). A key absent from a file takes the
 # paper's value instead (ess_threshold absent, pool = 1, discretisation = "{paper_disc}").
-# Command-line options override the file.
+# Command-line options override the file. With a config the rules that depend on the building
+# (the MPF-EKF2's rejuvenation, particle count and per-particle prior; see `sysid filter --help`)
+# do not apply: this file does not run exactly what no config runs. To rerun a run exactly,
+# write its plan (`sysid filter … --print-plan > plan.toml`) and run `--plan plan.toml`.
 
 # Number of particles Np (SPEC §3).
 particles = {particles}

@@ -418,6 +418,8 @@ pub fn execute(plan: &RunPlan, input: &RunInput, stop: &dyn Fn() -> bool) -> Res
         modal: None,
         pool_left_out: d.left_out,
         plan: None,
+        one_gaussian_filter: crate::rules::samples_nothing(algorithm, &spec)
+            && (s.particles, s.pool) == (1, 1),
     };
     // A result that is physically impossible or rests on few particles says so (issue 16).
     record.warnings = crate::checks::check(&record);

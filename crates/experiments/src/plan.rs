@@ -214,6 +214,9 @@ pub fn settle(req: PlanRequest) -> Result<RunPlan> {
         mpf_rules(&spec, &mut s, asked, scaled.as_ref(), &mut decisions);
         spec.marginal_prior = s.marginal_prior;
     }
+    if asked.is_some() && crate::rules::samples_nothing(algorithm, &spec) {
+        one_gaussian_filter(&mut s, &mut decisions);
+    }
     let auto = resolve_substeps(algorithm, &mut spec, &s, scaled.as_ref());
     decisions.extend(substep_decisions(&auto, algorithm, &spec));
     s.liu_west()?;
@@ -390,6 +393,26 @@ fn mpf_rules(
             });
         }
     }
+}
+
+/// A run that samples nothing ([`crate::rules::samples_nothing`]) is one Gaussian filter: one
+/// particle, no pool.
+fn one_gaussian_filter(s: &mut FilterSettings, decisions: &mut Vec<Decision>) {
+    let asked = (s.particles, s.pool);
+    s.particles = 1;
+    s.pool = 1;
+    decisions.push(Decision {
+        rule: "rules::samples_nothing".into(),
+        set: "particles = 1, pool = 1".into(),
+        level: Level::Note,
+        why: format!(
+            "the building has no hysteretic element and the MPF-EKF2 starts from one shared \
+             prior Gaussian: it samples nothing, so each of {} particles ({} filter(s)) would \
+             carry the same Gaussian; the run is that one Gaussian filter (EKF2), whose \
+             intervals have no Monte-Carlo error",
+            asked.0, asked.1
+        ),
+    });
 }
 
 /// What `substeps = "auto"` chose, as decisions (the lines `sysid filter` prints).

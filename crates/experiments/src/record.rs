@@ -193,6 +193,11 @@ pub struct RunRecord {
     /// (module `pool`); absent when every filter was kept, and in unpooled runs.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub pool_left_out: Vec<diagnostics::LeftOutFilter>,
+    /// Nothing was sampled: the run is one Gaussian filter (the MPF-EKF2 on a building without
+    /// hysteretic element, one shared prior Gaussian: `rules::samples_nothing`), so it has no
+    /// particle diagnostics (ESS, distinct values, Monte-Carlo error). Absent when false.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub one_gaussian_filter: bool,
     /// The plan the run executed (`plan::RunPlan`, read with `RunPlan::of_record`): written by
     /// `sysid filter` and the Python `identify`; absent in a study's records, whose plan is
     /// their study description and fingerprint.

@@ -143,3 +143,76 @@ pub struct LagSubsteps {
     pub above: f64,
     pub substeps: usize,
 }
+
+/// Whether the MPF-EKF2 of `spec` samples nothing: a building without hysteretic element (no
+/// sampled velocity, r or exponent) whose marginalised block starts from one shared prior
+/// Gaussian. Every particle then carries the same Gaussian, the weights stay equal, and the
+/// filter is one EKF2 computed once per particle: a run asked for by a person is that one
+/// filter (1 particle, no pool). Measured on the shake-table frame of `data/real/` (3 storeys,
+/// storey+mass damping, 1000 particles as 8 filters): 122 s against 0.94 s with one particle,
+/// θ_val equal to 12 significant digits (k1 2874.372842648326 against 2874.372842648327); the
+/// pooled filters differ only in their random streams, which a filter that samples nothing
+/// never draws from (docs/performance.md, "Nothing sampled, nothing repeated").
+pub fn samples_nothing(algorithm: Algorithm, spec: &ChainSpec) -> bool {
+    algorithm == Algorithm::MpfEkf2
+        && spec.building.hysteretic().is_empty()
+        && spec.marginal_prior == models::filtering::MarginalPrior::MomentMatched
+}
+
+/// `sysid filter --particles`'s help, from the rules that choose the count (so that the help
+/// cannot disagree with them).
+pub fn help_particles() -> String {
+    use crate::settings::{recommended_pool, PARTICLES_PER_POOLED_FILTER, RECOMMENDED_PARTICLES};
+    format!(
+        "Number of particles. With --config: the config's value. Without: \
+         {RECOMMENDED_PARTICLES} as {} pooled filters; for the MPF-EKF2 on field data of a \
+         hysteretic building sampled coarsely for its first mode, {HYSTERETIC_PARTICLES} as {} × \
+         {} (docs/structures.md, \"Stiff buildings\"); a P given here is pooled as one filter \
+         per {PARTICLES_PER_POOLED_FILTER} particles, 1 to {}. Whatever the count, the MPF-EKF2 \
+         on a building without hysteretic element and one shared prior Gaussian samples \
+         nothing and runs as one Gaussian filter (1 particle). `--plan-only` shows the count a \
+         run takes and why",
+        recommended_pool(RECOMMENDED_PARTICLES),
+        recommended_pool(HYSTERETIC_PARTICLES),
+        HYSTERETIC_PARTICLES / recommended_pool(HYSTERETIC_PARTICLES),
+        crate::settings::MAX_RECOMMENDED_POOL,
+    )
+}
+
+/// `sysid filter --rejuvenation`'s help, from [`MPF_REJUVENATION`] and the rule that applies
+/// it.
+pub fn help_rejuvenation() -> String {
+    format!(
+        "Move the sampled Bouc–Wen exponents n (MLN-RBPF, Storvik, MPF-EKF2) after every \
+         resampling with the Liu–West kernel of this discount δ, in [1/3, 1] (typical \
+         0.95–0.99; 1: no move; docs/calibration.md). Default without --config: δ = \
+         {MPF_REJUVENATION} for the MPF-EKF2 with one shared prior Gaussian on a hysteretic \
+         building, no move otherwise (other filters, per-particle prior means from \
+         {PER_PARTICLE_MIN_STOREYS} storeys or with unmeasured storeys); with --config: the \
+         config's `rejuvenation`, absent = no move"
+    )
+}
+
+/// `sysid filter --substeps`'s help, from the three sub-step rules' constants.
+pub fn help_substeps() -> String {
+    use crate::scaled_prior::{
+        HYSTERETIC_MAX_OMEGA1_H, HYSTERETIC_MAX_SUBSTEPS, HYSTERETIC_SUBSTEP_ABOVE,
+    };
+    use models::filtering::substeps::{LAG_NOTED_ABOVE, MAX_FREQUENCY_ERROR, SUBSTEP_ABOVE};
+    format!(
+        "Transitions inside the filter per sample interval (MPF-EKF2 and bootstrap PF), for data \
+         sampled coarsely relative to the structure's highest modes: a number, or `auto` (the \
+         default without --config; with one, the config's `substeps`, absent = 1). `auto` takes the \
+         largest of three rules: where one step per sample would shift the highest mode of the \
+         prior's building by more than {:.1} %, enough sub-steps to bring that shift under {:.1} \
+         % (docs/real-frame.md); on field data with Bouc–Wen elements whose data-scaled ω₁·dt \
+         exceeds {HYSTERETIC_SUBSTEP_ABOVE}, enough to bring it to {HYSTERETIC_MAX_OMEGA1_H}, \
+         at most {HYSTERETIC_MAX_SUBSTEPS} (docs/structures.md); and for the MPF-EKF2 with one \
+         shared prior Gaussian on a Bouc–Wen building below {PER_PARTICLE_MIN_STOREYS} storeys \
+         whose velocity lag exceeds {:.0} %, {LAG_SUBSTEPS} (docs/calibration.md, \"The prior \
+         or the size?\")",
+        100.0 * SUBSTEP_ABOVE,
+        100.0 * MAX_FREQUENCY_ERROR,
+        100.0 * LAG_NOTED_ABOVE,
+    )
+}

@@ -266,8 +266,15 @@ fn a_coarsely_sampled_hysteretic_building_takes_more_particles() {
         hysteretic: Some(vec![]),
         ..structure()
     };
-    let (s, _) = settled(&data, &dir, Algorithm::MpfEkf2, &linear, None, false);
-    assert_eq!(s.particles, RECOMMENDED_PARTICLES);
+    // A linear building samples nothing: one Gaussian filter (`rules::samples_nothing`), not
+    // the hysteretic rule's count.
+    let (s, notes) = settled(&data, &dir, Algorithm::MpfEkf2, &linear, None, false);
+    assert_eq!((s.particles, s.pool), (1, 1));
+    assert!(
+        notes.iter().any(|n| n.contains("one Gaussian filter"))
+            && !notes.iter().any(|n| n.contains("particles as")),
+        "{notes:?}"
+    );
     // The filter with the settled settings: every k within 5 % (k1 −3.8 %).
     let r = identify(&input(&data, 1), Algorithm::MpfEkf2, &chosen).unwrap();
     assert!(r.failure.is_none(), "{:?}", r.failure);

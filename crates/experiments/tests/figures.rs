@@ -128,6 +128,7 @@ fn record(algorithm: &str, run: u64, bias: f64) -> RunRecord {
         modal: None,
         pool_left_out: vec![],
         plan: None,
+        one_gaussian_filter: false,
     }
 }
 

@@ -261,3 +261,119 @@ fn plan_only_prints_the_plan_and_runs_nothing() {
     }
     assert_eq!(std::fs::read_dir(&dir).unwrap().count(), 1, "only the data");
 }
+
+/// `sysid filter --help` states the defaults the rules choose, from the rules' own constants:
+/// the rejuvenation's δ, the counts of particles and pooled filters, the sub-step caps; and a run
+/// without a config on a hysteretic building takes that δ.
+#[test]
+fn the_help_states_the_rules_defaults() {
+    use experiments::rules::{HYSTERETIC_PARTICLES, LAG_SUBSTEPS, MPF_REJUVENATION};
+    let out = ok(
+        sysid().args(["filter", "--help"]).output().unwrap(),
+        "--help",
+    );
+    let help = String::from_utf8(out.stdout).unwrap();
+    for needle in [
+        format!("Default without --config: δ = {MPF_REJUVENATION} for the MPF-EKF2"),
+        format!("{HYSTERETIC_PARTICLES} as 8 × 500"),
+        format!("velocity lag exceeds 3 %, {LAG_SUBSTEPS}"),
+        "runs as one Gaussian filter (1 particle)".to_string(),
+    ] {
+        assert!(help.contains(&needle), "`{needle}` missing from the help");
+    }
+    assert!(!help.contains("Default: no move"));
+    let (_tmp, dir) = temp_dir("help");
+    let data = dir.join("d");
+    simulate(&data, "1", false);
+    let printed = ok(
+        sysid()
+            .args([
+                "filter",
+                "--algorithm",
+                "mpf-ekf2",
+                "--print-plan",
+                "--data",
+            ])
+            .arg(&data)
+            .output()
+            .unwrap(),
+        "--print-plan",
+    );
+    let plan = RunPlan::from_toml(&String::from_utf8(printed.stdout).unwrap(), "plan").unwrap();
+    assert_eq!(plan.settings.rejuvenation, Some(MPF_REJUVENATION));
+}
+
+/// The MPF-EKF2 on a building without hysteretic element samples nothing: asked for 1000
+/// particles as 8 filters it runs one Gaussian filter, says so in the plan, the record and the
+/// summary, warns about no effective sample size, and gives the answer the 1000 identical
+/// particles give (θ_val equal to round-off: the same EKF2, its mean over 8 copies).
+#[test]
+fn a_linear_building_runs_one_gaussian_filter() {
+    let (_tmp, dir) = temp_dir("linear");
+    let data = dir.join("d");
+    ok(
+        sysid()
+            .args([
+                "simulate",
+                "--storeys",
+                "3",
+                "--hysteretic",
+                "none",
+                "--duration",
+                "4",
+            ])
+            .args(["--seed", "5", "--out"])
+            .arg(&data)
+            .output()
+            .unwrap(),
+        "simulate",
+    );
+    let run = |extra: &[&str], out: &Path| -> Output {
+        let o = sysid()
+            .args(["filter", "--algorithm", "mpf-ekf2", "--data"])
+            .arg(&data)
+            .args(extra)
+            .arg("--out")
+            .arg(out)
+            .output()
+            .unwrap();
+        ran(o.clone(), "filter");
+        o
+    };
+    let one = dir.join("one.json");
+    let o = run(&[], &one);
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(stderr.contains("[rules::samples_nothing]") || stderr.contains("one Gaussian filter"));
+    assert!(stdout.contains("One Gaussian filter (EKF2)"), "{stdout}");
+    assert!(!stdout.contains("ESS over the run"), "{stdout}");
+    assert!(!stderr.contains("effective sample size"), "{stderr}");
+    let r: RunRecord = serde_json::from_str(&std::fs::read_to_string(&one).unwrap()).unwrap();
+    assert!(r.one_gaussian_filter);
+    assert_eq!(r.particles, 1);
+    // A study's job keeps its settings (1000 particles as 8 filters, every one the same EKF2):
+    // the same answer to round-off.
+    let many = experiments::pipeline::identify(
+        &experiments::pipeline::RunInput {
+            data: &models::dataset::load_dir(&data).unwrap(),
+            chain: None,
+            experiment: "cli",
+            seed: 1,
+            run: 0,
+            progress: false,
+            residuals: false,
+        },
+        experiments::pipeline::Algorithm::MpfEkf2,
+        &experiments::pipeline::FilterSettings::recommended(),
+    )
+    .unwrap();
+    assert_eq!((many.particles, many.one_gaussian_filter), (1000, false));
+    for (j, (a, b)) in r.theta_val.iter().zip(&many.theta_val).enumerate() {
+        assert!(
+            (a - b).abs() <= 1e-9 * b.abs(),
+            "{}: {a} against {b}",
+            r.param_names[j]
+        );
+    }
+    assert!((r.loglik - many.loglik).abs() <= 1e-9 * many.loglik.abs());
+}

@@ -24,11 +24,7 @@ pub struct Args {
     /// `dataset.json` optional).
     #[arg(long, required_unless_present = "print_config")]
     pub data: Option<PathBuf>,
-    /// Number of particles (the config file's value; without a config 1000, as 8 pooled filters
-    /// — for the MPF-EKF2 on field data of a hysteretic building sampled coarsely for its first
-    /// mode, 4000 as 8 × 500, docs/structures.md, "Stiff buildings" — and P given here is
-    /// pooled as one filter per 125 particles, 1 to 8).
-    #[arg(long)]
+    #[arg(long, help = crate::rules::help_particles())]
     pub particles: Option<usize>,
     /// Master seed of the filter's random stream (default 1).
     #[arg(long)]
@@ -77,20 +73,9 @@ pub struct Args {
     /// symplectic (semi-implicit Euler: velocities first), or rk4 (bootstrap PF only).
     #[arg(long)]
     pub discretisation: Option<models::filtering::Discretisation>,
-    /// Transitions inside the filter per sample interval (MPF-EKF2 and bootstrap PF), for data
-    /// sampled coarsely relative to the structure's highest modes: a number, or `auto` (the
-    /// default without --config: where one step per sample would shift the highest mode of the
-    /// prior's building by more than 2 %, enough sub-steps to bring that shift under 0.5 %
-    /// (docs/real-frame.md); on field data with Bouc–Wen elements whose data-scaled ω₁·dt
-    /// exceeds 0.01, enough to bring it to 0.0035, at most 8 (docs/structures.md); and for the
-    /// MPF-EKF2 with one shared prior Gaussian on a Bouc–Wen building below 10 storeys whose
-    /// velocity lag exceeds 3 %, 4 (docs/calibration.md, "The prior or the size?")).
-    #[arg(long)]
+    #[arg(long, help = crate::rules::help_substeps())]
     pub substeps: Option<crate::settings::Substeps>,
-    /// Move the sampled Bouc–Wen exponents n (MLN-RBPF, Storvik, MPF-EKF2) after every
-    /// resampling with the Liu–West kernel of this discount δ, in [1/3, 1] (typical 0.95–0.99;
-    /// docs/calibration.md). Default: no move.
-    #[arg(long, value_name = "DELTA")]
+    #[arg(long, value_name = "DELTA", help = crate::rules::help_rejuvenation())]
     pub rejuvenation: Option<f64>,
     /// TOML file with filter settings (priors, noise fraction, masses, …) over the SPEC's (the
     /// paper's) defaults; command-line options override it. Without it: the recommended

@@ -83,6 +83,7 @@ pub fn record(algorithm: &str, run: u64, ratios: [f64; 9], nrmse: f64) -> RunRec
         modal: None,
         pool_left_out: vec![],
         plan: None,
+        one_gaussian_filter: false,
     })
 }
 
