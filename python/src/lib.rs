@@ -476,7 +476,7 @@ fn identify(
         experiment: &experiment,
         seed,
         run,
-        progress: false,
+        progress: None,
         residuals: true,
     };
     let record = stoppable(py, |stop| {

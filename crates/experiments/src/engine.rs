@@ -115,10 +115,11 @@ impl Engine<'_> {
 
     /// Says on stderr what a shard did and how its records become a report.
     pub fn shard_note(&self, did: &str) {
-        eprintln!(
+        log::info!(
             "shard {}/{}: {did}; merge the shards' records (`sysid merge`) and run the same \
              command without `--shard` and with `--resume` to write the report",
-            self.mode.shard.index, self.mode.shard.count
+            self.mode.shard.index,
+            self.mode.shard.count
         );
     }
 

@@ -592,7 +592,7 @@ pub fn run(study: &FieldStudy, opts: &RunOptions) -> Result<()> {
         let total = steps.len();
         for (i, step) in steps.iter().enumerate() {
             if opts.resume && step.writes.exists() {
-                eprintln!(
+                log::info!(
                     "[{}/{total}] {}: kept {}",
                     i + 1,
                     part.name,
@@ -602,7 +602,7 @@ pub fn run(study: &FieldStudy, opts: &RunOptions) -> Result<()> {
             }
             let t = std::time::Instant::now();
             let ended = execute(&opts.sysid, step)?;
-            eprintln!(
+            log::info!(
                 "[{}/{total}] {}: sysid {} → {} ({:.1} s){}",
                 i + 1,
                 part.name,
@@ -617,9 +617,10 @@ pub fn run(study: &FieldStudy, opts: &RunOptions) -> Result<()> {
             );
         }
         if let Some((chosen, record)) = select(part, &dirs)? {
-            eprintln!(
+            log::info!(
                 "{}: selected `{}` (largest log-likelihood of its group)",
-                part.name, chosen.name
+                part.name,
+                chosen.name
             );
             write_selected_settings(&dirs, &record)?;
             // The selected model's validation figures are kept beside the report (the records
@@ -636,7 +637,7 @@ pub fn run(study: &FieldStudy, opts: &RunOptions) -> Result<()> {
                     continue;
                 }
                 let ended = execute(&opts.sysid, &step)?;
-                eprintln!(
+                log::info!(
                     "{}: sysid filter → {} ({ended:?})",
                     part.name,
                     step.writes.display()
@@ -684,9 +685,9 @@ pub fn run(study: &FieldStudy, opts: &RunOptions) -> Result<()> {
     let path = opts.out.join("REPORT.md");
     crate::record::atomic::write_bytes_atomic(&path, text.as_bytes())?;
     for n in notes {
-        eprintln!("{n}");
+        log::info!("{n}");
     }
-    eprintln!(
+    log::info!(
         "field study: {:.0} s; report {}",
         started.elapsed().as_secs_f64(),
         path.display()

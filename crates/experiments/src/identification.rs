@@ -446,7 +446,7 @@ pub fn settle(
     note: &mut dyn FnMut(&Decision),
 ) -> Result<FilterSettings> {
     let plan = crate::plan::settle(t.request(settings, 0, 0, ""))?;
-    plan.decisions.iter().for_each(|d| note(d));
+    plan.decisions.iter().for_each(note);
     Ok(plan.settings)
 }
 
@@ -495,7 +495,7 @@ pub fn identify_plan(
     data: &LoadedDataset,
     chain: Option<&models::structure::ShearChain>,
     stop: &dyn Fn() -> bool,
-    progress: bool,
+    progress: Option<&(dyn Fn(usize, usize) + Sync)>,
 ) -> Result<Identified> {
     let input = RunInput {
         data,
@@ -526,8 +526,8 @@ pub fn identify_request(
 ) -> Result<Identified> {
     let (data, chain) = load_request_data(&req.data)?;
     let plan = plan_request(req, &data, chain.as_ref())?;
-    plan.decisions.iter().for_each(|d| note(d));
-    identify_plan(&plan, &data, chain.as_ref(), &|| false, true)
+    plan.decisions.iter().for_each(note);
+    identify_plan(&plan, &data, chain.as_ref(), &|| false, None)
 }
 
 /// Why a finished run is not an identification to use.

@@ -44,6 +44,7 @@ pub mod identification;
 pub mod information;
 pub mod likelihood;
 pub mod limits;
+pub mod logger;
 mod markdown;
 pub mod metrics;
 pub mod observe;

@@ -391,7 +391,7 @@ impl<'a> LikelihoodModel<'a> {
             experiment: "loglik",
             seed,
             run: 0,
-            progress: false,
+            progress: None,
             residuals: false,
         };
         let r = identify_stoppable(&input, Algorithm::MpfEkf2, &settings, stop)

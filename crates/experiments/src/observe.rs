@@ -49,6 +49,16 @@ pub struct TruthStates<'a> {
     pub rows: &'a [Vec<f64>],
 }
 
+/// How far a run is, told to its caller: `tell(steps done, steps in all)` with the steps of the
+/// earlier filters of a pool (`before`) counted in, so that a pooled run counts one way from 0
+/// to `total`.
+#[derive(Clone, Copy)]
+pub struct Progress<'a> {
+    pub tell: &'a (dyn Fn(usize, usize) + Sync),
+    pub before: usize,
+    pub total: usize,
+}
+
 /// Records what a run record needs.
 pub struct Recorder<'a> {
     total_steps: usize,
@@ -60,10 +70,8 @@ pub struct Recorder<'a> {
     pub last: Posterior,
     truth: Option<TruthStates<'a>>,
     pub state_sums: Vec<ErrorSums>,
-    /// Optional progress bar advanced every 64 steps (terminal runs of `sysid filter`).
-    pub progress: Option<indicatif::ProgressBar>,
-    /// Reports of the pace of a long run where no bar is drawn ([`crate::pace`]).
-    pub pace: Option<crate::pace::Pace>,
+    /// Who is told how far the run is ([`Progress`]).
+    pub progress: Option<Progress<'a>>,
     /// Distinct values of each sampled parameter at the end of a completed run (degeneracy).
     pub distinct: Vec<(String, usize)>,
     /// Central credible intervals of θ at the end of a completed run ([`ParamIntervals`]).
@@ -114,7 +122,6 @@ impl<'a> Recorder<'a> {
             truth,
             state_sums: vec![ErrorSums::default(); n_states],
             progress: None,
-            pace: None,
             distinct: Vec::new(),
             credible: Vec::new(),
             keep_final: false,
@@ -195,13 +202,10 @@ impl Observer for Recorder<'_> {
             self.trace.param_sd.push(post.param_sd.clone());
             self.trace.ess.push(info.ess);
         }
-        if let Some(bar) = &self.progress {
+        if let Some(p) = &self.progress {
             if k.is_multiple_of(64) || k == self.total_steps {
-                bar.set_position(k as u64);
+                (p.tell)(p.before + k, p.total);
             }
-        }
-        if let Some(p) = &mut self.pace {
-            p.step(k);
         }
         if let Some(p) = &mut self.predictor {
             p.step(k, post);

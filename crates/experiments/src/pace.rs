@@ -46,7 +46,7 @@ impl Pace {
             return;
         }
         self.next_report_s = next_report_after(elapsed);
-        eprintln!(
+        log::info!(
             "{}",
             report(&self.label, done, self.total, self.record_s, elapsed)
         );

@@ -45,8 +45,10 @@ pub struct RunInput<'a> {
     pub experiment: &'a str,
     pub seed: u64,
     pub run: u64,
-    /// Show a progress bar on stderr (when it is a terminal).
-    pub progress: bool,
+    /// Told how far the run is, `(steps done, steps in all)` counted over every pooled filter
+    /// one way from start to end, every 64 steps and at each filter's end (`sysid filter` draws
+    /// a bar or reports the pace; the library itself never prints).
+    pub progress: Option<&'a (dyn Fn(usize, usize) + Sync)>,
     /// Record the one-step prediction errors at every step ([`crate::residuals`]; `sysid
     /// filter` does, sweeps do not: their records stay small).
     pub residuals: bool,
@@ -69,12 +71,10 @@ pub fn build_filter(
 
 pub use crate::error::Interrupted;
 
-/// Which filter of a pool [`drive`] runs, when the whole run started (its pace is timed over
-/// all the pool's filters, [`crate::pace`]) and whether its caller asks it to stop.
+/// Which filter of a pool [`drive`] runs, and whether its caller asks it to stop.
 #[derive(Clone, Copy)]
 struct Member<'a> {
     index: usize,
-    started: Instant,
     stop: &'a dyn Fn() -> bool,
 }
 
@@ -91,7 +91,6 @@ fn drive(
 ) -> Driven {
     let Member {
         index: member,
-        started,
         stop,
     } = member;
     let data = input.data;
@@ -123,26 +122,12 @@ fn drive(
         layout.states.len(),
         truth_rows.as_ref().map(|rows| TruthStates { rows }),
     );
-    if input.progress && std::io::IsTerminal::is_terminal(&std::io::stderr()) {
-        let bar = indicatif::ProgressBar::new(steps as u64);
-        bar.set_style(
-            indicatif::ProgressStyle::with_template(
-                "{prefix:>10} [{bar:30}] {pos}/{len} steps, ETA {eta}",
-            )
-            .expect("valid template")
-            .progress_chars("=> "),
-        );
-        bar.set_prefix(algorithm.name());
-        recorder.progress = Some(bar);
-    } else if input.progress {
-        let pooled = s.pool.max(1);
-        recorder.pace = Some(crate::pace::Pace::new(
-            algorithm.name(),
-            steps * pooled,
-            steps as f64 * data.dt,
-            started,
-            member * steps,
-        ));
+    if let Some(progress) = input.progress {
+        recorder.progress = Some(crate::observe::Progress {
+            tell: progress,
+            before: member * steps,
+            total: steps * s.pool.max(1),
+        });
     }
     recorder.keep_final = s.pool > 1;
     recorder.predictor = predictor;
@@ -155,9 +140,6 @@ fn drive(
     let start = Instant::now();
     let summary = run(filter, pc, &ys, ny, &mut rng, &mut recorder);
     let wall_s = start.elapsed().as_secs_f64();
-    if let Some(bar) = &recorder.progress {
-        bar.finish_and_clear();
-    }
     Driven {
         distinct: std::mem::take(&mut recorder.distinct),
         credible: std::mem::take(&mut recorder.credible),
@@ -254,7 +236,6 @@ pub fn execute(plan: &RunPlan, input: &RunInput, stop: &dyn Fn() -> bool) -> Res
         )?))
     };
     // The pace of a long run is timed over all its pooled filters ([`crate::pace`]).
-    let started = Instant::now();
     let shape = filter.shape();
     crate::limits::check_particle_cloud(
         s.particles,
@@ -278,11 +259,7 @@ pub fn execute(plan: &RunPlan, input: &RunInput, stop: &dyn Fn() -> bool) -> Res
                     ..pc
                 };
                 let p = predictor()?;
-                let who = Member {
-                    index: m,
-                    started,
-                    stop,
-                };
+                let who = Member { index: m, stop };
                 interrupted(
                     drive(filter.as_mut(), input, s, algorithm, &member, who, p),
                     data.len() - 1,
@@ -294,11 +271,7 @@ pub fn execute(plan: &RunPlan, input: &RunInput, stop: &dyn Fn() -> bool) -> Res
         if s.pool == 0 {
             bail!("field `pool`: 0 filters (1 runs one filter)");
         }
-        let who = Member {
-            index: 0,
-            started,
-            stop,
-        };
+        let who = Member { index: 0, stop };
         interrupted(
             drive(filter.as_mut(), input, s, algorithm, &pc, who, predictor()?),
             data.len() - 1,

@@ -864,7 +864,6 @@ fn assemble_spec(
             _ => scanned(scan, data, structure)?
                 .prior
                 .alpha
-                .clone()
                 .context("the scaled prior of the storey+mass form has α")?,
         });
     }

@@ -14,8 +14,11 @@
 //! - log-likelihood: `log (1/M) Σ_m p̂_m(y_1:T)`, again an unbiased estimate of the likelihood;
 //! - ESS: the smallest over the filters' minima and the mean of their means (each out of Np/M);
 //!   repairs and resampling events summed;
-//! - traces and online state errors: those of the first kept filter (filter 0's stream is the
-//!   unpooled run's); prediction errors: filter 0's, none when it was left out.
+//! - trace: the pooled posterior at every kept step ([`pooled_trace`]: the mean of the kept
+//!   filters' means, the s.d. of their equal-weight mixture, their mean ESS), so that a figure
+//!   drawn from the trace shows the posterior the summary reports;
+//! - online state errors: those of the first kept filter (filter 0's stream is the unpooled
+//!   run's); prediction errors: filter 0's, none when it was left out.
 //!
 //! A filter that failed, or that **lost track of the record**, is left out of the pooled answer and
 //! listed in the record (`pool_left_out`, with a warning, [`crate::checks`]); the run fails (its
@@ -222,6 +225,7 @@ pub(crate) fn combine(layout: &Layout, members: Vec<Driven>, channels: usize) ->
     };
     let distinct = pooled.distinct_sampled_params();
     let (tail_loglik, tail_steps) = (members[0].tail_loglik, members[0].tail_steps);
+    let trace = pooled_trace(&members);
     let first = members.swap_remove(0);
     Driven {
         summary,
@@ -230,7 +234,7 @@ pub(crate) fn combine(layout: &Layout, members: Vec<Driven>, channels: usize) ->
         param_names: first.param_names,
         theta_val,
         theta_sd_final,
-        trace: first.trace,
+        trace,
         online: first.online,
         wall_s,
         final_particles: None,
@@ -240,6 +244,50 @@ pub(crate) fn combine(layout: &Layout, members: Vec<Driven>, channels: usize) ->
         tail_steps,
         left_out: left,
     }
+}
+
+/// The trace of the pooled posterior: at each kept step the equal-weight mixture of the kept
+/// filters' posteriors — the mean of their means, the s.d. from the mixture's second moment
+/// (`√(mean(s.d.² + mean²) − pooled mean²)`) — and the filters' mean ESS (each out of its own
+/// particles, as the record's ESS). The filters keep the same steps; a shorter trace (none
+/// in a completed pool) cuts the pooled one to its length.
+fn pooled_trace(members: &[Driven]) -> crate::observe::Trace {
+    let first = &members[0].trace;
+    let steps = members
+        .iter()
+        .map(|d| d.trace.t.len().min(d.trace.param_mean.len()))
+        .min()
+        .unwrap_or(0);
+    let m = members.len() as f64;
+    let mut trace = crate::observe::Trace {
+        every: first.every,
+        t: first.t[..steps].to_vec(),
+        ..Default::default()
+    };
+    for k in 0..steps {
+        let n = first.param_mean[k].len();
+        let mut mean = vec![0.0; n];
+        let mut second = vec![0.0; n];
+        for d in members {
+            for j in 0..n {
+                let (mu, sd) = (d.trace.param_mean[k][j], d.trace.param_sd[k][j]);
+                mean[j] += mu / m;
+                second[j] += (sd * sd + mu * mu) / m;
+            }
+        }
+        let sd = mean
+            .iter()
+            .zip(&second)
+            .map(|(mu, s2)| (s2 - mu * mu).max(0.0).sqrt())
+            .collect();
+        trace.param_mean.push(mean);
+        trace.param_sd.push(sd);
+    }
+    let ess_steps = members.iter().map(|d| d.trace.ess.len()).min().unwrap_or(0);
+    trace.ess = (0..ess_steps)
+        .map(|k| members.iter().map(|d| d.trace.ess[k]).sum::<f64>() / m)
+        .collect();
+    trace
 }
 
 #[cfg(test)]

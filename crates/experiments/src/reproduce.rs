@@ -105,7 +105,7 @@ pub fn reproduce(opts: &Options) -> Result<Done> {
             |job| reuse.run(&study, job),
         )?;
         if opts.mode.progress && reuse.taken() > 0 {
-            eprintln!(
+            log::info!(
                 "{name}: {} records taken over from {} (same fingerprint)",
                 reuse.taken(),
                 crate::discretisation::SOURCE
@@ -188,7 +188,7 @@ pub fn reproduce(opts: &Options) -> Result<Done> {
             "wall_s": { "sweeps": sweep_s, "total": total_s },
         "runs": { "executed": executed, "reused": done.reused, "failed": done.failed, "total": total_jobs },
     }))?;
-    eprintln!(
+    log::info!(
         "wrote {}; {total_jobs} runs: {executed} executed ({} failed), {} reused; {}",
         path.display(),
         done.failed,

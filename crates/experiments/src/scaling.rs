@@ -333,7 +333,7 @@ pub fn run_with(opts: &Options, write: &Writer<'_>) -> Result<Vec<Cell>> {
         let cells = cells(&study, &jobs, &records, &cpu_of(&jobs))?;
         write_cells(&engine, &cells, f64::NAN)?;
         write(opts, &study, &cells, &jobs, &records)?;
-        eprintln!(
+        log::info!(
             "wrote {} from {} existing records",
             opts.out.join("REPORT.md").display(),
             records.len()
@@ -367,7 +367,7 @@ pub fn run_with(opts: &Options, write: &Writer<'_>) -> Result<Vec<Cell>> {
     let cells = cells(&study, &jobs, &outcome.records, &cpu_of(&jobs))?;
     write_cells(&engine, &cells, sweep_s)?;
     write(opts, &study, &cells, &jobs, &outcome.records)?;
-    eprintln!(
+    log::info!(
         "wrote {}; {}",
         opts.out.join("REPORT.md").display(),
         clock(start.elapsed())
@@ -413,7 +413,7 @@ fn existing(study: &Study, jobs: &[Job], dir: &Path) -> Result<(Vec<Job>, Vec<Ru
         let record: RunRecord = match read_record(&path) {
             Ok(r) => r,
             Err(e) => {
-                eprintln!("{e:#}: left out of the report");
+                log::warn!("{e:#}: left out of the report");
                 continue;
             }
         };
@@ -423,7 +423,7 @@ fn existing(study: &Study, jobs: &[Job], dir: &Path) -> Result<(Vec<Job>, Vec<Ru
             kept.0.push(job.clone());
             kept.1.push(record);
         } else {
-            eprintln!(
+            log::info!(
                 "{}: computed from other inputs, left out of the report",
                 path.display()
             );

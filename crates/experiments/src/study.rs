@@ -620,7 +620,7 @@ impl Study {
             experiment: &self.name,
             seed: self.sweep.master_seed,
             run: job.run,
-            progress: false,
+            progress: None,
             residuals: false,
         };
         identify(&input, job.algorithm, &self.settings(job)?)

@@ -220,7 +220,7 @@ where
             .filter(|d| matches!(d, Decision::Run(Recompute::NotResuming)))
             .count();
         if opts.progress && replaced > 0 {
-            eprintln!(
+            log::info!(
                 "{}: computing all {pending} runs; the {replaced} records already in {} are \
                  replaced as runs finish (--resume reuses those whose fingerprint matches)",
                 opts.label,
@@ -274,7 +274,7 @@ where
     }?;
     out.wall_s = start.elapsed().as_secs_f64();
     if opts.progress {
-        eprintln!("{}: {}", opts.label, out.summary());
+        log::info!("{}: {}", opts.label, out.summary());
     }
     Ok(out)
 }
@@ -296,7 +296,7 @@ fn decide<R: SweepRecord>(
     let record: R = match read_record(&path) {
         Ok(r) => r,
         Err(e) => {
-            eprintln!("{e:#}: computing it again");
+            log::warn!("{e:#}: computing it again");
             return Ok(Decision::Run(Recompute::Unreadable));
         }
     };

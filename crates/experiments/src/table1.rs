@@ -54,11 +54,10 @@ fn fmt(v: f64) -> String {
     }
 }
 
-/// Computes Table I, prints it as Markdown and writes `table1.json` and `table1.md` into `out`.
-pub fn write(out: &Path) -> crate::error::Result<()> {
+/// Computes Table I, writes `table1.json` and `table1.md` into `out`, and returns the Markdown.
+pub fn write(out: &Path) -> crate::error::Result<String> {
     let rows = table1().context("computing Table I")?;
     let md = markdown(&rows);
-    print!("{md}");
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     let json_path = out.join("table1.json");
     let json = serde_json::json!({
@@ -70,8 +69,8 @@ pub fn write(out: &Path) -> crate::error::Result<()> {
         .with_context(|| format!("writing {}", json_path.display()))?;
     let md_path = out.join("table1.md");
     std::fs::write(&md_path, &md).with_context(|| format!("writing {}", md_path.display()))?;
-    eprintln!("wrote {} and {}", json_path.display(), md_path.display());
-    Ok(())
+    log::info!("wrote {} and {}", json_path.display(), md_path.display());
+    Ok(md)
 }
 
 #[cfg(test)]

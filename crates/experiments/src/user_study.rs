@@ -272,7 +272,7 @@ pub struct Options {
 /// Runs a study file and writes its records, `summary.json` and `REPORT.md` (per algorithm and
 /// parameter: θ_val mean over runs, run-to-run spread, posterior s.d.); a shard writes only its
 /// records.
-pub fn run(args: &Options) -> Result<()> {
+pub fn run(args: &Options) -> Result<Option<String>> {
     let start = Instant::now();
     let study = load(&args.config, args.mode.quick)?;
     std::fs::create_dir_all(&args.out)
@@ -287,7 +287,7 @@ pub fn run(args: &Options) -> Result<()> {
     )?;
     if engine.sharded() {
         engine.shard_note(&outcome.summary());
-        return Ok(());
+        return Ok(None);
     }
     let spreads = spreads(&outcome.records);
     let data = match &study.data.dir {
@@ -384,8 +384,7 @@ pub fn run(args: &Options) -> Result<()> {
     }
     write_json(&args.out.join("summary.json"), &summary)?;
     write_bytes_atomic(&args.out.join("REPORT.md"), report.as_bytes())?;
-    print!("{report}");
-    eprintln!(
+    log::info!(
         "study {}: {} runs ({} executed, {} reused, {} failed) in {:.1} s; wrote {}",
         study.name,
         outcome.records.len(),
@@ -395,5 +394,5 @@ pub fn run(args: &Options) -> Result<()> {
         start.elapsed().as_secs_f64(),
         args.out.display()
     );
-    Ok(())
+    Ok(Some(report))
 }

@@ -58,7 +58,7 @@ fn symplectic_identifies_a_stiff_building_where_euler_biases_damping() {
         experiment: "building-chain",
         seed: 11,
         run: 0,
-        progress: false,
+        progress: None,
         residuals: false,
     };
     let run = |d: Discretisation| {

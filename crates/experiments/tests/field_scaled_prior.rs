@@ -107,7 +107,7 @@ fn input<'a>(data: &'a LoadedDataset, seed: u64) -> RunInput<'a> {
         experiment: "stiff",
         seed,
         run: 0,
-        progress: false,
+        progress: None,
         residuals: false,
     }
 }

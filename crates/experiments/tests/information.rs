@@ -109,7 +109,7 @@ fn the_limit_is_the_likelihoods_maximum_and_its_curvature() {
         experiment: "information",
         seed: 3,
         run: 0,
-        progress: false,
+        progress: None,
         residuals: false,
     };
     let s = FilterSettings {

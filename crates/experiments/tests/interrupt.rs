@@ -21,7 +21,7 @@ fn a_stopped_run_is_interrupted_and_an_unstopped_one_unchanged() {
         experiment: "interrupt",
         seed: 4,
         run: 0,
-        progress: false,
+        progress: None,
         residuals: true,
     };
     let steps = loaded.len() - 1;

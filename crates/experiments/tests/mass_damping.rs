@@ -45,7 +45,7 @@ fn mpf_ekf2_recovers_alpha_and_the_stiffnesses_of_a_mass_damped_chain() {
         experiment: "mass-damping",
         seed: 3,
         run: 0,
-        progress: false,
+        progress: None,
         residuals: false,
     };
     let r = identify(&input, Algorithm::MpfEkf2, &settings()).unwrap();
@@ -102,7 +102,7 @@ fn field_data_take_the_form_from_the_structure_table_and_validate_with_it() {
         experiment: "mass-damping-field",
         seed: 3,
         run: 0,
-        progress: false,
+        progress: None,
         residuals: false,
     };
     let mut r = identify(&input, Algorithm::MpfEkf2, &s).unwrap();

@@ -360,7 +360,7 @@ fn a_linear_building_runs_one_gaussian_filter() {
             experiment: "cli",
             seed: 1,
             run: 0,
-            progress: false,
+            progress: None,
             residuals: false,
         },
         experiments::pipeline::Algorithm::MpfEkf2,

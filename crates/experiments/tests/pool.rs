@@ -18,7 +18,7 @@ fn two_pooled_filters_average_and_measure_their_spread() {
         experiment: "pool",
         seed: 3,
         run: 0,
-        progress: false,
+        progress: None,
         residuals: false,
     };
     let single = FilterSettings {
@@ -82,4 +82,61 @@ fn two_pooled_filters_average_and_measure_their_spread() {
     let v = serde_json::to_value(&single).unwrap();
     assert!(v.get("pool").is_none(), "{v}");
     assert_eq!(serde_json::to_value(&pooled).unwrap()["pool"], 2);
+}
+
+/// The trace of a pooled run is the pooled posterior the summary reports, not its first filter:
+/// averaged over the last `window` steps its means are θ_val (the mean of the filters' θ_vals);
+/// its last s.d. is the pooled posterior's final s.d.; and it differs from the first filter's.
+#[test]
+fn a_pooled_trace_shows_the_pooled_posterior() {
+    let mut config = DatasetConfig::from_preset("paper-3dof", 3).unwrap();
+    config.duration = Some(2.0);
+    let data = generate(&config).unwrap();
+    let loaded = data.to_loaded();
+    let input = RunInput {
+        data: &loaded,
+        chain: Some(&data.chain),
+        experiment: "pool",
+        seed: 5,
+        run: 0,
+        progress: None,
+        residuals: false,
+    };
+    let pooled = FilterSettings {
+        particles: 160,
+        pool: 4,
+        trace_every: 1,
+        validate: false,
+        ..FilterSettings::default()
+    };
+    let first = FilterSettings {
+        particles: 40,
+        pool: 1,
+        ..pooled.clone()
+    };
+    for alg in [Algorithm::MpfEkf2, Algorithm::Storvik] {
+        let r = identify(&input, alg, &pooled).unwrap();
+        let f = identify(&input, alg, &first).unwrap();
+        assert!(r.failure.is_none());
+        let (t, w) = (&r.trace, r.window);
+        assert_eq!(t.param_mean.len(), r.steps_total);
+        for (j, name) in r.param_names.iter().enumerate() {
+            let tail = &t.param_mean[t.param_mean.len() - w..];
+            let avg = tail.iter().map(|row| row[j]).sum::<f64>() / w as f64;
+            let want = r.theta_val[j];
+            assert!(
+                (avg - want).abs() <= 1e-9 * want.abs().max(1e-9),
+                "{} {name}: trace {avg} against θ_val {want}",
+                alg.name()
+            );
+            let sd = t.param_sd.last().unwrap()[j];
+            let final_sd = r.theta_sd_final[j];
+            assert!(
+                (sd - final_sd).abs() <= 1e-6 * final_sd.max(1e-12),
+                "{} {name}: last trace s.d. {sd} against the pooled final s.d. {final_sd}",
+                alg.name()
+            );
+        }
+        assert_ne!(r.trace.param_mean, f.trace.param_mean, "{}", alg.name());
+    }
 }

@@ -161,7 +161,7 @@ fn a_true_value_of_zero_gives_a_readable_relative_error() {
         experiment: "zero-truth",
         seed: 5,
         run: 0,
-        progress: false,
+        progress: None,
         residuals: false,
     };
     let record = identify(&input, Algorithm::MpfEkf2, &settings).unwrap();

@@ -39,7 +39,7 @@ fn run(data: &Dataset, alg: Algorithm, s: &FilterSettings) -> RunRecord {
         experiment: "rejuvenation",
         seed: 5,
         run: 0,
-        progress: false,
+        progress: None,
         residuals: false,
     };
     identify(&input, alg, s).unwrap()
@@ -233,7 +233,7 @@ fn a_bad_discount_is_refused_by_name() {
         experiment: "rejuvenation",
         seed: 1,
         run: 0,
-        progress: false,
+        progress: None,
         residuals: false,
     };
     for bad in [0.0, 0.3, 1.01, f64::NAN, -1.0] {

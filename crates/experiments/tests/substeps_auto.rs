@@ -106,7 +106,7 @@ fn a_stiff_record_is_sub_stepped_until_its_highest_mode_is_represented() {
         experiment: "auto",
         seed: 1,
         run: 0,
-        progress: false,
+        progress: None,
         residuals: false,
     };
     let r = identify(&input, Algorithm::MpfEkf2, &s).unwrap();
@@ -194,7 +194,7 @@ fn the_shared_prior_gaussian_below_ten_storeys_is_sub_stepped_against_the_veloci
         experiment: "lag",
         seed: 1,
         run: 0,
-        progress: false,
+        progress: None,
         residuals: false,
     };
     let s = FilterSettings {

@@ -73,6 +73,7 @@ enum Command {
 }
 
 fn main() -> std::process::ExitCode {
+    experiments::logger::install_logger();
     // The error and its causes, one per line — never a stack trace: an error here is a message
     // to the user (bad input, a failed run), not a bug report.
     match run(Cli::parse()) {

@@ -162,7 +162,12 @@ pub fn run(args: Args) -> Result<()> {
     for d in &plan.decisions {
         eprintln!("{d}");
     }
-    let identified = identify_plan(&plan, &data, chain.as_ref(), &|| false, true)?;
+    let steps = data.len().saturating_sub(1);
+    let shown = Shown::new(&plan, steps, steps as f64 * data.dt);
+    let progress = |done, total| shown.tell(done, total);
+    let identified = identify_plan(&plan, &data, chain.as_ref(), &|| false, Some(&progress));
+    shown.finish();
+    let identified = identified?;
     if let Some(noise) = &identified.noise {
         eprintln!("{noise}");
     }
@@ -176,6 +181,55 @@ pub fn run(args: Args) -> Result<()> {
         eprintln!("{} figures in {}", drawn.written.len(), dir.display());
     }
     outcome
+}
+
+/// How far a run is, shown to a person: a bar on a terminal, otherwise the pace of a long run
+/// ([`crate::pace`]: after 10 s and every minute). Counted over every pooled filter, from 0 to
+/// steps × filters.
+struct Shown {
+    bar: Option<indicatif::ProgressBar>,
+    pace: std::sync::Mutex<crate::pace::Pace>,
+}
+
+impl Shown {
+    fn new(plan: &RunPlan, steps: usize, record_s: f64) -> Self {
+        let total = steps * plan.settings.pool.max(1);
+        let label = plan.algorithm.name();
+        let bar = std::io::IsTerminal::is_terminal(&std::io::stderr()).then(|| {
+            let bar = indicatif::ProgressBar::new(total as u64);
+            bar.set_style(
+                indicatif::ProgressStyle::with_template(
+                    "{prefix:>10} [{bar:30}] {pos}/{len} steps, ETA {eta}",
+                )
+                .expect("valid template")
+                .progress_chars("=> "),
+            );
+            bar.set_prefix(label);
+            bar
+        });
+        let pace = crate::pace::Pace::new(label, total, record_s, std::time::Instant::now(), 0);
+        Self {
+            bar,
+            pace: std::sync::Mutex::new(pace),
+        }
+    }
+
+    fn tell(&self, done: usize, _total: usize) {
+        match &self.bar {
+            Some(bar) => bar.set_position(done as u64),
+            None => self
+                .pace
+                .lock()
+                .unwrap_or_else(|e| e.into_inner())
+                .step(done),
+        }
+    }
+
+    fn finish(&self) {
+        if let Some(bar) = &self.bar {
+            bar.finish_and_clear();
+        }
+    }
 }
 
 /// The request the flags make.

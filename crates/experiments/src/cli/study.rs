@@ -22,9 +22,13 @@ pub struct Args {
 
 /// Runs `sysid study`.
 pub fn run(args: Args) -> Result<()> {
-    crate::user_study::run(&crate::user_study::Options {
+    let report = crate::user_study::run(&crate::user_study::Options {
         config: args.config,
         out: args.out,
         mode: args.run.mode(),
-    })
+    })?;
+    if let Some(report) = report {
+        print!("{report}");
+    }
+    Ok(())
 }

@@ -12,5 +12,6 @@ pub struct Args {
 
 /// Runs `sysid table1`.
 pub fn run(args: Args) -> crate::error::Result<()> {
-    crate::table1::write(&args.out)
+    print!("{}", crate::table1::write(&args.out)?);
+    Ok(())
 }

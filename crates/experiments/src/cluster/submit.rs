@@ -314,11 +314,14 @@ fn report(plan: &Plan) -> crate::error::Result<()> {
                 _ => crate::excitations::run(&opts)?,
             };
         }
-        super::Kind::Study => crate::user_study::run(&crate::user_study::Options {
-            config,
-            out,
-            mode: RunMode::report_merged(plan.quick),
-        })?,
+        super::Kind::Study => {
+            // The report is in REPORT.md (the study logs where).
+            crate::user_study::run(&crate::user_study::Options {
+                config,
+                out,
+                mode: RunMode::report_merged(plan.quick),
+            })?;
+        }
     }
     Ok(())
 }

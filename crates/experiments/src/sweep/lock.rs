@@ -109,7 +109,7 @@ impl DirLock {
                     path.display()
                 );
             }
-            eprintln!(
+            log::warn!(
                 "taking over the lock of {} left by {}, which is no longer running",
                 dir.display(),
                 holder.describe()

@@ -85,7 +85,7 @@ impl Progress {
                     || done == self.total;
                 if due {
                     *last = (now, done);
-                    eprintln!("{}", self.line(done, failures));
+                    log::info!("{}", self.line(done, failures));
                 }
             }
         }
