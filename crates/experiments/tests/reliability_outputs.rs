@@ -1,0 +1,235 @@
+//! The third round of the hostile-user test of `sysid`, kept as regression tests: paths in the
+//! batch scripts of `sysid cluster submit`.
+#![cfg(unix)]
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn sysid() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_sysid"))
+}
+
+/// A fresh directory under the system temp dir, unique per test, and the guard that removes it
+/// when dropped (also when the test panics).
+fn temp_dir(tag: &str) -> (tempfile::TempDir, PathBuf) {
+    let tmp = tempfile::Builder::new()
+        .prefix(&format!("sysid-out-{tag}-"))
+        .tempdir()
+        .unwrap();
+    let d = tmp.path().to_path_buf();
+    (tmp, d)
+}
+
+fn run(args: &[&str], cwd: &Path) -> Output {
+    sysid().args(args).current_dir(cwd).output().unwrap()
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+fn stdout(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stdout).into_owned()
+}
+
+/// A non-zero exit that is an error message naming `needle`, not a panic or an abort.
+fn refused(o: &Output, needle: &str) {
+    let err = stderr(o);
+    assert!(!o.status.success(), "accepted: {err}");
+    assert!(
+        matches!(o.status.code(), Some(1 | 2)),
+        "{:?}: {err}",
+        o.status
+    );
+    assert!(!err.contains("panicked"), "{err}");
+    assert!(err.contains(needle), "`{needle}` not in: {err}");
+}
+
+fn ok(o: &Output) {
+    assert!(o.status.success(), "{}", stderr(o));
+}
+
+const STUDY: &str = r#"
+name = "mini"
+description = "cluster script test"
+[data]
+preset = "shear-chain"
+duration = 0.5
+[sweep]
+algorithms = ["mpf-ekf2"]
+runs = 2
+master_seed = 3
+particles = [20]
+[filter]
+trace_every = 0
+loop_every = 0
+validate = false
+"#;
+
+/// The text of the script printed after the header `# <path>` in a dry run's output.
+fn printed_script(printed: &str, path: &Path) -> String {
+    let header = format!("# {}\n", path.display());
+    let start = printed.find(&header).expect("script header") + header.len();
+    let rest = &printed[start..];
+    // Each script is followed by a blank line (the `println!` after its final newline).
+    rest[..rest.find("\n\n").expect("end of script") + 1].to_string()
+}
+
+/// Every line of a generated script is one the tool writes: nothing a path could have
+/// started.
+fn only_expected_lines(script: &str) {
+    for line in script.lines() {
+        assert!(
+            [
+                "#!/bin/bash",
+                "# ",
+                "#SBATCH --",
+                "set -euo pipefail",
+                "task=",
+                "part=",
+                "rm -f ",
+                "echo ",
+                "exec ",
+            ]
+            .iter()
+            .any(|p| line.starts_with(p)),
+            "unexpected line `{line}` in\n{script}"
+        );
+    }
+}
+
+#[test]
+fn cluster_scripts_refuse_paths_that_leave_their_line_and_quote_the_others() {
+    let (_tmp, dir) = temp_dir("cluster");
+    std::fs::write(dir.join("mini.toml"), STUDY).unwrap();
+    let submit = |config: &str, out: &str| {
+        run(
+            &[
+                "cluster",
+                "submit",
+                "study",
+                "--config",
+                config,
+                "--out",
+                out,
+                "--tasks",
+                "2",
+                "--dry-run",
+            ],
+            &dir,
+        )
+    };
+
+    // The reproducer: a newline in --out made `touch pwned #...` a line of the script.
+    let o = submit("mini.toml", "x\ntouch pwned #");
+    refused(&o, "--out");
+    assert!(!stdout(&o).contains("touch pwned"), "{}", stdout(&o));
+    // A directive of its own, smuggled in through a carriage return or a newline.
+    for out in ["x\r#SBATCH --wrap=id", "x\n#SBATCH --wrap=id"] {
+        let o = submit("mini.toml", out);
+        refused(&o, "--out");
+        assert!(!stdout(&o).contains("--wrap"), "{}", stdout(&o));
+    }
+    // Slurm, not the shell, reads `#SBATCH --output=`: whitespace, `#`, `%` and quotes are
+    // refused by name rather than misread.
+    for out in ["my runs", "a#b", "100%", "it's", "a\"b", "a\\b"] {
+        refused(&submit("mini.toml", out), "--out");
+    }
+    // The config's path is in a header comment and the shard command: a newline is refused.
+    let bad_config = dir.join("a\nb.toml");
+    std::fs::write(&bad_config, STUDY).unwrap();
+    refused(&submit(bad_config.to_str().unwrap(), "ok"), "--config");
+    // A config path with spaces is quoted, not refused: it is in no `#SBATCH` line.
+    std::fs::write(dir.join("my study.toml"), STUDY).unwrap();
+    let o = submit("my study.toml", "ok");
+    ok(&o);
+    assert!(
+        stdout(&o).contains(&format!(
+            "--config '{}'",
+            dir.join("my study.toml").canonicalize().unwrap().display()
+        )),
+        "{}",
+        stdout(&o)
+    );
+
+    // Characters the shell would act on are quoted: the scripts, run by bash, hand the exact
+    // paths to the binary.
+    let out = dir.join("a&b$c;d(e)|f`g");
+    let args_file = dir.join("args.txt");
+    let fake = dir.join("fake-sysid");
+    std::fs::write(
+        &fake,
+        format!(
+            "#!/bin/sh\nprintf '%s\\n' \"$@\" > '{}'\n",
+            args_file.display()
+        ),
+    )
+    .unwrap();
+    use std::os::unix::fs::PermissionsExt;
+    std::fs::set_permissions(&fake, std::fs::Permissions::from_mode(0o755)).unwrap();
+    let o = run(
+        &[
+            "cluster",
+            "submit",
+            "study",
+            "--config",
+            "mini.toml",
+            "--out",
+            out.to_str().unwrap(),
+            "--tasks",
+            "2",
+            "--sysid",
+            fake.to_str().unwrap(),
+            "--dry-run",
+        ],
+        &dir,
+    );
+    ok(&o);
+    let printed = stdout(&o);
+    let cluster = out.join("cluster");
+    let shard = printed_script(&printed, &cluster.join("shard.sh"));
+    let finish = printed_script(&printed, &cluster.join("finish.sh"));
+    only_expected_lines(&shard);
+    only_expected_lines(&finish);
+    let config = dir.join("mini.toml").canonicalize().unwrap();
+    let run_script = |text: &str| {
+        let o = Command::new("bash")
+            .arg("-c")
+            .arg(text)
+            .env("SLURM_ARRAY_TASK_ID", "1")
+            .current_dir(&dir)
+            .output()
+            .unwrap();
+        ok(&o);
+        std::fs::read_to_string(&args_file).unwrap()
+    };
+    let part = cluster.join("parts/shard-1");
+    assert_eq!(
+        run_script(&shard),
+        format!(
+            "study\n--config\n{}\n--out\n{}\n--shard\n1/2\n--resume\n--threads\n1\n",
+            config.display(),
+            part.display()
+        )
+    );
+    assert_eq!(
+        run_script(&finish),
+        format!("cluster\nfinish\n--out\n{}\n", out.display())
+    );
+    // Nothing the shell could have run on its own: no file but the fake's.
+    let mut names: Vec<String> = std::fs::read_dir(&dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    names.sort();
+    assert_eq!(
+        names,
+        [
+            "a\nb.toml",
+            "args.txt",
+            "fake-sysid",
+            "mini.toml",
+            "my study.toml"
+        ]
+    );
+}
