@@ -1,5 +1,5 @@
 //! The third round of the hostile-user test of `sysid`, kept as regression tests: paths in the
-//! batch scripts of `sysid cluster submit`.
+//! batch scripts of `sysid cluster submit`, and the bound on `sysid loglik --seeds`.
 #![cfg(unix)]
 
 use std::path::{Path, PathBuf};
@@ -232,4 +232,64 @@ fn cluster_scripts_refuse_paths_that_leave_their_line_and_quote_the_others() {
             "my study.toml"
         ]
     );
+}
+
+/// 1 s of the paper's data set in `dir/d`.
+fn small_data(dir: &Path) -> PathBuf {
+    let d = dir.join("d");
+    ok(&run(
+        &[
+            "simulate",
+            "--preset",
+            "paper-3dof",
+            "--duration",
+            "1",
+            "--seed",
+            "1",
+            "--out",
+            d.to_str().unwrap(),
+        ],
+        dir,
+    ));
+    d
+}
+
+#[test]
+fn loglik_seeds_are_bounded() {
+    let (_tmp, dir) = temp_dir("seeds");
+    let d = small_data(&dir);
+    let limit = experiments::likelihood::MAX_SEEDS.to_string();
+    for seeds in ["18446744073709551615", "1000000000", "10001", "0"] {
+        let o = run(
+            &[
+                "loglik",
+                "--data",
+                d.to_str().unwrap(),
+                "--truth",
+                "--particles",
+                "20",
+                "--seeds",
+                seeds,
+            ],
+            &dir,
+        );
+        refused(&o, "--seeds");
+        assert!(stderr(&o).contains(&limit), "{}", stderr(&o));
+    }
+    // The help states the limit.
+    let help = stdout(&run(&["loglik", "--help"], &dir));
+    assert!(help.contains(&format!("1 to {limit}")), "{help}");
+    // The library function the Python binding calls refuses it too, before any filter runs.
+    for seeds in [u64::MAX, 1_000_000_000] {
+        let req = experiments::likelihood::LikelihoodRequest {
+            data: d.clone(),
+            config: None,
+            particles: 20,
+            seeds,
+            truth: true,
+        };
+        let e = experiments::likelihood::score(&req, &[], &mut |_| {}).unwrap_err();
+        let e = format!("{e:#}");
+        assert!(e.contains("--seeds") && e.contains(&limit), "{e}");
+    }
 }

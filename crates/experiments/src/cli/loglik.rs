@@ -5,7 +5,7 @@
 use std::path::PathBuf;
 
 use crate::error::Result;
-use crate::likelihood::{score, table, Candidate, LikelihoodRequest};
+use crate::likelihood::{score, table, Candidate, LikelihoodRequest, MAX_SEEDS};
 
 /// Arguments of `sysid loglik`.
 #[derive(Debug, clap::Args)]
@@ -25,8 +25,8 @@ pub struct Args {
     /// Particles of the one filter of each estimate.
     #[arg(long, default_value_t = 250)]
     pub particles: usize,
-    /// Independent estimates per answer (their spread gives the standard error).
-    #[arg(long, default_value_t = 2)]
+    /// Independent estimates per answer (their spread gives the standard error); 1 to 10000.
+    #[arg(long, default_value_t = 2, value_parser = clap::value_parser!(u64).range(1..=MAX_SEEDS))]
     pub seeds: u64,
     /// Also write the table to this file.
     #[arg(long)]
