@@ -1,9 +1,11 @@
 //! The third round of the hostile-user test of `sysid`, kept as regression tests: paths in the
-//! batch scripts of `sysid cluster submit`, and the bound on `sysid loglik --seeds`.
+//! batch scripts of `sysid cluster submit`, the bound on `sysid loglik --seeds`, and how a
+//! command ends when its standard output closes early.
 #![cfg(unix)]
 
+use std::os::unix::process::ExitStatusExt;
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::process::{Command, Output, Stdio};
 
 fn sysid() -> Command {
     Command::new(env!("CARGO_BIN_EXE_sysid"))
@@ -292,4 +294,89 @@ fn loglik_seeds_are_bounded() {
         let e = format!("{e:#}");
         assert!(e.contains("--seeds") && e.contains(&limit), "{e}");
     }
+}
+
+/// A run record of `d` (a small filter) at `dir/run.json`.
+fn small_record(dir: &Path, d: &Path) -> PathBuf {
+    let r = dir.join("run.json");
+    ok(&run(
+        &[
+            "filter",
+            "--algorithm",
+            "mpf-ekf2",
+            "--particles",
+            "20",
+            "--data",
+            d.to_str().unwrap(),
+            "--out",
+            r.to_str().unwrap(),
+        ],
+        dir,
+    ));
+    r
+}
+
+/// Runs `sysid args` with a standard output whose reader is already gone.
+fn with_stdout_closed(args: &[&str], cwd: &Path) -> Output {
+    let (reader, writer) = std::io::pipe().unwrap();
+    // Closed before the child starts: its first write finds no reader, whatever the timing.
+    drop(reader);
+    sysid()
+        .args(args)
+        .current_dir(cwd)
+        .stdout(Stdio::from(writer))
+        .stderr(Stdio::piped())
+        .output()
+        .unwrap()
+}
+
+/// Ended by SIGPIPE, as a Unix tool whose reader has gone: no panic (exit 101), no message.
+fn ended_quietly(o: &Output) {
+    let err = stderr(o);
+    assert_ne!(o.status.code(), Some(101), "{err}");
+    assert!(!err.contains("panicked"), "{err}");
+    assert_eq!(o.status.signal(), Some(13), "{:?}: {err}", o.status);
+}
+
+#[test]
+fn a_closed_standard_output_ends_the_command_quietly() {
+    let (_tmp, dir) = temp_dir("pipe");
+    ended_quietly(&with_stdout_closed(&["filter", "--print-config"], &dir));
+    std::fs::write(dir.join("mini.toml"), STUDY).unwrap();
+    ended_quietly(&with_stdout_closed(
+        &[
+            "cluster",
+            "submit",
+            "study",
+            "--config",
+            "mini.toml",
+            "--out",
+            "o",
+            "--tasks",
+            "2",
+            "--dry-run",
+        ],
+        &dir,
+    ));
+    // validate writes its --out before it prints.
+    let d = small_data(&dir);
+    let record = small_record(&dir, &d);
+    let out = dir.join("validation.json");
+    ended_quietly(&with_stdout_closed(
+        &[
+            "validate",
+            "--draws",
+            "0",
+            "--record",
+            record.to_str().unwrap(),
+            "--data",
+            d.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ],
+        &dir,
+    ));
+    let v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
+    assert!(v.get("free_run").is_some(), "{v}");
 }

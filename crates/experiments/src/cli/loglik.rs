@@ -48,9 +48,11 @@ pub fn run(args: Args) -> Result<()> {
     };
     let c = score(&req, &candidates, &mut |line| eprintln!("{line}"))?;
     let t = table(&c);
-    print!("{t}");
+    // Written before it is printed: a reader of standard output that has gone ends the process
+    // at the print.
     if let Some(out) = &args.out {
         crate::sweep::write_bytes_atomic(out, t.as_bytes())?;
     }
+    print!("{t}");
     Ok(())
 }
