@@ -1,6 +1,7 @@
 //! The third round of the hostile-user test of `sysid`, kept as regression tests: paths in the
-//! batch scripts of `sysid cluster submit`, the bound on `sysid loglik --seeds`, and how a
-//! command ends when its standard output closes early.
+//! batch scripts of `sysid cluster submit`, the bound on `sysid loglik --seeds`, how a command
+//! ends when its standard output closes early, and outputs that are not regular files or are
+//! the command's own inputs.
 #![cfg(unix)]
 
 use std::os::unix::process::ExitStatusExt;
@@ -379,4 +380,149 @@ fn a_closed_standard_output_ends_the_command_quietly() {
     let v: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
     assert!(v.get("free_run").is_some(), "{v}");
+}
+
+/// `path` is still a symbolic link to `target`, and `target` still holds `keep`.
+fn link_intact(path: &Path, target: &Path) {
+    assert!(std::fs::symlink_metadata(path)
+        .unwrap()
+        .file_type()
+        .is_symlink());
+    assert_eq!(std::fs::read_link(path).unwrap(), target);
+    assert_eq!(std::fs::read_to_string(target).unwrap(), "keep\n");
+}
+
+fn mkfifo(path: &Path) {
+    let o = Command::new("mkfifo").arg(path).output().unwrap();
+    assert!(o.status.success(), "mkfifo: {}", stderr(&o));
+}
+
+#[test]
+fn outputs_that_are_not_regular_files_or_are_inputs_are_refused() {
+    let (_tmp, dir) = temp_dir("outputs");
+    let d = small_data(&dir);
+    let record = small_record(&dir, &d);
+    let record_bytes = std::fs::read(&record).unwrap();
+    let measured_bytes = std::fs::read(d.join("measured.csv")).unwrap();
+    let target = dir.join("target.txt");
+    std::fs::write(&target, "keep\n").unwrap();
+    let link = dir.join("link.json");
+    std::os::unix::fs::symlink(&target, &link).unwrap();
+    let fifo = dir.join("fifo.json");
+    mkfifo(&fifo);
+    let (d_s, r_s) = (d.to_str().unwrap(), record.to_str().unwrap());
+
+    for out in [&link, &fifo] {
+        let o_s = out.to_str().unwrap();
+        let what = if out == &link {
+            "symbolic link"
+        } else {
+            "named pipe"
+        };
+        // Refused before the work.
+        let o = run(
+            &[
+                "validate", "--draws", "0", "--record", r_s, "--data", d_s, "--out", o_s,
+            ],
+            &dir,
+        );
+        refused(&o, "--out");
+        assert!(stderr(&o).contains(what), "{}", stderr(&o));
+        let o = run(
+            &[
+                "loglik",
+                "--data",
+                d_s,
+                "--truth",
+                "--particles",
+                "20",
+                "--seeds",
+                "1",
+                "--out",
+                o_s,
+            ],
+            &dir,
+        );
+        refused(&o, "--out");
+        // `sysid filter` writes through the same function, which refuses it when writing.
+        let o = run(
+            &[
+                "filter",
+                "--algorithm",
+                "mpf-ekf2",
+                "--particles",
+                "20",
+                "--data",
+                d_s,
+                "--out",
+                o_s,
+            ],
+            &dir,
+        );
+        refused(&o, &out.display().to_string());
+        assert!(stderr(&o).contains(what), "{}", stderr(&o));
+    }
+    link_intact(&link, &target);
+    use std::os::unix::fs::FileTypeExt;
+    assert!(std::fs::symlink_metadata(&fifo)
+        .unwrap()
+        .file_type()
+        .is_fifo());
+
+    // validate --out over its own --record, or over a file of its --data, is refused.
+    let o = run(
+        &[
+            "validate", "--draws", "0", "--record", r_s, "--data", d_s, "--out", r_s,
+        ],
+        &dir,
+    );
+    refused(&o, "--record");
+    let measured = d.join("measured.csv");
+    let o = run(
+        &[
+            "validate",
+            "--draws",
+            "0",
+            "--record",
+            r_s,
+            "--data",
+            d_s,
+            "--out",
+            measured.to_str().unwrap(),
+        ],
+        &dir,
+    );
+    refused(&o, "--data");
+    // Also through another spelling of the same file.
+    let other = format!("{}/../d/measured.csv", d.display());
+    refused(
+        &run(
+            &[
+                "validate", "--draws", "0", "--record", r_s, "--data", d_s, "--out", &other,
+            ],
+            &dir,
+        ),
+        "--data",
+    );
+    assert_eq!(std::fs::read(&record).unwrap(), record_bytes);
+    assert_eq!(std::fs::read(&measured).unwrap(), measured_bytes);
+
+    // A regular file is still replaced: the check refuses only what it should.
+    let fine = dir.join("validation.json");
+    std::fs::write(&fine, "old\n").unwrap();
+    ok(&run(
+        &[
+            "validate",
+            "--draws",
+            "0",
+            "--record",
+            r_s,
+            "--data",
+            d_s,
+            "--out",
+            fine.to_str().unwrap(),
+        ],
+        &dir,
+    ));
+    assert!(std::fs::read_to_string(&fine).unwrap().starts_with('{'));
 }

@@ -34,6 +34,15 @@ pub struct Args {
 }
 
 pub fn run(args: Args) -> Result<()> {
+    // Checked before the scoring, not only when written: a refused --out costs no filter run.
+    if let Some(out) = &args.out {
+        let mut inputs: Vec<(&str, &std::path::Path)> = vec![("--data", &args.data)];
+        if let Some(c) = &args.config {
+            inputs.push(("--config", c));
+        }
+        inputs.extend(args.records.iter().map(|r| ("a record", r.as_path())));
+        crate::record::atomic::check_output(out, "--out", &inputs)?;
+    }
     let candidates = args
         .records
         .iter()

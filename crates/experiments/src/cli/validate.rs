@@ -33,6 +33,14 @@ pub struct Args {
 
 /// Runs `sysid validate`.
 pub fn run(args: Args) -> Result<()> {
+    // Checked before the work, not only when written: a refused --out costs no run.
+    if let Some(out) = &args.out {
+        crate::record::atomic::check_output(
+            out,
+            "--out",
+            &[("--record", &args.record), ("--data", &args.data)],
+        )?;
+    }
     let validated = cross_validate(&args.record, &args.data, args.draws, &mut |n| {
         eprintln!("note: {n}")
     })?;
