@@ -1,7 +1,8 @@
 //! The third round of the hostile-user test of `sysid`, kept as regression tests: paths in the
 //! batch scripts of `sysid cluster submit`, the bound on `sysid loglik --seeds`, how a command
-//! ends when its standard output closes early, and outputs that are not regular files or are
-//! the command's own inputs.
+//! ends when its standard output closes early, outputs that are not regular files or are the
+//! command's own inputs, and data-set directories holding a directory where a data-set file
+//! belongs.
 #![cfg(unix)]
 
 use std::os::unix::process::ExitStatusExt;
@@ -525,4 +526,44 @@ fn outputs_that_are_not_regular_files_or_are_inputs_are_refused() {
         &dir,
     ));
     assert!(std::fs::read_to_string(&fine).unwrap().starts_with('{'));
+}
+
+#[test]
+fn a_directory_named_like_a_data_set_file_is_not_deleted() {
+    let (_tmp, dir) = temp_dir("dataset");
+    for name in ["measured.csv", "truth.csv"] {
+        let o = dir.join(format!("o-{name}"));
+        std::fs::create_dir_all(o.join(name)).unwrap();
+        let precious = o.join(name).join("precious.txt");
+        std::fs::write(&precious, "keep\n").unwrap();
+        let out = run(
+            &[
+                "simulate",
+                "--preset",
+                "paper-3dof",
+                "--duration",
+                "1",
+                "--seed",
+                "1",
+                "--out",
+                o.to_str().unwrap(),
+            ],
+            &dir,
+        );
+        refused(&out, &o.display().to_string());
+        assert!(stderr(&out).contains(name), "{}", stderr(&out));
+        assert_eq!(std::fs::read_to_string(&precious).unwrap(), "keep\n");
+    }
+    // A link in a data-set file's place is refused too, its target kept.
+    let o = dir.join("o-link");
+    std::fs::create_dir_all(&o).unwrap();
+    let target = dir.join("elsewhere.csv");
+    std::fs::write(&target, "keep\n").unwrap();
+    std::os::unix::fs::symlink(&target, o.join("measured.csv")).unwrap();
+    let out = run(
+        &["simulate", "--duration", "1", "--out", o.to_str().unwrap()],
+        &dir,
+    );
+    refused(&out, "symbolic link");
+    link_intact(&o.join("measured.csv"), &target);
 }
