@@ -567,3 +567,21 @@ fn a_directory_named_like_a_data_set_file_is_not_deleted() {
     refused(&out, "symbolic link");
     link_intact(&o.join("measured.csv"), &target);
 }
+
+#[test]
+fn table1_writes_its_files_only_as_new_or_regular_files() {
+    let (_tmp, dir) = temp_dir("table1");
+    let out = dir.join("t");
+    std::fs::create_dir_all(&out).unwrap();
+    let target = dir.join("target.txt");
+    std::fs::write(&target, "keep\n").unwrap();
+    std::os::unix::fs::symlink(&target, out.join("table1.md")).unwrap();
+    let o = run(&["table1", "--out", out.to_str().unwrap()], &dir);
+    refused(&o, "symbolic link");
+    link_intact(&out.join("table1.md"), &target);
+    std::fs::remove_file(out.join("table1.md")).unwrap();
+    ok(&run(&["table1", "--out", out.to_str().unwrap()], &dir));
+    assert!(std::fs::read_to_string(out.join("table1.md"))
+        .unwrap()
+        .contains('|'));
+}
