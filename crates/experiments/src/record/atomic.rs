@@ -45,8 +45,6 @@ pub enum OutputError {
     },
 }
 
-crate::error::domain_error!(OutputError);
-
 /// What a non-regular file is, for messages.
 fn what(t: fs::FileType) -> &'static str {
     #[cfg(unix)]
