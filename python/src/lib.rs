@@ -93,6 +93,9 @@ struct PyDataset {
     generated: Option<Dataset>,
     /// The `measured.csv` the data came from, for messages.
     measured: PathBuf,
+    /// The directory the data set was loaded from (`None`: made in memory), an input that
+    /// `identify(out=...)` must not overwrite.
+    dir: Option<PathBuf>,
 }
 
 #[pymethods]
@@ -291,6 +294,7 @@ fn simulate(
         chain: Some(ds.chain.clone()),
         generated: Some(ds),
         measured: PathBuf::from(MEASURED),
+        dir: None,
     })
 }
 
@@ -310,6 +314,7 @@ fn load_dataset(py: Python<'_>, dir: PathBuf) -> PyResult<PyDataset> {
         chain,
         generated: None,
         measured: dir.join(MEASURED),
+        dir: Some(dir),
     })
 }
 
@@ -381,6 +386,7 @@ fn field_data(
         chain: None,
         generated: None,
         measured: PathBuf::from(MEASURED),
+        dir: None,
     })
 }
 
@@ -452,6 +458,18 @@ fn identify(
         },
     };
     let flags = structure_flags(storeys, hysteretic, masses, measurement, damping)?;
+    // Checked before the run, as `sysid filter --out` is when written: a device, a link or one
+    // of the run's own inputs is refused, not replaced.
+    if let Some(out) = &out {
+        let mut inputs: Vec<(&str, &std::path::Path)> = Vec::new();
+        if let Some(dir) = &data.dir {
+            inputs.push(("data", dir));
+        }
+        if let Some(c) = &config {
+            inputs.push(("config", c));
+        }
+        experiments::record::atomic::check_output(out, "out", &inputs).map_err(err)?;
+    }
     let d = &data.loaded;
     let config_name = config_name(&config, &config_json);
     let target = Target {

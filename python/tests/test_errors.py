@@ -136,3 +136,25 @@ def test_the_storey_mass_form_is_refused_by_name_where_unsupported():
     mass = sm.Building(3, [], 1.0, None, "absolute", "storey+mass")
     raises(sm.identify, ug, acc, 0.01, mass, algorithm="storvik", match="storey\\+mass damping form")
     raises(sm.identify, ug, acc, 0.01, mass, algorithm="mln-rbpf", match="MLN-RBPF/Storvik")
+
+
+def test_outputs_are_refused_over_inputs_links_and_directories(tmp_path, short_data):
+    d = tmp_path / "d"
+    short_data.write(d)
+    measured = (d / "measured.csv").read_bytes()
+    data = sm.load_dataset(d)
+    raises(sm.identify, data, particles=20, seed=1, out=d / "measured.csv", match="which this command reads")
+    assert (d / "measured.csv").read_bytes() == measured
+    target = tmp_path / "target.json"
+    target.write_text("keep\n")
+    link = tmp_path / "link.json"
+    link.symlink_to(target)
+    raises(sm.identify, data, particles=20, seed=1, out=link, match="symbolic link")
+    assert link.is_symlink() and target.read_text() == "keep\n"
+    # A directory where a data-set file belongs is refused, not deleted with its contents.
+    o = tmp_path / "o"
+    (o / "truth.csv").mkdir(parents=True)
+    (o / "truth.csv" / "precious.txt").write_text("keep\n")
+    raises(short_data.write, o, match="truth.csv")
+    assert (o / "truth.csv" / "precious.txt").read_text() == "keep\n"
+    raises(sm.loglik, data, truth=True, particles=20, seeds=10**9, match="--seeds 1000000000: at most 10000")

@@ -96,6 +96,8 @@ error_type! {
     Prior(models::priors::PriorError),
     /// A run record could not be read.
     Record(crate::record::read::ReadError),
+    /// An output path is refused (not a regular file, or one of the command's inputs).
+    Output(crate::record::atomic::OutputError),
     /// Recordings could not be imported into a data set.
     Import(models::import::ImportError),
     /// Text written into a `String` (never fails in practice).

@@ -58,6 +58,10 @@ impl Candidate {
     }
 }
 
+/// Most independent estimates per candidate: each is one full filter run, so more would run
+/// for days, and the count sizes an allocation (a value near `u64::MAX` would overflow it).
+pub const MAX_SEEDS: u64 = 10_000;
+
 /// What to score and how.
 #[derive(Debug, Clone)]
 pub struct LikelihoodRequest {
@@ -416,6 +420,12 @@ pub fn score_on(
 ) -> Result<Comparison> {
     if req.seeds == 0 {
         bail!("--seeds: at least one estimate per candidate");
+    }
+    if req.seeds > MAX_SEEDS {
+        bail!(
+            "--seeds {}: at most {MAX_SEEDS} estimates per candidate",
+            req.seeds
+        );
     }
     if req.particles == 0 {
         bail!("--particles: at least one particle per estimate");

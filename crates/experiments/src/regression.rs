@@ -477,20 +477,18 @@ impl RegressionRun {
     /// Writes the summary (`regression.json`): the regression file's path, the wall time, the run
     /// counts, the statistics and every check with its outcome.
     pub fn write_summary(&self, path: &Path, config: &Path, wall_s: f64) -> Result<()> {
-        std::fs::write(
-            path,
-            serde_json::to_string_pretty(&serde_json::json!({
-                "config": config,
-                "wall_s": wall_s,
-                "runs": { "executed": self.executed, "reused": self.reused, "total": self.records.len() },
-                "stats": self.stats,
-                "coverage95_kc": self.coverage,
-                "checks": self.checks.iter().map(|c| serde_json::json!({
-                    "check": c, "ok": c.ok()
-                })).collect::<Vec<_>>(),
-            }))? + "\n",
-        )
-        .with_context(|| format!("writing {}", path.display()))
+        let text = serde_json::to_string_pretty(&serde_json::json!({
+            "config": config,
+            "wall_s": wall_s,
+            "runs": { "executed": self.executed, "reused": self.reused, "total": self.records.len() },
+            "stats": self.stats,
+            "coverage95_kc": self.coverage,
+            "checks": self.checks.iter().map(|c| serde_json::json!({
+                "check": c, "ok": c.ok()
+            })).collect::<Vec<_>>(),
+        }))? + "\n";
+        // Through the writer of every output: atomic, and only a new or regular file replaced.
+        crate::sweep::write_bytes_atomic(path, text.as_bytes())
     }
 
     /// Every bound met, or the breached ones.

@@ -65,10 +65,14 @@ pub fn write(out: &Path) -> crate::error::Result<String> {
         "ut": { "alpha": TABLE1_UT_ALPHA, "beta": 2.0, "kappa": 0.0 },
         "rows": rows,
     });
-    std::fs::write(&json_path, serde_json::to_string_pretty(&json)? + "\n")
-        .with_context(|| format!("writing {}", json_path.display()))?;
+    // Through the writer of every output (only a new or regular file is replaced), and before
+    // the table is printed: a closed standard output ends the process at the print.
+    crate::record::atomic::write_bytes_atomic(
+        &json_path,
+        (serde_json::to_string_pretty(&json)? + "\n").as_bytes(),
+    )?;
     let md_path = out.join("table1.md");
-    std::fs::write(&md_path, &md).with_context(|| format!("writing {}", md_path.display()))?;
+    crate::record::atomic::write_bytes_atomic(&md_path, md.as_bytes())?;
     log::info!("wrote {} and {}", json_path.display(), md_path.display());
     Ok(md)
 }

@@ -73,6 +73,17 @@ enum Command {
 }
 
 fn main() -> std::process::ExitCode {
+    // Rust ignores SIGPIPE, so a write to a closed standard output (`sysid … | head`) fails, and
+    // `print!` panics on the failure. Restored to its default, the signal ends the process
+    // quietly, as it ends any Unix tool whose reader has gone; the commands write their files
+    // before they print, so what they were asked to write is already written. No child process
+    // is fed through a pipe, so the default is right for every other write too.
+    #[cfg(unix)]
+    // SAFETY: called first thing in `main`, before any thread is started; resetting a signal's
+    // disposition to its default installs no handler.
+    unsafe {
+        libc::signal(libc::SIGPIPE, libc::SIG_DFL);
+    }
     experiments::logger::install_logger();
     // The error and its causes, one per line — never a stack trace: an error here is a message
     // to the user (bad input, a failed run), not a bug report.

@@ -5,7 +5,7 @@
 use std::path::PathBuf;
 
 use crate::error::Result;
-use crate::likelihood::{score, table, Candidate, LikelihoodRequest};
+use crate::likelihood::{score, table, Candidate, LikelihoodRequest, MAX_SEEDS};
 
 /// Arguments of `sysid loglik`.
 #[derive(Debug, clap::Args)]
@@ -25,8 +25,8 @@ pub struct Args {
     /// Particles of the one filter of each estimate.
     #[arg(long, default_value_t = 250)]
     pub particles: usize,
-    /// Independent estimates per answer (their spread gives the standard error).
-    #[arg(long, default_value_t = 2)]
+    /// Independent estimates per answer (their spread gives the standard error); 1 to 10000.
+    #[arg(long, default_value_t = 2, value_parser = clap::value_parser!(u64).range(1..=MAX_SEEDS))]
     pub seeds: u64,
     /// Also write the table to this file.
     #[arg(long)]
@@ -34,6 +34,15 @@ pub struct Args {
 }
 
 pub fn run(args: Args) -> Result<()> {
+    // Checked before the scoring, not only when written: a refused --out costs no filter run.
+    if let Some(out) = &args.out {
+        let mut inputs: Vec<(&str, &std::path::Path)> = vec![("--data", &args.data)];
+        if let Some(c) = &args.config {
+            inputs.push(("--config", c));
+        }
+        inputs.extend(args.records.iter().map(|r| ("a record", r.as_path())));
+        crate::record::atomic::check_output(out, "--out", &inputs)?;
+    }
     let candidates = args
         .records
         .iter()
@@ -48,9 +57,11 @@ pub fn run(args: Args) -> Result<()> {
     };
     let c = score(&req, &candidates, &mut |line| eprintln!("{line}"))?;
     let t = table(&c);
-    print!("{t}");
+    // Written before it is printed: a reader of standard output that has gone ends the process
+    // at the print.
     if let Some(out) = &args.out {
         crate::sweep::write_bytes_atomic(out, t.as_bytes())?;
     }
+    print!("{t}");
     Ok(())
 }

@@ -125,9 +125,11 @@ pub fn compare(args: CompareArgs) -> Result<()> {
     let md = crate::reference::compare_files(&args.reference, &args.records, &mut |w| {
         eprintln!("warning: {w}")
     })?;
-    print!("{md}");
+    // Written before it is printed (a closed standard output ends the process at the print),
+    // and only as a new or regular file ([`crate::sweep::write_bytes_atomic`]).
     if let Some(out) = &args.out {
-        std::fs::write(out, &md).with_context(|| format!("writing {}", out.display()))?;
+        crate::sweep::write_bytes_atomic(out, md.as_bytes()).context("--out")?;
     }
+    print!("{md}");
     Ok(())
 }

@@ -33,10 +33,37 @@ pub struct Args {
 
 /// Runs `sysid validate`.
 pub fn run(args: Args) -> Result<()> {
+    // Checked before the work, not only when written: a refused --out costs no run.
+    if let Some(out) = &args.out {
+        crate::record::atomic::check_output(
+            out,
+            "--out",
+            &[("--record", &args.record), ("--data", &args.data)],
+        )?;
+    }
     let validated = cross_validate(&args.record, &args.data, args.draws, &mut |n| {
         eprintln!("note: {n}")
     })?;
     let (record, result) = (&validated.record, &validated.result);
+    // The files first, the summary after: a reader of standard output that has gone (`| head`)
+    // ends the process at its next print, and must not cost the files asked for.
+    if let Some(out) = &args.out {
+        crate::sweep::write_atomic(out, result)?;
+        eprintln!("result written to {}", out.display());
+    }
+    let (mut written, mut skipped) = (Vec::new(), Vec::new());
+    if let Some(dir) = &args.plot {
+        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+        let who = format!("{} on {}", record.algorithm, args.data.display());
+        validation::figures::draw(
+            Some(&result.free_run),
+            Some(&result.modal),
+            dir,
+            &who,
+            &mut written,
+            &mut skipped,
+        )?;
+    }
     println!(
         "cross-validation: {} ({}, seed {}) identified on {}, predicting {}",
         record.algorithm,
@@ -49,28 +76,11 @@ pub fn run(args: Args) -> Result<()> {
         "{}",
         validation::summary(Some(&result.free_run), Some(&result.modal))
     );
-    if let Some(out) = &args.out {
-        crate::sweep::write_atomic(out, result)?;
-        eprintln!("result written to {}", out.display());
+    for s in skipped {
+        eprintln!("note: {s}");
     }
-    if let Some(dir) = &args.plot {
-        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-        let (mut written, mut skipped) = (Vec::new(), Vec::new());
-        let who = format!("{} on {}", record.algorithm, args.data.display());
-        validation::figures::draw(
-            Some(&result.free_run),
-            Some(&result.modal),
-            dir,
-            &who,
-            &mut written,
-            &mut skipped,
-        )?;
-        for s in skipped {
-            eprintln!("note: {s}");
-        }
-        for w in written {
-            println!("{}", w.display());
-        }
+    for w in written {
+        println!("{}", w.display());
     }
     Ok(())
 }

@@ -191,6 +191,14 @@ impl Plan {
                 "--max-running 0: need at least 1".into(),
             ));
         }
+        for (flag, path) in [
+            ("--config", &self.config),
+            ("--out", &self.out),
+            ("--sysid", &self.sysid),
+        ] {
+            check_script_path(flag, path)?;
+        }
+        check_directive_path("--out", &self.out)?;
         for (flag, value) in [
             ("--partition", &self.slurm.partition),
             ("--time", &self.slurm.time),
@@ -332,6 +340,45 @@ impl Plan {
             .map_err(|e| ClusterError::file(&path, e.to_string()))?;
         Ok(plan)
     }
+}
+
+/// A path the scripts name (in a command, quoted, and in a header comment): it must be UTF-8,
+/// so that the script names the very file (a lossy conversion would name another), and free of
+/// control characters, which no quoting keeps within its line — a newline in a comment or a
+/// `#SBATCH` line would start a shell command or a directive of its own.
+fn check_script_path(flag: &str, path: &Path) -> Result<(), ClusterError> {
+    let Some(text) = path.to_str() else {
+        return Err(ClusterError::Invalid(format!(
+            "{flag} {}: not valid UTF-8; the batch scripts could not name it exactly",
+            path.display()
+        )));
+    };
+    if let Some(c) = text.chars().find(|c| c.is_control()) {
+        return Err(ClusterError::Invalid(format!(
+            "{flag} {text:?}: contains the control character {c:?}; a path in a batch script \
+             must stay on its line"
+        )));
+    }
+    Ok(())
+}
+
+/// A path that goes into a `#SBATCH` line (the logs' `--output=OUT/cluster/logs/...`). Slurm,
+/// not the shell, reads those lines: whitespace ends the value, `#` starts a comment, quotes
+/// and `\` are consumed, and `%` starts a file-name pattern. Rather than rely on how a given
+/// Slurm version unquotes a value, such characters are refused.
+fn check_directive_path(flag: &str, path: &Path) -> Result<(), ClusterError> {
+    let text = path.to_string_lossy();
+    if let Some(c) = text
+        .chars()
+        .find(|c| c.is_whitespace() || "#%'\"\\".contains(*c))
+    {
+        return Err(ClusterError::Invalid(format!(
+            "{flag} {text:?}: contains {c:?}, which Slurm would misread in the scripts' \
+             `#SBATCH --output=` line (it takes no whitespace, #, %, quotes or \\); choose \
+             a directory without it"
+        )));
+    }
+    Ok(())
 }
 
 /// `OUT/cluster`.

@@ -129,7 +129,7 @@ mod tests {
         let plan = Plan {
             kind: Kind::Scaling,
             config: "/w/experiments/scaling.toml".into(),
-            out: "/w/results/my scaling".into(),
+            out: "/w/results/a&b$c".into(),
             quick: false,
             tasks: 64,
             cpus_per_task: 1,
@@ -154,12 +154,12 @@ mod tests {
             "{s}"
         );
         assert!(
-            s.contains("part='/w/results/my scaling/cluster/parts/shard-'\"$task\""),
+            s.contains("part='/w/results/a&b$c/cluster/parts/shard-'\"$task\""),
             "{s}"
         );
         let f = finish_script(&plan);
         assert!(
-            f.contains("exec /w/target/release/sysid cluster finish --out '/w/results/my scaling'"),
+            f.contains("exec /w/target/release/sysid cluster finish --out '/w/results/a&b$c'"),
             "{f}"
         );
         assert!(!f.contains("--array"), "{f}");

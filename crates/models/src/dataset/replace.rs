@@ -19,7 +19,8 @@
 //! since it may then be the only copy.
 //!
 //! An existing `<name>` is replaced only when it is a directory holding nothing but data-set
-//! files: `--out .` or a directory with other files in it is refused, never deleted.
+//! files, each a regular file: `--out .`, a directory with other files in it, or one where a
+//! data-set file name is a directory, a link or a device is refused, never deleted.
 
 use super::{DatasetError, MEASURED, META, TRUTH};
 use std::ffi::OsString;
@@ -146,6 +147,28 @@ pub(crate) fn stage(target: &Path) -> Result<Staging, DatasetError> {
                              existing data set",
                             file.to_string_lossy(),
                             DATASET_FILES.join(", ")
+                        ),
+                    ));
+                }
+                // The old set is removed whole once the new one is in place: a directory
+                // named `measured.csv` would go with everything in it, and a link or a device
+                // is not a data-set file the guarantee lets the writer replace.
+                let kind = e.file_type().map_err(|err| io_error(&e.path(), err))?;
+                if !kind.is_file() {
+                    return Err(not_a_dataset(
+                        &target,
+                        format!(
+                            "holds `{}`, which is not a regular file ({}); a data set is \
+                             written only over data-set files, never over a directory, link \
+                             or device of that name",
+                            file.to_string_lossy(),
+                            if kind.is_dir() {
+                                "a directory"
+                            } else if kind.is_symlink() {
+                                "a symbolic link"
+                            } else {
+                                "a device, pipe or socket"
+                            }
                         ),
                     ));
                 }
