@@ -8,11 +8,10 @@
 //! library's errors, with their causes, as `sysid` prints them. Long runs release the GIL and
 //! look for a pending Ctrl-C every 50 ms; one stops the run with `KeyboardInterrupt`.
 
-use std::cell::Cell;
 use std::path::{Path, PathBuf};
 use std::str::FromStr;
 use std::sync::Mutex;
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use core_filters::resampling::Scheme;
 use core_filters::smc::storvik::StorvikUpdate;
@@ -509,31 +508,40 @@ fn identify(
     Ok(PyRecord { r: record })
 }
 
-/// Runs `work` without the GIL, handing it a `stop` that looks for a pending Ctrl-C every 50 ms
-/// (with the GIL, briefly); a Ctrl-C stops the work before its next filter step and is raised
-/// here as the signal's own exception.
+/// Runs `work` without the GIL on a thread of its own, handing it a `stop` that answers whether
+/// a Ctrl-C is pending; this thread looks for one every 50 ms (signals are seen on Python's main
+/// thread only, and the work may run on several threads: the pooled filters of a run run in
+/// parallel). A Ctrl-C stops the work before its next filter step and is raised here as the
+/// signal's own exception.
 fn stoppable<T: Send>(
     py: Python<'_>,
-    work: impl FnOnce(&dyn Fn() -> bool) -> experiments::error::Result<T> + Send,
+    work: impl FnOnce(&(dyn Fn() -> bool + Sync)) -> experiments::error::Result<T> + Send,
 ) -> PyResult<T> {
+    use std::sync::atomic::{AtomicBool, Ordering};
     let pending: Mutex<Option<PyErr>> = Mutex::new(None);
-    let outcome = py.allow_threads(|| {
-        let last = Cell::new(Instant::now());
-        let stop = || {
-            if last.get().elapsed() < Duration::from_millis(50) {
-                return false;
+    let stopped = AtomicBool::new(false);
+    let outcome = std::thread::scope(|scope| {
+        let stop = || stopped.load(Ordering::Relaxed);
+        let main = std::thread::current();
+        let worker = scope.spawn(move || {
+            let out = work(&stop);
+            // Wakes the waiting thread at once: a short run does not wait out the 50 ms.
+            main.unpark();
+            out
+        });
+        while !worker.is_finished() {
+            py.allow_threads(|| std::thread::park_timeout(Duration::from_millis(50)));
+            if let Err(e) = py.check_signals() {
+                *pending.lock().expect("not poisoned") = Some(e);
+                stopped.store(true, Ordering::Relaxed);
             }
-            last.set(Instant::now());
-            Python::with_gil(|py| match py.check_signals() {
-                Ok(()) => false,
-                Err(e) => {
-                    *pending.lock().expect("not poisoned") = Some(e);
-                    true
-                }
-            })
-        };
-        work(&stop)
+        }
+        worker.join()
     });
+    let outcome = match outcome {
+        Ok(v) => v,
+        Err(panic) => std::panic::resume_unwind(panic),
+    };
     match outcome {
         Ok(v) => Ok(v),
         Err(e) if e.interrupted().is_some() => Err(pending

@@ -494,7 +494,7 @@ pub fn identify_plan(
     plan: &RunPlan,
     data: &LoadedDataset,
     chain: Option<&models::structure::ShearChain>,
-    stop: &dyn Fn() -> bool,
+    stop: &(dyn Fn() -> bool + Sync),
     progress: Option<&(dyn Fn(usize, usize) + Sync)>,
 ) -> Result<Identified> {
     let input = RunInput {

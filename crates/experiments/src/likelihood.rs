@@ -386,7 +386,7 @@ impl<'a> LikelihoodModel<'a> {
         c: &Candidate,
         particles: usize,
         seed: u64,
-        stop: &dyn Fn() -> bool,
+        stop: &(dyn Fn() -> bool + Sync),
     ) -> Result<f64> {
         let settings = fixed_at(&self.base, c, particles);
         let input = RunInput {
@@ -416,7 +416,7 @@ pub fn score_on(
     req: Scoring,
     candidates: &[Candidate],
     progress: &mut dyn FnMut(&str),
-    stop: &dyn Fn() -> bool,
+    stop: &(dyn Fn() -> bool + Sync),
 ) -> Result<Comparison> {
     if req.seeds == 0 {
         bail!("--seeds: at least one estimate per candidate");

@@ -82,7 +82,7 @@ pub struct Recorder<'a> {
     /// One-step-ahead prediction errors, when asked for ([`crate::residuals`]).
     pub predictor: Option<crate::residuals::Predictor>,
     /// Asked before every step whether to stop the run (a user's interruption); `None`: never.
-    pub stop: Option<&'a dyn Fn() -> bool>,
+    pub stop: Option<&'a (dyn Fn() -> bool + Sync)>,
     /// Σ log p̂(y_k | y_1:k−1) over the record's tail (the steps after `tail_from`): how well the
     /// filter predicts the measurements once it has settled (module `pool` compares it
     /// between pooled filters).

@@ -377,3 +377,35 @@ fn a_linear_building_runs_one_gaussian_filter() {
     }
     assert!((r.loglik - many.loglik).abs() <= 1e-9 * many.loglik.abs());
 }
+
+/// The pooled filters of one run run side by side; the record is the same, byte for byte but
+/// for the timing, on 1, 2 and 7 threads (`--threads`), for a marginalised and a sampled filter.
+#[test]
+fn a_pooled_run_is_the_same_on_any_number_of_threads() {
+    let (_tmp, dir) = temp_dir("threads");
+    let data = dir.join("d");
+    simulate(&data, "2", false);
+    for alg in ["mpf-ekf2", "storvik"] {
+        let records: Vec<serde_json::Value> = ["1", "2", "7"]
+            .iter()
+            .map(|threads| {
+                let out = dir.join(format!("{alg}-{threads}.json"));
+                ran(
+                    sysid()
+                        .args(["filter", "--algorithm", alg, "--particles", "500"])
+                        .args(["--threads", threads, "--data"])
+                        .arg(&data)
+                        .arg("--out")
+                        .arg(&out)
+                        .output()
+                        .unwrap(),
+                    "filter",
+                );
+                without_timing(&out)
+            })
+            .collect();
+        assert_eq!(records[0]["config"]["filter"]["pool"], 4, "{alg}");
+        assert_eq!(records[0], records[1], "{alg}: 1 and 2 threads");
+        assert_eq!(records[0], records[2], "{alg}: 1 and 7 threads");
+    }
+}

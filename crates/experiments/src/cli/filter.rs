@@ -32,6 +32,10 @@ pub struct Args {
     /// Run index (with the seed, selects the filter's stream; default 0).
     #[arg(long)]
     pub run: Option<u64>,
+    /// Worker threads for the pooled filters of the run, which run side by side (default: every
+    /// core, or RAYON_NUM_THREADS where it is set); the record is the same for any count.
+    #[arg(long)]
+    pub threads: Option<usize>,
     /// Where to write the run record (JSON).
     #[arg(long, required_unless_present_any = ["print_config", "plan_only", "print_plan"])]
     pub out: Option<PathBuf>,
@@ -145,7 +149,11 @@ pub fn run(args: Args) -> Result<()> {
             let Some(algorithm) = args.algorithm else {
                 bail!("--algorithm is required (or --plan FILE)");
             };
-            plan_request(&request(&args, algorithm, data_dir), &data, chain.as_ref())?
+            plan_request(
+                &request(&args, algorithm, data_dir.clone()),
+                &data,
+                chain.as_ref(),
+            )?
         }
     };
     if args.plan_only {
@@ -159,13 +167,31 @@ pub fn run(args: Args) -> Result<()> {
     let Some(out) = args.out.clone() else {
         bail!("--out is required");
     };
+    // Refused before the run, not after it: an output that is not a regular file, or is one
+    // of the run's inputs.
+    let mut inputs: Vec<(&str, &Path)> = vec![("--data", &data_dir)];
+    for (flag, file) in [("--config", &args.config), ("--plan", &args.plan)] {
+        if let Some(f) = file {
+            inputs.push((flag, f));
+        }
+    }
+    crate::record::atomic::check_output(&out, "--out", &inputs)?;
     for d in &plan.decisions {
         eprintln!("{d}");
     }
     let steps = data.len().saturating_sub(1);
     let shown = Shown::new(&plan, steps, steps as f64 * data.dt);
     let progress = |done, total| shown.tell(done, total);
-    let identified = identify_plan(&plan, &data, chain.as_ref(), &|| false, Some(&progress));
+    let run = || identify_plan(&plan, &data, chain.as_ref(), &|| false, Some(&progress));
+    let identified = match args.threads {
+        Some(n) if n == 0 || n > 1024 => bail!("--threads {n}: give 1 to 1024 threads"),
+        Some(n) => rayon::ThreadPoolBuilder::new()
+            .num_threads(n)
+            .build()
+            .map_err(|e| crate::error::invalid!("--threads {n}: {e}"))?
+            .install(run),
+        None => run(),
+    };
     shown.finish();
     let identified = identified?;
     if let Some(noise) = &identified.noise {
