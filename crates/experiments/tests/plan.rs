@@ -2,6 +2,8 @@
 //! (`--plan-only`), written as TOML (`--print-plan`) and run again from that file (`--plan`) to
 //! the same record; refused on other data.
 
+mod common;
+
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
@@ -13,12 +15,7 @@ fn sysid() -> Command {
 }
 
 fn temp_dir(tag: &str) -> (tempfile::TempDir, PathBuf) {
-    let tmp = tempfile::Builder::new()
-        .prefix(&format!("sysid-plan-{tag}-"))
-        .tempdir()
-        .unwrap();
-    let d = tmp.path().to_path_buf();
-    (tmp, d)
+    common::temp_dir(&format!("sysid-plan-{tag}-"))
 }
 
 fn ok(out: Output, what: &str) -> Output {

@@ -6,21 +6,35 @@
 use experiments::pipeline::{identify, Algorithm, FilterSettings, RunInput};
 use models::dataset::{generate, DatasetConfig};
 
-#[test]
-fn two_pooled_filters_average_and_measure_their_spread() {
+/// A 2 s `paper-3dof` data set (its structure kept for the run input).
+fn paper_data() -> (models::dataset::Dataset, models::dataset::LoadedDataset) {
     let mut config = DatasetConfig::from_preset("paper-3dof", 3).unwrap();
     config.duration = Some(2.0);
     let data = generate(&config).unwrap();
     let loaded = data.to_loaded();
-    let input = RunInput {
-        data: &loaded,
+    (data, loaded)
+}
+
+fn input<'a>(
+    data: &'a models::dataset::Dataset,
+    loaded: &'a models::dataset::LoadedDataset,
+    seed: u64,
+) -> RunInput<'a> {
+    RunInput {
+        data: loaded,
         chain: Some(&data.chain),
         experiment: "pool",
-        seed: 3,
+        seed,
         run: 0,
         progress: None,
         residuals: false,
-    };
+    }
+}
+
+#[test]
+fn two_pooled_filters_average_and_measure_their_spread() {
+    let (data, loaded) = paper_data();
+    let input = input(&data, &loaded, 3);
     let single = FilterSettings {
         particles: 40,
         validate: false,
@@ -89,19 +103,8 @@ fn two_pooled_filters_average_and_measure_their_spread() {
 /// its last s.d. is the pooled posterior's final s.d.; and it differs from the first filter's.
 #[test]
 fn a_pooled_trace_shows_the_pooled_posterior() {
-    let mut config = DatasetConfig::from_preset("paper-3dof", 3).unwrap();
-    config.duration = Some(2.0);
-    let data = generate(&config).unwrap();
-    let loaded = data.to_loaded();
-    let input = RunInput {
-        data: &loaded,
-        chain: Some(&data.chain),
-        experiment: "pool",
-        seed: 5,
-        run: 0,
-        progress: None,
-        residuals: false,
-    };
+    let (data, loaded) = paper_data();
+    let input = input(&data, &loaded, 5);
     let pooled = FilterSettings {
         particles: 160,
         pool: 4,
