@@ -331,8 +331,14 @@ fn clocks_that_do_not_overlap_are_refused_unless_the_starts_are_declared_simulta
     let (_tmp, dir) = scratch("disagree");
     let g = clock(848_402_848, 100);
     let s = clock(1_045_181_031, 120);
-    sensor_file(&dir, "g.csv", &g, &vec![0.5; 100]);
-    sensor_file(&dir, "s.csv", &s, &vec![0.25; 120]);
+    // Any motion (a constant channel is refused as stuck).
+    let wave = |n: usize, f: f64| {
+        (0..n)
+            .map(|k| 1.0 + (k as f64 * f).sin())
+            .collect::<Vec<_>>()
+    };
+    sensor_file(&dir, "g.csv", &g, &wave(100, 0.1));
+    sensor_file(&dir, "s.csv", &s, &wave(120, 0.13));
     let e = run(&dir, &map("", "g.csv", &["s.csv"])).unwrap_err();
     assert!(
         e.contains("s.csv:9: storey 1:")
@@ -819,4 +825,29 @@ fn the_vendored_overpass_pairs_have_the_recorded_peaks() {
             assert!((peak(&d.ug) - g).abs() < 0.01, "{name}: {}", peak(&d.ug));
         }
     }
+}
+
+/// A stuck channel — every kept sample the same value, the ground's or a storey's — is refused
+/// naming its file, line and channel, instead of importing as a motion of zero after the mean is
+/// removed.
+#[test]
+fn a_stuck_channel_is_refused() {
+    let (_tmp, dir) = scratch("stuck");
+    let g = clock(0, 100);
+    let moving: Vec<f64> = g.iter().map(|&t| signal(t)).collect();
+    sensor_file(&dir, "moving.csv", &g, &moving);
+    sensor_file(&dir, "stuck.csv", &g, &vec![0.37; g.len()]);
+    let e = run(&dir, &map("", "stuck.csv", &["moving.csv"])).unwrap_err();
+    assert!(
+        e.contains("stuck.csv:") && e.contains(": ground: every one of its"),
+        "{e}"
+    );
+    let e = run(&dir, &map("", "moving.csv", &["stuck.csv"])).unwrap_err();
+    assert!(
+        e.contains("stuck.csv:") && e.contains(": storey 1: every one of its"),
+        "{e}"
+    );
+    let other: Vec<f64> = g.iter().map(|&t| 0.5 * signal(t + 1000)).collect();
+    sensor_file(&dir, "other.csv", &g, &other);
+    run(&dir, &map("", "moving.csv", &["other.csv"])).unwrap();
 }

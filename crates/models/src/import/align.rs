@@ -367,6 +367,24 @@ fn to_grid(
     Ok(OnGrid { first: k0, values })
 }
 
+/// Refuses a channel whose kept samples are all the same value (a stuck sensor, or a column
+/// that holds no motion): after the mean is removed it would read as a structure or ground at
+/// rest, silently. `line` is the channel's first kept line.
+fn refuse_stuck(c: &Recorded, line: usize, kept: &[f64]) -> Result<(), ImportError> {
+    match kept.first() {
+        Some(&v) if kept.len() > 1 && kept.iter().all(|&x| x == v) => Err(refuse(
+            c,
+            line,
+            format!(
+                "every one of its {} kept samples is {v}: the channel is stuck (a constant \
+                 signal records no motion); check the sensor and the map's column",
+                kept.len()
+            ),
+        )),
+        _ => Ok(()),
+    }
+}
+
 /// Subtracts the mean and, with `detrend`, the least-squares line; logs both.
 fn remove_offsets(values: &mut [f64], name: &str, opts: &Options, out: &mut Aligned) {
     let n = values.len() as f64;
@@ -512,11 +530,13 @@ pub fn align(
     }
     trim(ground.name(), 0, n, &mut out);
     let mut ug = ground.values[lo..hi].to_vec();
+    refuse_stuck(&ground, ground.lines[lo], &ug)?;
     let gname = ground.name();
     remove_offsets(&mut ug, &gname, opts, &mut out);
     for (c, g) in storeys.iter().zip(&grids) {
         trim(c.name(), g.first, g.values.len(), &mut out);
         let mut v = g.values[lo - g.first..hi - g.first].to_vec();
+        refuse_stuck(c, c.lines[0], &v)?;
         remove_offsets(&mut v, &c.name(), opts, &mut out);
         out.storeys.push(v);
     }
