@@ -258,23 +258,28 @@ pub fn summary_table(r: &RunRecord) -> String {
             "{name:<name_w$}  {v:>12.4}  {interval:>27}  {reliability}"
         );
     }
-    if r.one_gaussian_filter {
-        let _ = writeln!(
-            o,
-            "One Gaussian filter (EKF2): the building has no hysteretic element and the prior is \
-             one Gaussian, so nothing is sampled and there is no Monte-Carlo error. Intervals: \
-             central 95 % of the last step's Gaussian posterior."
-        );
-        for line in crate::residuals::describe(&r.innovation_checks) {
-            let _ = writeln!(o, "{line}");
-        }
-        return o;
+    let reliability = if r.one_gaussian_filter {
+        "One Gaussian filter (EKF2): the building has no hysteretic element and the prior is one \
+         Gaussian, so nothing is sampled and there is no Monte-Carlo error. Intervals: central \
+         95 % of the last step's Gaussian posterior."
+            .to_string()
+    } else {
+        ess_line(r, pool, approximated)
+    };
+    let _ = writeln!(o, "{reliability}");
+    for line in crate::residuals::describe(&r.innovation_checks) {
+        let _ = writeln!(o, "{line}");
     }
-    let _ = writeln!(
-        o,
+    o
+}
+
+/// The line on the particles behind the answer: the ESS over the run (per filter of a pool),
+/// flagged when tiny, and what the intervals are.
+fn ess_line(r: &RunRecord, pool: usize, approximated: bool) -> String {
+    format!(
         "ESS over the run: min {:.1}, mean {:.1} of {} particles{}{}. Intervals: central 95 % of \
-         the last step's particle posterior (Gaussian mixture for marginalised, weighted sample \
-         for sampled parameters){}; {} — their coverage is measured in docs/calibration.md.",
+     the last step's particle posterior (Gaussian mixture for marginalised, weighted sample \
+     for sampled parameters){}; {} — their coverage is measured in docs/calibration.md.",
         r.ess_min,
         r.ess_mean,
         particles_per_filter(r),
@@ -298,11 +303,7 @@ pub fn summary_table(r: &RunRecord) -> String {
         } else {
             "one filter's posterior does not include its own Monte-Carlo error"
         }
-    );
-    for line in crate::residuals::describe(&r.innovation_checks) {
-        let _ = writeln!(o, "{line}");
-    }
-    o
+    )
 }
 
 #[cfg(test)]

@@ -11,37 +11,32 @@ use std::time::Instant;
 const FIRST_REPORT_S: f64 = 10.0;
 const REPORT_EVERY_S: f64 = 60.0;
 
-/// The pace of one run: `total` filter steps (steps × pooled filters, run one after the other)
-/// over `record_s` seconds of record, all timed from `started`.
+/// The pace of one run: `total` filter steps (steps × pooled filters) over `record_s` seconds
+/// of record, timed from its creation.
 #[derive(Debug)]
 pub struct Pace {
     label: String,
     total: usize,
     record_s: f64,
     started: Instant,
-    /// Steps done before this filter (earlier pooled filters).
-    offset: usize,
     next_report_s: f64,
 }
 
 impl Pace {
-    pub fn new(label: &str, total: usize, record_s: f64, started: Instant, offset: usize) -> Self {
+    pub fn new(label: &str, total: usize, record_s: f64) -> Self {
         Self {
             label: label.to_string(),
             total,
             record_s,
-            started,
-            offset,
-            // Reports fall at 10 s, 70 s, 130 s, … of the run, whichever pooled filter is
-            // running then.
-            next_report_s: next_report_after(started.elapsed().as_secs_f64()),
+            started: Instant::now(),
+            // Reports fall at 10 s, 70 s, 130 s, … of the run.
+            next_report_s: FIRST_REPORT_S,
         }
     }
 
-    /// After step `k` (1-based) of this filter: a report on stderr when it is due.
-    pub fn step(&mut self, k: usize) {
+    /// After `done` of the run's steps (counted over every pooled filter): a report when due.
+    pub fn step(&mut self, done: usize) {
         let elapsed = self.started.elapsed().as_secs_f64();
-        let done = self.offset + k;
         if elapsed < self.next_report_s || done == 0 || done >= self.total {
             return;
         }

@@ -262,14 +262,18 @@ pub fn execute(
         // The filters of a pool run in parallel, each on a filter of its own and its own
         // stream (`drive`), and are combined in pool order: the record is the same whatever
         // the number of threads (tested).
-        let members: Vec<Driven> = (0..s.pool)
+        let mut filters = vec![filter];
+        for _ in 1..s.pool {
+            filters.push(build_filter(algorithm, spec.clone(), s)?);
+        }
+        let members: Vec<Driven> = filters
             .into_par_iter()
-            .map(|m| {
+            .enumerate()
+            .map(|(m, mut own)| {
                 let member = SmcConfig {
                     particles: each + usize::from(m < extra),
                     ..pc
                 };
-                let mut own = build_filter(algorithm, spec.clone(), s)?;
                 let p = predictor()?;
                 let who = Member { index: m, stop };
                 interrupted(

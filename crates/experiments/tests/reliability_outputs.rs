@@ -5,6 +5,8 @@
 //! belongs.
 #![cfg(unix)]
 
+mod common;
+
 use std::os::unix::process::ExitStatusExt;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};
@@ -13,15 +15,8 @@ fn sysid() -> Command {
     Command::new(env!("CARGO_BIN_EXE_sysid"))
 }
 
-/// A fresh directory under the system temp dir, unique per test, and the guard that removes it
-/// when dropped (also when the test panics).
 fn temp_dir(tag: &str) -> (tempfile::TempDir, PathBuf) {
-    let tmp = tempfile::Builder::new()
-        .prefix(&format!("sysid-out-{tag}-"))
-        .tempdir()
-        .unwrap();
-    let d = tmp.path().to_path_buf();
-    (tmp, d)
+    common::temp_dir(&format!("sysid-out-{tag}-"))
 }
 
 fn run(args: &[&str], cwd: &Path) -> Output {

@@ -233,7 +233,7 @@ impl Shown {
             bar.set_prefix(label);
             bar
         });
-        let pace = crate::pace::Pace::new(label, total, record_s, std::time::Instant::now(), 0);
+        let pace = crate::pace::Pace::new(label, total, record_s);
         Self {
             bar,
             pace: std::sync::Mutex::new(pace),
