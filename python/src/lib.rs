@@ -480,13 +480,10 @@ fn identify(
         config: config_name.as_deref(),
         particles_asked: particles.is_some(),
     };
-    let plan = experiments::plan::settle(target.request(
-        overrides.apply(settings),
-        seed,
-        run,
-        &experiment,
-    ))
-    .map_err(err)?;
+    let settings = overrides.apply(settings);
+    let plan = experiments::plan::settle(target.request(settings.clone(), seed, run, &experiment))
+        .and_then(|plan| experiments::choice::choose(plan, &target, &settings))
+        .map_err(err)?;
     let input = RunInput {
         data: d,
         chain: data.chain.as_ref(),

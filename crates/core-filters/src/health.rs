@@ -16,6 +16,15 @@ pub struct Health {
     pub nan_weights: u64,
     /// Resampling events.
     pub resamples: u64,
+    /// Marginalised Gaussians truncated to their physical support where a mean had left it (one
+    /// per bound and particle and step; `linalg::support`). Not a repair: the model's support,
+    /// enforced.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub truncated: u64,
+}
+
+fn is_zero(v: &u64) -> bool {
+    *v == 0
 }
 
 impl Health {
@@ -26,6 +35,7 @@ impl Health {
         self.cholesky_failures += other.cholesky_failures;
         self.nan_weights += other.nan_weights;
         self.resamples += other.resamples;
+        self.truncated += other.truncated;
     }
 
     /// Total number of repairs (excluding resampling, which is not a repair).

@@ -19,7 +19,8 @@ use models::sensors::MeasurementKind;
 use crate::checks;
 use crate::field::StructureSettings;
 use crate::pipeline::{Algorithm, FilterSettings, RunInput};
-use crate::plan::{Asked, Decision, PlanRequest, RunPlan};
+pub use crate::plan::Target;
+use crate::plan::{Decision, RunPlan};
 use crate::record::RunRecord;
 use crate::simulation::parse_storeys;
 
@@ -99,8 +100,15 @@ ess_threshold = {ess}
 pool = {pool}
 # Storvik's step (iii): "linearised" (the paper's) or "exact".
 storvik_update = {storvik}
-# Noise fraction nf: R and Q are set from nf × RMS of the signals (SPEC §3).
+# Noise fraction nf: R and Q are set from nf × RMS of the signals (SPEC §3). Without --config, on
+# field data of a linear building, chosen with process_noise_factor (and the damping form when no
+# --damping is given) by the free-run fit of the record's last third (docs/validation.md).
 noise_fraction = {nf}
+# The velocities' process noise relative to SPEC §3's (s.d. factor × dt × nf × RMS ü_g).
+process_noise_factor = {pnf}
+# Hold the marginalised stiffnesses, dampings and α at ≥ 0 after every step (moment-matched
+# truncation of each Gaussian): answers physical by construction. The paper's filters: false.
+physical_support = {physical}
 # Process noise of each hysteretic variable r: s.d. per step r_noise_fraction × dt × RMS drift
 # velocity of its element (SPEC §3: 0.05, the paper's σ_r; the simulated truth has none). A tenth
 # of it removes most of the MPF-EKF2's k1 bias at 10 storeys but made 20 storeys less accurate
@@ -172,6 +180,8 @@ marginal_prior = {{ kind = "moment_matched" }}
         storvik = q(&d.storvik_update),
         nf = q(&d.noise_fraction),
         rnf = q(&d.r_noise_fraction),
+        pnf = q(&d.process_noise_factor),
+        physical = d.physical_support,
         disc = q(&d.discretisation),
         substeps = d.substeps,
         window = d.window,
@@ -394,50 +404,6 @@ fn request_settings(req: &FilterRequest) -> Result<FilterSettings> {
     Ok(overrides.apply(settings))
 }
 
-/// A run to settle ([`settle`]): its algorithm, its data set (and `measured.csv` path), the
-/// true structure when the data set says what it is, the structure flags, and where the settings
-/// came from.
-pub struct Target<'a> {
-    pub algorithm: Algorithm,
-    pub data: &'a LoadedDataset,
-    pub chain: Option<&'a models::structure::ShearChain>,
-    pub measured: &'a Path,
-    pub flags: &'a StructureSettings,
-    /// The config's name (a file, or how else it was given); `None` when the run has no config
-    /// and takes the recommended settings.
-    pub config: Option<&'a str>,
-    /// Whether the run asked for its particle count (`--particles`); if not, and without a
-    /// config, the plan may choose it ([`crate::rules::HYSTERETIC_PARTICLES`]).
-    pub particles_asked: bool,
-}
-
-impl Target<'_> {
-    /// The plan request of this target with `settings`, seed, run and experiment.
-    pub fn request<'a>(
-        &'a self,
-        settings: FilterSettings,
-        seed: u64,
-        run: u64,
-        experiment: &'a str,
-    ) -> PlanRequest<'a> {
-        PlanRequest {
-            algorithm: self.algorithm,
-            data: self.data,
-            chain: self.chain,
-            settings,
-            seed,
-            run,
-            experiment,
-            asked: Some(Asked {
-                measured: self.measured,
-                flags: self.flags,
-                config: self.config,
-                particles_asked: self.particles_asked,
-            }),
-        }
-    }
-}
-
 /// The settings [`crate::plan::settle`] settles for `t` (seed 0, run 0), and its decisions, in
 /// order, to `note`.
 pub fn settle(
@@ -484,7 +450,9 @@ pub fn plan_request(
         config: config_name.as_deref(),
         particles_asked: req.particles.is_some(),
     };
-    crate::plan::settle(target.request(settings, req.seed, req.run, &req.experiment))
+    let plan =
+        crate::plan::settle(target.request(settings.clone(), req.seed, req.run, &req.experiment))?;
+    crate::choice::choose(plan, &target, &settings)
 }
 
 /// Runs a settled plan as `sysid filter` does: the run (progress shown, prediction errors

@@ -21,12 +21,15 @@
 //! - [`scaling`]: the scaling study (chains of 3 to 40 storeys), its figures and report;
 //! - [`verdict`]: the paper's statements decided by stated tests on the records (REPORT.md);
 //! - [`checks`]: plausibility warnings on a finished run record;
+//! - [`choice`]: the noise level and damping form of a field identification, chosen by
+//!   held-out prediction;
 //! - [`cluster`]: any study as a Slurm job array (submit, status, resubmit, finish);
 //! - [`calibration`] and [`coverage`]: coverage of credible intervals over a sweep with known truth.
 
 pub mod algorithm;
 pub mod calibration;
 pub mod checks;
+pub mod choice;
 pub mod cli;
 pub mod cli_reference;
 pub mod cluster;

@@ -14,12 +14,17 @@ pub use models::limits::*;
 
 use crate::settings::FilterSettings;
 
+/// Accepted range of `process_noise_factor` (the velocities' process noise relative to SPEC §3's).
+pub const MIN_PROCESS_NOISE_FACTOR: f64 = 1e-4;
+pub const MAX_PROCESS_NOISE_FACTOR: f64 = 100.0;
+
 /// Checks the user-given sizes and values of `s`; the error names the settings field.
 ///
 /// - `particles` in `1..=MAX_PARTICLES`;
 /// - `window` (θ_val averaging, SPEC eq. 26) in `1..=MAX_SAMPLES`: 0 has no mean;
 /// - `noise_fraction` in `[MIN_FILTER_NOISE_FRACTION, MAX_FILTER_NOISE_FRACTION]`;
 /// - `r_noise_fraction` in `[MIN_R_NOISE_FRACTION, MAX_R_NOISE_FRACTION]`;
+/// - `process_noise_factor` in `[MIN_PROCESS_NOISE_FACTOR, MAX_PROCESS_NOISE_FACTOR]`;
 /// - `ess_threshold` in `(0, 1]`;
 /// - `rejuvenation` (the Liu–West discount) in `[1/3, 1]`;
 /// - `substeps` in `1..=MAX_SUBSTEPS`;
@@ -32,6 +37,12 @@ pub fn check_filter_settings(s: &FilterSettings) -> Result<()> {
     check_count(s.pool, 1, MAX_PARTICLES).context("field `pool`")?;
     check_filter_noise_fraction(s.noise_fraction).context("field `noise_fraction`")?;
     check_r_noise_fraction(s.r_noise_fraction).context("field `r_noise_fraction`")?;
+    if !(MIN_PROCESS_NOISE_FACTOR..=MAX_PROCESS_NOISE_FACTOR).contains(&s.process_noise_factor) {
+        bail!(
+            "field `process_noise_factor`: {} is outside [{MIN_PROCESS_NOISE_FACTOR}, {MAX_PROCESS_NOISE_FACTOR}]",
+            s.process_noise_factor
+        );
+    }
     if let Some(t) = s.ess_threshold {
         if !(t > 0.0 && t <= 1.0) {
             bail!("field `ess_threshold`: {t} is not in (0, 1]");
@@ -140,6 +151,11 @@ mod tests {
         s.noise_fraction = 1e308;
         assert!(err(&s).contains("`noise_fraction`"));
         s.noise_fraction = 0.1;
+        for bad in [0.0, -1.0, f64::NAN, 1e9] {
+            s.process_noise_factor = bad;
+            assert!(err(&s).contains("`process_noise_factor`"), "{bad}");
+        }
+        s.process_noise_factor = 1.0;
         for bad in [0.0, -0.05, f64::NAN, 1e9] {
             s.r_noise_fraction = bad;
             assert!(err(&s).contains("`r_noise_fraction`"), "{bad}");

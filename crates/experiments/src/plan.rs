@@ -93,6 +93,116 @@ pub struct Evidence {
     /// `substeps = "auto"`: what each sub-step rule found.
     #[serde(default)]
     pub substeps: AutoChoice,
+    /// The noise fraction (and damping form) chosen by held-out prediction: every candidate's
+    /// score ([`crate::choice`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub held_out: Option<HeldOutChoice>,
+}
+
+/// One candidate and how well it predicted the held-out part.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Candidate {
+    pub damping: Damping,
+    pub noise_fraction: f64,
+    pub process_noise_factor: f64,
+    /// Free-run fit (%) of each channel over the held-out samples; empty when the candidate
+    /// has no free run (`note` says why).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub held_out_fit: Vec<f64>,
+    /// Their mean: the score.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub score: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub note: Option<String>,
+}
+
+/// The evidence of the choice: the split and every candidate's score.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct HeldOutChoice {
+    /// Samples identified on (the first ones) and held out (the rest).
+    pub identified_samples: usize,
+    pub held_out_samples: usize,
+    pub candidates: Vec<Candidate>,
+    /// Index of the chosen candidate.
+    pub chosen: usize,
+}
+
+impl HeldOutChoice {
+    /// One line per candidate, the chosen one marked.
+    pub fn describe(&self) -> String {
+        let mut s = format!(
+            "noise levels and damping form chosen by the free-run fit of the last {} of {} samples (the record's second half by energy), identified on the first {}:",
+            self.held_out_samples,
+            self.identified_samples + self.held_out_samples,
+            self.identified_samples
+        );
+        for (i, c) in self.candidates.iter().enumerate() {
+            let mark = if i == self.chosen { " ← chosen" } else { "" };
+            let what = match (&c.score, &c.note) {
+                (Some(v), _) => format!(
+                    "held-out fit {v:.1} % ({})",
+                    c.held_out_fit
+                        .iter()
+                        .map(|f| format!("{f:.1}"))
+                        .collect::<Vec<_>>()
+                        .join(" / ")
+                ),
+                (None, Some(n)) => n.clone(),
+                (None, None) => "no score".into(),
+            };
+            s.push_str(&format!(
+                "\n  damping {}, noise fraction {}, process noise ×{}: {what}{mark}",
+                c.damping, c.noise_fraction, c.process_noise_factor
+            ));
+        }
+        s
+    }
+}
+
+/// A run to settle ([`settle`]): its algorithm, its data set (and `measured.csv` path), the
+/// true structure when the data set says what it is, the structure flags, and where the settings
+/// came from.
+pub struct Target<'a> {
+    pub algorithm: Algorithm,
+    pub data: &'a LoadedDataset,
+    pub chain: Option<&'a models::structure::ShearChain>,
+    pub measured: &'a Path,
+    pub flags: &'a StructureSettings,
+    /// The config's name (a file, or how else it was given); `None` when the run has no config
+    /// and takes the recommended settings.
+    pub config: Option<&'a str>,
+    /// Whether the run asked for its particle count (`--particles`); if not, and without a
+    /// config, the plan may choose it ([`crate::rules::HYSTERETIC_PARTICLES`]).
+    pub particles_asked: bool,
+}
+
+impl Target<'_> {
+    /// The plan request of this target with `settings`, seed, run and experiment.
+    pub fn request<'a>(
+        &'a self,
+        settings: FilterSettings,
+        seed: u64,
+        run: u64,
+        experiment: &'a str,
+    ) -> PlanRequest<'a> {
+        PlanRequest {
+            algorithm: self.algorithm,
+            data: self.data,
+            chain: self.chain,
+            settings,
+            seed,
+            run,
+            experiment,
+            asked: Some(Asked {
+                measured: self.measured,
+                flags: self.flags,
+                config: self.config,
+                particles_asked: self.particles_asked,
+            }),
+        }
+    }
 }
 
 /// How much a decision asks of the reader.
@@ -241,6 +351,7 @@ pub fn settle(req: PlanRequest) -> Result<RunPlan> {
         evidence: Evidence {
             prior_from_data: scaled,
             substeps: auto,
+            held_out: None,
         },
         decisions,
     })
@@ -543,6 +654,7 @@ impl RunPlan {
             marginal_prior: self.settings.marginal_prior,
             discretisation: self.settings.discretisation,
             substeps: self.model.substeps,
+            physical_support: self.settings.physical_support,
         };
         if spec.sensors.len() != data.channels {
             bail!(
@@ -825,6 +937,8 @@ fn assemble_spec(
     spec.marginal_prior = s.marginal_prior;
     spec.set_r_noise_fraction(s.r_noise_fraction)?;
     spec.discretisation = s.discretisation;
+    spec.physical_support = s.physical_support;
+    spec.q_vel *= s.process_noise_factor;
     spec.substeps = match s.substeps {
         Substeps::Fixed(m) => m,
         // Chosen per algorithm once the prior is known (`resolve_substeps`).

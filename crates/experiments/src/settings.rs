@@ -74,6 +74,20 @@ pub struct FilterSettings {
     /// "The process noise of r"). Absent from a record's settings when the SPEC's.
     #[serde(skip_serializing_if = "is_spec_r_noise")]
     pub r_noise_fraction: f64,
+    /// Hold the marginalised stiffnesses, dampings and α to their physical support (≥ 0) after
+    /// every step by moment-matched truncation of each particle's Gaussian
+    /// ([`models::filtering::ChainSpec::physical_support`]): an answer is then physical by
+    /// construction, never a negative dashpot or an indefinite damping matrix. Absent: off (the
+    /// SPEC's unconstrained Gaussians), and absent from a record's settings.
+    #[serde(skip_serializing_if = "is_false")]
+    pub physical_support: bool,
+    /// The velocities' process noise relative to SPEC §3's: its s.d. per step is this factor ×
+    /// dt × `noise_fraction` × RMS ü_g (1: the SPEC's). Below 1 the filter must explain the
+    /// record through the model's dynamics rather than through noise driving its states — what
+    /// a free run (a prediction) rewards; on field data the plan chooses it by held-out
+    /// prediction ([`crate::choice`]). Absent from a record's settings when 1.
+    #[serde(skip_serializing_if = "is_one_f64")]
+    pub process_noise_factor: f64,
 }
 
 /// Transitions per sample interval: a number, or chosen by the rule of
@@ -154,6 +168,14 @@ fn is_one(v: &usize) -> bool {
     *v == 1
 }
 
+fn is_one_f64(v: &f64) -> bool {
+    *v == 1.0
+}
+
+fn is_false(v: &bool) -> bool {
+    !*v
+}
+
 fn is_spec_r_noise(v: &f64) -> bool {
     *v == models::filtering::SPEC_R_NOISE_FRACTION
 }
@@ -179,6 +201,8 @@ impl Default for FilterSettings {
             pool: 1,
             rejuvenation: None,
             r_noise_fraction: models::filtering::SPEC_R_NOISE_FRACTION,
+            physical_support: false,
+            process_noise_factor: 1.0,
         }
     }
 }
@@ -195,7 +219,8 @@ impl FilterSettings {
     /// dampings, SPEC §9), and as many transitions per sample as the prior's building needs for
     /// its highest mode ([`Substeps::Auto`]; one on the paper's data; for the MPF-EKF2 with one
     /// shared prior Gaussian below 10 storeys also four against a velocity lag above 3 %,
-    /// [`crate::pipeline::LAG_SUBSTEPS`]). The paper's studies keep
+    /// [`crate::pipeline::LAG_SUBSTEPS`]), and the stiffnesses and dampings held to their
+    /// physical support (`physical_support`). The paper's studies keep
     /// [`FilterSettings::default`].
     pub fn recommended() -> Self {
         Self {
@@ -204,6 +229,7 @@ impl FilterSettings {
             pool: recommended_pool(RECOMMENDED_PARTICLES),
             discretisation: Discretisation::Symplectic,
             substeps: Substeps::Auto,
+            physical_support: true,
             ..Self::default()
         }
     }

@@ -154,6 +154,7 @@ fn plastic_spec(case: &Case, disc: Discretisation) -> ChainSpecOf<PlasticLaw> {
         marginal_prior: s.marginal_prior,
         discretisation: s.discretisation,
         substeps: s.substeps,
+        physical_support: false,
     }
 }
 

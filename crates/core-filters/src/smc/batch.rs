@@ -22,6 +22,7 @@ use rand_distr::{Distribution, StandardNormal};
 use crate::error::FilterError;
 use crate::health::Health;
 use crate::linalg::pack::gather;
+use crate::linalg::support::{truncate_below, LowerBound};
 use crate::model::Layout;
 use crate::real::{Pack, Real, PACK_LANES};
 use crate::rng::StreamRng;
@@ -295,6 +296,9 @@ pub struct Marginalized<S: ParticleStep> {
     batch: Batch<S>,
     layout: Layout,
     statics: Vec<StaticParam>,
+    /// The model's physical support, enforced after the batch step (not inside it, so the
+    /// per-particle step stays the SPEC's and the lanes stay equal to it).
+    bounds: Vec<LowerBound>,
     health: Health,
 }
 
@@ -305,6 +309,7 @@ impl<S: ParticleStep> Marginalized<S> {
         Self {
             layout: step.layout(),
             statics: step.static_params(),
+            bounds: step.model().lower_bounds(),
             batch: Batch::new(&step, lanes),
             step,
             health: Health::default(),
@@ -357,6 +362,15 @@ impl<S: ParticleStep> Filter for Marginalized<S> {
         self.step.check(k)?;
         self.batch
             .step(&self.step, input, out, rng, &mut self.health);
+        if !self.bounds.is_empty() {
+            for i in 0..out.log_w.len() {
+                if out.log_w[i].is_finite() {
+                    let p = out.dst.particle_mut(i);
+                    let n = truncate_below(p.mean, p.cov, &self.bounds);
+                    self.health.truncated += n as u64;
+                }
+            }
+        }
         // Checked once per step: the flags are sticky, so a single wrong write is not missed.
         match self.batch.broken_pattern() {
             Some(which) => Err(FilterError::JacobianPattern { step: k, which }),

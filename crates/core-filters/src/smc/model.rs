@@ -61,6 +61,11 @@ pub trait Marginalised: Partition {
     /// the marginalised block for one particle (deterministic for the moment-matched prior,
     /// SPEC §3; a per-particle prior draws).
     fn marginal_prior(&self, rng: &mut StreamRng, mean: &mut [f64], cov: &mut [f64]);
+    /// Entries of the marginalised block held to their physical support after every step
+    /// (`linalg::support`); none by default.
+    fn lower_bounds(&self) -> Vec<crate::linalg::LowerBound> {
+        Vec::new()
+    }
 }
 
 /// A general state-space model with an augmented state (bootstrap PF, SPEC §5.1):

@@ -190,7 +190,7 @@ pub fn modal(d: &StructureDescription, data: &LoadedDataset, theta: &[f64]) -> M
             "Welch H1 = P_xy/P_xx of each floor's absolute acceleration against the measured \
              ground acceleration (Hann, 50 % overlap); peaks: the N largest local maxima of the \
              summed |H1| where the ground motion is within {:.0} dB of its strongest frequency \
-             (up to half the Nyquist frequency) and a floor's coherence with it is at least {}",
+             (up to the Nyquist frequency) and a floor's coherence with it is at least {}",
             -10.0 * spectral::BAND_FRACTION.log10(),
             spectral::MIN_COHERENCE
         ),

@@ -9,8 +9,9 @@
 //!
 //! Peaks are read from the sum over channels of |H1| (each floor sees every mode, with the
 //! weight of its mode shape), only where H1 means something: where the ground motion has energy
-//! — P_xx within 30 dB of its largest value, up to half the Nyquist frequency, the band in which
-//! the field-data prior reads the fundamental frequency (`scaled_prior`) — and where at least one
+//! — P_xx within 30 dB of its largest value, up to the bin below the Nyquist frequency (a stiff
+//! frame sampled at 120 Hz has its third mode near 40 Hz, above half the Nyquist frequency) — and
+//! where at least one
 //! floor's magnitude-squared coherence γ² = |P_xy|²/(P_xx P_yy) with the ground is ≥ 0.5 (the
 //! response there is mostly driven by the measured ground motion, not noise). The local maxima
 //! there, the N largest (N storeys) kept and reported by increasing frequency, each refined by a
@@ -198,12 +199,12 @@ pub fn welch_h1(x: &[f64], ys: &[Vec<f64>], dt: f64) -> Result<TransferEstimate,
 }
 
 /// The bins where the ground motion has energy (P_xx ≥ [`BAND_FRACTION`]·max), from the second
-/// bin up to half the Nyquist frequency.
+/// bin up to the one below the Nyquist frequency.
 pub fn in_band(t: &TransferEstimate) -> Vec<bool> {
     let max = t.pxx.iter().cloned().fold(0.0_f64, f64::max);
     let n = t.pxx.len();
     (0..n)
-        .map(|b| b >= 2 && 2 * b < n && t.pxx[b] >= BAND_FRACTION * max)
+        .map(|b| b >= 2 && b + 1 < n && t.pxx[b] >= BAND_FRACTION * max)
         .collect()
 }
 

@@ -409,6 +409,10 @@ impl<L: HysteresisLaw> ConditionallyLinear for MlnChainOf<L> {
 }
 
 impl<L: HysteresisLaw> Marginalised for MlnChainOf<L> {
+    fn lower_bounds(&self) -> Vec<core_filters::linalg::LowerBound> {
+        self.core.lower_bounds(&self.layout().params)
+    }
+
     /// θ's prior without the n's (z is θ with every nonlinear parameter removed), diagonal.
     fn marginal_prior(&self, rng: &mut StreamRng, mean: &mut [f64], cov: &mut [f64]) {
         let (n, ne) = (self.core.n, self.core.ne);

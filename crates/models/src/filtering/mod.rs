@@ -386,6 +386,25 @@ impl<L: HysteresisLaw> ChainCore<L> {
         }
     }
 
+    /// The physical support of the marginalised stiffnesses, dampings and α (each ≥ 0) when the
+    /// spec asks for it ([`ChainSpecOf::physical_support`]), from θ's slots `params`: with
+    /// every c_j ≥ 0 and α ≥ 0 the damping matrix Σ c_j e_j e_jᵀ + αM is positive semidefinite.
+    pub fn lower_bounds(&self, params: &[Slot]) -> Vec<core_filters::linalg::LowerBound> {
+        if !self.spec.physical_support {
+            return Vec::new();
+        }
+        let na = self.spec.building.damping().extra_parameters();
+        params[..2 * self.n + na]
+            .iter()
+            .filter_map(|s| match *s {
+                Slot::Marginal(index) => {
+                    Some(core_filters::linalg::LowerBound { index, bound: 0.0 })
+                }
+                Slot::Sampled(_) => None,
+            })
+            .collect()
+    }
+
     /// A partition's layout: θ's slots (in θ order) and the states' slots, with the
     /// structure's names.
     pub fn layout(&self, params: Vec<Slot>, states: Vec<Slot>) -> Layout {

@@ -526,6 +526,10 @@ impl<L: HysteresisLaw> ConditionallyQuadratic for MpfChainOf<L> {
 }
 
 impl<L: HysteresisLaw> Marginalised for MpfChainOf<L> {
+    fn lower_bounds(&self) -> Vec<core_filters::linalg::LowerBound> {
+        self.core.lower_bounds(&self.layout().params)
+    }
+
     /// States exactly zero (variance 0); k, c, (α), β, γ from θ's Gaussian prior (SPEC §3).
     fn marginal_prior(&self, rng: &mut StreamRng, mean: &mut [f64], cov: &mut [f64]) {
         let n = self.core.n;

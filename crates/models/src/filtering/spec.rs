@@ -93,6 +93,11 @@ pub struct ChainSpecOf<L: HysteresisLaw> {
     /// threshold (`docs/scaling.md`).
     #[serde(default = "one", skip_serializing_if = "is_one")]
     pub substeps: usize,
+    /// Hold the marginalised stiffnesses, dampings and α to k, c, α ≥ 0 after every step by
+    /// moment-matched truncation (`core_filters::linalg::support`): the answer is then physical
+    /// by construction. Off in the SPEC's filters (the paper's Gaussians are unconstrained).
+    #[serde(default, skip_serializing_if = "is_false")]
+    pub physical_support: bool,
 }
 
 /// The spec of a chain with Bouc–Wen elements.
@@ -111,6 +116,10 @@ fn one() -> usize {
 
 fn is_one(v: &usize) -> bool {
     *v == 1
+}
+
+fn is_false(v: &bool) -> bool {
+    !*v
 }
 
 /// RMS values of the clean simulated signals from which [`ChainSpecOf::from_rms`] sets the noise
@@ -194,6 +203,7 @@ impl<L: HysteresisLaw> ChainSpecOf<L> {
             marginal_prior: MarginalPrior::MomentMatched,
             discretisation: Discretisation::Euler,
             substeps: 1,
+            physical_support: false,
         };
         spec.validate()?;
         Ok(spec)

@@ -1,0 +1,238 @@
+//! The noise levels and damping form of a field identification chosen by held-out prediction
+//! (`experiments::choice`): every candidate scored and recorded in the plan, the best one run,
+//! the plan rerun to the same record; a candidate plan equal to the plan settled with its
+//! settings; the split holding the record's second half by energy.
+
+mod common;
+
+use std::path::Path;
+use std::process::Command;
+
+use experiments::choice::{split_point, with_noise, NOISE_FRACTIONS, PROCESS_NOISE_FACTORS};
+use experiments::plan::{settle, PlanRequest, RunPlan};
+use experiments::settings::FilterSettings;
+use models::dataset::{load_dir, LoadedDataset};
+use models::structure::Damping;
+
+fn sysid() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_sysid"))
+}
+
+/// A linear 3-storey building's 10 s record (2000 samples) as field data.
+fn linear_field_data(dir: &Path) {
+    let st = sysid()
+        .args([
+            "simulate",
+            "--storeys",
+            "3",
+            "--hysteretic",
+            "none",
+            "--duration",
+            "10",
+            "--seed",
+            "3",
+            "--absolute",
+        ])
+        .arg("--out")
+        .arg(dir)
+        .output()
+        .unwrap();
+    assert!(
+        st.status.success(),
+        "{}",
+        String::from_utf8_lossy(&st.stderr)
+    );
+    for f in ["dataset.json", "truth.csv"] {
+        std::fs::remove_file(dir.join(f)).unwrap();
+    }
+}
+
+const FLAGS: [&str; 10] = [
+    "filter",
+    "--algorithm",
+    "mpf-ekf2",
+    "--storeys",
+    "3",
+    "--hysteretic",
+    "none",
+    "--masses",
+    "1",
+    "--measurement",
+];
+
+fn print_plan(data: &Path, extra: &[&str]) -> (RunPlan, String) {
+    let out = sysid()
+        .args(FLAGS)
+        .arg("absolute")
+        .args(extra)
+        .arg("--data")
+        .arg(data)
+        .arg("--print-plan")
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let text = String::from_utf8(out.stdout).unwrap();
+    (RunPlan::from_toml(&text, "plan").unwrap(), text)
+}
+
+#[test]
+fn a_linear_field_identification_chooses_its_noise_by_held_out_prediction() {
+    let (_tmp, root) = common::temp_dir("sysid-choice-");
+    let data = root.join("d");
+    linear_field_data(&data);
+    let (plan, text) = print_plan(&data, &[]);
+    let choice = plan
+        .evidence
+        .held_out
+        .as_ref()
+        .expect("the choice is recorded");
+    // Both damping forms (no --damping), every noise fraction and process-noise factor.
+    let per_form = NOISE_FRACTIONS.len() * PROCESS_NOISE_FACTORS.len();
+    assert_eq!(choice.candidates.len(), 2 * per_form);
+    assert!(choice.candidates[..per_form]
+        .iter()
+        .all(|c| c.damping == Damping::Storey));
+    assert!(choice.candidates[per_form..]
+        .iter()
+        .all(|c| c.damping == Damping::StoreyMass));
+    let loaded = load_dir(&data).unwrap();
+    assert_eq!(choice.identified_samples, split_point(&loaded));
+    assert_eq!(
+        choice.identified_samples + choice.held_out_samples,
+        loaded.len()
+    );
+    // The chosen candidate has the best score, and the plan is its.
+    let best = choice
+        .candidates
+        .iter()
+        .filter_map(|c| c.score)
+        .fold(f64::NEG_INFINITY, f64::max);
+    let chosen = &choice.candidates[choice.chosen];
+    assert_eq!(chosen.score, Some(best));
+    assert_eq!(plan.settings.noise_fraction, chosen.noise_fraction);
+    assert_eq!(
+        plan.settings.process_noise_factor,
+        chosen.process_noise_factor
+    );
+    assert_eq!(plan.building.damping, chosen.damping);
+    assert!(plan.settings.physical_support);
+    assert!(plan
+        .decisions
+        .iter()
+        .any(|d| d.rule == "choice::choose" && d.set.contains("noise_fraction")));
+    // The plan reruns to the record of the direct run (the choice is settled, not redone).
+    let plan_file = root.join("plan.toml");
+    std::fs::write(&plan_file, &text).unwrap();
+    let run = |args: &[&str], out: &Path| {
+        let o = sysid()
+            .args(args)
+            .arg("--data")
+            .arg(&data)
+            .arg("--out")
+            .arg(out)
+            .output()
+            .unwrap();
+        assert!(
+            matches!(o.status.code(), Some(0 | 1)),
+            "{}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+        let v: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(out).unwrap()).unwrap();
+        v
+    };
+    let direct = run(&[&FLAGS[..], &["absolute"]].concat(), &root.join("a.json"));
+    let again = run(
+        &["filter", "--plan", plan_file.to_str().unwrap()],
+        &root.join("b.json"),
+    );
+    assert_eq!(direct["theta_val"], again["theta_val"]);
+    assert_eq!(direct["loglik"], again["loglik"]);
+    assert_eq!(direct["plan"], again["plan"]);
+    // A damping form given is kept: only the noise is chosen.
+    let (plan, _) = print_plan(&data, &["--damping", "storey"]);
+    let choice = plan.evidence.held_out.unwrap();
+    assert_eq!(choice.candidates.len(), per_form);
+    assert!(choice
+        .candidates
+        .iter()
+        .all(|c| c.damping == Damping::Storey));
+}
+
+/// The settings-free plan of `data` with noise fraction `nf` and process-noise factor `pf`.
+fn settled(data: &LoadedDataset, nf: f64, pf: f64) -> RunPlan {
+    let mut s = FilterSettings::recommended();
+    s.noise_fraction = nf;
+    s.process_noise_factor = pf;
+    s.structure.storeys = Some(3);
+    s.structure.hysteretic = Some(vec![]);
+    s.structure.masses = Some(vec![1.0]);
+    s.structure.measurement = Some(models::sensors::MeasurementKind::Absolute);
+    settle(PlanRequest {
+        algorithm: experiments::pipeline::Algorithm::MpfEkf2,
+        data,
+        chain: None,
+        settings: s,
+        seed: 1,
+        run: 0,
+        experiment: "t",
+        asked: None,
+    })
+    .unwrap()
+}
+
+#[test]
+fn a_candidate_is_the_plan_settled_with_its_noise() {
+    let (_tmp, root) = common::temp_dir("sysid-choice-noise-");
+    let dir = root.join("d");
+    linear_field_data(&dir);
+    let data = load_dir(&dir).unwrap();
+    let base = settled(&data, 0.1, 1.0);
+    for &(nf, pf) in &[(0.3, 0.1), (3.0, 0.01), (1.0, 1.0)] {
+        let want = settled(&data, nf, pf);
+        let got = with_noise(&base, nf, pf);
+        assert_eq!(got.settings, want.settings, "{nf} {pf}");
+        for (a, b) in got.model.r_diag.iter().zip(&want.model.r_diag) {
+            assert!((a - b).abs() <= 1e-14 * b.abs(), "R {nf}: {a} {b}");
+        }
+        let (a, b) = (got.model.q_vel, want.model.q_vel);
+        assert!((a - b).abs() <= 1e-14 * b.abs(), "q_vel {nf} {pf}: {a} {b}");
+        assert_eq!(got.model.q_r, want.model.q_r);
+        assert_eq!(got.model.q_disp, want.model.q_disp);
+        assert_eq!(got.model.prior, want.model.prior);
+    }
+}
+
+#[test]
+fn the_split_holds_the_second_half_of_the_energy() {
+    let n = 1000;
+    // Loud first tenth, quiet rest: half the energy arrives early, but each part keeps 20 %.
+    let mut y = vec![0.0; n];
+    for (k, v) in y.iter_mut().enumerate() {
+        let a = if k < 100 { 10.0 } else { 0.1 };
+        *v = a * if k % 2 == 0 { 1.0 } else { -1.0 };
+    }
+    let data = |y: &[f64]| LoadedDataset {
+        dt: 0.01,
+        t: (0..y.len()).map(|k| k as f64 * 0.01).collect(),
+        ug_meas: vec![0.0; y.len()],
+        y_meas: y.to_vec(),
+        channels: 1,
+        sensors: vec![1],
+        truth: None,
+        meta: None,
+    };
+    assert_eq!(split_point(&data(&y)), 200);
+    // Uniform shaking: half the energy at half the samples.
+    let flat: Vec<f64> = (0..n)
+        .map(|k| if k % 2 == 0 { 1.0 } else { -1.0 })
+        .collect();
+    assert_eq!(split_point(&data(&flat)), 500);
+    // Loud last tenth: the split stops 20 % before the end.
+    let late: Vec<f64> = y.iter().rev().copied().collect();
+    assert_eq!(split_point(&data(&late)), 800);
+}
