@@ -734,6 +734,34 @@ impl<'a> GaussianMixture<'a> {
         Ok(out[0])
     }
 
+    /// The central intervals at each of `levels` of the mixture truncated to `x ≥ bound` (the
+    /// posterior of a parameter held to its physical support, `linalg::support`): the
+    /// truncated CDF is (F(x) − F(a))/(1 − F(a)), so its p-quantile is the mixture's
+    /// (F(a) + p(1 − F(a)))-quantile. Without mass below `bound` these are
+    /// [`Self::central_intervals`] exactly.
+    pub fn central_intervals_above(
+        &self,
+        bound: f64,
+        levels: &[f64],
+        out: &mut [CredibleInterval],
+    ) -> Result<(), CredibleError> {
+        let below = self.cdf(bound);
+        if below <= 0.0 {
+            return self.central_intervals(levels, out);
+        }
+        let kept = 1.0 - below;
+        each_level(levels, out, |level| {
+            let (pl, pu) = central_probabilities(level)?;
+            let lo = self.quantile((below + pl * kept).min(1.0 - f64::EPSILON))?;
+            let hi = self.quantile((below + pu * kept).min(1.0 - f64::EPSILON))?;
+            Ok(CredibleInterval {
+                level,
+                lo: lo.max(bound),
+                hi: hi.max(bound),
+            })
+        })
+    }
+
     /// The central intervals at each of `levels`, written into `out` (same length). The
     /// validation and moments are shared, and each root finding starts from the tightest bracket the
     /// earlier ones left (nested intervals need few further evaluations). No allocation.

@@ -552,6 +552,7 @@ fn weighted_particles_read_the_right_block_of_each_slot() {
         states: vec![],
     };
     let wp = WeightedParticles {
+        bounds: &[],
         layout: &layout,
         w: &w,
         particles: &p,
@@ -579,6 +580,7 @@ fn weighted_particles_read_the_right_block_of_each_slot() {
     // One particle with all the weight: the marginal slot is N(μ, v), μ ± z √v.
     let w1 = [0.0, 0.0, 1.0, 0.0, 0.0];
     let wp1 = WeightedParticles {
+        bounds: &[],
         layout: &layout,
         w: &w1,
         particles: &p,

@@ -66,3 +66,63 @@ fn no_truncated_gaussian_has_a_negative_damping_or_an_indefinite_damping_matrix(
     // The cases did reach below zero (the test exercises the truncation).
     assert!(truncated > 2000, "{truncated} bounds applied");
 }
+
+/// The central interval of a Gaussian mixture truncated below at a bound, against bisection on
+/// the truncated CDF (F(x) − F(a))/(1 − F(a)) computed from the components directly.
+#[test]
+fn intervals_of_a_bounded_parameter_are_those_of_its_truncated_posterior() {
+    use core_filters::credible::{normal_cdf, GaussianMixture};
+    let w = [0.5, 0.3, 0.2];
+    let m = [0.05, -0.02, 0.3];
+    let v = [0.01, 0.04, 0.0025];
+    let mix = GaussianMixture::new(&w, &m, &v).unwrap();
+    let cdf = |x: f64| -> f64 {
+        w.iter()
+            .zip(&m)
+            .zip(&v)
+            .map(|((w, m), v)| w * normal_cdf((x - m) / v.sqrt()))
+            .sum()
+    };
+    let (a, fa) = (0.0, cdf(0.0));
+    let quantile = |p: f64| {
+        let (mut lo, mut hi) = (a, 5.0);
+        for _ in 0..200 {
+            let mid = 0.5 * (lo + hi);
+            if (cdf(mid) - fa) / (1.0 - fa) < p {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+        }
+        0.5 * (lo + hi)
+    };
+    let levels = [0.5, 0.9, 0.95];
+    let mut out = [core_filters::credible::CredibleInterval {
+        level: f64::NAN,
+        lo: f64::NAN,
+        hi: f64::NAN,
+    }; 3];
+    mix.central_intervals_above(a, &levels, &mut out).unwrap();
+    for (ci, level) in out.iter().zip(levels) {
+        let (pl, pu) = ((1.0 - level) / 2.0, (1.0 + level) / 2.0);
+        assert!(
+            (ci.lo - quantile(pl)).abs() < 1e-9,
+            "{level}: {} {}",
+            ci.lo,
+            quantile(pl)
+        );
+        assert!(
+            (ci.hi - quantile(pu)).abs() < 1e-9,
+            "{level}: {} {}",
+            ci.hi,
+            quantile(pu)
+        );
+        assert!(ci.lo >= a);
+    }
+    // No mass below the bound: the plain intervals, bit for bit.
+    let far = GaussianMixture::new(&[1.0], &[8.0], &[0.01]).unwrap();
+    let (mut x, mut y) = (out, out);
+    far.central_intervals_above(0.0, &levels, &mut x).unwrap();
+    far.central_intervals(&levels, &mut y).unwrap();
+    assert_eq!(x, y);
+}

@@ -41,6 +41,8 @@ pub fn final_intervals(last: &WeightedParticles<'_>) -> Vec<ParamIntervals> {
 pub struct FinalParticles {
     pub w: Vec<f64>,
     pub particles: Particles,
+    /// The filter's physical support (its intervals are truncated to it).
+    pub bounds: Vec<core_filters::linalg::LowerBound>,
 }
 
 /// The true state signals, for online errors: `truth[k][j]` is the true value at step `k` of the
@@ -172,6 +174,7 @@ impl Observer for Recorder<'_> {
             self.final_particles = Some(FinalParticles {
                 w: last.w.to_vec(),
                 particles: last.particles.clone(),
+                bounds: last.bounds.to_vec(),
             });
         }
     }

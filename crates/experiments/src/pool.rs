@@ -181,6 +181,7 @@ pub(crate) fn combine(layout: &Layout, members: Vec<Driven>, channels: usize) ->
         layout,
         w: &w,
         particles: &particles,
+        bounds: &finals[0].bounds,
     };
     let n_params = layout.params.len();
     let theta_val: Vec<f64> = (0..n_params)
@@ -346,6 +347,7 @@ mod tests {
             final_particles: (!failed).then(|| crate::observe::FinalParticles {
                 w: vec![1.0 / np as f64; np],
                 particles,
+                bounds: Vec::new(),
             }),
             residuals: None,
             tail_loglik: per_step * 300.0,

@@ -381,4 +381,8 @@ impl<S: ParticleStep> Filter for Marginalized<S> {
     fn health(&self) -> Health {
         self.health
     }
+
+    fn lower_bounds(&self) -> &[LowerBound] {
+        &self.bounds
+    }
 }

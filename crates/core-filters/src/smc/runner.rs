@@ -23,6 +23,7 @@ use serde::Serialize;
 use crate::credible::{CredibleError, CredibleInterval, GaussianMixture, WeightedSample};
 use crate::error::FilterError;
 use crate::health::Health;
+use crate::linalg::LowerBound;
 use crate::model::{Layout, Slot};
 use crate::resampling::{ResamplePolicy, Resampler};
 use crate::rng::StreamRng;
@@ -84,6 +85,11 @@ pub trait Filter: Send {
     ) -> Result<(), FilterError>;
     /// Repairs counted so far.
     fn health(&self) -> Health;
+    /// Entries of the marginalised block held to their physical support
+    /// ([`crate::linalg::support`]); none by default.
+    fn lower_bounds(&self) -> &[LowerBound] {
+        &[]
+    }
 }
 
 /// What step `k` starts from: the measurement `y_k` and the particles of step `k − 1`, particle
@@ -141,6 +147,9 @@ pub struct WeightedParticles<'a> {
     /// Normalised weights.
     pub w: &'a [f64],
     pub particles: &'a Particles,
+    /// The filter's physical support ([`Filter::lower_bounds`]): the credible intervals of a
+    /// bounded entry are those of its posterior truncated to the bound.
+    pub bounds: &'a [LowerBound],
 }
 
 impl WeightedParticles<'_> {
@@ -161,7 +170,8 @@ impl WeightedParticles<'_> {
 
     /// Central credible intervals of one slot at each of `levels` (SPEC §9 "Calibration"): the
     /// weighted sample `Σ w_i δ(x − x_i)` of a sampled entry, the Gaussian mixture
-    /// `Σ w_i N(μ_i, C_i)` of a marginalised one (see [`crate::credible`]). Allocates two
+    /// `Σ w_i N(μ_i, C_i)` of a marginalised one (see [`crate::credible`]), truncated to its
+    /// bound when the entry is held to a physical support. Allocates two
     /// vectors of `Np`; meant for the end of a run, not for every step.
     pub fn central_intervals(
         &self,
@@ -189,7 +199,11 @@ impl WeightedParticles<'_> {
                 let vars: Vec<f64> = (0..np)
                     .map(|i| self.particles.cov(i)[j + j * n].max(0.0))
                     .collect();
-                GaussianMixture::new(self.w, &means, &vars)?.central_intervals(levels, &mut out)?;
+                let mixture = GaussianMixture::new(self.w, &means, &vars)?;
+                match self.bounds.iter().find(|b| b.index == j) {
+                    Some(b) => mixture.central_intervals_above(b.bound, levels, &mut out)?,
+                    None => mixture.central_intervals(levels, &mut out)?,
+                }
             }
         }
         Ok(out)
@@ -409,6 +423,7 @@ pub fn run(
             layout: &layout,
             w: &w,
             particles: &front,
+            bounds: filter.lower_bounds(),
         });
     }
     let mut health = filter.health();
