@@ -482,7 +482,7 @@ fn identify(
     };
     let settings = overrides.apply(settings);
     let plan = experiments::plan::settle(target.request(settings.clone(), seed, run, &experiment))
-        .and_then(|plan| experiments::choice::choose(plan, &target, &settings))
+        .and_then(|plan| experiments::choice::choose(plan, &target, &settings, Default::default()))
         .map_err(err)?;
     let input = RunInput {
         data: d,

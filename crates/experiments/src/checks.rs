@@ -11,7 +11,11 @@
 //!   leaves copies of a few values; its posterior s.d. then says nothing about the real
 //!   uncertainty), or a tiny effective sample size;
 //! - a **failed** run (the filter stopped early), or filters of a pool **left out** of its
-//!   answer because they failed or lost track of the record (module `pool`).
+//!   answer because they failed or lost track of the record (module `pool`);
+//! - a parameter **held at its physical bound**: with the physical support on, a stiffness,
+//!   damping or α whose Gaussian the data pushed below zero is truncated there, and its answer
+//!   sits at a small fraction ([`AT_BOUND_FRACTION`]) of its prior mean — physical, but the
+//!   model (masses, damping form, storeys) likely does not fit these data.
 //!
 //! `sysid filter` prints every warning on stderr, writes them into the record's `warnings`, and
 //! exits non-zero when the answer is impossible or the run failed.
@@ -20,6 +24,17 @@ use std::fmt::Write as _;
 
 pub use crate::record::diagnostics::{Residuals, Warning, WarningKind};
 use crate::record::RunRecord;
+
+/// A truncated parameter whose θ_val is below this fraction of its prior mean is flagged as held
+/// at its bound.
+pub const AT_BOUND_FRACTION: f64 = 0.01;
+
+/// The prior means of θ from the record's `config.spec.prior` (none for a record without one).
+fn prior_means(r: &RunRecord) -> Option<Vec<f64>> {
+    let prior = r.config.get("spec")?.get("prior")?.clone();
+    let prior: models::filtering::ChainPrior = serde_json::from_value(prior).ok()?;
+    Some(prior.moments().0)
+}
 
 /// A sampled static parameter represented by fewer distinct particle values than this at the
 /// end is flagged: its posterior rests on a handful of particles.
@@ -148,6 +163,23 @@ pub fn check(r: &RunRecord) -> Vec<Warning> {
                     if name.starts_with('k') { "stiffness" } else { "damping" }
                 ),
             });
+        }
+    }
+    if r.health.truncated > 0 && !no_estimate {
+        let means = prior_means(r).unwrap_or_default();
+        for (j, (name, v)) in r.param_names.iter().zip(&r.theta_val).enumerate() {
+            let bounded = is_stiffness_or_damping(name) || name == models::structure::ALPHA_NAME;
+            let Some(&m) = means.get(j) else { continue };
+            if bounded && v.is_finite() && *v >= 0.0 && m > 0.0 && *v < AT_BOUND_FRACTION * m {
+                out.push(Warning {
+                    kind: WarningKind::AtBound,
+                    parameter: Some(name.clone()),
+                    message: format!(
+                        "{name}: θ_val {v:.4} is held at its physical bound 0 ({:.2} % of its prior mean {m:.4}): the data pushed it below zero, so the model (masses, damping form, storeys) likely does not fit these data",
+                        100.0 * v / m
+                    ),
+                });
+            }
         }
     }
     for (name, &d) in &r.distinct_sampled {

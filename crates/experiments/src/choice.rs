@@ -47,6 +47,14 @@ pub const MIN_PART: f64 = 0.2;
 /// tell candidates apart and the default stays).
 pub const MIN_SAMPLES: usize = 600;
 
+/// Which of the settings the choice would choose the run stated itself (`--noise-fraction`,
+/// `--process-noise-factor`): those are kept.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Stated {
+    pub noise_fraction: bool,
+    pub process_noise_factor: bool,
+}
+
 /// Whether `plan` (settled for `t` from `asked`-less defaults) is one the choice applies to.
 fn applies(plan: &RunPlan, t: &Target, data: &LoadedDataset) -> Result<Option<String>> {
     if t.config.is_some() {
@@ -209,7 +217,12 @@ fn score(plan: &RunPlan, ident: &LoadedDataset, data: &LoadedDataset) -> Result<
 /// settled for `t` from `settings` — by held-out prediction, and returns the plan of the chosen
 /// candidate with the evidence and a decision; a plan the choice does not apply to comes back
 /// with a decision saying why.
-pub fn choose(plan: RunPlan, t: &Target, settings: &FilterSettings) -> Result<RunPlan> {
+pub fn choose(
+    plan: RunPlan,
+    t: &Target,
+    settings: &FilterSettings,
+    stated: Stated,
+) -> Result<RunPlan> {
     let data = t.data;
     let mut plan = plan;
     if let Some(why) = applies(&plan, t, data)? {
@@ -223,8 +236,28 @@ pub fn choose(plan: RunPlan, t: &Target, settings: &FilterSettings) -> Result<Ru
         }
         return Ok(plan);
     }
-    // The damping forms: the user's, or both when the flags and table leave it open.
+    // The damping forms: the user's, or both when the flags and table leave it open; the noise
+    // levels: the stated ones, or the grids.
     let open = t.flags.damping.is_none() && settings.structure.damping.is_none();
+    let fractions: Vec<f64> = if stated.noise_fraction {
+        vec![settings.noise_fraction]
+    } else {
+        NOISE_FRACTIONS.to_vec()
+    };
+    let factors: Vec<f64> = if stated.process_noise_factor {
+        vec![settings.process_noise_factor]
+    } else {
+        PROCESS_NOISE_FACTORS.to_vec()
+    };
+    if !open && fractions.len() * factors.len() == 1 {
+        plan.decisions.push(Decision {
+            rule: "choice::choose".into(),
+            set: String::new(),
+            level: Level::Info,
+            why: "noise fraction, process noise and damping form as stated: nothing to choose on held-out data".into(),
+        });
+        return Ok(plan);
+    }
     let mut bases = vec![plan.clone()];
     if open {
         let other = match plan.building.damping {
@@ -257,8 +290,8 @@ pub fn choose(plan: RunPlan, t: &Target, settings: &FilterSettings) -> Result<Ru
     let mut candidates = Vec::new();
     let mut plans = Vec::new();
     for base in &bases {
-        for &nf in &NOISE_FRACTIONS {
-            for &pf in &PROCESS_NOISE_FACTORS {
+        for &nf in &fractions {
+            for &pf in &factors {
                 let p = with_noise(base, nf, pf);
                 candidates.push(score(&p, &ident, data)?);
                 plans.push(p);

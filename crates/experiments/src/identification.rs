@@ -231,6 +231,10 @@ pub struct FilterRequest {
     pub rejuvenation: Option<f64>,
     /// Fixed parameters, `name=value,…`.
     pub fix: Option<String>,
+    /// Noise fraction and process-noise factor, over the config's (stated: not chosen by
+    /// [`crate::choice`]).
+    pub noise_fraction: Option<f64>,
+    pub process_noise_factor: Option<f64>,
     pub experiment: String,
     pub seed: u64,
     pub run: u64,
@@ -401,7 +405,14 @@ fn request_settings(req: &FilterRequest) -> Result<FilterSettings> {
             None => BTreeMap::new(),
         },
     };
-    Ok(overrides.apply(settings))
+    let mut settings = overrides.apply(settings);
+    if let Some(nf) = req.noise_fraction {
+        settings.noise_fraction = nf;
+    }
+    if let Some(pf) = req.process_noise_factor {
+        settings.process_noise_factor = pf;
+    }
+    Ok(settings)
 }
 
 /// The settings [`crate::plan::settle`] settles for `t` (seed 0, run 0), and its decisions, in
@@ -452,7 +463,11 @@ pub fn plan_request(
     };
     let plan =
         crate::plan::settle(target.request(settings.clone(), req.seed, req.run, &req.experiment))?;
-    crate::choice::choose(plan, &target, &settings)
+    let stated = crate::choice::Stated {
+        noise_fraction: req.noise_fraction.is_some(),
+        process_noise_factor: req.process_noise_factor.is_some(),
+    };
+    crate::choice::choose(plan, &target, &settings, stated)
 }
 
 /// Runs a settled plan as `sysid filter` does: the run (progress shown, prediction errors

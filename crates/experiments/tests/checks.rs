@@ -211,3 +211,25 @@ fn a_filter_left_out_of_its_pool_is_a_warning_written_into_the_record_and_not_fa
     assert_eq!(back.pool_left_out[0].reason, LeftOutReason::Lost);
     assert_eq!(back.warnings[0].kind, WarningKind::LeftOut);
 }
+
+#[test]
+fn a_parameter_held_at_its_physical_bound_is_flagged_but_not_rejected() {
+    let mut r = healthy();
+    let prior = models::filtering::ChainPrior::paper(3, &[0]);
+    let means = prior.moments().0;
+    r.config = serde_json::json!({ "spec": { "prior": prior } });
+    // c2 (θ index 4) at 0.1 % of its prior mean, after truncations.
+    r.theta_val[4] = 1e-3 * means[4];
+    r.health.truncated = 7;
+    let w = check(&r);
+    let at: Vec<_> = w
+        .iter()
+        .filter(|w| w.kind == WarningKind::AtBound)
+        .collect();
+    assert_eq!(at.len(), 1, "{w:?}");
+    assert_eq!(at[0].parameter.as_deref(), Some("c2"));
+    assert!(!WarningKind::AtBound.is_fatal());
+    // Without a truncation the same value is a small damping, not one held at the bound.
+    r.health.truncated = 0;
+    assert!(check(&r).iter().all(|w| w.kind != WarningKind::AtBound));
+}

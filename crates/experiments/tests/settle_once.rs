@@ -41,6 +41,8 @@ fn one_identification_resolves_its_building_and_scans_its_prior_once() {
         substeps: None,
         rejuvenation: None,
         fix: None,
+        noise_fraction: None,
+        process_noise_factor: None,
         experiment: "once".into(),
         seed: 1,
         run: 0,

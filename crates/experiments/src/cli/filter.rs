@@ -54,7 +54,8 @@ pub struct Args {
     #[arg(long, value_name = "FILE", conflicts_with_all = [
         "algorithm", "particles", "seed", "run", "resampling", "ess_threshold", "storvik_update",
         "discretisation", "substeps", "rejuvenation", "config", "fix", "experiment", "storeys",
-        "hysteretic", "masses", "measurement", "damping",
+        "hysteretic", "masses", "measurement", "damping", "noise_fraction",
+        "process_noise_factor",
     ])]
     pub plan: Option<PathBuf>,
     /// Also draw the run's figures into this directory (as `sysid plot RECORD --out DIR`).
@@ -89,6 +90,16 @@ pub struct Args {
     /// Fix parameters at values, e.g. `k1=8,n=2`.
     #[arg(long)]
     pub fix: Option<String>,
+    /// Noise fraction nf: the measurement noise s.d. nf × RMS of each channel, the velocities'
+    /// process noise dt × nf × RMS ü_g (SPEC §3). Without --config the default is 0.1; on field
+    /// data of a linear building it is chosen by held-out prediction (docs/validation.md) unless
+    /// given here.
+    #[arg(long)]
+    pub noise_fraction: Option<f64>,
+    /// The velocities' process noise relative to SPEC §3's (1: the SPEC's). Chosen with the
+    /// noise fraction on field data of a linear building unless given here.
+    #[arg(long)]
+    pub process_noise_factor: Option<f64>,
     /// Experiment name written into the record (default `cli`).
     #[arg(long)]
     pub experiment: Option<String>,
@@ -272,6 +283,8 @@ fn request(args: &Args, algorithm: Algorithm, data: PathBuf) -> FilterRequest {
         substeps: args.substeps,
         rejuvenation: args.rejuvenation,
         fix: args.fix.clone(),
+        noise_fraction: args.noise_fraction,
+        process_noise_factor: args.process_noise_factor,
         experiment: args.experiment.clone().unwrap_or_else(|| "cli".into()),
         seed: args.seed.unwrap_or(1),
         run: args.run.unwrap_or(0),

@@ -19,6 +19,9 @@ pub enum WarningKind {
     TinyEss,
     /// Filters of a pool left out of the pooled answer (they failed or lost track of the record).
     LeftOut,
+    /// A stiffness, damping or α held at its physical bound: the data pushed its Gaussian below
+    /// zero and the support truncated it there (`linalg::support`).
+    AtBound,
 }
 
 impl WarningKind {
