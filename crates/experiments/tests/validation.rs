@@ -309,3 +309,67 @@ fn modes_pair_with_the_nearest_peak_and_never_with_a_far_one() {
     );
     assert!(text.contains("without a model mode: 46.000 Hz"), "{text}");
 }
+
+/// The modal intervals of a one-storey building against its closed form: the natural frequency
+/// √(k/m)/2π is increasing in k and the damping ratio c/(2√(km)) increasing in c and decreasing
+/// in k, so the central 95 % of each over the band's draws lies between their values at the ends
+/// of k's and c's 95 % intervals, holds the value at θ_val, and is reproduced by its seed.
+#[test]
+fn modal_intervals_of_one_storey_against_the_closed_form() {
+    use core_filters::credible::{CredibleInterval, STANDARD_LEVELS};
+    use experiments::observe::{ParamIntervals, PosteriorShape};
+    use experiments::validation::free_run::QuantileDraw;
+    use experiments::validation::modal_intervals;
+    let (k, c, m) = (600.0_f64, 1.0_f64, 1.0_f64);
+    let names = vec!["k1".to_string(), "c1".to_string()];
+    // Symmetric intervals of half-widths 2 %, 5 %, 10 % of the value at 50, 90, 95 %.
+    let credible: Vec<ParamIntervals> = [k, c]
+        .iter()
+        .zip(&names)
+        .map(|(&v, name)| ParamIntervals {
+            parameter: name.clone(),
+            shape: PosteriorShape::GaussianMixture,
+            intervals: STANDARD_LEVELS
+                .iter()
+                .zip([0.02, 0.05, 0.10])
+                .map(|(&level, h)| CredibleInterval {
+                    level,
+                    lo: v * (1.0 - h),
+                    hi: v * (1.0 + h),
+                })
+                .collect(),
+            error: None,
+            mc_se: None,
+        })
+        .collect();
+    let q = QuantileDraw::new(&names, &credible).unwrap();
+    let building =
+        models::building::Building::new(vec![m], vec![], models::structure::Damping::Storey)
+            .unwrap();
+    let d = models::description::StructureDescription::of(
+        &building,
+        vec![1],
+        models::sensors::MeasurementKind::Absolute,
+    );
+    let got = modal_intervals(&d, &q, 5, 0, 1);
+    let (f, z) = got[0].expect("every draw is under-damped");
+    let freq = |k: f64| (k / m).sqrt() / std::f64::consts::TAU;
+    let ratio = |k: f64, c: f64| c / (2.0 * (k * m).sqrt());
+    assert!(
+        freq(0.9 * k) <= f[0] && f[0] < freq(k) && freq(k) < f[1] && f[1] <= freq(1.1 * k),
+        "{f:?}"
+    );
+    assert!(
+        ratio(1.1 * k, 0.9 * c) <= z[0] && z[0] < ratio(k, c),
+        "{z:?}"
+    );
+    assert!(
+        ratio(k, c) < z[1] && z[1] <= ratio(0.9 * k, 1.1 * c),
+        "{z:?}"
+    );
+    assert_eq!(
+        modal_intervals(&d, &q, 5, 0, 1),
+        got,
+        "the same seed, the same intervals"
+    );
+}

@@ -81,6 +81,12 @@ pub struct ModePair {
     /// 100·(model − measured)/measured.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub difference_percent: Option<f64>,
+    /// The central 95 % of this mode's natural frequency (Hz) and damping ratio over θ drawn
+    /// from the posterior as the free-run band draws it (`validation::modal_intervals`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub model_hz_95: Option<[f64; 2]>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub damping_ratio_95: Option<[f64; 2]>,
 }
 
 /// Modes of the identified linearised model and the measured transfer functions.

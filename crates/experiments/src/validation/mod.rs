@@ -287,8 +287,66 @@ pub fn pair(modes: &[Mode], peaks: &[Peak], resolution_hz: f64) -> Vec<ModePair>
                 damping_ratio: m.damping_ratio,
                 measured_hz: p,
                 difference_percent: p.map(|p| 100.0 * (m.frequency_hz - p) / p),
+                model_hz_95: None,
+                damping_ratio_95: None,
             }
         })
+        .collect()
+}
+
+/// Purpose of the random stream of the modal intervals' draws.
+pub const MODAL_PURPOSE: &str = "validation-modes";
+
+/// θ drawn for the modal intervals.
+pub const MODAL_DRAWS: usize = 400;
+
+/// The central 95 % of each mode's natural frequency and damping ratio over [`MODAL_DRAWS`] θ
+/// drawn from `q` as the free-run band draws them (each parameter inside its 95 % interval,
+/// parameters independently: the record keeps no correlations) on the stream (seed, run,
+/// [`MODAL_PURPOSE`]); one entry per mode of θ_val (`count`), `None` for all when fewer than
+/// half the draws give a building with as many under-damped modes (mode `r` of a draw is its
+/// `r`-th by frequency).
+pub fn modal_intervals(
+    d: &StructureDescription,
+    q: &QuantileDraw,
+    seed: u64,
+    run: u64,
+    count: usize,
+) -> Vec<Option<([f64; 2], [f64; 2])>> {
+    let n = d.storeys;
+    let alpha_at = d.damping.has_mass_term().then_some(2 * n);
+    let mut rng = core_filters::rng::stream(seed, run, MODAL_PURPOSE);
+    let mut freq = vec![Vec::with_capacity(MODAL_DRAWS); count];
+    let mut zeta = vec![Vec::with_capacity(MODAL_DRAWS); count];
+    for _ in 0..MODAL_DRAWS {
+        let theta = q.draw(&mut rng);
+        let alpha = alpha_at.map(|i| theta[i]);
+        let Ok(m) = models::modal::modes_of_damped(&d.masses, &theta[..n], &theta[n..2 * n], alpha)
+        else {
+            continue;
+        };
+        if m.modes.len() != count {
+            continue;
+        }
+        for (r, mode) in m.modes.iter().enumerate() {
+            freq[r].push(mode.frequency_hz);
+            zeta[r].push(mode.damping_ratio);
+        }
+    }
+    let valid = freq.first().map_or(0, Vec::len);
+    if count == 0 || 2 * valid < MODAL_DRAWS {
+        return vec![None; count];
+    }
+    let central = |v: &mut Vec<f64>| {
+        v.sort_by(f64::total_cmp);
+        [
+            free_run::percentile_sorted(v, 0.025),
+            free_run::percentile_sorted(v, 0.975),
+        ]
+    };
+    freq.iter_mut()
+        .zip(zeta.iter_mut())
+        .map(|(f, z)| Some((central(f), central(z))))
         .collect()
 }
 
@@ -383,7 +441,17 @@ pub fn attach(r: &mut RunRecord, data: &LoadedDataset, d: &StructureDescription)
             return;
         }
     }
-    r.modal = Some(modal(d, data, &r.theta_val));
+    let mut m = modal(d, data, &r.theta_val);
+    if let Ok(q) = &posterior {
+        let intervals = modal_intervals(d, q, r.seed, r.run, m.modes.len());
+        for p in &mut m.pairs {
+            if let Some(Some((f, z))) = intervals.get(p.mode - 1) {
+                p.model_hz_95 = Some(*f);
+                p.damping_ratio_95 = Some(*z);
+            }
+        }
+    }
+    r.modal = Some(m);
 }
 
 /// The terminal table of a free run and a modal comparison (empty when neither is present).
@@ -440,16 +508,23 @@ pub fn summary(free: Option<&FreeRun>, modal: Option<&ModalComparison>) -> Strin
         );
         let _ = writeln!(
             o,
-            "{:<5}  {:>12}  {:>8}  {:>16}  {:>10}",
-            "mode", "model [Hz]", "ζ", "measured [Hz]", "difference"
+            "{:<5}  {:>12}  {:>18}  {:>8}  {:>18}  {:>16}  {:>10}",
+            "mode", "model [Hz]", "95 % [Hz]", "ζ", "ζ 95 %", "measured [Hz]", "difference"
         );
+        let span = |v: Option<[f64; 2]>, digits: usize| {
+            v.map_or("–".to_string(), |[a, b]| {
+                format!("[{a:.digits$}, {b:.digits$}]")
+            })
+        };
         for p in &m.pairs {
             let _ = writeln!(
                 o,
-                "{:<5}  {:>12.3}  {:>8.4}  {:>16}  {:>10}",
+                "{:<5}  {:>12.3}  {:>18}  {:>8.4}  {:>18}  {:>16}  {:>10}",
                 p.mode,
                 p.model_hz,
+                span(p.model_hz_95, 3),
                 p.damping_ratio,
+                span(p.damping_ratio_95, 4),
                 p.measured_hz.map_or(
                     if p.model_hz < 2.0 * m.resolution_hz {
                         "below resolution".to_string()
@@ -460,6 +535,14 @@ pub fn summary(free: Option<&FreeRun>, modal: Option<&ModalComparison>) -> Strin
                 ),
                 p.difference_percent
                     .map_or("–".to_string(), |d| format!("{d:+.1} %")),
+            );
+        }
+        if m.pairs.iter().any(|p| p.model_hz_95.is_some()) {
+            let _ = writeln!(
+                o,
+                "95 %: the central 95 % of each mode over {MODAL_DRAWS} θ drawn as the band's \
+                 (each parameter inside its 95 % interval, independently: the record keeps no \
+                 correlations) — docs/validation.md"
             );
         }
         if m.pairs.iter().any(|p| p.damping_ratio < 0.0) {
