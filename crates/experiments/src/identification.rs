@@ -513,6 +513,14 @@ pub fn identify_request(
     identify_plan(&plan, &data, chain.as_ref(), &|| false, None)
 }
 
+/// Seconds of record filtered per second of computation (the record's `config.spec.dt` × the
+/// steps completed over the wall time); `None` without a spec or a time.
+pub fn realtime_factor(r: &RunRecord) -> Option<f64> {
+    let dt = r.config.get("spec")?.get("dt")?.as_f64()?;
+    let wall = r.timing.wall_s;
+    (wall > 0.0 && dt > 0.0).then(|| r.steps_completed as f64 * dt / wall)
+}
+
 /// Why a finished run is not an identification to use.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum Rejected {
@@ -544,8 +552,10 @@ impl Finished {
     /// The line on the run (algorithm, steps, log-likelihood, pace, record path).
     pub fn headline(&self) -> String {
         let record = &self.record;
+        let realtime =
+            realtime_factor(record).map_or(String::new(), |f| format!(", {f:.1}× real time"));
         format!(
-            "{}: {} of {} steps, loglik {:.2}, {:.2} s ({:.2} M particle-steps/s); record {}",
+            "{}: {} of {} steps, loglik {:.2}, {:.2} s ({:.2} M particle-steps/s{realtime}); record {}",
             record.algorithm,
             record.steps_completed,
             record.steps_total,

@@ -233,3 +233,17 @@ fn a_parameter_held_at_its_physical_bound_is_flagged_but_not_rejected() {
     r.health.truncated = 0;
     assert!(check(&r).iter().all(|w| w.kind != WarningKind::AtBound));
 }
+
+#[test]
+fn the_real_time_factor_is_seconds_of_record_per_second_of_computation() {
+    let mut r = healthy();
+    r.config = serde_json::json!({ "spec": { "dt": 0.01 } });
+    r.steps_completed = 1000;
+    r.timing.wall_s = 2.0;
+    assert_eq!(experiments::identification::realtime_factor(&r), Some(5.0));
+    r.timing.wall_s = 0.0;
+    assert_eq!(experiments::identification::realtime_factor(&r), None);
+    r.config = serde_json::json!({});
+    r.timing.wall_s = 2.0;
+    assert_eq!(experiments::identification::realtime_factor(&r), None);
+}

@@ -83,6 +83,11 @@ pub trait ParticleStep: Sync + Send {
         self.model().sample_initial(rng, sampled);
         self.model().marginal_prior(rng, mean, cov);
     }
+    /// The entries of the marginalised block held to their physical support after every step
+    /// (`linalg::support`): the model's by default.
+    fn lower_bounds(&self) -> Vec<LowerBound> {
+        self.model().lower_bounds()
+    }
     /// A failure of the whole step, before any particle moves (e.g. an `R` that could not be
     /// factorised); none by default.
     fn check(&self, _k: usize) -> Result<(), FilterError> {
@@ -309,7 +314,7 @@ impl<S: ParticleStep> Marginalized<S> {
         Self {
             layout: step.layout(),
             statics: step.static_params(),
-            bounds: step.model().lower_bounds(),
+            bounds: step.lower_bounds(),
             batch: Batch::new(&step, lanes),
             step,
             health: Health::default(),

@@ -164,6 +164,14 @@ impl<M: ConditionallyLinear> ParticleStep for StorvikStep<M> {
         &self.model
     }
 
+    /// None: Storvik's algorithm draws θ from the Gaussian of its sufficient statistics at every
+    /// step, so truncating the moments would not keep its draws ≥ 0 (and changes its statistics
+    /// non-conjugately: with it the default regression's c1 spread rose from its bound 0.132 to
+    /// 0.139). Its impossible answers stay flagged instead.
+    fn lower_bounds(&self) -> Vec<crate::linalg::LowerBound> {
+        Vec::new()
+    }
+
     /// `R` is factorised once; if it could not be, every step fails with that error.
     fn check(&self, k: usize) -> Result<(), FilterError> {
         FactoredNoise::at_step(&self.noise, k).map(|_| ())
