@@ -132,8 +132,13 @@ pub struct HeldOutChoice {
 impl HeldOutChoice {
     /// One line per candidate, the chosen one marked.
     pub fn describe(&self) -> String {
+        let forms = self
+            .candidates
+            .iter()
+            .any(|c| c.damping != self.candidates[0].damping);
         let mut s = format!(
-            "noise levels and damping form chosen by the free-run fit of the last {} of {} samples (the record's second half by energy), identified on the first {}:",
+            "noise levels{} chosen by the free-run fit of the last {} of {} samples (the record's second half by energy), identified on the first {}:",
+            if forms { " and damping form" } else { "" },
             self.held_out_samples,
             self.identified_samples + self.held_out_samples,
             self.identified_samples

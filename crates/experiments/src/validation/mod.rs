@@ -44,8 +44,8 @@ pub const BAND_DRAWS: usize = 100;
 /// At most this many time points of each series are kept in a record.
 pub const MAX_POINTS: usize = 5000;
 
-/// The measured channels of a record, channel-major, and the 1-based storey of each.
-fn measured_channels(data: &LoadedDataset) -> Vec<Vec<f64>> {
+/// The measured channels of a record, channel-major.
+pub(crate) fn measured_channels(data: &LoadedDataset) -> Vec<Vec<f64>> {
     (0..data.channels)
         .map(|c| (0..data.len()).map(|k| data.y(k)[c]).collect())
         .collect()
