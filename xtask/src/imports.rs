@@ -759,11 +759,11 @@ mod tests {
         );
     }
 
-    /// The run record is a types-only leaf of `experiments`: it imports no other module of the
+    /// The run record is a types-only leaf of `identify`: it imports no other module of the
     /// crate (the analyses import it).
     #[test]
     fn the_run_record_imports_no_other_module() {
-        let graph = crate_graph(&workspace_root().join("crates/experiments/src")).unwrap();
+        let graph = crate_graph(&workspace_root().join("crates/identify/src")).unwrap();
         let imports: Vec<String> = graph.edges["record"]
             .iter()
             .map(|(to, places)| format!("{to} ({}:{})", places[0].file.display(), places[0].line))

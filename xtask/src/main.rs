@@ -234,7 +234,7 @@ fn build_sysid(root: &Path) -> Result<PathBuf> {
 }
 
 fn main() -> Result<()> {
-    experiments::logger::install_logger();
+    identify::logger::install_logger();
     let root = root();
     match Cli::parse().task {
         Task::ReproducePaper {

@@ -517,7 +517,7 @@ pub fn markdown(sweep: &SweepCalibration) -> String {
 // ---------------------------------------------------------------------------------------------
 
 // Fonts, sizes and palette of every figure of the project.
-use crate::figures::{
+use identify::figures::{
     draw_mesh, grid_dims, marker, open_figure, present, style, CAPTION_SIZE, DESC_SIZE, FONT,
 };
 

@@ -4,7 +4,7 @@
 //!
 //! What enters: per record and parameter, θ_true (from the data set), θ_val (the estimate a user
 //! reads, SPEC eq. 26), the final posterior s.d. and the record's central credible intervals
-//! (`credible`: the last step's particle posterior, see [`crate::observe::ParamIntervals`]).
+//! (`credible`: the last step's particle posterior, see [`identify::observe::ParamIntervals`]).
 //! Left out, and counted: failed runs (their last weights are not a posterior) and records
 //! without intervals (written before intervals were recorded, or a parameter whose interval
 //! could not be computed). A sweep without a known truth (field data) has no coverage.
@@ -17,8 +17,8 @@ use core_filters::credible::STANDARD_LEVELS;
 use serde::{Deserialize, Serialize};
 
 use crate::calibration::{calibrate_algorithm, markdown, RunPosterior, SweepCalibration};
-use crate::record::RunRecord;
 use crate::study::Study;
+use identify::record::RunRecord;
 
 /// Runs of one algorithm left out of its coverage, and why.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

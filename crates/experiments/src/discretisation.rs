@@ -15,17 +15,17 @@ use std::path::{Path, PathBuf};
 use crate::error::Result;
 use models::filtering::Discretisation;
 
-use crate::figures;
 use crate::markdown::{header, row};
-use crate::metrics::mean_sd;
-use crate::pipeline::Algorithm;
-use crate::record::RunRecord;
 use crate::stats::{algorithm_stats, AlgorithmStats, PAPER_EQ31};
 use crate::study::Study;
 use crate::verdict::{
     findings_table, group_error, in_group, online_nrmse, per_run, ratio, scheme, validation_nrmse,
     Estimate, Finding,
 };
+use identify::figures;
+use identify::metrics::mean_sd;
+use identify::pipeline::Algorithm;
+use identify::record::RunRecord;
 
 /// The studies of the discretisation section, in the order they run (after the paper's).
 pub const STUDIES: [&str; 2] = ["discretisation", "discretisation-100hz"];

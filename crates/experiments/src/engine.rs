@@ -11,9 +11,9 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use crate::error::{Context, Result};
 use serde::Serialize;
 
-use crate::record::RunRecord;
 use crate::study::{Job, Study};
 use crate::sweep::{run_sweep, write_bytes_atomic, Shard, SweepOptions, SweepOutcome};
+use identify::record::RunRecord;
 
 /// How a study command runs, whatever the study: its `[quick]` form or the full one, with how
 /// many threads, which part of the sweep, with progress on stderr or not, and whether existing

@@ -18,17 +18,17 @@ use std::path::Path;
 use crate::error::Result;
 use serde::Serialize;
 
-use crate::figures::{category_panels, CategoryGroup, CategoryPanel};
 use crate::markdown::{compact_header, joined, num, share};
-use crate::metrics::mean_sd;
-use crate::pipeline::Algorithm;
-use crate::record::RunRecord;
 use crate::scaling::structures::{structure_values, StructureValues};
 use crate::scaling::{self, Cell, Options};
 use crate::study::{Job, Study};
 use crate::sweep::write_bytes_atomic;
 use crate::verdict::declared::Metric;
 use crate::verdict::{group_error, ratio, Declared, Estimate, Finding};
+use identify::figures::{category_panels, CategoryGroup, CategoryPanel};
+use identify::metrics::mean_sd;
+use identify::pipeline::Algorithm;
+use identify::record::RunRecord;
 
 /// Runs the study and writes its outputs. Returns the cells.
 pub fn run(opts: &Options) -> Result<Vec<Cell>> {

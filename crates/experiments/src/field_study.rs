@@ -20,8 +20,8 @@ use std::process::Command;
 use crate::error::{bail, Context, Result};
 use serde::Deserialize;
 
-use crate::pipeline::Algorithm;
-use crate::record::RunRecord;
+use identify::pipeline::Algorithm;
+use identify::record::RunRecord;
 
 /// The whole study: its parts (one structure each).
 #[derive(Debug, Clone, Deserialize)]
@@ -425,8 +425,8 @@ pub fn select<'a>(part: &'a Part, dirs: &PartDirs) -> Result<Option<(&'a Variant
         if !path.exists() {
             continue;
         }
-        let r: RunRecord = crate::record::read::read(&path)?;
-        if r.failure.is_some() || crate::checks::is_fatal(&r.warnings) {
+        let r: RunRecord = identify::record::read::read(&path)?;
+        if r.failure.is_some() || identify::checks::is_fatal(&r.warnings) {
             continue;
         }
         if best.as_ref().is_none_or(|(_, b)| r.loglik > b.loglik) {
@@ -440,7 +440,7 @@ pub fn select<'a>(part: &'a Part, dirs: &PartDirs) -> Result<Option<(&'a Variant
 /// record) written out, so that the other records are identified from the same prior rather
 /// than one scaled from each of them (`--config` of [`plan_selected`]).
 pub fn write_selected_settings(dirs: &PartDirs, selected: &RunRecord) -> Result<PathBuf> {
-    let mut settings: crate::settings::FilterSettings =
+    let mut settings: identify::settings::FilterSettings =
         serde_json::from_value(selected.config["filter"].clone())
             .context("the selected record's filter settings")?;
     settings.prior = Some(
@@ -452,7 +452,7 @@ pub fn write_selected_settings(dirs: &PartDirs, selected: &RunRecord) -> Result<
     if let Some(d) = path.parent() {
         std::fs::create_dir_all(d)?;
     }
-    crate::record::atomic::write_bytes_atomic(
+    identify::record::atomic::write_bytes_atomic(
         &path,
         format!(
             "# The settings and prior of the selected run on the identification record (written by\n\
@@ -683,7 +683,7 @@ pub fn run(study: &FieldStudy, opts: &RunOptions) -> Result<()> {
     }
     let text = report::render(study, &opts.out)?;
     let path = opts.out.join("REPORT.md");
-    crate::record::atomic::write_bytes_atomic(&path, text.as_bytes())?;
+    identify::record::atomic::write_bytes_atomic(&path, text.as_bytes())?;
     for n in notes {
         log::info!("{n}");
     }

@@ -11,8 +11,8 @@ use std::path::Path;
 
 use crate::error::{bail, Context, Result};
 
-use crate::record::RunRecord;
 use crate::reproduce::{algorithm_stats, AlgorithmStats};
+use identify::record::RunRecord;
 
 /// The line before the generated table in the README.
 pub const BEGIN: &str = "<!-- headline table: generated from results/paper/records/fig7 by `cargo xtask docs`; do not edit by hand -->";

@@ -21,7 +21,6 @@ use serde::{Deserialize, Serialize};
 
 use crate::error::{bail, Context, Result};
 use crate::likelihood::{Candidate, LikelihoodModel, ScoredData};
-use crate::record::{RunRecord, Versions};
 use crate::reference::comparison::{
     goal_markdown, goal_rows, information_limit as limit_rows, limit_markdown, record_data_sha,
     DataSetRuns,
@@ -29,6 +28,7 @@ use crate::reference::comparison::{
 use crate::reference::ParamSummary;
 use crate::verdict::in_group;
 use core_filters::laplace::{maximise, NewtonOptions};
+use identify::record::{RunRecord, Versions};
 
 /// Default central-difference step, relative to each parameter's start value.
 pub const REL_STEP: f64 = 1e-3;
@@ -175,7 +175,7 @@ pub fn information_limit(
     };
     let l = maximise(&start.theta, &h, opts, eval)
         .with_context(|| format!("{}: the maximum of the likelihood", on.name))?;
-    let data_sha256 = crate::record::fingerprint::data_identity(on.data)["sha256"]
+    let data_sha256 = identify::record::fingerprint::data_identity(on.data)["sha256"]
         .as_str()
         .unwrap_or_default()
         .to_string();
@@ -211,7 +211,7 @@ pub fn on_data(r: &RunRecord, limit: &InformationLimit) -> bool {
 }
 
 fn mean(x: &[f64]) -> f64 {
-    crate::metrics::mean_sd(x).0
+    identify::metrics::mean_sd(x).0
 }
 
 fn answer(limit: &InformationLimit, truth: &[f64], r: &RunRecord) -> Result<Answer> {
@@ -299,7 +299,7 @@ pub fn table(limit: &InformationLimit, records: &[RunRecord]) -> Result<String> 
         writeln!(o)?;
     }
     let gain = limit.loglik_mle - limit.loglik_start;
-    let chi2 = crate::residuals::chi2_95(limit.names.len());
+    let chi2 = identify::residuals::chi2_95(limit.names.len());
     writeln!(
         o,
         "\nθ̂ lies {gain:.2} nats above the start ({}; {} Newton steps, {} Kalman-filter runs, \

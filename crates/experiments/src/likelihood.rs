@@ -20,11 +20,11 @@
 use std::path::{Path, PathBuf};
 
 use crate::error::{bail, Context, Result};
-use crate::field::StructureSettings;
-use crate::identification::{settle, Target};
-use crate::pipeline::{identify_stoppable, Algorithm, RunInput};
-use crate::record::RunRecord;
-use crate::settings::FilterSettings;
+use identify::field::StructureSettings;
+use identify::identification::{settle, Target};
+use identify::pipeline::{identify_stoppable, Algorithm, RunInput};
+use identify::record::RunRecord;
+use identify::settings::FilterSettings;
 use models::dataset::{load_dir, LoadedDataset, MEASURED};
 use models::structure::ShearChain;
 
@@ -249,7 +249,7 @@ impl DataDir {
             .true_chain()
             .context("rebuilding the data set's structure")?;
         let settings = config
-            .map(crate::limits::load_filter_settings)
+            .map(identify::limits::load_filter_settings)
             .transpose()?;
         Ok(Self {
             data,
@@ -336,7 +336,7 @@ impl<'a> LikelihoodModel<'a> {
             particles_asked: true,
         };
         let base = settle(&target, base, &mut |_| {})?;
-        let names = crate::pipeline::chain_spec(data, on.chain, &base)?
+        let names = identify::pipeline::chain_spec(data, on.chain, &base)?
             .prior
             .names();
         Ok(Self { on, base, names })
@@ -351,7 +351,7 @@ impl<'a> LikelihoodModel<'a> {
     /// storeys — so that `log p̂(y | θ)` is the Kalman filter's exact log-likelihood, the same
     /// for every seed and particle count.
     pub fn is_exact(&self) -> Result<bool> {
-        let spec = crate::pipeline::chain_spec(self.on.data, self.on.chain, &self.base)?;
+        let spec = identify::pipeline::chain_spec(self.on.data, self.on.chain, &self.base)?;
         Ok(spec.building.hysteretic().is_empty())
     }
 
@@ -430,7 +430,7 @@ pub fn score_on(
     if req.particles == 0 {
         bail!("--particles: at least one particle per estimate");
     }
-    crate::limits::check_particle_cloud(req.particles, 1).context("--particles")?;
+    identify::limits::check_particle_cloud(req.particles, 1).context("--particles")?;
     let model = LikelihoodModel::settle(on)?;
     let mut all = candidates.to_vec();
     if req.truth {
@@ -469,7 +469,7 @@ pub fn score_on(
     Ok(Comparison {
         scored,
         params,
-        region_nats: crate::residuals::chi2_95(params.max(1)) / 2.0,
+        region_nats: identify::residuals::chi2_95(params.max(1)) / 2.0,
     })
 }
 
@@ -540,7 +540,7 @@ mod tests {
                 })
                 .collect(),
             params,
-            region_nats: crate::residuals::chi2_95(params) / 2.0,
+            region_nats: identify::residuals::chi2_95(params) / 2.0,
         }
     }
 

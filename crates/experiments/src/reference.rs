@@ -33,7 +33,7 @@ use models::filtering::{ChainPrior, ChainSpec};
 use models::priors::{BetaGammaPrior, Prior};
 use serde::{Deserialize, Serialize};
 
-use crate::pipeline::{build_filter, Algorithm, FilterSettings};
+use identify::pipeline::{build_filter, Algorithm, FilterSettings};
 
 pub mod comparison;
 pub mod posterior;
@@ -311,17 +311,17 @@ impl Target for FilterLikelihood {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct ParamSummary {
     pub name: String,
-    #[serde(with = "crate::record::number::scalar")]
+    #[serde(with = "identify::record::number::scalar")]
     pub mean: f64,
-    #[serde(with = "crate::record::number::scalar")]
+    #[serde(with = "identify::record::number::scalar")]
     pub sd: f64,
     /// 2.5, 25, 50, 75 and 97.5% quantiles.
-    #[serde(with = "crate::record::number::array")]
+    #[serde(with = "identify::record::number::array")]
     pub quantiles: [f64; 5],
     /// Effective sample size of the chain for this parameter.
-    #[serde(with = "crate::record::number::scalar")]
+    #[serde(with = "identify::record::number::scalar")]
     pub ess: f64,
-    #[serde(with = "crate::record::number::opt_scalar")]
+    #[serde(with = "identify::record::number::opt_scalar")]
     pub truth: Option<f64>,
 }
 
@@ -337,7 +337,7 @@ pub fn summarise(
         .into_iter()
         .map(|i| {
             let x: Vec<f64> = thetas.iter().map(|t| t[i]).collect();
-            let (mean, sd, _) = crate::metrics::mean_sd(&x);
+            let (mean, sd, _) = identify::metrics::mean_sd(&x);
             let n = x.len() as f64;
             let mut sorted = x.clone();
             sorted.sort_by(f64::total_cmp);

@@ -24,12 +24,12 @@ use std::path::Path;
 use crate::error::{bail, Context, Result};
 use serde::{Deserialize, Serialize};
 
-use crate::metrics::mean_sd;
-use crate::record::RunRecord;
 use crate::reproduce::{algorithm_stats, AlgorithmStats};
 use crate::study::Study;
 use crate::sweep::lock::DirLock;
 use crate::sweep::{run_sweep, Shard, SweepOptions};
+use identify::metrics::mean_sd;
+use identify::record::RunRecord;
 
 /// Bounds for one algorithm.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]

@@ -7,11 +7,11 @@ use std::fmt::Write as _;
 use crate::error::Result;
 
 use crate::markdown::{header, row};
-use crate::pipeline::Algorithm;
-use crate::record::RunRecord;
 use crate::stats::{AlgorithmStats, PAPER_EQ31};
 use crate::study::Study;
 use crate::verdict::{findings_table, paper_findings, Verdict};
+use identify::pipeline::Algorithm;
+use identify::record::RunRecord;
 
 fn stats<'a>(
     summary: &'a BTreeMap<&str, Vec<AlgorithmStats>>,
@@ -104,7 +104,7 @@ pub fn write_report(
         &mut o,
         &[
             "numerics version".into(),
-            crate::record::NUMERICS_VERSION.to_string(),
+            identify::record::NUMERICS_VERSION.to_string(),
         ],
     );
     row(

@@ -13,13 +13,13 @@ use std::time::Instant;
 use crate::error::{bail, Result};
 
 use crate::engine::{load, write_json, Reuse, RunMode};
-use crate::figures;
-use crate::pipeline::Algorithm;
-use crate::record::RunRecord;
 use crate::run_dir::open;
 use crate::study::Study;
 use crate::sweep::progress::clock;
 use crate::sweep::write_bytes_atomic;
+use identify::figures;
+use identify::pipeline::Algorithm;
+use identify::record::RunRecord;
 
 pub use crate::stats::{algorithm_stats, AlgorithmStats, ParamStats, PAPER_EQ31, STUDIES};
 

@@ -26,14 +26,14 @@ use crate::error::{bail, Context, Result};
 use serde::Serialize;
 
 use crate::engine::{load, write_json, Engine, RunMode};
-use crate::metrics::{mean_sd, mean_spread, median};
-use crate::pipeline::Algorithm;
-use crate::record::RunRecord;
 use crate::run_dir::open;
 use crate::study::{Job, Study};
 use crate::sweep::progress::clock;
 use crate::sweep::{read_record, record_path, write_bytes_atomic};
 use crate::verdict::group_mean_error;
+use identify::metrics::{mean_sd, mean_spread, median};
+use identify::pipeline::Algorithm;
+use identify::record::RunRecord;
 
 mod figures;
 mod report;

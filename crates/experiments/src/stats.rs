@@ -5,8 +5,8 @@ use std::collections::BTreeMap;
 
 use serde::Serialize;
 
-use crate::metrics::mean_sd;
-use crate::record::RunRecord;
+use identify::metrics::mean_sd;
+use identify::record::RunRecord;
 
 /// The studies of the reproduction, in the order they run.
 pub const STUDIES: [&str; 5] = ["fig4", "fig5", "fig6", "fig8", "fig7"];

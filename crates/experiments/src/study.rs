@@ -16,9 +16,9 @@ use models::filtering::Discretisation;
 use models::structure::ShearChain;
 use serde::{Deserialize, Serialize};
 
-use crate::pipeline::{identify, Algorithm, FilterSettings, RunInput};
-use crate::record::{Fingerprint, RunRecord};
 use crate::verdict::Declared;
+use identify::pipeline::{identify, Algorithm, FilterSettings, RunInput};
+use identify::record::{Fingerprint, RunRecord};
 
 /// The data of a study.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -116,7 +116,7 @@ impl Structure {
         {
             bail!("{}: the label must be letters, digits and `-`", ctx());
         }
-        crate::limits::check_count(self.storeys, 1, models::limits::MAX_STOREYS)
+        identify::limits::check_count(self.storeys, 1, models::limits::MAX_STOREYS)
             .with_context(|| format!("{}: field `storeys`", ctx()))?;
         for (field, list) in [("hysteretic", &self.hysteretic), ("sensors", &self.sensors)] {
             if let Some(list) = list {
@@ -298,12 +298,12 @@ impl Study {
             bail!("particles must be at least 1");
         }
         for &p in &self.sweep.particles {
-            crate::limits::check_count(p, 1, crate::limits::MAX_PARTICLES)
+            identify::limits::check_count(p, 1, identify::limits::MAX_PARTICLES)
                 .context("field `sweep.particles`")?;
         }
-        crate::limits::check_count(self.sweep.runs as usize, 1, MAX_RUNS)
+        identify::limits::check_count(self.sweep.runs as usize, 1, MAX_RUNS)
             .context("field `sweep.runs`")?;
-        crate::limits::check_filter_settings(&self.filter).context("table `filter`")?;
+        identify::limits::check_filter_settings(&self.filter).context("table `filter`")?;
         for name in self.filter_for.keys() {
             let algorithm: Algorithm = name
                 .parse()
@@ -311,7 +311,7 @@ impl Study {
             let settings = self
                 .filter_of(algorithm)
                 .with_context(|| format!("table `filter_for.{name}`"))?;
-            crate::limits::check_filter_settings(&settings)
+            identify::limits::check_filter_settings(&settings)
                 .with_context(|| format!("table `filter_for.{name}`"))?;
         }
         for (i, st) in self.sweep.structures.iter().enumerate() {
@@ -330,7 +330,7 @@ impl Study {
                 let settings = self
                     .filter_for_structure(Some(i), algorithm)
                     .with_context(ctx)?;
-                crate::limits::check_filter_settings(&settings).with_context(ctx)?;
+                identify::limits::check_filter_settings(&settings).with_context(ctx)?;
             }
         }
         if self

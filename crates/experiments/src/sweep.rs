@@ -9,7 +9,7 @@
 //!   removed by the next sweep or merge of the directory.
 //! - A sweep computes every run unless asked to **resume**; then it reuses an existing record
 //!   only when it reads back, passes its checks and its fingerprint equals the job's (the hash of
-//!   everything that determines the result, see [`crate::record::fingerprint`]), and says how
+//!   everything that determines the result, see [`identify::record::fingerprint`]), and says how
 //!   many it reused and recomputed, and why.
 //! - `--shard i/n` runs the jobs whose index is `i` modulo `n` (e.g. one Slurm array task each);
 //!   [`merge`] gathers the shard directories into one, checking every record.
@@ -33,11 +33,11 @@ use serde::Serialize;
 
 use progress::{clock, Progress};
 
-/// [`crate::record::atomic::write_bytes_atomic`], as this crate's error.
+/// [`identify::record::atomic::write_bytes_atomic`], as this crate's error.
 pub fn write_bytes_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
-    Ok(crate::record::atomic::write_bytes_atomic(path, bytes)?)
+    Ok(identify::record::atomic::write_bytes_atomic(path, bytes)?)
 }
-pub use crate::record::read::SweepRecord;
+pub use identify::record::read::SweepRecord;
 
 /// Part `index` of `count` of a sweep (`0 ≤ index < count`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -262,7 +262,8 @@ where
         }
         Ok(out)
     };
-    crate::limits::check_count(opts.threads, 0, crate::limits::MAX_THREADS).context("--threads")?;
+    identify::limits::check_count(opts.threads, 0, identify::limits::MAX_THREADS)
+        .context("--threads")?;
     let mut out = if opts.threads > 0 {
         rayon::ThreadPoolBuilder::new()
             .num_threads(opts.threads)
@@ -327,11 +328,11 @@ pub fn record_path(dir: &Path, id: &str) -> PathBuf {
     dir.join(format!("{id}.json"))
 }
 
-/// Reads one record and checks it ([`crate::record::read::read`], the one reader of records);
+/// Reads one record and checks it ([`identify::record::read::read`], the one reader of records);
 /// errors name the file and say what is wrong (a record cut short, a value that is not a number,
 /// a fingerprint that does not match, …).
 pub fn read_record<R: SweepRecord>(path: &Path) -> Result<R> {
-    Ok(crate::record::read::read(path)?)
+    Ok(identify::record::read::read(path)?)
 }
 
 /// Writes `value` as pretty JSON to `path` atomically (see [`write_bytes_atomic`]).

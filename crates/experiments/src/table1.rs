@@ -67,12 +67,12 @@ pub fn write(out: &Path) -> crate::error::Result<String> {
     });
     // Through the writer of every output (only a new or regular file is replaced), and before
     // the table is printed: a closed standard output ends the process at the print.
-    crate::record::atomic::write_bytes_atomic(
+    identify::record::atomic::write_bytes_atomic(
         &json_path,
         (serde_json::to_string_pretty(&json)? + "\n").as_bytes(),
     )?;
     let md_path = out.join("table1.md");
-    crate::record::atomic::write_bytes_atomic(&md_path, md.as_bytes())?;
+    identify::record::atomic::write_bytes_atomic(&md_path, md.as_bytes())?;
     log::info!("wrote {} and {}", json_path.display(), md_path.display());
     Ok(md)
 }

@@ -16,12 +16,12 @@ use crate::error::{Context, Result};
 
 use crate::engine::{load, write_json, RunMode};
 use crate::markdown::compact_header;
-use crate::metrics::mean_spread;
-use crate::record::RunRecord;
 use crate::run_dir::open;
 use crate::stats::{completed, truth};
 use crate::sweep::write_bytes_atomic;
 use crate::verdict::{findings_table, Finding};
+use identify::metrics::mean_spread;
+use identify::record::RunRecord;
 
 /// One algorithm's statistics of one parameter over the runs of a study.
 #[derive(Debug, Clone, PartialEq, Serialize)]
@@ -75,7 +75,7 @@ pub fn spreads(records: &[RunRecord]) -> Vec<AlgorithmSpread> {
                         .filter_map(|r| r.theta_sd_final.get(j).copied())
                         .collect();
                     let (mean, spread) = mean_spread(&vals);
-                    let posterior_sd = crate::metrics::mean_sd(&sds).0;
+                    let posterior_sd = identify::metrics::mean_sd(&sds).0;
                     ParamSpread {
                         algorithm: alg.to_string(),
                         param: name.clone(),
@@ -174,7 +174,7 @@ pub fn figures(
     spreads: &[AlgorithmSpread],
     out: &std::path::Path,
 ) -> crate::error::Result<Vec<std::path::PathBuf>> {
-    use crate::figures::{category_panels, CategoryGroup, CategoryPanel};
+    use identify::figures::{category_panels, CategoryGroup, CategoryPanel};
     let Some(first) = spreads.iter().find(|a| !a.params.is_empty()) else {
         return Ok(Vec::new());
     };
@@ -191,7 +191,7 @@ pub fn figures(
                 ps.filter_map(|p| p.truth).next().unwrap_or(f64::NAN)
             } else {
                 let means: Vec<f64> = ps.map(|p| p.mean).collect();
-                crate::metrics::mean_sd(&means).0
+                identify::metrics::mean_sd(&means).0
             }
         })
         .collect();

@@ -16,8 +16,8 @@ use models::filtering::Discretisation;
 use serde::Serialize;
 
 use crate::markdown::{cell, header, row};
-use crate::metrics::mean_sd;
-use crate::record::RunRecord;
+use identify::metrics::mean_sd;
+use identify::record::RunRecord;
 
 pub mod declared;
 
@@ -170,11 +170,7 @@ pub fn paired_difference(a: &BTreeMap<u64, f64>, b: &BTreeMap<u64, f64>) -> Esti
     Estimate::of(&d)
 }
 
-/// Whether `name` is a parameter of the group `prefix` followed by digits (`k1`, `c12`).
-pub fn in_group(name: &str, prefix: char) -> bool {
-    name.strip_prefix(prefix)
-        .is_some_and(|rest| !rest.is_empty() && rest.chars().all(|c| c.is_ascii_digit()))
-}
+pub use identify::metrics::in_group;
 
 /// Mean relative error of one run over a group of parameters (`k` stiffnesses, `c` dampings);
 /// `None` without truth or without such parameters.

@@ -3,7 +3,7 @@
 //! (ω_N·dt ≈ 0.45) the symplectic discretisation identifies them while forward Euler's damping
 //! bias (dt·k/c, docs/discretisation.md) becomes a factor of several.
 
-use experiments::pipeline::{chain_spec, identify, Algorithm, FilterSettings, RunInput};
+use identify::pipeline::{chain_spec, identify, Algorithm, FilterSettings, RunInput};
 use models::dataset::{generate, DatasetConfig};
 use models::filtering::{ChainPrior, Discretisation};
 use models::priors::Prior;
@@ -75,7 +75,7 @@ fn symplectic_identifies_a_stiff_building_where_euler_biases_damping() {
     let sym = run(Discretisation::Symplectic);
     let eul = run(Discretisation::Euler);
     assert!(sym.failure.is_none(), "{:?}", sym.failure);
-    let ratio = |r: &experiments::record::RunRecord, name: &str| {
+    let ratio = |r: &identify::record::RunRecord, name: &str| {
         let j = r.param_names.iter().position(|n| n == name).unwrap();
         r.theta_val[j] / r.theta_true.as_ref().unwrap()[j]
     };

@@ -10,7 +10,7 @@ use experiments::calibration::{
     calibrate_algorithm, calibrate_parameter, coverage_figure, markdown, CalibrationError,
     LevelCoverage, RunPosterior, SweepCalibration, Verdict, ZQuantile,
 };
-use experiments::figures::validate_svg;
+use identify::figures::validate_svg;
 use rand::Rng;
 
 fn ci(level: f64, lo: f64, hi: f64) -> CredibleInterval {

@@ -5,10 +5,10 @@ mod common;
 
 use common::record;
 use core_filters::credible::CredibleInterval;
-use experiments::checks::{check, summary_table, WarningKind};
-use experiments::identification::{finish, Rejected};
-use experiments::observe::{ParamIntervals, PosteriorShape};
-use experiments::record::RunRecord;
+use identify::checks::{check, summary_table, WarningKind};
+use identify::identification::{finish, Rejected};
+use identify::observe::{ParamIntervals, PosteriorShape};
+use identify::record::RunRecord;
 
 /// The exit decision on a finished run: its record written, then accepted or rejected.
 fn finish_run(r: RunRecord, path: &std::path::Path) -> Result<(), Rejected> {
@@ -181,7 +181,7 @@ fn records_without_warnings_still_load() {
 
 #[test]
 fn a_filter_left_out_of_its_pool_is_a_warning_written_into_the_record_and_not_fatal() {
-    use experiments::record::diagnostics::{LeftOutFilter, LeftOutReason};
+    use identify::record::diagnostics::{LeftOutFilter, LeftOutReason};
     let r = healthy();
     // Eight pooled filters: the settings and their fingerprint.
     let filter = serde_json::json!({ "particles": r.particles, "window": r.window, "pool": 8 });
@@ -240,10 +240,10 @@ fn the_real_time_factor_is_seconds_of_record_per_second_of_computation() {
     r.config = serde_json::json!({ "spec": { "dt": 0.01 } });
     r.steps_completed = 1000;
     r.timing.wall_s = 2.0;
-    assert_eq!(experiments::identification::realtime_factor(&r), Some(5.0));
+    assert_eq!(identify::identification::realtime_factor(&r), Some(5.0));
     r.timing.wall_s = 0.0;
-    assert_eq!(experiments::identification::realtime_factor(&r), None);
+    assert_eq!(identify::identification::realtime_factor(&r), None);
     r.config = serde_json::json!({});
     r.timing.wall_s = 2.0;
-    assert_eq!(experiments::identification::realtime_factor(&r), None);
+    assert_eq!(identify::identification::realtime_factor(&r), None);
 }

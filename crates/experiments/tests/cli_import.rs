@@ -137,7 +137,7 @@ fn import_then_filter_the_frame_runs_and_says_what_it_repaired() {
     assert!(t.contains("12115 of 12115 steps"), "{t}");
     let r: serde_json::Value = serde_json::from_slice(&std::fs::read(&run).unwrap()).unwrap();
     // Six parameters with per-storey dashpots, seven with αM: the damping form is left open
-    // here, so the plan chooses it by held-out prediction (`experiments::choice`).
+    // here, so the plan chooses it by held-out prediction (`identify::choice`).
     let alpha = r["plan"]["building"]["damping"] == "storey+mass";
     assert_eq!(
         r["theta_val"].as_array().unwrap().len(),

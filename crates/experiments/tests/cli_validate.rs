@@ -123,7 +123,7 @@ fn cross_validation_end_to_end() {
     assert_eq!(r["free_run"]["band"]["purpose"], "validation-band");
     assert_eq!(r["modal"]["pairs"].as_array().unwrap().len(), 3);
     for f in ["free_run.svg", "transfer.svg"] {
-        experiments::figures::validate_svg(&figs.join(f)).unwrap();
+        identify::figures::validate_svg(&figs.join(f)).unwrap();
     }
 
     // Cross-validation on another record of the same building (simulated with its own

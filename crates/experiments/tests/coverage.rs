@@ -8,8 +8,8 @@ use common::{record, NAMES, THETA_TRUE};
 use core_filters::credible::{CredibleInterval, STANDARD_LEVELS};
 use experiments::calibration::Verdict;
 use experiments::coverage::{report_section, run_posterior, sweep_coverage, Missing};
-use experiments::observe::{ParamIntervals, PosteriorShape};
-use experiments::record::RunRecord;
+use identify::observe::{ParamIntervals, PosteriorShape};
+use identify::record::RunRecord;
 
 /// Half-widths of the 50, 90 and 95 % intervals for a parameter whose truth is 8 (scaled with
 /// the truth for the others).

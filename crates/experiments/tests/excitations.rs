@@ -8,10 +8,10 @@ use std::path::{Path, PathBuf};
 
 use experiments::engine::RunMode;
 use experiments::excitations;
-use experiments::figures::validate_svg;
 use experiments::scaling::structures::structure_values;
 use experiments::scaling::Options;
 use experiments::study::Study;
+use identify::figures::validate_svg;
 use models::dataset::ExcitationSource;
 
 /// A fresh directory under the system temp dir, unique per test, and the guard that removes it

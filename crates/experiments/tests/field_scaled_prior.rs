@@ -6,12 +6,12 @@
 use std::fmt::Write as _;
 
 use core_filters::rng::stream;
-use experiments::field::StructureSettings;
-use experiments::identification::{settle, Target};
-use experiments::pipeline::{
+use identify::field::StructureSettings;
+use identify::identification::{settle, Target};
+use identify::pipeline::{
     identify, prior_from_data, Algorithm, FilterSettings, RunInput, HYSTERETIC_PARTICLES,
 };
-use experiments::settings::RECOMMENDED_PARTICLES;
+use identify::settings::RECOMMENDED_PARTICLES;
 use models::dataset::{load_dir, LoadedDataset, MeasurementKind};
 use models::excitation::GroundMotion;
 use models::ground_motions::el_centro;
@@ -114,11 +114,7 @@ fn input<'a>(data: &'a LoadedDataset, seed: u64) -> RunInput<'a> {
 
 /// Every identified k within 5 % of the truth (the goal of docs/structures.md, "Stiff
 /// buildings"); `context` goes into the message.
-fn assert_every_k_within_5_percent(
-    r: &experiments::record::RunRecord,
-    k_true: &[f64],
-    context: &str,
-) {
+fn assert_every_k_within_5_percent(r: &identify::record::RunRecord, k_true: &[f64], context: &str) {
     for (j, k) in k_true.iter().enumerate() {
         let rel = r.theta_val[j] / k - 1.0;
         assert!(
@@ -160,7 +156,7 @@ fn a_stiff_building_is_identified_with_data_scaled_priors() {
     // The scaled median puts the true stiffness within one prior log-s.d.
     let off = (scaled.k_median / k_true[0]).ln();
     assert!(
-        off.abs() < experiments::scaled_prior::K_LOG_SD,
+        off.abs() < identify::scaled_prior::K_LOG_SD,
         "{}",
         scaled.describe()
     );

@@ -6,12 +6,12 @@ use std::collections::BTreeMap;
 use std::path::PathBuf;
 
 use core_filters::Health;
-use experiments::figures::{
+use identify::figures::{
     convergence, convergence_y_range, crosses, hysteresis, state_errors, validate_svg,
 };
-use experiments::metrics::{SignalError, StateErrors};
-use experiments::observe::Trace;
-use experiments::record::{Loop, RunRecord, Timing, Validation, Versions};
+use identify::metrics::{SignalError, StateErrors};
+use identify::observe::Trace;
+use identify::record::{Loop, RunRecord, Timing, Validation, Versions};
 
 const NAMES: [&str; 9] = ["k1", "k2", "k3", "c1", "c2", "c3", "beta", "gamma", "n"];
 const THETA_TRUE: [f64; 9] = [8.0, 8.0, 8.0, 0.25, 0.25, 0.25, 2.0, 1.0, 2.0];

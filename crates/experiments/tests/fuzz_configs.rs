@@ -1,6 +1,6 @@
 //! Property-based fuzzing of the TOML readers: study files (`experiments::study::Study`) and
-//! filter config files (`experiments::pipeline::FilterSettings`, read by
-//! `experiments::limits::load_filter_settings`). Valid files are mutated (the mutations of
+//! filter config files (`identify::pipeline::FilterSettings`, read by
+//! `identify::limits::load_filter_settings`). Valid files are mutated (the mutations of
 //! `models/tests/fuzz_common`); each reader must neither panic nor abort, and either return
 //! settings that pass the limits or an error whose message names the file.
 //!
@@ -10,10 +10,10 @@
 #[path = "../../models/tests/fuzz_common/mod.rs"]
 mod fuzz_common;
 
-use experiments::limits::{check_filter_settings, load_filter_settings};
-use experiments::pipeline::FilterSettings;
 use experiments::study::Study;
 use fuzz_common::{apply, mutations, run, scratch};
+use identify::limits::{check_filter_settings, load_filter_settings};
+use identify::pipeline::FilterSettings;
 use proptest::prelude::*;
 use proptest::test_runner::TestCaseError;
 use std::path::{Path, PathBuf};

@@ -6,10 +6,10 @@
 use std::path::{Path, PathBuf};
 
 use experiments::engine::RunMode;
-use experiments::record::RunRecord;
 use experiments::reproduce::{figure_files, reproduce, Done, Options};
 use experiments::study::Study;
 use experiments::sweep::{merge, run_sweep, Recompute, Shard, SweepOptions, SweepOutcome};
+use identify::record::RunRecord;
 
 /// A fresh directory under the system temp dir, unique per test, and the guard that removes it
 /// when dropped (also when the test panics).
@@ -235,7 +235,7 @@ fn quick_reproduction_draws_every_figure_and_the_report() {
         .into_iter()
         .chain(experiments::discretisation::figure_files(&out))
     {
-        experiments::figures::validate_svg(&f).unwrap_or_else(|e| panic!("{}: {e:#}", f.display()));
+        identify::figures::validate_svg(&f).unwrap_or_else(|e| panic!("{}: {e:#}", f.display()));
     }
     let report = std::fs::read_to_string(out.join("REPORT.md")).unwrap();
     for needle in [

@@ -1,5 +1,5 @@
 //! The noise levels and damping form of a field identification chosen by held-out prediction
-//! (`experiments::choice`): every candidate scored and recorded in the plan, the best one run,
+//! (`identify::choice`): every candidate scored and recorded in the plan, the best one run,
 //! the plan rerun to the same record; a candidate plan equal to the plan settled with its
 //! settings; the split holding the record's second half by energy.
 
@@ -8,9 +8,9 @@ mod common;
 use std::path::Path;
 use std::process::Command;
 
-use experiments::choice::{split_point, with_noise, NOISE_FRACTIONS, PROCESS_NOISE_FACTORS};
-use experiments::plan::{settle, PlanRequest, RunPlan};
-use experiments::settings::FilterSettings;
+use identify::choice::{split_point, with_noise, NOISE_FRACTIONS, PROCESS_NOISE_FACTORS};
+use identify::plan::{settle, PlanRequest, RunPlan};
+use identify::settings::FilterSettings;
 use models::dataset::{load_dir, LoadedDataset};
 use models::structure::Damping;
 
@@ -173,7 +173,7 @@ fn settled(data: &LoadedDataset, nf: f64, pf: f64) -> RunPlan {
     s.structure.masses = Some(vec![1.0]);
     s.structure.measurement = Some(models::sensors::MeasurementKind::Absolute);
     settle(PlanRequest {
-        algorithm: experiments::pipeline::Algorithm::MpfEkf2,
+        algorithm: identify::pipeline::Algorithm::MpfEkf2,
         data,
         chain: None,
         settings: s,

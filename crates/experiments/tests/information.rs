@@ -7,11 +7,11 @@ mod common;
 
 use std::path::{Path, PathBuf};
 
-use experiments::field::StructureSettings;
 use experiments::information::{information_limit, summary, table, InformationLimit, REL_STEP};
 use experiments::likelihood::{Candidate, LikelihoodModel, ScoredData};
-use experiments::pipeline::{identify, Algorithm, RunInput};
-use experiments::settings::FilterSettings;
+use identify::field::StructureSettings;
+use identify::pipeline::{identify, Algorithm, RunInput};
+use identify::settings::FilterSettings;
 use models::dataset::{generate, load_dir, DatasetConfig, LoadedDataset, MEASURED};
 
 /// A fresh directory under the system temp dir, unique per test, and the guard that removes it

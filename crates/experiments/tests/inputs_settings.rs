@@ -2,8 +2,8 @@
 //! stiffnesses from a filter noise fraction of 1e-9, aborts from huge sizes) are errors naming
 //! the file and the field.
 
-use experiments::limits::{check_particle_cloud, load_filter_settings, MAX_PARTICLES};
 use experiments::study::Study;
+use identify::limits::{check_particle_cloud, load_filter_settings, MAX_PARTICLES};
 use std::path::{Path, PathBuf};
 
 /// A fresh directory under the system temp dir, unique per test, and the guard that removes it
@@ -52,7 +52,7 @@ fn filter_settings_out_of_range_are_named() {
     assert_eq!((s.particles, s.window), (300, 40));
     std::fs::write(&p, "substeps = \"auto\"\n").unwrap();
     let s = load_filter_settings(&p).unwrap();
-    assert_eq!(s.substeps, experiments::settings::Substeps::Auto);
+    assert_eq!(s.substeps, identify::settings::Substeps::Auto);
     // The cloud's size once the dimension is known.
     assert!(check_particle_cloud(MAX_PARTICLES, 100).is_err());
     check_particle_cloud(500, 100).unwrap();

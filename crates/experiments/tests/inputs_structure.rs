@@ -7,8 +7,8 @@
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
-use experiments::field::StructureSettings;
-use experiments::pipeline::{chain_spec, FilterSettings};
+use identify::field::StructureSettings;
+use identify::pipeline::{chain_spec, FilterSettings};
 use models::dataset::{generate, load_dir, DatasetConfig, DatasetError, MeasurementKind};
 
 fn sysid() -> Command {
@@ -441,7 +441,7 @@ fn printed_defaults_and_the_field_example_parse() {
     }
     let example =
         Path::new(env!("CARGO_MANIFEST_DIR")).join("../../experiments/examples/field.toml");
-    let s = experiments::limits::load_filter_settings(&example).unwrap();
+    let s = identify::limits::load_filter_settings(&example).unwrap();
     assert_eq!(s.structure.storeys, Some(5));
     assert_eq!(s.structure.measurement, Some(MeasurementKind::Absolute));
     assert!(s.structure.hysteretic.is_some() && s.structure.masses.is_some());

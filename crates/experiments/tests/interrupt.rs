@@ -4,7 +4,7 @@
 
 use std::sync::atomic::{AtomicUsize, Ordering};
 
-use experiments::pipeline::{
+use identify::pipeline::{
     identify, identify_stoppable, Algorithm, FilterSettings, Interrupted, RunInput,
 };
 use models::dataset::{generate, DatasetConfig};

@@ -3,8 +3,8 @@
 //! the run pipeline (α marginalised beside k and c), and the same data as field data through the
 //! `[structure]` table (data-scaled prior with α, free run and modal table with αM).
 
-use experiments::field::{resolve_for_run, StructureSettings};
-use experiments::pipeline::{identify, prior_from_data, Algorithm, FilterSettings, RunInput};
+use identify::field::{resolve_for_run, StructureSettings};
+use identify::pipeline::{identify, prior_from_data, Algorithm, FilterSettings, RunInput};
 use models::dataset::{generate, DatasetConfig};
 use models::filtering::Discretisation;
 use models::sensors::MeasurementKind;
@@ -114,7 +114,7 @@ fn field_data_take_the_form_from_the_structure_table_and_validate_with_it() {
     );
     let d = resolve_for_run(&data, None, &s.structure).unwrap();
     assert_eq!(d.damping, Damping::StoreyMass);
-    experiments::validation::attach(&mut r, &data, &d);
+    identify::validation::attach(&mut r, &data, &d);
     // The free run simulates θ_val with its αM: the clean response it was generated from, up to
     // the 10 % measurement noise.
     let f = r.free_run.as_ref().expect("a free run");

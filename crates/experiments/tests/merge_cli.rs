@@ -7,10 +7,10 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Output};
 use std::time::{Duration, Instant};
 
-use experiments::record::RunRecord;
 use experiments::study::Study;
 use experiments::sweep::lock::{DirLock, LOCK_FILE};
 use experiments::sweep::{read_record, run_sweep, SweepOptions};
+use identify::record::RunRecord;
 
 fn sysid() -> Command {
     Command::new(env!("CARGO_BIN_EXE_sysid"))

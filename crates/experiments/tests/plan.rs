@@ -1,4 +1,4 @@
-//! The plan of a `sysid filter` run (`experiments::plan`): settled once, printed
+//! The plan of a `sysid filter` run (`identify::plan`): settled once, printed
 //! (`--plan-only`), written as TOML (`--print-plan`) and run again from that file (`--plan`) to
 //! the same record; refused on other data.
 
@@ -7,8 +7,8 @@ mod common;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
-use experiments::plan::RunPlan;
-use experiments::record::RunRecord;
+use identify::plan::RunPlan;
+use identify::record::RunRecord;
 
 fn sysid() -> Command {
     Command::new(env!("CARGO_BIN_EXE_sysid"))
@@ -264,7 +264,7 @@ fn plan_only_prints_the_plan_and_runs_nothing() {
 /// without a config on a hysteretic building takes that δ.
 #[test]
 fn the_help_states_the_rules_defaults() {
-    use experiments::rules::{HYSTERETIC_PARTICLES, LAG_SUBSTEPS, MPF_REJUVENATION};
+    use identify::rules::{HYSTERETIC_PARTICLES, LAG_SUBSTEPS, MPF_REJUVENATION};
     let out = ok(
         sysid().args(["filter", "--help"]).output().unwrap(),
         "--help",
@@ -350,8 +350,8 @@ fn a_linear_building_runs_one_gaussian_filter() {
     assert_eq!(r.particles, 1);
     // A study's job keeps its settings (1000 particles as 8 filters, every one the same EKF2):
     // the same answer to round-off.
-    let many = experiments::pipeline::identify(
-        &experiments::pipeline::RunInput {
+    let many = identify::pipeline::identify(
+        &identify::pipeline::RunInput {
             data: &models::dataset::load_dir(&data).unwrap(),
             chain: None,
             experiment: "cli",
@@ -360,8 +360,8 @@ fn a_linear_building_runs_one_gaussian_filter() {
             progress: None,
             residuals: false,
         },
-        experiments::pipeline::Algorithm::MpfEkf2,
-        &experiments::pipeline::FilterSettings::recommended(),
+        identify::pipeline::Algorithm::MpfEkf2,
+        &identify::pipeline::FilterSettings::recommended(),
     )
     .unwrap();
     assert_eq!((many.particles, many.one_gaussian_filter), (1000, false));

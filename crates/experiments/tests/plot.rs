@@ -7,10 +7,10 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 
 use common::{hysteresis_loop, record, trace, THETA_TRUE};
-use experiments::checks::Residuals;
-use experiments::figures::validate_svg;
-use experiments::plot::plot;
-use experiments::record::Validation;
+use identify::checks::Residuals;
+use identify::figures::validate_svg;
+use identify::plot::plot;
+use identify::record::Validation;
 
 /// A fresh directory under the system temp dir, unique per test, and the guard that removes it
 /// when dropped (also when the test panics).
@@ -146,7 +146,7 @@ fn a_field_record_draws_what_it_has_through_the_binary() {
 
     // A failed validation is named.
     r.validation = Some(Validation {
-        states: experiments::metrics::StateErrors {
+        states: identify::metrics::StateErrors {
             names: vec![],
             errors: vec![],
         },

@@ -3,7 +3,7 @@
 //! stream; the intervals are those of the pooled posterior; a pool larger than the particles is
 //! a named error; an unpooled run's settings are written without the field.
 
-use experiments::pipeline::{identify, Algorithm, FilterSettings, RunInput};
+use identify::pipeline::{identify, Algorithm, FilterSettings, RunInput};
 use models::dataset::{generate, DatasetConfig};
 
 /// A 2 s `paper-3dof` data set (its structure kept for the run input).

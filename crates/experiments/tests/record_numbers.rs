@@ -13,14 +13,14 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use core_filters::credible::CredibleInterval;
-use experiments::checks::{Residuals, Warning, WarningKind};
-use experiments::metrics::{SignalError, StateErrors};
-use experiments::observe::{ParamIntervals, PosteriorShape, Trace};
-use experiments::record::read::{parse, read, write};
-use experiments::record::{Loop, RunRecord, Validation};
 use experiments::reference::ParamSummary;
 use experiments::reference::ReferenceRecord;
-use experiments::residuals::ChannelCheck;
+use identify::checks::{Residuals, Warning, WarningKind};
+use identify::metrics::{SignalError, StateErrors};
+use identify::observe::{ParamIntervals, PosteriorShape, Trace};
+use identify::record::read::{parse, read, write};
+use identify::record::{Loop, RunRecord, Validation};
+use identify::residuals::ChannelCheck;
 use proptest::prelude::*;
 use proptest::test_runner::{Config, RngAlgorithm, TestRng, TestRunner};
 
@@ -253,7 +253,7 @@ fn records_with_non_finite_numbers_in_every_field_read_back_through_every_reader
             prop_assert_eq!(text(&back), text(&r));
             // `sysid plot`: read and draw (every 8th case: drawing is the slow part).
             if case.is_multiple_of(8) {
-                experiments::plot::plot(&path, &dir.join(format!("figs{case}")))
+                identify::plot::plot(&path, &dir.join(format!("figs{case}")))
                     .map_err(|e| TestCaseError::fail(format!("plot: {e:#}")))?;
             }
             Ok(())
@@ -323,7 +323,7 @@ fn float_leaves(v: &serde_json::Value, at: String, skip: &[&str], out: &mut Vec<
 
 /// Each float field of a written record, set to `"NaN"` in turn, still parses: no number of a
 /// record is read as a plain `f64` (which would refuse the encoding its writer uses).
-fn every_float_takes_the_encoding<R: experiments::record::read::Checked + serde::Serialize>(
+fn every_float_takes_the_encoding<R: identify::record::read::Checked + serde::Serialize>(
     record: &R,
     skip: &[&str],
     expected_at_least: usize,

@@ -7,13 +7,13 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 
 use experiments::engine::RunMode;
-use experiments::pipeline::{identify, Algorithm, FilterSettings, RunInput};
-use experiments::record::{Fingerprint, RunRecord, RECORD_SCHEMA};
 use experiments::reproduce::{figure_files, reproduce, Options, STUDIES};
 use experiments::study::Study;
 use experiments::sweep::{
     merge, read_record, run_sweep, study_pairs, write_atomic, Shard, SweepOptions,
 };
+use identify::pipeline::{identify, Algorithm, FilterSettings, RunInput};
+use identify::record::{Fingerprint, RunRecord, RECORD_SCHEMA};
 use models::dataset::{generate, DatasetConfig};
 
 /// A fresh directory under the system temp dir, unique per test, and the guard that removes it

@@ -5,12 +5,12 @@
 mod common;
 
 use core_filters::rng::stream;
-use experiments::pipeline::{chain_spec, Algorithm, FilterSettings};
 use experiments::reference::{
     compare, goal_rows, information_limit, pool_chains, reference_covers, FilterLikelihood,
     ParamSummary, ThetaMap, GOAL_MARGIN,
 };
 use experiments::verdict::Verdict;
+use identify::pipeline::{chain_spec, Algorithm, FilterSettings};
 use models::dataset::{generate, DatasetConfig};
 
 /// `log mean exp` of independent log-likelihood estimates (an estimate of log p(y | θ) whose
@@ -151,7 +151,7 @@ fn untrustworthy_chains_are_flagged() {
 #[test]
 fn information_limit_on_constructed_records() {
     use core_filters::credible::CredibleInterval;
-    use experiments::observe::{ParamIntervals, PosteriorShape};
+    use identify::observe::{ParamIntervals, PosteriorShape};
     let summary = |mean: f64, sd: f64| ParamSummary {
         name: "k1".into(),
         mean,

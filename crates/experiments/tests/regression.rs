@@ -7,14 +7,14 @@ use std::collections::BTreeMap;
 use std::path::PathBuf;
 
 use core_filters::credible::{CredibleInterval, STANDARD_LEVELS};
-use experiments::observe::{ParamIntervals, PosteriorShape};
-use experiments::record::RunRecord;
 use experiments::regression::{
     evaluate, evaluate_coverage, format_table, kc_coverage95, KcCoverage, RegressionFile,
     PAPER_PARAMS,
 };
 use experiments::reproduce::{AlgorithmStats, ParamStats};
-use experiments::settings::FilterSettings;
+use identify::observe::{ParamIntervals, PosteriorShape};
+use identify::record::RunRecord;
+use identify::settings::FilterSettings;
 
 fn file() -> RegressionFile {
     let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../experiments/regression.toml");

@@ -7,10 +7,10 @@
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-use experiments::pipeline::{identify, Algorithm, FilterSettings, RunInput};
-use experiments::record::RunRecord;
 use experiments::study::Study;
 use experiments::sweep::{run_sweep, Shard, SweepOptions};
+use identify::pipeline::{identify, Algorithm, FilterSettings, RunInput};
+use identify::record::RunRecord;
 use models::dataset::{generate, Dataset, DatasetConfig};
 
 /// A fresh directory under the system temp dir, unique per test, and the guard that removes it
@@ -253,7 +253,7 @@ fn a_bad_discount_is_refused_by_name() {
     std::fs::write(&config, "rejuvenation = 2.0\n").unwrap();
     let e = format!(
         "{:#}",
-        experiments::limits::load_filter_settings(&config).unwrap_err()
+        identify::limits::load_filter_settings(&config).unwrap_err()
     );
     assert!(
         e.contains("`rejuvenation`") && e.contains("bad.toml"),
@@ -373,7 +373,7 @@ fn the_mpf_ekf2_rejuvenates_by_default() {
     };
     assert_eq!(
         rejuvenation("mpf-ekf2", &[]),
-        Some(experiments::pipeline::MPF_REJUVENATION)
+        Some(identify::pipeline::MPF_REJUVENATION)
     );
     for alg in ["mln-rbpf", "storvik", "bootstrap"] {
         assert_eq!(rejuvenation(alg, &[]), None, "{alg}");

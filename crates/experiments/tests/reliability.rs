@@ -123,7 +123,7 @@ fn reference_takes_the_structure_of_field_data_from_a_config() {
         "{}",
         stderr(&o)
     );
-    let r: experiments::reference::ReferenceRecord = experiments::record::read::read(&out).unwrap();
+    let r: experiments::reference::ReferenceRecord = identify::record::read::read(&out).unwrap();
     assert_eq!(r.params.len(), 9);
 }
 
@@ -369,7 +369,7 @@ fn write_reference(path: &Path) {
             .collect(),
         warnings: Vec::new(),
     };
-    experiments::record::read::write(path, &r).unwrap();
+    identify::record::read::write(path, &r).unwrap();
 }
 
 #[test]

@@ -1,4 +1,4 @@
-//! One-step-ahead prediction errors (`experiments::residuals`): from the true states and θ they
+//! One-step-ahead prediction errors (`identify::residuals`): from the true states and θ they
 //! are the measurement noise (white, variance ≈ 1 once divided by the noise s.d.), whatever
 //! filter's layout the posterior comes in; a run of `sysid filter` records them and `sysid plot`
 //! draws their panels.
@@ -6,8 +6,8 @@
 use std::process::Command;
 
 use core_filters::smc::Posterior;
-use experiments::pipeline::{build_filter, chain_spec, Algorithm, FilterSettings};
-use experiments::residuals::{channel_checks, Predictor};
+use identify::pipeline::{build_filter, chain_spec, Algorithm, FilterSettings};
+use identify::residuals::{channel_checks, Predictor};
 use models::dataset::{generate, DatasetConfig};
 use models::filtering::Discretisation;
 
@@ -122,7 +122,7 @@ fn filter_records_prediction_errors_and_plot_draws_them() {
         text.contains("a2: one-step prediction errors / noise s.d."),
         "{text}"
     );
-    let r: experiments::record::RunRecord =
+    let r: identify::record::RunRecord =
         serde_json::from_str(&std::fs::read_to_string(&rec).unwrap()).unwrap();
     assert_eq!(r.innovation_checks.len(), 3);
     let res = r.residuals.as_ref().unwrap();
@@ -145,7 +145,7 @@ fn filter_records_prediction_errors_and_plot_draws_them() {
         "innovations.svg",
         "innovation_acf.svg",
     ] {
-        experiments::figures::validate_svg(&figs.join(f)).unwrap();
+        identify::figures::validate_svg(&figs.join(f)).unwrap();
     }
 }
 
@@ -192,7 +192,7 @@ fn field_data_in_one_command_prints_and_plots() {
     assert!(o.status.success(), "{out}");
     assert!(out.contains("prior scaled from the data"), "{out}");
     // A sensible identification: every k within 15 % of the truth (8).
-    let r: experiments::record::RunRecord =
+    let r: identify::record::RunRecord =
         serde_json::from_str(&std::fs::read_to_string(d.join("run.json")).unwrap()).unwrap();
     for (name, v) in r.param_names.iter().zip(&r.theta_val) {
         if name.starts_with('k') {
@@ -206,7 +206,7 @@ fn field_data_in_one_command_prints_and_plots() {
         "innovations.svg",
         "innovation_acf.svg",
     ] {
-        experiments::figures::validate_svg(&figs.join(f)).unwrap();
+        identify::figures::validate_svg(&figs.join(f)).unwrap();
     }
     // No truth, no validation run: the loop is skipped with a note, not drawn.
     assert!(!figs.join("hysteresis.svg").exists());

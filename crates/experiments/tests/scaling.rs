@@ -5,10 +5,10 @@
 use std::path::{Path, PathBuf};
 
 use experiments::engine::RunMode;
-use experiments::figures::validate_svg;
-use experiments::pipeline::Algorithm;
 use experiments::scaling::{self, Options};
 use experiments::study::Study;
+use identify::figures::validate_svg;
+use identify::pipeline::Algorithm;
 
 /// A fresh directory under the system temp dir, unique per test, and the guard that removes it
 /// when dropped (also when the test panics).
@@ -187,7 +187,7 @@ fn a_structure_takes_its_own_filter_keys() {
 /// without a config, on the data sets of `experiments/scaling.toml`.
 #[test]
 fn the_defaults_study_runs_the_settings_of_sysid_filter() {
-    use experiments::pipeline::FilterSettings;
+    use identify::pipeline::FilterSettings;
     let study = Study::load(&workspace().join("experiments/scaling-defaults.toml")).unwrap();
     let scaling = Study::load(&workspace().join("experiments/scaling.toml")).unwrap();
     assert_eq!(study.sweep.algorithms, vec![Algorithm::MpfEkf2]);

@@ -3,8 +3,8 @@
 //! building once and scans the data's spectra for the prior once. Alone in its test binary: the
 //! counters are the process's.
 
-use experiments::identification::{identify_request, FilterRequest};
-use experiments::pipeline::Algorithm;
+use identify::identification::{identify_request, FilterRequest};
+use identify::pipeline::Algorithm;
 use models::sensors::MeasurementKind;
 
 #[test]
@@ -53,21 +53,17 @@ fn one_identification_resolves_its_building_and_scans_its_prior_once() {
         damping: None,
     };
     let (resolved, scanned) = (
-        experiments::field::resolutions(),
-        experiments::scaled_prior::scans(),
+        identify::field::resolutions(),
+        identify::scaled_prior::scans(),
     );
     let mut notes = 0;
     let identified = identify_request(&req, &mut |_| notes += 1).unwrap();
     assert!(identified.record.failure.is_none());
     assert!(notes >= 3, "building, prior and rules are said");
     assert_eq!(
-        experiments::field::resolutions() - resolved,
+        identify::field::resolutions() - resolved,
         1,
         "building resolutions"
     );
-    assert_eq!(
-        experiments::scaled_prior::scans() - scanned,
-        1,
-        "prior scans"
-    );
+    assert_eq!(identify::scaled_prior::scans() - scanned, 1, "prior scans");
 }

@@ -7,7 +7,7 @@
 use std::path::PathBuf;
 use std::process::Command;
 
-use experiments::pipeline::{
+use identify::pipeline::{
     chain_spec, per_particle_reason, unmeasured_storeys, Algorithm, FilterSettings,
     MPF_REJUVENATION, PER_PARTICLE_MIN_STOREYS, SPARSE_REL_SD,
 };

@@ -4,9 +4,9 @@
 
 use std::fmt::Write as _;
 
-use experiments::field::StructureSettings;
-use experiments::pipeline::{chain_spec, identify, resolve_substeps, Algorithm, RunInput};
-use experiments::settings::{FilterSettings, Substeps};
+use identify::field::StructureSettings;
+use identify::pipeline::{chain_spec, identify, resolve_substeps, Algorithm, RunInput};
+use identify::settings::{FilterSettings, Substeps};
 use models::dataset::{generate, load_dir, DatasetConfig, MeasurementKind};
 use models::integrate::simulate_rk4;
 use models::structure::ShearChain;
@@ -135,7 +135,7 @@ fn the_papers_data_need_no_sub_step() {
 /// linear building, ten storeys, a fixed number of sub-steps, the paper's building.
 #[test]
 fn the_shared_prior_gaussian_below_ten_storeys_is_sub_stepped_against_the_velocity_lag() {
-    use experiments::pipeline::LAG_SUBSTEPS;
+    use identify::pipeline::LAG_SUBSTEPS;
     use models::filtering::MarginalPrior;
     let building = |storeys: usize, hysteretic: bool| {
         let mut c = DatasetConfig::from_preset("building-chain", 1).unwrap();

@@ -89,7 +89,7 @@ fn a_study_on_a_data_directory_runs_every_seed_on_the_same_record() {
     assert!(report.contains("run-to-run s.d."), "{report}");
     // The figures: valid SVGs, linked from the report, one category per parameter.
     for f in ["theta_val.svg", "sd_over_spread.svg"] {
-        experiments::figures::validate_svg(&out.join(f)).unwrap();
+        identify::figures::validate_svg(&out.join(f)).unwrap();
         assert!(report.contains(&format!("({f})")), "{f} not linked");
         let svg = std::fs::read_to_string(out.join(f)).unwrap();
         assert!(

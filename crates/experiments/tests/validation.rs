@@ -2,7 +2,7 @@
 //! simulated data of a known structure, with and without noise of a known level; the measured
 //! transfer-function peaks against the known modes; the posterior band.
 
-use experiments::validation::{self, free_run, spectral};
+use identify::validation::{self, free_run, spectral};
 use models::dataset::{generate, DatasetConfig, LoadedDataset};
 use models::description::StructureDescription;
 use models::sensors::MeasurementKind;
@@ -203,7 +203,7 @@ fn measured_transfer_peaks_sit_at_the_modes_of_a_known_linear_building() {
 #[test]
 fn the_band_is_reproducible_and_collapses_on_a_point_posterior() {
     use core_filters::credible::CredibleInterval;
-    use experiments::observe::{ParamIntervals, PosteriorShape};
+    use identify::observe::{ParamIntervals, PosteriorShape};
     let (data, d, theta) = clean("paper-3dof", None, MeasurementKind::Relative);
     let names = ["k1", "k2", "k3", "c1", "c2", "c3", "beta", "gamma", "n"].map(String::from);
     let intervals = |spread: f64| -> Vec<ParamIntervals> {
@@ -317,9 +317,9 @@ fn modes_pair_with_the_nearest_peak_and_never_with_a_far_one() {
 #[test]
 fn modal_intervals_of_one_storey_against_the_closed_form() {
     use core_filters::credible::{CredibleInterval, STANDARD_LEVELS};
-    use experiments::observe::{ParamIntervals, PosteriorShape};
-    use experiments::validation::free_run::QuantileDraw;
-    use experiments::validation::modal_intervals;
+    use identify::observe::{ParamIntervals, PosteriorShape};
+    use identify::validation::free_run::QuantileDraw;
+    use identify::validation::modal_intervals;
     let (k, c, m) = (600.0_f64, 1.0_f64, 1.0_f64);
     let names = vec!["k1".to_string(), "c1".to_string()];
     // Symmetric intervals of half-widths 2 %, 5 %, 10 % of the value at 50, 90, 95 %.

@@ -6,9 +6,9 @@
 mod common;
 
 use common::{record, wiggle};
-use experiments::record::RunRecord;
 use experiments::study::Study;
 use experiments::verdict::{paper_findings, Declared, Finding, Verdict};
+use identify::record::RunRecord;
 
 const RUNS: u64 = 20;
 

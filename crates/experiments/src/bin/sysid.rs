@@ -84,7 +84,7 @@ fn main() -> std::process::ExitCode {
     unsafe {
         libc::signal(libc::SIGPIPE, libc::SIG_DFL);
     }
-    experiments::logger::install_logger();
+    identify::logger::install_logger();
     // The error and its causes, one per line — never a stack trace: an error here is a message
     // to the user (bad input, a failed run), not a bug report.
     match run(Cli::parse()) {

@@ -38,7 +38,7 @@ pub fn run(args: Args) -> Result<()> {
     if args.report_only {
         let text = crate::field_study::report::render(&study, &args.out)?;
         let path = args.out.join("REPORT.md");
-        crate::record::atomic::write_bytes_atomic(&path, text.as_bytes())?;
+        identify::record::atomic::write_bytes_atomic(&path, text.as_bytes())?;
         eprintln!("report {}", path.display());
         return Ok(());
     }

@@ -7,12 +7,12 @@ use core_filters::resampling::Scheme;
 use core_filters::smc::storvik::StorvikUpdate;
 use models::sensors::MeasurementKind;
 
-use crate::identification::{
+use identify::identification::{
     commented_defaults, finish, identify_plan, load_request_data, plan_request, FilterRequest,
 };
-use crate::pipeline::Algorithm;
-use crate::plan::RunPlan;
-use crate::record::RunRecord;
+use identify::pipeline::Algorithm;
+use identify::plan::RunPlan;
+use identify::record::RunRecord;
 
 /// Arguments of `sysid filter`.
 #[derive(Debug, clap::Args)]
@@ -24,7 +24,7 @@ pub struct Args {
     /// `dataset.json` optional).
     #[arg(long, required_unless_present = "print_config")]
     pub data: Option<PathBuf>,
-    #[arg(long, help = crate::rules::help_particles())]
+    #[arg(long, help = identify::rules::help_particles())]
     pub particles: Option<usize>,
     /// Master seed of the filter's random stream (default 1).
     #[arg(long)]
@@ -78,9 +78,9 @@ pub struct Args {
     /// symplectic (semi-implicit Euler: velocities first), or rk4 (bootstrap PF only).
     #[arg(long)]
     pub discretisation: Option<models::filtering::Discretisation>,
-    #[arg(long, help = crate::rules::help_substeps())]
-    pub substeps: Option<crate::settings::Substeps>,
-    #[arg(long, value_name = "DELTA", help = crate::rules::help_rejuvenation())]
+    #[arg(long, help = identify::rules::help_substeps())]
+    pub substeps: Option<identify::settings::Substeps>,
+    #[arg(long, value_name = "DELTA", help = identify::rules::help_rejuvenation())]
     pub rejuvenation: Option<f64>,
     /// TOML file with filter settings (priors, noise fraction, masses, …) over the SPEC's (the
     /// paper's) defaults; command-line options override it. Without it: the recommended
@@ -151,7 +151,7 @@ pub fn run(args: Args) -> Result<()> {
     let plan = match &args.plan {
         Some(file) => {
             let name = file.display().to_string();
-            let text = crate::limits::read_text_file(file, "run plan")?;
+            let text = identify::limits::read_text_file(file, "run plan")?;
             let plan = RunPlan::from_toml(&text, &name)?;
             plan.check_data(&data, &name)?;
             plan
@@ -186,7 +186,7 @@ pub fn run(args: Args) -> Result<()> {
             inputs.push((flag, f));
         }
     }
-    crate::record::atomic::check_output(&out, "--out", &inputs)?;
+    identify::record::atomic::check_output(&out, "--out", &inputs)?;
     for d in &plan.decisions {
         eprintln!("{d}");
     }
@@ -211,7 +211,7 @@ pub fn run(args: Args) -> Result<()> {
     let outcome = report(identified.record, &out);
     // The figures of a failed or implausible run are drawn too: they show what went wrong.
     if let Some(dir) = &args.plot {
-        let drawn = crate::plot::plot(&out, dir)?;
+        let drawn = identify::plot::plot(&out, dir)?;
         for note in &drawn.skipped {
             eprintln!("note: {note}");
         }

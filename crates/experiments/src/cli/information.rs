@@ -8,7 +8,7 @@ use std::path::PathBuf;
 use crate::error::{bail, Result};
 use crate::information::{information_limit, report, table, InformationLimit, REL_STEP};
 use crate::likelihood::{Candidate, DataDir};
-use crate::record::RunRecord;
+use identify::record::RunRecord;
 
 /// Arguments of `sysid information`.
 #[derive(Debug, clap::Args)]

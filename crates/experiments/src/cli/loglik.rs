@@ -41,7 +41,7 @@ pub fn run(args: Args) -> Result<()> {
             inputs.push(("--config", c));
         }
         inputs.extend(args.records.iter().map(|r| ("a record", r.as_path())));
-        crate::record::atomic::check_output(out, "--out", &inputs)?;
+        identify::record::atomic::check_output(out, "--out", &inputs)?;
     }
     let candidates = args
         .records

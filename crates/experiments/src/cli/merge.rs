@@ -9,9 +9,9 @@ use std::path::PathBuf;
 
 use crate::error::Result;
 
-use crate::record::RunRecord;
 use crate::sweep::lock::DirLock;
 use crate::sweep::{merge, study_pairs};
+use identify::record::RunRecord;
 
 /// Arguments of `sysid merge`.
 #[derive(Debug, clap::Args)]

@@ -6,7 +6,7 @@
 //! - `hysteresis.svg`: the validation hysteresis loop, with the true loop when known;
 //! - `accelerations.svg`, `innovations.svg`, `innovation_acf.svg`: measured against predicted
 //!   accelerations, the normalised innovations and their autocorrelation with a whiteness check
-//!   (Ljung–Box), when the record carries `residuals` ([`crate::checks::Residuals`]).
+//!   (Ljung–Box), when the record carries `residuals` ([`identify::checks::Residuals`]).
 //!
 //! A figure whose data the record lacks is skipped with a note saying what is missing.
 
@@ -14,7 +14,7 @@ use std::path::PathBuf;
 
 use crate::error::Result;
 
-use crate::plot::plot;
+use identify::plot::plot;
 
 /// Arguments of `sysid plot`.
 #[derive(Debug, clap::Args)]

@@ -5,8 +5,8 @@ use std::path::PathBuf;
 
 use crate::error::{Context, Result};
 
-use crate::pipeline::Algorithm;
 use crate::reference::posterior::{reference_posterior, write_reference, ReferenceRequest};
+use identify::pipeline::Algorithm;
 
 /// Arguments of `sysid reference`.
 #[derive(Debug, clap::Args)]

@@ -11,7 +11,7 @@ use models::dataset;
 use models::readers::Units;
 use std::path::PathBuf;
 
-use crate::simulation::{dataset_config, SimulationRequest};
+use identify::simulation::{dataset_config, SimulationRequest};
 
 /// Units of a CSV excitation record.
 #[derive(Debug, Clone, Copy, clap::ValueEnum)]

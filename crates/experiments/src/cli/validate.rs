@@ -8,8 +8,8 @@ use std::path::PathBuf;
 
 use crate::error::{Context, Result};
 
-use crate::validation::cross::cross_validate;
-use crate::validation::{self, BAND_DRAWS};
+use identify::validation::cross::cross_validate;
+use identify::validation::{self, BAND_DRAWS};
 
 /// Arguments of `sysid validate`.
 #[derive(Debug, clap::Args)]
@@ -35,7 +35,7 @@ pub struct Args {
 pub fn run(args: Args) -> Result<()> {
     // Checked before the work, not only when written: a refused --out costs no run.
     if let Some(out) = &args.out {
-        crate::record::atomic::check_output(
+        identify::record::atomic::check_output(
             out,
             "--out",
             &[("--record", &args.record), ("--data", &args.data)],

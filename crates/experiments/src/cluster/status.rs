@@ -13,8 +13,8 @@ use rayon::prelude::*;
 use super::plan::Plan;
 use super::scheduler::{self, Queued};
 use super::ClusterError;
-use crate::record::RunRecord;
 use crate::sweep::{read_record, SweepRecord};
+use identify::record::RunRecord;
 
 /// Where a run stands.
 #[derive(Debug, Clone, PartialEq, Eq)]

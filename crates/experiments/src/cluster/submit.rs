@@ -8,9 +8,9 @@ use super::script::{finish_script, shard_script};
 use super::status::status;
 use super::ClusterError;
 use crate::engine::RunMode;
-use crate::record::RunRecord;
 use crate::sweep::lock::{utc_now, DirLock};
 use crate::sweep::{merge, study_pairs, write_bytes_atomic};
+use identify::record::RunRecord;
 
 /// What `submit` or `resubmit` will do or did.
 #[derive(Debug, Clone)]

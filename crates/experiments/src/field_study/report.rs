@@ -11,9 +11,9 @@ use crate::error::{Context, Result};
 use serde::Deserialize;
 
 use super::{select, FieldStudy, Part, PartDirs};
-use crate::record::RunRecord;
-use crate::validation::cross::CrossValidation;
-use crate::validation::{FreeRun, ModalComparison};
+use identify::record::RunRecord;
+use identify::validation::cross::CrossValidation;
+use identify::validation::{FreeRun, ModalComparison};
 
 /// The baseline's result (`experiments/real/srim.py`).
 #[derive(Debug, Clone, Deserialize)]
@@ -67,7 +67,7 @@ fn run_record(path: &Path) -> Result<Option<RunRecord>> {
     if !path.exists() {
         return Ok(None);
     }
-    Ok(Some(crate::record::read::read::<RunRecord>(path)?))
+    Ok(Some(identify::record::read::read::<RunRecord>(path)?))
 }
 
 fn cross(path: &Path) -> Result<Option<CrossValidation>> {

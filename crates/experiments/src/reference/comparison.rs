@@ -30,7 +30,7 @@ pub struct Comparison {
 /// last window, which on a short record is close to it).
 pub fn compare(
     reference: &[ParamSummary],
-    records: &[crate::record::RunRecord],
+    records: &[identify::record::RunRecord],
 ) -> Vec<Comparison> {
     let mut algorithms: Vec<&str> = records.iter().map(|r| r.algorithm.as_str()).collect();
     algorithms.sort();
@@ -56,14 +56,14 @@ pub fn compare(
             if shifts.is_empty() {
                 continue;
             }
-            let (mean, spread, n) = crate::metrics::mean_sd(&shifts);
+            let (mean, spread, n) = identify::metrics::mean_sd(&shifts);
             out.push(Comparison {
                 algorithm: alg.to_string(),
                 param: p.name.clone(),
                 runs: n,
                 mean_shift_in_ref_sd: mean,
                 spread_in_ref_sd: if n > 1 { spread } else { f64::NAN },
-                sd_ratio: crate::metrics::mean_sd(&ratios).0,
+                sd_ratio: identify::metrics::mean_sd(&ratios).0,
             });
         }
     }
@@ -73,7 +73,7 @@ pub fn compare(
 /// The comparison as a markdown table, with the reference beside it.
 pub fn compare_markdown(
     reference: &[ParamSummary],
-    records: &[crate::record::RunRecord],
+    records: &[identify::record::RunRecord],
 ) -> String {
     use std::fmt::Write as _;
     let mut o = String::new();
@@ -141,7 +141,7 @@ pub struct LimitRow {
 }
 
 /// One data set: its (pooled) reference and the online records computed on it.
-pub type DataSetRuns = (Vec<ParamSummary>, Vec<crate::record::RunRecord>);
+pub type DataSetRuns = (Vec<ParamSummary>, Vec<identify::record::RunRecord>);
 
 /// The algorithms of the online records of `groups`, sorted, once each.
 fn algorithms_of(groups: &[DataSetRuns]) -> Vec<&str> {
@@ -203,7 +203,7 @@ pub fn information_limit(groups: &[DataSetRuns]) -> Vec<LimitRow> {
             if err.is_empty() {
                 continue;
             }
-            let mean = |x: &[f64]| crate::metrics::mean_sd(x).0;
+            let mean = |x: &[f64]| identify::metrics::mean_sd(x).0;
             out.push(LimitRow {
                 param: name.to_string(),
                 algorithm: alg.to_string(),
@@ -272,14 +272,14 @@ pub fn goal_rows(groups: &[DataSetRuns]) -> Vec<GoalRow> {
                         .collect();
                     if !errors.is_empty() {
                         reference.push((p.mean / t - 1.0).abs());
-                        online.push(crate::metrics::mean_sd(&errors).0);
+                        online.push(identify::metrics::mean_sd(&errors).0);
                     }
                 }
             }
             if reference.is_empty() {
                 continue;
             }
-            let mean = |x: &[f64]| crate::metrics::mean_sd(x).0;
+            let mean = |x: &[f64]| identify::metrics::mean_sd(x).0;
             let difference = Estimate::of(
                 &online
                     .iter()
@@ -390,7 +390,7 @@ pub fn limit_markdown(rows: &[LimitRow]) -> String {
 }
 
 /// The data set a run record was computed on (`data.sha256` of its fingerprint).
-pub fn record_data_sha(r: &crate::record::RunRecord) -> Option<&str> {
+pub fn record_data_sha(r: &identify::record::RunRecord) -> Option<&str> {
     r.fingerprint
         .as_ref()?
         .inputs
@@ -404,7 +404,7 @@ struct DataSetGroup {
     data: String,
     sha: Option<String>,
     chains: Vec<Vec<crate::reference::ParamSummary>>,
-    records: Vec<crate::record::RunRecord>,
+    records: Vec<identify::record::RunRecord>,
 }
 
 /// `sysid compare-reference`: the online filters' final posteriors against the reference; with
@@ -424,7 +424,7 @@ pub fn compare_files(
     // effective samples is not read as exact.
     let mut chain_notes = Vec::new();
     for path in references {
-        let r: ReferenceRecord = crate::record::read::read(path)?;
+        let r: ReferenceRecord = identify::record::read::read(path)?;
         // Older records carry no warnings: recompute them from what they hold.
         let warnings = chain_warnings(r.acceptance, &r.params, r.failed_estimates, r.evaluations);
         if r.acceptance == 0.0 {
@@ -454,7 +454,7 @@ pub fn compare_files(
         );
     }
     for p in records {
-        let r: crate::record::RunRecord = crate::sweep::read_record(p)?;
+        let r: identify::record::RunRecord = crate::sweep::read_record(p)?;
         let sha = record_data_sha(&r);
         let group = match groups.as_mut_slice() {
             // A reference that does not name its data set is compared with every record, as

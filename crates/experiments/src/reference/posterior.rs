@@ -10,7 +10,7 @@ use core_filters::rng::stream;
 use models::dataset::load_dir;
 
 use super::{chain_warnings, run_chain, summarise, FilterLikelihood, ReferenceRecord, ThetaMap};
-use crate::pipeline::{chain_spec, Algorithm, FilterSettings};
+use identify::pipeline::{chain_spec, Algorithm, FilterSettings};
 
 /// What `sysid reference` asks for (every flag but `--out`).
 #[derive(Debug, Clone)]
@@ -43,9 +43,9 @@ pub fn reference_posterior(
     args: &ReferenceRequest,
     note: &mut dyn FnMut(String),
 ) -> Result<ReferenceRecord> {
-    crate::limits::check_count(args.particles, 1, crate::limits::MAX_PARTICLES)
+    identify::limits::check_count(args.particles, 1, identify::limits::MAX_PARTICLES)
         .context("--particles")?;
-    crate::limits::check_chain(args.iterations, args.burn_in, args.probe)
+    identify::limits::check_chain(args.iterations, args.burn_in, args.probe)
         .map_err(|(flag, e)| crate::error::invalid!("{flag}: {e}"))?;
     let data = load_dir(&args.data)
         .with_context(|| format!("loading data set {}", args.data.display()))?;
@@ -53,7 +53,7 @@ pub fn reference_posterior(
         .true_chain()
         .context("rebuilding the data set's structure")?;
     let mut settings = match &args.config {
-        Some(path) => crate::limits::load_filter_settings(path)?,
+        Some(path) => identify::limits::load_filter_settings(path)?,
         None => FilterSettings::default(),
     };
     let config_name = args
@@ -64,17 +64,18 @@ pub fn reference_posterior(
     let measured = args.data.join(models::dataset::MEASURED);
     if data.meta.is_some() {
         // Simulated data carry their structure: a stated key must agree with it.
-        crate::field::resolve(&data, None, &settings.structure, &measured, &table_name)?;
-        settings.structure = crate::field::StructureSettings::default();
+        identify::field::resolve(&data, None, &settings.structure, &measured, &table_name)?;
+        settings.structure = identify::field::StructureSettings::default();
     } else {
-        crate::field::resolve(&data, None, &settings.structure, &measured, &table_name).context(
-            "field data: give the building with --config FILE and its [structure] table",
-        )?;
+        identify::field::resolve(&data, None, &settings.structure, &measured, &table_name)
+            .context(
+                "field data: give the building with --config FILE and its [structure] table",
+            )?;
     }
     let mut spec = chain_spec(&data, chain.as_ref(), &settings)?;
     // `substeps = "auto"` in a config is resolved as in `sysid filter`, not silently one.
-    let scaled = crate::pipeline::prior_from_data(&data, chain.as_ref(), &settings)?;
-    crate::pipeline::resolve_substeps(args.estimator, &mut spec, &settings, scaled.as_ref());
+    let scaled = identify::pipeline::prior_from_data(&data, chain.as_ref(), &settings)?;
+    identify::pipeline::resolve_substeps(args.estimator, &mut spec, &settings, scaled.as_ref());
     let names = spec.prior.names();
     let map = ThetaMap::new(&spec.prior)?;
     let truth = data.meta.as_ref().map(|m| m.theta_true.clone());
@@ -82,7 +83,7 @@ pub fn reference_posterior(
         (Some(t), true, _) => t.clone(),
         (None, true, _) => bail!("--start-at-truth: {} has no true θ", args.data.display()),
         (_, false, Some(path)) => {
-            let r: crate::record::RunRecord = crate::sweep::read_record(path)?;
+            let r: identify::record::RunRecord = crate::sweep::read_record(path)?;
             if r.param_names != names {
                 bail!(
                     "--start-from {}: its parameters {:?} are not this data set's {:?}",
@@ -168,7 +169,7 @@ pub fn reference_posterior(
     );
     let record = ReferenceRecord {
         data: args.data.display().to_string(),
-        data_sha256: crate::record::fingerprint::data_identity(&data)
+        data_sha256: identify::record::fingerprint::data_identity(&data)
             .get("sha256")
             .and_then(|v| v.as_str())
             .map(str::to_string),
@@ -196,7 +197,7 @@ pub fn reference_posterior(
 /// Writes a reference record to `out`; an error (after writing) when its chain did not move
 /// after the burn-in.
 pub fn write_reference(out: &Path, record: &ReferenceRecord) -> Result<()> {
-    crate::record::read::write(out, record)
+    identify::record::read::write(out, record)
         .with_context(|| format!("writing {}", out.display()))?;
     if record.acceptance == 0.0 {
         bail!(

@@ -15,27 +15,27 @@ pub struct ReferenceRecord {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub data_sha256: Option<String>,
     pub steps: usize,
-    #[serde(with = "crate::record::number::scalar")]
+    #[serde(with = "identify::record::number::scalar")]
     pub dt: f64,
     pub estimator: String,
     pub particles: usize,
     pub iterations: usize,
     pub burn_in: usize,
     pub seed: u64,
-    #[serde(with = "crate::record::number::vec")]
+    #[serde(with = "identify::record::number::vec")]
     pub start: Vec<f64>,
     /// Mean and s.d. of `probe` likelihood estimates at the start point.
-    #[serde(with = "crate::record::number::scalar")]
+    #[serde(with = "identify::record::number::scalar")]
     pub loglik_at_start_mean: f64,
-    #[serde(with = "crate::record::number::scalar")]
+    #[serde(with = "identify::record::number::scalar")]
     pub loglik_at_start_sd: f64,
-    #[serde(with = "crate::record::number::scalar")]
+    #[serde(with = "identify::record::number::scalar")]
     pub acceptance: f64,
-    #[serde(with = "crate::record::number::scalar")]
+    #[serde(with = "identify::record::number::scalar")]
     pub acceptance_burn_in: f64,
     pub evaluations: u64,
     pub failed_estimates: u64,
-    #[serde(with = "crate::record::number::scalar")]
+    #[serde(with = "identify::record::number::scalar")]
     pub wall_s: f64,
     pub params: Vec<ParamSummary>,
     /// Why this reference should not be trusted as it is ([`chain_warnings`]).
@@ -43,7 +43,7 @@ pub struct ReferenceRecord {
     pub warnings: Vec<String>,
 }
 
-impl crate::record::read::Checked for ReferenceRecord {
+impl identify::record::read::Checked for ReferenceRecord {
     const KIND: &'static str = "reference record";
     /// One summary per free parameter with distinct names, quantiles in order where they are
     /// numbers, and counts that agree (failed estimates within the evaluations).

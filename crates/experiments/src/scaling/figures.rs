@@ -8,8 +8,8 @@ use crate::error::{bail, Context, Result};
 use plotters::prelude::*;
 
 use super::{is_reference, Cell, CostFit};
-use crate::figures::{style, CAPTION_SIZE, DESC_SIZE, FONT, LABEL_SIZE, TITLE_SIZE, WIDTH};
-use crate::pipeline::Algorithm;
+use identify::figures::{style, CAPTION_SIZE, DESC_SIZE, FONT, LABEL_SIZE, TITLE_SIZE, WIDTH};
+use identify::pipeline::Algorithm;
 
 fn label_of(name: &str) -> &'static str {
     name.parse::<Algorithm>().map_or("?", |a| a.label())

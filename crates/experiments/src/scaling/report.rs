@@ -6,8 +6,8 @@ use std::fmt::Write as _;
 
 use super::{is_reference, Cell, CostFit};
 use crate::markdown::{compact_header, joined, num, share};
-use crate::pipeline::Algorithm;
 use crate::study::Study;
+use identify::pipeline::Algorithm;
 
 /// Steps of the whole El Centro record at dt = 0.005 s (31.18 s).
 pub const FULL_RECORD_STEPS: usize = 6236;
@@ -74,7 +74,7 @@ fn settings_phrase(study: &Study) -> String {
         joined(&study.sweep.particles, ", "),
         f.discretisation.name()
     );
-    if f.substeps != crate::settings::Substeps::default() {
+    if f.substeps != identify::settings::Substeps::default() {
         let _ = write!(words, ", sub-steps {}", f.substeps);
     }
     if let Some(d) = f.rejuvenation {

@@ -18,7 +18,7 @@ use std::path::{Path, PathBuf};
 use crate::error::{bail, Context, Result};
 
 use super::{clean_stale_temporaries, same_but_timing, write_bytes_atomic, SweepRecord};
-use crate::record::read::{parse, read_bytes};
+use identify::record::read::{parse, read_bytes};
 
 /// What a merge did.
 #[derive(Debug, Clone, Default, PartialEq)]
@@ -110,7 +110,7 @@ pub fn merge<R: SweepRecord>(pairs: &[(PathBuf, PathBuf)]) -> Result<MergeReport
         }
         let old = match read_bytes(&p.dst) {
             Ok(b) => b,
-            Err(e @ crate::record::read::ReadError::TooLarge { .. }) => {
+            Err(e @ identify::record::read::ReadError::TooLarge { .. }) => {
                 p.replaces = Some(format!("unreadable: {e}"));
                 continue;
             }

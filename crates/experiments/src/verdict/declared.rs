@@ -38,8 +38,8 @@ use super::{
     Finding, Verdict,
 };
 use crate::error::{bail, Result};
-use crate::metrics::mean_sd;
-use crate::record::RunRecord;
+use identify::metrics::mean_sd;
+use identify::record::RunRecord;
 
 /// Fewest completed runs on both sides for a difference to count in `differs-from-first`.
 pub const MIN_RUNS: usize = 5;

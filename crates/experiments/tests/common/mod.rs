@@ -5,9 +5,9 @@
 use std::collections::BTreeMap;
 
 use core_filters::Health;
-use experiments::metrics::{SignalError, StateErrors};
-use experiments::observe::Trace;
-use experiments::record::{Fingerprint, Loop, RunRecord, Timing, Validation, Versions};
+use identify::metrics::{SignalError, StateErrors};
+use identify::observe::Trace;
+use identify::record::{Fingerprint, Loop, RunRecord, Timing, Validation, Versions};
 
 /// A fresh directory under the system temp dir whose name starts with `prefix`, and the guard
 /// that removes it when dropped (also when the test panics).

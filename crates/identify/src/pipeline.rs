@@ -241,7 +241,7 @@ pub fn execute(
             channels,
         )?))
     };
-    // The pace of a long run is timed over all its pooled filters ([`crate::pace`]).
+    // The pace of a long run is timed over all its pooled filters (the caller's pace).
     let shape = filter.shape();
     crate::limits::check_particle_cloud(
         s.particles,

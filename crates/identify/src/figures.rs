@@ -31,14 +31,14 @@ use crate::record::RunRecord;
 use style::SeriesStyle;
 
 /// Font family of all text (the SVG backend writes `<text>` elements; the viewer lays them out).
-pub(crate) const FONT: &str = "sans-serif";
+pub const FONT: &str = "sans-serif";
 /// Font sizes in plotters units; the SVG backend writes `size / 1.24` px, so these give ≥ 16 px
 /// tick labels, ≥ 17 px axis descriptions and ≥ 20 px titles.
-pub(crate) const TITLE_SIZE: f64 = 32.0;
-pub(crate) const CAPTION_SIZE: f64 = 26.0;
-pub(crate) const DESC_SIZE: f64 = 21.0;
-pub(crate) const LABEL_SIZE: f64 = 20.0;
-pub(crate) const WIDTH: u32 = 1200;
+pub const TITLE_SIZE: f64 = 32.0;
+pub const CAPTION_SIZE: f64 = 26.0;
+pub const DESC_SIZE: f64 = 21.0;
+pub const LABEL_SIZE: f64 = 20.0;
+pub const WIDTH: u32 = 1200;
 
 /// Colour-blind-safe palette (Okabe–Ito), one colour per run or algorithm, cycled.
 pub(crate) const PALETTE: [RGBColor; 7] = [
@@ -75,7 +75,7 @@ pub fn param_unit(name: &str) -> &'static str {
 
 /// Grid of panels for `n` panels: as square as possible, columns first (9 → 3×3, 4 → 2×2,
 /// 2 → 1×2, 5 → 2×3).
-pub(crate) fn grid_dims(n: usize) -> (usize, usize) {
+pub fn grid_dims(n: usize) -> (usize, usize) {
     let n = n.max(1);
     let mut cols = 1;
     while cols * cols < n {
@@ -161,7 +161,7 @@ pub(crate) type Area<'a> = DrawingArea<SVGBackend<'a>, Shift>;
 /// Opens the SVG figure `path`, [`WIDTH`] × `height` px: creates its parent directory, fills the
 /// background white, draws the title and splits a legend strip `legend_h` px high off the
 /// bottom. Returns the root (for [`present`]), the area below the title and the legend strip.
-pub(crate) fn open_figure<'a>(
+pub fn open_figure<'a>(
     path: &'a Path,
     height: u32,
     title: &str,
@@ -176,7 +176,7 @@ pub(crate) fn open_figure<'a>(
 }
 
 /// Writes the figure drawn on `root` to its file, `path`.
-pub(crate) fn present(root: &Area<'_>, path: &Path) -> Result<()> {
+pub fn present(root: &Area<'_>, path: &Path) -> Result<()> {
     root.present()
         .with_context(|| format!("writing {}", path.display()))?;
     Ok(())
@@ -203,7 +203,7 @@ fn panel_chart<'a>(
 }
 
 /// Draws a mesh configured by the caller in the figures' fonts, without light grid lines.
-pub(crate) fn draw_mesh(
+pub fn draw_mesh(
     mesh: &mut MeshStyle<'_, '_, RangedCoordf64, RangedCoordf64, SVGBackend<'_>>,
 ) -> Result<()> {
     mesh.label_style((FONT, LABEL_SIZE))
@@ -247,7 +247,7 @@ fn legend_layout(entries: &[(Swatch, String)]) -> (usize, u32) {
 
 /// The marker of a series centred at pixel `(x, y)`: circle, triangle, square, diamond; filled
 /// for solid series (forward Euler or no scheme), hollow for dashed ones.
-pub(crate) fn marker<DB: DrawingBackend>(
+pub fn marker<DB: DrawingBackend>(
     st: SeriesStyle,
     (x, y): (i32, i32),
 ) -> DynElement<'static, DB, (i32, i32)> {
@@ -792,7 +792,7 @@ pub fn crosses(groups: &[(&str, Vec<&RunRecord>)], path: &Path, title: &str) -> 
 /// dampings `c…`, and the rest (the hysteresis parameters β, γ, n of SPEC §1). Empty groups are
 /// left out.
 pub fn parameter_groups(names: &[String]) -> Vec<(String, Vec<usize>)> {
-    let numbered = crate::verdict::in_group;
+    let numbered = crate::metrics::in_group;
     let mut groups: Vec<(String, Vec<usize>)> = vec![
         ("stiffness".into(), Vec::new()),
         ("damping".into(), Vec::new()),

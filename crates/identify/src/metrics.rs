@@ -56,7 +56,7 @@ impl StateErrors {
 }
 
 /// The median of the finite values of `v` (None when there are none).
-pub(crate) fn median(v: &[f64]) -> Option<f64> {
+pub fn median(v: &[f64]) -> Option<f64> {
     let mut v: Vec<f64> = v.iter().copied().filter(|x| x.is_finite()).collect();
     if v.is_empty() {
         return None;
@@ -91,6 +91,12 @@ pub fn mean_sd(values: &[f64]) -> (f64, f64, usize) {
 pub fn mean_spread(x: &[f64]) -> (f64, f64) {
     let (m, sd, n) = mean_sd(x);
     (m, if n > 1 { sd } else { f64::NAN })
+}
+
+/// Whether `name` is a parameter of the group `prefix` followed by digits (`k1`, `c12`).
+pub fn in_group(name: &str, prefix: char) -> bool {
+    name.strip_prefix(prefix)
+        .is_some_and(|rest| !rest.is_empty() && rest.chars().all(|c| c.is_ascii_digit()))
 }
 
 #[cfg(test)]

@@ -215,7 +215,7 @@ impl Whiteness {
 /// 95% quantile of χ² with `dof` degrees of freedom: exact for 1 and 2 (1.96² and −2 ln 0.05),
 /// Wilson–Hilferty from 3 up (relative error below 1%; 2.4 % at 1 degree, where the likelihood
 /// region of one free parameter needs it).
-pub(crate) fn chi2_95(dof: usize) -> f64 {
+pub fn chi2_95(dof: usize) -> f64 {
     match dof {
         1 => return 3.841_458_820_694_124,
         2 => return -2.0 * 0.05_f64.ln(),
