@@ -31,14 +31,14 @@ use crate::markdown::{header, row};
 
 /// Runs below which no verdict is given: with fewer than 10 runs the normal approximation to the
 /// binomial behind the test is poor and, at q = 0.5, not even 0 of n covered would be flagged.
-pub const MIN_RUNS_FOR_VERDICT: usize = 10;
+pub(crate) const MIN_RUNS_FOR_VERDICT: usize = 10;
 
 /// Width of the calibration test in nominal standard errors (two-sided, ≈ 5 % false alarms
 /// per level under the normal approximation).
-pub const VERDICT_SE: f64 = 2.0;
+pub(crate) const VERDICT_SE: f64 = 2.0;
 
 /// Probabilities at which the z-score distribution is summarised.
-pub const Z_PROBABILITIES: [f64; 5] = [0.05, 0.25, 0.5, 0.75, 0.95];
+pub(crate) const Z_PROBABILITIES: [f64; 5] = [0.05, 0.25, 0.5, 0.75, 0.95];
 
 /// Two interval levels closer than this are the same nominal level.
 const LEVEL_MATCH: f64 = 1e-9;
@@ -104,7 +104,7 @@ pub enum Verdict {
     OverConfident,
     /// Coverage above q by more than 2 nominal s.e.: intervals too wide.
     UnderConfident,
-    /// Fewer than [`MIN_RUNS_FOR_VERDICT`] runs.
+    /// Fewer than `MIN_RUNS_FOR_VERDICT` runs.
     TooFewRuns,
 }
 
@@ -125,7 +125,7 @@ impl Verdict {
 /// `coverage = covered / runs`. Two standard errors are given: `se = sqrt(c(1 − c)/n)` at the
 /// observed coverage c, the one to display beside it, and `se_nominal = sqrt(q(1 − q)/n)` at the
 /// nominal level q, the one the test uses (the s.e. under the hypothesis of calibration; it does
-/// not vanish when 0 or all of n runs are covered). Verdict: with n ≥ [`MIN_RUNS_FOR_VERDICT`],
+/// not vanish when 0 or all of n runs are covered). Verdict: with n ≥ `MIN_RUNS_FOR_VERDICT`,
 /// over-confident if `q − c > 2 se_nominal`, under-confident if `c − q > 2 se_nominal`, else
 /// consistent with nominal.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

@@ -184,7 +184,10 @@ pub fn report_section(out: &mut String, title: &str, c: &SweepCoverage) {
 }
 
 /// The coverage of a study's sweep, its records grouped by the study's algorithms in order.
-pub fn study_coverage(study: &Study, records: &[RunRecord]) -> Result<Option<SweepCoverage>> {
+pub(crate) fn study_coverage(
+    study: &Study,
+    records: &[RunRecord],
+) -> Result<Option<SweepCoverage>> {
     let groups: Vec<(&str, Vec<&RunRecord>)> = study
         .sweep
         .algorithms

@@ -16,7 +16,7 @@ use models::integrate::Trajectory;
 use thiserror::Error;
 
 /// Largest decimation factor accepted (a factor beyond it leaves too few samples of any record).
-pub const MAX_FACTOR: usize = 1000;
+pub(crate) const MAX_FACTOR: usize = 1000;
 
 /// A decimation that cannot be applied.
 #[derive(Debug, Clone, PartialEq, Eq, Error)]
@@ -34,7 +34,7 @@ pub enum DecimateError {
 crate::error::domain_error!(DecimateError);
 
 /// Checks a decimation factor on its own (before any data exist).
-pub fn check_factor(factor: usize) -> Result<(), DecimateError> {
+pub(crate) fn check_factor(factor: usize) -> Result<(), DecimateError> {
     if (1..=MAX_FACTOR).contains(&factor) {
         Ok(())
     } else {

@@ -3,7 +3,7 @@
 //! mechanism check in `docs/discretisation.md`). The marginalised filters run with forward Euler
 //! (the paper's, SPEC §3) and with semi-implicit (symplectic) Euler on the same data sets; the
 //! reproduction takes over the Fig. 7 sweep's Euler records where they are the same jobs
-//! ([`crate::engine::Reuse`] from [`SOURCE`]). This module draws and tabulates the schemes side
+//! ([`crate::engine::Reuse`] from `SOURCE`). This module draws and tabulates the schemes side
 //! by side; the statements the section decides (paired Euler − symplectic differences, the
 //! dt·k/c band, the goals, 100 Hz against 200 Hz) are declared in the two study files
 //! (`[[verdicts]]`, [`crate::verdict::declared`]).
@@ -31,10 +31,11 @@ use identify::record::RunRecord;
 pub const STUDIES: [&str; 2] = ["discretisation", "discretisation-100hz"];
 
 /// The sweep whose records the Euler arm may take over (same data sets, same settings).
-pub const SOURCE: &str = "fig7";
+pub(crate) const SOURCE: &str = "fig7";
 
 /// The algorithms of the study, in the report's order.
-pub const ALGORITHMS: [Algorithm; 3] = [Algorithm::MlnRbpf, Algorithm::Storvik, Algorithm::MpfEkf2];
+pub(crate) const ALGORITHMS: [Algorithm; 3] =
+    [Algorithm::MlnRbpf, Algorithm::Storvik, Algorithm::MpfEkf2];
 
 /// The schemes compared.
 pub const SCHEMES: [Discretisation; 2] = [Discretisation::Euler, Discretisation::Symplectic];

@@ -1,6 +1,6 @@
 //! The study engine: one way to run any study description ([`Study`], `experiments/*.toml`).
 //! Every study command (the paper reproduction, the discretisation, excitations and scaling
-//! studies, a user's study) runs its jobs through [`Engine::sweep`] — records written as runs
+//! studies, a user's study) runs its jobs through `Engine::sweep` — records written as runs
 //! finish, resumable by fingerprint, shardable — and then turns the records into its summary
 //! and report; only that last step is the study's own.
 
@@ -46,7 +46,7 @@ impl RunMode {
     }
 
     /// The report of merged shards: every record reused, nothing computed.
-    pub fn report_merged(quick: bool) -> Self {
+    pub(crate) fn report_merged(quick: bool) -> Self {
         Self {
             quick,
             threads: 1,
@@ -59,7 +59,7 @@ impl RunMode {
 
 /// How a study is run: where its results go and the [`RunMode`].
 #[derive(Debug, Clone, Copy)]
-pub struct Engine<'a> {
+pub(crate) struct Engine<'a> {
     /// The study's output directory (records below it, summary and report in it).
     pub out: &'a Path,
     pub mode: RunMode,
@@ -109,12 +109,12 @@ impl Engine<'_> {
 
     /// Whether this is one part of a sharded sweep: then only records are written, and the
     /// summary and report wait for the merged records ([`Engine::shard_note`]).
-    pub fn sharded(&self) -> bool {
+    pub(crate) fn sharded(&self) -> bool {
         self.mode.shard != Shard::default()
     }
 
     /// Says on stderr what a shard did and how its records become a report.
-    pub fn shard_note(&self, did: &str) {
+    pub(crate) fn shard_note(&self, did: &str) {
         log::info!(
             "shard {}/{}: {did}; merge the shards' records (`sysid merge`) and run the same \
              command without `--shard` and with `--resume` to write the report",

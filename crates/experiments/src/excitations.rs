@@ -5,7 +5,7 @@
 //!
 //! The study is an ordinary [`Study`] whose structure axis varies the excitation (the
 //! `excitation` and `scale` fields of `[[sweep.structures]]`); its sweep is the one of the
-//! scaling study ([`crate::scaling::run_with`]: resumable, shardable, CPU time per run). This
+//! scaling study (`crate::scaling::run_with`: resumable, shardable, CPU time per run). This
 //! module writes its outputs: per ground motion and algorithm the stiffness and damping errors,
 //! θ_val ratios of the Bouc–Wen parameters, the coverage of the 95 % intervals of k and c and
 //! the failures; a figure; and the verdicts the study file declares (`[[verdicts]]`, test

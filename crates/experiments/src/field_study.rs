@@ -6,7 +6,7 @@
 //! `mdof`).
 //!
 //! The study is a description (this module's [`FieldStudy`], a TOML file) turned into the
-//! `sysid` commands a user would type ([`plan_identify`], [`plan_validate`]); [`run`] executes them with
+//! `sysid` commands a user would type (`plan_identify`, `plan_validate`); [`run`] executes them with
 //! the `sysid` binary it is given, so every number of the report comes from the same commands
 //! as a user's and from their records. The report is drawn from those records only
 //! ([`report`]).
@@ -206,7 +206,7 @@ fn is_stem(s: &str) -> bool {
 
 impl Part {
     /// The identification record.
-    pub fn identify_record(&self) -> &RecordSpec {
+    pub(crate) fn identify_record(&self) -> &RecordSpec {
         self.record
             .iter()
             .find(|r| r.role == Role::Identify)
@@ -214,7 +214,7 @@ impl Part {
     }
 
     /// The records kept out of every choice.
-    pub fn validate_records(&self) -> impl Iterator<Item = &RecordSpec> {
+    pub(crate) fn validate_records(&self) -> impl Iterator<Item = &RecordSpec> {
         self.record.iter().filter(|r| r.role == Role::Validate)
     }
 }
@@ -239,7 +239,7 @@ impl PartDirs {
         self.root.join("records").join(format!("{variant}.json"))
     }
     /// The selected model identified on `record`.
-    pub fn selected_record(&self, record: &str) -> PathBuf {
+    pub(crate) fn selected_record(&self, record: &str) -> PathBuf {
         self.root
             .join("records")
             .join(format!("selected--{record}.json"))
@@ -253,7 +253,7 @@ impl PartDirs {
         self.root.join("figures").join(variant)
     }
     /// Settings and prior of the selected run, for the other records.
-    pub fn selected_settings(&self) -> PathBuf {
+    pub(crate) fn selected_settings(&self) -> PathBuf {
         self.root.join("selected-settings.toml")
     }
     /// The baseline's result.
@@ -282,7 +282,7 @@ fn s(p: &Path) -> String {
 }
 
 /// The imports and the identifications on the identification record (every variant).
-pub fn plan_identify(part: &Part, dirs: &PartDirs) -> Vec<Step> {
+pub(crate) fn plan_identify(part: &Part, dirs: &PartDirs) -> Vec<Step> {
     let mut steps: Vec<Step> = part
         .record
         .iter()
@@ -385,7 +385,7 @@ fn filter_step(part: &Part, dirs: &PartDirs, call: FilterCall) -> Step {
 }
 
 /// Cross-validation of every variant on every record kept out of the choices.
-pub fn plan_validate(part: &Part, dirs: &PartDirs) -> Vec<Step> {
+pub(crate) fn plan_validate(part: &Part, dirs: &PartDirs) -> Vec<Step> {
     let mut steps = Vec::new();
     for v in &part.variant {
         for r in part.validate_records() {
@@ -439,7 +439,7 @@ pub fn select<'a>(part: &'a Part, dirs: &PartDirs) -> Result<Option<(&'a Variant
 /// The settings of the selected run with its prior (the one scaled from the identification
 /// record) written out, so that the other records are identified from the same prior rather
 /// than one scaled from each of them (`--config` of [`plan_selected`]).
-pub fn write_selected_settings(dirs: &PartDirs, selected: &RunRecord) -> Result<PathBuf> {
+pub(crate) fn write_selected_settings(dirs: &PartDirs, selected: &RunRecord) -> Result<PathBuf> {
     let mut settings: identify::settings::FilterSettings =
         serde_json::from_value(selected.config["filter"].clone())
             .context("the selected record's filter settings")?;
@@ -465,7 +465,7 @@ pub fn write_selected_settings(dirs: &PartDirs, selected: &RunRecord) -> Result<
 
 /// The selected variant identified on every other record, with the identification record's
 /// settings and prior ([`write_selected_settings`]).
-pub fn plan_selected(part: &Part, dirs: &PartDirs, chosen: &Variant) -> Vec<Step> {
+pub(crate) fn plan_selected(part: &Part, dirs: &PartDirs, chosen: &Variant) -> Vec<Step> {
     let mut extra: Vec<String> = vec!["--config".into(), s(&dirs.selected_settings())];
     extra.extend(
         part.selection
@@ -508,7 +508,7 @@ pub enum Ended {
 
 /// The error a log ends with (from its last line starting with `Error`, causes joined), or its
 /// last line.
-pub fn log_reason(log: &Path) -> String {
+pub(crate) fn log_reason(log: &Path) -> String {
     let text = std::fs::read_to_string(log).unwrap_or_default();
     let lines: Vec<&str> = text.lines().collect();
     match lines.iter().rposition(|l| l.starts_with("Error")) {

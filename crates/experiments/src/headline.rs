@@ -15,9 +15,9 @@ use crate::reproduce::{algorithm_stats, AlgorithmStats};
 use identify::record::RunRecord;
 
 /// The line before the generated table in the README.
-pub const BEGIN: &str = "<!-- headline table: generated from results/paper/records/fig7 by `cargo xtask docs`; do not edit by hand -->";
+pub(crate) const BEGIN: &str = "<!-- headline table: generated from results/paper/records/fig7 by `cargo xtask docs`; do not edit by hand -->";
 /// The line after it.
-pub const END: &str = "<!-- end of the generated headline table -->";
+pub(crate) const END: &str = "<!-- end of the generated headline table -->";
 
 /// Rows in this order (the paper's order of presentation, then the baseline).
 const ALGORITHMS: [(&str, &str); 4] = [
@@ -131,7 +131,7 @@ pub fn from_dir(dir: &Path) -> Result<String> {
     table(&records)
 }
 
-/// `readme` with the text between [`BEGIN`] and [`END`] replaced by `table`.
+/// `readme` with the text between `BEGIN` and `END` replaced by `table`.
 pub fn splice(readme: &str, table: &str) -> Result<String> {
     let (Some(b), Some(e)) = (readme.find(BEGIN), readme.find(END)) else {
         bail!("the README has no generated headline table (the lines `{BEGIN}` and `{END}`)");

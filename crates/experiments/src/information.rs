@@ -3,7 +3,7 @@
 //!
 //! For a building without hysteretic storeys the filters' model is linear given θ, so with θ
 //! fixed the MPF-EKF2 samples nothing and its log-likelihood is the Kalman filter's, exact and
-//! smooth in θ ([`crate::likelihood::LikelihoodModel::is_exact`]). Its maximum, the
+//! smooth in θ (`crate::likelihood::LikelihoodModel::is_exact`). Its maximum, the
 //! maximum-likelihood θ̂, is found by Newton's ascent from the truth (or a given start) with
 //! central-difference derivatives ([`core_filters::laplace`]), and `(−H)⁻¹` at θ̂ gives each
 //! parameter's standard deviation: the Cramér–Rao bound of an unbiased answer, which is also the
@@ -34,7 +34,7 @@ use identify::record::{RunRecord, Versions};
 pub const REL_STEP: f64 = 1e-3;
 
 /// Largest move of a parameter in one step of the ascent, relative to its value.
-pub const MAX_REL_STEP: f64 = 0.2;
+pub(crate) const MAX_REL_STEP: f64 = 0.2;
 
 /// The information limit of one data set (`sysid information` writes it as JSON).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -99,7 +99,7 @@ impl InformationLimit {
     }
 
     /// θ̂'s error relative to the truth, per parameter (None without a truth).
-    pub fn mle_error(&self) -> Option<Vec<f64>> {
+    pub(crate) fn mle_error(&self) -> Option<Vec<f64>> {
         let t = self.truth.as_ref()?;
         Some(self.mle.iter().zip(t).map(|(m, t)| m / t - 1.0).collect())
     }
@@ -206,7 +206,7 @@ struct Answer {
 
 /// Whether run record `r` was identified on the data set of `limit` (its fingerprint names the
 /// same data identity).
-pub fn on_data(r: &RunRecord, limit: &InformationLimit) -> bool {
+pub(crate) fn on_data(r: &RunRecord, limit: &InformationLimit) -> bool {
     record_data_sha(r) == Some(limit.data_sha256.as_str())
 }
 

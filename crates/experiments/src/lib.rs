@@ -35,7 +35,7 @@ pub mod headline;
 pub mod information;
 pub mod likelihood;
 mod markdown;
-pub mod pace;
+pub(crate) mod pace;
 pub mod reference;
 pub mod regression;
 pub mod report;

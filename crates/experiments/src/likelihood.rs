@@ -91,7 +91,7 @@ pub struct Scoring {
 
 impl LikelihoodRequest {
     /// How each candidate is scored.
-    pub fn scoring(&self) -> Scoring {
+    pub(crate) fn scoring(&self) -> Scoring {
         Scoring {
             particles: self.particles,
             seeds: self.seeds,
@@ -231,7 +231,7 @@ pub fn score(
 
 /// A data-set directory loaded with the settings of its model (a config file's, or `None` for
 /// `sysid filter`'s recommended ones): what [`ScoredData`] borrows from.
-pub struct DataDir {
+pub(crate) struct DataDir {
     pub data: LoadedDataset,
     pub chain: Option<ShearChain>,
     measured: PathBuf,
@@ -350,13 +350,13 @@ impl<'a> LikelihoodModel<'a> {
     /// Whether the model samples nothing once θ is fixed — a building without hysteretic
     /// storeys — so that `log p̂(y | θ)` is the Kalman filter's exact log-likelihood, the same
     /// for every seed and particle count.
-    pub fn is_exact(&self) -> Result<bool> {
+    pub(crate) fn is_exact(&self) -> Result<bool> {
         let spec = identify::pipeline::chain_spec(self.on.data, self.on.chain, &self.base)?;
         Ok(spec.building.hysteretic().is_empty())
     }
 
     /// Parameters that the base settings already fix: the same in every candidate, not free.
-    pub fn fixed_by_settings(&self) -> usize {
+    pub(crate) fn fixed_by_settings(&self) -> usize {
         self.names
             .iter()
             .filter(|n| self.base.fix.contains_key(*n))

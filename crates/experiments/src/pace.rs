@@ -14,7 +14,7 @@ const REPORT_EVERY_S: f64 = 60.0;
 /// The pace of one run: `total` filter steps (steps × pooled filters) over `record_s` seconds
 /// of record, timed from its creation.
 #[derive(Debug)]
-pub struct Pace {
+pub(crate) struct Pace {
     label: String,
     total: usize,
     record_s: f64,

@@ -171,7 +171,7 @@ impl ThetaMap {
     }
 
     /// u(θ) for the free entries of `theta` (inside the support).
-    pub fn unconstrained(&self, theta: &[f64]) -> Vec<f64> {
+    pub(crate) fn unconstrained(&self, theta: &[f64]) -> Vec<f64> {
         let logit = |p: f64| (p / (1.0 - p)).ln();
         let mut u = Vec::with_capacity(self.dim);
         for c in &self.coordinates {
@@ -220,7 +220,7 @@ impl ThetaMap {
     }
 
     /// Name-free list of the θ indices each coordinate moves (for reporting).
-    pub fn free_indices(&self) -> Vec<usize> {
+    pub(crate) fn free_indices(&self) -> Vec<usize> {
         let mut out = Vec::new();
         for c in &self.coordinates {
             match *c {
@@ -326,7 +326,7 @@ pub struct ParamSummary {
 }
 
 /// Summaries of a chain in θ space.
-pub fn summarise(
+pub(crate) fn summarise(
     chain: &PmmhChain,
     map: &ThetaMap,
     names: &[String],
@@ -355,7 +355,7 @@ pub fn summarise(
 }
 
 /// Runs the chain from θ0 with per-coordinate initial random-walk s.d. `initial_sd`.
-pub fn run_chain(
+pub(crate) fn run_chain(
     target: &mut FilterLikelihood,
     theta0: &[f64],
     config: &PmmhConfig,

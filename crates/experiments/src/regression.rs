@@ -321,7 +321,9 @@ pub fn evaluate(
 
 /// Algorithm → parameter → standard error over the successful runs of the mean relative error
 /// (s.d. / √n), for the table and for recalibrating the bounds.
-pub fn rel_error_std_errors(records: &[RunRecord]) -> BTreeMap<String, BTreeMap<String, f64>> {
+pub(crate) fn rel_error_std_errors(
+    records: &[RunRecord],
+) -> BTreeMap<String, BTreeMap<String, f64>> {
     let mut out: BTreeMap<String, BTreeMap<String, f64>> = BTreeMap::new();
     let mut algs: Vec<&str> = records.iter().map(|r| r.algorithm.as_str()).collect();
     algs.sort_unstable();
@@ -476,7 +478,7 @@ pub fn run(file: &RegressionFile, options: &RegressionOptions) -> Result<Regress
 impl RegressionRun {
     /// Writes the summary (`regression.json`): the regression file's path, the wall time, the run
     /// counts, the statistics and every check with its outcome.
-    pub fn write_summary(&self, path: &Path, config: &Path, wall_s: f64) -> Result<()> {
+    pub(crate) fn write_summary(&self, path: &Path, config: &Path, wall_s: f64) -> Result<()> {
         let text = serde_json::to_string_pretty(&serde_json::json!({
             "config": config,
             "wall_s": wall_s,

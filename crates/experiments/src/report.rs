@@ -65,7 +65,7 @@ pub struct Target<'a> {
 }
 
 /// Builds the report text.
-pub fn write_report(
+pub(crate) fn write_report(
     opts: &Target<'_>,
     studies: &BTreeMap<&str, Study>,
     records: &BTreeMap<&str, Vec<RunRecord>>,

@@ -10,12 +10,12 @@
 //! `cells.csv`, `summary.json` and `REPORT.md`.
 //!
 //! Costs are measured twice: the records' wall times, and the CPU time of the thread that ran
-//! each job (written beside its record as `<id>.cpu`, see [`thread_cpu_s`]). On a machine shared
+//! each job (written beside its record as `<id>.cpu`, see `thread_cpu_s`). On a machine shared
 //! with other work the wall time of a run grows with the load while its CPU time does not, so
 //! the cost figure and fits use CPU time when every run of a cell has it.
 //!
 //! Runs a sweep has not computed yet are listed in the report as not run (as would a structure a
-//! build could not generate: [`crate::study::Structure::unsupported`]).
+//! build could not generate: `crate::study::Structure::unsupported`).
 
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
@@ -61,7 +61,11 @@ pub struct Options {
 /// - MPF-EKF2: sampled the velocities the hysteresis laws read (`v_j`, and `v_{j−1}` above the
 ///   first storey), `r` and `n` of each element; marginalised the rest: 4N + 2E minus the
 ///   sampled velocities.
-pub fn dimensions(algorithm: Algorithm, storeys: usize, hysteretic: &[usize]) -> (usize, usize) {
+pub(crate) fn dimensions(
+    algorithm: Algorithm,
+    storeys: usize,
+    hysteretic: &[usize],
+) -> (usize, usize) {
     let (n, e) = (storeys, hysteretic.len());
     match algorithm {
         Algorithm::Bootstrap => (4 * n + 4 * e, 0),
@@ -122,7 +126,7 @@ pub struct Cell {
 }
 
 /// CPU time (s) consumed so far by the calling thread (NaN where the clock is unavailable).
-pub fn thread_cpu_s() -> f64 {
+pub(crate) fn thread_cpu_s() -> f64 {
     #[cfg(unix)]
     {
         let mut ts = libc::timespec {
@@ -139,12 +143,12 @@ pub fn thread_cpu_s() -> f64 {
 }
 
 /// Path of the CPU-time file of record `id`.
-pub fn cpu_path(records: &Path, id: &str) -> PathBuf {
+pub(crate) fn cpu_path(records: &Path, id: &str) -> PathBuf {
     records.join(format!("{id}.cpu"))
 }
 
 /// The CPU seconds of record `id`, if its file exists and holds a positive number.
-pub fn read_cpu(records: &Path, id: &str) -> Option<f64> {
+pub(crate) fn read_cpu(records: &Path, id: &str) -> Option<f64> {
     let text = std::fs::read_to_string(cpu_path(records, id)).ok()?;
     text.trim()
         .parse::<f64>()
@@ -264,7 +268,7 @@ pub fn cell(of: &CellOf, records: &[&RunRecord], cpu_s: &[Option<f64>]) -> Cell 
 
 /// Least-squares slope and intercept of `ln y` against `ln x` over the finite positive pairs
 /// (`None` with fewer than two distinct x).
-pub fn log_log_fit(points: &[(f64, f64)]) -> Option<(f64, f64)> {
+pub(crate) fn log_log_fit(points: &[(f64, f64)]) -> Option<(f64, f64)> {
     let p: Vec<(f64, f64)> = points
         .iter()
         .filter(|(x, y)| x.is_finite() && y.is_finite() && *x > 0.0 && *y > 0.0)
@@ -284,7 +288,7 @@ pub fn log_log_fit(points: &[(f64, f64)]) -> Option<(f64, f64)> {
 
 /// The jobs of a structure study's sweep, in sweep order (the order `--shard i/n` deals them
 /// out in): every job of a structure this build can generate.
-pub fn sweep_jobs(study: &Study) -> Vec<Job> {
+pub(crate) fn sweep_jobs(study: &Study) -> Vec<Job> {
     study
         .jobs()
         .into_iter()
@@ -312,12 +316,13 @@ pub fn run(opts: &Options) -> Result<Vec<Cell>> {
 /// What writes a structure study's outputs from its cells and records.
 /// Its arguments: the options, the study, the cells, the jobs with a record and those records
 /// (in the same order); `cells.csv` and `last-run.json` are written before it is called.
-pub type Writer<'a> = dyn Fn(&Options, &Study, &[Cell], &[Job], &[RunRecord]) -> Result<()> + 'a;
+pub(crate) type Writer<'a> =
+    dyn Fn(&Options, &Study, &[Cell], &[Job], &[RunRecord]) -> Result<()> + 'a;
 
 /// [`run`] with another writer of the outputs: the sweep over a study's structure axis,
 /// resumable, shardable, with CPU times, shared by the studies that have one (the scaling and
 /// the excitations studies).
-pub fn run_with(opts: &Options, write: &Writer<'_>) -> Result<Vec<Cell>> {
+pub(crate) fn run_with(opts: &Options, write: &Writer<'_>) -> Result<Vec<Cell>> {
     let start = Instant::now();
     let (_lock, engine) = open(&opts.out, opts.mode)?;
     let study = load(&opts.config, opts.mode.quick)?;
@@ -384,7 +389,7 @@ fn write_cells(engine: &Engine<'_>, cells: &[Cell], sweep_s: f64) -> Result<()> 
 
 /// Writes a structure study's `summary.json`: its name, form and structures, and the fields of
 /// `results`.
-pub fn write_summary(
+pub(crate) fn write_summary(
     opts: &Options,
     study: &Study,
     values: &[structures::StructureValues],
@@ -534,7 +539,7 @@ pub fn csv(cells: &[Cell]) -> String {
 /// The cost fit of one algorithm: µs per particle-step against the marginalised dimension over
 /// the structures of one family (the base-hysteresis, all-sensor chains).
 #[derive(Debug, Clone, Serialize)]
-pub struct CostFit {
+pub(crate) struct CostFit {
     pub algorithm: String,
     /// Whether the points are CPU times (every cell of the algorithm has them) or wall times.
     pub cpu: bool,
@@ -546,12 +551,12 @@ pub struct CostFit {
 
 /// Whether a cell belongs to the reference family: Bouc–Wen at storey 1 only, every storey
 /// measured.
-pub fn is_reference(c: &Cell) -> bool {
+pub(crate) fn is_reference(c: &Cell) -> bool {
     c.hysteretic == [1] && c.sensors.len() == c.storeys
 }
 
 /// The cost fits of the reference family, one per algorithm with runs.
-pub fn cost_fits(cells: &[Cell]) -> Vec<CostFit> {
+pub(crate) fn cost_fits(cells: &[Cell]) -> Vec<CostFit> {
     let mut algs: Vec<&str> = Vec::new();
     for c in cells {
         if !algs.contains(&c.algorithm.as_str()) {
@@ -592,7 +597,7 @@ pub fn cost_fits(cells: &[Cell]) -> Vec<CostFit> {
 
 /// The dimension the cost is plotted against: the marginalised one, or for the bootstrap PF
 /// (which marginalises nothing) its sampled dimension.
-pub fn cost_dimension(c: &Cell) -> usize {
+pub(crate) fn cost_dimension(c: &Cell) -> usize {
     if c.marginalised_dim > 0 {
         c.marginalised_dim
     } else {
@@ -624,13 +629,6 @@ fn write_outputs(opts: &Options, study: &Study, cells: &[Cell]) -> Result<()> {
     )?;
     let text = report::write(study, &values, cells, &fits, &unsupported, opts.mode.quick);
     write_bytes_atomic(&out.join("REPORT.md"), text.as_bytes())
-}
-
-/// The report's directory-relative path of a figure (for links).
-pub fn figure_name(path: &Path) -> String {
-    path.file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_default()
 }
 
 #[cfg(test)]

@@ -102,7 +102,7 @@ impl Structure {
     /// Why this build cannot generate the structure's data, if it cannot. Every structure of
     /// the axis is supported (the data configuration takes hysteretic storeys and a sensor
     /// layout); kept so that a future structure field that a build lacks is named, not ignored.
-    pub fn unsupported(&self) -> Option<String> {
+    pub(crate) fn unsupported(&self) -> Option<String> {
         None
     }
 
@@ -218,7 +218,7 @@ pub struct QuickSection {
 }
 
 /// Most runs a study may have (a sweep's records are kept in one directory).
-pub const MAX_RUNS: usize = 100_000;
+pub(crate) const MAX_RUNS: usize = 100_000;
 
 /// One study (`experiments/<name>.toml`).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -549,7 +549,7 @@ impl Study {
     /// The filter settings of `algorithm`'s runs on structure `structure` (an index into the
     /// sweep's structures; `None`: no structure axis): [`Study::filter_of`] with the structure's
     /// `filter` keys laid over it.
-    pub fn filter_for_structure(
+    pub(crate) fn filter_for_structure(
         &self,
         structure: Option<usize>,
         algorithm: Algorithm,

@@ -343,7 +343,7 @@ pub fn write_atomic<T: Serialize>(path: &Path, value: &T) -> Result<()> {
 
 /// Removes the temporary files `*.json.tmp<pid>` that processes which have ended left in `dir`
 /// (a sweep or merge killed between writing a record and renaming it); returns how many.
-pub fn clean_stale_temporaries(dir: &Path) -> Result<usize> {
+pub(crate) fn clean_stale_temporaries(dir: &Path) -> Result<usize> {
     let Ok(entries) = fs::read_dir(dir) else {
         return Ok(0);
     };

@@ -54,7 +54,7 @@ pub struct AlgorithmSpread {
 }
 
 /// The statistics per algorithm (in name order) and parameter.
-pub fn spreads(records: &[RunRecord]) -> Vec<AlgorithmSpread> {
+pub(crate) fn spreads(records: &[RunRecord]) -> Vec<AlgorithmSpread> {
     let mut by: BTreeMap<&str, Vec<&RunRecord>> = BTreeMap::new();
     for r in records {
         by.entry(r.algorithm.as_str()).or_default().push(r);

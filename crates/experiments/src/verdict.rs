@@ -100,7 +100,7 @@ impl Estimate {
 }
 
 /// Φ⁻¹(p), the standard normal quantile, by bisection on Φ(z) = erfc(−z/√2)/2 (to 1e-12).
-pub fn normal_quantile(p: f64) -> f64 {
+pub(crate) fn normal_quantile(p: f64) -> f64 {
     let cdf = |z: f64| 0.5 * libm::erfc(-z / std::f64::consts::SQRT_2);
     let (mut lo, mut hi) = (-40.0_f64, 40.0_f64);
     for _ in 0..200 {
@@ -119,7 +119,7 @@ pub fn normal_quantile(p: f64) -> f64 {
 
 /// The two-sided critical z of `m` simultaneous comparisons at a family-wise level of 5 %
 /// (Bonferroni): Φ⁻¹(1 − 0.025/m); 1.96 for one comparison, 2.50 for four.
-pub fn bonferroni_z(m: usize) -> f64 {
+pub(crate) fn bonferroni_z(m: usize) -> f64 {
     normal_quantile(1.0 - 0.025 / m.max(1) as f64)
 }
 
@@ -152,7 +152,10 @@ pub fn within(e: &Estimate, lo: f64, hi: f64) -> Verdict {
 
 /// Per-run values of a metric, keyed by run index, for the runs that completed and give a
 /// finite value.
-pub fn per_run(records: &[&RunRecord], metric: impl Fn(&RunRecord) -> f64) -> BTreeMap<u64, f64> {
+pub(crate) fn per_run(
+    records: &[&RunRecord],
+    metric: impl Fn(&RunRecord) -> f64,
+) -> BTreeMap<u64, f64> {
     records
         .iter()
         .filter(|r| !r.is_failure())
@@ -162,7 +165,7 @@ pub fn per_run(records: &[&RunRecord], metric: impl Fn(&RunRecord) -> f64) -> BT
 }
 
 /// Paired difference a − b over the run indices present in both.
-pub fn paired_difference(a: &BTreeMap<u64, f64>, b: &BTreeMap<u64, f64>) -> Estimate {
+pub(crate) fn paired_difference(a: &BTreeMap<u64, f64>, b: &BTreeMap<u64, f64>) -> Estimate {
     let d: Vec<f64> = a
         .iter()
         .filter_map(|(run, va)| b.get(run).map(|vb| va - vb))
@@ -174,7 +177,7 @@ pub use identify::metrics::in_group;
 
 /// Mean relative error of one run over a group of parameters (`k` stiffnesses, `c` dampings);
 /// `None` without truth or without such parameters.
-pub fn group_mean_error(r: &RunRecord, prefix: char) -> Option<f64> {
+pub(crate) fn group_mean_error(r: &RunRecord, prefix: char) -> Option<f64> {
     let v: Vec<f64> = r
         .param_names
         .iter()
@@ -186,7 +189,7 @@ pub fn group_mean_error(r: &RunRecord, prefix: char) -> Option<f64> {
 }
 
 /// [`group_mean_error`], NaN where it has none.
-pub fn group_error(r: &RunRecord, prefix: char) -> f64 {
+pub(crate) fn group_error(r: &RunRecord, prefix: char) -> f64 {
     group_mean_error(r, prefix).unwrap_or(f64::NAN)
 }
 
@@ -200,14 +203,14 @@ pub fn ratio(r: &RunRecord, name: &str) -> f64 {
 }
 
 /// Mean online-state NRMSE of one run (NaN without truth).
-pub fn online_nrmse(r: &RunRecord) -> f64 {
+pub(crate) fn online_nrmse(r: &RunRecord) -> f64 {
     r.online_states
         .as_ref()
         .map_or(f64::NAN, |s| s.mean_nrmse())
 }
 
 /// Mean validation-run NRMSE of one run (NaN without a successful validation).
-pub fn validation_nrmse(r: &RunRecord) -> f64 {
+pub(crate) fn validation_nrmse(r: &RunRecord) -> f64 {
     r.validation
         .as_ref()
         .filter(|v| v.error.is_none())
@@ -220,7 +223,7 @@ pub fn scheme(r: &RunRecord) -> Option<Discretisation> {
 }
 
 /// Largest number of distinct values of a sampled static parameter at the end of one run.
-pub fn max_distinct(r: &RunRecord) -> f64 {
+pub(crate) fn max_distinct(r: &RunRecord) -> f64 {
     r.distinct_sampled
         .values()
         .copied()
@@ -244,7 +247,7 @@ pub struct Finding {
 
 /// Writes findings as a Markdown table under the column names `columns` (statement, verdict,
 /// test, evidence).
-pub fn findings_table(out: &mut String, columns: [&str; 4], findings: &[Finding]) {
+pub(crate) fn findings_table(out: &mut String, columns: [&str; 4], findings: &[Finding]) {
     header(out, &columns);
     for f in findings {
         row(

@@ -14,7 +14,7 @@
 //!   answer because they failed or lost track of the record (module `pool`);
 //! - a parameter **held at its physical bound**: with the physical support on, a stiffness,
 //!   damping or α whose Gaussian the data pushed below zero is truncated there, and its answer
-//!   sits at a small fraction ([`AT_BOUND_FRACTION`]) of its prior mean — physical, but the
+//!   sits at a small fraction (`AT_BOUND_FRACTION`) of its prior mean — physical, but the
 //!   model (masses, damping form, storeys) likely does not fit these data.
 //!
 //! `sysid filter` prints every warning on stderr, writes them into the record's `warnings`, and
@@ -27,7 +27,7 @@ use crate::record::RunRecord;
 
 /// A truncated parameter whose θ_val is below this fraction of its prior mean is flagged as held
 /// at its bound.
-pub const AT_BOUND_FRACTION: f64 = 0.01;
+pub(crate) const AT_BOUND_FRACTION: f64 = 0.01;
 
 /// The prior means of θ from the record's `config.spec.prior` (none for a record without one).
 fn prior_means(r: &RunRecord) -> Option<Vec<f64>> {
@@ -38,15 +38,15 @@ fn prior_means(r: &RunRecord) -> Option<Vec<f64>> {
 
 /// A sampled static parameter represented by fewer distinct particle values than this at the
 /// end is flagged: its posterior rests on a handful of particles.
-pub const FEW_DISTINCT: usize = 10;
+pub(crate) const FEW_DISTINCT: usize = 10;
 
 /// The ESS is tiny when its minimum over the run falls below this many particles…
-pub const TINY_ESS_ABS: f64 = 10.0;
+pub(crate) const TINY_ESS_ABS: f64 = 10.0;
 /// …or below this fraction of the particles, whichever is larger.
-pub const TINY_ESS_FRACTION: f64 = 0.02;
+pub(crate) const TINY_ESS_FRACTION: f64 = 0.02;
 
 /// Independent filters pooled in the run (`pool` of its settings; 1 when absent).
-pub fn pooled_filters(r: &RunRecord) -> usize {
+pub(crate) fn pooled_filters(r: &RunRecord) -> usize {
     r.config
         .get("filter")
         .and_then(|f| f.get("pool"))
@@ -220,7 +220,7 @@ pub fn is_fatal(warnings: &[Warning]) -> bool {
 /// posterior from the record (θ_val ± 1.96 final s.d., marked `*`, for a record without one),
 /// and the Monte-Carlo
 /// reliability of the estimate: the number of distinct particle values of a sampled parameter
-/// (flagged below [`FEW_DISTINCT`]), the ESS for the others.
+/// (flagged below `FEW_DISTINCT`), the ESS for the others.
 pub fn summary_table(r: &RunRecord) -> String {
     let mut o = String::new();
     let name_w = r

@@ -12,7 +12,7 @@
 //! every candidate (each noise fraction of [`NOISE_FRACTIONS`] × each process-noise factor of
 //! [`PROCESS_NOISE_FACTORS`] × each damping form the user left open) is identified on the first part of the record, its θ_val run freely from rest over the
 //! whole record, and scored by the fit of the part it never saw (the record's second half by
-//! energy, [`HELD_OUT_ENERGY`]); the best mean fit over the channels wins, the first listed (less noise,
+//! energy, `HELD_OUT_ENERGY`); the best mean fit over the channels wins, the first listed (less noise,
 //! fewer parameters) on a tie. The plan records every candidate's score ([`HeldOutChoice`]).
 //!
 //! Only where a candidate is cheap: the run is one Gaussian filter (a linear building under the
@@ -39,14 +39,14 @@ pub const PROCESS_NOISE_FACTORS: [f64; 3] = [1.0, 0.1, 0.01];
 /// energy, so that the held-out part holds strong shaking, not only a quiet tail (on the
 /// shake-table frame's `northridge` the last third by time is free decay at a tenth of the
 /// shaking's amplitude, where every candidate's fit was negative).
-pub const HELD_OUT_ENERGY: f64 = 0.5;
+pub(crate) const HELD_OUT_ENERGY: f64 = 0.5;
 
 /// Each part keeps at least this share of the samples.
-pub const MIN_PART: f64 = 0.2;
+pub(crate) const MIN_PART: f64 = 0.2;
 
 /// Fewest samples a record needs for the choice (below it the held-out part is too short to
 /// tell candidates apart and the default stays).
-pub const MIN_SAMPLES: usize = 600;
+pub(crate) const MIN_SAMPLES: usize = 600;
 
 /// Which of the settings the choice would choose the run stated itself (`--noise-fraction`,
 /// `--process-noise-factor`): those are kept.
@@ -111,8 +111,8 @@ pub fn with_noise(plan: &RunPlan, nf: f64, pf: f64) -> RunPlan {
     p
 }
 
-/// Samples identified on: up to the sample by which the channels hold [`HELD_OUT_ENERGY`] of
-/// their energy, each part keeping at least [`MIN_PART`] of the samples.
+/// Samples identified on: up to the sample by which the channels hold `HELD_OUT_ENERGY` of
+/// their energy, each part keeping at least `MIN_PART` of the samples.
 pub fn split_point(data: &LoadedDataset) -> usize {
     let (n, c) = (data.len(), data.channels);
     let mean: Vec<f64> = (0..c)

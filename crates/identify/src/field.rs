@@ -51,7 +51,7 @@ impl StructureSettings {
     }
 
     /// Sets every key `over` gives (flags over the config table).
-    pub fn overlay(&mut self, over: &StructureSettings) {
+    pub(crate) fn overlay(&mut self, over: &StructureSettings) {
         if over.storeys.is_some() {
             self.storeys = over.storeys;
         }
@@ -72,10 +72,10 @@ impl StructureSettings {
 
 /// How a key is named in messages: a flag (`--storeys`) or a config key
 /// (`[structure] storeys in field.toml`).
-pub type KeyName<'a> = &'a dyn Fn(&str) -> String;
+pub(crate) type KeyName<'a> = &'a dyn Fn(&str) -> String;
 
 /// The name of a key in the `[structure]` table of a config (the form used by the library).
-pub fn table_key(key: &str) -> String {
+pub(crate) fn table_key(key: &str) -> String {
     format!("[structure] `{key}`")
 }
 
@@ -90,7 +90,7 @@ fn expand_masses(masses: &[f64], storeys: usize) -> Vec<f64> {
 
 /// Errors when a stated key differs from the structure `dataset.json` records; each names the
 /// key (through `name`) and `dataset.json`.
-pub fn check_agrees(
+pub(crate) fn check_agrees(
     recorded: &StructureDescription,
     given: &StructureSettings,
     name: KeyName,
@@ -144,7 +144,7 @@ fn list<T: std::fmt::Display>(v: &[T]) -> String {
 
 /// The structure of a run's data.
 ///
-/// - With `dataset.json`: the structure it records (`given` must agree, see [`check_agrees`]).
+/// - With `dataset.json`: the structure it records (`given` must agree, see `check_agrees`).
 /// - Without, but with the true `chain` (data generated in memory): its storeys, masses and
 ///   hysteretic storeys where `given` is silent.
 /// - Field data: every key from `given`; a missing key is refused by name.

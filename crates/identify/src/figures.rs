@@ -57,7 +57,7 @@ pub(crate) fn colour(i: usize) -> RGBColor {
 
 /// Units of a parameter of the Bouc–Wen chain with unit masses (SPEC §2): stiffnesses k [1/s²],
 /// dampings c [1/s], β and γ [1/mⁿ] (β|r|ⁿ has units of 1/m), the exponent n dimensionless.
-pub fn param_unit(name: &str) -> &'static str {
+pub(crate) fn param_unit(name: &str) -> &'static str {
     let digits_after = |prefix: &str| {
         name.strip_prefix(prefix)
             .is_some_and(|rest| rest.chars().all(|c| c.is_ascii_digit()))
@@ -791,7 +791,7 @@ pub fn crosses(groups: &[(&str, Vec<&RunRecord>)], path: &Path, title: &str) -> 
 /// Parameters grouped for separate panels, in order of first appearance: stiffnesses `k…`,
 /// dampings `c…`, and the rest (the hysteresis parameters β, γ, n of SPEC §1). Empty groups are
 /// left out.
-pub fn parameter_groups(names: &[String]) -> Vec<(String, Vec<usize>)> {
+pub(crate) fn parameter_groups(names: &[String]) -> Vec<(String, Vec<usize>)> {
     let numbered = crate::metrics::in_group;
     let mut groups: Vec<(String, Vec<usize>)> = vec![
         ("stiffness".into(), Vec::new()),
@@ -970,7 +970,7 @@ pub fn state_errors(groups: &[(&str, Vec<&RunRecord>)], path: &Path, title: &str
 }
 
 /// One line of a [`time_series`] panel.
-pub struct Series<'a> {
+pub(crate) struct Series<'a> {
     pub label: String,
     pub t: &'a [f64],
     pub y: &'a [f64],
@@ -979,7 +979,7 @@ pub struct Series<'a> {
 }
 
 /// One panel of a [`time_series`] figure.
-pub struct Panel<'a> {
+pub(crate) struct Panel<'a> {
     pub caption: String,
     pub y_desc: String,
     pub series: Vec<Series<'a>>,
@@ -989,7 +989,7 @@ pub struct Panel<'a> {
 
 /// Time-series figure: panels stacked vertically, lines against t, every drawn value inside the
 /// axes; non-finite values leave gaps. Legend entries are taken from the first panel.
-pub fn time_series(panels: &[Panel<'_>], path: &Path, title: &str) -> Result<()> {
+pub(crate) fn time_series(panels: &[Panel<'_>], path: &Path, title: &str) -> Result<()> {
     if panels.is_empty() {
         bail!("time-series figure {}: no panels", path.display());
     }
@@ -1052,7 +1052,7 @@ pub fn time_series(panels: &[Panel<'_>], path: &Path, title: &str) -> Result<()>
 
 /// Autocorrelation figure: for each channel a panel of the sample autocorrelation at lags
 /// 1, 2, … as stems, with the ±`bound` band of a white sequence dashed (1.96/√n for 95%).
-pub fn autocorrelation(
+pub(crate) fn autocorrelation(
     channels: &[(String, Vec<f64>)],
     bound: f64,
     path: &Path,

@@ -194,7 +194,7 @@ marginal_prior = {{ kind = "moment_matched" }}
 
 /// A value as TOML writes it (through serde, so the printed defaults are the real ones).
 mod erased {
-    pub trait Show {
+    pub(crate) trait Show {
         fn show(&self) -> String;
     }
     impl<T: serde::Serialize> Show for T {

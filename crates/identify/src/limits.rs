@@ -15,8 +15,8 @@ pub use models::limits::*;
 use crate::settings::FilterSettings;
 
 /// Accepted range of `process_noise_factor` (the velocities' process noise relative to SPEC §3's).
-pub const MIN_PROCESS_NOISE_FACTOR: f64 = 1e-4;
-pub const MAX_PROCESS_NOISE_FACTOR: f64 = 100.0;
+pub(crate) const MIN_PROCESS_NOISE_FACTOR: f64 = 1e-4;
+pub(crate) const MAX_PROCESS_NOISE_FACTOR: f64 = 100.0;
 
 /// Checks the user-given sizes and values of `s`; the error names the settings field.
 ///

@@ -3,7 +3,7 @@
 pub use crate::record::signal_errors::{SignalError, StateErrors};
 
 /// Relative error `|θ − θ_true| / |θ_true|` per entry (SPEC §7).
-pub fn relative_errors(theta: &[f64], truth: &[f64]) -> Vec<f64> {
+pub(crate) fn relative_errors(theta: &[f64], truth: &[f64]) -> Vec<f64> {
     theta
         .iter()
         .zip(truth)
@@ -13,7 +13,7 @@ pub fn relative_errors(theta: &[f64], truth: &[f64]) -> Vec<f64> {
 
 /// Running sums for the error of an estimated signal against the true one.
 #[derive(Debug, Clone, Copy, Default)]
-pub struct ErrorSums {
+pub(crate) struct ErrorSums {
     sse: f64,
     sum_abs_true: f64,
     sum_sq_true: f64,
@@ -42,7 +42,7 @@ impl ErrorSums {
 }
 
 impl StateErrors {
-    pub fn from_sums(names: &[String], sums: &[ErrorSums]) -> Self {
+    pub(crate) fn from_sums(names: &[String], sums: &[ErrorSums]) -> Self {
         Self {
             names: names.to_vec(),
             errors: sums.iter().map(ErrorSums::finish).collect(),

@@ -11,7 +11,7 @@ use crate::metrics::ErrorSums;
 pub use crate::record::trace::{ParamIntervals, PosteriorShape, Trace};
 
 /// The intervals of every parameter of the layout from the weighted particles of the last step.
-pub fn final_intervals(last: &WeightedParticles<'_>) -> Vec<ParamIntervals> {
+pub(crate) fn final_intervals(last: &WeightedParticles<'_>) -> Vec<ParamIntervals> {
     last.layout
         .param_names
         .iter()
@@ -38,7 +38,7 @@ pub fn final_intervals(last: &WeightedParticles<'_>) -> Vec<ParamIntervals> {
 
 /// The normalised weights and the particles of a run's last step, kept for pooling.
 #[derive(Debug, Clone)]
-pub struct FinalParticles {
+pub(crate) struct FinalParticles {
     pub w: Vec<f64>,
     pub particles: Particles,
     /// The filter's physical support (its intervals are truncated to it).
@@ -47,7 +47,7 @@ pub struct FinalParticles {
 
 /// The true state signals, for online errors: `truth[k][j]` is the true value at step `k` of the
 /// filter's state `j` (already mapped to the filter's layout order).
-pub struct TruthStates<'a> {
+pub(crate) struct TruthStates<'a> {
     pub rows: &'a [Vec<f64>],
 }
 
@@ -62,7 +62,7 @@ pub struct Progress<'a> {
 }
 
 /// Records what a run record needs.
-pub struct Recorder<'a> {
+pub(crate) struct Recorder<'a> {
     total_steps: usize,
     window: usize,
     dt: f64,
@@ -94,7 +94,7 @@ pub struct Recorder<'a> {
 }
 
 /// The steps of a run's tail: the last tenth of the record, and at least the averaging window.
-pub fn tail_steps(total_steps: usize, window: usize) -> usize {
+pub(crate) fn tail_steps(total_steps: usize, window: usize) -> usize {
     (total_steps / 10).max(window).min(total_steps)
 }
 
@@ -147,11 +147,6 @@ impl<'a> Recorder<'a> {
             .iter()
             .map(|s| s / self.window_n as f64)
             .collect()
-    }
-
-    /// Steps of the averaging window that completed (θ_val averages over them).
-    pub fn window_steps_completed(&self) -> usize {
-        self.window_n
     }
 }
 

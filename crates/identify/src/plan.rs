@@ -32,13 +32,13 @@ use crate::settings::{recommended_pool, FilterSettings, Substeps, RECOMMENDED_PA
 
 /// The version of the plan's layout, written into every plan (a plan file of another version
 /// is refused by name).
-pub const PLAN_VERSION: u32 = 1;
+pub(crate) const PLAN_VERSION: u32 = 1;
 
 /// Everything one run does, settled before it starts ([`settle`]).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct RunPlan {
-    /// [`PLAN_VERSION`].
+    /// `PLAN_VERSION`.
     pub plan_version: u32,
     pub algorithm: Algorithm,
     /// Master seed and run index: the filter's random streams are derived from them.
@@ -1029,7 +1029,7 @@ fn scanned<'a>(
 
 /// What `substeps = "auto"` chose for a run: by the linear modes of the prior's building
 /// ([`models::filtering::substeps`]), on field data with Bouc–Wen elements by the data-scaled
-/// ω₁·dt ([`crate::scaled_prior::hysteretic_substeps`]) and, for the MPF-EKF2 with one shared
+/// ω₁·dt (`crate::scaled_prior::hysteretic_substeps`) and, for the MPF-EKF2 with one shared
 /// prior Gaussian below [`PER_PARTICLE_MIN_STOREYS`] storeys, by the velocity lag
 /// ([`LagSubsteps`]); the run takes the largest.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]

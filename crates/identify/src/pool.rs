@@ -50,9 +50,9 @@ use crate::record::diagnostics::{LeftOutFilter, LeftOutReason};
 /// innovation χ² larger by 4 on every channel at every step of the tail; on 3-storey paper data
 /// sets the marginalised filters stay within 0.26 of their median and the bootstrap PF's,
 /// but for one of 320, within 1.01)
-pub const LOST_NATS: f64 = 2.0;
+pub(crate) const LOST_NATS: f64 = 2.0;
 /// …and by more than this many robust s.d.s of the pool's tail log-likelihoods.
-pub const LOST_ROBUST_SDS: f64 = 6.0;
+pub(crate) const LOST_ROBUST_SDS: f64 = 6.0;
 
 /// What the driver of one filter returns ([`crate::pipeline`]).
 pub(crate) struct Driven {

@@ -20,7 +20,7 @@ pub mod diagnostics;
 pub mod fingerprint;
 pub mod number;
 pub mod read;
-pub mod signal_errors;
+pub(crate) mod signal_errors;
 pub mod trace;
 pub mod validation;
 
@@ -212,7 +212,7 @@ impl RunRecord {
     }
 
     /// θ_val / θ_true (null for field data).
-    pub fn normalised_theta_val(&self) -> Option<Vec<f64>> {
+    pub(crate) fn normalised_theta_val(&self) -> Option<Vec<f64>> {
         self.theta_true
             .as_ref()
             .map(|t| self.theta_val.iter().zip(t).map(|(a, b)| a / b).collect())
@@ -470,10 +470,10 @@ mod state_errors {
     use super::*;
     use serde::{Deserializer, Serializer};
 
-    pub fn serialize<S: Serializer>(x: &StateErrors, s: S) -> Result<S::Ok, S::Error> {
+    pub(crate) fn serialize<S: Serializer>(x: &StateErrors, s: S) -> Result<S::Ok, S::Error> {
         StateErrorsRepr::from(x).serialize(s)
     }
-    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<StateErrors, D::Error> {
+    pub(crate) fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<StateErrors, D::Error> {
         StateErrorsRepr::deserialize(d).map(Into::into)
     }
 }
@@ -482,10 +482,15 @@ mod opt_state_errors {
     use super::*;
     use serde::{Deserializer, Serializer};
 
-    pub fn serialize<S: Serializer>(x: &Option<StateErrors>, s: S) -> Result<S::Ok, S::Error> {
+    pub(crate) fn serialize<S: Serializer>(
+        x: &Option<StateErrors>,
+        s: S,
+    ) -> Result<S::Ok, S::Error> {
         x.as_ref().map(StateErrorsRepr::from).serialize(s)
     }
-    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<Option<StateErrors>, D::Error> {
+    pub(crate) fn deserialize<'de, D: Deserializer<'de>>(
+        d: D,
+    ) -> Result<Option<StateErrors>, D::Error> {
         Ok(Option::<StateErrorsRepr>::deserialize(d)?.map(Into::into))
     }
 }
@@ -508,7 +513,7 @@ mod trace_repr {
     use super::*;
     use serde::{Deserializer, Serializer};
 
-    pub fn serialize<S: Serializer>(x: &Trace, s: S) -> Result<S::Ok, S::Error> {
+    pub(crate) fn serialize<S: Serializer>(x: &Trace, s: S) -> Result<S::Ok, S::Error> {
         let Trace {
             every,
             t,
@@ -525,7 +530,7 @@ mod trace_repr {
         }
         .serialize(s)
     }
-    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<Trace, D::Error> {
+    pub(crate) fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<Trace, D::Error> {
         let r = TraceRepr::deserialize(d)?;
         Ok(Trace {
             every: r.every,

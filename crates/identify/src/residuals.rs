@@ -22,7 +22,7 @@ use serde::Serialize;
 pub use crate::record::diagnostics::{ChannelCheck, Residuals};
 
 /// Lags of the whiteness check.
-pub const MAX_LAG: usize = 20;
+pub(crate) const MAX_LAG: usize = 20;
 
 /// The one-step-ahead predictor of one run (see the module documentation).
 pub struct Predictor {
@@ -207,7 +207,7 @@ pub struct Whiteness {
 
 impl Whiteness {
     /// Whether the sequence passes: Q below its 95% critical value.
-    pub fn is_white(&self) -> bool {
+    pub(crate) fn is_white(&self) -> bool {
         self.ljung_box < self.critical
     }
 }

@@ -9,7 +9,7 @@
 //! - its particle count on coarsely sampled hysteretic field data ([`HYSTERETIC_PARTICLES`]);
 //! - the sub-steps against the velocity lag ([`LAG_SUBSTEPS`]); the sub-steps of the prior's
 //!   linear modes ([`models::filtering::substeps`]) and of the data-scaled ω₁·dt
-//!   ([`crate::scaled_prior::hysteretic_substeps`]) are stated where they are computed.
+//!   (`crate::scaled_prior::hysteretic_substeps`) are stated where they are computed.
 //!
 //! The settings a run starts from (the recommended ones without a config, the config's with
 //! one, [`crate::settings::FilterSettings::recommended`]) and the data-scaled prior of field
@@ -62,7 +62,7 @@ pub const MPF_REJUVENATION: f64 = 0.98;
 
 /// The MPF-EKF2's particle count without a config or `--particles` on field data of a building
 /// with Bouc–Wen elements and one shared prior Gaussian whose data-scaled ω₁·dt asks for
-/// sub-steps ([`crate::scaled_prior::hysteretic_substeps`], `substeps = "auto"`), pooled as
+/// sub-steps (`crate::scaled_prior::hysteretic_substeps`, `substeps = "auto"`), pooled as
 /// 8 filters of 500 (chosen in [`crate::identification::settle`]).
 ///
 /// Measured (`docs/structures.md`, "Stiff buildings"): the paper's chain time-scaled ×4

@@ -23,7 +23,7 @@
 //! ([`models::filtering::prior::alpha_prior`]; pure mass damping has ζ = α/(2ω)).
 //!
 //! The same ω₁ sets the sub-steps of a building with Bouc–Wen elements when the filter chooses
-//! them (`substeps = "auto"`, [`hysteretic_substeps`]).
+//! them (`substeps = "auto"`, `hysteretic_substeps`).
 
 use crate::error::{bail, Result};
 use models::dataset::LoadedDataset;
@@ -36,10 +36,10 @@ use nalgebra::{DMatrix, SymmetricEigen};
 use serde::Serialize;
 
 /// The damping ratio assumed at ω₁.
-pub const DAMPING_RATIO: f64 = 0.02;
+pub(crate) const DAMPING_RATIO: f64 = 0.02;
 /// Log-s.d. of the stiffness and damping priors.
 pub const K_LOG_SD: f64 = 0.5;
-pub const C_LOG_SD: f64 = 0.7;
+pub(crate) const C_LOG_SD: f64 = 0.7;
 
 /// A prior scaled from the data, with what it was read from (printed and recorded).
 #[derive(Debug, Clone, PartialEq, Serialize, serde::Deserialize)]
@@ -102,14 +102,14 @@ impl ScaledPrior {
 
 /// ω₁·dt (data-scaled ω₁, sample interval dt) above which a building with Bouc–Wen elements is
 /// sub-stepped when the filter chooses its sub-steps ([`hysteretic_substeps`]).
-pub const HYSTERETIC_SUBSTEP_ABOVE: f64 = 0.01;
+pub(crate) const HYSTERETIC_SUBSTEP_ABOVE: f64 = 0.01;
 /// Largest ω₁·h (h = dt/M, the filter's step) left once it sub-steps.
-pub const HYSTERETIC_MAX_OMEGA1_H: f64 = 0.0035;
+pub(crate) const HYSTERETIC_MAX_OMEGA1_H: f64 = 0.0035;
 /// Most sub-steps the rule chooses: the most it was measured with. A record sampled more
 /// coarsely still (the shake-table frame at 120 Hz has ω₁·dt ≈ 0.19 and would ask for 55) gets
 /// these 8 and a cost 8 times one step's, not a cost without a measured gain; `--substeps N`
 /// chooses more.
-pub const HYSTERETIC_MAX_SUBSTEPS: usize = 8;
+pub(crate) const HYSTERETIC_MAX_SUBSTEPS: usize = 8;
 
 /// Sub-steps for a building with Bouc–Wen elements, from the data-scaled ω₁ (rad/s) and the
 /// sample interval `dt` (s): 1 while ω₁·dt ≤ [`HYSTERETIC_SUBSTEP_ABOVE`], else the fewest M
@@ -125,7 +125,7 @@ pub const HYSTERETIC_MAX_SUBSTEPS: usize = 8;
 /// and 4.9 %), while the same building sampled at 800 Hz (ω₁·dt = 0.0069) needs none (0.9 %
 /// low, worst 3.7 %). The paper's data sets (ω₁·dt ≈ 0.007) are below the threshold, and
 /// their priors are not scaled from the data anyway. `docs/structures.md`, "Stiff buildings".
-pub fn hysteretic_substeps(omega1: f64, dt: f64) -> usize {
+pub(crate) fn hysteretic_substeps(omega1: f64, dt: f64) -> usize {
     let x = omega1 * dt;
     if !(x.is_finite() && x > HYSTERETIC_SUBSTEP_ABOVE) {
         return 1;
@@ -133,7 +133,7 @@ pub fn hysteretic_substeps(omega1: f64, dt: f64) -> usize {
     ((x / HYSTERETIC_MAX_OMEGA1_H).ceil() as usize).clamp(1, HYSTERETIC_MAX_SUBSTEPS)
 }
 
-/// What [`hysteretic_substeps`] chose for a run (printed and recorded under
+/// What `hysteretic_substeps` chose for a run (printed and recorded under
 /// `config.substeps_hysteretic`).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, serde::Deserialize)]
 pub struct HystereticSubsteps {

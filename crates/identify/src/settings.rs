@@ -211,7 +211,7 @@ impl FilterSettings {
     /// The settings `sysid filter` uses without a configuration file: the SPEC's, except where
     /// the coverage measurements of `docs/calibration.md` showed them over-confident — resample
     /// only when the ESS falls below half the particles (path degeneracy), pool independent
-    /// filters of [`PARTICLES_PER_POOLED_FILTER`] particles so that the posterior includes their
+    /// filters of `PARTICLES_PER_POOLED_FILTER` particles so that the posterior includes their
     /// spread and θ_val comes with its Monte-Carlo s.e. (1000 particles as 8 filters: the 95 %
     /// intervals of k and c of every marginalised filter then hold the truth in 0.92–0.94 of
     /// fresh data sets of the paper's structure, against 0.81–0.84 with 4 filters of 125, at
@@ -235,8 +235,8 @@ impl FilterSettings {
     }
 
     /// The recommended settings with `particles` particles when a run asks for a count of its
-    /// own (`--particles` without a config): pooled as [`recommended_pool`] says, so that each
-    /// filter keeps [`PARTICLES_PER_POOLED_FILTER`] particles.
+    /// own (`--particles` without a config): pooled as `recommended_pool` says, so that each
+    /// filter keeps `PARTICLES_PER_POOLED_FILTER` particles.
     pub fn recommended_with(particles: Option<usize>) -> Self {
         let mut s = Self::recommended();
         if let Some(p) = particles {
@@ -250,7 +250,7 @@ impl FilterSettings {
 impl FilterSettings {
     /// The Liu–West kernel of `rejuvenation`, `None` without one; a discount outside [1/3, 1]
     /// is an error naming the field.
-    pub fn liu_west(&self) -> crate::error::Result<Option<LiuWest>> {
+    pub(crate) fn liu_west(&self) -> crate::error::Result<Option<LiuWest>> {
         self.rejuvenation
             .map(LiuWest::new)
             .transpose()
@@ -264,15 +264,15 @@ pub const RECOMMENDED_PARTICLES: usize = 1000;
 /// Particles of each pooled filter of the recommended settings: fewer add Monte-Carlo error
 /// that pooling then reports rather than removes (8 filters of 62 were less accurate than 4 of
 /// 125 at the same cost, `docs/calibration.md`).
-pub const PARTICLES_PER_POOLED_FILTER: usize = 125;
+pub(crate) const PARTICLES_PER_POOLED_FILTER: usize = 125;
 
 /// The most filters the recommended settings pool.
-pub const MAX_RECOMMENDED_POOL: usize = 8;
+pub(crate) const MAX_RECOMMENDED_POOL: usize = 8;
 
 /// Filters the recommended settings pool for `particles` particles: one per
 /// [`PARTICLES_PER_POOLED_FILTER`], between 1 and [`MAX_RECOMMENDED_POOL`] (500 → 4, 1000 → 8,
 /// fewer than 250 → 1).
-pub fn recommended_pool(particles: usize) -> usize {
+pub(crate) fn recommended_pool(particles: usize) -> usize {
     (particles / PARTICLES_PER_POOLED_FILTER).clamp(1, MAX_RECOMMENDED_POOL)
 }
 

@@ -97,7 +97,11 @@ fn excitation_source(arg: &str, units: Units) -> ExcitationSource {
 
 /// Parses a comma list of 1-based storeys (`1,4`); `none` (when allowed) is the empty list.
 /// Errors name the flag.
-pub fn parse_storeys(flag: &str, s: &str, allow_none: bool) -> Result<Vec<usize>, SimulationError> {
+pub(crate) fn parse_storeys(
+    flag: &str,
+    s: &str,
+    allow_none: bool,
+) -> Result<Vec<usize>, SimulationError> {
     if allow_none && s.trim() == "none" {
         return Ok(Vec::new());
     }

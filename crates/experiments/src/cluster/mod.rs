@@ -12,14 +12,14 @@
 //! - [`plan`]: the study kinds, the submission's settings (`OUT/cluster/plan.json`) and the
 //!   command line of a shard and of the report;
 //! - [`script`]: the two batch scripts;
-//! - [`scheduler`]: `sbatch`, `squeue` and `scancel`;
+//! - `scheduler`: `sbatch`, `squeue` and `scancel`;
 //! - [`status`]: what is done, queued and missing, per run and per shard;
 //! - [`submit`]: submit, resubmit the failed shards, finish (merge, check, report);
 //! - [`compare`]: two output directories compared with the timings set aside.
 
 pub mod compare;
 pub mod plan;
-pub mod scheduler;
+pub(crate) mod scheduler;
 pub mod script;
 pub mod status;
 pub mod submit;

@@ -99,12 +99,11 @@ pub struct Plan {
 
 /// Most array tasks a plan accepts (Slurm's own `MaxArraySize` may be lower and is checked by
 /// `sbatch`).
-pub const MAX_TASKS: usize = 100_000;
+pub(crate) const MAX_TASKS: usize = 100_000;
 
 /// One sweep of a study: its jobs in sweep order (job `j` belongs to shard `j % tasks`) and where
 /// their records go.
-pub struct Sweep {
-    pub name: String,
+pub(crate) struct Sweep {
     pub study: Study,
     pub jobs: Vec<Job>,
     /// Record file stems, one per job.
@@ -119,15 +118,15 @@ impl Plan {
         cluster_dir(&self.out)
     }
 
-    pub fn plan_path(&self) -> PathBuf {
+    pub(crate) fn plan_path(&self) -> PathBuf {
         self.dir().join("plan.json")
     }
 
-    pub fn shard_script(&self) -> PathBuf {
+    pub(crate) fn shard_script(&self) -> PathBuf {
         self.dir().join("shard.sh")
     }
 
-    pub fn finish_script(&self) -> PathBuf {
+    pub(crate) fn finish_script(&self) -> PathBuf {
         self.dir().join("finish.sh")
     }
 
@@ -136,7 +135,7 @@ impl Plan {
     }
 
     /// The log of array task `i` (every instance of the task appends to it).
-    pub fn shard_log(&self, i: usize) -> PathBuf {
+    pub(crate) fn shard_log(&self, i: usize) -> PathBuf {
         self.logs().join(format!("shard-{i}.log"))
     }
 
@@ -150,7 +149,7 @@ impl Plan {
     }
 
     /// A name for the jobs: `sysid-paper`, or `sysid-<study file stem>`.
-    pub fn job_name(&self) -> String {
+    pub(crate) fn job_name(&self) -> String {
         if self.kind == Kind::Paper {
             return "sysid-paper".into();
         }
@@ -243,25 +242,8 @@ impl Plan {
         args
     }
 
-    /// The command line that writes the report from the merged records (without the binary): the
-    /// study's own subcommand with `--resume`, so that every run is loaded, none computed.
-    pub fn report_args(&self) -> Vec<String> {
-        let mut args = vec![
-            self.kind.subcommand().to_string(),
-            self.kind.config_flag().to_string(),
-            self.config.display().to_string(),
-            "--out".into(),
-            self.out.display().to_string(),
-            "--resume".into(),
-        ];
-        if self.quick {
-            args.push("--quick".into());
-        }
-        args
-    }
-
     /// The study's sweeps, as its subcommand runs them.
-    pub fn sweeps(&self) -> Result<Vec<Sweep>, ClusterError> {
+    pub(crate) fn sweeps(&self) -> Result<Vec<Sweep>, ClusterError> {
         let err = |e: crate::error::Error| ClusterError::Study {
             config: self.config.display().to_string(),
             message: format!("{e:#}"),
@@ -286,7 +268,6 @@ impl Plan {
                     let jobs = study.jobs();
                     let ids = jobs.iter().map(Study::job_id).collect();
                     sweeps.push(Sweep {
-                        name: name.to_string(),
                         study,
                         jobs,
                         ids,
@@ -303,7 +284,6 @@ impl Plan {
                 };
                 let ids = jobs.iter().map(|j| study.record_id(j)).collect();
                 vec![Sweep {
-                    name: study.name.clone(),
                     study,
                     jobs,
                     ids,
@@ -382,7 +362,7 @@ fn check_directive_path(flag: &str, path: &Path) -> Result<(), ClusterError> {
 }
 
 /// `OUT/cluster`.
-pub fn cluster_dir(out: &Path) -> PathBuf {
+pub(crate) fn cluster_dir(out: &Path) -> PathBuf {
     out.join("cluster")
 }
 
@@ -411,17 +391,12 @@ mod tests {
             "reproduce --experiments /c/experiments --out $part --shard $task/8 --resume \
              --threads 2 --quick"
         );
-        assert_eq!(
-            p.report_args().join(" "),
-            "reproduce --experiments /c/experiments --out /o --resume --quick"
-        );
         for (kind, sub) in [
             (Kind::Scaling, "scaling --config"),
             (Kind::Excitations, "excitations --config"),
             (Kind::Study, "study --config"),
         ] {
             assert!(plan(kind).shard_args("0", "p").join(" ").starts_with(sub));
-            assert!(plan(kind).report_args().join(" ").starts_with(sub));
         }
     }
 

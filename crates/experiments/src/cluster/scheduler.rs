@@ -37,7 +37,7 @@ pub fn submissions(plan: &Plan) -> Result<Vec<Submission>, ClusterError> {
 }
 
 /// Appends a submission to `OUT/cluster/submissions.json` (rewritten atomically).
-pub fn record_submission(plan: &Plan, s: Submission) -> Result<(), ClusterError> {
+pub(crate) fn record_submission(plan: &Plan, s: Submission) -> Result<(), ClusterError> {
     let path = plan.dir().join("submissions.json");
     let mut all = submissions(plan)?;
     all.push(s);
@@ -66,7 +66,7 @@ fn run(cmd: &mut Command) -> Result<String, ClusterError> {
 }
 
 /// The job id in `sbatch --parsable`'s answer (`<id>` or `<id>;<cluster>`).
-pub fn parse_job_id(answer: &str) -> Option<String> {
+pub(crate) fn parse_job_id(answer: &str) -> Option<String> {
     let id = answer.trim().split(';').next()?.trim();
     (!id.is_empty() && id.chars().all(|c| c.is_ascii_digit())).then(|| id.to_string())
 }
@@ -128,7 +128,7 @@ const ENDED: [&str; 11] = [
 
 /// Parses `squeue -h -r -o '%F|%K|%T|%r'` lines (array job id, task, state, reason); jobs in a
 /// state that means they ended are left out.
-pub fn parse_squeue(answer: &str) -> BTreeMap<(String, Option<usize>), Queued> {
+pub(crate) fn parse_squeue(answer: &str) -> BTreeMap<(String, Option<usize>), Queued> {
     answer
         .lines()
         .filter_map(|line| {

@@ -4,7 +4,7 @@
 use super::plan::Plan;
 
 /// `value` as one word for the shell (single-quoted; a `'` inside closes, escapes and reopens).
-pub fn quote(value: &str) -> String {
+pub(crate) fn quote(value: &str) -> String {
     if !value.is_empty()
         && value
             .chars()
@@ -37,7 +37,7 @@ fn common_directives(plan: &Plan) -> String {
 /// instance reuse every record the old one finished (records are written atomically, so the
 /// runs in flight when it was stopped are the only ones computed again). The log is opened in
 /// append mode so that every instance of a task adds to the same file.
-pub fn shard_script(plan: &Plan) -> String {
+pub(crate) fn shard_script(plan: &Plan) -> String {
     let part = format!("{}/shard-", plan.parts().display());
     let args: Vec<String> = plan
         .shard_args("${task}", "${part}")
@@ -88,7 +88,7 @@ exec {sysid} {args}
 /// The finish script: merge the parts, check every run, write the report (`sysid cluster
 /// finish`). It depends on the array with `afterany`, so it runs however the tasks ended and
 /// names the shards that failed instead of waiting for them forever.
-pub fn finish_script(plan: &Plan) -> String {
+pub(crate) fn finish_script(plan: &Plan) -> String {
     format!(
         "#!/bin/bash
 # Merges the shards of this study (`sysid {kind}`):

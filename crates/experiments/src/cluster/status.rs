@@ -301,7 +301,7 @@ pub fn status(plan: &Plan, query: bool) -> Result<Status, ClusterError> {
 
 /// The last line of a shard's log that says why it stopped: an error, a cancellation, a time or
 /// memory limit; else its last line.
-pub fn why_stopped(log: &Path, submitted: bool) -> String {
+pub(crate) fn why_stopped(log: &Path, submitted: bool) -> String {
     let Ok(mut f) = std::fs::File::open(log) else {
         return if submitted {
             format!("never started (no log {})", log.display())

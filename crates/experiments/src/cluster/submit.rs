@@ -22,7 +22,7 @@ pub struct Submitted {
 }
 
 /// `0-3,7,9-10` for the shards 0, 1, 2, 3, 7, 9, 10 (sorted), with `%K` when at most K may run.
-pub fn array_spec(shards: &[usize], max_running: Option<usize>) -> String {
+pub(crate) fn array_spec(shards: &[usize], max_running: Option<usize>) -> String {
     let mut parts: Vec<String> = Vec::new();
     let mut i = 0;
     while i < shards.len() {

@@ -17,7 +17,7 @@ use identify::validation::{FreeRun, ModalComparison};
 
 /// The baseline's result (`experiments/real/srim.py`).
 #[derive(Debug, Clone, Deserialize)]
-pub struct Baseline {
+pub(crate) struct Baseline {
     pub method: String,
     pub mdof_version: String,
     pub command: String,
@@ -27,7 +27,7 @@ pub struct Baseline {
 
 /// One model order of the baseline.
 #[derive(Debug, Clone, Deserialize)]
-pub struct BaselineRun {
+pub(crate) struct BaselineRun {
     pub order: usize,
     /// Fit % per channel on each data set (keyed by its directory; `null`: unstable model).
     pub fits: BTreeMap<String, Option<Vec<f64>>>,
@@ -36,14 +36,14 @@ pub struct BaselineRun {
 }
 
 #[derive(Debug, Clone, Deserialize)]
-pub struct BaselineMode {
+pub(crate) struct BaselineMode {
     pub frequency_hz: f64,
     pub damping_ratio: f64,
 }
 
 impl BaselineRun {
     /// Fits on the record named `record` (the last component of the data directory).
-    pub fn fits_on(&self, record: &str) -> Option<&[f64]> {
+    pub(crate) fn fits_on(&self, record: &str) -> Option<&[f64]> {
         self.fits
             .iter()
             .find(|(k, _)| Path::new(k).file_name().is_some_and(|n| n == record))

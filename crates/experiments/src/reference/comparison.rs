@@ -390,7 +390,7 @@ pub fn limit_markdown(rows: &[LimitRow]) -> String {
 }
 
 /// The data set a run record was computed on (`data.sha256` of its fingerprint).
-pub fn record_data_sha(r: &identify::record::RunRecord) -> Option<&str> {
+pub(crate) fn record_data_sha(r: &identify::record::RunRecord) -> Option<&str> {
     r.fingerprint
         .as_ref()?
         .inputs

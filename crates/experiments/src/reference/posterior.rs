@@ -14,7 +14,7 @@ use identify::pipeline::{chain_spec, Algorithm, FilterSettings};
 
 /// What `sysid reference` asks for (every flag but `--out`).
 #[derive(Debug, Clone)]
-pub struct ReferenceRequest {
+pub(crate) struct ReferenceRequest {
     /// Data-set directory.
     pub data: PathBuf,
     /// Likelihood estimator: the MPF-EKF2 or the bootstrap PF.
@@ -39,7 +39,7 @@ pub struct ReferenceRequest {
 /// Runs the chain of a request: checks the counts, resolves the building (simulated data carry
 /// theirs; field data need the config's `[structure]` table), estimates the likelihood's s.d. at
 /// the start point, runs the chain and summarises it. `note` hears the progress lines, in order.
-pub fn reference_posterior(
+pub(crate) fn reference_posterior(
     args: &ReferenceRequest,
     note: &mut dyn FnMut(String),
 ) -> Result<ReferenceRecord> {

@@ -140,7 +140,7 @@ pub fn cost(fits: &[CostFit], path: &Path) -> Result<()> {
 /// Mean relative error of k and of c (%, log scale) against the storey count, one line per
 /// algorithm, for the chains with hysteresis at the base and every storey measured; error bars
 /// of ± one run-to-run s.d. (clipped at the axis bottom).
-pub fn accuracy(cells: &[Cell], path: &Path) -> Result<()> {
+pub(crate) fn accuracy(cells: &[Cell], path: &Path) -> Result<()> {
     let reference: Vec<&Cell> = cells
         .iter()
         .filter(|c| is_reference(c) && c.runs > c.failed)

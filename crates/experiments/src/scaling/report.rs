@@ -10,7 +10,7 @@ use crate::study::Study;
 use identify::pipeline::Algorithm;
 
 /// Steps of the whole El Centro record at dt = 0.005 s (31.18 s).
-pub const FULL_RECORD_STEPS: usize = 6236;
+pub(crate) const FULL_RECORD_STEPS: usize = 6236;
 /// The goals.
 const GOAL_MINUTES_N20: f64 = 5.0;
 const GOAL_SLOPE: f64 = 2.0;

@@ -23,7 +23,7 @@ pub const LOCK_FILE: &str = ".sysid.lock";
 
 /// Who holds a lock.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
-pub struct Holder {
+pub(crate) struct Holder {
     pub pid: u32,
     pub host: String,
     /// The holder's command line.
@@ -123,7 +123,8 @@ impl DirLock {
     }
 
     /// Who holds this lock (this process).
-    pub fn holder(&self) -> &Holder {
+    #[cfg(test)]
+    pub(crate) fn holder(&self) -> &Holder {
         &self.holder
     }
 }
@@ -204,7 +205,7 @@ fn clean_leftovers(dir: &Path) {
 
 /// Whether a process with id `pid` (and, when known, kernel start time `start`) is running on
 /// this host. On Linux from `/proc` (a zombie counts as ended); elsewhere `kill -0`.
-pub fn is_running(pid: u32, start: Option<u64>) -> bool {
+pub(crate) fn is_running(pid: u32, start: Option<u64>) -> bool {
     if Path::new("/proc/self/stat").exists() {
         let Ok(stat) = fs::read_to_string(format!("/proc/{pid}/stat")) else {
             return false;
@@ -250,7 +251,7 @@ fn host_name() -> String {
 }
 
 /// The current time, UTC, as `YYYY-MM-DDTHH:MM:SSZ`.
-pub fn utc_now() -> String {
+pub(crate) fn utc_now() -> String {
     let secs = SystemTime::now()
         .duration_since(UNIX_EPOCH)
         .map_or(0, |d| d.as_secs()) as i64;

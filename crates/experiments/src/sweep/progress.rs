@@ -61,7 +61,7 @@ impl Progress {
     }
 
     /// One run finished.
-    pub fn inc(&self, failed: bool) {
+    pub(crate) fn inc(&self, failed: bool) {
         let done = self.done.fetch_add(1, Ordering::Relaxed) + 1;
         let failures = if failed {
             self.failed.fetch_add(1, Ordering::Relaxed) + 1

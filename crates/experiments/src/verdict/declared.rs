@@ -42,7 +42,7 @@ use identify::metrics::mean_sd;
 use identify::record::RunRecord;
 
 /// Fewest completed runs on both sides for a difference to count in `differs-from-first`.
-pub const MIN_RUNS: usize = 5;
+pub(crate) const MIN_RUNS: usize = 5;
 
 /// The per-run quantity a statement is about.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -174,7 +174,7 @@ pub enum Test {
     /// differs from the first structure's: each difference of independent means (s.e.
     /// √(s.e.₁² + s.e.₂²)) is judged at the Bonferroni z of the comparisons; holds when some ±z
     /// s.e. interval excludes 0, does not hold when every one lies within ±`threshold`
-    /// (counting only differences with [`MIN_RUNS`] completed runs on both sides).
+    /// (counting only differences with `MIN_RUNS` completed runs on both sides).
     DiffersFromFirst,
 }
 

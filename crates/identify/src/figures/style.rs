@@ -32,7 +32,7 @@ pub fn algorithm_colour(a: Algorithm) -> RGBColor {
 }
 
 /// The marker of an algorithm: circle, triangle, square, diamond.
-pub fn algorithm_marker(a: Algorithm) -> usize {
+pub(crate) fn algorithm_marker(a: Algorithm) -> usize {
     match a {
         Algorithm::MpfEkf2 => 0,
         Algorithm::MlnRbpf => 1,
@@ -42,13 +42,13 @@ pub fn algorithm_marker(a: Algorithm) -> usize {
 }
 
 /// Whether a scheme's lines are dashed: forward Euler (the paper's) solid, the others dashed.
-pub fn scheme_dashed(d: Discretisation) -> bool {
+pub(crate) fn scheme_dashed(d: Discretisation) -> bool {
     !matches!(d, Discretisation::Euler)
 }
 
 /// The algorithm a series label names, if any: its figure label ("MPF-EKF2", "Bootstrap PF") or
 /// its command-line name ("mpf-ekf2"), anywhere in the label.
-pub fn algorithm_in(label: &str) -> Option<Algorithm> {
+pub(crate) fn algorithm_in(label: &str) -> Option<Algorithm> {
     let lower = label.to_lowercase();
     Algorithm::ALL.into_iter().find(|a| {
         lower.contains(&a.label().to_lowercase())
@@ -58,7 +58,7 @@ pub fn algorithm_in(label: &str) -> Option<Algorithm> {
 }
 
 /// The scheme a series label names, if any ("· symplectic", "euler").
-pub fn scheme_in(label: &str) -> Option<Discretisation> {
+pub(crate) fn scheme_in(label: &str) -> Option<Discretisation> {
     let lower = label.to_lowercase();
     if lower.contains("symplectic") || lower.contains("semi-implicit") {
         Some(Discretisation::Symplectic)
@@ -89,18 +89,18 @@ pub fn for_label(label: &str, index: usize) -> SeriesStyle {
     }
 }
 
-/// The style of an algorithm's series (solid lines).
-pub fn for_algorithm(a: Algorithm) -> SeriesStyle {
-    SeriesStyle {
-        colour: algorithm_colour(a),
-        marker: algorithm_marker(a),
-        dashed: false,
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The style of an algorithm's series (solid lines).
+    fn for_algorithm(a: Algorithm) -> SeriesStyle {
+        SeriesStyle {
+            colour: algorithm_colour(a),
+            marker: algorithm_marker(a),
+            dashed: false,
+        }
+    }
 
     #[test]
     fn every_algorithm_has_its_own_colour_and_marker() {

@@ -71,7 +71,7 @@ fn what(t: fs::FileType) -> &'static str {
 
 /// Checks that `path` (given as `flag`) may be replaced: it does not exist, or it is a regular
 /// file (not followed through a symbolic link: a link is refused, not its target written).
-pub fn check_replaceable(path: &Path, flag: &str) -> Result<(), OutputError> {
+pub(crate) fn check_replaceable(path: &Path, flag: &str) -> Result<(), OutputError> {
     match fs::symlink_metadata(path) {
         Ok(m) if m.file_type().is_file() => Ok(()),
         Ok(m) => Err(OutputError::NotAFile {
@@ -106,7 +106,7 @@ fn same_file(a: &Path, b: &Path) -> bool {
     }
 }
 
-/// Checks an output path before a command's work: replaceable ([`check_replaceable`]) and none
+/// Checks an output path before a command's work: replaceable (`check_replaceable`) and none
 /// of the command's `inputs` (option, path). An input that is a directory stands for the
 /// data-set files in it (`measured.csv`, ...), which is what the commands read from one.
 pub fn check_output(out: &Path, flag: &str, inputs: &[(&str, &Path)]) -> Result<(), OutputError> {
@@ -136,7 +136,7 @@ pub fn check_output(out: &Path, flag: &str, inputs: &[(&str, &Path)]) -> Result<
 /// directory, then a rename over `path`. An interruption leaves either the old file or the new
 /// one, never a part of either (and possibly the temporary file, removed by the next sweep or
 /// merge of the directory). A `path` that exists and is not a regular file is refused
-/// ([`check_replaceable`]): every file the tool writes goes through here, so none replaces a
+/// (`check_replaceable`): every file the tool writes goes through here, so none replaces a
 /// device, a pipe or a symbolic link.
 /// The error names the file and what was being done.
 pub fn write_bytes_atomic(path: &Path, bytes: &[u8]) -> io::Result<()> {

@@ -105,7 +105,7 @@ pub struct ChannelCheck {
     /// Variance of the normalised errors: ≥ 1 expected ([`crate::residuals`]).
     #[serde(with = "crate::record::number::scalar")]
     pub variance: f64,
-    /// Ljung–Box Q over lags 1..=[`MAX_LAG`](crate::residuals::MAX_LAG) and its 95 % critical value.
+    /// Ljung–Box Q over lags 1..=`MAX_LAG` (20) and its 95 % critical value.
     #[serde(with = "crate::record::number::scalar")]
     pub ljung_box: f64,
     #[serde(with = "crate::record::number::scalar")]

@@ -133,7 +133,7 @@ pub fn data_identity(data: &LoadedDataset) -> Value {
 
 /// Canonical JSON text of a value: object keys sorted by their UTF-8 bytes, no whitespace,
 /// strings and numbers as `serde_json` writes them.
-pub fn canonical_json(v: &Value) -> String {
+pub(crate) fn canonical_json(v: &Value) -> String {
     let mut out = String::new();
     write_canonical(v, &mut out);
     out
@@ -170,7 +170,7 @@ fn write_canonical(v: &Value, out: &mut String) {
 }
 
 /// SHA-256 of `bytes`, lower-case hex.
-pub fn sha256_hex(bytes: &[u8]) -> String {
+pub(crate) fn sha256_hex(bytes: &[u8]) -> String {
     hex(&Sha256::digest(bytes))
 }
 

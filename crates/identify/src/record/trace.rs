@@ -75,14 +75,19 @@ mod intervals_repr {
         hi: f64,
     }
 
-    pub fn serialize<S: Serializer>(x: &[CredibleInterval], s: S) -> Result<S::Ok, S::Error> {
+    pub(crate) fn serialize<S: Serializer>(
+        x: &[CredibleInterval],
+        s: S,
+    ) -> Result<S::Ok, S::Error> {
         s.collect_seq(x.iter().map(|c| Repr {
             level: c.level,
             lo: c.lo,
             hi: c.hi,
         }))
     }
-    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<Vec<CredibleInterval>, D::Error> {
+    pub(crate) fn deserialize<'de, D: Deserializer<'de>>(
+        d: D,
+    ) -> Result<Vec<CredibleInterval>, D::Error> {
         Ok(Vec::<Repr>::deserialize(d)?
             .into_iter()
             .map(|r| CredibleInterval {

@@ -34,7 +34,7 @@ pub struct CrossValidation {
 }
 
 /// Most draws accepted.
-pub const MAX_DRAWS: usize = 10_000;
+pub(crate) const MAX_DRAWS: usize = 10_000;
 
 /// Reads and checks a run record.
 pub fn read_record(path: &Path) -> Result<RunRecord> {
@@ -49,7 +49,7 @@ pub fn read_record(path: &Path) -> Result<RunRecord> {
 
 /// Refuses another record whose building differs from the identified one; returns notes on
 /// what is assumed of it.
-pub fn check_same_building(
+pub(crate) fn check_same_building(
     d: &StructureDescription,
     data: &models::dataset::LoadedDataset,
     dir: &Path,
@@ -121,7 +121,7 @@ pub struct CrossValidated {
 }
 
 /// Cross-validates the identification of the run record at `record_path` on the data set at
-/// `data_dir`, with a band of `draws` posterior draws (0: no band; else 2 to [`MAX_DRAWS`]).
+/// `data_dir`, with a band of `draws` posterior draws (0: no band; else 2 to `MAX_DRAWS`).
 /// `note` hears what is assumed of the other record and why there is no band, in order.
 pub fn cross_validate(
     record_path: &Path,

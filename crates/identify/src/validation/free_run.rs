@@ -21,7 +21,7 @@ pub use crate::record::validation::Integrator;
 
 /// The free run's integrator: adaptive, tighter than the SPEC §7 validation default so that
 /// the integration error (relative ~10⁻⁸) is far below any fit difference worth reporting.
-pub const FREE_RUN_INTEGRATOR: Integrator = Integrator::Adaptive(Tolerance {
+pub(crate) const FREE_RUN_INTEGRATOR: Integrator = Integrator::Adaptive(Tolerance {
     rtol: 1e-8,
     atol: 1e-12,
 });
@@ -152,7 +152,7 @@ pub fn nrmse(y: &[f64], yhat: &[f64]) -> f64 {
 }
 
 /// Percentile `p` ∈ [0, 1] of sorted values, linear between order statistics.
-pub fn percentile_sorted(sorted: &[f64], p: f64) -> f64 {
+pub(crate) fn percentile_sorted(sorted: &[f64], p: f64) -> f64 {
     match sorted.len() {
         0 => f64::NAN,
         1 => sorted[0],

@@ -38,11 +38,11 @@ use spectral::Peak;
 type DrawResult = Result<(Vec<f64>, Vec<Vec<f64>>), String>;
 
 /// Purpose of the band's random stream.
-pub const BAND_PURPOSE: &str = "validation-band";
+pub(crate) const BAND_PURPOSE: &str = "validation-band";
 /// Draws of θ for the band.
 pub const BAND_DRAWS: usize = 100;
 /// At most this many time points of each series are kept in a record.
-pub const MAX_POINTS: usize = 5000;
+pub(crate) const MAX_POINTS: usize = 5000;
 
 /// The measured channels of a record, channel-major.
 pub(crate) fn measured_channels(data: &LoadedDataset) -> Vec<Vec<f64>> {
@@ -53,7 +53,7 @@ pub(crate) fn measured_channels(data: &LoadedDataset) -> Vec<Vec<f64>> {
 
 /// The free run of building `d` with θ on record `data` (its measured ü_g and channels; the
 /// channels' storeys from its header, their kind from `d`), with a band of `draws` θ from
-/// `posterior` on the stream (seed, run, [`BAND_PURPOSE`]) when given.
+/// `posterior` on the stream (seed, run, `BAND_PURPOSE`) when given.
 pub fn free_run(
     d: &StructureDescription,
     data: &LoadedDataset,
@@ -247,10 +247,10 @@ pub fn modal(d: &StructureDescription, data: &LoadedDataset, theta: &[f64]) -> M
 }
 
 /// Largest frequency ratio between a model mode and the measured peak it is paired with.
-pub const PAIR_RATIO: f64 = 1.5;
+pub(crate) const PAIR_RATIO: f64 = 1.5;
 
 /// Pairs each model mode with a measured peak: repeatedly the closest remaining (mode, peak)
-/// pair in log-frequency, as long as their ratio is below [`PAIR_RATIO`]; a mode left without
+/// pair in log-frequency, as long as their ratio is below `PAIR_RATIO`; a mode left without
 /// a peak (none near it, or it lies below two frequency bins where no peak can be resolved)
 /// shows none, and a peak left without a mode is listed apart. Modes keep their order (1 = the
 /// lowest).
@@ -295,15 +295,15 @@ pub fn pair(modes: &[Mode], peaks: &[Peak], resolution_hz: f64) -> Vec<ModePair>
 }
 
 /// Purpose of the random stream of the modal intervals' draws.
-pub const MODAL_PURPOSE: &str = "validation-modes";
+pub(crate) const MODAL_PURPOSE: &str = "validation-modes";
 
 /// θ drawn for the modal intervals.
-pub const MODAL_DRAWS: usize = 400;
+pub(crate) const MODAL_DRAWS: usize = 400;
 
-/// The central 95 % of each mode's natural frequency and damping ratio over [`MODAL_DRAWS`] θ
+/// The central 95 % of each mode's natural frequency and damping ratio over `MODAL_DRAWS` θ
 /// drawn from `q` as the free-run band draws them (each parameter inside its 95 % interval,
 /// parameters independently: the record keeps no correlations) on the stream (seed, run,
-/// [`MODAL_PURPOSE`]); one entry per mode of θ_val (`count`), `None` for all when fewer than
+/// `MODAL_PURPOSE`); one entry per mode of θ_val (`count`), `None` for all when fewer than
 /// half the draws give a building with as many under-damped modes (mode `r` of a draw is its
 /// `r`-th by frequency).
 pub fn modal_intervals(
@@ -352,7 +352,7 @@ pub fn modal_intervals(
 
 /// The building a record was identified on, from its `config.spec` (masses, 0-based
 /// hysteretic storeys, sensor layout).
-pub fn description_of(r: &RunRecord) -> Result<StructureDescription> {
+pub(crate) fn description_of(r: &RunRecord) -> Result<StructureDescription> {
     let spec = r
         .config
         .get("spec")
@@ -378,13 +378,13 @@ pub fn description_of(r: &RunRecord) -> Result<StructureDescription> {
 }
 
 /// The band's θ distribution for a record, or why there is none.
-pub fn posterior_of(r: &RunRecord) -> Result<QuantileDraw, String> {
+pub(crate) fn posterior_of(r: &RunRecord) -> Result<QuantileDraw, String> {
     QuantileDraw::new(&r.param_names, &r.credible)
 }
 
 /// Checks that a record's θ_val can be simulated: a completed run with finite values and no
 /// physically impossible parameter (a stiffness or damping ≤ 0, `checks::check`).
-pub fn check_identified(r: &RunRecord) -> Result<()> {
+pub(crate) fn check_identified(r: &RunRecord) -> Result<()> {
     if let Some(f) = &r.failure {
         bail!("the run failed ({f}): it identified no θ to validate");
     }

@@ -4,7 +4,7 @@
 //! acceleration (relative channels plus ü_g), H1(f) = P_xy(f) / P_xx(f): cross- and auto-spectra
 //! averaged over segments of L samples (L the largest power of two ≤ K/4, at most 8192, so at
 //! least seven segments), Hann window, 50 % overlap, each segment's mean removed. Uncorrelated
-//! noise on y does not bias H1. The FFT is a plain iterative radix-2 routine ([`fft`]), tested
+//! noise on y does not bias H1. The FFT is a plain iterative radix-2 routine (`fft`), tested
 //! against the direct DFT.
 //!
 //! Peaks are read from the sum over channels of |H1| (each floor sees every mode, with the
@@ -24,13 +24,13 @@ use thiserror::Error;
 pub use crate::record::validation::Peak;
 
 /// Shortest record for a transfer function: 8 segments of 32 samples.
-pub const MIN_SAMPLES: usize = 128;
+pub(crate) const MIN_SAMPLES: usize = 128;
 /// Longest segment.
 pub const MAX_SEGMENT: usize = 8192;
 /// The ground motion's band: P_xx above this fraction of its largest value (30 dB).
-pub const BAND_FRACTION: f64 = 1e-3;
+pub(crate) const BAND_FRACTION: f64 = 1e-3;
 /// A peak needs this coherence on at least one channel.
-pub const MIN_COHERENCE: f64 = 0.5;
+pub(crate) const MIN_COHERENCE: f64 = 0.5;
 
 #[derive(Debug, Clone, PartialEq, Error)]
 pub enum SpectralError {
@@ -45,7 +45,7 @@ pub enum SpectralError {
 crate::error::domain_error!(SpectralError);
 
 /// In-place radix-2 FFT of (re, im), length a power of two: X_k = Σ x_n e^{−2πikn/L}.
-pub fn fft(re: &mut [f64], im: &mut [f64]) {
+pub(crate) fn fft(re: &mut [f64], im: &mut [f64]) {
     let n = re.len();
     assert!(n.is_power_of_two() && im.len() == n, "FFT length");
     let mut j = 0;
@@ -99,7 +99,7 @@ pub struct TransferEstimate {
 }
 
 /// The segment length for K samples.
-pub fn segment_length(k: usize) -> Result<usize, SpectralError> {
+pub(crate) fn segment_length(k: usize) -> Result<usize, SpectralError> {
     if k < MIN_SAMPLES {
         return Err(SpectralError::TooShort(k));
     }
@@ -200,7 +200,7 @@ pub fn welch_h1(x: &[f64], ys: &[Vec<f64>], dt: f64) -> Result<TransferEstimate,
 
 /// The bins where the ground motion has energy (P_xx ≥ [`BAND_FRACTION`]·max), from the second
 /// bin up to the one below the Nyquist frequency.
-pub fn in_band(t: &TransferEstimate) -> Vec<bool> {
+pub(crate) fn in_band(t: &TransferEstimate) -> Vec<bool> {
     let max = t.pxx.iter().cloned().fold(0.0_f64, f64::max);
     let n = t.pxx.len();
     (0..n)
@@ -209,7 +209,7 @@ pub fn in_band(t: &TransferEstimate) -> Vec<bool> {
 }
 
 /// The `count` largest local maxima of Σ_c |H1_c| inside the ground motion's band where at least
-/// one channel's coherence is at least [`MIN_COHERENCE`], by increasing frequency.
+/// one channel's coherence is at least `MIN_COHERENCE`, by increasing frequency.
 pub fn peaks(t: &TransferEstimate, count: usize) -> Vec<Peak> {
     let n = t.frequency_hz.len();
     let sum: Vec<f64> = (0..n)
