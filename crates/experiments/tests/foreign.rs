@@ -219,19 +219,7 @@ fn foreign_structures_get_physical_answers_that_predict_better_than_the_ground()
         std::fs::write(dir.join("measured.csv"), csv).unwrap();
         let out = dir.join("r.json");
         let o = sysid()
-            .args([
-                "filter",
-                "--algorithm",
-                "mpf-ekf2",
-                "--storeys",
-                "3",
-                "--hysteretic",
-                "none",
-                "--masses",
-                "1",
-                "--measurement",
-                "absolute",
-            ])
+            .args(common::LINEAR_FIELD_FILTER)
             .arg("--data")
             .arg(&dir)
             .arg("--out")

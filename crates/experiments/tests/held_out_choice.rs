@@ -47,23 +47,9 @@ fn linear_field_data(dir: &Path) {
     }
 }
 
-const FLAGS: [&str; 10] = [
-    "filter",
-    "--algorithm",
-    "mpf-ekf2",
-    "--storeys",
-    "3",
-    "--hysteretic",
-    "none",
-    "--masses",
-    "1",
-    "--measurement",
-];
-
 fn print_plan(data: &Path, extra: &[&str]) -> (RunPlan, String) {
     let out = sysid()
-        .args(FLAGS)
-        .arg("absolute")
+        .args(common::LINEAR_FIELD_FILTER)
         .args(extra)
         .arg("--data")
         .arg(data)
@@ -145,7 +131,7 @@ fn a_linear_field_identification_chooses_its_noise_by_held_out_prediction() {
             serde_json::from_str(&std::fs::read_to_string(out).unwrap()).unwrap();
         v
     };
-    let direct = run(&[&FLAGS[..], &["absolute"]].concat(), &root.join("a.json"));
+    let direct = run(&common::LINEAR_FIELD_FILTER, &root.join("a.json"));
     let again = run(
         &["filter", "--plan", plan_file.to_str().unwrap()],
         &root.join("b.json"),

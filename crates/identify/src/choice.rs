@@ -10,14 +10,15 @@
 //! the candidate this choice takes (storey+mass, `nf = 3`) predicts it at +24.1 %.
 //! A user judges an identification by what it predicts, so the plan chooses by prediction:
 //! every candidate (each noise fraction of [`NOISE_FRACTIONS`] × each process-noise factor of
-//! [`PROCESS_NOISE_FACTORS`] × each damping form the user left open) is identified on the first part of the record, its θ_val run freely from rest over the
-//! whole record, and scored by the fit of the part it never saw (the record's second half by
-//! energy, `HELD_OUT_ENERGY`); the best mean fit over the channels wins, the first listed (less noise,
-//! fewer parameters) on a tie. The plan records every candidate's score ([`HeldOutChoice`]).
+//! [`PROCESS_NOISE_FACTORS`] × each damping form the user left open) is identified on the first
+//! part of the record, its θ_val run freely from rest over the whole record, and scored by the
+//! fit of the part it never saw (the record's second half by energy, `HELD_OUT_ENERGY`); the best
+//! mean fit over the channels wins, the first listed (less noise, fewer parameters) on a tie. The plan records every candidate's score ([`HeldOutChoice`]).
 //!
 //! Only where a candidate is cheap: the run is one Gaussian filter (a linear building under the
 //! MPF-EKF2, [`crate::rules::samples_nothing`]) on field data, asked for without a config. A
-//! particle run would cost eight full runs; its plan says so and keeps the default.
+//! particle run would cost one full run per candidate (24 with both damping forms open); its plan
+//! says so and keeps the default.
 
 use models::dataset::LoadedDataset;
 use models::structure::Damping;
@@ -70,7 +71,7 @@ fn applies(plan: &RunPlan, t: &Target, data: &LoadedDataset) -> Result<Option<St
     }
     if !crate::rules::samples_nothing(plan.algorithm, &plan.spec(data)?) {
         return Ok(Some(format!(
-            "noise fraction {} kept (SPEC §3): choosing it on held-out data would cost {} full particle runs",
+            "noise fraction {} kept (SPEC §3): choosing it on held-out data would cost one full particle run per candidate (up to {})",
             plan.settings.noise_fraction,
             NOISE_FRACTIONS.len() * PROCESS_NOISE_FACTORS.len() * 2
         )));
@@ -109,6 +110,16 @@ pub fn with_noise(plan: &RunPlan, nf: f64, pf: f64) -> RunPlan {
         *q *= clean;
     }
     p
+}
+
+/// Records in `plan` that the choice kept its settings, and why.
+fn kept(plan: &mut RunPlan, level: Level, why: String) {
+    plan.decisions.push(Decision {
+        rule: "choice::choose".into(),
+        set: String::new(),
+        level,
+        why,
+    });
 }
 
 /// Samples identified on: up to the sample by which the channels hold `HELD_OUT_ENERGY` of
@@ -228,12 +239,7 @@ pub fn choose(
     let mut plan = plan;
     if let Some(why) = applies(&plan, t, data)? {
         if t.config.is_none() && data.meta.is_none() {
-            plan.decisions.push(Decision {
-                rule: "choice::choose".into(),
-                set: String::new(),
-                level: Level::Info,
-                why,
-            });
+            kept(&mut plan, Level::Info, why);
         }
         return Ok(plan);
     }
@@ -251,12 +257,11 @@ pub fn choose(
         PROCESS_NOISE_FACTORS.to_vec()
     };
     if !open && fractions.len() * factors.len() == 1 {
-        plan.decisions.push(Decision {
-            rule: "choice::choose".into(),
-            set: String::new(),
-            level: Level::Info,
-            why: "noise fraction, process noise and damping form as stated: nothing to choose on held-out data".into(),
-        });
+        kept(
+            &mut plan,
+            Level::Info,
+            "noise fraction, process noise and damping form as stated: nothing to choose on held-out data".into(),
+        );
         return Ok(plan);
     }
     let mut bases = vec![plan.clone()];
@@ -308,20 +313,16 @@ pub fn choose(
             _ => Some((i, s)),
         });
     let Some((chosen, _)) = best else {
-        plan.decisions.push(Decision {
-            rule: "choice::choose".into(),
-            set: String::new(),
-            level: Level::Warning,
-            why: format!(
-                "no candidate of the held-out choice predicted the record (noise fraction {} kept): {}",
-                plan.settings.noise_fraction,
-                candidates
-                    .iter()
-                    .filter_map(|c| c.note.clone())
-                    .collect::<Vec<_>>()
-                    .join("; ")
-            ),
-        });
+        let why = format!(
+            "no candidate of the held-out choice predicted the record (noise fraction {} kept): {}",
+            plan.settings.noise_fraction,
+            candidates
+                .iter()
+                .filter_map(|c| c.note.clone())
+                .collect::<Vec<_>>()
+                .join("; ")
+        );
+        kept(&mut plan, Level::Warning, why);
         return Ok(plan);
     };
     let choice = HeldOutChoice {

@@ -102,7 +102,8 @@ pool = {pool}
 storvik_update = {storvik}
 # Noise fraction nf: R and Q are set from nf × RMS of the signals (SPEC §3). Without --config, on
 # field data of a linear building, chosen with process_noise_factor (and the damping form when no
-# --damping is given) by the free-run fit of the record's last third (docs/validation.md).
+# --damping is given) by the free-run fit of the record's second half by energy, which the
+# candidates were not identified on (docs/validation.md).
 noise_fraction = {nf}
 # The velocities' process noise relative to SPEC §3's (s.d. factor × dt × nf × RMS ü_g).
 process_noise_factor = {pnf}

@@ -9,6 +9,22 @@ use identify::metrics::{SignalError, StateErrors};
 use identify::observe::Trace;
 use identify::record::{Fingerprint, Loop, RunRecord, Timing, Validation, Versions};
 
+/// `sysid filter` on field data of a linear 3-storey building with unit masses, measured as
+/// absolute accelerations (the MPF-EKF2, which runs it as one Gaussian filter).
+pub const LINEAR_FIELD_FILTER: [&str; 11] = [
+    "filter",
+    "--algorithm",
+    "mpf-ekf2",
+    "--storeys",
+    "3",
+    "--hysteretic",
+    "none",
+    "--masses",
+    "1",
+    "--measurement",
+    "absolute",
+];
+
 /// A fresh directory under the system temp dir whose name starts with `prefix`, and the guard
 /// that removes it when dropped (also when the test panics).
 pub fn temp_dir(prefix: &str) -> (tempfile::TempDir, std::path::PathBuf) {
