@@ -28,6 +28,7 @@ use crate::field::StructureSettings;
 use crate::plan::{Candidate, Decision, HeldOutChoice, Level, RunPlan, Target};
 use crate::settings::FilterSettings;
 use crate::validation::free_run::{chain_of, fit_percent, simulate_channels, FREE_RUN_INTEGRATOR};
+use crate::validation::prediction;
 
 /// The noise fractions tried, in order of preference on a tie (SPEC §3's 0.1 first).
 pub const NOISE_FRACTIONS: [f64; 4] = [0.1, 0.3, 1.0, 3.0];
@@ -169,6 +170,7 @@ fn score(plan: &RunPlan, ident: &LoadedDataset, data: &LoadedDataset) -> Result<
         process_noise_factor: plan.settings.process_noise_factor,
         held_out_fit: Vec::new(),
         score: None,
+        held_out_error: None,
         note: None,
     };
     let input = crate::pipeline::RunInput {
@@ -215,6 +217,20 @@ fn score(plan: &RunPlan, ident: &LoadedDataset, data: &LoadedDataset) -> Result<
             f64::NAN
         };
         c.held_out_fit.push(fit);
+    }
+    let names: Vec<String> = data.sensors.iter().map(|s| format!("a{s}")).collect();
+    if sim.iter().all(|s| s.len() == data.len()) {
+        c.held_out_error = prediction::learn(
+            &names,
+            &measured,
+            &sim,
+            data.dt,
+            prediction::window_seconds(&plan.building, &record.theta_val),
+            from,
+            prediction::ErrorSource::HeldOut {
+                samples: data.len() - from,
+            },
+        );
     }
     let fits = &c.held_out_fit;
     if fits.iter().all(|f| f.is_finite()) {

@@ -495,7 +495,15 @@ pub fn identify_plan(
     let mut noise = None;
     if data.meta.is_none() {
         // Field data: validation without the truth (free run, modes; docs/validation.md).
-        crate::validation::attach(&mut record, data, &plan.building);
+        // The band's model error: the chosen candidate's, learned on the part of the record
+        // it did not fit (in-sample when the held-out choice did not run).
+        let held_out = plan
+            .evidence
+            .held_out
+            .as_ref()
+            .and_then(|h| h.candidates.get(h.chosen))
+            .and_then(|c| c.held_out_error.as_ref());
+        crate::validation::attach(&mut record, data, &plan.building, held_out);
         // The noise levels were chosen from the measured signals (SPEC §3).
         noise = Some(NoiseLevels::of(plan));
     }

@@ -113,6 +113,10 @@ pub struct Candidate {
     /// Their mean: the score.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub score: Option<f64>,
+    /// The model error of its free run learned on the held-out samples
+    /// (`crate::validation::prediction`): the chosen candidate's widens the run's predictive band.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub held_out_error: Option<crate::record::validation::ModelError>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub note: Option<String>,
 }

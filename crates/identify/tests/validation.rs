@@ -49,7 +49,15 @@ fn the_free_run_with_the_true_theta_fits_noise_free_data_perfectly() {
             let fit = free_run::fit_percent(&measured, yc);
             assert!((fit - 100.0).abs() < 1e-9, "{preset} a{c}: fit {fit}");
         }
-        let f = validation::free_run(&d, &data, &theta, None, 0).unwrap();
+        let f = validation::free_run(
+            &d,
+            &data,
+            &theta,
+            None,
+            0,
+            validation::prediction::ErrorBand::Without,
+        )
+        .unwrap();
         assert_eq!(f.channels.len(), data.channels);
         // The free run's adaptive integrator (tolerance 1e-8) differs from the data's RK4 by
         // RK4's own truncation error: a phase error of about T·ω·(ω·dt)⁴/120 per mode, 3e-8 rad
@@ -97,7 +105,15 @@ fn the_fit_on_data_with_known_noise_is_the_value_the_noise_level_predicts() {
             *v += s * normal(&mut rng);
         }
     }
-    let f = validation::free_run(&d, &data, &theta, None, 0).unwrap();
+    let f = validation::free_run(
+        &d,
+        &data,
+        &theta,
+        None,
+        0,
+        validation::prediction::ErrorBand::Without,
+    )
+    .unwrap();
     for (c, ch) in f.channels.iter().enumerate() {
         let y: Vec<f64> = (0..k).map(|i| data.y(i)[c]).collect();
         let mean = y.iter().sum::<f64>() / k as f64;
@@ -228,7 +244,15 @@ fn the_band_is_reproducible_and_collapses_on_a_point_posterior() {
     };
     // A point posterior: every draw is θ, the band's fits are the fit.
     let q = free_run::QuantileDraw::new(&names, &intervals(0.0)).unwrap();
-    let f = validation::free_run(&d, &data, &theta, Some((&q, 1, 0)), 5).unwrap();
+    let f = validation::free_run(
+        &d,
+        &data,
+        &theta,
+        Some((&q, 1, 0)),
+        5,
+        validation::prediction::ErrorBand::Without,
+    )
+    .unwrap();
     for c in &f.channels {
         let p = c.fit_draws.as_ref().unwrap();
         assert!(p.iter().all(|x| (x - c.fit_percent).abs() < 1e-9), "{p:?}");
@@ -236,9 +260,33 @@ fn the_band_is_reproducible_and_collapses_on_a_point_posterior() {
     // A spread posterior: the same band for the same (seed, run), another for another seed,
     // and the free run at θ inside it almost everywhere.
     let q = free_run::QuantileDraw::new(&names, &intervals(0.05)).unwrap();
-    let a = validation::free_run(&d, &data, &theta, Some((&q, 1, 0)), 20).unwrap();
-    let b = validation::free_run(&d, &data, &theta, Some((&q, 1, 0)), 20).unwrap();
-    let c = validation::free_run(&d, &data, &theta, Some((&q, 2, 0)), 20).unwrap();
+    let a = validation::free_run(
+        &d,
+        &data,
+        &theta,
+        Some((&q, 1, 0)),
+        20,
+        validation::prediction::ErrorBand::Without,
+    )
+    .unwrap();
+    let b = validation::free_run(
+        &d,
+        &data,
+        &theta,
+        Some((&q, 1, 0)),
+        20,
+        validation::prediction::ErrorBand::Without,
+    )
+    .unwrap();
+    let c = validation::free_run(
+        &d,
+        &data,
+        &theta,
+        Some((&q, 2, 0)),
+        20,
+        validation::prediction::ErrorBand::Without,
+    )
+    .unwrap();
     assert_eq!(a, b);
     assert_ne!(a.band_lo, c.band_lo);
     assert_eq!(a.band.as_ref().unwrap().valid, 20);
@@ -249,11 +297,27 @@ fn the_band_is_reproducible_and_collapses_on_a_point_posterior() {
 #[test]
 fn bad_inputs_are_refused_with_a_reason() {
     let (data, d, theta) = clean("paper-3dof", None, MeasurementKind::Relative);
-    let e = validation::free_run(&d, &data, &theta[..5], None, 0).unwrap_err();
+    let e = validation::free_run(
+        &d,
+        &data,
+        &theta[..5],
+        None,
+        0,
+        validation::prediction::ErrorBand::Without,
+    )
+    .unwrap_err();
     assert!(e.to_string().contains("θ has 5 entries"), "{e}");
     let mut bad = theta.clone();
     bad[4] = -1.0;
-    let e = validation::free_run(&d, &data, &bad, None, 0).unwrap_err();
+    let e = validation::free_run(
+        &d,
+        &data,
+        &bad,
+        None,
+        0,
+        validation::prediction::ErrorBand::Without,
+    )
+    .unwrap_err();
     assert!(e.to_string().contains("damping"), "{e}");
     let chain = free_run::chain_of(&d, &theta).unwrap();
     let e = free_run::simulate_channels(

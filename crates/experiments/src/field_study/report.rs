@@ -13,7 +13,7 @@ use serde::Deserialize;
 use super::{select, FieldStudy, Part, PartDirs};
 use identify::record::RunRecord;
 use identify::validation::cross::CrossValidation;
-use identify::validation::{FreeRun, ModalComparison};
+use identify::validation::{ErrorSource, FreeRun, ModalComparison};
 
 /// The baseline's result (`experiments/real/srim.py`).
 #[derive(Debug, Clone, Deserialize)]
@@ -489,6 +489,7 @@ fn render_part(s: &mut String, part: &Part, out: &Path) -> Result<()> {
         }
         writeln!(s, "\n")?;
         agreement(s, &on)?;
+        band(s, &dirs, chosen, r0, train, &validate)?;
         // The goals compare with the baseline: only where the part has one.
         if part.baseline {
             goals(s, part, &dirs, chosen, r0, best, &validate)?;
@@ -554,6 +555,75 @@ fn agreement(s: &mut String, on: &[(String, RunRecord)]) -> Result<()> {
     )?;
     for (_, w) in worst.iter().take(6) {
         writeln!(s, "- {w}")?;
+    }
+    writeln!(s)?;
+    Ok(())
+}
+
+/// How much of each record the selected model's 95 % predictive band covers: on the record it
+/// was identified on (not independent: its model error was learned there) and on each record
+/// kept out (independent), with the verdict of the stated test on those.
+fn band(
+    s: &mut String,
+    dirs: &PartDirs,
+    chosen: &super::Variant,
+    r0: &RunRecord,
+    train: &str,
+    validate: &[&str],
+) -> Result<()> {
+    let Some(f0) = r0.free_run.as_ref() else {
+        return Ok(());
+    };
+    let source = match f0.model_error.as_ref().map(|m| m.source) {
+        Some(ErrorSource::HeldOut { samples }) => format!(
+            "learned on the {samples} samples of `{train}` that the held-out choice's candidate did not fit"
+        ),
+        Some(ErrorSource::InSample) => format!("learned in-sample on `{train}`"),
+        None => "none: the band holds the parameters' spread only".into(),
+    };
+    writeln!(
+        s,
+        "**The 95 % predictive band** of the selected model (docs/validation.md): the spread of \
+         its posterior draws widened by the model's error ({source}). Per cent of each floor's \
+         samples inside it:\n"
+    )?;
+    writeln!(s, "| record | covered % | |\n|---|---|---|")?;
+    let cell = |f: &FreeRun| -> Option<Vec<f64>> {
+        f.channels.iter().map(|c| c.coverage_percent).collect()
+    };
+    writeln!(
+        s,
+        "| `{train}` | {} | identified on it (not independent) |",
+        fit_cell(cell(f0).as_deref())
+    )?;
+    let mut kept = Vec::new();
+    for v in validate {
+        let c = cross(&dirs.validation(&chosen.name, v))?.and_then(|cv| cell(&cv.free_run));
+        writeln!(s, "| `{v}` | {} | kept out |", fit_cell(c.as_deref()))?;
+        kept.push((v, c));
+    }
+    if !kept.is_empty() {
+        let inside = kept
+            .iter()
+            .filter_map(|(_, c)| c.as_ref())
+            .flatten()
+            .filter(|c| (90.0..=98.0).contains(*c))
+            .count();
+        let total = kept
+            .iter()
+            .filter_map(|(_, c)| c.as_ref())
+            .flatten()
+            .count();
+        writeln!(
+            s,
+            "\nTest: the band covers 90–98 % of every floor of every record kept out. {inside} of \
+             {total} (record, floor) cases inside: **{}**.",
+            if total > 0 && inside == total {
+                "met"
+            } else {
+                "not met"
+            }
+        )?;
     }
     writeln!(s)?;
     Ok(())

@@ -26,6 +26,43 @@ pub struct ChannelFit {
         skip_serializing_if = "Option::is_none"
     )]
     pub fit_draws: Option<Vec<f64>>,
+    /// Per cent of the kept samples of the measured channel inside the predictive band
+    /// (`band_lo`..`band_hi`: parameters and model error); absent without a band.
+    #[serde(
+        default,
+        with = "number::opt_scalar",
+        skip_serializing_if = "Option::is_none"
+    )]
+    pub coverage_percent: Option<f64>,
+}
+
+/// Where the model error's scale was learned (`crate::validation::prediction`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case", tag = "kind")]
+pub enum ErrorSource {
+    /// On the held-out part of the identifying record (its last `samples` samples), by a θ
+    /// identified without them: an out-of-sample scale.
+    HeldOut { samples: usize },
+    /// On the identifying record by its own θ_val: in-sample, narrower than a new record needs.
+    InSample,
+}
+
+/// The model-error part of the predictive band (`crate::validation::prediction`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ModelError {
+    pub source: ErrorSource,
+    /// The channels it was learned on, in the order of `quantile`.
+    pub channels: Vec<String>,
+    /// Window of the local scale of the predicted motion (s).
+    #[serde(with = "number::scalar")]
+    pub window_s: f64,
+    /// Per channel: the constant part of the local scale, as a fraction of the predicted RMS.
+    #[serde(with = "number::vec")]
+    pub floor: Vec<f64>,
+    /// Per channel: the 95 % quantile of |y − ŷ| / local scale.
+    #[serde(with = "number::vec")]
+    pub quantile: Vec<f64>,
 }
 
 /// How the band was made.
@@ -53,12 +90,17 @@ pub struct FreeRun {
     pub band: Option<BandInfo>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub band_error: Option<String>,
+    /// The model error the band includes, and where it was learned (absent: the band holds
+    /// the parameters' spread only).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub model_error: Option<ModelError>,
     /// The series below keep one sample in `every`.
     pub every: usize,
     #[serde(with = "number::vec")]
     pub t: Vec<f64>,
-    /// Per channel: measured, simulated at θ_val, and the pointwise 2.5 % and 97.5 % percentiles
-    /// of the band's draws (empty without a band).
+    /// Per channel: measured, simulated at θ_val, and the 95 % predictive band: the pointwise
+    /// 2.5 % and 97.5 % percentiles of the band's draws widened by the model error (`model_error`)
+    /// where there is one (empty without either).
     #[serde(with = "number::vec_vec")]
     pub measured: Vec<Vec<f64>>,
     #[serde(with = "number::vec_vec")]

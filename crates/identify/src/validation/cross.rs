@@ -153,7 +153,19 @@ pub fn cross_validate(
         }
     };
     let q = posterior.as_ref().map(|q| (q, record.seed, record.run));
-    let free = super::free_run(&d, &data, &record.theta_val, q, draws)
+    // The model error learned with the identification (none in records older than it).
+    let error = match record
+        .free_run
+        .as_ref()
+        .and_then(|f| f.model_error.as_ref())
+    {
+        Some(m) => super::prediction::ErrorBand::Given(m),
+        None => {
+            note("the record holds no model error: the band holds the parameters' spread only");
+            super::prediction::ErrorBand::Without
+        }
+    };
+    let free = super::free_run(&d, &data, &record.theta_val, q, draws, error)
         .with_context(|| format!("the free run on {}", data_dir.display()))?;
     let modal = super::modal(&d, &data, &record.theta_val);
     let result = CrossValidation {

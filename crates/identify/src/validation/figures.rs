@@ -1,7 +1,8 @@
 //! Figures of a free run and a modal comparison, drawn from a record only:
 //!
 //! - `free_run.svg`: per channel the measured acceleration, the free run at θ_val and the
-//!   pointwise 95 % band of the posterior draws (its two edges);
+//!   pointwise 95 % predictive band (its two edges: the posterior draws' spread, widened by the
+//!   model error where the record has one), with the share of the record it covers;
 //! - `transfer.svg`: per channel the measured |H1| (log scale) with the identified model's
 //!   modes as dashed vertical lines and the peaks read from the data as dots.
 
@@ -36,9 +37,14 @@ pub fn free_run(f: &FreeRun, out: &Path, who: &str) -> Result<PathBuf> {
                 },
             ];
             if with_band {
-                for (edge, y) in [("2.5 %", &f.band_lo[i]), ("97.5 %", &f.band_hi[i])] {
+                let what = if f.model_error.is_some() {
+                    "95 % predictive band (parameters + model error)"
+                } else {
+                    "posterior draws, pointwise 95 %"
+                };
+                for (edge, y) in [("lower", &f.band_lo[i]), ("upper", &f.band_hi[i])] {
                     series.push(Series {
-                        label: format!("posterior draws, pointwise {edge}"),
+                        label: format!("{what}, {edge} edge"),
                         t: &f.t,
                         y,
                         colour: Some(2),
@@ -47,7 +53,7 @@ pub fn free_run(f: &FreeRun, out: &Path, who: &str) -> Result<PathBuf> {
             }
             Panel {
                 caption: format!(
-                    "{}: fit {:.1} %, NRMSE {:.3}{}",
+                    "{}: fit {:.1} %, NRMSE {:.3}{}{}",
                     c.channel,
                     c.fit_percent,
                     c.nrmse,
@@ -55,7 +61,9 @@ pub fn free_run(f: &FreeRun, out: &Path, who: &str) -> Result<PathBuf> {
                         Some(p) if p.len() == 3 =>
                             format!(" (draws: {:.1} to {:.1} %)", p[0], p[2]),
                         _ => String::new(),
-                    }
+                    },
+                    c.coverage_percent
+                        .map_or(String::new(), |v| format!(", band covers {v:.1} %"))
                 ),
                 y_desc: format!("{} [m/s²]", c.channel),
                 series,

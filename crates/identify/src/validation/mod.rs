@@ -15,6 +15,7 @@
 pub mod cross;
 pub mod figures;
 pub mod free_run;
+pub mod prediction;
 pub mod spectral;
 
 use std::fmt::Write as _;
@@ -26,7 +27,9 @@ use models::modal::Mode;
 use models::sensors::{MeasurementKind, SensorLayout};
 use rayon::prelude::*;
 
-pub use crate::record::validation::{BandInfo, ChannelFit, FreeRun, ModalComparison, ModePair};
+pub use crate::record::validation::{
+    BandInfo, ChannelFit, ErrorSource, FreeRun, ModalComparison, ModePair, ModelError,
+};
 use crate::record::RunRecord;
 use free_run::{
     chain_of, fit_percent, nrmse, percentile_sorted, simulate_channels, FreeRunError, QuantileDraw,
@@ -53,13 +56,15 @@ pub(crate) fn measured_channels(data: &LoadedDataset) -> Vec<Vec<f64>> {
 
 /// The free run of building `d` with θ on record `data` (its measured ü_g and channels; the
 /// channels' storeys from its header, their kind from `d`), with a band of `draws` θ from
-/// `posterior` on the stream (seed, run, `BAND_PURPOSE`) when given.
+/// `posterior` on the stream (seed, run, `BAND_PURPOSE`) when given, widened by the model error
+/// `error` ([`prediction`]); each channel's coverage by the band.
 pub fn free_run(
     d: &StructureDescription,
     data: &LoadedDataset,
     theta: &[f64],
     posterior: Option<(&QuantileDraw, u64, u64)>,
     draws: usize,
+    error: prediction::ErrorBand<'_>,
 ) -> Result<FreeRun, FreeRunError> {
     let chain = chain_of(d, theta)?;
     let sensors = &data.sensors;
@@ -88,6 +93,7 @@ pub fn free_run(
             fit_percent: fit_percent(&measured[c], &simulated[c]),
             nrmse: nrmse(&measured[c], &simulated[c]),
             fit_draws: None,
+            coverage_percent: None,
         })
         .collect();
     let (mut band, mut band_error) = (None, None);
@@ -156,6 +162,70 @@ pub fn free_run(
             }
         }
     }
+    let model_error = match error {
+        prediction::ErrorBand::Without => None,
+        prediction::ErrorBand::InSample => prediction::learn(
+            &names,
+            &measured,
+            &simulated,
+            data.dt,
+            prediction::window_seconds(d, theta),
+            0,
+            ErrorSource::InSample,
+        ),
+        prediction::ErrorBand::Given(m) if m.channels == names => Some(m.clone()),
+        prediction::ErrorBand::Given(m) => {
+            let why = format!(
+                "the model error was learned on channels {} and this record has {}: the band \
+                 holds the parameters' spread only",
+                m.channels.join(", "),
+                names.join(", ")
+            );
+            band_error = Some(match band_error {
+                Some(e) => format!("{e}; {why}"),
+                None => why,
+            });
+            None
+        }
+    };
+    if let Some(me) = &model_error {
+        let with_param = !band_lo.is_empty();
+        let (mut lo_all, mut hi_all) = (Vec::new(), Vec::new());
+        for c in 0..names.len() {
+            let scale = prediction::local_scale(&simulated[c], data.dt, me.window_s, me.floor[c]);
+            let (lo, hi): (Vec<f64>, Vec<f64>) = (0..k)
+                .step_by(every)
+                .enumerate()
+                .map(|(i, t)| {
+                    let param = with_param.then(|| (band_lo[c][i], band_hi[c][i]));
+                    prediction::widen(simulated[c][t], param, me.quantile[c] * scale[t])
+                })
+                .unzip();
+            lo_all.push(lo);
+            hi_all.push(hi);
+        }
+        band_lo = lo_all;
+        band_hi = hi_all;
+    }
+    if let (Some(b), Some(me)) = (&mut band, &model_error) {
+        let _ = write!(
+            b.method,
+            "; widened in quadrature by the model error learned {} (docs/validation.md)",
+            match me.source {
+                ErrorSource::HeldOut { .. } => "on the held-out part of the identifying record",
+                ErrorSource::InSample => "in-sample on the identifying record",
+            }
+        );
+    }
+    if !band_lo.is_empty() {
+        for (c, ch) in channels.iter_mut().enumerate() {
+            ch.coverage_percent = Some(prediction::coverage_percent(
+                &keep(&measured[c]),
+                &band_lo[c],
+                &band_hi[c],
+            ));
+        }
+    }
     Ok(FreeRun {
         method: format!(
             "the identified model (posterior mean θ_val) simulated from rest under the measured \
@@ -168,6 +238,7 @@ pub fn free_run(
         channels,
         band,
         band_error,
+        model_error,
         every,
         t: keep(&data.t),
         measured: measured.iter().map(|v| keep(v)).collect(),
@@ -412,8 +483,15 @@ pub(crate) fn check_identified(r: &RunRecord) -> Result<()> {
 }
 
 /// Attaches the free run and the modal comparison to the record of a field-data run on
-/// `data` with building `d` (nothing when the run failed: the record says why).
-pub fn attach(r: &mut RunRecord, data: &LoadedDataset, d: &StructureDescription) {
+/// `data` with building `d` (nothing when the run failed: the record says why). The band's
+/// model error is `held_out` (learned by the held-out choice) or, without one, learned
+/// in-sample on `data`.
+pub fn attach(
+    r: &mut RunRecord,
+    data: &LoadedDataset,
+    d: &StructureDescription,
+    held_out: Option<&ModelError>,
+) {
     r.warnings = crate::checks::check(r);
     if let Err(e) = check_identified(r) {
         // The modes of an impossible θ are still shown (a negative damping can leave every
@@ -426,7 +504,11 @@ pub fn attach(r: &mut RunRecord, data: &LoadedDataset, d: &StructureDescription)
     }
     let posterior = posterior_of(r);
     let q = posterior.as_ref().ok().map(|q| (q, r.seed, r.run));
-    match free_run(d, data, &r.theta_val, q, BAND_DRAWS) {
+    let error = held_out.map_or(
+        prediction::ErrorBand::InSample,
+        prediction::ErrorBand::Given,
+    );
+    match free_run(d, data, &r.theta_val, q, BAND_DRAWS, error) {
         Ok(mut f) => {
             if let Err(e) = &posterior {
                 f.band_error = Some(e.clone());
@@ -466,21 +548,53 @@ pub fn summary(free: Option<&FreeRun>, modal: Option<&ModalComparison>) -> Strin
         );
         let _ = writeln!(
             o,
-            "{:<8}  {:>8}  {:>7}  fit of {} posterior draws (2.5 / 50 / 97.5 %)",
+            "{:<8}  {:>8}  {:>7}  {:>26}  {:>12}",
             "channel",
             "fit %",
             "NRMSE",
-            f.band.as_ref().map_or(0, |b| b.valid)
+            format!(
+                "fit of {} draws 2.5/50/97.5",
+                f.band.as_ref().map_or(0, |b| b.valid)
+            ),
+            "band covers"
         );
         for c in &f.channels {
             let draws = match &c.fit_draws {
                 Some(p) if p.len() == 3 => format!("{:.1} / {:.1} / {:.1}", p[0], p[1], p[2]),
                 _ => "–".into(),
             };
+            let covers = c
+                .coverage_percent
+                .map_or("–".to_string(), |v| format!("{v:.1} %"));
             let _ = writeln!(
                 o,
-                "{:<8}  {:>8.1}  {:>7.3}  {draws}",
+                "{:<8}  {:>8.1}  {:>7.3}  {draws:>26}  {covers:>12}",
                 c.channel, c.fit_percent, c.nrmse
+            );
+        }
+        if let Some(me) = &f.model_error {
+            let _ = writeln!(
+                o,
+                "95 % predictive band: the parameters' spread and the model's error, learned {} \
+                 (|error| ≤ {} × √(m + (f·RMS)²), m the predicted motion's mean square over \
+                 {:.2} s, f = {}; channels in order) — docs/validation.md",
+                match me.source {
+                    ErrorSource::HeldOut { samples } =>
+                        format!("on the {samples} held-out samples the identification did not fit"),
+                    ErrorSource::InSample =>
+                        "in-sample on this record (narrower than a new record needs)".to_string(),
+                },
+                me.quantile
+                    .iter()
+                    .map(|q| format!("{q:.2}"))
+                    .collect::<Vec<_>>()
+                    .join(" / "),
+                me.window_s,
+                me.floor
+                    .iter()
+                    .map(|q| format!("{q:.2}"))
+                    .collect::<Vec<_>>()
+                    .join(" / "),
             );
         }
         match (&f.band, &f.band_error) {

@@ -1,0 +1,132 @@
+//! The free run's 95 % predictive band (`identify::validation::prediction`): on field data of the
+//! filter's own class, the band learned on the held-out part of one record covers 95 % of an
+//! independent record of the same building, within the Monte-Carlo error of that coverage; the
+//! record says where its model error was learned.
+
+mod common;
+
+use std::path::Path;
+use std::process::Command;
+
+use identify::record::RunRecord;
+use identify::validation::cross::CrossValidation;
+use identify::validation::ErrorSource;
+
+fn sysid() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_sysid"))
+}
+
+fn run(args: &[&str], paths: &[(&str, &Path)]) -> String {
+    let mut c = sysid();
+    c.args(args);
+    for (flag, p) in paths {
+        c.arg(flag).arg(p);
+    }
+    let out = c.output().unwrap();
+    assert!(
+        out.status.success(),
+        "{args:?}: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8(out.stdout).unwrap()
+}
+
+/// A linear 3-storey building's 20 s record (4000 samples, 10 % RMS white noise on each
+/// channel from the stream of `seed`) as field data: only `measured.csv`.
+fn linear_field_data(dir: &Path, seed: &str) {
+    run(
+        &[
+            "simulate",
+            "--storeys",
+            "3",
+            "--hysteretic",
+            "none",
+            "--duration",
+            "20",
+            "--seed",
+            seed,
+            "--absolute",
+        ],
+        &[("--out", dir)],
+    );
+    for f in ["dataset.json", "truth.csv"] {
+        std::fs::remove_file(dir.join(f)).unwrap();
+    }
+}
+
+#[test]
+fn the_band_learned_on_one_record_covers_95_percent_of_another() {
+    let (_tmp, root) = common::temp_dir("sysid-band-");
+    let (a, b) = (root.join("a"), root.join("b"));
+    linear_field_data(&a, "3");
+    linear_field_data(&b, "4");
+    let record = root.join("r.json");
+    run(
+        &common::LINEAR_FIELD_FILTER,
+        &[("--data", &a), ("--out", &record)],
+    );
+    let r: RunRecord = serde_json::from_str(&std::fs::read_to_string(&record).unwrap()).unwrap();
+    let f = r.free_run.as_ref().expect("a free run");
+    let me = f.model_error.as_ref().expect("a model error");
+    // The held-out choice ran: the scale comes from the samples its candidate did not fit.
+    let held_out = r
+        .plan
+        .as_ref()
+        .and_then(|p| p["evidence"]["held_out"]["held_out_samples"].as_u64())
+        .expect("the held-out choice is in the plan") as usize;
+    assert_eq!(me.source, ErrorSource::HeldOut { samples: held_out });
+    assert_eq!(me.channels, ["a1", "a2", "a3"]);
+
+    let out = root.join("v.json");
+    run(
+        &["validate"],
+        &[("--record", &record), ("--data", &b), ("--out", &out)],
+    );
+    let v: CrossValidation = serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
+    assert_eq!(v.free_run.model_error.as_ref(), Some(me));
+    // The errors here are the white measurement noise: the coverage's Monte-Carlo error is that
+    // of the 95 % quantile learned from `held_out` samples, √(0.95·0.05/m), and of the coverage
+    // counted over the record's samples, √(0.95·0.05/n) (independent samples): 4 s.d. of both.
+    let n = v.free_run.measured[0].len() as f64;
+    let sd = (0.95 * 0.05 * (1.0 / held_out as f64 + 1.0 / n)).sqrt() * 100.0;
+    for c in &v.free_run.channels {
+        let cov = c.coverage_percent.expect("a coverage");
+        assert!(
+            (cov - 95.0).abs() < 4.0 * sd,
+            "{}: the band covers {cov:.2} % (95 ± {:.2})",
+            c.channel,
+            4.0 * sd
+        );
+    }
+}
+
+#[test]
+fn without_a_held_out_part_the_band_is_learned_in_sample_and_says_so() {
+    let (_tmp, root) = common::temp_dir("sysid-band-");
+    let a = root.join("a");
+    linear_field_data(&a, "3");
+    let record = root.join("r.json");
+    // Everything stated: the choice has nothing to choose.
+    let text = run(
+        &[
+            &common::LINEAR_FIELD_FILTER[..],
+            &[
+                "--damping",
+                "storey",
+                "--noise-fraction",
+                "0.1",
+                "--process-noise-factor",
+                "1",
+            ],
+        ]
+        .concat(),
+        &[("--data", &a), ("--out", &record)],
+    );
+    let r: RunRecord = serde_json::from_str(&std::fs::read_to_string(&record).unwrap()).unwrap();
+    let me = r.free_run.unwrap().model_error.unwrap();
+    assert_eq!(me.source, ErrorSource::InSample);
+    assert!(
+        text.contains("in-sample on this record (narrower than a new record needs)"),
+        "{text}"
+    );
+}
