@@ -299,6 +299,9 @@ pub fn summary_table(r: &RunRecord) -> String {
         ess_line(r, pool, approximated)
     };
     let _ = writeln!(o, "{reliability}");
+    if let Some(s) = &r.segment_spread {
+        let _ = writeln!(o, "{}", crate::spread::describe(s));
+    }
     for line in crate::residuals::describe(&r.innovation_checks) {
         let _ = writeln!(o, "{line}");
     }

@@ -493,6 +493,21 @@ pub fn identify_plan(
     let mut record = crate::pipeline::execute(plan, &input, stop)?;
     record.plan = Some(serde_json::to_value(plan).context("recording the plan")?);
     let mut noise = None;
+    if data.meta.is_none() && record.failure.is_none() {
+        // Field data: the intervals include the spread of θ between the record's parts
+        // (model error, docs/validation.md), before the band and the modes draw from them.
+        let held = plan.settings.physical_support && plan.algorithm != Algorithm::Storvik;
+        let bounded = |name: &str| held && crate::spread::physically_bounded(name);
+        if let Some((spread, widened)) = crate::spread::spread(
+            &record.param_names,
+            &record.credible,
+            &record.trace,
+            &bounded,
+        ) {
+            record.credible = widened;
+            record.segment_spread = Some(spread);
+        }
+    }
     if data.meta.is_none() {
         // Field data: validation without the truth (free run, modes; docs/validation.md).
         // The band's model error: the chosen candidate's, learned on the part of the record

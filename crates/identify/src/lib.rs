@@ -45,4 +45,5 @@ pub mod rules;
 pub mod scaled_prior;
 pub mod settings;
 pub mod simulation;
+pub mod spread;
 pub mod validation;

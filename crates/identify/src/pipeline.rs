@@ -400,6 +400,7 @@ pub fn execute(
         },
         warnings: Vec::new(),
         credible: d.credible,
+        segment_spread: None,
         innovation_checks: d
             .residuals
             .as_ref()

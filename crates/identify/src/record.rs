@@ -174,6 +174,10 @@ pub struct RunRecord {
     /// written before intervals were recorded.
     #[serde(default)]
     pub credible: Vec<trace::ParamIntervals>,
+    /// Field records: the spread of θ between the record's parts that widened `credible`
+    /// (model error, `crate::spread`), with the filter's own intervals.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub segment_spread: Option<diagnostics::SegmentSpread>,
     /// Whiteness check of each channel's one-step-ahead prediction errors
     /// ([`crate::residuals`]); empty in sweep records (no traces) and older records.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]

@@ -112,3 +112,33 @@ pub struct ChannelCheck {
     pub critical: f64,
     pub white: bool,
 }
+
+/// What one parameter's parts of the record say of it alone (`crate::spread`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ParamSpread {
+    pub parameter: String,
+    /// Mean and s.d. of each part with information, in time order.
+    #[serde(with = "super::number::vec")]
+    pub part_mean: Vec<f64>,
+    #[serde(with = "super::number::vec")]
+    pub part_sd: Vec<f64>,
+    /// The between-part s.d. τ that widened its intervals (0: the parts agree); absent with too
+    /// few parts.
+    #[serde(
+        default,
+        with = "super::number::opt_scalar",
+        skip_serializing_if = "Option::is_none"
+    )]
+    pub tau: Option<f64>,
+}
+
+/// The spread of θ between the parts of a field record and the filter's own intervals, before
+/// they were widened by it (`crate::spread`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SegmentSpread {
+    /// Parts of equal duration the run was cut into.
+    pub segments: usize,
+    pub parameters: Vec<ParamSpread>,
+    /// The credible intervals of the filter's posterior alone.
+    pub filter_credible: Vec<super::trace::ParamIntervals>,
+}
