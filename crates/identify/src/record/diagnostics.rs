@@ -93,6 +93,13 @@ pub struct Residuals {
     /// levels are right.
     #[serde(with = "crate::record::number::vec_vec")]
     pub normalised_innovation: Vec<Vec<f64>>,
+    /// √R_ii of each channel: the noise s.d. the errors are divided by (absent in older records).
+    #[serde(
+        default,
+        with = "crate::record::number::vec",
+        skip_serializing_if = "Vec::is_empty"
+    )]
+    pub noise_sd: Vec<f64>,
 }
 
 /// The whiteness check of one channel's normalised prediction errors.

@@ -1,0 +1,104 @@
+//! The whiteness check of the one-step prediction errors (`identify::residuals`) is calibrated:
+//! on records of the model's own class it flags channels at about its nominal 5 %, and on the
+//! shake-table frame, which the shear model does not fully explain, it flags every channel.
+
+mod common;
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use identify::record::RunRecord;
+
+fn sysid() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_sysid"))
+}
+
+fn root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
+}
+
+fn ok(c: &mut Command) {
+    let out = c.output().unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
+fn flagged(record: &Path) -> (usize, usize) {
+    let r: RunRecord = serde_json::from_str(&std::fs::read_to_string(record).unwrap()).unwrap();
+    let n = r.innovation_checks.len();
+    (r.innovation_checks.iter().filter(|c| !c.white).count(), n)
+}
+
+#[test]
+fn on_records_of_the_models_own_class_it_flags_at_its_nominal_rate() {
+    let (_tmp, root) = common::temp_dir("sysid-white-");
+    let (mut hits, mut channels) = (0, 0);
+    // The user guide's command: the paper's data, 500 particles (4 pooled filters).
+    for seed in 51..71 {
+        let data = root.join(format!("d{seed}"));
+        ok(sysid()
+            .args(["simulate", "--seed", &seed.to_string(), "--out"])
+            .arg(&data));
+        let record = root.join(format!("r{seed}.json"));
+        ok(sysid()
+            .args([
+                "filter",
+                "--algorithm",
+                "mpf-ekf2",
+                "--particles",
+                "500",
+                "--seed",
+                "1",
+                "--data",
+            ])
+            .arg(&data)
+            .arg("--out")
+            .arg(&record));
+        let (h, n) = flagged(&record);
+        hits += h;
+        channels += n;
+    }
+    // 60 channels of a 5 % test: at most 9 is the 99.9 % quantile of Binomial(60, 0.05).
+    assert_eq!(channels, 60);
+    assert!(hits <= 9, "{hits} of {channels} channels flagged");
+}
+
+#[test]
+fn on_the_shake_table_frame_it_flags_every_channel() {
+    let (_tmp, dir) = common::temp_dir("sysid-white-");
+    let data = dir.join("northridge");
+    ok(sysid()
+        .current_dir(root())
+        .args([
+            "import",
+            "--map",
+            "experiments/real/frame-northridge.toml",
+            "--out",
+        ])
+        .arg(&data));
+    let record = dir.join("r.json");
+    ok(sysid()
+        .args([
+            "filter",
+            "--algorithm",
+            "mpf-ekf2",
+            "--storeys",
+            "3",
+            "--hysteretic",
+            "none",
+            "--masses",
+            "1,1,1.2",
+            "--damping",
+            "storey+mass",
+            "--measurement",
+            "absolute",
+            "--data",
+        ])
+        .arg(&data)
+        .arg("--out")
+        .arg(&record));
+    assert_eq!(flagged(&record), (3, 3));
+}
