@@ -353,7 +353,7 @@ fn modes_pair_with_the_nearest_peak_and_never_with_a_far_one() {
     // A spurious peak at 46 Hz and a missing one near 16 Hz; a mode below two bins.
     let modes = [mode(0.05), mode(3.7), mode(11.0), mode(15.5)];
     let peaks = [peak(3.68), peak(11.13), peak(46.0)];
-    let p = validation::pair(&modes, &peaks, 0.06);
+    let p = validation::pair(&modes, &peaks, 0.06, &[]);
     let got: Vec<Option<f64>> = p.iter().map(|q| q.measured_hz).collect();
     assert_eq!(got, [None, Some(3.68), Some(11.13), None]);
     assert!((p[1].difference_percent.unwrap() - 100.0 * (3.7 - 3.68) / 3.68).abs() < 1e-12);
@@ -372,6 +372,31 @@ fn modes_pair_with_the_nearest_peak_and_never_with_a_far_one() {
         "{text}"
     );
     assert!(text.contains("without a model mode: 46.000 Hz"), "{text}");
+
+    // A record whose ground motion does not reach the second mode (45 dB below its strongest
+    // frequency, as a 2 Hz sine leaves the frame's 11 Hz mode): a bump of the input's spectrum at
+    // 13 Hz, within the pairing ratio, is not taken for it.
+    let modes = [mode(3.7), mode(11.0)];
+    let peaks = [peak(3.68), peak(13.0)];
+    let p = validation::pair(&modes, &peaks, 0.06, &[Some(-5.0), Some(-45.0)]);
+    let got: Vec<Option<f64>> = p.iter().map(|q| q.measured_hz).collect();
+    assert_eq!(got, [Some(3.68), None]);
+    assert_eq!(p[1].excitation_db, Some(-45.0));
+    let text = validation::summary(
+        None,
+        Some(&validation::ModalComparison {
+            modes: modes.to_vec(),
+            peaks: peaks.to_vec(),
+            pairs: p,
+            resolution_hz: 0.06,
+            ..Default::default()
+        }),
+    );
+    assert!(text.contains("not excited (-45 dB)"), "{text}");
+    assert!(text.contains("without a model mode: 13.000 Hz"), "{text}");
+    // Excited (−20 dB): paired as before.
+    let p = validation::pair(&modes, &peaks, 0.06, &[Some(-5.0), Some(-20.0)]);
+    assert_eq!(p[1].measured_hz, Some(13.0));
 }
 
 /// The modal intervals of a one-storey building against its closed form: the natural frequency

@@ -123,6 +123,10 @@ pub struct ModePair {
     /// 100·(model − measured)/measured.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub difference_percent: Option<f64>,
+    /// The record's ground-motion power near this mode, in dB below its strongest frequency
+    /// (`validation::spectral`); a mode below the band's −30 dB is not excited and not paired.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub excitation_db: Option<f64>,
     /// The central 95 % of this mode's natural frequency (Hz) and damping ratio over θ drawn
     /// from the posterior as the free-run band draws it (`validation::modal_intervals`).
     #[serde(default, skip_serializing_if = "Option::is_none")]

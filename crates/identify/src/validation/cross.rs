@@ -167,7 +167,7 @@ pub fn cross_validate(
     };
     let free = super::free_run(&d, &data, &record.theta_val, q, draws, error)
         .with_context(|| format!("the free run on {}", data_dir.display()))?;
-    let modal = super::modal(&d, &data, &record.theta_val);
+    let modal = super::modal_with_intervals(&d, &data, &record.theta_val, q);
     let result = CrossValidation {
         record: record_path.display().to_string(),
         data: data_dir.display().to_string(),

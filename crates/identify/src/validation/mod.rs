@@ -292,8 +292,14 @@ pub fn modal(d: &StructureDescription, data: &LoadedDataset, theta: &[f64]) -> M
             MeasurementKind::Relative => y.iter().zip(&data.ug_meas).map(|(a, u)| a + u).collect(),
         })
         .collect();
+    let mut excitation = Vec::new();
     match spectral::welch_h1(&data.ug_meas, &absolute, data.dt) {
         Ok(t) => {
+            excitation = out
+                .modes
+                .iter()
+                .map(|m| spectral::excitation_db(&t, m.frequency_hz))
+                .collect();
             out.peaks = spectral::peaks(&t, d.storeys);
             let band = spectral::in_band(&t);
             let (first, last) = (
@@ -313,22 +319,43 @@ pub fn modal(d: &StructureDescription, data: &LoadedDataset, theta: &[f64]) -> M
         }
         Err(e) => out.errors.push(format!("transfer functions: {e}")),
     }
-    out.pairs = pair(&out.modes, &out.peaks, out.resolution_hz);
+    out.pairs = pair(&out.modes, &out.peaks, out.resolution_hz, &excitation);
     out
 }
 
 /// Largest frequency ratio between a model mode and the measured peak it is paired with.
 pub(crate) const PAIR_RATIO: f64 = 1.5;
 
+/// Ground-motion power near a mode below which the record does not excite it (dB relative to
+/// the strongest frequency): the band the measured peaks are read in (`spectral::BAND_FRACTION`).
+pub(crate) fn not_excited_db() -> f64 {
+    10.0 * spectral::BAND_FRACTION.log10()
+}
+
 /// Pairs each model mode with a measured peak: repeatedly the closest remaining (mode, peak)
 /// pair in log-frequency, as long as their ratio is below `PAIR_RATIO`; a mode left without
-/// a peak (none near it, or it lies below two frequency bins where no peak can be resolved)
-/// shows none, and a peak left without a mode is listed apart. Modes keep their order (1 = the
-/// lowest).
-pub fn pair(modes: &[Mode], peaks: &[Peak], resolution_hz: f64) -> Vec<ModePair> {
+/// a peak (none near it, it lies below two frequency bins where no peak can be resolved, or the
+/// record's ground motion near it — `excitation[i]`, dB below its strongest frequency — is
+/// below [`not_excited_db`], so a peak elsewhere would be a bump of the input's spectrum, not
+/// this mode) shows none, and a peak left without a mode is listed apart. Modes keep their
+/// order (1 = the lowest).
+pub fn pair(
+    modes: &[Mode],
+    peaks: &[Peak],
+    resolution_hz: f64,
+    excitation: &[Option<f64>],
+) -> Vec<ModePair> {
     let mut candidates: Vec<(f64, usize, usize)> = Vec::new();
     for (i, m) in modes.iter().enumerate() {
         if m.frequency_hz.is_nan() || m.frequency_hz < 2.0 * resolution_hz {
+            continue;
+        }
+        if excitation
+            .get(i)
+            .copied()
+            .flatten()
+            .is_some_and(|db| db < not_excited_db())
+        {
             continue;
         }
         for (j, p) in peaks.iter().enumerate() {
@@ -358,6 +385,7 @@ pub fn pair(modes: &[Mode], peaks: &[Peak], resolution_hz: f64) -> Vec<ModePair>
                 damping_ratio: m.damping_ratio,
                 measured_hz: p,
                 difference_percent: p.map(|p| 100.0 * (m.frequency_hz - p) / p),
+                excitation_db: excitation.get(i).copied().flatten(),
                 model_hz_95: None,
                 damping_ratio_95: None,
             }
@@ -523,9 +551,25 @@ pub fn attach(
             return;
         }
     }
-    let mut m = modal(d, data, &r.theta_val);
-    if let Ok(q) = &posterior {
-        let intervals = modal_intervals(d, q, r.seed, r.run, m.modes.len());
+    r.modal = Some(modal_with_intervals(
+        d,
+        data,
+        &r.theta_val,
+        posterior.as_ref().ok().map(|q| (q, r.seed, r.run)),
+    ));
+}
+
+/// [`modal`] with each mode's 95 % intervals ([`modal_intervals`]) from `posterior` (the
+/// record's θ distribution, seed and run) when there is one.
+pub(crate) fn modal_with_intervals(
+    d: &StructureDescription,
+    data: &LoadedDataset,
+    theta: &[f64],
+    posterior: Option<(&QuantileDraw, u64, u64)>,
+) -> ModalComparison {
+    let mut m = modal(d, data, theta);
+    if let Some((q, seed, run)) = posterior {
+        let intervals = modal_intervals(d, q, seed, run, m.modes.len());
         for p in &mut m.pairs {
             if let Some(Some((f, z))) = intervals.get(p.mode - 1) {
                 p.model_hz_95 = Some(*f);
@@ -533,7 +577,7 @@ pub fn attach(
             }
         }
     }
-    r.modal = Some(m);
+    m
 }
 
 /// The terminal table of a free run and a modal comparison (empty when neither is present).
@@ -642,6 +686,8 @@ pub fn summary(free: Option<&FreeRun>, modal: Option<&ModalComparison>) -> Strin
                 p.measured_hz.map_or(
                     if p.model_hz < 2.0 * m.resolution_hz {
                         "below resolution".to_string()
+                    } else if let Some(db) = p.excitation_db.filter(|db| *db < not_excited_db()) {
+                        format!("not excited ({db:.0} dB)")
                     } else {
                         "no peak near".to_string()
                     },
@@ -657,6 +703,18 @@ pub fn summary(free: Option<&FreeRun>, modal: Option<&ModalComparison>) -> Strin
                 "95 %: the central 95 % of each mode over {MODAL_DRAWS} θ drawn as the band's \
                  (each parameter inside its 95 % interval, independently: the record keeps no \
                  correlations) — docs/validation.md"
+            );
+        }
+        if m.pairs.iter().any(|p| {
+            p.measured_hz.is_none() && p.excitation_db.is_some_and(|db| db < not_excited_db())
+        }) {
+            let _ = writeln!(
+                o,
+                "not excited: the record's ground motion near that mode is more than {:.0} dB \
+                 below its strongest frequency, so the record cannot show it (a sine or a narrow \
+                 band excites only its own frequencies); its measured peaks there are bumps of \
+                 the input's spectrum",
+                -not_excited_db()
             );
         }
         if m.pairs.iter().any(|p| p.damping_ratio < 0.0) {

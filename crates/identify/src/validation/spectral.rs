@@ -208,6 +208,24 @@ pub(crate) fn in_band(t: &TransferEstimate) -> Vec<bool> {
         .collect()
 }
 
+/// The ground motion's power near `f_hz` (the largest P_xx within two bins) relative to its
+/// strongest bin, in dB; `None` outside the estimate's bins or without power.
+pub(crate) fn excitation_db(t: &TransferEstimate, f_hz: f64) -> Option<f64> {
+    let max = t.pxx.iter().cloned().fold(0.0_f64, f64::max);
+    if !(max > 0.0 && f_hz.is_finite() && f_hz >= 0.0) {
+        return None;
+    }
+    let b = (f_hz / t.resolution_hz).round() as usize;
+    if b >= t.pxx.len() {
+        return None;
+    }
+    let near = t.pxx[b.saturating_sub(2)..(b + 3).min(t.pxx.len())]
+        .iter()
+        .cloned()
+        .fold(0.0_f64, f64::max);
+    Some(10.0 * (near / max).log10())
+}
+
 /// The `count` largest local maxima of Σ_c |H1_c| inside the ground motion's band where at least
 /// one channel's coherence is at least `MIN_COHERENCE`, by increasing frequency.
 pub fn peaks(t: &TransferEstimate, count: usize) -> Vec<Peak> {
