@@ -45,6 +45,12 @@ fn filter_prints_a_summary_table_and_records_its_warnings() {
         );
     }
     assert!(stdout.contains("RESTS ON FEW PARTICLES"), "{stdout}");
+    // Simulated data: the true values beside the answer (k1 = 8 in the paper's building), and
+    // what ✗ means.
+    assert!(stdout.contains("true θ"), "{stdout}");
+    let k1 = stdout.lines().find(|l| l.starts_with("k1")).unwrap();
+    assert!(k1.contains("8.0000"), "{k1}");
+    assert!(stdout.contains("✗: outside the 95 % interval"), "{stdout}");
     assert!(stderr.contains("warning: ") && stderr.contains("distinct particle value"));
     let r: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();

@@ -230,10 +230,19 @@ pub fn summary_table(r: &RunRecord) -> String {
         .max()
         .unwrap_or(0)
         .max("parameter".len());
+    // Simulated data: the true values beside the answer, and whether the interval holds them.
+    let truth = r.theta_true.as_ref().filter(|t| t.len() == r.param_names.len());
     let _ = writeln!(
         o,
-        "{:<name_w$}  {:>12}  {:>27}  Monte-Carlo reliability",
-        "parameter", "θ_val", "95% credible interval"
+        "{:<name_w$}  {:>12}  {:>27}  {}Monte-Carlo reliability",
+        "parameter",
+        "θ_val",
+        "95% credible interval",
+        if truth.is_some() {
+            format!("{:>12}  ", "true θ")
+        } else {
+            String::new()
+        }
     );
     let mut approximated = false;
     let pool = pooled_filters(r);
@@ -285,9 +294,28 @@ pub fn summary_table(r: &RunRecord) -> String {
         {
             let _ = write!(reliability, "; θ_val MC s.e. {se:.4}");
         }
+        let true_cell = match truth {
+            Some(t) => {
+                let inside = r
+                    .credible
+                    .iter()
+                    .find(|p| &p.parameter == name)
+                    .and_then(|p| p.at(0.95))
+                    .map(|ci| ci.lo <= t[j] && t[j] <= ci.hi);
+                format!(
+                    "{:>12}  ",
+                    format!(
+                        "{:.4}{}",
+                        t[j],
+                        if inside == Some(false) { " ✗" } else { "" }
+                    )
+                )
+            }
+            None => String::new(),
+        };
         let _ = writeln!(
             o,
-            "{name:<name_w$}  {v:>12.4}  {interval:>27}  {reliability}"
+            "{name:<name_w$}  {v:>12.4}  {interval:>27}  {true_cell}{reliability}"
         );
     }
     let reliability = if r.one_gaussian_filter {
@@ -299,6 +327,12 @@ pub fn summary_table(r: &RunRecord) -> String {
         ess_line(r, pool, approximated)
     };
     let _ = writeln!(o, "{reliability}");
+    if truth.is_some() {
+        let _ = writeln!(
+            o,
+            "true θ: the values the data were simulated with (✗: outside the 95 % interval)."
+        );
+    }
     if let Some(s) = &r.segment_spread {
         let _ = writeln!(o, "{}", crate::spread::describe(s));
     }
