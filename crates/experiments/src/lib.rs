@@ -36,6 +36,7 @@ pub mod information;
 pub mod likelihood;
 mod markdown;
 pub(crate) mod pace;
+pub(crate) mod project;
 pub mod reference;
 pub mod regression;
 pub mod report;

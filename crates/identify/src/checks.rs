@@ -231,7 +231,10 @@ pub fn summary_table(r: &RunRecord) -> String {
         .unwrap_or(0)
         .max("parameter".len());
     // Simulated data: the true values beside the answer, and whether the interval holds them.
-    let truth = r.theta_true.as_ref().filter(|t| t.len() == r.param_names.len());
+    let truth = r
+        .theta_true
+        .as_ref()
+        .filter(|t| t.len() == r.param_names.len());
     let _ = writeln!(
         o,
         "{:<name_w$}  {:>12}  {:>27}  {}Monte-Carlo reliability",

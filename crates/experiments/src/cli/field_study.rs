@@ -34,7 +34,8 @@ pub struct Args {
 
 /// Runs `sysid field-study`.
 pub fn run(args: Args) -> Result<()> {
-    let study = FieldStudy::load(&args.config)?;
+    let config = crate::project::locate(&args.config, "field study")?;
+    let study = FieldStudy::load(&config)?;
     if args.report_only {
         let text = crate::field_study::report::render(&study, &args.out)?;
         let path = args.out.join("REPORT.md");
@@ -49,7 +50,10 @@ pub fn run(args: Args) -> Result<()> {
             sysid,
             out: args.out,
             python: args.python,
-            baseline_script: Some(args.baseline_script),
+            baseline_script: Some(
+                crate::project::locate(&args.baseline_script, "baseline script")
+                    .unwrap_or(args.baseline_script),
+            ),
             resume: args.resume,
         },
     )

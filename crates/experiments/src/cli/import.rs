@@ -23,7 +23,7 @@ pub struct Args {
 }
 
 pub fn run(args: Args) -> crate::error::Result<()> {
-    let map = ChannelMap::load(&args.map)?;
+    let map = ChannelMap::load(&crate::project::locate(&args.map, "channel map")?)?;
     let imported = import::import(&map)?;
     let record = imported
         .write_dir(&args.out)

@@ -49,7 +49,8 @@ pub struct Args {
 /// Runs `sysid regression`.
 pub fn run(args: Args) -> Result<()> {
     let start = Instant::now();
-    let file = RegressionFile::load(&args.config)?;
+    let config = crate::project::locate(&args.config, "regression file")?;
+    let file = RegressionFile::load(&config)?;
     let options = RegressionOptions {
         out: &args.out,
         threads: args.threads,

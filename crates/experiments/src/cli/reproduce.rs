@@ -21,7 +21,7 @@ pub struct Args {
 /// Runs `sysid reproduce`.
 pub fn run(args: Args) -> crate::error::Result<()> {
     reproduce(&Options {
-        experiments: args.experiments,
+        experiments: crate::project::locate(&args.experiments, "study directory")?,
         out: args.out,
         mode: args.run.mode(),
     })?;

@@ -26,28 +26,29 @@ pub struct Args {
 }
 
 impl Args {
-    fn options(self, study: &str) -> Options {
-        Options {
-            config: self
-                .config
-                .unwrap_or_else(|| PathBuf::from(format!("experiments/{study}.toml"))),
+    fn options(self, study: &str) -> crate::error::Result<Options> {
+        let config = self
+            .config
+            .unwrap_or_else(|| PathBuf::from(format!("experiments/{study}.toml")));
+        Ok(Options {
+            config: crate::project::locate(&config, "study")?,
             out: self
                 .out
                 .unwrap_or_else(|| PathBuf::from(format!("results/{study}"))),
             mode: self.run.mode(),
             report_only: self.report_only,
-        }
+        })
     }
 }
 
 /// Runs `sysid scaling`.
 pub fn run(args: Args) -> crate::error::Result<()> {
-    run_study(&args.options("scaling"))?;
+    run_study(&args.options("scaling")?)?;
     Ok(())
 }
 
 /// Runs `sysid excitations`.
 pub fn run_excitations(args: Args) -> crate::error::Result<()> {
-    crate::excitations::run(&args.options("excitations"))?;
+    crate::excitations::run(&args.options("excitations")?)?;
     Ok(())
 }

@@ -23,7 +23,7 @@ pub struct Args {
 /// Runs `sysid study`.
 pub fn run(args: Args) -> Result<()> {
     let report = crate::user_study::run(&crate::user_study::Options {
-        config: args.config,
+        config: crate::project::locate(&args.config, "study")?,
         out: args.out,
         mode: args.run.mode(),
     })?;
