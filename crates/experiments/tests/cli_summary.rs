@@ -60,6 +60,11 @@ fn filter_prints_a_summary_table_and_records_its_warnings() {
         "{}",
         r["warnings"]
     );
+    // The real-time factor: seconds of record (600 steps of 5 ms) per second of computation.
+    let t = &r["timing"];
+    let f = t["realtime_factor"].as_f64().expect("a real-time factor");
+    let want = 600.0 * 0.005 / t["wall_s"].as_f64().unwrap();
+    assert!((f - want).abs() <= 1e-9 * want, "{f} vs {want}");
     // The record carries the 50/90/95 % intervals of every parameter.
     let c = r["credible"].as_array().expect("intervals in the record");
     assert_eq!(c.len(), 9);

@@ -540,6 +540,9 @@ pub fn identify_request(
 /// Seconds of record filtered per second of computation (the record's `config.spec.dt` × the
 /// steps completed over the wall time); `None` without a spec or a time.
 pub fn realtime_factor(r: &RunRecord) -> Option<f64> {
+    if r.timing.realtime_factor.is_some() {
+        return r.timing.realtime_factor;
+    }
     let dt = r.config.get("spec")?.get("dt")?.as_f64()?;
     let wall = r.timing.wall_s;
     (wall > 0.0 && dt > 0.0).then(|| r.steps_completed as f64 * dt / wall)

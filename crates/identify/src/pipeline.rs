@@ -397,6 +397,8 @@ pub fn execute(
             particle_steps_per_s: (s.particles * d.summary.steps_completed) as f64
                 / d.wall_s.max(1e-12),
             validation_s,
+            realtime_factor: (d.wall_s > 0.0)
+                .then(|| d.summary.steps_completed as f64 * spec.dt / d.wall_s),
         },
         warnings: Vec::new(),
         credible: d.credible,

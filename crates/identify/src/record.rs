@@ -82,6 +82,14 @@ pub struct Timing {
     /// Wall time of the validation integration (s).
     #[serde(with = "number::scalar")]
     pub validation_s: f64,
+    /// Seconds of record filtered per second of computation (steps × dt / wall_s): above 1 the
+    /// filter keeps up with the structure in real time. Absent in older records.
+    #[serde(
+        default,
+        with = "number::opt_scalar",
+        skip_serializing_if = "Option::is_none"
+    )]
+    pub realtime_factor: Option<f64>,
 }
 
 /// A hysteresis loop: restoring force of element 1 (k1·r1) against its drift x1, decimated.

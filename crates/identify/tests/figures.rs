@@ -119,6 +119,7 @@ fn record(algorithm: &str, run: u64, bias: f64) -> RunRecord {
             wall_s: 1.0,
             particle_steps_per_s: 1.0e5,
             validation_s: 0.1,
+            realtime_factor: None,
         },
         warnings: Vec::new(),
         credible: Vec::new(),

@@ -90,6 +90,7 @@ pub fn record(algorithm: &str, run: u64, ratios: [f64; 9], nrmse: f64) -> RunRec
             wall_s: 1.0,
             particle_steps_per_s: 5.0e5,
             validation_s: 0.1,
+            realtime_factor: None,
         },
         warnings: Vec::new(),
         credible: Vec::new(),
