@@ -44,6 +44,7 @@ fn residuals(n: usize) -> Residuals {
         measured,
         predicted,
         normalised_innovation: innov,
+        noise_sd: vec![0.1; 3],
     }
 }
 

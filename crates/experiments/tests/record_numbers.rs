@@ -148,6 +148,7 @@ fn record_from(v: &[f64]) -> RunRecord {
         measured: (0..KEPT).map(|_| take(CHANNELS)).collect(),
         predicted: (0..KEPT).map(|_| take(CHANNELS)).collect(),
         normalised_innovation: (0..KEPT).map(|_| take(CHANNELS)).collect(),
+        noise_sd: take(CHANNELS),
     });
     r.warnings = vec![Warning {
         kind: WarningKind::TinyEss,
