@@ -151,7 +151,7 @@ fn slot_index(slot: core_filters::model::Slot) -> usize {
 }
 
 /// The check of every channel over the steps after the learning transient
-/// ([`LEARNING_SHARE`]; channels with too few finite values are left out).
+/// (`LEARNING_SHARE`; channels with too few finite values are left out).
 pub fn channel_checks(r: &Residuals) -> Vec<ChannelCheck> {
     let from = (r.normalised_innovation.len() as f64 * LEARNING_SHARE).round() as usize;
     r.channels

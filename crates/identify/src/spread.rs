@@ -70,7 +70,7 @@ pub fn parts(trace: &Trace, j: usize, segments: usize) -> Vec<(f64, f64)> {
             }
             let lambda = 1.0 / vb - 1.0 / va;
             // A part that added (almost) nothing: its own estimate is undefined.
-            if !(lambda > 1e-12 / vb) {
+            if lambda.is_nan() || lambda <= 1e-12 / vb {
                 return None;
             }
             let mean = (mb / vb - ma / va) / lambda;

@@ -336,7 +336,7 @@ pub(crate) fn not_excited_db() -> f64 {
 /// pair in log-frequency, as long as their ratio is below `PAIR_RATIO`; a mode left without
 /// a peak (none near it, it lies below two frequency bins where no peak can be resolved, or the
 /// record's ground motion near it — `excitation[i]`, dB below its strongest frequency — is
-/// below [`not_excited_db`], so a peak elsewhere would be a bump of the input's spectrum, not
+/// below `not_excited_db`, so a peak elsewhere would be a bump of the input's spectrum, not
 /// this mode) shows none, and a peak left without a mode is listed apart. Modes keep their
 /// order (1 = the lowest).
 pub fn pair(

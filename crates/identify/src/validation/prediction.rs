@@ -11,10 +11,10 @@
 //! strength of the *predicted* motion: |e_j(t)| ≤ q_j·s_j(t) with probability 95 %, where
 //!
 //! - s_j(t)² = m_j(t) + (f_j · RMS ŷ_j)², where m_j(t) is the mean of ŷ_j² over a window of
-//!   [`PERIODS`] periods of the model's lowest mode centred on t: an error that grows with the
+//!   `PERIODS` periods of the model's lowest mode centred on t: an error that grows with the
 //!   motion (a stiffness or damping slightly off) and one that does not (what the model does not
 //!   represent at all, sensor noise), in a proportion f_j learned from the errors — the f_j of
-//!   [`FLOOR_GRID`] that maximises the likelihood of e_j(t) ~ N(0, a²·s_j(t)²) with a² at its
+//!   `FLOOR_GRID` that maximises the likelihood of e_j(t) ~ N(0, a²·s_j(t)²) with a² at its
 //!   maximum for that f_j (on the shake-table frame's `northridge`, f ≈ 1.3–2.8: the error is
 //!   nearly as large in the quiet parts as in the strong shaking);
 //! - q_j is the 95 % quantile of |e_j|/s_j (no Gaussian shape assumed).
@@ -56,8 +56,8 @@ pub enum ErrorBand<'a> {
 /// Window (s) used when the model has no under-damped mode to take a period from.
 pub(crate) const FALLBACK_WINDOW_S: f64 = 1.0;
 
-/// The window of the local scale for building `d` with θ: [`PERIODS`] periods of its lowest
-/// under-damped mode (linearised at rest), or [`FALLBACK_WINDOW_S`].
+/// The window of the local scale for building `d` with θ: `PERIODS` periods of its lowest
+/// under-damped mode (linearised at rest), or `FALLBACK_WINDOW_S`.
 pub fn window_seconds(d: &StructureDescription, theta: &[f64]) -> f64 {
     let n = d.storeys;
     if theta.len() < 2 * n + d.damping.extra_parameters() {
@@ -98,7 +98,7 @@ pub fn local_scale(yhat: &[f64], dt: f64, window_s: f64, floor: f64) -> Vec<f64>
         .collect()
 }
 
-/// The proportion f of [`FLOOR_GRID`] under which the errors `y − ŷ` over samples `from..` are
+/// The proportion f of `FLOOR_GRID` under which the errors `y − ŷ` over samples `from..` are
 /// most likely as N(0, a²·s(t)²), a² at its maximum-likelihood value mean(e²/s²) for each f.
 pub fn learn_floor(y: &[f64], yhat: &[f64], dt: f64, window_s: f64, from: usize) -> f64 {
     let (lo, hi, count) = FLOOR_GRID;
@@ -122,7 +122,7 @@ pub fn learn_floor(y: &[f64], yhat: &[f64], dt: f64, window_s: f64, from: usize)
     best.1
 }
 
-/// q: the [`LEVEL`] quantile of |y − ŷ|/s over the samples `from..` of one channel (`None` with
+/// q: the `LEVEL` quantile of |y − ŷ|/s over the samples `from..` of one channel (`None` with
 /// fewer than 20 finite ratios).
 pub fn error_quantile(y: &[f64], yhat: &[f64], scale: &[f64], from: usize) -> Option<f64> {
     let n = y.len().min(yhat.len()).min(scale.len());
@@ -226,7 +226,7 @@ mod tests {
             })
             .collect();
         let m = local_scale(&yhat, dt, 1.0, 0.0);
-        let sign = |k: usize| if (k / 7) % 2 == 0 { 1.0 } else { -1.0 };
+        let sign = |k: usize| if (k / 7).is_multiple_of(2) { 1.0 } else { -1.0 };
         let proportional: Vec<f64> = (0..n).map(|k| yhat[k] + 0.3 * m[k] * sign(k)).collect();
         let constant: Vec<f64> = (0..n).map(|k| yhat[k] + 0.3 * sign(k)).collect();
         let f_prop = learn_floor(&proportional, &yhat, dt, 1.0, 0);
