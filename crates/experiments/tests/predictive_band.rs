@@ -31,35 +31,12 @@ fn run(args: &[&str], paths: &[(&str, &Path)]) -> String {
     String::from_utf8(out.stdout).unwrap()
 }
 
-/// A linear 3-storey building's 20 s record (4000 samples, 10 % RMS white noise on each
-/// channel from the stream of `seed`) as field data: only `measured.csv`.
-fn linear_field_data(dir: &Path, seed: &str) {
-    run(
-        &[
-            "simulate",
-            "--storeys",
-            "3",
-            "--hysteretic",
-            "none",
-            "--duration",
-            "20",
-            "--seed",
-            seed,
-            "--absolute",
-        ],
-        &[("--out", dir)],
-    );
-    for f in ["dataset.json", "truth.csv"] {
-        std::fs::remove_file(dir.join(f)).unwrap();
-    }
-}
-
 #[test]
 fn the_band_learned_on_one_record_covers_95_percent_of_another() {
     let (_tmp, root) = common::temp_dir("sysid-band-");
     let (a, b) = (root.join("a"), root.join("b"));
-    linear_field_data(&a, "3");
-    linear_field_data(&b, "4");
+    common::linear_field_data(&a, "3", "20");
+    common::linear_field_data(&b, "4", "20");
     let record = root.join("r.json");
     run(
         &common::LINEAR_FIELD_FILTER,
@@ -104,7 +81,7 @@ fn the_band_learned_on_one_record_covers_95_percent_of_another() {
 fn without_a_held_out_part_the_band_is_learned_in_sample_and_says_so() {
     let (_tmp, root) = common::temp_dir("sysid-band-");
     let a = root.join("a");
-    linear_field_data(&a, "3");
+    common::linear_field_data(&a, "3", "20");
     let record = root.join("r.json");
     // Everything stated: the choice has nothing to choose.
     let text = run(

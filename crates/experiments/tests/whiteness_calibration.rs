@@ -4,27 +4,10 @@
 
 mod common;
 
-use std::path::{Path, PathBuf};
-use std::process::Command;
+use std::ffi::OsStr;
+use std::path::Path;
 
 use identify::record::RunRecord;
-
-fn sysid() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_sysid"))
-}
-
-fn root() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
-}
-
-fn ok(c: &mut Command) {
-    let out = c.output().unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-}
 
 fn flagged(record: &Path) -> (usize, usize) {
     let r: RunRecord = serde_json::from_str(&std::fs::read_to_string(record).unwrap()).unwrap();
@@ -39,12 +22,17 @@ fn on_records_of_the_models_own_class_it_flags_at_its_nominal_rate() {
     // The user guide's command: the paper's data, 500 particles (4 pooled filters).
     for seed in 51..71 {
         let data = root.join(format!("d{seed}"));
-        ok(sysid()
-            .args(["simulate", "--seed", &seed.to_string(), "--out"])
-            .arg(&data));
+        let seed = seed.to_string();
+        common::sysid_ok([
+            OsStr::new("simulate"),
+            "--seed".as_ref(),
+            seed.as_ref(),
+            "--out".as_ref(),
+            data.as_os_str(),
+        ]);
         let record = root.join(format!("r{seed}.json"));
-        ok(sysid()
-            .args([
+        common::sysid_ok(
+            [
                 "filter",
                 "--algorithm",
                 "mpf-ekf2",
@@ -52,11 +40,16 @@ fn on_records_of_the_models_own_class_it_flags_at_its_nominal_rate() {
                 "500",
                 "--seed",
                 "1",
-                "--data",
-            ])
-            .arg(&data)
-            .arg("--out")
-            .arg(&record));
+            ]
+            .map(OsStr::new)
+            .into_iter()
+            .chain([
+                "--data".as_ref(),
+                data.as_os_str(),
+                "--out".as_ref(),
+                record.as_os_str(),
+            ]),
+        );
         let (h, n) = flagged(&record);
         hits += h;
         channels += n;
@@ -70,35 +63,13 @@ fn on_records_of_the_models_own_class_it_flags_at_its_nominal_rate() {
 fn on_the_shake_table_frame_it_flags_every_channel() {
     let (_tmp, dir) = common::temp_dir("sysid-white-");
     let data = dir.join("northridge");
-    ok(sysid()
-        .current_dir(root())
-        .args([
-            "import",
-            "--map",
-            "experiments/real/frame-northridge.toml",
-            "--out",
-        ])
-        .arg(&data));
+    common::import_frame_northridge(&data);
     let record = dir.join("r.json");
-    ok(sysid()
-        .args([
-            "filter",
-            "--algorithm",
-            "mpf-ekf2",
-            "--storeys",
-            "3",
-            "--hysteretic",
-            "none",
-            "--masses",
-            "1,1,1.2",
-            "--damping",
-            "storey+mass",
-            "--measurement",
-            "absolute",
-            "--data",
-        ])
-        .arg(&data)
-        .arg("--out")
-        .arg(&record));
+    common::sysid_ok(common::FRAME_FILTER.iter().map(OsStr::new).chain([
+        "--data".as_ref(),
+        data.as_os_str(),
+        "--out".as_ref(),
+        record.as_os_str(),
+    ]));
     assert_eq!(flagged(&record), (3, 3));
 }

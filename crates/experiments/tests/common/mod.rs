@@ -25,6 +25,77 @@ pub const LINEAR_FIELD_FILTER: [&str; 11] = [
     "absolute",
 ];
 
+/// The README's `sysid filter` of the shake-table frame (`northridge`, masses 1 : 1 : 1.2,
+/// dashpots and αM, no hysteresis, absolute accelerations); `--data` and `--out` to add.
+pub const FRAME_FILTER: [&str; 13] = [
+    "filter",
+    "--algorithm",
+    "mpf-ekf2",
+    "--storeys",
+    "3",
+    "--hysteretic",
+    "none",
+    "--masses",
+    "1,1,1.2",
+    "--damping",
+    "storey+mass",
+    "--measurement",
+    "absolute",
+];
+
+/// Runs `sysid` (the binary under test) with `args`; panics with its standard error unless it
+/// succeeds; returns its standard output.
+pub fn sysid_ok<I, S>(args: I) -> String
+where
+    I: IntoIterator<Item = S>,
+    S: AsRef<std::ffi::OsStr>,
+{
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_sysid"))
+        .current_dir(std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../.."))
+        .args(args)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8(out.stdout).unwrap()
+}
+
+/// `sysid import` of the shake-table frame's `northridge` record into `dir`.
+pub fn import_frame_northridge(dir: &std::path::Path) {
+    sysid_ok([
+        std::ffi::OsStr::new("import"),
+        "--map".as_ref(),
+        "experiments/real/frame-northridge.toml".as_ref(),
+        "--out".as_ref(),
+        dir.as_os_str(),
+    ]);
+}
+
+/// `sysid simulate` of a linear 3-storey building (`duration` s, absolute accelerations, the
+/// noise stream of `seed`) written into `dir` as field data: only `measured.csv`.
+pub fn linear_field_data(dir: &std::path::Path, seed: &str, duration: &str) {
+    sysid_ok([
+        std::ffi::OsStr::new("simulate"),
+        "--storeys".as_ref(),
+        "3".as_ref(),
+        "--hysteretic".as_ref(),
+        "none".as_ref(),
+        "--duration".as_ref(),
+        duration.as_ref(),
+        "--seed".as_ref(),
+        seed.as_ref(),
+        "--absolute".as_ref(),
+        "--out".as_ref(),
+        dir.as_os_str(),
+    ]);
+    for f in ["dataset.json", "truth.csv"] {
+        std::fs::remove_file(dir.join(f)).unwrap();
+    }
+}
+
 /// A fresh directory under the system temp dir whose name starts with `prefix`, and the guard
 /// that removes it when dropped (also when the test panics).
 pub fn temp_dir(prefix: &str) -> (tempfile::TempDir, std::path::PathBuf) {
