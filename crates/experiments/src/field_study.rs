@@ -107,10 +107,8 @@ pub struct Selection {
 impl FieldStudy {
     /// Reads and checks a study file; paths in it are made relative to its directory.
     pub fn load(path: &Path) -> Result<Self> {
-        let text = std::fs::read_to_string(path)
-            .with_context(|| format!("reading study {}", path.display()))?;
-        let mut s: FieldStudy = toml::from_str(&text)
-            .with_context(|| format!("{}: not a field study", path.display()))?;
+        let text = identify::limits::read_text_file(path, "study")?;
+        let mut s: FieldStudy = identify::limits::parse_toml(&text, path, "field study")?;
         let base = path.parent().unwrap_or(Path::new("."));
         for p in &mut s.part {
             for r in &mut p.record {

@@ -896,20 +896,12 @@ fn read_bytes(path: &Path) -> Result<Option<Vec<u8>>, DatasetError> {
         }
         .into()
     };
-    let bytes = match std::fs::metadata(path) {
-        Ok(m) => m.len(),
+    match std::fs::metadata(path) {
+        Ok(_) => {}
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
         Err(e) => return Err(io(e)),
     };
-    if bytes > limits::MAX_FILE_BYTES {
-        return Err(ReadError::FileTooLarge {
-            file: path.to_path_buf(),
-            bytes,
-            max: limits::MAX_FILE_BYTES,
-        }
-        .into());
-    }
-    std::fs::read(path).map(Some).map_err(io)
+    Ok(Some(crate::readers::read_input(path)?))
 }
 
 /// `bytes` as UTF-8 text; the error names the file and the line of the first invalid byte.

@@ -41,6 +41,11 @@ pub fn run(args: Args) -> Result<()> {
             &[("--record", &args.record), ("--data", &args.data)],
         )?;
     }
+    // The record goes through the one reader of records first, with every check `plot` and
+    // `merge` make: a regular file within the size limit (a named pipe or `/dev/zero` is
+    // refused before a byte is read), complete, its fingerprint and the digest of its `config`
+    // verified (an edited sensor kind would model another building).
+    let _: identify::record::RunRecord = identify::record::read::read(&args.record)?;
     let validated = cross_validate(&args.record, &args.data, args.draws, &mut |n| {
         eprintln!("note: {n}")
     })?;
