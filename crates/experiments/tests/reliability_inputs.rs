@@ -370,3 +370,72 @@ fn refusals_name_the_key_the_line_and_no_temporary_file() {
     );
 }
 
+/// A field-data set the reader would refuse is not written (issue 50, item 9: the Python
+/// `field_data(...).write` wrote sets of 0 or 1 samples and a sensor at storey 2**63 as
+/// `a9223372036854775808`, which `load_dataset` then accepted beyond the 200-storey limit).
+#[test]
+fn data_sets_that_would_not_load_back_are_not_written_nor_read() {
+    use models::dataset::{load_dir, LoadedDataset};
+    let (_tmp, dir) = common::temp_dir("sysid-inputs-write-");
+    let set = |k: usize, sensors: Vec<usize>| LoadedDataset {
+        dt: 0.01,
+        t: (0..k).map(|i| i as f64 * 0.01).collect(),
+        ug_meas: vec![0.5; k],
+        y_meas: vec![0.25; k * sensors.len()],
+        channels: sensors.len(),
+        sensors,
+        truth: None,
+        meta: None,
+    };
+    for (name, data, needle) in [
+        ("none", set(0, vec![1]), "0 samples, at least 2"),
+        ("one", set(1, vec![1]), "1 samples, at least 2"),
+        (
+            "huge",
+            set(5, vec![1 << 63]),
+            "storey 9223372036854775808 is not one of 1 to 200",
+        ),
+        (
+            "201",
+            set(5, vec![3, 201]),
+            "storey 201 is not one of 1 to 200",
+        ),
+        (
+            "zero",
+            set(5, vec![0, 2]),
+            "storey 0 is not one of 1 to 200",
+        ),
+        ("order", set(5, vec![2, 1]), "[2, 1] is not increasing"),
+    ] {
+        let out = dir.join(name);
+        let e = data.write_measured_dir(&out).unwrap_err().to_string();
+        assert!(
+            e.contains(needle) && e.contains(out.to_str().unwrap()),
+            "{name}: {e}"
+        );
+        assert!(!out.exists(), "{name}: written");
+    }
+    // What is written loads back, at both ends of the storey range.
+    for sensors in [vec![1], vec![1, 200]] {
+        let out = dir.join(format!("ok-{}", sensors.len()));
+        let data = set(2, sensors);
+        data.write_measured_dir(&out).unwrap();
+        let back = load_dir(&out).unwrap();
+        assert_eq!((back.len(), &back.sensors), (2, &data.sensors));
+    }
+    // The reader refuses a storey beyond the limit, naming the file, line and column.
+    let out = dir.join("beyond");
+    std::fs::create_dir(&out).unwrap();
+    std::fs::write(
+        out.join("measured.csv"),
+        "t,ug,a9223372036854775808\n0,0,1\n0.01,0,1\n",
+    )
+    .unwrap();
+    let e = load_dir(&out).unwrap_err().to_string();
+    assert!(
+        e.contains("measured.csv:1: field `a9223372036854775808`")
+            && e.contains("beyond the 200 storeys"),
+        "{e}"
+    );
+}
+
