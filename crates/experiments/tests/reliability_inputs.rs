@@ -439,3 +439,105 @@ fn data_sets_that_would_not_load_back_are_not_written_nor_read() {
     );
 }
 
+/// What an import decided silently (issue 50, item 12), now refused by name: a storey file cut
+/// short to 3 rows (it trimmed the whole import to 2 samples, exit 0), a storey clock ticking at
+/// twice or half the ground's rate (resampled), and one file mapped as two storeys through a
+/// symbolic link (the duplicate check compared paths only).
+#[test]
+fn imports_refuse_a_short_channel_another_rate_and_a_linked_duplicate() {
+    let (_tmp, dir) = common::temp_dir("sysid-inputs-import-");
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
+    let map = frame_map(&root);
+    let storey1 = root.join("data/real/shake-table/bonus-event/floor-2.csv");
+    let text = std::fs::read_to_string(&storey1).unwrap();
+    // The sensor file with its data rows changed by `edit` (index, time stamp in µs, line).
+    let variant = |name: &str, edit: &dyn Fn(usize, i64, &str) -> Option<String>| -> PathBuf {
+        let mut out = String::new();
+        let mut row = 0;
+        let mut t0 = None;
+        for line in text.lines() {
+            let t = line.split(',').next().and_then(|t| t.parse::<i64>().ok());
+            match t {
+                Some(t) => {
+                    let t0 = *t0.get_or_insert(t);
+                    if let Some(l) = edit(row, t - t0, line) {
+                        out.push_str(&l);
+                        out.push('\n');
+                    }
+                    row += 1;
+                }
+                None => {
+                    out.push_str(line);
+                    out.push('\n');
+                }
+            }
+        }
+        let p = dir.join(name);
+        std::fs::write(&p, out).unwrap();
+        p
+    };
+    let with_storey1 = |name: &str, file: &Path| -> PathBuf {
+        let m = dir.join(name);
+        std::fs::write(
+            &m,
+            map.replace(storey1.to_str().unwrap(), file.to_str().unwrap()),
+        )
+        .unwrap();
+        m
+    };
+    let import = |m: &Path| {
+        run_within(
+            &["import", "--map", m.to_str().unwrap(), "--out", "o"],
+            &dir,
+        )
+        .0
+    };
+    // The map as shipped imports.
+    let o = import(&with_storey1("as-is.toml", &storey1));
+    assert!(o.status.success(), "{}", stderr(&o));
+    let refused = |m: &Path, file: &Path, needle: &str| {
+        let o = import(m);
+        let err = stderr(&o);
+        assert_eq!(o.status.code(), Some(1), "{err}");
+        assert!(
+            err.contains(file.to_str().unwrap())
+                && err.contains("storey 1")
+                && err.contains(needle),
+            "`{needle}` about {} not in: {err}",
+            file.display()
+        );
+    };
+    let short = variant("short.csv", &|row, _, l| (row < 3).then(|| l.to_string()));
+    refused(
+        &with_storey1("short.toml", &short),
+        &short,
+        "a file cut short?",
+    );
+    for (name, factor, needle) in [("fast.csv", 2.0, "+100.0 %"), ("slow.csv", 0.5, "-50.0 %")] {
+        let file = variant(name, &|_, dt, l| {
+            let value = l.split(',').nth(1).unwrap();
+            Some(format!(
+                "{},{value}",
+                1_000_000 + (dt as f64 * factor) as i64
+            ))
+        });
+        refused(&with_storey1(&format!("{name}.toml"), &file), &file, needle);
+    }
+    // Storey 2 reads storey 1's file through a link.
+    let link = dir.join("link.csv");
+    std::os::unix::fs::symlink(&storey1, &link).unwrap();
+    let storey2 = root.join("data/real/shake-table/bonus-event/floor-1.csv");
+    let m = dir.join("linked.toml");
+    std::fs::write(
+        &m,
+        map.replace(storey2.to_str().unwrap(), link.to_str().unwrap()),
+    )
+    .unwrap();
+    let o = import(&m);
+    let err = stderr(&o);
+    assert_eq!(o.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains("linked.toml") && err.contains("reads the same signal as storey 1"),
+        "{err}"
+    );
+}

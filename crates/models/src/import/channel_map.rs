@@ -242,6 +242,25 @@ pub struct ChannelMap {
     pub storeys: Vec<Channel>,
 }
 
+/// Whether `a` and `b` are one file: the same path, or (both existing) the same device and
+/// inode, so that a link to a file already mapped is seen as that file.
+fn same_file(a: &Path, b: &Path) -> bool {
+    if a == b {
+        return true;
+    }
+    match (std::fs::metadata(a), std::fs::metadata(b)) {
+        #[cfg(unix)]
+        (Ok(ma), Ok(mb)) => {
+            use std::os::unix::fs::MetadataExt;
+            ma.dev() == mb.dev() && ma.ino() == mb.ino()
+        }
+        _ => matches!(
+            (std::fs::canonicalize(a), std::fs::canonicalize(b)),
+            (Ok(x), Ok(y)) if x == y
+        ),
+    }
+}
+
 fn line_of(text: &str, offset: usize) -> usize {
     text.get(..offset)
         .map_or(1, |s| s.bytes().filter(|&b| b == b'\n').count() + 1)
@@ -370,7 +389,8 @@ impl ChannelMap {
         let all: Vec<&Channel> = std::iter::once(&ground).chain(&storeys).collect();
         for (i, a) in all.iter().enumerate() {
             for b in &all[..i] {
-                if a.path == b.path && a.spec.column == b.spec.column {
+                // The same file also through another name (a symbolic or hard link).
+                if same_file(&a.path, &b.path) && a.spec.column == b.spec.column {
                     return Err(err(
                         a.line,
                         "file",
