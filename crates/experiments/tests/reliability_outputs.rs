@@ -721,3 +721,42 @@ fn a_resumed_field_study_redraws_broken_figures_and_links_only_existing_ones() {
     let report = report_links_only_existing_figures(&out);
     assert!(report.contains("frame/selected-free_run.svg"), "{report}");
 }
+
+/// `validate --plot` puts its figures in place as `plot` does: a figure name that is a link is
+/// refused, not written through, and a figure cut short is replaced whole.
+#[test]
+fn validate_plot_puts_each_figure_in_place_whole() {
+    let (_tmp, dir) = temp_dir("validate-plot");
+    let d = small_data(&dir);
+    let record = small_record(&dir, &d);
+    let (r, d) = (record.to_str().unwrap(), d.to_str().unwrap());
+    let figs = dir.join("figs");
+    ok(&run(
+        &["validate", "--record", r, "--data", d, "--plot", "figs"],
+        &dir,
+    ));
+    let whole = std::fs::read(figs.join("free_run.svg")).unwrap();
+    identify::figures::validate_svg(&figs.join("free_run.svg")).unwrap();
+    std::fs::write(figs.join("free_run.svg"), &whole[..whole.len() / 2]).unwrap();
+    ok(&run(
+        &["validate", "--record", r, "--data", d, "--plot", "figs"],
+        &dir,
+    ));
+    assert_eq!(std::fs::read(figs.join("free_run.svg")).unwrap(), whole);
+    let keep = dir.join("keep.txt");
+    std::fs::write(&keep, "keep\n").unwrap();
+    std::fs::remove_file(figs.join("free_run.svg")).unwrap();
+    std::os::unix::fs::symlink(&keep, figs.join("free_run.svg")).unwrap();
+    let o = run(
+        &["validate", "--record", r, "--data", d, "--plot", "figs"],
+        &dir,
+    );
+    refused(&o, "free_run.svg");
+    link_intact(&figs.join("free_run.svg"), &keep);
+    let hidden: Vec<_> = std::fs::read_dir(&figs)
+        .unwrap()
+        .flatten()
+        .filter(|e| e.file_name().to_string_lossy().starts_with('.'))
+        .collect();
+    assert!(hidden.is_empty(), "{hidden:?}");
+}

@@ -40,6 +40,15 @@ const MAX_LAG: usize = 20;
 /// removed by the next `plot` into `out`.
 pub fn plot(record_path: &Path, out: &Path) -> Result<Plotted> {
     let record: RunRecord = crate::record::read::read(record_path)?;
+    draw_in_place(out, |staging| {
+        draw(&record, record.residuals.as_ref(), staging)
+    })
+}
+
+/// Runs `draw` on a fresh hidden directory of `out` and puts every figure it reports written
+/// in place in `out`, as [`plot`] does (each checked and renamed whole); the figures of
+/// `sysid validate --plot` go through here too.
+pub fn draw_in_place(out: &Path, draw: impl FnOnce(&Path) -> Result<Plotted>) -> Result<Plotted> {
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     remove_stale_staging(out);
     let staging = out.join(format!("{STAGING}{}", std::process::id()));
@@ -48,8 +57,7 @@ pub fn plot(record_path: &Path, out: &Path) -> Result<Plotted> {
             .with_context(|| format!("removing {}", staging.display()))?;
     }
     std::fs::create_dir(&staging).with_context(|| format!("creating {}", staging.display()))?;
-    let placed = draw(&record, record.residuals.as_ref(), &staging)
-        .and_then(|drawn| put_in_place(drawn, &staging, out));
+    let placed = draw(&staging).and_then(|drawn| put_in_place(drawn, &staging, out));
     // The staging directory holds only what was not put in place (nothing, on success).
     let _ = std::fs::remove_dir_all(&staging);
     placed
