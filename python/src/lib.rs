@@ -351,6 +351,17 @@ fn field_data(
             "sensors: {sensors:?} is not a list of storeys numbered from 1, increasing"
         ));
     }
+    if let Some(&s) = sensors.iter().find(|&&s| s > models::limits::MAX_STOREYS) {
+        return bad(format!(
+            "sensors: storey {s} is beyond the {} storeys a building may have",
+            models::limits::MAX_STOREYS
+        ));
+    }
+    if k < 2 {
+        return bad(format!(
+            "ug has {k} samples: at least 2 are needed (a record has a time step)"
+        ));
+    }
     models::limits::check_table(k, cols + 2).map_err(err)?;
     let check = |what: &str, i: usize, v: f64| -> PyResult<()> {
         models::limits::check_value(v)

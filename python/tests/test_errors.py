@@ -158,3 +158,23 @@ def test_outputs_are_refused_over_inputs_links_and_directories(tmp_path, short_d
     raises(short_data.write, o, match="truth.csv")
     assert (o / "truth.csv" / "precious.txt").read_text() == "keep\n"
     raises(sm.loglik, data, truth=True, particles=20, seeds=10**9, match="--seeds 1000000000: at most 10000")
+
+
+@pytest.mark.parametrize(
+    "k, sensors, match",
+    [
+        (0, [1], "at least 2 are needed"),
+        (1, [1], "at least 2 are needed"),
+        (5, [2**63], "beyond the 200 storeys"),
+        (5, [3, 201], "beyond the 200 storeys"),
+    ],
+)
+def test_field_data_that_would_not_load_back_is_refused(tmp_path, k, sensors, match):
+    # The package wrote these, and read back a storey 2**63 beyond the 200-storey limit.
+    ug = np.zeros(k)
+    acc = np.ones((k, len(sensors)))
+    raises(sm.field_data, ug, acc, 0.01, sensors, match=match)
+    # What is written loads back, at both ends of the storey range.
+    d = sm.field_data(np.zeros(2), np.ones((2, 2)), 0.01, [1, 200])
+    d.write(tmp_path / "ok")
+    assert sm.load_dataset(tmp_path / "ok").sensors == [1, 200]

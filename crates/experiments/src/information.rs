@@ -92,8 +92,7 @@ impl InformationLimit {
 
     /// Reads a limit written by `sysid information --out`.
     pub fn read(path: &std::path::Path) -> Result<Self> {
-        let text =
-            std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+        let text = identify::limits::read_text_file(path, "information limit")?;
         serde_json::from_str(&text)
             .with_context(|| format!("{}: not an information limit", path.display()))
     }

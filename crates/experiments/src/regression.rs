@@ -72,10 +72,10 @@ impl RegressionFile {
     /// ([`Study::param_names`]: the paper's [`PAPER_PARAMS`] for `paper-3dof`, `k1..kN`,
     /// `c1..cN` and the elements' for one structure of a building preset); errors name the file.
     pub fn load(path: &Path) -> Result<Self> {
-        let text =
-            std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+        let text = identify::limits::read_text_file(path, "regression file")?;
         let parse = || -> Result<Self> {
-            let file: RegressionFile = toml::from_str(&text)?;
+            let file: RegressionFile =
+                identify::limits::parse_toml(&text, path, "regression file")?;
             let names = file.study.param_names()?;
             let names: Vec<&str> = names.iter().map(String::as_str).collect();
             file.check(&names)?;

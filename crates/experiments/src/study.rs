@@ -256,10 +256,8 @@ pub struct Job {
 impl Study {
     /// Reads and checks a study file; errors name the file.
     pub fn load(path: &Path) -> Result<Self> {
-        let text = std::fs::read_to_string(path)
-            .with_context(|| format!("reading study {}", path.display()))?;
-        let mut s: Study =
-            toml::from_str(&text).with_context(|| format!("parsing study {}", path.display()))?;
+        let text = identify::limits::read_text_file(path, "study")?;
+        let mut s: Study = identify::limits::parse_toml(&text, path, "study")?;
         if let Some(dir) = &s.data.dir {
             if dir.is_relative() {
                 let base = path.parent().unwrap_or_else(|| Path::new("."));

@@ -167,7 +167,8 @@ fn a_bad_map_or_output_is_refused_by_name_and_nothing_is_written() {
         .unwrap();
     let t = text(&o);
     assert!(!o.status.success());
-    assert!(t.contains("bad.toml:5: key `minutes`"), "{t}");
+    // The key, within its table (not the value, which toml quotes).
+    assert!(t.contains("bad.toml:5: key `ground.time_units`"), "{t}");
     assert!(!out.exists());
     // Never over a directory that holds something else.
     let mine = dir.join("mine");

@@ -518,3 +518,65 @@ fn compare_reference_groups_records_by_their_data_set() {
     args.extend(["online-a.json", "online-c.json"]);
     refused(&run(&args, &dir), "online-c.json");
 }
+
+/// A record whose `config` was edited after the run — the sensors' kind, which decides the
+/// building `validate` models — is refused by every reader, `validate` included, naming the
+/// file and the `config`; the unedited record is accepted (issue 50, item 10).
+#[test]
+fn a_record_with_an_edited_config_is_refused_before_it_is_used() {
+    let (_tmp, dir) = temp_dir("config-edit");
+    // Field data (measured.csv alone): nothing but the record says what the building is.
+    let sim = small_data(&dir);
+    let d = dir.join("f");
+    std::fs::create_dir(&d).unwrap();
+    std::fs::copy(sim.join("measured.csv"), d.join("measured.csv")).unwrap();
+    let o = run(
+        &[
+            "filter",
+            "--algorithm",
+            "mpf-ekf2",
+            "--storeys",
+            "3",
+            "--hysteretic",
+            "none",
+            "--masses",
+            "1",
+            "--measurement",
+            "relative",
+            "--data",
+            "f",
+            "--out",
+            "run.json",
+        ],
+        &dir,
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    let mut v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("run.json")).unwrap()).unwrap();
+    // Written again unedited, through serde_json: still accepted.
+    std::fs::write(dir.join("same.json"), serde_json::to_string(&v).unwrap()).unwrap();
+    let o = run(&["validate", "--record", "same.json", "--data", "f"], &dir);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let kind = &mut v["config"]["spec"]["sensors"]["kind"];
+    assert_eq!(kind, "relative");
+    *kind = "absolute".into();
+    std::fs::write(dir.join("edited.json"), serde_json::to_string(&v).unwrap()).unwrap();
+    for args in [
+        &["validate", "--record", "edited.json", "--data", "f"][..],
+        &[
+            "validate",
+            "--record",
+            "edited.json",
+            "--data",
+            "f",
+            "--out",
+            "v.json",
+        ],
+        &["plot", "edited.json", "--out", "figs"],
+    ] {
+        let o = run(args, &dir);
+        refused(&o, "edited.json");
+        refused(&o, "`config` is not the one it was written with");
+    }
+    assert!(!dir.join("v.json").exists());
+}

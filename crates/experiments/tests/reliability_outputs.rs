@@ -580,3 +580,183 @@ fn table1_writes_its_files_only_as_new_or_regular_files() {
         .unwrap()
         .contains('|'));
 }
+
+/// A field study of the frame's shortest recording with one variant, selected: small enough to
+/// run three times.
+fn mini_field_study(dir: &Path) -> PathBuf {
+    let map =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../experiments/real/frame-bonus-event.toml");
+    let study = dir.join("study.toml");
+    std::fs::write(
+        &study,
+        format!(
+            r#"title = "mini"
+[[part]]
+name = "frame"
+title = "frame"
+about = "the frame"
+common = ["--storeys", "3", "--hysteretic", "none", "--measurement", "absolute", "--masses", "1", "--particles", "50", "--seed", "1"]
+[[part.record]]
+name = "bonus"
+map = "{}"
+role = "identify"
+[[part.variant]]
+name = "mpf"
+label = "MPF-EKF2"
+algorithm = "mpf-ekf2"
+group = "g"
+[part.selection]
+group = "g"
+"#,
+            map.display()
+        ),
+    )
+    .unwrap();
+    study
+}
+
+/// The SVG figures under `dir` (recursively) and their bytes.
+fn figures_under(dir: &Path) -> std::collections::BTreeMap<PathBuf, Vec<u8>> {
+    let mut out = std::collections::BTreeMap::new();
+    let mut stack = vec![dir.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        for e in std::fs::read_dir(&d).unwrap().flatten() {
+            let p = e.path();
+            if p.is_dir() {
+                stack.push(p);
+            } else if p.extension().is_some_and(|x| x == "svg") {
+                out.insert(p.clone(), std::fs::read(&p).unwrap());
+            }
+        }
+    }
+    out
+}
+
+/// The figures under `out` are those of `whole`, byte for byte; the message names the others.
+fn same_figures(out: &Path, whole: &std::collections::BTreeMap<PathBuf, Vec<u8>>) {
+    let now = figures_under(out);
+    let differ: Vec<_> = whole
+        .keys()
+        .chain(now.keys())
+        .filter(|p| whole.get(*p) != now.get(*p))
+        .collect();
+    assert!(differ.is_empty(), "missing, cut short or other: {differ:?}");
+}
+
+/// Every figure REPORT.md links is there.
+fn report_links_only_existing_figures(out: &Path) -> String {
+    let report = std::fs::read_to_string(out.join("REPORT.md")).unwrap();
+    for link in report.split("](").skip(1) {
+        let target = &link[..link.find(')').unwrap()];
+        if target.ends_with(".svg") {
+            assert!(
+                out.join(target).is_file(),
+                "REPORT.md links the absent {target}"
+            );
+        }
+    }
+    report
+}
+
+#[test]
+fn a_resumed_field_study_redraws_broken_figures_and_links_only_existing_ones() {
+    let (_tmp, dir) = temp_dir("field-study");
+    let study = mini_field_study(&dir);
+    let out = dir.join("out");
+    let (s, o) = (study.to_str().unwrap(), out.to_str().unwrap());
+    ok(&run(&["field-study", "--config", s, "--out", o], &dir));
+    let whole = figures_under(&out);
+    let figs = out.join("frame/figures/mpf");
+    let selected = out.join("frame/selected-free_run.svg");
+    for f in [
+        figs.join("free_run.svg"),
+        figs.join("transfer.svg"),
+        selected.clone(),
+    ] {
+        assert!(whole.contains_key(&f), "{} not drawn", f.display());
+    }
+    for f in whole.keys() {
+        identify::figures::validate_svg(f).unwrap();
+    }
+    let report = report_links_only_existing_figures(&out);
+    assert!(report.contains("frame/selected-transfer.svg"), "{report}");
+
+    // An interrupted study: a figure cut short, one missing, a copy beside the report cut
+    // short and one missing. The resumed study puts every figure back as it was.
+    let cut = |p: &Path| {
+        let b = std::fs::read(p).unwrap();
+        std::fs::write(p, &b[..b.len() / 2]).unwrap();
+    };
+    cut(&figs.join("free_run.svg"));
+    std::fs::remove_file(figs.join("transfer.svg")).unwrap();
+    cut(&selected);
+    std::fs::remove_file(out.join("frame/selected-transfer.svg")).unwrap();
+    ok(&run(
+        &["field-study", "--config", s, "--out", o, "--resume"],
+        &dir,
+    ));
+    same_figures(&out, &whole);
+    report_links_only_existing_figures(&out);
+
+    // A lost figure directory is drawn again; no staging directory is left.
+    std::fs::remove_dir_all(out.join("frame/figures")).unwrap();
+    ok(&run(
+        &["field-study", "--config", s, "--out", o, "--resume"],
+        &dir,
+    ));
+    same_figures(&out, &whole);
+    let hidden: Vec<_> = std::fs::read_dir(&figs)
+        .unwrap()
+        .flatten()
+        .filter(|e| e.file_name().to_string_lossy().starts_with('.'))
+        .collect();
+    assert!(hidden.is_empty(), "{hidden:?}");
+
+    // A figure beside the report that is not there is not linked.
+    std::fs::remove_file(out.join("frame/selected-transfer.svg")).unwrap();
+    ok(&run(
+        &["field-study", "--config", s, "--out", o, "--report-only"],
+        &dir,
+    ));
+    let report = report_links_only_existing_figures(&out);
+    assert!(report.contains("frame/selected-free_run.svg"), "{report}");
+}
+
+/// `validate --plot` puts its figures in place as `plot` does: a figure name that is a link is
+/// refused, not written through, and a figure cut short is replaced whole.
+#[test]
+fn validate_plot_puts_each_figure_in_place_whole() {
+    let (_tmp, dir) = temp_dir("validate-plot");
+    let d = small_data(&dir);
+    let record = small_record(&dir, &d);
+    let (r, d) = (record.to_str().unwrap(), d.to_str().unwrap());
+    let figs = dir.join("figs");
+    ok(&run(
+        &["validate", "--record", r, "--data", d, "--plot", "figs"],
+        &dir,
+    ));
+    let whole = std::fs::read(figs.join("free_run.svg")).unwrap();
+    identify::figures::validate_svg(&figs.join("free_run.svg")).unwrap();
+    std::fs::write(figs.join("free_run.svg"), &whole[..whole.len() / 2]).unwrap();
+    ok(&run(
+        &["validate", "--record", r, "--data", d, "--plot", "figs"],
+        &dir,
+    ));
+    assert_eq!(std::fs::read(figs.join("free_run.svg")).unwrap(), whole);
+    let keep = dir.join("keep.txt");
+    std::fs::write(&keep, "keep\n").unwrap();
+    std::fs::remove_file(figs.join("free_run.svg")).unwrap();
+    std::os::unix::fs::symlink(&keep, figs.join("free_run.svg")).unwrap();
+    let o = run(
+        &["validate", "--record", r, "--data", d, "--plot", "figs"],
+        &dir,
+    );
+    refused(&o, "free_run.svg");
+    link_intact(&figs.join("free_run.svg"), &keep);
+    let hidden: Vec<_> = std::fs::read_dir(&figs)
+        .unwrap()
+        .flatten()
+        .filter(|e| e.file_name().to_string_lossy().starts_with('.'))
+        .collect();
+    assert!(hidden.is_empty(), "{hidden:?}");
+}

@@ -100,6 +100,8 @@ error_type! {
     Output(crate::record::atomic::OutputError),
     /// Recordings could not be imported into a data set.
     Import(models::import::ImportError),
+    /// An input file is refused (not a regular file, too large, not UTF-8) or could not be read.
+    Read(models::readers::ReadError),
     /// Text written into a `String` (never fails in practice).
     Format(std::fmt::Error),
     /// A text that is not UTF-8.

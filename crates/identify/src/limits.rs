@@ -9,7 +9,7 @@
 
 use std::path::Path;
 
-use crate::error::{bail, invalid, Context, Result};
+use crate::error::{bail, Context, Result};
 pub use models::limits::*;
 
 use crate::settings::FilterSettings;
@@ -74,44 +74,48 @@ pub fn check_particle_cloud(particles: usize, per_particle: usize) -> Result<()>
     Ok(())
 }
 
-/// Reads a small text file a user gives (a config, a run plan): a regular file of at most
-/// [`MAX_FILE_BYTES`] bytes, read no further than that (a FIFO, a device or a directory is
-/// refused before reading), UTF-8, its byte-order mark dropped; `what` names it in errors.
+/// Reads a text file a user gives (a config, a run plan, a study): through the one reader of
+/// input files, [`models::readers::read_input`] — a regular file of at most [`MAX_FILE_BYTES`]
+/// bytes, checked before a byte is read (a FIFO, a device or a directory is refused, naming the
+/// file) — UTF-8 (a byte that is not is refused with its line), its byte-order mark dropped;
+/// `what` names the file in errors.
 pub fn read_text_file(path: &Path, what: &str) -> Result<String> {
-    use std::io::Read;
-    let meta =
-        std::fs::metadata(path).with_context(|| format!("reading {what} {}", path.display()))?;
-    if !meta.is_file() {
-        bail!(
-            "{what} {}: not a regular file (a {what} is read from a file)",
-            path.display()
-        );
-    }
-    if meta.len() > MAX_FILE_BYTES {
-        bail!(
-            "{what} {}: {} bytes, more than the {MAX_FILE_BYTES} bytes a {what} may have",
-            path.display(),
-            meta.len()
-        );
-    }
-    let mut bytes = Vec::new();
-    std::fs::File::open(path)
-        .and_then(|f| f.take(MAX_FILE_BYTES + 1).read_to_end(&mut bytes))
-        .with_context(|| format!("reading {what} {}", path.display()))?;
-    if bytes.len() as u64 > MAX_FILE_BYTES {
-        bail!(
-            "{what} {}: more than the {MAX_FILE_BYTES} bytes a {what} may have",
-            path.display()
-        );
-    }
-    let text = String::from_utf8(bytes).map_err(|e| {
-        let upto = &e.as_bytes()[..e.utf8_error().valid_up_to()];
-        let line = upto.iter().filter(|&&b| b == b'\n').count() + 1;
-        invalid!("{what} {}: line {line}: not UTF-8 text", path.display())
-    })?;
+    let text = models::readers::read_input_text(path).with_context(|| format!("reading {what}"))?;
     Ok(match text.strip_prefix('\u{feff}') {
         Some(t) => t.to_string(),
         None => text,
+    })
+}
+
+/// Most characters of a parser's message repeated in an error.
+const MAX_MESSAGE_CHARS: usize = 300;
+
+/// Parses the TOML text of the file `path` (a `what`: "study", "config", ...). An error names
+/// the file, the line and the column, and says what is wrong in at most
+/// [`MAX_MESSAGE_CHARS`] characters; the offending line is not echoed (a line of 200,000
+/// brackets was, whole).
+pub fn parse_toml<T: serde::de::DeserializeOwned>(
+    text: &str,
+    path: &Path,
+    what: &str,
+) -> Result<T> {
+    toml::from_str(text).map_err(|e| {
+        let (line, column) = e.span().map_or((1, 1), |s| {
+            let before = text.get(..s.start).unwrap_or("");
+            let line = before.bytes().filter(|&b| b == b'\n').count() + 1;
+            let column = before.rsplit('\n').next().map_or(0, |l| l.chars().count()) + 1;
+            (line, column)
+        });
+        let message = e.message().trim();
+        let message: String = match message.char_indices().nth(MAX_MESSAGE_CHARS) {
+            Some((cut, _)) => format!("{}…", &message[..cut]),
+            None => message.to_string(),
+        };
+        crate::error::invalid!(
+            "{what} {}:{line}:{column}: {}",
+            path.display(),
+            message.replace('\n', " ")
+        )
     })
 }
 
@@ -119,8 +123,7 @@ pub fn read_text_file(path: &Path, what: &str) -> Result<String> {
 /// file.
 pub fn load_filter_settings(path: &Path) -> Result<FilterSettings> {
     let text = read_text_file(path, "config")?;
-    let s: FilterSettings =
-        toml::from_str(&text).with_context(|| format!("parsing config {}", path.display()))?;
+    let s: FilterSettings = parse_toml(&text, path, "config")?;
     check_filter_settings(&s).with_context(|| format!("config {}", path.display()))?;
     Ok(s)
 }

@@ -357,6 +357,8 @@ pub fn execute(
     if let Some(p) = &plan.evidence.prior_from_data {
         config["prior_from_data"] = serde_json::to_value(p).expect("serialisable");
     }
+    let fingerprint =
+        Fingerprint::of_run(algorithm.name(), input.seed, input.run, s, data).with_config(&config);
     let mut record = RunRecord {
         experiment: input.experiment.to_string(),
         algorithm: algorithm.name().to_string(),
@@ -384,13 +386,7 @@ pub fn execute(
         validation,
         config,
         versions: Versions::current(),
-        fingerprint: Some(Fingerprint::of_run(
-            algorithm.name(),
-            input.seed,
-            input.run,
-            s,
-            data,
-        )),
+        fingerprint: Some(fingerprint),
         trace: d.trace,
         timing: Timing {
             wall_s: d.wall_s,

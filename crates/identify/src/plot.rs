@@ -30,10 +30,88 @@ const MAX_LAG: usize = 20;
 
 /// Reads a record (through [`crate::record::read::read`], with every reader's checks) and draws
 /// its figures into `out`.
+///
+/// Each figure is put in place whole or not at all: every figure is drawn into a hidden
+/// directory `out/.figures.tmp<pid>`, checked to be a complete SVG document
+/// ([`figures::validate_svg`]) and then renamed over `out/<name>.svg` (the same file system, so
+/// the rename is atomic), as records are written. An interruption leaves each figure either as
+/// it was or complete; a figure of `out` that exists and is not a regular file (a link, a
+/// directory) is refused, not replaced. The hidden directory of a process that has ended is
+/// removed by the next `plot` into `out`.
 pub fn plot(record_path: &Path, out: &Path) -> Result<Plotted> {
     let record: RunRecord = crate::record::read::read(record_path)?;
+    draw_in_place(out, |staging| {
+        draw(&record, record.residuals.as_ref(), staging)
+    })
+}
+
+/// Runs `draw` on a fresh hidden directory of `out` and puts every figure it reports written
+/// in place in `out`, as [`plot`] does (each checked and renamed whole); the figures of
+/// `sysid validate --plot` go through here too.
+pub fn draw_in_place(out: &Path, draw: impl FnOnce(&Path) -> Result<Plotted>) -> Result<Plotted> {
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
-    draw(&record, record.residuals.as_ref(), out)
+    remove_stale_staging(out);
+    let staging = out.join(format!("{STAGING}{}", std::process::id()));
+    if staging.exists() {
+        std::fs::remove_dir_all(&staging)
+            .with_context(|| format!("removing {}", staging.display()))?;
+    }
+    std::fs::create_dir(&staging).with_context(|| format!("creating {}", staging.display()))?;
+    let placed = draw(&staging).and_then(|drawn| put_in_place(drawn, &staging, out));
+    // The staging directory holds only what was not put in place (nothing, on success).
+    let _ = std::fs::remove_dir_all(&staging);
+    placed
+}
+
+/// Prefix of the directory figures are drawn in before they are put in place.
+const STAGING: &str = ".figures.tmp";
+
+/// Checks every figure drawn into `staging` and renames it into `out`.
+fn put_in_place(drawn: Plotted, staging: &Path, out: &Path) -> Result<Plotted> {
+    let mut placed = Plotted {
+        written: Vec::with_capacity(drawn.written.len()),
+        skipped: drawn.skipped,
+    };
+    for from in drawn.written {
+        let name = from
+            .strip_prefix(staging)
+            .map_err(|_| crate::error::invalid!("figure {} outside its directory", from.display()))?
+            .to_path_buf();
+        figures::validate_svg(&from)?;
+        let to = out.join(&name);
+        crate::record::atomic::check_replaceable(&to, "figure")?;
+        if let Some(dir) = to.parent() {
+            std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+        }
+        std::fs::rename(&from, &to)
+            .with_context(|| format!("renaming {} into {}", from.display(), to.display()))?;
+        placed.written.push(to);
+    }
+    Ok(placed)
+}
+
+/// Removes the staging directories of `plot` runs into `out` whose process has ended (Linux:
+/// no `/proc/<pid>`); elsewhere they are left.
+fn remove_stale_staging(out: &Path) {
+    if !Path::new("/proc/self").exists() {
+        return;
+    }
+    let Ok(entries) = std::fs::read_dir(out) else {
+        return;
+    };
+    for e in entries.flatten() {
+        let name = e.file_name();
+        let Some(pid) = name
+            .to_str()
+            .and_then(|n| n.strip_prefix(STAGING))
+            .and_then(|p| p.parse::<u32>().ok())
+        else {
+            continue;
+        };
+        if pid != std::process::id() && !Path::new(&format!("/proc/{pid}")).exists() {
+            let _ = std::fs::remove_dir_all(e.path());
+        }
+    }
 }
 
 /// Draws every figure the record has data for.

@@ -254,6 +254,7 @@ impl RunRecord {
                 .as_ref()
                 .ok_or("a record of schema 2 has no fingerprint")?;
             f.verify()?;
+            f.verify_config(&self.config)?;
             let inputs = &f.inputs;
             let agree = |key: &str, value: serde_json::Value| -> Result<(), String> {
                 if inputs.get(key) == Some(&value) {

@@ -343,6 +343,13 @@ pub enum DatasetError {
         field: String,
         message: String,
     },
+    /// A data set that [`load_dir`] would refuse, so it is not written.
+    #[error("{dir}: not written: field `{field}`: {message} (the data set would not load back)")]
+    NotWritable {
+        dir: PathBuf,
+        field: &'static str,
+        message: String,
+    },
 }
 
 fn invalid(field: &'static str, message: impl Into<String>) -> DatasetError {
@@ -851,10 +858,65 @@ impl LoadedDataset {
         &self.y_meas[k * self.channels..(k + 1) * self.channels]
     }
 
+    /// What [`load_dir`] would refuse in this data set's `measured.csv`: the field and why.
+    fn check_writable(&self) -> Result<(), (&'static str, String)> {
+        let k = self.len();
+        if k < 2 {
+            return Err(("t", format!("{k} samples, at least 2 are needed")));
+        }
+        if self.ug_meas.len() != k {
+            return Err((
+                "ug",
+                format!("{} samples for {k} times", self.ug_meas.len()),
+            ));
+        }
+        limits::check_table(k, self.channels + 2).map_err(|e| ("t", e.to_string()))?;
+        if self.y_meas.len() != k * self.channels || self.sensors.len() != self.channels {
+            return Err((
+                "sensors",
+                format!(
+                    "{} sensors, {} channels and {} values for {k} samples",
+                    self.sensors.len(),
+                    self.channels,
+                    self.y_meas.len()
+                ),
+            ));
+        }
+        if self.sensors.is_empty() {
+            return Err(("sensors", "no measured storey".to_string()));
+        }
+        for (i, &s) in self.sensors.iter().enumerate() {
+            if s == 0 || s > limits::MAX_STOREYS {
+                return Err((
+                    "sensors",
+                    format!(
+                        "storey {s} is not one of 1 to {} (storeys are numbered from 1)",
+                        limits::MAX_STOREYS
+                    ),
+                ));
+            }
+            if i > 0 && s <= self.sensors[i - 1] {
+                return Err(("sensors", format!("{:?} is not increasing", self.sensors)));
+            }
+        }
+        Ok(())
+    }
+
     /// Writes the measured data alone (`measured.csv`: `t,ug,a<s>...`, numbers that parse back
     /// to the same bits) as the directory `dir`, a field-data set that [`load_dir`] reads.
     /// Written under a temporary name and swapped into place like [`Dataset::write_dir`].
+    ///
+    /// Only what [`load_dir`] reads back is written: at least two samples, one to
+    /// [`limits::MAX_STOREYS`] measured storeys numbered from 1 and increasing, none beyond
+    /// [`limits::MAX_STOREYS`], one column per storey and the table within
+    /// [`limits::check_table`]; anything else is refused before a file is touched.
     pub fn write_measured_dir(&self, dir: &Path) -> Result<(), DatasetError> {
+        self.check_writable()
+            .map_err(|(field, message)| DatasetError::NotWritable {
+                dir: dir.to_path_buf(),
+                field,
+                message,
+            })?;
         let mut s = String::from("t,ug");
         for storey in &self.sensors {
             write!(s, ",a{storey}").unwrap();
@@ -896,20 +958,12 @@ fn read_bytes(path: &Path) -> Result<Option<Vec<u8>>, DatasetError> {
         }
         .into()
     };
-    let bytes = match std::fs::metadata(path) {
-        Ok(m) => m.len(),
+    match std::fs::metadata(path) {
+        Ok(_) => {}
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
         Err(e) => return Err(io(e)),
     };
-    if bytes > limits::MAX_FILE_BYTES {
-        return Err(ReadError::FileTooLarge {
-            file: path.to_path_buf(),
-            bytes,
-            max: limits::MAX_FILE_BYTES,
-        }
-        .into());
-    }
-    std::fs::read(path).map(Some).map_err(io)
+    Ok(Some(crate::readers::read_input(path)?))
 }
 
 /// `bytes` as UTF-8 text; the error names the file and the line of the first invalid byte.
@@ -1210,6 +1264,16 @@ fn measured_storeys(path: &Path, names: &[String]) -> Result<Vec<usize>, Dataset
                 path,
                 name,
                 "storey 0 does not exist (storeys are numbered from 1)".to_string(),
+            ));
+        }
+        if s > limits::MAX_STOREYS {
+            return Err(header_error(
+                path,
+                name,
+                format!(
+                    "storey {s} is beyond the {} storeys a building may have",
+                    limits::MAX_STOREYS
+                ),
             ));
         }
         if storeys.contains(&s) {

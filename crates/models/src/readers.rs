@@ -102,8 +102,18 @@ pub enum ReadError {
         #[source]
         source: LimitError,
     },
-    #[error("{file}: {bytes} bytes, more than the {max} bytes a record or data file may have")]
+    #[error("{file}: {bytes} bytes, more than the {max} bytes an input file may have")]
     FileTooLarge { file: PathBuf, bytes: u64, max: u64 },
+    /// An input that is not a regular file: a device (`/dev/zero`, also through a symbolic
+    /// link), a named pipe (whose read would wait for a writer), a socket or a directory.
+    #[error("{file}: is {what}, not a regular file; an input is read only from a regular file")]
+    NotAFile { file: PathBuf, what: &'static str },
+    #[error("{file}:{line}: not UTF-8 text (byte {byte} of the file)")]
+    NotUtf8 {
+        file: PathBuf,
+        line: usize,
+        byte: usize,
+    },
     #[error("{file}: empty record ({found} samples, at least {needed} needed)")]
     Empty {
         file: PathBuf,
@@ -249,21 +259,110 @@ fn step_error(file: &Path, line: usize, e: LimitError) -> ReadError {
     }
 }
 
-/// Reads a whole text file after checking its size against `MAX_FILE_BYTES`.
-pub(crate) fn read_text(path: &Path) -> Result<String, ReadError> {
+/// What a file that is not a regular file is, for messages.
+fn file_kind(t: std::fs::FileType) -> &'static str {
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::FileTypeExt;
+        if t.is_block_device() || t.is_char_device() {
+            return "a device";
+        }
+        if t.is_fifo() {
+            return "a named pipe (FIFO)";
+        }
+        if t.is_socket() {
+            return "a socket";
+        }
+    }
+    if t.is_dir() {
+        "a directory"
+    } else {
+        "not a regular file"
+    }
+}
+
+/// Checks that `meta` (of `path`) is a regular file of at most [`limits::MAX_FILE_BYTES`].
+fn check_input(path: &Path, meta: &std::fs::Metadata) -> Result<(), ReadError> {
+    if !meta.is_file() {
+        return Err(ReadError::NotAFile {
+            file: path.to_path_buf(),
+            what: file_kind(meta.file_type()),
+        });
+    }
+    if meta.len() > limits::MAX_FILE_BYTES {
+        return Err(ReadError::FileTooLarge {
+            file: path.to_path_buf(),
+            bytes: meta.len(),
+            max: limits::MAX_FILE_BYTES,
+        });
+    }
+    Ok(())
+}
+
+/// Checks, without opening it, that `path` is an input [`read_input`] reads: a regular file
+/// (through any symbolic link) of at most [`limits::MAX_FILE_BYTES`] bytes. For a command that
+/// hands the path on (resolved, to a script) before reading it.
+pub fn check_input_file(path: &Path) -> Result<(), ReadError> {
+    let meta = std::fs::metadata(path).map_err(|source| ReadError::Io {
+        file: path.to_path_buf(),
+        source,
+    })?;
+    check_input(path, &meta)
+}
+
+/// Reads the input file `path` whole: the one reader of every file a user gives (records, data
+/// files, channel maps, configs, study and cluster files, excitations).
+///
+/// Before a byte is read (before the file is even opened, so that a named pipe cannot make
+/// the call wait for a writer), `path` must be a regular file (a symbolic link is followed: a
+/// link to `/dev/zero` is a device and refused) of at most [`limits::MAX_FILE_BYTES`] bytes (a
+/// sparse file of 3 GiB is refused at once). The opened file is checked again, and no more than
+/// the limit is ever read, so a file that grows meanwhile cannot make the read unbounded.
+pub fn read_input(path: &Path) -> Result<Vec<u8>, ReadError> {
+    use std::io::Read;
     let io = |source| ReadError::Io {
         file: path.to_path_buf(),
         source,
     };
-    let bytes = std::fs::metadata(path).map_err(io)?.len();
-    if bytes > limits::MAX_FILE_BYTES {
+    check_input_file(path)?;
+    let file = std::fs::File::open(path).map_err(io)?;
+    let meta = file.metadata().map_err(io)?;
+    check_input(path, &meta)?;
+    let mut bytes = Vec::with_capacity(meta.len() as usize);
+    file.take(limits::MAX_FILE_BYTES + 1)
+        .read_to_end(&mut bytes)
+        .map_err(io)?;
+    if bytes.len() as u64 > limits::MAX_FILE_BYTES {
         return Err(ReadError::FileTooLarge {
             file: path.to_path_buf(),
-            bytes,
+            bytes: bytes.len() as u64,
             max: limits::MAX_FILE_BYTES,
         });
     }
-    std::fs::read_to_string(path).map_err(io)
+    Ok(bytes)
+}
+
+/// `bytes` of `path` as UTF-8 text; a byte that is not UTF-8 is refused naming its line.
+pub(crate) fn utf8_text(path: &Path, bytes: Vec<u8>) -> Result<String, ReadError> {
+    String::from_utf8(bytes).map_err(|e| {
+        let byte = e.utf8_error().valid_up_to();
+        let line = e.as_bytes()[..byte].iter().filter(|&&b| b == b'\n').count() + 1;
+        ReadError::NotUtf8 {
+            file: path.to_path_buf(),
+            line,
+            byte: byte + 1,
+        }
+    })
+}
+
+/// Reads the input text file `path` whole ([`read_input`], then [`utf8_text`]).
+pub fn read_input_text(path: &Path) -> Result<String, ReadError> {
+    utf8_text(path, read_input(path)?)
+}
+
+/// Reads a whole text file ([`read_input_text`]).
+pub(crate) fn read_text(path: &Path) -> Result<String, ReadError> {
+    read_input_text(path)
 }
 
 /// `text` without a leading UTF-8 byte-order mark (which some spreadsheet programs write and

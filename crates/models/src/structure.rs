@@ -53,6 +53,7 @@ pub enum StructureError {
         expected: usize,
         found: usize,
     },
+    /// `storey` is 1-based (`k1` is storey 1's stiffness).
     #[error("{what} of storey {storey} must be non-negative and finite, got {value}")]
     NegativeCoefficient {
         what: &'static str,
@@ -341,9 +342,10 @@ impl<L: HysteresisLaw> ShearChainOf<L> {
         for (what, v) in [("stiffness k", &k), ("damping c", &c)] {
             for (j, &x) in v.iter().enumerate() {
                 if !(x >= 0.0 && x.is_finite()) {
+                    // Storeys are numbered from 1, as θ names them (`k1` is storey 1's).
                     return Err(StructureError::NegativeCoefficient {
                         what,
-                        storey: j,
+                        storey: j + 1,
                         value: x,
                     });
                 }
@@ -715,13 +717,19 @@ mod tests {
             building_field(ok(vec![1.0, 0.0], vec![1.0; 2], vec![0.0; 2], vec![])),
             "masses"
         );
+        // Storeys numbered from 1, as θ names them: k2 is storey 2's, c1 storey 1's.
+        let e = ok(vec![1.0; 2], vec![1.0, -1.0], vec![0.0; 2], vec![]).unwrap_err();
         assert!(matches!(
-            ok(vec![1.0; 2], vec![1.0, -1.0], vec![0.0; 2], vec![]),
-            Err(StructureError::NegativeCoefficient { storey: 1, .. })
+            e,
+            StructureError::NegativeCoefficient { storey: 2, .. }
         ));
+        assert_eq!(
+            e.to_string(),
+            "stiffness k of storey 2 must be non-negative and finite, got -1"
+        );
         assert!(matches!(
             ok(vec![1.0; 2], vec![1.0; 2], vec![f64::NAN, 0.0], vec![]),
-            Err(StructureError::NegativeCoefficient { storey: 0, .. })
+            Err(StructureError::NegativeCoefficient { storey: 1, .. })
         ));
         assert_eq!(
             building_field(ok(

@@ -171,6 +171,11 @@ fn run_submit(a: SubmitArgs) -> Result<()> {
         (None, Some(d)) => PathBuf::from(d),
         (None, None) => bail!("`{}` needs --config FILE.toml", a.kind.name()),
     };
+    if a.kind != Kind::Paper {
+        // Checked as given, before its link (if any) is resolved: a link to /dev/zero is named
+        // as the user wrote it.
+        models::readers::check_input_file(&config).context("--config")?;
+    }
     let config = absolute(&config, "--config")?;
     if (a.kind == Kind::Paper) != config.is_dir() {
         bail!(

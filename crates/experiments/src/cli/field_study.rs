@@ -37,6 +37,15 @@ pub fn run(args: Args) -> Result<()> {
     let config = crate::project::locate(&args.config, "field study")?;
     let study = FieldStudy::load(&config)?;
     if args.report_only {
+        // The report is drawn from a study's output; without one there is nothing to report
+        // (and no directory to write REPORT.md into).
+        if !args.out.is_dir() {
+            crate::error::bail!(
+                "--out {}: no such directory: --report-only writes REPORT.md from the records of \
+                 a study run into it (run the study first, without --report-only)",
+                args.out.display()
+            );
+        }
         let text = crate::field_study::report::render(&study, &args.out)?;
         let path = args.out.join("REPORT.md");
         identify::record::atomic::write_bytes_atomic(&path, text.as_bytes())?;

@@ -6,7 +6,7 @@
 
 use std::path::PathBuf;
 
-use crate::error::{Context, Result};
+use crate::error::Result;
 
 use identify::validation::cross::cross_validate;
 use identify::validation::{self, BAND_DRAWS};
@@ -41,6 +41,11 @@ pub fn run(args: Args) -> Result<()> {
             &[("--record", &args.record), ("--data", &args.data)],
         )?;
     }
+    // The record goes through the one reader of records first, with every check `plot` and
+    // `merge` make: a regular file within the size limit (a named pipe or `/dev/zero` is
+    // refused before a byte is read), complete, its fingerprint and the digest of its `config`
+    // verified (an edited sensor kind would model another building).
+    let _: identify::record::RunRecord = identify::record::read::read(&args.record)?;
     let validated = cross_validate(&args.record, &args.data, args.draws, &mut |n| {
         eprintln!("note: {n}")
     })?;
@@ -51,18 +56,22 @@ pub fn run(args: Args) -> Result<()> {
         crate::sweep::write_atomic(out, result)?;
         eprintln!("result written to {}", out.display());
     }
-    let (mut written, mut skipped) = (Vec::new(), Vec::new());
+    let mut drawn = identify::plot::Plotted::default();
     if let Some(dir) = &args.plot {
-        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
         let who = format!("{} on {}", record.algorithm, args.data.display());
-        validation::figures::draw(
-            Some(&result.free_run),
-            Some(&result.modal),
-            dir,
-            &who,
-            &mut written,
-            &mut skipped,
-        )?;
+        // Each figure put in place whole (drawn aside, checked, renamed), as `sysid plot` does.
+        drawn = identify::plot::draw_in_place(dir, |staging| {
+            let mut p = identify::plot::Plotted::default();
+            validation::figures::draw(
+                Some(&result.free_run),
+                Some(&result.modal),
+                staging,
+                &who,
+                &mut p.written,
+                &mut p.skipped,
+            )?;
+            Ok(p)
+        })?;
     }
     println!(
         "cross-validation: {} ({}, seed {}) identified on {}, predicting {}",
@@ -76,10 +85,10 @@ pub fn run(args: Args) -> Result<()> {
         "{}",
         validation::summary(Some(&result.free_run), Some(&result.modal))
     );
-    for s in skipped {
+    for s in drawn.skipped {
         eprintln!("note: {s}");
     }
-    for w in written {
+    for w in drawn.written {
         println!("{}", w.display());
     }
     Ok(())

@@ -175,7 +175,7 @@ pub fn compare(a: &Path, b: &Path) -> Result<Vec<String>, ClusterError> {
     for rel in fa.intersection(&fb) {
         let read = |root: &Path| {
             let p = root.join(rel);
-            std::fs::read(&p).map_err(|e| ClusterError::file(&p, e))
+            models::readers::read_input(&p).map_err(|e| ClusterError::file(&p, e))
         };
         if !same_file(rel, &read(a)?, &read(b)?) {
             diffs.push(format!("{} differs", rel.display()));

@@ -305,7 +305,7 @@ impl Plan {
     /// Reads the plan of the submission whose output directory is `out`.
     pub fn load(out: &Path) -> Result<Self, ClusterError> {
         let path = cluster_dir(out).join("plan.json");
-        let text = std::fs::read_to_string(&path).map_err(|e| {
+        let text = models::readers::read_input_text(&path).map_err(|e| {
             ClusterError::file(
                 &path,
                 format!(

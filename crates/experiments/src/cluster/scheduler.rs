@@ -29,11 +29,11 @@ pub struct Submission {
 /// The submissions of a plan, oldest first.
 pub fn submissions(plan: &Plan) -> Result<Vec<Submission>, ClusterError> {
     let path = plan.dir().join("submissions.json");
-    match std::fs::read_to_string(&path) {
-        Ok(text) => serde_json::from_str(&text).map_err(|e| ClusterError::file(&path, e)),
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(Vec::new()),
-        Err(e) => Err(ClusterError::file(&path, e)),
+    if !path.exists() && path.symlink_metadata().is_err() {
+        return Ok(Vec::new());
     }
+    let text = models::readers::read_input_text(&path).map_err(|e| ClusterError::file(&path, e))?;
+    serde_json::from_str(&text).map_err(|e| ClusterError::file(&path, e))
 }
 
 /// Appends a submission to `OUT/cluster/submissions.json` (rewritten atomically).

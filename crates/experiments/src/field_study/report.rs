@@ -334,13 +334,21 @@ fn render_part(s: &mut String, part: &Part, out: &Path) -> Result<()> {
         )?;
     }
     if let Some((chosen, _)) = select(part, &dirs)? {
-        if dirs.root.join("selected-free_run.svg").exists() {
+        // Only the figures that are there are linked.
+        let links: Vec<String> = [
+            ("free run against the measured floors", "free_run"),
+            ("transfer functions", "transfer"),
+        ]
+        .iter()
+        .filter(|(_, f)| dirs.root.join(format!("selected-{f}.svg")).is_file())
+        .map(|(label, f)| format!("[{label}]({}/selected-{f}.svg)", part.name))
+        .collect();
+        if !links.is_empty() {
             writeln!(
                 s,
-                "Figures of the selected model ({}): [free run against the measured floors]({}/selected-free_run.svg), [transfer functions]({}/selected-transfer.svg); every variant's figures are in `{}/figures/` after a run.",
+                "Figures of the selected model ({}): {}; every variant's figures are in `{}/figures/` after a run.",
                 chosen.label,
-                part.name,
-                part.name,
+                links.join(", "),
                 part.name
             )?;
         }

@@ -140,8 +140,6 @@ pub fn check_output(out: &Path, flag: &str, inputs: &[(&str, &Path)]) -> Result<
 /// device, a pipe or a symbolic link.
 /// The error names the file and what was being done.
 pub fn write_bytes_atomic(path: &Path, bytes: &[u8]) -> io::Result<()> {
-    // The message carries the path: an `io::Error` has no other place for it.
-    let named = |what: String| move |e: io::Error| io::Error::new(e.kind(), format!("{what}: {e}"));
     let name = path.file_name().ok_or_else(|| {
         io::Error::new(
             io::ErrorKind::InvalidInput,
@@ -155,9 +153,36 @@ pub fn write_bytes_atomic(path: &Path, bytes: &[u8]) -> io::Result<()> {
     let mut tmp_name = name.to_os_string();
     tmp_name.push(format!(".tmp{}", std::process::id()));
     let tmp = path.with_file_name(tmp_name);
-    fs::write(&tmp, bytes).map_err(named(format!("writing {}", tmp.display())))?;
-    fs::rename(&tmp, path).map_err(named(format!("renaming into {}", path.display())))?;
-    Ok(())
+    write_and_rename(&tmp, path, bytes)
+}
+
+/// Writes `bytes` to `tmp` and renames it over `path`. When either fails, `tmp` is removed: a
+/// failed write leaves nothing behind (a failed rename used to leave the whole temporary file).
+/// The error names the file and what was being done; a missing directory is said as such.
+fn write_and_rename(tmp: &Path, path: &Path, bytes: &[u8]) -> io::Result<()> {
+    // The message carries the path: an `io::Error` has no other place for it.
+    let named = |what: String| move |e: io::Error| io::Error::new(e.kind(), format!("{what}: {e}"));
+    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+        if !dir.is_dir() {
+            return Err(io::Error::new(
+                io::ErrorKind::NotFound,
+                format!(
+                    "writing {}: the directory {} does not exist",
+                    path.display(),
+                    dir.display()
+                ),
+            ));
+        }
+    }
+    let done = fs::write(tmp, bytes)
+        .map_err(named(format!("writing {}", path.display())))
+        .and_then(|()| {
+            fs::rename(tmp, path).map_err(named(format!("renaming into {}", path.display())))
+        });
+    if done.is_err() {
+        let _ = fs::remove_file(tmp);
+    }
+    done
 }
 
 #[cfg(test)]
@@ -181,6 +206,20 @@ mod tests {
             .file_type()
             .is_symlink());
         assert_eq!(fs::read(&file).unwrap(), b"two");
+        // A rename that fails (over a directory that appeared after the check) leaves no
+        // temporary file; a missing directory is named as such, not by a temporary file.
+        let dir = tmp.path().join("d.json");
+        fs::create_dir(&dir).unwrap();
+        fs::write(dir.join("keep"), b"keep").unwrap();
+        let t = tmp.path().join("d.json.tmp1");
+        assert!(write_and_rename(&t, &dir, b"new").is_err());
+        assert!(!t.exists());
+        assert_eq!(fs::read(dir.join("keep")).unwrap(), b"keep");
+        let e = write_bytes_atomic(&tmp.path().join("no/such/r.json"), b"x").unwrap_err();
+        assert!(
+            e.to_string().contains("the directory") && !e.to_string().contains("r.json.tmp"),
+            "{e}"
+        );
         let e = write_bytes_atomic(tmp.path(), b"x").unwrap_err();
         assert!(e.to_string().contains("names no file") || e.to_string().contains("directory"));
         let e = check_output(&file, "--out", &[("--record", &file)]).unwrap_err();

@@ -35,6 +35,14 @@ pub struct Fingerprint {
     pub sha256: String,
     /// What was hashed (see the module documentation).
     pub inputs: Value,
+    /// SHA-256 (lower-case hex) of the canonical JSON of the record's own `config` (the filter's
+    /// specification as it ran: building, sensors and their kind, noise levels, prior), which
+    /// the inputs determine but do not hold: an edit of the record's `config` (a sensor kind
+    /// changed, so that `sysid validate` would model another building) is refused when the
+    /// record is read ([`Fingerprint::verify_config`]). Absent in records written before it was
+    /// kept, whose `config` is then not checked.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub config_sha256: Option<String>,
 }
 
 impl Fingerprint {
@@ -43,6 +51,25 @@ impl Fingerprint {
         Self {
             sha256: sha256_hex(canonical_json(&inputs).as_bytes()),
             inputs,
+            config_sha256: None,
+        }
+    }
+
+    /// The fingerprint with the digest of the record's `config` kept beside it.
+    pub(crate) fn with_config(mut self, config: &Value) -> Self {
+        self.config_sha256 = Some(sha256_hex(canonical_json(config).as_bytes()));
+        self
+    }
+
+    /// Whether the record's `config` is the one the digest was taken of (when it was kept).
+    pub(crate) fn verify_config(&self, config: &Value) -> Result<(), String> {
+        match &self.config_sha256 {
+            Some(kept) if *kept != sha256_hex(canonical_json(config).as_bytes()) => Err(
+                "the record's `config` is not the one it was written with (edited after the \
+                 run: its digest `fingerprint.config_sha256` no longer matches)"
+                    .to_string(),
+            ),
+            _ => Ok(()),
         }
     }
 

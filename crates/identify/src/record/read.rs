@@ -10,8 +10,6 @@
 //!   strings `"NaN"`, `"inf"`, `"-inf"` ([`super::number`]);
 //! - the record passes its own checks ([`Checked::check`]: schema, lengths, fingerprint).
 
-use std::fs::File;
-use std::io::Read;
 use std::path::{Path, PathBuf};
 
 use serde::de::DeserializeOwned;
@@ -61,8 +59,8 @@ pub enum ReadError {
         #[source]
         source: std::io::Error,
     },
-    #[error("{} is not a file (a record is a file)", path.display())]
-    NotAFile { path: PathBuf },
+    #[error("{} is not a file but {what} (a record is a regular file)", path.display())]
+    NotAFile { path: PathBuf, what: &'static str },
     #[error(
         "{}: {bytes} bytes, more than the {max} bytes a record may have; not read",
         path.display(),
@@ -91,37 +89,29 @@ pub enum ReadError {
     },
 }
 
-/// The bytes of the record at `path`, refused beyond [`MAX_FILE_BYTES`] before reading.
+/// The bytes of the record at `path`, through the one reader of input files
+/// ([`models::readers::read_input`]): a regular file of at most [`MAX_FILE_BYTES`] bytes,
+/// checked before a byte is read (a named pipe or a link to `/dev/zero` is refused at once).
 pub fn read_bytes(path: &Path) -> Result<Vec<u8>, ReadError> {
-    let io = |source| ReadError::Io {
-        path: path.to_path_buf(),
-        source,
-    };
-    let meta = std::fs::metadata(path).map_err(io)?;
-    if !meta.is_file() {
-        return Err(ReadError::NotAFile {
+    use models::readers::ReadError as Input;
+    models::readers::read_input(path).map_err(|e| match e {
+        Input::NotAFile { what, .. } => ReadError::NotAFile {
             path: path.to_path_buf(),
-        });
-    }
-    if meta.len() > MAX_FILE_BYTES {
-        return Err(ReadError::TooLarge {
+            what,
+        },
+        Input::FileTooLarge { bytes, .. } => ReadError::TooLarge {
             path: path.to_path_buf(),
-            bytes: meta.len(),
-        });
-    }
-    let mut bytes = Vec::with_capacity(meta.len() as usize);
-    File::open(path)
-        .map_err(io)?
-        .take(MAX_FILE_BYTES + 1)
-        .read_to_end(&mut bytes)
-        .map_err(io)?;
-    if bytes.len() as u64 > MAX_FILE_BYTES {
-        return Err(ReadError::TooLarge {
+            bytes,
+        },
+        Input::Io { source, .. } => ReadError::Io {
             path: path.to_path_buf(),
-            bytes: bytes.len() as u64,
-        });
-    }
-    Ok(bytes)
+            source,
+        },
+        other => ReadError::Io {
+            path: path.to_path_buf(),
+            source: std::io::Error::other(other.to_string()),
+        },
+    })
 }
 
 /// Parses and checks the bytes of one record; `path` names it in errors.

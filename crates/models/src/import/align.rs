@@ -63,6 +63,16 @@ fn refuse(c: &Recorded, line: usize, message: String) -> ImportError {
     }
 }
 
+/// Largest relative difference between a storey clock's sample interval and the ground's that is
+/// resampled (1 %): a logger's clock drifts by parts per million, so a larger difference is
+/// another sampling rate or a time unit misread, which interpolation would only hide.
+pub(crate) const MAX_RATE_DIFFERENCE: f64 = 0.01;
+
+/// Smallest share of the longest channel's samples that the span all channels share must keep
+/// (one half): a channel much shorter than the others is an export cut short, not a clock
+/// offset, and trimming every channel to it would throw the record away.
+pub(crate) const MIN_KEPT_SHARE: f64 = 0.5;
+
 fn ms(s: f64) -> String {
     format!("{:.3} ms", s * 1e3)
 }
@@ -245,6 +255,19 @@ fn to_grid(
         ));
     }
     let step = (last - first) / (c.times.len() - 1) as f64;
+    if (step / dt - 1.0).abs() > MAX_RATE_DIFFERENCE {
+        return Err(refuse(
+            c,
+            c.lines[0],
+            format!(
+                "its samples are {step:.6} s apart on average, the ground's {dt:.6} s ({:+.1} %): \
+                 another sampling rate (or a misread time unit) is not resampled; give channels \
+                 recorded at one rate (clocks may differ by at most {} %)",
+                (step / dt - 1.0) * 100.0,
+                MAX_RATE_DIFFERENCE * 100.0
+            ),
+        ));
+    }
     let shift = start_offset / dt;
     let same_rate = (step - dt).abs() <= 1e-4 * dt;
     // Whole samples apart (within `clock_tolerance` of a sample) and ticking together: a
@@ -498,6 +521,25 @@ pub fn align(
     let lengths: Vec<usize> = std::iter::once(n)
         .chain(grids.iter().map(|g| g.values.len()))
         .collect();
+    let longest = lengths.iter().copied().max().unwrap_or(n);
+    if ((hi - lo) as f64) < MIN_KEPT_SHARE * longest as f64 {
+        // The channel that covers least of the ground's grid.
+        let (c, len) = std::iter::once((&ground, n))
+            .chain(storeys.iter().zip(grids.iter().map(|g| g.values.len())))
+            .min_by_key(|&(_, len)| len)
+            .expect("the ground at least");
+        return Err(refuse(
+            c,
+            c.lines[0],
+            format!(
+                "covers {len} of the ground's samples, the longest channel {longest}: the span \
+                 all channels share keeps {} samples, less than {:.0} % of the record; a file \
+                 cut short? (trim the longer files to the common span if that is meant)",
+                hi - lo,
+                MIN_KEPT_SHARE * 100.0
+            ),
+        ));
+    }
     let trim = |name: String, first: usize, len: usize, out: &mut Aligned| {
         let (a, b) = (lo - first, first + len - hi);
         if a + b > 0 {

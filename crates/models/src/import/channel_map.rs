@@ -242,9 +242,57 @@ pub struct ChannelMap {
     pub storeys: Vec<Channel>,
 }
 
+/// Whether `a` and `b` are one file: the same path, or (both existing) the same device and
+/// inode, so that a link to a file already mapped is seen as that file.
+fn same_file(a: &Path, b: &Path) -> bool {
+    if a == b {
+        return true;
+    }
+    match (std::fs::metadata(a), std::fs::metadata(b)) {
+        #[cfg(unix)]
+        (Ok(ma), Ok(mb)) => {
+            use std::os::unix::fs::MetadataExt;
+            ma.dev() == mb.dev() && ma.ino() == mb.ino()
+        }
+        _ => matches!(
+            (std::fs::canonicalize(a), std::fs::canonicalize(b)),
+            (Ok(x), Ok(y)) if x == y
+        ),
+    }
+}
+
 fn line_of(text: &str, offset: usize) -> usize {
     text.get(..offset)
         .map_or(1, |s| s.bytes().filter(|&b| b == b'\n').count() + 1)
+}
+
+/// The key written on the line of byte `offset` (`name = value`), with the table it is in
+/// (`storey.storey`, `ground.units`); the table alone on a table's header line; `None` when
+/// the line holds neither.
+fn key_at(text: &str, offset: usize) -> Option<String> {
+    let start = text.get(..offset)?.rfind('\n').map_or(0, |i| i + 1);
+    let table = text[..start]
+        .lines()
+        .rev()
+        .map(str::trim)
+        .find(|l| l.starts_with('['))
+        .map(|l| l.trim_matches(|c| c == '[' || c == ']').trim().to_string());
+    let line = text[start..].lines().next().unwrap_or("").trim();
+    if line.starts_with('[') {
+        return Some(
+            line.trim_matches(|c| c == '[' || c == ']')
+                .trim()
+                .to_string(),
+        );
+    }
+    let key = line.split_once('=')?.0.trim().trim_matches('"');
+    if key.is_empty() || key.chars().count() > 64 {
+        return None;
+    }
+    Some(match table {
+        Some(t) => format!("{t}.{key}"),
+        None => key.to_string(),
+    })
 }
 
 impl ChannelMap {
@@ -265,10 +313,16 @@ impl ChannelMap {
         };
         let raw: MapFile = toml::from_str(text).map_err(|e| {
             let line = e.span().map_or(1, |s| line_of(text, s.start));
-            // toml names the offending key or value in backquotes.
             let msg = e.message().trim().to_string();
-            let key = msg.split('`').nth(1).unwrap_or("map").to_string();
-            err(line, &key, msg)
+            // A missing or unknown key is named by toml in backquotes; otherwise the key is
+            // the one written on the line of the error (toml quotes the value there, not the
+            // key), within its table.
+            let named = msg.starts_with("missing field") || msg.starts_with("unknown field");
+            let key = match (named, e.span()) {
+                (true, _) | (false, None) => msg.split('`').nth(1).map(str::to_string),
+                (false, Some(s)) => key_at(text, s.start),
+            };
+            err(line, key.as_deref().unwrap_or("(the map's top level)"), msg)
         })?;
         let dir = path.parent().unwrap_or(Path::new("")).to_path_buf();
         let options = match raw.options {
@@ -335,7 +389,8 @@ impl ChannelMap {
         let all: Vec<&Channel> = std::iter::once(&ground).chain(&storeys).collect();
         for (i, a) in all.iter().enumerate() {
             for b in &all[..i] {
-                if a.path == b.path && a.spec.column == b.spec.column {
+                // The same file also through another name (a symbolic or hard link).
+                if same_file(&a.path, &b.path) && a.spec.column == b.spec.column {
                     return Err(err(
                         a.line,
                         "file",

@@ -106,10 +106,7 @@ pub struct Imported {
 }
 
 fn digest_of(path: &Path) -> Result<FileDigest, ReadError> {
-    let bytes = std::fs::read(path).map_err(|source| ReadError::Io {
-        file: path.to_path_buf(),
-        source,
-    })?;
+    let bytes = crate::readers::read_input(path)?;
     Ok(FileDigest::of(&bytes))
 }
 
