@@ -36,15 +36,10 @@ pub struct CrossValidation {
 /// Most draws accepted.
 pub(crate) const MAX_DRAWS: usize = 10_000;
 
-/// Reads and checks a run record.
+/// Reads and checks a run record (the one bounded, checked record reader,
+/// `record::read::read`).
 pub fn read_record(path: &Path) -> Result<RunRecord> {
-    let text = std::fs::read_to_string(path)
-        .with_context(|| format!("reading run record {}", path.display()))?;
-    let r: RunRecord = serde_json::from_str(&text)
-        .with_context(|| format!("{}: not a run record", path.display()))?;
-    r.check()
-        .map_err(|e| crate::error::invalid!("{}: {e}", path.display()))?;
-    Ok(r)
+    Ok(crate::record::read::read::<RunRecord>(path)?)
 }
 
 /// Refuses another record whose building differs from the identified one; returns notes on
