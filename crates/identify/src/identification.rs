@@ -492,6 +492,13 @@ pub fn identify_plan(
     };
     let mut record = crate::pipeline::execute(plan, &input, stop)?;
     record.plan = Some(serde_json::to_value(plan).context("recording the plan")?);
+    // The digest of the record's `config`, so that an edit of the building a later `validate`
+    // or `plot` would use is refused. Only in the records of an identification: a study's
+    // records are their study description and fingerprint, and stay as committed.
+    record.fingerprint = record
+        .fingerprint
+        .take()
+        .map(|f| f.with_config(&record.config));
     let mut noise = None;
     if data.meta.is_none() && record.failure.is_none() {
         // Field data: the intervals include the spread of θ between the record's parts

@@ -357,8 +357,7 @@ pub fn execute(
     if let Some(p) = &plan.evidence.prior_from_data {
         config["prior_from_data"] = serde_json::to_value(p).expect("serialisable");
     }
-    let fingerprint =
-        Fingerprint::of_run(algorithm.name(), input.seed, input.run, s, data).with_config(&config);
+    let fingerprint = Fingerprint::of_run(algorithm.name(), input.seed, input.run, s, data);
     let mut record = RunRecord {
         experiment: input.experiment.to_string(),
         algorithm: algorithm.name().to_string(),
