@@ -355,7 +355,7 @@ pub(crate) fn utf8_text(path: &Path, bytes: Vec<u8>) -> Result<String, ReadError
     })
 }
 
-/// Reads the input text file `path` whole ([`read_input`], then [`utf8_text`]).
+/// Reads the input text file `path` whole ([`read_input`], then `utf8_text`).
 pub fn read_input_text(path: &Path) -> Result<String, ReadError> {
     utf8_text(path, read_input(path)?)
 }
