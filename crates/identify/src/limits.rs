@@ -92,7 +92,7 @@ const MAX_MESSAGE_CHARS: usize = 300;
 
 /// Parses the TOML text of the file `path` (a `what`: "study", "config", ...). An error names
 /// the file, the line and the column, and says what is wrong in at most
-/// [`MAX_MESSAGE_CHARS`] characters; the offending line is not echoed (a line of 200,000
+/// `MAX_MESSAGE_CHARS` characters; the offending line is not echoed (a line of 200,000
 /// brackets was, whole).
 pub fn parse_toml<T: serde::de::DeserializeOwned>(
     text: &str,

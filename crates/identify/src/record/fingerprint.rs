@@ -39,7 +39,7 @@ pub struct Fingerprint {
     /// specification as it ran: building, sensors and their kind, noise levels, prior), which
     /// the inputs determine but do not hold: an edit of the record's `config` (a sensor kind
     /// changed, so that `sysid validate` would model another building) is refused when the
-    /// record is read ([`Fingerprint::verify_config`]). Absent in records written before it was
+    /// record is read (`Fingerprint::verify_config`). Absent in records written before it was
     /// kept, whose `config` is then not checked.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub config_sha256: Option<String>,
