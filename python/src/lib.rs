@@ -15,7 +15,7 @@ use std::time::Duration;
 
 use ::identify::field::StructureSettings;
 use ::identify::identification::{Overrides, Target};
-use ::identify::pipeline::{Algorithm, FilterSettings, RunInput};
+use ::identify::pipeline::{Algorithm, FilterSettings};
 use ::identify::record::RunRecord;
 use core_filters::resampling::Scheme;
 use core_filters::smc::storvik::StorvikUpdate;
@@ -495,18 +495,12 @@ fn identify_py(
     let plan = ::identify::plan::settle(target.request(settings.clone(), seed, run, &experiment))
         .and_then(|plan| ::identify::choice::choose(plan, &target, &settings, Default::default()))
         .map_err(err)?;
-    let input = RunInput {
-        data: d,
-        chain: data.chain.as_ref(),
-        experiment: &experiment,
-        seed,
-        run,
-        progress: None,
-        residuals: true,
-    };
     let record = stoppable(py, |stop| {
-        let mut record = ::identify::pipeline::execute(&plan, &input, stop)?;
-        record.plan = Some(serde_json::to_value(&plan).context("recording the plan")?);
+        // The run as `sysid filter` runs it: the plan, the config digest, and for field data
+        // the intervals' model error and the validation without the truth.
+        let record =
+            ::identify::identification::identify_plan(&plan, d, data.chain.as_ref(), stop, None)?
+                .record;
         if let Some(out) = &out {
             // Written as `sysid filter` writes it: a temporary file renamed into place.
             experiments::sweep::write_atomic(out, &record)?;
