@@ -20,31 +20,7 @@ fn sysid() -> Command {
 
 /// A linear 3-storey building's 10 s record (2000 samples) as field data.
 fn linear_field_data(dir: &Path) {
-    let st = sysid()
-        .args([
-            "simulate",
-            "--storeys",
-            "3",
-            "--hysteretic",
-            "none",
-            "--duration",
-            "10",
-            "--seed",
-            "3",
-            "--absolute",
-        ])
-        .arg("--out")
-        .arg(dir)
-        .output()
-        .unwrap();
-    assert!(
-        st.status.success(),
-        "{}",
-        String::from_utf8_lossy(&st.stderr)
-    );
-    for f in ["dataset.json", "truth.csv"] {
-        std::fs::remove_file(dir.join(f)).unwrap();
-    }
+    common::linear_field_data(dir, "3", "10");
 }
 
 fn print_plan(data: &Path, extra: &[&str]) -> (RunPlan, String) {

@@ -12,7 +12,7 @@
 //! running again: for a Gaussian posterior, information adds, so the part between trace points a
 //! and b alone has precision λ = 1/v_b − 1/v_a and mean (m_b/v_b − m_a/v_a)/λ — per parameter,
 //! because the trace keeps no correlations (exact for uncorrelated parameters, an approximation
-//! otherwise). The run is cut into [`SEGMENTS`] parts of equal duration; a part that added no
+//! otherwise). The run is cut into `SEGMENTS` parts of equal duration; a part that added no
 //! information (λ ≤ 0) is left out. Where the model fits the record the parts agree within their
 //! own s.d.s; where it does not they scatter. The test: Cochran's Q = Σ w_s (m_s − m̄)², w = 1/v_s,
 //! above the 95 % quantile of χ²_{S−1} (agreeing parts exceed it 5 % of the time). Where it
@@ -31,13 +31,13 @@ use crate::observe::{ParamIntervals, PosteriorShape, Trace};
 pub use crate::record::diagnostics::{ParamSpread, SegmentSpread};
 
 /// Parts of the record.
-pub const SEGMENTS: usize = 8;
+pub(crate) const SEGMENTS: usize = 8;
 
 /// Fewest parts with information a parameter needs for τ² (below: not widened).
 pub(crate) const MIN_PARTS: usize = 3;
 
 /// Whether parameter `name` is one the physical support holds ≥ 0 (k_j, c_j, α).
-pub fn physically_bounded(name: &str) -> bool {
+pub(crate) fn physically_bounded(name: &str) -> bool {
     let indexed = |p: &str| {
         name.strip_prefix(p)
             .is_some_and(|d| !d.is_empty() && d.chars().all(|c| c.is_ascii_digit()))
@@ -47,7 +47,7 @@ pub fn physically_bounded(name: &str) -> bool {
 
 /// What each part of the trace says of parameter `j` alone: (mean, variance) per part with
 /// information.
-pub fn parts(trace: &Trace, j: usize, segments: usize) -> Vec<(f64, f64)> {
+pub(crate) fn parts(trace: &Trace, j: usize, segments: usize) -> Vec<(f64, f64)> {
     let n = trace.param_mean.len();
     if n < 2 || segments == 0 {
         return Vec::new();
@@ -89,12 +89,12 @@ fn cochran_q(parts: &[(f64, f64)]) -> f64 {
 
 /// The test that decides whether the parts disagree: Cochran's Q above the 95 % quantile of
 /// χ² with S − 1 degrees of freedom (what agreeing parts give 5 % of the time).
-pub fn heterogeneous(parts: &[(f64, f64)]) -> bool {
+pub(crate) fn heterogeneous(parts: &[(f64, f64)]) -> bool {
     parts.len() >= 2 && cochran_q(parts) > crate::residuals::chi2_95(parts.len() - 1)
 }
 
 /// The DerSimonian–Laird between-part variance τ² of estimates (mean, variance).
-pub fn between_variance(parts: &[(f64, f64)]) -> f64 {
+pub(crate) fn between_variance(parts: &[(f64, f64)]) -> f64 {
     let s = parts.len();
     if s < 2 {
         return 0.0;
@@ -119,7 +119,7 @@ fn z_of(level: f64) -> f64 {
 
 /// `p` widened by τ: each level's interval about `centre` (the last step's posterior mean),
 /// each side in quadrature with z·τ, held at 0 when `bounded`.
-pub fn widen(p: &ParamIntervals, centre: f64, tau: f64, bounded: bool) -> ParamIntervals {
+pub(crate) fn widen(p: &ParamIntervals, centre: f64, tau: f64, bounded: bool) -> ParamIntervals {
     let mut out = p.clone();
     out.intervals = p
         .intervals
@@ -144,7 +144,7 @@ pub fn widen(p: &ParamIntervals, centre: f64, tau: f64, bounded: bool) -> ParamI
 /// The spread of every marginalised parameter between the parts of the run's `trace`, and its
 /// credible intervals widened by it; `bounded(name)` says whether a parameter is held ≥ 0.
 /// `None` when the trace is too short to cut.
-pub fn spread(
+pub(crate) fn spread(
     names: &[String],
     credible: &[ParamIntervals],
     trace: &Trace,
@@ -195,7 +195,7 @@ pub fn spread(
 }
 
 /// The summary's line on the spread.
-pub fn describe(s: &SegmentSpread) -> String {
+pub(crate) fn describe(s: &SegmentSpread) -> String {
     let widened: Vec<String> = s
         .parameters
         .iter()

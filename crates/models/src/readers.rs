@@ -259,8 +259,9 @@ fn step_error(file: &Path, line: usize, e: LimitError) -> ReadError {
     }
 }
 
-/// What a file that is not a regular file is, for messages.
-fn file_kind(t: std::fs::FileType) -> &'static str {
+/// What a file that is not a regular file is, for messages (also for the output checks, which
+/// look at a path without following a link).
+pub fn file_kind(t: std::fs::FileType) -> &'static str {
     #[cfg(unix)]
     {
         use std::os::unix::fs::FileTypeExt;
@@ -274,7 +275,9 @@ fn file_kind(t: std::fs::FileType) -> &'static str {
             return "a socket";
         }
     }
-    if t.is_dir() {
+    if t.is_symlink() {
+        "a symbolic link"
+    } else if t.is_dir() {
         "a directory"
     } else {
         "not a regular file"

@@ -45,30 +45,6 @@ pub enum OutputError {
     },
 }
 
-/// What a non-regular file is, for messages.
-fn what(t: fs::FileType) -> &'static str {
-    #[cfg(unix)]
-    {
-        use std::os::unix::fs::FileTypeExt;
-        if t.is_block_device() || t.is_char_device() {
-            return "a device";
-        }
-        if t.is_fifo() {
-            return "a named pipe (FIFO)";
-        }
-        if t.is_socket() {
-            return "a socket";
-        }
-    }
-    if t.is_symlink() {
-        "a symbolic link"
-    } else if t.is_dir() {
-        "a directory"
-    } else {
-        "not a regular file"
-    }
-}
-
 /// Checks that `path` (given as `flag`) may be replaced: it does not exist, or it is a regular
 /// file (not followed through a symbolic link: a link is refused, not its target written).
 pub(crate) fn check_replaceable(path: &Path, flag: &str) -> Result<(), OutputError> {
@@ -77,7 +53,7 @@ pub(crate) fn check_replaceable(path: &Path, flag: &str) -> Result<(), OutputErr
         Ok(m) => Err(OutputError::NotAFile {
             flag: flag.to_string(),
             path: path.to_path_buf(),
-            what: what(m.file_type()),
+            what: models::readers::file_kind(m.file_type()),
         }),
         Err(e) if e.kind() == io::ErrorKind::NotFound => Ok(()),
         Err(source) => Err(OutputError::Io {

@@ -621,7 +621,9 @@ pub fn summary(free: Option<&FreeRun>, modal: Option<&ModalComparison>) -> Strin
                 o,
                 "95 % predictive band: the parameters' spread and the model's error, learned {} \
                  (|error| ≤ {} × √(m + (f·RMS)²), m the predicted motion's mean square over \
-                 {:.2} s, f = {}; channels in order) — docs/validation.md",
+                 {:.2} s, f = {}; channels in order). On the record it was learned on, its \
+                 coverage is not an independent test: `sysid validate` on another record gives \
+                 one — docs/validation.md",
                 match me.source {
                     ErrorSource::HeldOut { samples } =>
                         format!("on the {samples} held-out samples the identification did not fit"),

@@ -58,7 +58,7 @@ pub(crate) const FALLBACK_WINDOW_S: f64 = 1.0;
 
 /// The window of the local scale for building `d` with θ: `PERIODS` periods of its lowest
 /// under-damped mode (linearised at rest), or `FALLBACK_WINDOW_S`.
-pub fn window_seconds(d: &StructureDescription, theta: &[f64]) -> f64 {
+pub(crate) fn window_seconds(d: &StructureDescription, theta: &[f64]) -> f64 {
     let n = d.storeys;
     if theta.len() < 2 * n + d.damping.extra_parameters() {
         return FALLBACK_WINDOW_S;
@@ -74,14 +74,20 @@ pub fn window_seconds(d: &StructureDescription, theta: &[f64]) -> f64 {
 /// The local scale s(t) of a predicted series `yhat` sampled at `dt` (see the module
 /// documentation), over a centred window of `window_s` seconds (at least one sample), with the
 /// constant part `floor` × RMS ŷ.
-pub fn local_scale(yhat: &[f64], dt: f64, window_s: f64, floor: f64) -> Vec<f64> {
+pub(crate) fn local_scale(yhat: &[f64], dt: f64, window_s: f64, floor: f64) -> Vec<f64> {
+    let (m, rms) = mean_square(yhat, dt, window_s);
+    let constant = (floor * rms).powi(2);
+    m.iter().map(|v| (v + constant).sqrt()).collect()
+}
+
+/// m(t), the mean of ŷ² over a centred window of `window_s` seconds (at least one sample), and
+/// the RMS of ŷ: the two parts of the local scale.
+fn mean_square(yhat: &[f64], dt: f64, window_s: f64) -> (Vec<f64>, f64) {
     let n = yhat.len();
     if n == 0 {
-        return Vec::new();
+        return (Vec::new(), 0.0);
     }
     let half = ((window_s / dt / 2.0).round() as usize).min(n);
-    let rms = (yhat.iter().map(|v| v * v).sum::<f64>() / n as f64).sqrt();
-    let constant = (floor * rms).powi(2);
     // Prefix sums of ŷ²: the window's mean in O(1) per sample.
     let mut prefix = Vec::with_capacity(n + 1);
     prefix.push(0.0);
@@ -90,31 +96,39 @@ pub fn local_scale(yhat: &[f64], dt: f64, window_s: f64, floor: f64) -> Vec<f64>
         acc += v * v;
         prefix.push(acc);
     }
-    (0..n)
+    let m = (0..n)
         .map(|k| {
             let (a, b) = (k.saturating_sub(half), (k + half + 1).min(n));
-            ((prefix[b] - prefix[a]) / (b - a) as f64 + constant).sqrt()
+            (prefix[b] - prefix[a]) / (b - a) as f64
         })
-        .collect()
+        .collect();
+    (m, (acc / n as f64).sqrt())
 }
 
 /// The proportion f of `FLOOR_GRID` under which the errors `y − ŷ` over samples `from..` are
 /// most likely as N(0, a²·s(t)²), a² at its maximum-likelihood value mean(e²/s²) for each f.
-pub fn learn_floor(y: &[f64], yhat: &[f64], dt: f64, window_s: f64, from: usize) -> f64 {
+/// m(t) is computed once; each f only changes the constant part of s².
+pub(crate) fn learn_floor(y: &[f64], yhat: &[f64], dt: f64, window_s: f64, from: usize) -> f64 {
     let (lo, hi, count) = FLOOR_GRID;
     let n = y.len().min(yhat.len());
     let from = from.min(n);
+    if from == n {
+        return lo;
+    }
+    let (m, rms) = mean_square(&yhat[..n], dt, window_s);
+    let samples = (n - from) as f64;
     let mut best = (f64::INFINITY, lo);
     for i in 0..count {
         let f = lo * (hi / lo).powf(i as f64 / (count - 1) as f64);
-        let s = local_scale(&yhat[..n], dt, window_s, f);
-        let m = (n - from) as f64;
+        let constant = (f * rms).powi(2);
         let a2 = (from..n)
-            .map(|k| ((y[k] - yhat[k]) / s[k]).powi(2))
+            .map(|k| (y[k] - yhat[k]).powi(2) / (m[k] + constant))
             .sum::<f64>()
-            / m;
+            / samples;
         // −2 log-likelihood up to constants: Σ log(a² s²) + (n − from).
-        let nll = (from..n).map(|k| (a2 * s[k] * s[k]).ln()).sum::<f64>();
+        let nll = (from..n)
+            .map(|k| (a2 * (m[k] + constant)).ln())
+            .sum::<f64>();
         if nll < best.0 {
             best = (nll, f);
         }
@@ -124,7 +138,7 @@ pub fn learn_floor(y: &[f64], yhat: &[f64], dt: f64, window_s: f64, from: usize)
 
 /// q: the `LEVEL` quantile of |y − ŷ|/s over the samples `from..` of one channel (`None` with
 /// fewer than 20 finite ratios).
-pub fn error_quantile(y: &[f64], yhat: &[f64], scale: &[f64], from: usize) -> Option<f64> {
+pub(crate) fn error_quantile(y: &[f64], yhat: &[f64], scale: &[f64], from: usize) -> Option<f64> {
     let n = y.len().min(yhat.len()).min(scale.len());
     let mut z: Vec<f64> = (from.min(n)..n)
         .map(|k| (y[k] - yhat[k]).abs() / scale[k])
@@ -140,7 +154,7 @@ pub fn error_quantile(y: &[f64], yhat: &[f64], scale: &[f64], from: usize) -> Op
 /// The model error of the free run `yhat` (per channel) against `measured`, learned on the
 /// samples `from..` (`source` says which part that is), with window `window_s`; `None` when a
 /// channel has too few samples there.
-pub fn learn(
+pub(crate) fn learn(
     channels: &[String],
     measured: &[Vec<f64>],
     yhat: &[Vec<f64>],
