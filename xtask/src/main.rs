@@ -35,6 +35,7 @@
 //!   unless `--full`), then appends one dated line per benchmark to `results/perf/history.csv`
 //!   and prints the change against the previous line of the same benchmark.
 
+mod foreign;
 mod imports;
 
 use std::fs;
@@ -99,6 +100,17 @@ enum Task {
         /// Keep the files of an interrupted run instead of recomputing them.
         #[arg(long)]
         resume: bool,
+    },
+    /// The foreign corpus (experiments::foreign, docs/foreign.md): each case identified with
+    /// the minimal flags, validated on a held-out earthquake, beside SRIM; records and
+    /// REPORT.md under results/foreign.
+    ReproduceForeign {
+        /// Do not compute the baseline (SRIM, Python package mdof).
+        #[arg(long)]
+        no_baseline: bool,
+        /// Compute nothing: write REPORT.md from the files already there.
+        #[arg(long)]
+        report_only: bool,
     },
     /// Identification-accuracy regression checks (experiments/regression.toml,
     /// regression-symplectic.toml, regression-defaults.toml, regression-defaults-n5.toml and
@@ -322,6 +334,21 @@ fn main() -> Result<()> {
                 }
                 run(&mut cmd)?;
             }
+            Ok(())
+        }
+        Task::ReproduceForeign {
+            no_baseline,
+            report_only,
+        } => {
+            let started = std::time::Instant::now();
+            let sysid = build_sysid(&root)?;
+            let python = if no_baseline || report_only {
+                None
+            } else {
+                Some(baseline_python(&root)?)
+            };
+            foreign::reproduce(&root, &sysid, python, report_only)?;
+            eprintln!("reproduce-foreign: {:.0} s in all", started.elapsed().as_secs_f64());
             Ok(())
         }
         Task::ReproduceReal {

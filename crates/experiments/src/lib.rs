@@ -31,6 +31,7 @@ pub mod engine;
 pub mod error;
 pub mod excitations;
 pub mod field_study;
+pub mod foreign;
 pub mod headline;
 pub mod information;
 pub mod likelihood;
