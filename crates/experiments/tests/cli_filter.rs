@@ -31,9 +31,13 @@ fn simulate(dir: &std::path::Path) {
             "--out",
         ])
         .arg(dir)
-        .status()
+        .output()
         .unwrap();
-    assert!(st.success());
+    assert!(
+        st.status.success(),
+        "{}",
+        String::from_utf8_lossy(&st.stderr)
+    );
 }
 
 fn record_without_timing(path: &std::path::Path) -> serde_json::Value {

@@ -15,9 +15,13 @@ fn filter_prints_a_summary_table_and_records_its_warnings() {
         .args(["simulate", "--preset", "paper-3dof", "--seed", "1"])
         .args(["--duration", "3", "--out"])
         .arg(&data)
-        .status()
+        .output()
         .unwrap();
-    assert!(st.success());
+    assert!(
+        st.status.success(),
+        "{}",
+        String::from_utf8_lossy(&st.stderr)
+    );
     let out = dir.join("r.json");
     // The paper's settings: a configuration file over the SPEC defaults, here empty.
     let paper = dir.join("paper.toml");

@@ -83,14 +83,22 @@ fn simulate_killed_at_random_points_leaves_the_old_or_the_new_data_set() {
     let (_tmp, dir) = temp_dir("kill");
     let ds = dir.join("ds");
     let sets = [expected(1), expected(2)];
-    let st = sysid().args(simulate_args(1, &ds)).status().unwrap();
-    assert!(st.success());
+    let st = sysid().args(simulate_args(1, &ds)).output().unwrap();
+    assert!(
+        st.status.success(),
+        "{}",
+        String::from_utf8_lossy(&st.stderr)
+    );
     assert_eq!(load_dir(&ds).unwrap(), sets[0]);
     // The length of one uninterrupted run sets the range of the kill times.
     let start = Instant::now();
-    let st = sysid().args(simulate_args(2, &ds)).status().unwrap();
+    let st = sysid().args(simulate_args(2, &ds)).output().unwrap();
     let full = start.elapsed();
-    assert!(st.success());
+    assert!(
+        st.status.success(),
+        "{}",
+        String::from_utf8_lossy(&st.stderr)
+    );
     let mut current = 2u64;
     let mut delays = Delays(18);
     let (mut kept_old, mut got_new, mut mid_write) = (0, 0, 0);
@@ -145,8 +153,12 @@ fn simulate_killed_at_random_points_leaves_the_old_or_the_new_data_set() {
     assert!(kept_old > 0 && got_new > 0, "{kept_old} / {got_new}");
     assert!(mid_write > 0, "no kill landed during the write");
     // One uninterrupted run removes every leftover of the killed ones.
-    let st = sysid().args(simulate_args(1, &ds)).status().unwrap();
-    assert!(st.success());
+    let st = sysid().args(simulate_args(1, &ds)).output().unwrap();
+    assert!(
+        st.status.success(),
+        "{}",
+        String::from_utf8_lossy(&st.stderr)
+    );
     let names: Vec<String> = std::fs::read_dir(&dir)
         .unwrap()
         .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())

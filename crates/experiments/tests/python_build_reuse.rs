@@ -43,7 +43,10 @@ fn the_python_binding_selects_the_release_builds_features() {
     // What `cargo build --release` (default members) and the main job (`-p experiments`)
     // select, and what maturin selects for the binding.
     let python = features(&["-p", "sysid-mpf-py", "--features", "pyo3/extension-module"]);
-    for selection in [&["--workspace", "--exclude", "sysid-mpf-py"][..], &["-p", "experiments"]] {
+    for selection in [
+        &["--workspace", "--exclude", "sysid-mpf-py"][..],
+        &["-p", "experiments"],
+    ] {
         let release = features(selection);
         let shared: Vec<_> = release.keys().filter(|k| python.contains_key(*k)).collect();
         assert!(
@@ -53,7 +56,13 @@ fn the_python_binding_selects_the_release_builds_features() {
         let differ: Vec<String> = shared
             .into_iter()
             .filter(|k| release[k.as_str()] != python[k.as_str()])
-            .map(|k| format!("{k}: [{}] against the binding's [{}]", release[k.as_str()], python[k.as_str()]))
+            .map(|k| {
+                format!(
+                    "{k}: [{}] against the binding's [{}]",
+                    release[k.as_str()],
+                    python[k.as_str()]
+                )
+            })
             .collect();
         assert!(
             differ.is_empty(),

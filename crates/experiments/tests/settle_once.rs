@@ -23,9 +23,13 @@ fn one_identification_resolves_its_building_and_scans_its_prior_once() {
         ])
         .arg("--out")
         .arg(&dir)
-        .status()
+        .output()
         .unwrap();
-    assert!(st.success());
+    assert!(
+        st.status.success(),
+        "{}",
+        String::from_utf8_lossy(&st.stderr)
+    );
     for f in ["dataset.json", "truth.csv"] {
         std::fs::remove_file(dir.join(f)).unwrap();
     }

@@ -107,9 +107,13 @@ fn simulate_building_chain(data: &std::path::Path, args: &[&str]) {
         .args(args)
         .arg("--out")
         .arg(data)
-        .status()
+        .output()
         .unwrap();
-    assert!(st.success());
+    assert!(
+        st.status.success(),
+        "{}",
+        String::from_utf8_lossy(&st.stderr)
+    );
 }
 
 fn sysid() -> Command {
