@@ -17,7 +17,9 @@ use serde_json::{json, Value};
 use experiments::foreign;
 
 /// What a user knows of every building of the corpus (`sysid filter`'s minimal flags).
-const MINIMAL_FLAGS: [&str; 9] = [
+const MINIMAL_FLAGS: [&str; 11] = [
+    "--algorithm",
+    "mpf-ekf2",
     "--storeys",
     "3",
     "--hysteretic",
@@ -48,11 +50,12 @@ pub fn reproduce(
     python: Option<PathBuf>,
     report_only: bool,
 ) -> Result<()> {
-    let out = root.join("results/foreign");
-    fs::create_dir_all(&out)?;
+    // Relative paths, run from the workspace root: what the files record names no path of
+    // this machine.
+    let out = Path::new("results/foreign");
+    fs::create_dir_all(root.join(out))?;
     if !report_only {
-        let data = crate::target_dir(root).join("foreign-data");
-        let grounds = grounds(sysid, &data)?;
+        let grounds = grounds(root, sysid, &out.join("ground"))?;
         let mut corpus = Vec::new();
         for (index, mut case) in foreign::cases().into_iter().enumerate() {
             eprintln!("foreign: {} ({})", case.name, case.about);
@@ -61,14 +64,19 @@ pub fn reproduce(
             let mut entry = json!({"case": case.name, "about": case.about});
             for (role, (ug, dt)) in GROUNDS.iter().map(|g| g.0).zip(&grounds) {
                 let clean = foreign::respond(&case.structure, ug, *dt);
-                let mut rng = core_filters::rng::stream(SEED, index as u64, &format!("foreign {role}"));
+                let mut rng =
+                    core_filters::rng::stream(SEED, index as u64, &format!("foreign {role}"));
                 let record = foreign::measure(&case.sensing, ug, clean, &mut rng);
-                let dir = data.join(case.name).join(role);
+                let dir = root.join(out).join(case.name).join("data").join(role);
                 foreign::write(&record, *dt, &dir)
                     .with_context(|| format!("writing {}", dir.display()))?;
                 // The two simple references: the floors move with the ground, and the true
                 // structure (the noise-free response) — what no model can beat.
-                let ground: Vec<f64> = record.measured.iter().map(|y| foreign::fit(y, &record.ug)).collect();
+                let ground: Vec<f64> = record
+                    .measured
+                    .iter()
+                    .map(|y| foreign::fit(y, &record.ug))
+                    .collect();
                 let truth: Vec<f64> = record
                     .measured
                     .iter()
@@ -77,14 +85,19 @@ pub fn reproduce(
                     .collect();
                 entry[role] = json!({"ground_fit": ground, "truth_fit": truth});
             }
-            identify_case(sysid, &data.join(case.name), &out.join(case.name))?;
+            let case_dir = out.join(case.name);
+            identify_case(root, sysid, &case_dir)?;
             if let Some(py) = &python {
-                srim(root, py, &data.join(case.name), &out.join(case.name))?;
+                srim(root, py, &case_dir)?;
             }
             corpus.push(entry);
         }
-        write_atomic(&out.join("corpus.json"), &serde_json::to_string_pretty(&corpus)?)?;
+        write_atomic(
+            &root.join(out).join("corpus.json"),
+            &serde_json::to_string_pretty(&corpus)?,
+        )?;
     }
+    let out = root.join(out);
     let report = report(&out)?;
     write_atomic(&out.join("REPORT.md"), &report)?;
     eprintln!("foreign: wrote {}", out.join("REPORT.md").display());
@@ -92,38 +105,53 @@ pub fn reproduce(
 }
 
 /// The two ground motions and their time step, from `sysid simulate` (3 storeys, 200 Hz).
-fn grounds(sysid: &Path, data: &Path) -> Result<Vec<(Vec<f64>, f64)>> {
+fn grounds(root: &Path, sysid: &Path, data: &Path) -> Result<Vec<(Vec<f64>, f64)>> {
     let mut out = Vec::new();
     for (role, extra) in GROUNDS {
-        let dir = data.join(format!("ground-{role}"));
+        let dir = data.join(role);
         crate::run(
             Command::new(sysid)
-                .args(["simulate", "--storeys", "3", "--hysteretic", "none", "--seed", "1"])
+                .current_dir(root)
+                .args([
+                    "simulate",
+                    "--storeys",
+                    "3",
+                    "--hysteretic",
+                    "none",
+                    "--seed",
+                    "1",
+                ])
                 .args(extra)
                 .arg("--out")
                 .arg(&dir),
         )?;
+        let dir = root.join(dir);
         out.push(
             foreign::clean_ground(&dir).with_context(|| format!("reading {}", dir.display()))?,
         );
     }
     if out[0].1 != out[1].1 {
-        bail!("the two ground motions have different time steps: {} and {}", out[0].1, out[1].1);
+        bail!(
+            "the two ground motions have different time steps: {} and {}",
+            out[0].1,
+            out[1].1
+        );
     }
     Ok(out)
 }
 
-/// `sysid filter` on the identification record, `sysid validate` on the held-out one. A failed
-/// identification (exit ≠ 0: an impossible answer, or an error) is recorded, not fatal.
-fn identify_case(sysid: &Path, data: &Path, out: &Path) -> Result<()> {
-    fs::create_dir_all(out)?;
-    let record = out.join("identify.json");
+/// `sysid filter` on the identification record, `sysid validate` on the held-out one (from the
+/// workspace root, `case` relative to it). A failed identification (exit ≠ 0: an impossible
+/// answer, or an error) is recorded, not fatal.
+fn identify_case(root: &Path, sysid: &Path, case: &Path) -> Result<()> {
+    let record = case.join("identify.json");
     let o = Command::new(sysid)
+        .current_dir(root)
         .arg("filter")
         .args(MINIMAL_FLAGS)
         .arg(SEED.to_string())
         .arg("--data")
-        .arg(data.join("identify"))
+        .arg(case.join("data/identify"))
         .arg("--out")
         .arg(&record)
         .output()?;
@@ -131,38 +159,47 @@ fn identify_case(sysid: &Path, data: &Path, out: &Path) -> Result<()> {
         "exit_code": o.status.code(),
         "stderr_tail": tail(&String::from_utf8_lossy(&o.stderr), 30),
     });
-    write_atomic(&out.join("identify-exit.json"), &serde_json::to_string_pretty(&status)?)?;
-    if !record.exists() {
-        bail!("sysid filter wrote no record for {}: {}", data.display(), status);
+    write_atomic(
+        &root.join(case).join("identify-exit.json"),
+        &serde_json::to_string_pretty(&status)?,
+    )?;
+    if !root.join(&record).exists() {
+        bail!(
+            "sysid filter wrote no record for {}: {status}",
+            case.display()
+        );
     }
     let v = Command::new(sysid)
+        .current_dir(root)
         .args(["validate", "--record"])
         .arg(&record)
         .arg("--data")
-        .arg(data.join("held-out"))
+        .arg(case.join("data/held-out"))
         .arg("--out")
-        .arg(out.join("held-out.json"))
+        .arg(case.join("held-out.json"))
         .output()?;
     if !v.status.success() {
         bail!(
             "sysid validate failed on {}: {}",
-            data.display(),
+            case.display(),
             String::from_utf8_lossy(&v.stderr)
         );
     }
     Ok(())
 }
 
-fn srim(root: &Path, python: &Path, data: &Path, out: &Path) -> Result<()> {
+/// SRIM trained on the case's identification record, scored on both.
+fn srim(root: &Path, python: &Path, case: &Path) -> Result<()> {
     crate::run(
         Command::new(python)
-            .arg(root.join("experiments/real/srim.py"))
+            .current_dir(root)
+            .arg("experiments/real/srim.py")
             .arg("--train")
-            .arg(data.join("identify"))
+            .arg(case.join("data/identify"))
             .arg("--validate")
-            .arg(data.join("held-out"))
+            .arg(case.join("data/held-out"))
             .arg("--out")
-            .arg(out.join("srim.json")),
+            .arg(case.join("srim.json")),
     )
 }
 
@@ -194,10 +231,15 @@ fn mean(x: &[f64]) -> f64 {
 }
 
 fn list(x: &[f64]) -> String {
-    x.iter().map(|v| format!("{v:.1}")).collect::<Vec<_>>().join(" / ")
+    x.iter()
+        .map(|v| format!("{v:.1}"))
+        .collect::<Vec<_>>()
+        .join(" / ")
 }
 
-/// One case's numbers, read from its files.
+/// One case's numbers, read from its files (`summary.json` keeps them: the records themselves,
+/// tens of megabytes, are not committed).
+#[derive(serde::Serialize, serde::Deserialize)]
 struct Row {
     case: String,
     about: String,
@@ -221,7 +263,11 @@ fn row(out: &Path, entry: &Value) -> Result<Row> {
     let channel_fits = |v: &Value| -> Vec<f64> {
         v["free_run"]["channels"]
             .as_array()
-            .map(|a| a.iter().map(|c| c["fit_percent"].as_f64().unwrap_or(f64::NAN)).collect())
+            .map(|a| {
+                a.iter()
+                    .map(|c| c["fit_percent"].as_f64().unwrap_or(f64::NAN))
+                    .collect()
+            })
             .unwrap_or_default()
     };
     let held = read_json(&dir.join("held-out.json"))?;
@@ -266,20 +312,37 @@ fn row(out: &Path, entry: &Value) -> Result<Row> {
     })
 }
 
-fn report(out: &Path) -> Result<String> {
+/// The cases' numbers: from the files of the runs where they are there (and then written to
+/// `summary.json`), else from `summary.json`.
+fn summary(out: &Path) -> Result<Vec<Row>> {
+    let path = out.join("summary.json");
     let corpus = read_json(&out.join("corpus.json"))?;
-    let rows: Vec<Row> = corpus
-        .as_array()
-        .context("corpus.json is not a list")?
-        .iter()
-        .map(|e| row(out, e))
-        .collect::<Result<_>>()?;
+    let entries = corpus.as_array().context("corpus.json is not a list")?;
+    let have_records = entries.iter().all(|e| {
+        let case = e["case"].as_str().unwrap_or("?");
+        out.join(case).join("identify.json").exists()
+    });
+    if !have_records {
+        let text =
+            fs::read_to_string(&path).with_context(|| format!("reading {}", path.display()))?;
+        return serde_json::from_str(&text).with_context(|| format!("parsing {}", path.display()));
+    }
+    let rows: Vec<Row> = entries.iter().map(|e| row(out, e)).collect::<Result<_>>()?;
+    write_atomic(&path, &serde_json::to_string_pretty(&rows)?)?;
+    Ok(rows)
+}
+
+fn report(out: &Path) -> Result<String> {
+    let rows = summary(out)?;
     let mut s = String::new();
-    writeln!(s, "# The foreign corpus: structures outside the filter's class\n")?;
     writeln!(
         s,
-        "Written by `cargo xtask reproduce-foreign` from the files beside it (`corpus.json`, and \
-         per case `identify.json` — the record of `sysid filter {} {SEED}` on the record of El \
+        "# The foreign corpus: structures outside the filter's class\n"
+    )?;
+    writeln!(
+        s,
+        "Written by `cargo xtask reproduce-foreign` from `summary.json`, the numbers it read from \
+         the files of the runs (`corpus.json`, and per case `identify.json` — the record of `sysid filter {} {SEED}` on the record of El \
          Centro 1940 × 3 —, `held-out.json` — `sysid validate` of that record on the same \
          building under Loma Prieta 1989, kept out of the identification — and `srim.json`, SRIM \
          trained on the same record, its order chosen on it). The cases are described in \
@@ -289,7 +352,10 @@ fn report(out: &Path) -> Result<String> {
         MINIMAL_FLAGS.join(" ")
     )?;
     writeln!(s, "| case | exit | physical | fit, identified record | SRIM (order) | fit, held-out record | SRIM | ground | true structure | band covers (held-out) |")?;
-    writeln!(s, "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |")?;
+    writeln!(
+        s,
+        "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"
+    )?;
     for r in &rows {
         let (so, sid) = match &r.srim {
             Some((o, a, b)) => (format!("{} ({o})", list(a)), list(b)),
@@ -327,7 +393,11 @@ fn verdicts(s: &mut String, rows: &[Row]) -> Result<()> {
         s,
         "- **Never an impossible answer** (exit 0 and every identified parameter > 0 on every \
          case): {} — {impossible} of {n} cases impossible.",
-        if impossible == 0 { "holds" } else { "does not hold" }
+        if impossible == 0 {
+            "holds"
+        } else {
+            "does not hold"
+        }
     )?;
     let better_than_ground = rows
         .iter()
@@ -355,17 +425,28 @@ fn verdicts(s: &mut String, rows: &[Row]) -> Result<()> {
             "- **At least SRIM's held-out fit on ≥ 80 % of cases** (the mean over floors of the \
              free-run fit on the held-out record, against SRIM's best order's): {} — {at_least} of \
              {} cases ({share:.0} %).",
-            if share >= 80.0 { "holds" } else { "does not hold" },
+            if share >= 80.0 {
+                "holds"
+            } else {
+                "does not hold"
+            },
             with_srim.len()
         )?;
     }
-    let cov: Vec<f64> = rows.iter().flat_map(|r| r.coverage.iter().copied()).collect();
+    let cov: Vec<f64> = rows
+        .iter()
+        .flat_map(|r| r.coverage.iter().copied())
+        .collect();
     let inside = cov.iter().filter(|&&c| (90.0..=98.0).contains(&c)).count();
     writeln!(
         s,
         "- **The 95 % predictive band covers 90–98 % of the held-out record** (every case and \
          floor): {} — {inside} of {} (case, floor) pairs inside.",
-        if inside == cov.len() && !cov.is_empty() { "holds" } else { "does not hold" },
+        if inside == cov.len() && !cov.is_empty() {
+            "holds"
+        } else {
+            "does not hold"
+        },
         cov.len()
     )?;
     Ok(())

@@ -348,7 +348,10 @@ fn main() -> Result<()> {
                 Some(baseline_python(&root)?)
             };
             foreign::reproduce(&root, &sysid, python, report_only)?;
-            eprintln!("reproduce-foreign: {:.0} s in all", started.elapsed().as_secs_f64());
+            eprintln!(
+                "reproduce-foreign: {:.0} s in all",
+                started.elapsed().as_secs_f64()
+            );
             Ok(())
         }
         Task::ReproduceReal {

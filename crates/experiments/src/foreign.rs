@@ -105,7 +105,9 @@ fn rayleigh(m: &DMatrix<f64>, k: &DMatrix<f64>, w1: f64, w2: f64) -> DMatrix<f64
 /// The base chain's lowest and highest circular frequencies (unit masses).
 fn base_band() -> (f64, f64) {
     let e = chain(&STIFFNESS).symmetric_eigen().eigenvalues;
-    let (lo, hi) = e.iter().fold((f64::INFINITY, 0.0_f64), |(l, h), &v| (l.min(v), h.max(v)));
+    let (lo, hi) = e
+        .iter()
+        .fold((f64::INFINITY, 0.0_f64), |(l, h), &v| (l.min(v), h.max(v)));
     (lo.sqrt(), hi.sqrt())
 }
 
@@ -168,7 +170,12 @@ pub fn cases() -> Vec<Case> {
         braced[(a, b)] += s;
     }
     // A 5 % mass on floor 3 tuned 5 % below the second mode.
-    let w2 = base.clone().symmetric_eigen().eigenvalues.as_slice().to_vec();
+    let w2 = base
+        .clone()
+        .symmetric_eigen()
+        .eigenvalues
+        .as_slice()
+        .to_vec();
     let mut w2s = w2.clone();
     w2s.sort_by(f64::total_cmp);
     let ma = 0.05;
@@ -269,11 +276,10 @@ fn restoring(s: &Structure, x: &DVector<f64>) -> DVector<f64> {
 
 /// The clean absolute accelerations at the sensors (channels × samples) under `ug`, from rest.
 pub fn respond(s: &Structure, ug: &[f64], dt: f64) -> Vec<Vec<f64>> {
-    let minv = s
-        .m
-        .clone()
-        .try_inverse()
-        .expect("the corpus's mass matrices are positive definite");
+    let minv =
+        s.m.clone()
+            .try_inverse()
+            .expect("the corpus's mass matrices are positive definite");
     // Absolute accelerations of the degrees of freedom, and ẍ (relative) for the integration.
     let absolute = |x: &DVector<f64>, v: &DVector<f64>| -> DVector<f64> {
         -(&minv * (&s.c * v + restoring(s, x)))

@@ -19,12 +19,24 @@ fn sysid() -> Command {
 /// 1940 × 3, 31.18 s at 200 Hz), as `cargo xtask reproduce-foreign` identifies with.
 fn ground_motion(dir: &Path) -> (Vec<f64>, f64) {
     let st = sysid()
-        .args(["simulate", "--storeys", "3", "--hysteretic", "none", "--seed", "1"])
+        .args([
+            "simulate",
+            "--storeys",
+            "3",
+            "--hysteretic",
+            "none",
+            "--seed",
+            "1",
+        ])
         .arg("--out")
         .arg(dir)
         .output()
         .unwrap();
-    assert!(st.status.success(), "{}", String::from_utf8_lossy(&st.stderr));
+    assert!(
+        st.status.success(),
+        "{}",
+        String::from_utf8_lossy(&st.stderr)
+    );
     foreign::clean_ground(dir).unwrap()
 }
 
