@@ -4,7 +4,7 @@
 
 use std::fmt::Write as _;
 
-use super::{is_reference, Cell, CostFit};
+use super::{cost_dimension, is_reference, log_log_fit, Cell, CostFit};
 use crate::markdown::{compact_header, joined, num, share};
 use crate::study::Study;
 use identify::pipeline::Algorithm;
@@ -203,6 +203,7 @@ pub fn write(
         );
     }
     let _ = writeln!(o, "\n![cost](cost_vs_dimension.svg)\n");
+    fixed_sensor_costs(&mut o, cells);
 
     let mpf: Vec<&&Cell> = reference
         .iter()
@@ -614,6 +615,99 @@ fn goals(o: &mut String, reference: &[&Cell], fits: &[CostFit]) {
              cell in the table above).",
             pct(worst),
             each.join("; ")
+        );
+    }
+    let _ = writeln!(o);
+}
+
+/// The cost against the size where the sensor count does not grow with it: the cells with
+/// Bouc–Wen at storey 1 grouped by (algorithm, sensor count), for the groups of two sizes or more
+/// whose largest building has storeys without a sensor (the reference family, every storey
+/// measured, is the table above). Nothing is written when the study has no such group.
+fn fixed_sensor_costs(o: &mut String, cells: &[Cell]) {
+    let mut groups: Vec<((&str, usize), Vec<&Cell>)> = Vec::new();
+    for c in cells.iter().filter(|c| c.hysteretic == [1] && c.runs > 0) {
+        let key = (c.algorithm.as_str(), c.sensors.len());
+        match groups.iter_mut().find(|(k, _)| *k == key) {
+            Some((_, v)) => v.push(c),
+            None => groups.push((key, vec![c])),
+        }
+    }
+    groups.retain(|(_, v)| v.len() >= 2 && v.iter().any(|c| c.sensors.len() < c.storeys));
+    if groups.is_empty() {
+        return;
+    }
+    let _ = writeln!(
+        o,
+        "**With a fixed sensor count.** The same cost where the number of sensors does not grow \
+         with N, so that only the marginalised dimension does (CPU µs per particle-step, median \
+         over runs), and its fitted growth against that dimension:\n"
+    );
+    compact_header(
+        o,
+        &[
+            "algorithm",
+            "sensors",
+            "N",
+            "marginalised dim.",
+            "CPU µs / particle-step",
+            "runs (failed)",
+        ],
+        "lrrrrr",
+    );
+    let mut fits = Vec::new();
+    for ((alg, sensors), mut v) in groups {
+        v.sort_by_key(|c| c.storeys);
+        for c in &v {
+            let _ = writeln!(
+                o,
+                "| {} | {sensors} | {} | {} | {} | {} ({}) |",
+                label(alg),
+                c.storeys,
+                c.marginalised_dim,
+                num(c.cpu_us_per_particle_step, 2),
+                c.runs,
+                c.failed
+            );
+        }
+        let points: Vec<(f64, f64)> = v
+            .iter()
+            .map(|c| (cost_dimension(c) as f64, c.cpu_us_per_particle_step))
+            .collect();
+        let ratio = v
+            .last()
+            .map(|l| l.cpu_us_per_particle_step)
+            .unwrap_or(f64::NAN)
+            / v.first()
+                .map(|f| f.cpu_us_per_particle_step)
+                .unwrap_or(f64::NAN);
+        fits.push((
+            alg,
+            sensors,
+            v.len(),
+            log_log_fit(&points).map(|f| f.0),
+            ratio,
+        ));
+    }
+    let _ = writeln!(o);
+    compact_header(
+        o,
+        &[
+            "algorithm",
+            "sensors",
+            "sizes",
+            "slope",
+            "largest / smallest",
+        ],
+        "lrrrr",
+    );
+    for (alg, sensors, n, slope, ratio) in fits {
+        let _ = writeln!(
+            o,
+            "| {} | {sensors} | {n} | {} | {}× |",
+            label(alg),
+            slope.map_or("–".into(), |s| format!("{s:.2}")),
+            num(ratio, 0)
         );
     }
     let _ = writeln!(o);
