@@ -40,6 +40,29 @@ pub const DESC_SIZE: f64 = 21.0;
 pub const LABEL_SIZE: f64 = 20.0;
 pub const WIDTH: u32 = 1200;
 
+/// Average advance of one character of the figures' text, in em: about DejaVu Sans's (among the
+/// widest sans-serif fonts; a narrower one only leaves more room). The SVG backend writes no
+/// text metrics and the viewer lays the text out, so its width is estimated from its length.
+pub const EM_PER_CHAR: f64 = 0.6;
+
+/// Estimated width in px of `text` at plotters font size `size` (the SVG backend writes
+/// `size / 1.24` px).
+pub fn text_width(text: &str, size: f64) -> f64 {
+    text.chars().count() as f64 * EM_PER_CHAR * size / 1.24
+}
+
+/// The font size, at most `size`, at which `text` fits in `avail` px ([`text_width`]): a
+/// caption longer than its panel is drawn smaller instead of running past the panel's edge
+/// (or the figure's, where the viewer cuts it).
+pub fn fitted_size(text: &str, size: f64, avail: f64) -> f64 {
+    let w = text_width(text, size);
+    if w > avail && avail > 0.0 {
+        size * avail / w
+    } else {
+        size
+    }
+}
+
 /// Colour-blind-safe palette (Okabe–Ito), one colour per run or algorithm, cycled.
 pub(crate) const PALETTE: [RGBColor; 7] = [
     RGBColor(0, 114, 178),
@@ -96,7 +119,7 @@ fn create_parent(path: &Path) -> Result<()> {
 }
 
 /// Smallest and largest finite values, if any.
-fn finite_range(values: impl IntoIterator<Item = f64>) -> Option<(f64, f64)> {
+pub(crate) fn finite_range(values: impl IntoIterator<Item = f64>) -> Option<(f64, f64)> {
     values
         .into_iter()
         .filter(|v| v.is_finite())
@@ -107,7 +130,7 @@ fn finite_range(values: impl IntoIterator<Item = f64>) -> Option<(f64, f64)> {
 }
 
 /// A non-degenerate range with 5 % padding on both sides (plotters needs lo < hi).
-fn padded((lo, hi): (f64, f64)) -> (f64, f64) {
+pub(crate) fn padded((lo, hi): (f64, f64)) -> (f64, f64) {
     if hi > lo {
         let pad = 0.05 * (hi - lo);
         (lo - pad, hi + pad)
@@ -118,7 +141,7 @@ fn padded((lo, hi): (f64, f64)) -> (f64, f64) {
 }
 
 /// Tick label with as many decimals as the tick spacing of a range of width `span` needs.
-fn tick(v: f64, span: f64) -> String {
+pub(crate) fn tick(v: f64, span: f64) -> String {
     // Plotters picks at most ~10 ticks at 1, 2 or 5 × 10^k, so span/10 bounds the spacing.
     let step = span / 10.0;
     let decimals = if step > 0.0 && step.is_finite() {
@@ -136,7 +159,7 @@ fn tick(v: f64, span: f64) -> String {
 }
 
 /// Maximal runs of consecutive indices where `ok` holds (gaps at non-finite data).
-fn segments(n: usize, ok: impl Fn(usize) -> bool) -> Vec<std::ops::Range<usize>> {
+pub(crate) fn segments(n: usize, ok: impl Fn(usize) -> bool) -> Vec<std::ops::Range<usize>> {
     let mut out = Vec::new();
     let mut start = None;
     for k in 0..n {
@@ -170,7 +193,8 @@ pub fn open_figure<'a>(
     create_parent(path)?;
     let root = SVGBackend::new(path, (WIDTH, height)).into_drawing_area();
     root.fill(&WHITE)?;
-    let body = root.titled(title, (FONT, TITLE_SIZE))?;
+    let size = fitted_size(title, TITLE_SIZE, WIDTH as f64 - 20.0);
+    let body = root.titled(title, (FONT, size))?;
     let (body, legend) = body.split_vertically(body.dim_in_pixel().1 - legend_h);
     Ok((root, body, legend))
 }
@@ -185,18 +209,34 @@ pub fn present(root: &Area<'_>, path: &Path) -> Result<()> {
 /// A chart of the figures' axes.
 type Chart<'a> = ChartContext<'a, SVGBackend<'a>, Cartesian2d<RangedCoordf64, RangedCoordf64>>;
 
-/// The chart of one panel of a figure of several: its caption above, an 8 px margin, an x label
-/// area 48 px high and a y label area `y_label_area` px wide.
-fn panel_chart<'a>(
+/// The chart of one panel of a figure of several: its caption above (sized to fit the panel's
+/// width, [`fitted_size`]), an 8 px margin, an x label area 48 px high and a y label area
+/// `y_label_area` px wide.
+pub(crate) fn panel_chart<'a>(
     area: &Area<'a>,
     caption: &str,
     y_label_area: u32,
     x: std::ops::Range<f64>,
     y: std::ops::Range<f64>,
 ) -> Result<Chart<'a>> {
+    panel_chart_right(area, caption, y_label_area, 8, x, y)
+}
+
+/// [`panel_chart`] with a right margin of `right` px: room for half of a tick label at the x
+/// axis's right end (a tick can fall on it, as on a window of whole seconds).
+pub(crate) fn panel_chart_right<'a>(
+    area: &Area<'a>,
+    caption: &str,
+    y_label_area: u32,
+    right: u32,
+    x: std::ops::Range<f64>,
+    y: std::ops::Range<f64>,
+) -> Result<Chart<'a>> {
+    let avail = area.dim_in_pixel().0 as f64 - 2.0 * 8.0;
     Ok(ChartBuilder::on(area)
-        .caption(caption, (FONT, CAPTION_SIZE))
+        .caption(caption, (FONT, fitted_size(caption, CAPTION_SIZE, avail)))
         .margin(8)
+        .margin_right(right)
         .x_label_area_size(48)
         .y_label_area_size(y_label_area)
         .build_cartesian_2d(x, y)?)
@@ -214,11 +254,14 @@ pub fn draw_mesh(
 }
 
 /// One legend entry of a manually drawn legend strip.
-enum Swatch {
+pub(crate) enum Swatch {
     Line(RGBColor),
     Dashed(RGBColor),
-    Band(RGBColor),
+    /// A shaded area of this colour and opacity.
+    Band(RGBColor, f64),
     Bar(RGBColor),
+    /// A filled dot (a marked point, e.g. a peak).
+    Dot(RGBColor),
     /// A cross with the marker and line style of a series (see [`marker`]).
     Marker(SeriesStyle),
 }
@@ -228,18 +271,16 @@ const LEGEND_ROW: u32 = 34;
 
 /// Columns and height (px) of the legend strip of `entries` on a figure `WIDTH` px wide: as
 /// many columns as the longest label allows, so that labels never overlap.
-fn legend_layout(entries: &[(Swatch, String)]) -> (usize, u32) {
+pub(crate) fn legend_layout(entries: &[(Swatch, String)]) -> (usize, u32) {
     if entries.is_empty() {
         return (1, 0);
     }
-    // Swatch, gap and the label at ≈ 0.6 em per character (the SVG viewer lays text out).
-    let em = DESC_SIZE / 1.24;
+    // Swatch, gap and the label at its estimated width (the SVG viewer lays text out).
     let longest = entries
         .iter()
-        .map(|(_, l)| l.chars().count())
-        .max()
-        .unwrap_or(0);
-    let slot = 70.0 + 0.6 * em * longest as f64;
+        .map(|(_, l)| text_width(l, DESC_SIZE))
+        .fold(0.0, f64::max);
+    let slot = 70.0 + longest;
     let cols = (((WIDTH - 40) as f64 / slot).floor() as usize).clamp(1, entries.len());
     let rows = entries.len().div_ceil(cols) as u32;
     (cols, rows * LEGEND_ROW + 16)
@@ -316,10 +357,11 @@ fn legend_strip(area: &Area<'_>, entries: &[(Swatch, String)]) -> Result<()> {
                     ))?;
                 }
             }
-            Swatch::Band(c) => area.draw(&Rectangle::new(
+            Swatch::Band(c, alpha) => area.draw(&Rectangle::new(
                 [(x, y - 8), (x + 40, y + 8)],
-                c.mix(0.25).filled(),
+                c.mix(*alpha).filled(),
             ))?,
+            Swatch::Dot(c) => area.draw(&Circle::new((x + 20, y), 6, c.filled()))?,
             Swatch::Bar(c) => area.draw(&Rectangle::new(
                 [(x + 8, y - 9), (x + 32, y + 9)],
                 c.mix(0.85).filled(),
@@ -340,7 +382,7 @@ fn legend_strip(area: &Area<'_>, entries: &[(Swatch, String)]) -> Result<()> {
 }
 
 /// Draws the legend strip of `entries` and writes the figure ([`present`]).
-fn finish(
+pub(crate) fn finish(
     root: &Area<'_>,
     legend: &Area<'_>,
     entries: &[(Swatch, String)],
@@ -441,7 +483,7 @@ pub fn convergence(runs: &[(&str, &RunRecord)], path: &Path, title: &str) -> Res
             )
         })
         .collect();
-    entries.push((Swatch::Band(colour(6)), "mean ± 2 s.d.".to_string()));
+    entries.push((Swatch::Band(colour(6), 0.25), "mean ± 2 s.d.".to_string()));
     if (0..names.len()).any(|j| truth(j).is_some()) {
         entries.push((Swatch::Dashed(BLACK), "true value".to_string()));
     }
@@ -1080,13 +1122,16 @@ pub(crate) fn autocorrelation(
         let (lo, hi) = padded(
             finite_range(rho.iter().copied().chain([bound, -bound, 0.0])).unwrap_or((-1.0, 1.0)),
         );
-        let mut chart = panel_chart(area, name, 80, 0.0..lags + 0.5, lo..hi)?;
+        // Ticks of ±0.025 take six characters: a y label area of 96 px keeps them off the
+        // axis description, and six of them fit the panel's height without touching.
+        let mut chart = panel_chart(area, name, 96, 0.0..lags + 0.5, lo..hi)?;
         let yspan = hi - lo;
         draw_mesh(
             chart
                 .configure_mesh()
                 .x_desc("lag [steps]")
                 .y_desc("autocorrelation [-]")
+                .y_labels(6)
                 .x_label_formatter(&|v| format!("{v:.0}"))
                 .y_label_formatter(&|v| tick(*v, yspan)),
         )?;

@@ -1,198 +1,372 @@
 //! Figures of a free run and a modal comparison, drawn from a record only:
 //!
 //! - `free_run.svg`: per channel the measured acceleration, the free run at θ_val and the
-//!   pointwise 95 % predictive band (its two edges: the posterior draws' spread, widened by the
-//!   model error where the record has one), with the share of the record it covers;
+//!   pointwise 95 % predictive band (the posterior draws' spread, widened by the model error
+//!   where the record has one) over the whole record, with the share of the record it covers,
+//!   and below it the same enlarged on the window of strongest shaking ([`zoom_window`]); the
+//!   band is shaded underneath and the free run drawn last, so that no line hides it;
 //! - `transfer.svg`: per channel the measured |H1| (log scale) with the identified model's
-//!   modes as dashed vertical lines and the peaks read from the data as dots.
+//!   modes as dashed vertical lines and the peaks read from the data as dots; the legend is a
+//!   strip below the panels, where it covers no curve.
 
 use std::path::{Path, PathBuf};
 
-use crate::error::{bail, Context, Result};
+use crate::error::{bail, Result};
 use plotters::prelude::*;
 
 use super::{FreeRun, ModalComparison};
-use crate::figures::{self, colour, Panel, Series, CAPTION_SIZE, DESC_SIZE, FONT, LABEL_SIZE};
+use crate::figures::{
+    colour, draw_mesh, finish, finite_range, legend_layout, open_figure, padded, panel_chart_right,
+    segments, tick, Area, Swatch,
+};
 
-/// Draws `free_run.svg`.
-pub fn free_run(f: &FreeRun, out: &Path, who: &str) -> Result<PathBuf> {
-    let with_band = !f.band_lo.is_empty();
-    let panels: Vec<Panel<'_>> = f
-        .channels
-        .iter()
-        .enumerate()
-        .map(|(i, c)| {
-            let mut series = vec![
-                Series {
-                    label: "measured".into(),
-                    t: &f.t,
-                    y: &f.measured[i],
-                    colour: None,
-                },
-                Series {
-                    label: "free run at θ_val".into(),
-                    t: &f.t,
-                    y: &f.simulated[i],
-                    colour: Some(1),
-                },
-            ];
-            if with_band {
-                let what = if f.model_error.is_some() {
-                    "95 % predictive band (parameters + model error)"
-                } else {
-                    "posterior draws, pointwise 95 %"
-                };
-                for (edge, y) in [("lower", &f.band_lo[i]), ("upper", &f.band_hi[i])] {
-                    series.push(Series {
-                        label: format!("{what}, {edge} edge"),
-                        t: &f.t,
-                        y,
-                        colour: Some(2),
-                    });
-                }
-            }
-            Panel {
-                caption: format!(
-                    "{}: fit {:.1} %, NRMSE {:.3}{}{}",
-                    c.channel,
-                    c.fit_percent,
-                    c.nrmse,
-                    match &c.fit_draws {
-                        Some(p) if p.len() == 3 =>
-                            format!(" (draws: {:.1} to {:.1} %)", p[0], p[2]),
-                        _ => String::new(),
-                    },
-                    c.coverage_percent
-                        .map_or(String::new(), |v| format!(", band covers {v:.1} %"))
-                ),
-                y_desc: format!("{} [m/s²]", c.channel),
-                series,
-                reference: Vec::new(),
-            }
+/// Length (s) of the enlarged window of `free_run.svg`: at 3–20 Hz (the modes of the frames
+/// and bridges the toolkit meets) 15 to 100 cycles, each wide enough on a 1200 px figure to
+/// tell the measured from the predicted.
+pub const ZOOM_S: f64 = 5.0;
+
+/// Right margin (px) of the panels: half of the widest tick label ("100.0" at 16 px) and more,
+/// for a tick on the axis's right end.
+const RIGHT: u32 = 32;
+
+/// Opacity of the predictive band's shade (the legend's swatch uses the same).
+const BAND_ALPHA: f64 = 0.25;
+/// Opacity of the zoom window's shade on the whole-record panels.
+const WINDOW_ALPHA: f64 = 0.15;
+
+/// The window of strongest shaking of a record: the [`ZOOM_S`]-second window `[t_i, t_i +
+/// ZOOM_S]` in which the measured accelerations, squared and summed over every channel, add up
+/// to the most (the earliest such window on a tie; non-finite values count 0). `None` when the
+/// record is not longer than 2 × [`ZOOM_S`]: its panels already show every cycle.
+pub fn zoom_window(t: &[f64], measured: &[Vec<f64>]) -> Option<(f64, f64)> {
+    let (first, last) = (*t.first()?, *t.last()?);
+    let span = last - first;
+    if span.is_nan() || span <= 2.0 * ZOOM_S {
+        return None;
+    }
+    let energy: Vec<f64> = (0..t.len())
+        .map(|k| {
+            measured
+                .iter()
+                .filter_map(|c| c.get(k))
+                .filter(|v| v.is_finite())
+                .map(|v| v * v)
+                .sum()
         })
         .collect();
-    let path = out.join("free_run.svg");
-    figures::time_series(
-        &panels,
-        &path,
-        &format!("{who}: free run from rest under the measured ground motion"),
+    // Two pointers over the sorted times: [i, j) is the window starting at t[i].
+    let (mut best, mut best_sum) = (0, f64::NEG_INFINITY);
+    let (mut j, mut sum) = (0, 0.0);
+    for i in 0..t.len() {
+        if t[i] + ZOOM_S > last {
+            break;
+        }
+        while j < t.len() && t[j] <= t[i] + ZOOM_S {
+            sum += energy[j];
+            j += 1;
+        }
+        if sum > best_sum {
+            (best, best_sum) = (i, sum);
+        }
+        sum -= energy[i];
+    }
+    Some((t[best], t[best] + ZOOM_S))
+}
+
+/// Indices of the samples of `t` from the last one at or before `a` to the first one at or
+/// after `b` (so that the lines reach the window's edges).
+fn indices_within(t: &[f64], (a, b): (f64, f64)) -> std::ops::Range<usize> {
+    let start = t.iter().rposition(|v| *v <= a).unwrap_or(0);
+    let end = t.iter().position(|v| *v >= b).map_or(t.len(), |k| k + 1);
+    start..end.max(start)
+}
+
+/// What one panel of `free_run.svg` shows: channel `channel` on the samples `range`, the zoom
+/// window `shade` marked (on the whole-record panels).
+struct FreeRunPanel<'a> {
+    caption: String,
+    y_desc: String,
+    channel: usize,
+    range: std::ops::Range<usize>,
+    x: (f64, f64),
+    shade: Option<(f64, f64)>,
+    f: &'a FreeRun,
+}
+
+/// Draws one panel of `free_run.svg`: the zoom window's shade, the band, the measured record
+/// and the free run, in that order (each drawn over the ones before it).
+fn free_run_panel(area: &Area<'_>, p: &FreeRunPanel<'_>) -> Result<()> {
+    let (f, i, r) = (p.f, p.channel, p.range.clone());
+    let with_band = has_band(f);
+    let mut drawn: Vec<&[f64]> = vec![&f.measured[i][r.clone()], &f.simulated[i][r.clone()]];
+    if with_band {
+        drawn.extend([&f.band_lo[i][r.clone()], &f.band_hi[i][r.clone()]]);
+    }
+    let (lo, hi) =
+        padded(finite_range(drawn.iter().flat_map(|s| s.iter().copied())).unwrap_or((-1.0, 1.0)));
+    let (x0, x1) = p.x;
+    let mut chart = panel_chart_right(area, &p.caption, 80, RIGHT, x0..x1, lo..hi)?;
+    let (tspan, yspan) = (x1 - x0, hi - lo);
+    draw_mesh(
+        chart
+            .configure_mesh()
+            .x_desc("t [s]")
+            .y_desc(p.y_desc.clone())
+            .x_labels(8)
+            .y_labels(5)
+            .x_label_formatter(&|v| tick(*v, tspan))
+            .y_label_formatter(&|v| tick(*v, yspan)),
     )?;
+    if let Some((a, b)) = p.shade {
+        chart.draw_series(std::iter::once(Rectangle::new(
+            [(a, lo), (b, hi)],
+            colour(6).mix(WINDOW_ALPHA).filled(),
+        )))?;
+    }
+    let t = &f.t[r.clone()];
+    if with_band {
+        let (blo, bhi) = (&f.band_lo[i][r.clone()], &f.band_hi[i][r.clone()]);
+        let ok = |k: usize| t[k].is_finite() && blo[k].is_finite() && bhi[k].is_finite();
+        for seg in segments(t.len(), ok) {
+            let outline: Vec<(f64, f64)> = seg
+                .clone()
+                .map(|k| (t[k], bhi[k]))
+                .chain(seg.rev().map(|k| (t[k], blo[k])))
+                .collect();
+            chart.draw_series(std::iter::once(Polygon::new(
+                outline,
+                colour(2).mix(BAND_ALPHA).filled(),
+            )))?;
+        }
+    }
+    for (y, style) in [
+        (&f.measured[i][r.clone()], BLACK.stroke_width(3)),
+        (&f.simulated[i][r.clone()], colour(1).stroke_width(2)),
+    ] {
+        let ok = |k: usize| t[k].is_finite() && y[k].is_finite();
+        for seg in segments(t.len(), ok) {
+            let points: Vec<(f64, f64)> = seg.map(|k| (t[k], y[k])).collect();
+            chart.draw_series(LineSeries::new(points, style))?;
+        }
+    }
+    Ok(())
+}
+
+/// Whether the record's free run has a band for every channel.
+fn has_band(f: &FreeRun) -> bool {
+    let n = f.channels.len();
+    f.band_lo.len() >= n && f.band_hi.len() >= n && n > 0
+}
+
+/// Samples every drawn series of `f` has (a record's series have the same length; a shorter one
+/// is not read past).
+fn common_len(f: &FreeRun) -> usize {
+    let n = f.channels.len();
+    let mut len = f.t.len();
+    for s in f.measured[..n].iter().chain(&f.simulated[..n]) {
+        len = len.min(s.len());
+    }
+    if has_band(f) {
+        for s in f.band_lo[..n].iter().chain(&f.band_hi[..n]) {
+            len = len.min(s.len());
+        }
+    }
+    len
+}
+
+/// The caption of channel `i`'s whole-record panel: its fit, NRMSE and the band's coverage.
+fn fit_caption(f: &FreeRun, i: usize) -> String {
+    let c = &f.channels[i];
+    format!(
+        "{}: fit {:.1} %, NRMSE {:.3}{}{}",
+        c.channel,
+        c.fit_percent,
+        c.nrmse,
+        match &c.fit_draws {
+            Some(p) if p.len() == 3 => format!(" (draws: {:.1} to {:.1} %)", p[0], p[2]),
+            _ => String::new(),
+        },
+        c.coverage_percent
+            .map_or(String::new(), |v| format!(", band covers {v:.1} %"))
+    )
+}
+
+/// The legend of `free_run.svg`.
+fn free_run_legend(f: &FreeRun, zoom: Option<(f64, f64)>) -> Vec<(Swatch, String)> {
+    let mut entries = vec![
+        (Swatch::Line(BLACK), "measured".to_string()),
+        (Swatch::Line(colour(1)), "free run at θ_val".to_string()),
+    ];
+    if has_band(f) {
+        let what = if f.model_error.is_some() {
+            "95 % predictive band (parameters + model error)"
+        } else {
+            "posterior draws, pointwise 95 %"
+        };
+        entries.push((Swatch::Band(colour(2), BAND_ALPHA), what.to_string()));
+    }
+    if zoom.is_some() {
+        entries.push((
+            Swatch::Band(colour(6), WINDOW_ALPHA),
+            format!(
+                "enlarged below: the {ZOOM_S:.0} s of strongest shaking (largest sum of measured² over all channels)"
+            ),
+        ));
+    }
+    entries
+}
+
+/// Draws `free_run.svg`: per channel a panel of the whole record and, when the record is
+/// longer than 2 × [`ZOOM_S`], one of its window of strongest shaking ([`zoom_window`]) below.
+pub fn free_run(f: &FreeRun, out: &Path, who: &str) -> Result<PathBuf> {
+    let n = f.channels.len();
+    if n == 0 || f.measured.len() < n || f.simulated.len() < n {
+        bail!("the record's free run has no channels to draw");
+    }
+    let len = common_len(f);
+    let t = &f.t[..len];
+    let zoom = zoom_window(t, &f.measured[..n]);
+    let entries = free_run_legend(f, zoom);
+    let (_, legend_h) = legend_layout(&entries);
+    let rows = if zoom.is_some() { 2 * n } else { n };
+    let path = out.join("free_run.svg");
+    // The figure borrows its file's path until it is written; `path` is returned.
+    let file = path.clone();
+    let (root, grid, legend) = open_figure(
+        &file,
+        60 + legend_h + 280 * rows as u32,
+        &format!("{who}: free run from rest under the measured ground motion"),
+        legend_h,
+    )?;
+    let areas = grid.split_evenly((rows, 1));
+    let whole = padded(finite_range(t.iter().copied()).unwrap_or((0.0, 1.0)));
+    let mut areas = areas.iter();
+    for i in 0..n {
+        let name = &f.channels[i].channel;
+        let mut panel = FreeRunPanel {
+            caption: fit_caption(f, i),
+            y_desc: format!("{name} [m/s²]"),
+            channel: i,
+            range: 0..len,
+            x: whole,
+            shade: zoom,
+            f,
+        };
+        free_run_panel(areas.next().expect("a panel per row"), &panel)?;
+        if let Some((a, b)) = zoom {
+            panel.caption = format!("{name}, {a:.1} to {b:.1} s (shaded above), enlarged");
+            panel.range = indices_within(t, (a, b));
+            panel.x = (a, b);
+            panel.shade = None;
+            free_run_panel(areas.next().expect("a panel per row"), &panel)?;
+        }
+    }
+    finish(&root, &legend, &entries, &file)?;
     Ok(path)
 }
 
-/// Draws `transfer.svg`.
+/// Draws one panel of `transfer.svg`: channel `name`'s |H1| on a log scale, the model's modes
+/// in the band and the data's peaks.
+fn transfer_panel(area: &Area<'_>, m: &ModalComparison, name: &str, mag: &[f64]) -> Result<()> {
+    let f0 = m.frequency_hz[0];
+    let f1 = *m.frequency_hz.last().expect("two bins");
+    let logs: Vec<f64> = mag
+        .iter()
+        .map(|v| if *v > 0.0 { v.log10() } else { f64::NAN })
+        .collect();
+    let (lo, hi) = match finite_range(logs.iter().copied()) {
+        Some((lo, hi)) if lo < hi => (lo - 0.1 * (hi - lo), hi + 0.1 * (hi - lo)),
+        _ => (-1.0, 1.0),
+    };
+    let caption = format!("{name}: |H1| of floor / ground (absolute accelerations)");
+    let mut chart = panel_chart_right(area, &caption, 80, RIGHT, f0..f1, lo..hi)?;
+    draw_mesh(
+        chart
+            .configure_mesh()
+            .x_desc("f [Hz]")
+            .y_desc("log₁₀ |H1| [-]"),
+    )?;
+    let pts: Vec<(f64, f64)> = m
+        .frequency_hz
+        .iter()
+        .zip(&logs)
+        .filter(|(_, v)| v.is_finite())
+        .map(|(f, v)| (*f, *v))
+        .collect();
+    chart.draw_series(LineSeries::new(pts, BLACK.stroke_width(2)))?;
+    for f in modes_in_band(m) {
+        chart.draw_series(DashedLineSeries::new(
+            vec![(f, lo), (f, hi)],
+            8,
+            5,
+            colour(1).stroke_width(2),
+        ))?;
+    }
+    let peak_pts: Vec<(f64, f64)> = m
+        .peaks
+        .iter()
+        .filter_map(|p| {
+            let b = m
+                .frequency_hz
+                .iter()
+                .position(|f| *f >= p.frequency_hz)
+                .unwrap_or(logs.len() - 1);
+            logs.get(b)
+                .filter(|v| v.is_finite())
+                .map(|v| (p.frequency_hz, *v))
+        })
+        .collect();
+    chart.draw_series(
+        peak_pts
+            .iter()
+            .map(|p| Circle::new(*p, 6, colour(0).filled())),
+    )?;
+    Ok(())
+}
+
+/// The model's natural frequencies inside the band of the transfer functions.
+fn modes_in_band(m: &ModalComparison) -> impl Iterator<Item = f64> + '_ {
+    let f0 = m.frequency_hz[0];
+    let f1 = *m.frequency_hz.last().expect("two bins");
+    m.modes
+        .iter()
+        .map(|mode| mode.frequency_hz)
+        .filter(move |f| *f >= f0 && *f <= f1)
+}
+
+/// Draws `transfer.svg`: a panel per channel, the legend in a strip below them.
 pub fn transfer(m: &ModalComparison, out: &Path, who: &str) -> Result<PathBuf> {
     if m.channels.is_empty() || m.frequency_hz.len() < 2 {
         bail!("the record holds no transfer functions");
     }
-    let path = out.join("transfer.svg");
-    let height = 80 + 320 * m.channels.len() as u32;
-    let file = path.clone();
-    let root = SVGBackend::new(&file, (figures::WIDTH, height)).into_drawing_area();
-    root.fill(&WHITE)?;
-    let (title, body) = root.split_vertically(60);
-    title.titled(
-        &format!("{who}: measured transfer functions and the model's modes"),
-        (FONT, figures::TITLE_SIZE),
-    )?;
-    let areas = body.split_evenly((m.channels.len(), 1));
-    let f0 = m.frequency_hz[0];
-    let f1 = *m.frequency_hz.last().expect("two bins");
-    for ((name, mag), area) in m.channels.iter().zip(&m.magnitude).zip(&areas) {
-        let logs: Vec<f64> = mag
-            .iter()
-            .map(|v| if *v > 0.0 { v.log10() } else { f64::NAN })
-            .collect();
-        let (lo, hi) = logs
-            .iter()
-            .filter(|v| v.is_finite())
-            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
-                (a.min(*v), b.max(*v))
-            });
-        let (lo, hi) = if lo < hi {
-            (lo - 0.1 * (hi - lo), hi + 0.1 * (hi - lo))
-        } else {
-            (-1.0, 1.0)
-        };
-        let mut chart = ChartBuilder::on(area)
-            .caption(
-                format!("{name}: |H1| of floor / ground (absolute accelerations)"),
-                (FONT, CAPTION_SIZE),
-            )
-            .margin(8)
-            .x_label_area_size(48)
-            .y_label_area_size(80)
-            .build_cartesian_2d(f0..f1, lo..hi)?;
-        chart
-            .configure_mesh()
-            .x_desc("f [Hz]")
-            .y_desc("log₁₀ |H1| [-]")
-            .label_style((FONT, LABEL_SIZE))
-            .axis_desc_style((FONT, DESC_SIZE))
-            .light_line_style(WHITE)
-            .draw()?;
-        let pts: Vec<(f64, f64)> = m
-            .frequency_hz
-            .iter()
-            .zip(&logs)
-            .filter(|(_, v)| v.is_finite())
-            .map(|(f, v)| (*f, *v))
-            .collect();
-        chart
-            .draw_series(LineSeries::new(pts, BLACK.stroke_width(2)))?
-            .label("measured |H1| (Welch)")
-            .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLACK.stroke_width(2)));
-        let mut labelled = false;
-        for mode in &m.modes {
-            let f = mode.frequency_hz;
-            if f < f0 || f > f1 {
-                continue;
-            }
-            let s = chart.draw_series(DashedLineSeries::new(
-                vec![(f, lo), (f, hi)],
-                8,
-                5,
-                colour(1).stroke_width(2),
-            ))?;
-            if !labelled {
-                s.label("identified model's modes (linearised)")
-                    .legend(|(x, y)| {
-                        PathElement::new(vec![(x, y), (x + 20, y)], colour(1).stroke_width(2))
-                    });
-                labelled = true;
-            }
-        }
-        let peak_pts: Vec<(f64, f64)> = m
-            .peaks
-            .iter()
-            .filter_map(|p| {
-                let b = m
-                    .frequency_hz
-                    .iter()
-                    .position(|f| *f >= p.frequency_hz)
-                    .unwrap_or(logs.len() - 1);
-                logs.get(b)
-                    .filter(|v| v.is_finite())
-                    .map(|v| (p.frequency_hz, *v))
-            })
-            .collect();
-        chart
-            .draw_series(
-                peak_pts
-                    .iter()
-                    .map(|p| Circle::new(*p, 6, colour(0).filled())),
-            )?
-            .label("peaks read from the data (summed over floors)")
-            .legend(|(x, y)| Circle::new((x + 10, y), 6, colour(0).filled()));
-        chart
-            .configure_series_labels()
-            .label_font((FONT, LABEL_SIZE))
-            .background_style(WHITE.mix(0.85))
-            .border_style(BLACK)
-            .draw()?;
+    let mut entries = vec![(Swatch::Line(BLACK), "measured |H1| (Welch)".to_string())];
+    if modes_in_band(m).next().is_some() {
+        entries.push((
+            Swatch::Dashed(colour(1)),
+            "identified model's modes (linearised)".to_string(),
+        ));
     }
-    root.present()
-        .with_context(|| format!("writing {}", path.display()))?;
+    if !m.peaks.is_empty() {
+        entries.push((
+            Swatch::Dot(colour(0)),
+            "peaks read from the data (summed over floors)".to_string(),
+        ));
+    }
+    let (_, legend_h) = legend_layout(&entries);
+    let path = out.join("transfer.svg");
+    // The figure borrows its file's path until it is written; `path` is returned.
+    let file = path.clone();
+    let (root, grid, legend) = open_figure(
+        &file,
+        60 + legend_h + 320 * m.channels.len() as u32,
+        &format!("{who}: measured transfer functions and the model's modes"),
+        legend_h,
+    )?;
+    let areas = grid.split_evenly((m.channels.len(), 1));
+    for ((name, mag), area) in m.channels.iter().zip(&m.magnitude).zip(&areas) {
+        transfer_panel(area, m, name, mag)?;
+    }
+    finish(&root, &legend, &entries, &file)?;
     Ok(path)
 }
 
@@ -228,4 +402,37 @@ pub fn draw(
         ),
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_zoom_window_holds_the_strongest_shaking() {
+        // 60 s at 10 Hz: quiet, a burst on channel 2 around t = 41 s, quiet.
+        let t: Vec<f64> = (0..600).map(|k| k as f64 * 0.1).collect();
+        let quiet = vec![0.1; t.len()];
+        let burst: Vec<f64> = t
+            .iter()
+            .map(|t| if (40.0..42.0).contains(t) { 5.0 } else { 0.1 })
+            .collect();
+        let (a, b) = zoom_window(&t, &[quiet.clone(), burst]).unwrap();
+        assert!((b - a - ZOOM_S).abs() < 1e-12);
+        assert!(a <= 40.0 && b >= 41.9, "window {a}..{b}");
+        // Non-finite values count 0; a record of 2 × ZOOM_S or less is drawn whole.
+        let mut gaps = quiet.clone();
+        gaps[10] = f64::NAN;
+        assert!(zoom_window(&t, &[gaps]).is_some());
+        assert_eq!(zoom_window(&t[..101], &[quiet[..101].to_vec()]), None);
+        assert_eq!(zoom_window(&[], &[]), None);
+    }
+
+    #[test]
+    fn window_indices_reach_its_edges() {
+        let t: Vec<f64> = (0..10).map(|k| k as f64).collect();
+        assert_eq!(indices_within(&t, (2.5, 5.5)), 2..7);
+        assert_eq!(indices_within(&t, (2.0, 5.0)), 2..6);
+        assert_eq!(indices_within(&t, (-1.0, 20.0)), 0..10);
+    }
 }
