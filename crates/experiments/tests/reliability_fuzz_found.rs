@@ -1,8 +1,9 @@
 //! What the fuzz driver (`cargo xtask fuzz`, `experiments::fuzz`) found in its first runs,
 //! kept as tests: outputs of `reference`, `information` and `compare-reference` written over
 //! the command's own inputs, a lock file that is a named pipe (`merge` waited forever), files
-//! asked for that a closed standard output kept from being written, and refusals that quoted a
-//! mutated value of 100,000 characters whole. (A figure name that is a named pipe is in
+//! asked for that a closed standard output kept from being written, refusals that quoted a
+//! mutated value of 100,000 characters whole, and an information limit cut short that made
+//! `information --limit` panic. (A figure name that is a named pipe is in
 //! `reliability_figures.rs`; values quoted by the readers in `models`' fuzz corpus.)
 #![cfg(unix)]
 
@@ -332,4 +333,51 @@ fn refusals_quote_long_values_by_their_start_and_length() {
     );
     refused(&o, &["truth.csv:4: field", "characters)"]);
     assert!(stderr(&o).len() < 1_000, "{} bytes", stderr(&o).len());
+}
+
+/// An information limit whose `mle` lost an entry (the fuzz driver cut 22 bytes of one) made
+/// `information --limit` panic (index out of bounds); it is refused naming the file, the line
+/// and the field. So are the other lists of another length and a limit without parameters.
+#[test]
+fn an_information_limit_of_another_shape_is_refused_by_field() {
+    let (_tmp, dir) = common::temp_dir("sysid-found-limit-");
+    inputs(&dir);
+    ok(&run(
+        &["information", "--data", "lin", "--out", "lim.json"],
+        &dir,
+    ));
+    let text = std::fs::read_to_string(dir.join("lim.json")).unwrap();
+    let good: serde_json::Value = serde_json::from_str(&text).unwrap();
+    ok(&run(
+        &["information", "--limit", "lim.json", "runlin.json"],
+        &dir,
+    ));
+    for (field, edit) in [
+        ("mle", "pop"),
+        ("sd", "push"),
+        ("truth", "pop"),
+        ("names", "clear"),
+    ] {
+        let mut v = good.clone();
+        let list = v[field].as_array_mut().unwrap();
+        match edit {
+            "pop" => {
+                list.pop();
+            }
+            "push" => list.push(serde_json::json!(1.0)),
+            _ => list.clear(),
+        }
+        std::fs::write(
+            dir.join("bad.json"),
+            serde_json::to_string_pretty(&v).unwrap(),
+        )
+        .unwrap();
+        let o = run(&["information", "--limit", "bad.json", "runlin.json"], &dir);
+        let err = stderr(&o);
+        assert_eq!(o.status.code(), Some(1), "{field}: {err}");
+        assert!(
+            err.contains("bad.json:") && err.contains(&format!("field `{field}`")),
+            "{field}: {err}"
+        );
+    }
 }
