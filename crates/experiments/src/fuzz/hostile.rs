@@ -126,9 +126,10 @@ const ODD_NAMES: &[&str] = &[
     "\t",
 ];
 
-fn odd_name(rng: &mut FuzzRng) -> String {
-    if rng.random_bool(0.1) {
-        // Longer than a file name may be.
+/// An odd file name; for an output (which need not exist) sometimes one longer than a file
+/// name may be.
+fn odd_name(rng: &mut FuzzRng, output: bool) -> String {
+    if output && rng.random_bool(0.1) {
         return "n".repeat(300);
     }
     ODD_NAMES.choose(rng).expect("names").to_string()
@@ -182,7 +183,7 @@ fn special_input(p: &mut Probe, rng: &mut FuzzRng) -> Option<String> {
         }
         8 if slot.refer != Ref::None => {
             // Renamed: the same content under an odd name.
-            let name = odd_name(rng);
+            let name = odd_name(rng, false);
             let renamed = path.with_file_name(&name);
             for (rel, node) in taken {
                 p.nodes.insert(joined(&renamed, &rel), node);
@@ -295,7 +296,7 @@ fn special_output(p: &mut Probe, rng: &mut FuzzRng) -> Option<String> {
         }
         8 if out.dir && !out.names.is_empty() => return special_inside(p, &out, rng),
         _ => {
-            let name = odd_name(rng);
+            let name = odd_name(rng, true);
             let new = path.with_file_name(&name);
             p.set(&out.refer, new.strip_prefix("work").ok()?.to_str()?);
             retarget(p, &path, new);
@@ -435,12 +436,39 @@ fn damaged_command_line(p: &mut Probe, rng: &mut FuzzRng) -> Option<String> {
         .position(|a| a.to_string_lossy().starts_with("--"))
         .unwrap_or(p.args.len());
     let what = match rng.random_range(0..5) {
-        0 if first < p.args.len() => {
-            let i = rng.random_range(first..p.args.len());
-            let gone = p.args.remove(i);
+        0 => {
+            // A whole option (with its value): a lone value or positional argument dropped
+            // would give the command another meaning rather than a damaged one (`merge --into
+            // part0 part1` merges into an input, as asked).
+            // A switch, or an option whose value is one the probes vary: not one naming a path
+            // (without `--out` a command writes to its default, `results/...`; without
+            // `--config` a study runs the project's own, a big valid workload) and not
+            // `--dry-run` (without it a submission writes, and its output is declared only
+            // for a real one).
+            let varied: Vec<usize> = p
+                .flags
+                .iter()
+                .filter_map(|f| match f {
+                    Ref::Arg(i) => Some(*i - 1),
+                    _ => None,
+                })
+                .collect();
+            let options: Vec<usize> = (first..p.args.len())
+                .filter(|&i| {
+                    let a = p.args[i].to_string_lossy();
+                    let switch = p
+                        .args
+                        .get(i + 1)
+                        .is_none_or(|v| v.to_string_lossy().starts_with("--"));
+                    a.starts_with("--") && a != "--dry-run" && (switch || varied.contains(&i))
+                })
+                .collect();
+            let &i = options.choose(rng)?;
+            let with_value = varied.contains(&i);
+            let gone: Vec<_> = p.args.drain(i..i + 1 + usize::from(with_value)).collect();
             // The values after it moved: none of them is varied any more.
             p.flags.clear();
-            format!("argument {gone:?} dropped")
+            format!("option {gone:?} dropped")
         }
         1 if first < p.args.len() => {
             let i = rng.random_range(first..p.args.len());
