@@ -7,7 +7,7 @@ use rand::seq::IndexedRandom;
 use rand::Rng;
 
 use super::mutate::{self, FuzzRng};
-use super::probe::{relative_target, work, Node, Out, Probe, Program, Ref};
+use super::probe::{may_make_devices, relative_target, work, Node, Out, Probe, Program, Ref};
 
 /// One hostile change to `p`, recorded in `p.what` (a few probes stay valid).
 pub(crate) fn harden(p: &mut Probe, rng: &mut FuzzRng) {
@@ -145,6 +145,10 @@ fn special_input(p: &mut Probe, rng: &mut FuzzRng) -> Option<String> {
             p.nodes.insert(path.clone(), Node::Fifo);
             "a named pipe"
         }
+        1 if may_make_devices() && rng.random_bool(0.5) => {
+            p.nodes.insert(path.clone(), Node::Device(1, 5));
+            "the zero device (a device node)"
+        }
         1 => {
             p.nodes.insert(path.clone(), Node::Link("/dev/zero".into()));
             "a link to /dev/zero"
@@ -228,6 +232,11 @@ fn special_output(p: &mut Probe, rng: &mut FuzzRng) -> Option<String> {
     take_nodes(p, &path);
     let victim = PathBuf::from("outside/victim.txt");
     let what: String = match rng.random_range(0..12) {
+        0 if may_make_devices() && rng.random_bool(0.5) => {
+            p.nodes.insert(path.clone(), Node::Device(1, 3));
+            p.protected.push(path.clone());
+            "the null device (a device node)".into()
+        }
         0 => {
             p.nodes.insert(path.clone(), Node::Link("/dev/null".into()));
             p.protected.push(path.clone());

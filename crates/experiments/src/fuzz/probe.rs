@@ -24,6 +24,9 @@ pub(crate) enum Node {
     Fifo,
     /// A sparse file of this many bytes.
     Sparse(u64),
+    /// A character device with this major and minor number (made only as root: 1, 3 is the
+    /// null device and 1, 5 the zero device, so nothing escapes through it).
+    Device(u32, u32),
 }
 
 /// Which program runs.
@@ -293,6 +296,7 @@ impl Probe {
                 Node::Link(target) => std::os::unix::fs::symlink(target, &p)?,
                 Node::Fifo => mkfifo(&p)?,
                 Node::Sparse(len) => std::fs::File::create(&p)?.set_len(*len)?,
+                Node::Device(major, minor) => mknod(&p, *major, *minor)?,
             }
         }
         Ok(())
@@ -336,6 +340,24 @@ fn mkfifo(path: &Path) -> std::io::Result<()> {
         .map_err(|e| std::io::Error::new(std::io::ErrorKind::InvalidInput, e))?;
     // SAFETY: `c` is a NUL-terminated path that outlives the call.
     if unsafe { libc::mkfifo(c.as_ptr(), 0o644) } != 0 {
+        return Err(std::io::Error::last_os_error());
+    }
+    Ok(())
+}
+
+/// Whether this process may make device nodes (it runs as root).
+pub(crate) fn may_make_devices() -> bool {
+    // SAFETY: `geteuid` takes no argument and cannot fail.
+    unsafe { libc::geteuid() == 0 }
+}
+
+fn mknod(path: &Path, major: u32, minor: u32) -> std::io::Result<()> {
+    use std::os::unix::ffi::OsStrExt;
+    let c = std::ffi::CString::new(path.as_os_str().as_bytes())
+        .map_err(|e| std::io::Error::new(std::io::ErrorKind::InvalidInput, e))?;
+    let dev = libc::makedev(major, minor);
+    // SAFETY: `c` is a NUL-terminated path that outlives the call.
+    if unsafe { libc::mknod(c.as_ptr(), libc::S_IFCHR | 0o666, dev) } != 0 {
         return Err(std::io::Error::last_os_error());
     }
     Ok(())
@@ -401,5 +423,17 @@ mod tests {
             .unwrap()
             .file_type();
         assert!(t.is_fifo());
+        if may_make_devices() {
+            let mut q = Probe::new("t", Program::Sysid);
+            q.nodes.insert(work("null"), Node::Device(1, 3));
+            q.materialise(&tmp.path().join("q")).unwrap();
+            let null = tmp.path().join("q/work/null");
+            assert!(std::fs::symlink_metadata(&null)
+                .unwrap()
+                .file_type()
+                .is_char_device());
+            std::fs::write(&null, "discarded").unwrap();
+            assert_eq!(std::fs::read(&null).unwrap(), b"");
+        }
     }
 }
