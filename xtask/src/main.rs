@@ -31,11 +31,17 @@
 //! - `imports [--write-doc]`: fails when a crate has an import cycle between its top-level
 //!   modules, else prints each crate's modules in layers (leaves first); `--write-doc` writes
 //!   them into `docs/architecture.md` (a test fails when they have drifted).
+//! - `fuzz [--seed N] [--probes N] [--timeout S] [--python PATH] [--jobs N] [--only T] [--list]`:
+//!   builds `sysid` in release and runs the fuzz driver (`experiments::fuzz`, docs/guarantees.md):
+//!   hostile inputs against every subcommand (and the Python package with `--python`); prints a
+//!   table per subcommand and fails on a crash, a hang, a write outside a probe's outputs or a
+//!   refusal without a message, leaving reproducers in `target/fuzz/failures-seed<N>/`.
 //! - `bench [--full]`: runs the criterion benchmarks of `core-filters` (short measurement times
 //!   unless `--full`), then appends one dated line per benchmark to `results/perf/history.csv`
 //!   and prints the change against the previous line of the same benchmark.
 
 mod foreign;
+mod fuzz;
 mod imports;
 
 use std::fs;
@@ -124,6 +130,10 @@ enum Task {
         #[arg(long)]
         resume: bool,
     },
+    /// Hostile inputs against every sysid subcommand (and the Python package with --python):
+    /// fails on a crash, a hang, a write outside a probe's outputs or a refusal without a
+    /// message; reproducers in target/fuzz/failures-seed<N>/.
+    Fuzz(fuzz::FuzzArgs),
     /// Run the criterion benchmarks (release) and append the medians to results/perf/history.csv.
     Bench {
         /// Criterion's own measurement times instead of the short ones.
@@ -360,6 +370,10 @@ fn main() -> Result<()> {
             resume,
         } => reproduce_real(&root, no_baseline, report_only, resume),
         Task::Bench { full } => bench(&root, full),
+        Task::Fuzz(a) => {
+            let sysid = build_sysid(&root)?;
+            fuzz::run(&root, &target_dir(&root), sysid, a)
+        }
         Task::Docs => docs(&root),
         Task::Imports { write_doc } => imports::run(&root, write_doc),
     }

@@ -152,7 +152,9 @@ fn write_outputs(
             serde_json::json!({ "algorithm": a, "differences": f.parts, "verdict": f.verdict })
         })
         .collect();
-    figure(study, &rows, &out.join("errors_by_excitation.svg"))?;
+    identify::plot::figures_in_place(out, |dir| {
+        figure(study, &rows, &dir.join("errors_by_excitation.svg"))
+    })?;
     scaling::write_summary(
         opts,
         study,

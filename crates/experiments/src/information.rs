@@ -90,11 +90,49 @@ impl InformationLimit {
             .collect()
     }
 
-    /// Reads a limit written by `sysid information --out`.
+    /// Reads a limit written by `sysid information --out`, with one entry per parameter in each
+    /// of its lists (a limit file cut or edited into another shape is refused by file, line and
+    /// field, not indexed past its end).
     pub fn read(path: &std::path::Path) -> Result<Self> {
         let text = identify::limits::read_text_file(path, "information limit")?;
-        serde_json::from_str(&text)
-            .with_context(|| format!("{}: not an information limit", path.display()))
+        let limit: Self = serde_json::from_str(&text)
+            .with_context(|| format!("{}: not an information limit", path.display()))?;
+        limit.check_shape(path, &text)?;
+        Ok(limit)
+    }
+
+    /// `mle`, `sd` and `truth` hold one value per parameter of `names`, of which there is one
+    /// at least.
+    fn check_shape(&self, path: &std::path::Path, text: &str) -> Result<()> {
+        // 1-based line of the first `"field"` in the file (1 when absent).
+        let line = |field: &str| {
+            text.find(&format!("\"{field}\""))
+                .map_or(1, |at| text[..at].matches('\n').count() + 1)
+        };
+        let n = self.names.len();
+        if n == 0 {
+            bail!(
+                "{}:{}: field `names`: no parameter",
+                path.display(),
+                line("names")
+            );
+        }
+        let lists = [
+            ("mle", Some(self.mle.len())),
+            ("sd", Some(self.sd.len())),
+            ("truth", self.truth.as_ref().map(Vec::len)),
+        ];
+        for (field, len) in lists {
+            if let Some(len) = len.filter(|&len| len != n) {
+                bail!(
+                    "{}:{}: field `{field}`: {len} entries, {n} expected (one per parameter of \
+                     `names`)",
+                    path.display(),
+                    line(field)
+                );
+            }
+        }
+        Ok(())
     }
 
     /// θ̂'s error relative to the truth, per parameter (None without a truth).

@@ -18,7 +18,8 @@
 //!   over seeds, the information of a record;
 //! - [`field_study`]: candidate models of real records, selected on held-out records;
 //! - [`cluster`]: any study as a Slurm job array (submit, status, resubmit, finish);
-//! - [`calibration`] and [`coverage`]: coverage of credible intervals over a sweep with known truth.
+//! - [`calibration`] and [`coverage`]: coverage of credible intervals over a sweep with known truth;
+//! - [`fuzz`]: the fuzz driver of the command line and the Python package (`cargo xtask fuzz`).
 
 pub mod calibration;
 pub mod cli;
@@ -32,6 +33,7 @@ pub mod error;
 pub mod excitations;
 pub mod field_study;
 pub mod foreign;
+pub mod fuzz;
 pub mod headline;
 pub mod information;
 pub mod likelihood;

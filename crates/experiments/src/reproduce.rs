@@ -131,8 +131,6 @@ pub fn reproduce(opts: &Options) -> Result<Done> {
     let sweep_s = start.elapsed().as_secs_f64();
 
     crate::table1::write(&opts.out.join("table1"))?;
-    draw(opts, &studies, &records)?;
-    crate::discretisation::draw(&opts.out, &records)?;
     let mut summary: BTreeMap<&str, Vec<AlgorithmStats>> = STUDIES
         .iter()
         .map(|name| {
@@ -153,13 +151,20 @@ pub fn reproduce(opts: &Options) -> Result<Done> {
             coverage.insert(name, c);
         }
     }
-    if let Some(c) = coverage.get("fig7") {
-        crate::calibration::coverage_figure(
-            &c.calibration,
-            &opts.out.join("fig7_coverage.svg"),
-            "Fig. 7 sweep — coverage of central credible intervals",
-        )?;
-    }
+    // Every figure is drawn aside and put in place whole (an interrupted reproduction leaves
+    // each figure as it was or complete; a resumed one draws them all again from the records).
+    identify::plot::figures_in_place(&opts.out, |dir| {
+        draw(dir, &studies, &records)?;
+        crate::discretisation::draw(dir, &records)?;
+        if let Some(c) = coverage.get("fig7") {
+            crate::calibration::coverage_figure(
+                &c.calibration,
+                &dir.join("fig7_coverage.svg"),
+                "Fig. 7 sweep — coverage of central credible intervals",
+            )?;
+        }
+        Ok(())
+    })?;
     summary.extend(crate::discretisation::summary(&records));
     let total_s = start.elapsed().as_secs_f64();
     write_json(
@@ -198,12 +203,13 @@ pub fn reproduce(opts: &Options) -> Result<Done> {
     Ok(done)
 }
 
+/// Draws the paper's figures from the records into `dir`.
 fn draw(
-    opts: &Options,
+    dir: &Path,
     studies: &BTreeMap<&str, Study>,
     records: &BTreeMap<&str, Vec<RunRecord>>,
 ) -> Result<()> {
-    let fig = |name: &str| opts.out.join(format!("{name}.svg"));
+    let fig = |name: &str| dir.join(format!("{name}.svg"));
     let first = |study: &str, alg: Algorithm| -> Option<&RunRecord> {
         records[study]
             .iter()

@@ -608,8 +608,10 @@ pub(crate) fn cost_dimension(c: &Cell) -> usize {
 fn write_outputs(opts: &Options, study: &Study, cells: &[Cell]) -> Result<()> {
     let out = &opts.out;
     let fits = cost_fits(cells);
-    figures::cost(&fits, &out.join("cost_vs_dimension.svg"))?;
-    figures::accuracy(cells, &out.join("accuracy_vs_storeys.svg"))?;
+    identify::plot::figures_in_place(out, |dir| {
+        figures::cost(&fits, &dir.join("cost_vs_dimension.svg"))?;
+        figures::accuracy(cells, &dir.join("accuracy_vs_storeys.svg"))
+    })?;
     let unsupported: Vec<String> = study
         .sweep
         .structures

@@ -298,7 +298,7 @@ pub fn run(args: &Options) -> Result<Option<String>> {
         "runs": { "executed": outcome.executed, "reused": outcome.reused, "failed": outcome.failed },
         "wall_s": start.elapsed().as_secs_f64(),
     }))?;
-    figures(&spreads, &args.out)?;
+    identify::plot::figures_in_place(&args.out, |dir| figures(&spreads, dir).map(|_| ()))?;
     let mut report = markdown(
         &study.name,
         &study.description,

@@ -55,6 +55,22 @@ fn check_filter(dir: &Path, bytes: &[u8]) -> Result<(), TestCaseError> {
     }
 }
 
+/// An information limit (`sysid information --limit`): read, then used as a summary and a
+/// table, or refused naming the file.
+fn check_limit(dir: &Path, bytes: &[u8]) -> Result<(), TestCaseError> {
+    use experiments::information::{table, InformationLimit};
+    let path = dir.join("lim.json");
+    std::fs::write(&path, bytes).unwrap();
+    match InformationLimit::read(&path) {
+        Ok(l) => {
+            prop_assert_eq!(l.summaries().len(), l.names.len());
+            prop_assert!(table(&l, &[]).is_ok());
+            Ok(())
+        }
+        Err(e) => names(&format!("{e:#}"), &path),
+    }
+}
+
 fn study_seeds() -> Vec<Vec<u8>> {
     ["fig4", "fig5", "fig6", "fig7", "fig8"]
         .iter()
@@ -110,16 +126,16 @@ fn fuzz_filter_configs() {
 fn corpus_inputs_are_handled() {
     let (_tmp, dir) = scratch("config-corpus");
     let mut count = 0;
-    for target in ["study", "filter"] {
+    for target in ["study", "filter", "information-limit"] {
         let corpus = Path::new(env!("CARGO_MANIFEST_DIR"))
             .join("tests/fuzz_corpus")
             .join(target);
         for file in fuzz_common::corpus(&corpus) {
             let bytes = std::fs::read(&file).unwrap();
-            let r = if target == "study" {
-                check_study(&dir, &bytes)
-            } else {
-                check_filter(&dir, &bytes)
+            let r = match target {
+                "study" => check_study(&dir, &bytes),
+                "filter" => check_filter(&dir, &bytes),
+                _ => check_limit(&dir, &bytes),
             };
             if let Err(e) = r {
                 panic!("{}: {e}", file.display());

@@ -63,6 +63,44 @@ pub fn draw_in_place(out: &Path, draw: impl FnOnce(&Path) -> Result<Plotted>) ->
     placed
 }
 
+/// Runs `draw` on a fresh hidden directory of `out` and puts every file it drew there in place
+/// in `out`, each checked to be a complete SVG document and renamed whole, as [`plot`] does:
+/// the one way the figures of the studies (`sysid reproduce`, `scaling`, `excitations`,
+/// `study`) reach their directory. Returns the figures put in place.
+pub fn figures_in_place(
+    out: &Path,
+    draw: impl FnOnce(&Path) -> Result<()>,
+) -> Result<Vec<PathBuf>> {
+    let placed = draw_in_place(out, |staging| {
+        draw(staging)?;
+        Ok(Plotted {
+            written: files_under(staging)?,
+            skipped: Vec::new(),
+        })
+    })?;
+    Ok(placed.written)
+}
+
+/// The files under `dir`, recursively, in name order.
+fn files_under(dir: &Path) -> Result<Vec<PathBuf>> {
+    let mut files = Vec::new();
+    let mut stack = vec![dir.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        for e in std::fs::read_dir(&d).with_context(|| format!("listing {}", d.display()))? {
+            let p = e
+                .with_context(|| format!("listing {}", d.display()))?
+                .path();
+            if p.is_dir() {
+                stack.push(p);
+            } else {
+                files.push(p);
+            }
+        }
+    }
+    files.sort();
+    Ok(files)
+}
+
 /// Prefix of the directory figures are drawn in before they are put in place.
 const STAGING: &str = ".figures.tmp";
 

@@ -318,7 +318,7 @@ pub enum DatasetError {
         #[source]
         source: std::io::Error,
     },
-    #[error("{file}:{line}:{column}: {message}")]
+    #[error("{file}:{line}:{column}: {}", crate::readers::clipped(.message))]
     Json {
         file: PathBuf,
         line: usize,
@@ -336,7 +336,11 @@ pub enum DatasetError {
     NotADataset { dir: PathBuf, message: String },
     #[error("{file}: {message}")]
     Checksum { file: PathBuf, message: String },
-    #[error("{file}:{line}: field `{field}`: {message}")]
+    #[error(
+        "{file}:{line}: field `{}`: {}",
+        crate::readers::quoted(.field),
+        crate::readers::clipped(.message)
+    )]
     Mismatch {
         file: PathBuf,
         line: usize,

@@ -12,6 +12,34 @@ use crate::limits::{self, LimitError};
 use std::path::{Path, PathBuf};
 use thiserror::Error;
 
+/// Characters of a value, field name or line of an input that an error message quotes.
+const QUOTED_CHARS: usize = 60;
+/// Characters of a reader's message (which may quote a value) that an error shows.
+const MESSAGE_CHARS: usize = 400;
+
+/// `text` from an input (a value, a field name, a line) as an error message quotes it: whole
+/// up to 60 characters, else its start and its length. A line of a million bytes, or brackets
+/// nested 100,000 deep, is not echoed whole (the TOML readers cut their messages too).
+pub fn quoted(text: &str) -> std::borrow::Cow<'_, str> {
+    cut(text, QUOTED_CHARS)
+}
+
+/// A reader's message about an input, cut to 400 characters when longer (with its length).
+pub fn clipped(text: &str) -> std::borrow::Cow<'_, str> {
+    cut(text, MESSAGE_CHARS)
+}
+
+fn cut(text: &str, max: usize) -> std::borrow::Cow<'_, str> {
+    match text.char_indices().nth(max) {
+        None => std::borrow::Cow::Borrowed(text),
+        Some((at, _)) => std::borrow::Cow::Owned(format!(
+            "{}… ({} characters)",
+            &text[..at],
+            text.chars().count()
+        )),
+    }
+}
+
 /// Units of the acceleration column of a CSV record (declared by the caller).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub enum Units {
@@ -49,14 +77,14 @@ pub enum ReadError {
         expected: usize,
         found: usize,
     },
-    #[error("{file}:{line}: field `{field}`: `{value}` is not a number")]
+    #[error("{file}:{line}: field `{}`: `{}` is not a number", quoted(.field), quoted(.value))]
     NotNumeric {
         file: PathBuf,
         line: usize,
         field: String,
         value: String,
     },
-    #[error("{file}:{line}: field `{field}`: non-finite value `{value}`")]
+    #[error("{file}:{line}: field `{}`: non-finite value `{}`", quoted(.field), quoted(.value))]
     NonFinite {
         file: PathBuf,
         line: usize,
@@ -87,14 +115,14 @@ pub enum ReadError {
         declared: usize,
         found: usize,
     },
-    #[error("{file}:{line}: field `{field}`: {message}")]
+    #[error("{file}:{line}: field `{}`: {}", quoted(.field), clipped(.message))]
     Header {
         file: PathBuf,
         line: usize,
         field: String,
         message: String,
     },
-    #[error("{file}:{line}: field `{field}`: {source}")]
+    #[error("{file}:{line}: field `{}`: {source}", quoted(.field))]
     Limit {
         file: PathBuf,
         line: usize,
@@ -558,6 +586,26 @@ pub fn parse_at2(file: &Path, text: &str) -> Result<GroundMotion, ReadError> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A value of 100,000 characters (brackets a fuzz run inserted into a CSV cell, a header
+    /// line of a million digits) is quoted by its start and length, not echoed whole.
+    #[test]
+    fn long_values_are_quoted_by_their_start_and_length() {
+        let f = Path::new("exc.csv");
+        let long = format!("-0.03{}", "{".repeat(100_000));
+        let text = format!("t,acc\n0,0.1\n0.01,{long}\n");
+        let e = parse_csv(f, &text, Units::G).unwrap_err().to_string();
+        assert!(e.starts_with("exc.csv:3: field `acc`: `-0.03{{{{"), "{e}");
+        assert!(e.contains("… (100005 characters)") && e.len() < 200, "{e}");
+        let header = format!("head\nline 2\nline 3\n{}\n0.1\n", "9".repeat(1_000_000));
+        let e = parse_at2(Path::new("rec.AT2"), &header)
+            .unwrap_err()
+            .to_string();
+        assert!(e.starts_with("rec.AT2:4: field `NPTS`"), "{e}");
+        assert!(e.len() < 600, "{} characters: {}", e.len(), &e[..200]);
+        // Short values are quoted whole.
+        assert_eq!(quoted("1e400"), "1e400");
+    }
 
     #[test]
     fn csv_with_and_without_header() {

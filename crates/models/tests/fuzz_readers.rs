@@ -33,11 +33,21 @@ fn corpus_dir(target: &str) -> PathBuf {
 }
 
 /// The error message names `file`.
+/// The longest message a refusal may have: a value of the input is quoted by its start and
+/// length, never echoed whole (a cell of 100,000 brackets was).
+const LONGEST_MESSAGE: usize = 1_000;
+
 fn names(msg: &str, file: &Path) -> Result<(), TestCaseError> {
     prop_assert!(
         msg.contains(&file.display().to_string()),
         "the message does not name {}: {msg}",
         file.display()
+    );
+    prop_assert!(
+        msg.len() <= LONGEST_MESSAGE,
+        "a message of {} characters: {}…",
+        msg.len(),
+        msg.chars().take(300).collect::<String>()
     );
     Ok(())
 }
@@ -160,6 +170,12 @@ fn check_dir(dir: &Path, files: &[&str]) -> Result<(), TestCaseError> {
                     .iter()
                     .any(|f| msg.contains(&dir.join(f).display().to_string())),
                 "the message names none of {files:?}: {msg}"
+            );
+            prop_assert!(
+                msg.len() <= LONGEST_MESSAGE,
+                "a message of {} characters: {}…",
+                msg.len(),
+                msg.chars().take(300).collect::<String>()
             );
             Ok(())
         }

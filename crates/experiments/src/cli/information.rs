@@ -45,7 +45,30 @@ fn read_records(paths: &[PathBuf]) -> Result<Vec<RunRecord>> {
     paths.iter().map(|p| crate::sweep::read_record(p)).collect()
 }
 
+/// Checks `--out` and `--table` before any work: each may be replaced, and neither is one of
+/// the files the command reads.
+fn check_outputs(args: &Args) -> Result<()> {
+    let mut inputs: Vec<(&str, &std::path::Path)> = Vec::new();
+    if let Some(d) = &args.data {
+        inputs.push(("--data", d));
+    }
+    for (flag, p) in [("--start", &args.start), ("--config", &args.config)] {
+        if let Some(p) = p {
+            inputs.push((flag, p));
+        }
+    }
+    inputs.extend(args.limit.iter().map(|p| ("--limit", p.as_path())));
+    inputs.extend(args.records.iter().map(|p| ("a record", p.as_path())));
+    for (flag, out) in [("--out", &args.out), ("--table", &args.table)] {
+        if let Some(out) = out {
+            identify::record::atomic::check_output(out, flag, &inputs)?;
+        }
+    }
+    Ok(())
+}
+
 pub fn run(args: Args) -> Result<()> {
+    check_outputs(&args)?;
     let records = read_records(&args.records)?;
     let text = if !args.limit.is_empty() {
         let limits = args
@@ -72,9 +95,11 @@ pub fn run(args: Args) -> Result<()> {
         }
         table(&limit, &records)?
     };
-    print!("{text}");
+    // Written before it is printed: a reader of standard output that has gone ends the process
+    // at the print (SIGPIPE), and the file asked for is there by then.
     if let Some(out) = &args.table {
         crate::sweep::write_bytes_atomic(out, text.as_bytes())?;
     }
+    print!("{text}");
     Ok(())
 }

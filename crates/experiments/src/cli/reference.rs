@@ -64,6 +64,18 @@ fn parse_estimator(s: &str) -> Result<Algorithm, String> {
 }
 
 pub fn run(args: Args) -> Result<()> {
+    // Checked before the chain runs: a refused --out costs no filter run, and the record never
+    // replaces a file the chain reads.
+    let mut inputs: Vec<(&str, &std::path::Path)> = vec![("--data", &args.data)];
+    for (flag, p) in [
+        ("--config", &args.config),
+        ("--start-from", &args.start_from),
+    ] {
+        if let Some(p) = p {
+            inputs.push((flag, p));
+        }
+    }
+    identify::record::atomic::check_output(&args.out, "--out", &inputs)?;
     let request = ReferenceRequest {
         data: args.data,
         estimator: args.estimator,
@@ -77,6 +89,9 @@ pub fn run(args: Args) -> Result<()> {
         config: args.config,
     };
     let record = reference_posterior(&request, &mut |line| eprintln!("{line}"))?;
+    // Written before the table is printed: a reader of standard output that has gone ends the
+    // process at the print (SIGPIPE), and the record asked for is there by then.
+    write_reference(&args.out, &record)?;
     println!(
         "{:<8} {:>12} {:>10} {:>24} {:>8} {:>10}",
         "param", "mean", "s.d.", "95% interval", "ESS", "truth"
@@ -101,7 +116,7 @@ pub fn run(args: Args) -> Result<()> {
     for w in &record.warnings {
         eprintln!("warning: {w}");
     }
-    write_reference(&args.out, &record)
+    Ok(())
 }
 
 /// Arguments of `sysid compare-reference`.
@@ -122,6 +137,12 @@ pub struct CompareArgs {
 
 /// `sysid compare-reference`.
 pub fn compare(args: CompareArgs) -> Result<()> {
+    if let Some(out) = &args.out {
+        let mut inputs: Vec<(&str, &std::path::Path)> = Vec::new();
+        inputs.extend(args.reference.iter().map(|p| ("--reference", p.as_path())));
+        inputs.extend(args.records.iter().map(|p| ("a record", p.as_path())));
+        identify::record::atomic::check_output(out, "--out", &inputs)?;
+    }
     let md = crate::reference::compare_files(&args.reference, &args.records, &mut |w| {
         eprintln!("warning: {w}")
     })?;

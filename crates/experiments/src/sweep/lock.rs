@@ -80,10 +80,8 @@ impl DirLock {
                 Err(e) if e.kind() == ErrorKind::AlreadyExists => {}
                 Err(e) => return Err(e).with_context(|| format!("creating {}", path.display())),
             }
-            let found = match fs::read_to_string(&path) {
-                Ok(t) => t,
-                Err(e) if e.kind() == ErrorKind::NotFound => continue,
-                Err(e) => return Err(e).with_context(|| format!("reading {}", path.display())),
+            let Some(found) = read_lock(&path, dir)? else {
+                continue;
             };
             let Ok(holder) = serde_json::from_str::<Holder>(&found) else {
                 bail!(
@@ -138,6 +136,32 @@ impl Drop for DirLock {
         if ours {
             let _ = fs::remove_file(&self.path);
         }
+    }
+}
+
+/// The text of the lock `path` of `dir`, or `None` when it has gone meanwhile. A lock that is
+/// not a regular file (a named pipe, whose read would wait for a writer; a link; a directory)
+/// was not written by `sysid` and is refused, naming it; a regular one is read within the
+/// input limits.
+fn read_lock(path: &Path, dir: &Path) -> Result<Option<String>> {
+    match fs::symlink_metadata(path) {
+        Ok(m) if !m.file_type().is_file() => bail!(
+            "{} is {}, not a lock written by sysid; if no sysid is writing to {}, remove it",
+            path.display(),
+            models::readers::file_kind(m.file_type()),
+            dir.display()
+        ),
+        Err(e) if e.kind() == ErrorKind::NotFound => return Ok(None),
+        _ => {}
+    }
+    match models::readers::read_input_text(path) {
+        Ok(t) => Ok(Some(t)),
+        Err(models::readers::ReadError::Io { source, .. })
+            if source.kind() == ErrorKind::NotFound =>
+        {
+            Ok(None)
+        }
+        Err(e) => Err(e).with_context(|| format!("reading the lock of {}", dir.display())),
     }
 }
 
@@ -303,6 +327,33 @@ mod tests {
         drop(lock);
         assert!(!dir.join(LOCK_FILE).exists(), "released lock left behind");
         DirLock::acquire(&dir).unwrap();
+    }
+
+    /// A lock that is a named pipe, a link to nothing or a directory is refused by name at
+    /// once (a named pipe made `merge` wait for a writer forever); it is left as it was.
+    #[test]
+    #[cfg(unix)]
+    fn a_lock_that_is_not_a_regular_file_is_refused_at_once() {
+        let (_tmp, dir) = temp("special");
+        fs::create_dir_all(&dir).unwrap();
+        let lock = dir.join(LOCK_FILE);
+        let fifo = std::ffi::CString::new(lock.to_str().unwrap()).unwrap();
+        // SAFETY: a NUL-terminated path that outlives the call.
+        assert_eq!(unsafe { libc::mkfifo(fifo.as_ptr(), 0o644) }, 0);
+        let e = DirLock::acquire(&dir).unwrap_err().to_string();
+        assert!(e.contains("named pipe") && e.contains(LOCK_FILE), "{e}");
+        fs::remove_file(&lock).unwrap();
+        std::os::unix::fs::symlink("nowhere", &lock).unwrap();
+        let e = DirLock::acquire(&dir).unwrap_err().to_string();
+        assert!(e.contains("symbolic link"), "{e}");
+        assert!(fs::symlink_metadata(&lock)
+            .unwrap()
+            .file_type()
+            .is_symlink());
+        fs::remove_file(&lock).unwrap();
+        fs::create_dir(&lock).unwrap();
+        let e = DirLock::acquire(&dir).unwrap_err().to_string();
+        assert!(e.contains("a directory"), "{e}");
     }
 
     #[test]

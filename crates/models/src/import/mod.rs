@@ -34,21 +34,25 @@ pub use crate::dataset::replace::IMPORT;
 pub enum ImportError {
     #[error(transparent)]
     Read(#[from] ReadError),
-    #[error("{file}:{line}: key `{key}`: {message}")]
+    #[error(
+        "{file}:{line}: key `{}`: {}",
+        crate::readers::quoted(.key),
+        crate::readers::clipped(.message)
+    )]
     Map {
         file: PathBuf,
         line: usize,
         key: String,
         message: String,
     },
-    #[error("{file}:{line}: {channel}: {message}")]
+    #[error("{file}:{line}: {channel}: {}", crate::readers::clipped(.message))]
     Refused {
         file: PathBuf,
         line: usize,
         channel: String,
         message: String,
     },
-    #[error("{channel}: {message}")]
+    #[error("{channel}: {}", crate::readers::clipped(.message))]
     Value { channel: String, message: String },
     #[error("no span of time is covered by every channel ({channels}): nothing to import")]
     NoCommonSpan { channels: String },
