@@ -132,7 +132,7 @@ enum Task {
     },
     /// Hostile inputs against every sysid subcommand (and the Python package with --python):
     /// fails on a crash, a hang, a write outside a probe's outputs or a refusal without a
-    /// message; reproducers in target/fuzz/failures-seed<N>/.
+    /// message; reproducers in `target/fuzz/failures-seed<N>/`.
     Fuzz(fuzz::FuzzArgs),
     /// Run the criterion benchmarks (release) and append the medians to results/perf/history.csv.
     Bench {

@@ -147,9 +147,25 @@ pub(crate) fn cpu_path(records: &Path, id: &str) -> PathBuf {
     records.join(format!("{id}.cpu"))
 }
 
-/// The CPU seconds of record `id`, if its file exists and holds a positive number.
+/// Bytes of a CPU-time file read at most: one number.
+const CPU_FILE_BYTES: u64 = 64;
+
+/// The CPU seconds of record `id`, if its file is a regular file that holds a positive
+/// number. Anything else counts as no CPU time and is not waited on or read far: a named pipe
+/// there made a report wait forever.
 pub(crate) fn read_cpu(records: &Path, id: &str) -> Option<f64> {
-    let text = std::fs::read_to_string(cpu_path(records, id)).ok()?;
+    use std::io::Read;
+    let path = cpu_path(records, id);
+    let meta = std::fs::metadata(&path).ok()?;
+    if !meta.is_file() || meta.len() > CPU_FILE_BYTES {
+        return None;
+    }
+    let mut text = String::new();
+    std::fs::File::open(&path)
+        .ok()?
+        .take(CPU_FILE_BYTES)
+        .read_to_string(&mut text)
+        .ok()?;
     text.trim()
         .parse::<f64>()
         .ok()
@@ -636,6 +652,31 @@ fn write_outputs(opts: &Options, study: &Study, cells: &[Cell]) -> Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A CPU-time file that is a named pipe, a directory, a 3 GiB sparse file or not a number
+    /// counts as none, at once (a named pipe made `scaling --report-only` wait forever).
+    #[test]
+    #[cfg(unix)]
+    fn cpu_files_that_are_not_a_number_count_as_none_at_once() {
+        let tmp = tempfile::tempdir().unwrap();
+        let d = tmp.path();
+        std::fs::write(cpu_path(d, "ok"), "0.5\n").unwrap();
+        assert_eq!(read_cpu(d, "ok"), Some(0.5));
+        std::fs::write(cpu_path(d, "text"), "fast").unwrap();
+        std::fs::create_dir(cpu_path(d, "dir")).unwrap();
+        std::fs::File::create(cpu_path(d, "huge"))
+            .unwrap()
+            .set_len(3 << 30)
+            .unwrap();
+        let fifo = std::ffi::CString::new(cpu_path(d, "fifo").to_str().unwrap()).unwrap();
+        // SAFETY: a NUL-terminated path that outlives the call.
+        assert_eq!(unsafe { libc::mkfifo(fifo.as_ptr(), 0o644) }, 0);
+        let started = std::time::Instant::now();
+        for id in ["text", "dir", "huge", "fifo", "missing"] {
+            assert_eq!(read_cpu(d, id), None, "{id}");
+        }
+        assert!(started.elapsed() < std::time::Duration::from_secs(5));
+    }
 
     #[test]
     fn dimensions_of_the_paper_chain() {

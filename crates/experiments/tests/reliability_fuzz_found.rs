@@ -2,8 +2,10 @@
 //! kept as tests: outputs of `reference`, `information` and `compare-reference` written over
 //! the command's own inputs, a lock file that is a named pipe (`merge` waited forever), files
 //! asked for that a closed standard output kept from being written, refusals that quoted a
-//! mutated value of 100,000 characters whole, and an information limit cut short that made
-//! `information --limit` panic. (A figure name that is a named pipe is in
+//! mutated value of 100,000 characters whole, an information limit cut short that made
+//! `information --limit` panic, a storey count of 2⁶³ that made `filter` panic on field data,
+//! and a scaling run's CPU-time file that was a named pipe (`scaling --report-only` waited
+//! forever). (A figure name that is a named pipe is in
 //! `reliability_figures.rs`; values quoted by the readers in `models`' fuzz corpus.)
 #![cfg(unix)]
 
@@ -380,4 +382,115 @@ fn an_information_limit_of_another_shape_is_refused_by_field() {
             "{field}: {err}"
         );
     }
+}
+
+/// `filter` on field data with `--storeys 9223372036854775808` (or a `[structure]` that says
+/// so) panicked (capacity overflow: one mass per storey); the count is refused by name.
+#[test]
+fn a_storey_count_beyond_the_limit_is_refused_on_field_data() {
+    let (_tmp, dir) = common::temp_dir("sysid-found-storeys-");
+    ok(&run(
+        &["simulate", "--duration", "0.5", "--seed", "1", "--out", "d"],
+        &dir,
+    ));
+    std::fs::create_dir(dir.join("field")).unwrap();
+    std::fs::copy(dir.join("d/measured.csv"), dir.join("field/measured.csv")).unwrap();
+    for storeys in ["9223372036854775808", "201", "0"] {
+        let o = run(
+            &[
+                "filter",
+                "--data",
+                "field",
+                "--algorithm",
+                "mpf-ekf2",
+                "--particles",
+                "20",
+                "--storeys",
+                storeys,
+                "--hysteretic",
+                "1",
+                "--masses",
+                "1",
+                "--measurement",
+                "relative",
+                "--out",
+                "r.json",
+            ],
+            &dir,
+        );
+        refused(&o, &["--storeys"]);
+    }
+    std::fs::write(
+        dir.join("big.toml"),
+        "[structure]\nstoreys = 9223372036854775807\nhysteretic = [1]\nmasses = [1.0]\n\
+         measurement = \"relative\"\n",
+    )
+    .unwrap();
+    let o = run(
+        &[
+            "filter",
+            "--data",
+            "field",
+            "--algorithm",
+            "mpf-ekf2",
+            "--config",
+            "big.toml",
+            "--out",
+            "r.json",
+        ],
+        &dir,
+    );
+    refused(&o, &["storeys", "exceeds the maximum 200"]);
+}
+
+/// A scaling study's report from records whose CPU-time file is a named pipe: the time counts
+/// as unknown and the report is written, at once (it waited on the pipe forever).
+#[test]
+fn a_cpu_time_file_that_is_a_named_pipe_is_not_waited_on() {
+    let (_tmp, dir) = common::temp_dir("sysid-found-cpu-");
+    std::fs::write(
+        dir.join("sc.toml"),
+        "name = \"scaling\"\ndescription = \"cpu test\"\n[data]\npreset = \"building-chain\"\n\
+         duration = 0.5\n[sweep]\nalgorithms = [\"mpf-ekf2\"]\nruns = 1\nmaster_seed = 5\n\
+         particles = [20]\n[filter]\ntrace_every = 0\nloop_every = 0\nvalidate = false\n\
+         [[sweep.structures]]\nlabel = \"n3\"\nstoreys = 3\nscale = 50.0\n",
+    )
+    .unwrap();
+    let args = [
+        "scaling",
+        "--config",
+        "sc.toml",
+        "--out",
+        "sc",
+        "--threads",
+        "1",
+    ];
+    ok(&run(&args, &dir));
+    let cpu = std::fs::read_dir(dir.join("sc/records"))
+        .unwrap()
+        .flatten()
+        .map(|e| e.path())
+        .find(|p| p.extension().is_some_and(|x| x == "cpu"))
+        .expect("a CPU-time file");
+    std::fs::remove_file(&cpu).unwrap();
+    let o = Command::new("mkfifo").arg(&cpu).output().unwrap();
+    assert!(o.status.success());
+    let started = Instant::now();
+    let report = [&args[..], &["--report-only"]].concat();
+    let mut child = sysid()
+        .args(&report)
+        .current_dir(&dir)
+        .stdin(Stdio::null())
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    while child.try_wait().unwrap().is_none() {
+        if started.elapsed() > Duration::from_secs(20) {
+            child.kill().unwrap();
+            panic!("scaling --report-only still waits on the named pipe after 20 s");
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    ok(&child.wait_with_output().unwrap());
 }

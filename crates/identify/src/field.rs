@@ -207,6 +207,10 @@ pub fn resolve(
         );
     }
     let n = given.storeys.expect("checked");
+    // Bounded before anything is sized from it: one mass for every storey of 2⁶³ storeys was
+    // a capacity-overflow panic.
+    models::limits::check_storeys(n)
+        .map_err(|e| crate::error::invalid!("{}: {e} storeys", name("storeys")))?;
     let d = StructureDescription {
         storeys: n,
         masses: expand_masses(&given.masses.expect("checked"), n),

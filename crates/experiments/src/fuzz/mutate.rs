@@ -119,7 +119,7 @@ pub(crate) fn mutate(bytes: &mut Vec<u8>, rng: &mut FuzzRng) -> String {
         1 => flip_bits(bytes, rng),
         2 => delete_span(bytes, rng),
         3 => insert_token(bytes, rng),
-        4 | 5 | 6 => replace_number(bytes, rng),
+        4..=6 => replace_number(bytes, rng),
         7 => long_line(bytes, rng),
         8 => duplicate_line(bytes, rng),
         9 => delete_line(bytes, rng),

@@ -97,6 +97,11 @@ fn load_dataset(s: &Seeds, rng: &mut FuzzRng) -> Probe {
     data(&mut p, s, rng);
     if rng.random_bool(0.5) {
         p.py_output("out", "o", true, DATASET);
+        // `Dataset.write` replaces a data-set directory with the data set it holds, as
+        // `simulate --out` does: the one it was loaded from too.
+        for slot in p.inputs.iter_mut() {
+            slot.kept = false;
+        }
     }
     p
 }
@@ -298,10 +303,11 @@ fn loglik(s: &Seeds, rng: &mut FuzzRng) -> Probe {
 
 const RECORDS: &str = r#"    if P.get("parse"):
         import os, stat
-        # The script's own read (parse_record takes text): only of a regular file, which the
-        # reader of sysid_mpf would have checked.
-        if not stat.S_ISREG(os.stat(P["record"]).st_mode):
-            raise ValueError(f"{P['record']}: not a regular file (the probe's own check)")
+        # The script's own read (parse_record takes text): only of a regular file of a size
+        # the reader of sysid_mpf would read.
+        st = os.stat(P["record"])
+        if not stat.S_ISREG(st.st_mode) or st.st_size > 1 << 26:
+            raise ValueError(f"{P['record']}: not a regular file of text (the probe's own check)")
         with open(P["record"], "rb") as f:
             r = sm.parse_record(f.read().decode("utf-8", "replace"))
     else:
