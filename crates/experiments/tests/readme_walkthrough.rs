@@ -1,7 +1,9 @@
 //! The README's walk-through runs as written, from a scratch directory: every `sysid` command of
 //! its "A first run" and "Your own recording" blocks, in order, in a fresh temporary directory
 //! (so the project's own files are found from elsewhere, and nothing is written into the
-//! checkout).
+//! checkout). The numbers the README states of those runs, and of the foreign corpus, are the
+//! runs' own: each is found, at the README's precision, in what the commands printed and wrote or
+//! in the report it cites.
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -42,6 +44,7 @@ fn the_readme_walkthrough_runs_from_a_scratch_directory() {
         .tempdir()
         .unwrap();
     let mut ran = 0;
+    let mut printed = String::new();
     for line in first[2..].iter().chain(&own) {
         let words: Vec<&str> = line.split_whitespace().collect();
         assert_eq!(
@@ -58,6 +61,8 @@ fn the_readme_walkthrough_runs_from_a_scratch_directory() {
             "{line}\n{}",
             String::from_utf8_lossy(&out.stderr)
         );
+        printed.push_str(&String::from_utf8_lossy(&out.stdout));
+        printed.push_str(&String::from_utf8_lossy(&out.stderr));
         ran += 1;
     }
     assert_eq!(ran, 6);
@@ -65,4 +70,123 @@ fn the_readme_walkthrough_runs_from_a_scratch_directory() {
     for p in ["d", "r.json", "r-figures", "frame-northridge", "frame.json"] {
         assert!(scratch.path().join(p).exists(), "{p}");
     }
+    // "Measured on this frame": from the frame's commands, their record and the study's report.
+    let record = std::fs::read_to_string(scratch.path().join("frame.json")).unwrap();
+    let real = std::fs::read_to_string(root().join("results/real/REPORT.md")).unwrap();
+    let frame = between(&readme, "Measured on this frame:", "The whole comparison");
+    assert_numbers_found(frame, &[&printed, &record, &real], 8);
+    // The foreign corpus: from its report.
+    let foreign = std::fs::read_to_string(root().join("results/foreign/REPORT.md")).unwrap();
+    let corpus = between(
+        &readme,
+        "On structures nobody tuned it for",
+        "results/foreign/REPORT.md",
+    );
+    assert_numbers_found(corpus, &[&foreign], 2);
+}
+
+fn between<'a>(text: &'a str, start: &str, end: &str) -> &'a str {
+    let after = text
+        .split_once(start)
+        .unwrap_or_else(|| panic!("README has no {start:?}"))
+        .1;
+    after
+        .split_once(end)
+        .unwrap_or_else(|| panic!("README has no {end:?} after {start:?}"))
+        .0
+}
+
+/// The numbers of a text in order: (as written, value, start, end).
+fn numbers(text: &str) -> Vec<(String, f64, usize, usize)> {
+    let mut out = Vec::new();
+    let mut cur = String::new();
+    let mut start = 0;
+    for (i, ch) in text
+        .char_indices()
+        .chain(std::iter::once((text.len(), ' ')))
+    {
+        if ch.is_ascii_digit() || (ch == '.' && !cur.is_empty() && !cur.contains('.')) {
+            if cur.is_empty() {
+                start = i;
+            }
+            cur.push(ch);
+            continue;
+        }
+        let t = cur.trim_end_matches('.').to_string();
+        if let Ok(v) = t.parse::<f64>() {
+            out.push((t.clone(), v, start, start + t.len()));
+        }
+        cur.clear();
+    }
+    out
+}
+
+/// The README's claims as groups: numbers written together ("67.7 / 73.7 / 75.4", "0.097 [0.000,
+/// 0.612]"), nothing but punctuation between them.
+fn groups(text: &str) -> Vec<Vec<String>> {
+    let mut out: Vec<Vec<String>> = Vec::new();
+    let mut last_end = None;
+    for (t, _, start, end) in numbers(text) {
+        let joined = last_end
+            .is_some_and(|e: usize| text[e..start].chars().all(|c| " /,[]()–-".contains(c)));
+        match out.last_mut() {
+            Some(g) if joined => g.push(t),
+            _ => out.push(vec![t]),
+        }
+        last_end = Some(end);
+    }
+    out
+}
+
+/// Every group of numbers of `claims` that holds a number with a decimal point or of three digits
+/// or more (two-digit whole numbers alone — counts, dates — are not checked) is found in one of
+/// `sources` in that order, each within a few numbers of the one before and equal at the
+/// README's precision.
+fn assert_numbers_found(claims: &str, sources: &[&str], at_least: usize) {
+    let streams: Vec<Vec<f64>> = sources
+        .iter()
+        .map(|s| numbers(s).into_iter().map(|n| n.1).collect())
+        .collect();
+    let mut checked = 0;
+    for g in groups(claims) {
+        if !g.iter().any(|t| t.contains('.') || t.len() >= 3) {
+            continue;
+        }
+        checked += 1;
+        let same = |v: f64, t: &String| {
+            let decimals = t.split_once('.').map_or(0, |(_, d)| d.len());
+            format!("{v:.decimals$}") == *t
+        };
+        // In order, each within the next `GAP` numbers of the one before (a table row prints a
+        // mode's frequency, damping and measured peak before the next mode's).
+        const GAP: usize = 8;
+        let from = |s: &[f64], i: usize, k: usize| -> bool {
+            fn go(
+                s: &[f64],
+                i: usize,
+                k: usize,
+                g: &[String],
+                same: &dyn Fn(f64, &String) -> bool,
+            ) -> bool {
+                if k == g.len() {
+                    return true;
+                }
+                (i..(i + GAP).min(s.len()))
+                    .any(|j| same(s[j], &g[k]) && go(s, j + 1, k + 1, g, same))
+            }
+            go(s, i, k, &g, &same)
+        };
+        let found = streams
+            .iter()
+            .any(|s| (0..s.len()).any(|i| same(s[i], &g[0]) && from(s, i + 1, 1)));
+        assert!(
+            found,
+            "the README states {g:?}, which no output, record or report it cites holds in that \
+             order at that precision"
+        );
+    }
+    assert!(
+        checked >= at_least,
+        "{checked} groups checked in {claims:?}"
+    );
 }
