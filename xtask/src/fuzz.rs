@@ -50,9 +50,15 @@ pub fn run(
         0 => std::thread::available_parallelism().map_or(1, |n| n.get()),
         j => j,
     };
+    // Every probe runs in a directory of its own: a relative interpreter path (CI passes
+    // `target/python-ci/bin/python`) is made absolute from where the command was started.
+    let python = match a.python {
+        Some(p) if p.is_relative() => Some(std::env::current_dir()?.join(p)),
+        p => p,
+    };
     let opts = Options {
         sysid,
-        python: a.python,
+        python,
         repository: root.to_path_buf(),
         scratch: target.join("fuzz/scratch"),
         failures: target.join(format!("fuzz/failures-seed{}", a.seed)),
