@@ -16,33 +16,8 @@ use serde_json::{json, Value};
 
 use experiments::foreign;
 
-/// What a user knows of every building of the corpus (`sysid filter`'s minimal flags).
-const MINIMAL_FLAGS: [&str; 11] = [
-    "--algorithm",
-    "mpf-ekf2",
-    "--storeys",
-    "3",
-    "--hysteretic",
-    "none",
-    "--masses",
-    "1",
-    "--measurement",
-    "absolute",
-    "--seed",
-];
-
-/// The two ground motions: the identification's (El Centro 1940 × 3, `sysid simulate`'s
-/// default for 3 storeys) and the held-out one (Loma Prieta 1989, another earthquake).
-const GROUNDS: [(&str, &[&str]); 2] = [
-    ("identify", &[]),
-    (
-        "held-out",
-        &["--excitation", "loma-prieta-1989", "--duration", "31.18"],
-    ),
-];
-
-/// The master seed of the corpus's noise and of the identifications.
-const SEED: u64 = 49;
+/// The two ground motions: `sysid simulate`'s arguments besides [`foreign::GROUND`].
+const GROUNDS: [(&str, &[&str]); 2] = [("identify", &[]), ("held-out", &foreign::HELD_OUT_GROUND)];
 
 pub fn reproduce(
     root: &Path,
@@ -64,8 +39,11 @@ pub fn reproduce(
             let mut entry = json!({"case": case.name, "about": case.about});
             for (role, (ug, dt)) in GROUNDS.iter().map(|g| g.0).zip(&grounds) {
                 let clean = foreign::respond(&case.structure, ug, *dt);
-                let mut rng =
-                    core_filters::rng::stream(SEED, index as u64, &format!("foreign {role}"));
+                let mut rng = core_filters::rng::stream(
+                    foreign::SEED,
+                    index as u64,
+                    &format!("foreign {role}"),
+                );
                 let record = foreign::measure(&case.sensing, ug, clean, &mut rng);
                 let dir = root.join(out).join(case.name).join("data").join(role);
                 foreign::write(&record, *dt, &dir)
@@ -148,8 +126,8 @@ fn identify_case(root: &Path, sysid: &Path, case: &Path) -> Result<()> {
     let o = Command::new(sysid)
         .current_dir(root)
         .arg("filter")
-        .args(MINIMAL_FLAGS)
-        .arg(SEED.to_string())
+        .args(foreign::MINIMAL_FLAGS)
+        .args(["--seed", &foreign::SEED.to_string()])
         .arg("--data")
         .arg(case.join("data/identify"))
         .arg("--out")
@@ -208,11 +186,13 @@ fn tail(s: &str, lines: usize) -> String {
     v[v.len().saturating_sub(lines)..].join("\n")
 }
 
+/// Through the one atomic writer of the project (a temporary name renamed into place; never
+/// over a device, a pipe or a link).
 fn write_atomic(path: &Path, text: &str) -> Result<()> {
-    let tmp = path.with_extension("tmp");
-    fs::write(&tmp, text).with_context(|| format!("writing {}", tmp.display()))?;
-    fs::rename(&tmp, path).with_context(|| format!("renaming to {}", path.display()))?;
-    Ok(())
+    Ok(experiments::sweep::write_bytes_atomic(
+        path,
+        text.as_bytes(),
+    )?)
 }
 
 fn read_json(path: &Path) -> Result<Value> {
@@ -342,14 +322,15 @@ fn report(out: &Path) -> Result<String> {
     writeln!(
         s,
         "Written by `cargo xtask reproduce-foreign` from `summary.json`, the numbers it read from \
-         the files of the runs (`corpus.json`, and per case `identify.json` — the record of `sysid filter {} {SEED}` on the record of El \
+         the files of the runs (`corpus.json`, and per case `identify.json` — the record of `sysid filter {} --seed {}` on the record of El \
          Centro 1940 × 3 —, `held-out.json` — `sysid validate` of that record on the same \
          building under Loma Prieta 1989, kept out of the identification — and `srim.json`, SRIM \
          trained on the same record, its order chosen on it). The cases are described in \
          docs/foreign.md and simulated by `experiments::foreign` (3 floors, 200 Hz, 31.18 s, \
          5 % noise). Nothing was chosen on this corpus: it judges the defaults. Fits are free-run \
          fits per floor, 100 (1 − ‖y − ŷ‖/‖y − ȳ‖) %.\n",
-        MINIMAL_FLAGS.join(" ")
+        foreign::MINIMAL_FLAGS.join(" "),
+        foreign::SEED
     )?;
     writeln!(s, "| case | exit | physical | fit, identified record | SRIM (order) | fit, held-out record | SRIM | ground | true structure | band covers (held-out) |")?;
     writeln!(

@@ -24,6 +24,8 @@ use rand_distr::{Distribution, StandardNormal};
 
 use models::dataset::{load_dir, DatasetError, LoadedDataset};
 
+use crate::error::{bail, Result};
+
 /// The storey stiffnesses (per unit mass of floor 1) of the corpus's base building: modes near
 /// 1.9, 5.3 and 7.9 Hz, where earthquake records carry energy, with 200 Hz sampling.
 pub const STIFFNESS: [f64; 3] = [1200.0, 1000.0, 800.0];
@@ -34,6 +36,40 @@ pub const DAMPING_RATIO: f64 = 0.02;
 /// Measurement noise: this fraction of each clean channel's RMS (the ground sensor's too, in
 /// the case that has one).
 pub const NOISE_FRACTION: f64 = 0.05;
+
+/// What a user knows of every building of the corpus: `sysid filter`'s minimal flags (the seed
+/// is [`SEED`]).
+pub const MINIMAL_FLAGS: [&str; 10] = [
+    "--algorithm",
+    "mpf-ekf2",
+    "--storeys",
+    "3",
+    "--hysteretic",
+    "none",
+    "--masses",
+    "1",
+    "--measurement",
+    "absolute",
+];
+
+/// The master seed of the corpus's noise streams and of its identifications.
+pub const SEED: u64 = 49;
+
+/// `sysid simulate` of the identification's ground motion (El Centro 1940 × 3, its default for
+/// 3 storeys, 31.18 s at 200 Hz); the clean `ug` of its `truth.csv` is taken ([`clean_ground`]).
+pub const GROUND: [&str; 7] = [
+    "simulate",
+    "--storeys",
+    "3",
+    "--hysteretic",
+    "none",
+    "--seed",
+    "1",
+];
+
+/// Added to [`GROUND`] for the held-out record's ground motion: another earthquake, Loma Prieta
+/// 1989, over the same duration.
+pub const HELD_OUT_GROUND: [&str; 4] = ["--excitation", "loma-prieta-1989", "--duration", "31.18"];
 
 /// A hardening joint in storey 1: spring force k·d·(1 + ε (d/d₀)²).
 #[derive(Debug, Clone)]
@@ -170,16 +206,15 @@ pub fn cases() -> Vec<Case> {
         braced[(a, b)] += s;
     }
     // A 5 % mass on floor 3 tuned 5 % below the second mode.
-    let w2 = base
+    let mut w2 = base
         .clone()
         .symmetric_eigen()
         .eigenvalues
         .as_slice()
         .to_vec();
-    let mut w2s = w2.clone();
-    w2s.sort_by(f64::total_cmp);
+    w2.sort_by(f64::total_cmp);
     let ma = 0.05;
-    let ka = ma * (0.95 * w2s[1].sqrt()).powi(2);
+    let ka = ma * (0.95 * w2[1].sqrt()).powi(2);
     let mut app_k = DMatrix::zeros(4, 4);
     app_k.view_mut((0, 0), (3, 3)).copy_from(&base);
     for (a, b, s) in [(2, 2, ka), (3, 3, ka), (2, 3, -ka), (3, 2, -ka)] {
@@ -274,8 +309,14 @@ fn restoring(s: &Structure, x: &DVector<f64>) -> DVector<f64> {
     f
 }
 
-/// The clean absolute accelerations at the sensors (channels × samples) under `ug`, from rest.
-pub fn respond(s: &Structure, ug: &[f64], dt: f64) -> Vec<Vec<f64>> {
+/// Integrates the structure under `ug` from rest by RK4 at `dt`, handing each sample's
+/// displacements and the degrees of freedom's absolute accelerations to `visit`.
+fn integrate(
+    s: &Structure,
+    ug: &[f64],
+    dt: f64,
+    mut visit: impl FnMut(&DVector<f64>, DVector<f64>),
+) {
     let minv =
         s.m.clone()
             .try_inverse()
@@ -287,12 +328,8 @@ pub fn respond(s: &Structure, ug: &[f64], dt: f64) -> Vec<Vec<f64>> {
     let rel = |x: &DVector<f64>, v: &DVector<f64>, u: f64| absolute(x, v) - &s.r * u;
     let n = s.m.nrows();
     let (mut x, mut v) = (DVector::zeros(n), DVector::zeros(n));
-    let mut out = vec![Vec::with_capacity(ug.len()); s.sensors.nrows()];
     for i in 0..ug.len() {
-        let a = &s.sensors * absolute(&x, &v);
-        for (ch, &ai) in out.iter_mut().zip(a.iter()) {
-            ch.push(ai);
-        }
+        visit(&x, absolute(&x, &v));
         if i + 1 == ug.len() {
             break;
         }
@@ -308,11 +345,21 @@ pub fn respond(s: &Structure, ug: &[f64], dt: f64) -> Vec<Vec<f64>> {
         x += (&v + &v2 * 2.0 + &v3 * 2.0 + &v4) * (dt / 6.0);
         v += (&k1v + &k2v * 2.0 + &k3v * 2.0 + &k4v) * (dt / 6.0);
     }
+}
+
+/// The clean absolute accelerations at the sensors (channels × samples) under `ug`, from rest.
+pub fn respond(s: &Structure, ug: &[f64], dt: f64) -> Vec<Vec<f64>> {
+    let mut out = vec![Vec::with_capacity(ug.len()); s.sensors.nrows()];
+    integrate(s, ug, dt, |_, a| {
+        for (ch, ai) in out.iter_mut().zip((&s.sensors * a).iter()) {
+            ch.push(*ai);
+        }
+    });
     out
 }
 
-/// Sets the joint's d₀ to the peak storey-1 drift of the linear building under `ug`, so that
-/// the spring is ε stiffer at that drift whatever the record's amplitude.
+/// Sets the joint's d₀ to the peak storey-1 drift of the same building with a linear spring
+/// under `ug`, so that the spring is ε stiffer at that drift whatever the record's amplitude.
 pub fn calibrate_joint(case: &mut Case, ug: &[f64], dt: f64) {
     let Some(joint) = case.structure.joint.clone() else {
         return;
@@ -320,31 +367,11 @@ pub fn calibrate_joint(case: &mut Case, ug: &[f64], dt: f64) {
     let mut linear = case.structure.clone();
     linear.joint = None;
     linear.k[(0, 0)] += joint.k;
-    // The drift itself: a sensor reading x₀'s acceleration integrated twice is noisy, so read
-    // the displacement by integrating with a sensor map of zero and tracking x directly.
-    let peak = peak_drift(&linear, ug, dt);
+    let mut peak = 0.0_f64;
+    integrate(&linear, ug, dt, |x, _| peak = peak.max(x[0].abs()));
     if let Some(j) = case.structure.joint.as_mut() {
         j.d0 = peak.max(f64::MIN_POSITIVE);
     }
-}
-
-/// The largest |x₀| of a linear structure under `ug` (semi-implicit Euler at dt / 4).
-fn peak_drift(s: &Structure, ug: &[f64], dt: f64) -> f64 {
-    let minv = s.m.clone().try_inverse().expect("positive definite mass");
-    let n = s.m.nrows();
-    let (mut x, mut v) = (DVector::<f64>::zeros(n), DVector::<f64>::zeros(n));
-    let h = dt / 4.0;
-    let mut peak = 0.0_f64;
-    for w in ug.windows(2) {
-        for q in 0..4 {
-            let u = w[0] + (w[1] - w[0]) * q as f64 / 4.0;
-            let a = -(&minv * (&s.c * &v + &s.k * &x)) - &s.r * u;
-            v += a * h;
-            x += &v * h;
-            peak = peak.max(x[0].abs());
-        }
-    }
-    peak
 }
 
 /// One measured record: the ground channel and the floor channels as the sensors read them.
@@ -419,20 +446,18 @@ pub fn write(record: &Record, dt: f64, dir: &Path) -> Result<(), DatasetError> {
 }
 
 /// The clean ground motion and time step of a data set `sysid simulate` wrote (its
-/// `truth.csv`; the measured `ug` would add the simulator's own noise to every case).
-pub fn clean_ground(dir: &Path) -> Result<(Vec<f64>, f64), DatasetError> {
+/// `truth.csv`; the measured `ug` would add the simulator's own noise to every case). A data set
+/// without the truth (field data) is refused: its ground motion is not clean.
+pub fn clean_ground(dir: &Path) -> Result<(Vec<f64>, f64)> {
     let data = load_dir(dir)?;
-    let dt = data.dt;
     match data.truth {
-        Some(t) => Ok((t.ug_clean, dt)),
-        None => Ok((data.ug_meas, dt)),
+        Some(t) => Ok((t.ug_clean, data.dt)),
+        None => bail!(
+            "{}: no truth.csv: the corpus needs a simulated, noise-free ground motion",
+            dir.display()
+        ),
     }
 }
 
-/// fit = 100 (1 − ‖y − ŷ‖ / ‖y − ȳ‖), as `sysid validate` scores a free run.
-pub fn fit(y: &[f64], yhat: &[f64]) -> f64 {
-    let mean = y.iter().sum::<f64>() / y.len() as f64;
-    let num: f64 = y.iter().zip(yhat).map(|(a, b)| (a - b).powi(2)).sum();
-    let den: f64 = y.iter().map(|a| (a - mean).powi(2)).sum();
-    100.0 * (1.0 - (num / den).sqrt())
-}
+/// fit = 100 (1 − ‖y − ŷ‖ / ‖y − ȳ‖) %, as `sysid validate` scores a free run.
+pub use identify::validation::free_run::fit_percent as fit;

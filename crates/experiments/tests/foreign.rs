@@ -47,14 +47,15 @@ fn foreign_structures_get_physical_answers_that_predict_better_than_the_ground()
     for (ci, mut case) in foreign::cases().into_iter().enumerate() {
         foreign::calibrate_joint(&mut case, &ug, dt);
         let clean = foreign::respond(&case.structure, &ug, dt);
-        let mut rng = core_filters::rng::stream(49, ci as u64, "foreign identify");
+        let mut rng = core_filters::rng::stream(foreign::SEED, ci as u64, "foreign identify");
         let record = foreign::measure(&case.sensing, &ug, clean, &mut rng);
         let dir = root.join(case.name);
         foreign::write(&record, dt, &dir).unwrap();
         let out = dir.join("r.json");
         let o = sysid()
-            .args(common::LINEAR_FIELD_FILTER)
-            .args(["--seed", "49", "--data"])
+            .arg("filter")
+            .args(foreign::MINIMAL_FLAGS)
+            .args(["--seed", &foreign::SEED.to_string(), "--data"])
             .arg(&dir)
             .arg("--out")
             .arg(&out)

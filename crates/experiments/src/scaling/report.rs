@@ -674,13 +674,8 @@ fn fixed_sensor_costs(o: &mut String, cells: &[Cell]) {
             .iter()
             .map(|c| (cost_dimension(c) as f64, c.cpu_us_per_particle_step))
             .collect();
-        let ratio = v
-            .last()
-            .map(|l| l.cpu_us_per_particle_step)
-            .unwrap_or(f64::NAN)
-            / v.first()
-                .map(|f| f.cpu_us_per_particle_step)
-                .unwrap_or(f64::NAN);
+        // Two sizes or more in every group kept.
+        let ratio = v[v.len() - 1].cpu_us_per_particle_step / v[0].cpu_us_per_particle_step;
         fits.push((
             alg,
             sensors,
