@@ -55,6 +55,7 @@ fn xsens_columns() -> CsvColumns {
         time_units: TimeUnits::Microseconds,
         column: "Acc_X".into(),
         header_lines: None,
+        drop_non_finite: false,
     }
 }
 

@@ -28,7 +28,7 @@ pub struct Recorded {
 }
 
 impl Recorded {
-    fn name(&self) -> String {
+    pub(crate) fn name(&self) -> String {
         format!("{} ({})", self.role, self.file.display())
     }
 }
@@ -336,6 +336,12 @@ fn to_grid(
             values,
         });
     }
+    // A clock at the ground's rate to a hundredth of a sample over the whole record: one
+    // shift holds for every sample.
+    let drift = (step / dt - 1.0).abs() * c.times.len() as f64;
+    if same_rate && jitter_ok && drift <= 0.01 {
+        return shift_band_limited(c, shift, start_offset, log);
+    }
     // Resample: linear interpolation at the grid times inside the channel's span.
     let k0 = ((first - t0) / dt).ceil().max(0.0) as usize;
     let k1 = (((last - t0) / dt).floor() as i64).min(n as i64 - 1);
@@ -388,6 +394,52 @@ fn to_grid(
         ),
     });
     Ok(OnGrid { first: k0, values })
+}
+
+/// A channel on the ground's sampling rate whose clock starts `shift` samples (not whole)
+/// after the ground's: its values at the ground's sample times by a band-limited shift
+/// ([`super::delay::advance`]). Linear interpolation would lower a mode's amplitude — by 16 %
+/// at 22 Hz sampled at 120 Hz and half a sample — as a low-pass filter does.
+fn shift_band_limited(
+    c: &Recorded,
+    shift: f64,
+    start_offset: f64,
+    log: &mut Vec<Repair>,
+) -> Result<OnGrid, ImportError> {
+    // The ground's sample `first + m` lies `frac` samples after the channel's sample `m`.
+    let first = shift.ceil();
+    let frac = first - shift;
+    let mut values = super::delay::advance(&c.values, frac);
+    // The last value would need a sample after the channel's last.
+    values.pop();
+    let (first_index, before) = if first >= 0.0 {
+        (first as usize, 0)
+    } else {
+        let drop = (-first) as usize;
+        if drop + 2 > values.len() {
+            return Err(refuse(c, c.lines[0], "fewer than 2 samples in the ground's span".into()));
+        }
+        values.drain(..drop);
+        (0, drop)
+    };
+    log.push(Repair {
+        channel: c.name(),
+        action: format!(
+            "resampled onto the ground's samples by a band-limited shift of {frac:.3} sample: \
+             its clock starts {} {} the ground's, at the ground's rate{}",
+            ms(start_offset.abs()),
+            if start_offset >= 0.0 { "after" } else { "before" },
+            if before > 0 {
+                format!("; its {before} samples before the ground's first are not used")
+            } else {
+                String::new()
+            }
+        ),
+    });
+    Ok(OnGrid {
+        first: first_index,
+        values,
+    })
 }
 
 /// Refuses a channel whose kept samples are all the same value (a stuck sensor, or a column

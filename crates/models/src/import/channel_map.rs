@@ -8,6 +8,8 @@
 //! detrend = false            # also remove a least-squares straight line (drift)
 //! drop_leading_zeros = true  # drop the rows of exact zeros a logger writes before its first sample
 //! max_gap = 0.05             # s: a gap in the time stamps up to this long is interpolated, longer is refused
+//! clock_delay = "remove"    # or "measure": a sensor-csv storey whose clock lags the ground's (phase below the first mode) is advanced, or only logged
+//! non_finite = "refuse"      # or "drop": a sensor-csv row whose value is nan/inf is dropped (a lost packet) and its sample filled as a gap
 //! align = "timestamps"       # or "start": the files' first rows are simultaneous (clocks not shared)
 //! max_clock_offset = 1.0     # s: channels whose clocks start further apart than this are refused
 //! clock_tolerance = 0.05     # samples: clocks closer than this to whole samples apart are shifted, not resampled
@@ -90,6 +92,32 @@ pub enum Align {
     Start,
 }
 
+/// What the import does with a sensor-CSV row whose value is not a finite number (`nan`, `inf`:
+/// how some loggers write a lost packet).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum NonFinite {
+    /// The import stops, naming the file, the line and the column (the default: a value the
+    /// logger could not write is not guessed without being asked).
+    #[default]
+    Refuse,
+    /// The row is dropped and logged; the sample it should have held becomes a gap in the time
+    /// stamps, filled by interpolation under `max_gap` like any other (or refused beyond it).
+    Drop,
+}
+
+/// What the import does with a storey sensor whose clock is offset from the ground sensor's
+/// ([`super::delay`]); only between sensor-CSV files (a V2 record's channels share a recorder).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum ClockDelay {
+    /// Measure it and, where the rule finds it unambiguous, advance the storey by it (logged).
+    #[default]
+    Remove,
+    /// Measure and log it only.
+    Measure,
+}
+
 fn yes() -> bool {
     true
 }
@@ -127,6 +155,10 @@ pub struct Options {
     pub drop_leading_zeros: bool,
     #[serde(default = "default_max_gap")]
     pub max_gap: f64,
+    #[serde(default)]
+    pub non_finite: NonFinite,
+    #[serde(default)]
+    pub clock_delay: ClockDelay,
     #[serde(default = "default_align")]
     pub align: Align,
     #[serde(default = "default_max_clock_offset")]
@@ -218,6 +250,7 @@ impl Channel {
             time_units: self.spec.time_units?,
             column: self.spec.column.clone()?,
             header_lines: self.spec.header_lines,
+            drop_non_finite: false,
         })
     }
 

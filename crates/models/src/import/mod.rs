@@ -13,14 +13,15 @@
 pub mod align;
 pub mod channel_map;
 pub mod csmip;
-pub mod mode_shape;
+pub mod delay;
+mod mode_shape;
 pub mod sensor_csv;
 
 use crate::dataset::{self, DatasetError, FileDigest, MEASURED};
 use crate::readers::ReadError;
 use crate::sensors::MeasurementKind;
 use align::{Recorded, Repair};
-use channel_map::{Channel, ChannelMap, Format, Options, Role};
+use channel_map::{Channel, ChannelMap, ClockDelay, Format, NonFinite, Options, Role};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -95,6 +96,10 @@ pub struct ImportRecord {
     pub channels: Vec<Source>,
     pub repairs: Vec<Repair>,
     pub warnings: Vec<String>,
+    /// Each sensor-CSV storey's delay against the ground where one was measured (storey,
+    /// delay), removed or not ([`delay`]).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub clock_delays: Vec<(usize, delay::Delay)>,
     /// Size and SHA-256 of the `measured.csv` written with this record.
     pub files: BTreeMap<String, FileDigest>,
 }
@@ -116,11 +121,19 @@ fn digest_of(path: &Path) -> Result<FileDigest, ReadError> {
 
 /// Reads one channel, converted to m/s² with the map's units, scale and sign and its clock
 /// moved by the map's `offset`.
-fn read_channel(c: &Channel) -> Result<(Recorded, Source), ImportError> {
+/// `non_finite` says what a sensor-CSV row with a `nan`/`inf` value does; the lines of the rows
+/// it drops are returned with the channel.
+fn read_channel(
+    c: &Channel,
+    non_finite: NonFinite,
+) -> Result<(Recorded, Source, Vec<usize>), ImportError> {
+    let mut dropped = Vec::new();
     let (times, values, lines, recorded_as) = match c.spec.format {
         Format::SensorCsv => {
-            let cols = c.csv_columns().expect("checked by the map");
+            let mut cols = c.csv_columns().expect("checked by the map");
+            cols.drop_non_finite = non_finite == NonFinite::Drop;
             let col = sensor_csv::read_sensor_csv(&c.path, &cols)?;
+            dropped = col.dropped;
             (col.times, col.values, col.lines, None)
         }
         Format::CsmipV2 => {
@@ -173,20 +186,143 @@ fn read_channel(c: &Channel) -> Result<(Recorded, Source), ImportError> {
         samples,
         recorded_as,
     };
-    Ok((rec, src))
+    Ok((rec, src, dropped))
+}
+
+/// The log entry of the rows a channel lost to `non_finite = "drop"`.
+fn dropped_rows(channel: &Recorded, lines: &[usize]) -> Repair {
+    let shown: Vec<String> = lines.iter().take(10).map(usize::to_string).collect();
+    let more = if lines.len() > 10 { ", …" } else { "" };
+    Repair {
+        channel: channel.name(),
+        action: format!(
+            "dropped {} row{} with a non-finite value (line{} {}{more}; non_finite = \"drop\"): \
+             their samples are gaps in the time stamps, filled under max_gap",
+            lines.len(),
+            if lines.len() == 1 { "" } else { "s" },
+            if lines.len() == 1 { "" } else { "s" },
+            shown.join(", ")
+        ),
+    }
+}
+
+/// Measures each sensor-CSV storey's clock delay against the ground ([`delay::measure`]) and,
+/// under `rule`, advances the storeys whose delay is unambiguous, dropping from every channel
+/// the samples at the ends the shifts leave without data. Logged as repairs.
+fn remove_clock_delays(
+    a: &mut align::Aligned,
+    channels: &[Channel],
+    names: &[String],
+    clocks_differ: impl Fn(&Channel) -> bool,
+    rule: ClockDelay,
+) -> Vec<(usize, delay::Delay)> {
+    let mut found = Vec::new();
+    let (mut head, mut tail) = (0usize, 0usize);
+    // The first mode from the highest storey measured, as the swapped-storeys check finds it.
+    let Some(f1) = a
+        .storeys
+        .last()
+        .and_then(|top| delay::first_mode(a.dt, &a.ug, top))
+    else {
+        return found;
+    };
+    for (j, c) in channels.iter().enumerate() {
+        let Role::Storey(storey) = c.role else { continue };
+        if !clocks_differ(c) {
+            continue;
+        }
+        let Some(mut d) = delay::measure(a.dt, &a.ug, &a.storeys[j], f1) else {
+            continue;
+        };
+        // A shift of a tenth of the record would be no clock offset but a misread time unit.
+        d.removed &= rule == ClockDelay::Remove && d.seconds.abs() < 0.1 * a.ug.len() as f64 * a.dt;
+        if d.removed {
+            let shift = d.seconds / a.dt;
+            a.storeys[j] = delay::advance(&a.storeys[j], shift);
+            if shift > 0.0 {
+                tail = tail.max(shift.ceil() as usize);
+            } else {
+                head = head.max((-shift).ceil() as usize);
+            }
+        }
+        let how = if d.removed {
+            "advanced by it (a band-limited shift; clock_delay = \"measure\" keeps it)"
+        } else if rule == ClockDelay::Measure {
+            "kept (clock_delay = \"measure\")"
+        } else {
+            "kept: not beyond the rule's margins"
+        };
+        if d.removed || rule == ClockDelay::Measure {
+            a.repairs.push(Repair {
+                channel: names[j].clone(),
+                action: format!(
+                    "its clock {} the ground's by {:.2} ms ({:.2} samples, s.e. {:.2} ms), \
+                     measured from the phase of its transfer function at {} frequencies of \
+                     {:.2}–{:.2} Hz, below half its first mode ({:.2} Hz): {how}",
+                    if d.seconds >= 0.0 { "lags" } else { "leads" },
+                    1e3 * d.seconds.abs(),
+                    d.seconds.abs() / a.dt,
+                    1e3 * d.standard_error,
+                    d.bins,
+                    d.band_hz.0,
+                    d.band_hz.1,
+                    d.first_mode_hz
+                ),
+            });
+        }
+        found.push((storey, d));
+    }
+    if head + tail > 0 {
+        let n = a.ug.len();
+        a.ug = a.ug[head..n - tail].to_vec();
+        for v in &mut a.storeys {
+            *v = v[head..n - tail].to_vec();
+        }
+        a.t0 += head as f64 * a.dt;
+        a.repairs.push(Repair {
+            channel: "all".into(),
+            action: format!(
+                "dropped {head} sample{} at the start and {tail} at the end of every channel: \
+                 the clock-delay shifts leave them without data",
+                if head == 1 { "" } else { "s" }
+            ),
+        });
+    }
+    found
 }
 
 /// Reads every channel of `map`, aligns and repairs them (see [`align`]).
 pub fn import(map: &ChannelMap) -> Result<Imported, ImportError> {
-    let (ground, gsrc) = read_channel(&map.ground)?;
+    let non_finite = map.options.non_finite;
+    let (ground, gsrc, gdropped) = read_channel(&map.ground, non_finite)?;
+    let mut dropped = Vec::new();
+    if !gdropped.is_empty() {
+        dropped.push(dropped_rows(&ground, &gdropped));
+    }
     let mut storeys = Vec::with_capacity(map.storeys.len());
     let mut sources = vec![gsrc];
     for c in &map.storeys {
-        let (r, s) = read_channel(c)?;
+        let (r, s, d) = read_channel(c, non_finite)?;
+        if !d.is_empty() {
+            dropped.push(dropped_rows(&r, &d));
+        }
         storeys.push(r);
         sources.push(s);
     }
-    let a = align::align(ground, storeys, &map.options)?;
+    let names: Vec<String> = storeys.iter().map(Recorded::name).collect();
+    let mut a = align::align(ground, storeys, &map.options)?;
+    // Dropped rows are the first thing done to a channel: logged before the gaps they left.
+    a.repairs.splice(0..0, dropped);
+    let clocks_differ = |c: &Channel| {
+        map.ground.spec.format == Format::SensorCsv && c.spec.format == Format::SensorCsv
+    };
+    let clock_delays = remove_clock_delays(
+        &mut a,
+        &map.storeys,
+        &names,
+        clocks_differ,
+        map.options.clock_delay,
+    );
     let k = a.ug.len();
     let m = a.storeys.len();
     let mut y = vec![0.0; k * m];
@@ -227,6 +363,7 @@ pub fn import(map: &ChannelMap) -> Result<Imported, ImportError> {
                 .into(),
             channels: sources,
             repairs: a.repairs,
+            clock_delays,
             warnings,
             files: BTreeMap::new(),
         },

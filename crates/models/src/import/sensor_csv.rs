@@ -52,6 +52,9 @@ pub struct CsvColumns {
     /// Lines before the line of column names; `None`: the first line (among the first
     /// [`HEADER_SEARCH_LINES`]) that names both columns.
     pub header_lines: Option<usize>,
+    /// Drop a row whose value is `nan` or `inf` (its line goes to [`SensorColumn::dropped`])
+    /// instead of refusing the file.
+    pub drop_non_finite: bool,
 }
 
 /// One column of a sensor file, as recorded: time stamps in seconds of the sensor's clock and
@@ -61,6 +64,8 @@ pub struct SensorColumn {
     pub times: Vec<f64>,
     pub values: Vec<f64>,
     pub lines: Vec<usize>,
+    /// Lines of the rows dropped for a non-finite value ([`CsvColumns::drop_non_finite`]).
+    pub dropped: Vec<usize>,
 }
 
 /// Reads `columns` of the sensor CSV file `path`.
@@ -156,6 +161,7 @@ pub fn parse_sensor_csv(
         times: Vec::new(),
         values: Vec::new(),
         lines: Vec::new(),
+        dropped: Vec::new(),
     };
     for (i, l) in lines.iter().enumerate().skip(header + 1) {
         let line = i + 1;
@@ -178,6 +184,23 @@ pub fn parse_sensor_csv(
         let t = parse_number(file, line, &columns.time, fields[jt])? * to_s;
         let t = limits::check_time(t)
             .map_err(|e| crate::readers::limit_error(file, line, &columns.time, e))?;
+        let raw = fields[jv].trim();
+        if raw.parse::<f64>().is_ok_and(|v| !v.is_finite()) {
+            if columns.drop_non_finite {
+                out.dropped.push(line);
+                continue;
+            }
+            return Err(ReadError::Header {
+                file: file.to_path_buf(),
+                line,
+                field: columns.column.clone(),
+                message: format!(
+                    "non-finite value `{raw}` (how some loggers write a lost packet; \
+                     `[options] non_finite = \"drop\"` in the map drops such rows and fills \
+                     their samples as gaps under max_gap)"
+                ),
+            });
+        }
         let v = parse_field(file, line, &columns.column, fields[jv])?;
         out.times.push(t);
         out.values.push(v);
@@ -213,6 +236,7 @@ mod tests {
             time_units: TimeUnits::Microseconds,
             column: "Acc_X".into(),
             header_lines,
+            drop_non_finite: false,
         }
     }
 
@@ -244,6 +268,7 @@ mod tests {
             time_units: TimeUnits::Seconds,
             column: "a".into(),
             header_lines: None,
+            drop_non_finite: false,
         };
         let e = parse_sensor_csv(Path::new("m.csv"), text, &c)
             .unwrap_err()
