@@ -351,6 +351,9 @@ pub fn execute(
     if let Some(l) = auto.lag {
         config["substeps_lag"] = serde_json::to_value(l).expect("serialisable");
     }
+    if let Some(f) = auto.field {
+        config["substeps_field"] = serde_json::to_value(f).expect("serialisable");
+    }
     if !spec.building.damping().is_default() {
         config["spec"]["damping"] = spec.building.damping().name().into();
     }

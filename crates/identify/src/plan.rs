@@ -582,6 +582,24 @@ fn substep_decisions(auto: &AutoChoice, algorithm: Algorithm, spec: &ChainSpec) 
             ),
         });
     }
+    if let Some(f) = auto.field {
+        out.push(Decision {
+            rule: "rules::FIELD_FREQUENCY_ERROR".into(),
+            set: format!("substeps = {}", spec.substeps),
+            level: Level::Info,
+            why: format!(
+                "sub-steps: {} per sample (auto, field data of a linear building, one Gaussian \
+                 filter: the highest mode's frequency shift {:.2} % with one step, {:.3} % with \
+                 {}, at most {:.2} %, because the free run's phase over a lightly damped mode's \
+                 many cycles is that shift over ζ: docs/real-frame.md)",
+                spec.substeps,
+                100.0 * f.error_one,
+                100.0 * f.error_chosen,
+                f.substeps,
+                100.0 * crate::rules::FIELD_FREQUENCY_ERROR
+            ),
+        });
+    }
     if let Some(a) = auto.linear {
         if a.substeps == 1 && a.error_one > SUBSTEP_ABOVE {
             out.push(Decision {
@@ -600,7 +618,8 @@ fn substep_decisions(auto: &AutoChoice, algorithm: Algorithm, spec: &ChainSpec) 
                 ),
             });
         }
-        if a.substeps > 1 {
+        // The field rule's message says what the run takes when it raised the count.
+        if a.substeps > 1 && auto.field.is_none() {
             out.push(Decision {
                 rule: "models::filtering::substeps::auto_substeps".into(),
                 set: format!("substeps = {}", spec.substeps),
@@ -1041,6 +1060,8 @@ pub struct AutoChoice {
     pub linear: Option<models::filtering::substeps::AutoSubsteps>,
     pub hysteretic: Option<crate::scaled_prior::HystereticSubsteps>,
     pub lag: Option<LagSubsteps>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub field: Option<crate::rules::FieldSubsteps>,
 }
 
 /// Resolves `substeps = "auto"` for the algorithms that sub-step (MPF-EKF2, bootstrap PF);
@@ -1085,9 +1106,14 @@ pub fn resolve_substeps(
                 substeps: LAG_SUBSTEPS,
             }
         });
+    let field = (scaled.is_some() && crate::rules::samples_nothing(algorithm, spec))
+    .then(|| crate::rules::FieldSubsteps::new(a.omega_max * spec.dt))
+    .flatten()
+    .inspect(|f| spec.substeps = spec.substeps.max(f.substeps));
     AutoChoice {
         linear: Some(a),
         hysteretic,
         lag,
+        field,
     }
 }
