@@ -1,7 +1,16 @@
 #!/usr/bin/env python3
 """How the files under data/real/ were made from the original recordings (see PROVENANCE.md).
 
-Usage: python3 data/real/convert.py SOURCE_DATA_DIR
+Usage: python3 data/real/convert.py SOURCE_DATA_DIR [MDOF_CHECKOUT]
+
+With MDOF_CHECKOUT (a checkout of chrystalchern/mdof at commit 4f0e831c) the two structures of
+`unseen/` are made too, from its `notebooks/uploads` as they are there:
+
+- `unseen/stiff-one-storey/`: the Xsens exports of `mini_shake_table/Flexible vs. Stiff/Stiff 1
+  story`, kept as the shake-table files above (SampleTimeFine and Acc_X; a value the sensor
+  wrote `nan` stays `nan`).
+- `unseen/meloland/`: from three zipped CSMIP V2 sets of `meloland/`, the transverse channels 7
+  (deck, middle of the bridge) and 11 (south embankment), kept as the V2 records above.
 
 - Shake table (Xsens DOT CSV exports): the seven header lines and the column-name line are
   kept; of the columns only SampleTimeFine (sensor clock, µs) and Acc_X (the shaking axis,
@@ -55,6 +64,75 @@ def csmip(src):
             f.write(b"\n".join(kept) + b"\n")
 
 
+STIFF_EVENTS = {
+    "elcentro-1": "(El Centro Trial 1)",
+    "elcentro-2": "(El Centro Trial 2)",
+    "northridge-1": "(Northridge Trial 1)",
+    "northridge-2": "(Northridge Trial 2)",
+    "sine-1": "(Sine Wave Trial 1)",
+    "sine-2": "(Sine Wave Trial 2)",
+}
+STIFF_SENSORS = {"ground": "Ground Floor", "floor-1": "Top Floor"}
+MELOLAND_EVENTS = {
+    "calexico-2008-11-20": "Calexico_20Nov2008_CE01336P.ZIP",
+    "el-mayor-cucapah-2010-04-04": "calexico_04apr2010_14607652_CE01336P.ZIP",
+    "borrego-springs-2010-07-07": "BorregoSprings_07Jul2010_CE01336P.ZIP",
+}
+MELOLAND_CHANNELS = [7, 11]
+
+
+def compact_xsens(path, dst):
+    with open(path, encoding="utf-8", newline="") as f:
+        lines = f.read().splitlines()
+    names = lines[7].split(",")
+    jt, ja = names.index("SampleTimeFine"), names.index("Acc_X")
+    out = lines[:7] + ["SampleTimeFine,Acc_X"]
+    for row in lines[8:]:
+        if not row.strip():
+            continue
+        fields = row.split(",")
+        out.append("%s,%.5f" % (fields[jt], float(fields[ja])))
+    os.makedirs(os.path.dirname(dst), exist_ok=True)
+    with open(dst, "w", encoding="utf-8", newline="\n") as f:
+        f.write("\n".join(out) + "\n")
+
+
+def v2_acceleration(raw):
+    """The text header and the acceleration block of one V2 record (bytes)."""
+    lines = raw.split(b"\n")
+    npts = int(lines[15].split()[0])
+    return b"\n".join(lines[: 46 + (npts + 7) // 8]) + b"\n"
+
+
+def unseen(mdof):
+    import zipfile
+
+    up = os.path.join(mdof, "notebooks", "uploads")
+    stiff = os.path.join(up, "mini_shake_table", "Flexible vs. Stiff", "Stiff 1 story")
+    names = []
+    for event, tag in STIFF_EVENTS.items():
+        for sensor, folder in STIFF_SENSORS.items():
+            d = os.path.join(stiff, folder)
+            (name,) = [n for n in sorted(os.listdir(d)) if n.startswith(tag)]
+            compact_xsens(
+                os.path.join(d, name),
+                os.path.join(HERE, "unseen", "stiff-one-storey", event, sensor + ".csv"),
+            )
+            names.append("%s/%s.csv <- Stiff 1 story/%s/%s" % (event, sensor, folder, name))
+    with open(os.path.join(HERE, "unseen", "stiff-one-storey", "ORIGINAL_NAMES.txt"), "w") as f:
+        f.write("\n".join(names) + "\n")
+    for event, zname in MELOLAND_EVENTS.items():
+        with zipfile.ZipFile(os.path.join(up, "meloland", zname)) as z:
+            for c in MELOLAND_CHANNELS:
+                name = "CHAN%03d.V2" % c
+                dst = os.path.join(HERE, "unseen", "meloland", event, name)
+                os.makedirs(os.path.dirname(dst), exist_ok=True)
+                with open(dst, "wb") as f:
+                    f.write(v2_acceleration(z.read(name)))
+
+
 if __name__ == "__main__":
     shake_table(sys.argv[1])
     csmip(sys.argv[1])
+    if len(sys.argv) > 2:
+        unseen(sys.argv[2])

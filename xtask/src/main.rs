@@ -12,7 +12,9 @@
 //! - `reproduce-real [--no-baseline] [--report-only]`: builds `sysid` in release, installs the
 //!   baseline's Python package (`experiments/real/requirements.txt`, PyPI's `mdof`) into a
 //!   virtual environment under `target/`, and runs `sysid field-study` on
-//!   `experiments/real/study.toml` into `results/real/` (REPORT.md). Without Python or network
+//!   `experiments/real/study.toml` into `results/real/` and on
+//!   `experiments/real/unseen/study.toml` (structures the defaults never saw) into
+//!   `results/unseen/` (REPORT.md each). Without Python or network
 //!   the committed baseline numbers are used and the run says so.
 //! - `regression [--threads N] [--resume]`: builds `sysid` in release and runs `sysid regression`
 //!   on `experiments/regression.toml` (the paper's settings, into `results/regression/`),
@@ -381,34 +383,44 @@ fn main() -> Result<()> {
 
 /// The real-structure case study: `sysid field-study`, with the baseline's Python package
 /// installed into `target/real-python` when it can be.
+/// The real-structure studies: the structures the defaults were developed on, then those they
+/// never saw (`experiments/real/unseen/`).
+const REAL_STUDIES: [(&str, &str); 2] = [
+    ("experiments/real/study.toml", "results/real"),
+    ("experiments/real/unseen/study.toml", "results/unseen"),
+];
+
 fn reproduce_real(root: &Path, no_baseline: bool, report_only: bool, resume: bool) -> Result<()> {
     let started = std::time::Instant::now();
     let sysid = build_sysid(root)?;
     let build_s = started.elapsed().as_secs_f64();
-    let mut cmd = Command::new(sysid);
-    cmd.current_dir(root).args([
-        "field-study",
-        "--config",
-        "experiments/real/study.toml",
-        "--out",
-        "results/real",
-    ]);
-    if resume {
-        cmd.arg("--resume");
-    }
-    if report_only {
-        cmd.arg("--report-only");
-    } else if !no_baseline {
+    let python = if report_only || no_baseline {
+        None
+    } else {
         match baseline_python(root) {
-            Ok(python) => {
-                cmd.arg("--python").arg(python);
+            Ok(python) => Some(python),
+            Err(e) => {
+                eprintln!(
+                    "note: the baseline (SRIM, Python package mdof) is not recomputed: {e:#}; the committed srim.json files are used"
+                );
+                None
             }
-            Err(e) => eprintln!(
-                "note: the baseline (SRIM, Python package mdof) is not recomputed: {e:#}; the committed results/real/frame/srim.json is used"
-            ),
         }
+    };
+    for (config, out) in REAL_STUDIES {
+        let mut cmd = Command::new(&sysid);
+        cmd.current_dir(root)
+            .args(["field-study", "--config", config, "--out", out]);
+        if resume {
+            cmd.arg("--resume");
+        }
+        if report_only {
+            cmd.arg("--report-only");
+        } else if let Some(python) = &python {
+            cmd.arg("--python").arg(python);
+        }
+        run(&mut cmd)?;
     }
-    run(&mut cmd)?;
     eprintln!(
         "reproduce-real: {:.0} s in all (build {build_s:.0} s, study {:.0} s)",
         started.elapsed().as_secs_f64(),

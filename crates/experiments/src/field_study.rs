@@ -51,6 +51,10 @@ pub struct Part {
     /// `experiments/real/srim.py`).
     #[serde(default)]
     pub baseline: bool,
+    /// The baseline's model orders (`--orders` of the script; absent: its default, 6–16, for
+    /// three storeys — a one-storey structure wants 2–8).
+    #[serde(default)]
+    pub baseline_orders: Option<Vec<usize>>,
 }
 
 /// A recording of the structure, imported by `sysid import --map`.
@@ -691,6 +695,10 @@ pub fn run(study: &FieldStudy, opts: &RunOptions) -> Result<()> {
                 cmd.arg(dirs.data(&r.name));
             }
             cmd.arg("--out").arg(&baseline);
+            if let Some(orders) = &part.baseline_orders {
+                let list: Vec<String> = orders.iter().map(usize::to_string).collect();
+                cmd.arg("--orders").arg(list.join(","));
+            }
             let status = cmd
                 .status()
                 .with_context(|| format!("starting {}", python.display()))?;

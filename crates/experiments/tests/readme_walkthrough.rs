@@ -1,9 +1,9 @@
 //! The README's walk-through runs as written, from a scratch directory: every `sysid` command of
 //! its "A first run" and "Your own recording" blocks, in order, in a fresh temporary directory
 //! (so the project's own files are found from elsewhere, and nothing is written into the
-//! checkout). The numbers the README states of those runs, and of the foreign corpus, are the
-//! runs' own: each is found, at the README's precision, in what the commands printed and wrote or
-//! in the report it cites.
+//! checkout). The numbers the README states of those runs, of the foreign corpus and of the unseen
+//! real structures are the runs' own: each is found, at the README's precision, in what the
+//! commands printed and wrote or in the report it cites.
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -83,6 +83,14 @@ fn the_readme_walkthrough_runs_from_a_scratch_directory() {
         "results/foreign/REPORT.md",
     );
     assert_numbers_found(corpus, &[&foreign], 2);
+    // The real structures it was never developed on: from their study's report.
+    let unseen = std::fs::read_to_string(root().join("results/unseen/REPORT.md")).unwrap();
+    let structures = between(
+        &readme,
+        "On two real structures it was never developed on",
+        "results/unseen/REPORT.md",
+    );
+    assert_numbers_found(structures, &[&unseen], 4);
 }
 
 fn between<'a>(text: &'a str, start: &str, end: &str) -> &'a str {

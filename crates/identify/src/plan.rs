@@ -1107,9 +1107,9 @@ pub fn resolve_substeps(
             }
         });
     let field = (scaled.is_some() && crate::rules::samples_nothing(algorithm, spec))
-    .then(|| crate::rules::FieldSubsteps::new(a.omega_max * spec.dt))
-    .flatten()
-    .inspect(|f| spec.substeps = spec.substeps.max(f.substeps));
+        .then(|| crate::rules::FieldSubsteps::new(a.omega_max * spec.dt))
+        .flatten()
+        .inspect(|f| spec.substeps = spec.substeps.max(f.substeps));
     AutoChoice {
         linear: Some(a),
         hysteretic,

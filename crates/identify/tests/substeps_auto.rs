@@ -118,9 +118,8 @@ fn a_stiff_record_is_sub_stepped_until_its_highest_mode_is_represented() {
     let m = f["substeps"].as_u64().unwrap() as usize;
     assert!(m > a.substeps, "{f}");
     assert!(f["error_chosen"].as_f64().unwrap() <= identify::rules::FIELD_FREQUENCY_ERROR);
-    let fewer = models::filtering::substeps::frequency_error(
-        a.omega_max * spec.dt / (m - 1) as f64,
-    );
+    let fewer =
+        models::filtering::substeps::frequency_error(a.omega_max * spec.dt / (m - 1) as f64);
     assert!(fewer > identify::rules::FIELD_FREQUENCY_ERROR, "{f}");
     assert_eq!(r.config["spec"]["substeps"], m);
 }

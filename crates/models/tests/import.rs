@@ -892,12 +892,18 @@ fn a_storey_clock_late_by_samples_is_measured_and_advanced_unless_asked_to_keep_
     sensor_file(&dir, "s.csv", &t, &late);
     let d = run(&dir, &map("remove_mean = false", "g.csv", &["s.csv"])).unwrap();
     let log = actions(&d.record);
-    assert!(log.contains("s.csv): its clock lags the ground's by"), "{log}");
+    assert!(
+        log.contains("s.csv): its clock lags the ground's by"),
+        "{log}"
+    );
     assert!(log.contains("advanced by it"), "{log}");
     let (_, x) = &d.record.clock_delays[0];
     assert!(x.removed && (x.seconds * 120.0 - 2.34).abs() < 0.1, "{x:?}");
     // 3 samples dropped at the end; what is kept is the on-time signal, away from the ends.
-    assert!(log.contains("0 samples at the start and 3 at the end"), "{log}");
+    assert!(
+        log.contains("0 samples at the start and 3 at the end"),
+        "{log}"
+    );
     assert_eq!(d.ug.len(), n - 3);
     let y = storey(&d, 0);
     let rms = (on_time.iter().map(|a| a * a).sum::<f64>() / n as f64).sqrt();
@@ -914,7 +920,11 @@ fn a_storey_clock_late_by_samples_is_measured_and_advanced_unless_asked_to_keep_
     // `clock_delay = "measure"`: logged, the samples as recorded.
     let d = run(
         &dir,
-        &map("remove_mean = false\nclock_delay = \"measure\"", "g.csv", &["s.csv"]),
+        &map(
+            "remove_mean = false\nclock_delay = \"measure\"",
+            "g.csv",
+            &["s.csv"],
+        ),
     )
     .unwrap();
     assert!(actions(&d.record).contains("kept (clock_delay = \"measure\")"));
@@ -931,7 +941,11 @@ fn a_storey_clock_on_time_is_left_alone() {
     sensor_file(&dir, "g.csv", &t, &ug);
     sensor_file(&dir, "s.csv", &t, &y);
     let d = run(&dir, &map("remove_mean = false", "g.csv", &["s.csv"])).unwrap();
-    assert!(!d.record.clock_delays[0].1.removed, "{:?}", d.record.clock_delays);
+    assert!(
+        !d.record.clock_delays[0].1.removed,
+        "{:?}",
+        d.record.clock_delays
+    );
     assert_eq!(storey(&d, 0), y);
 }
 
@@ -946,11 +960,25 @@ fn a_clock_a_fraction_of_a_sample_off_is_shifted_band_limited() {
     let wave = |t_us: i64| (std::f64::consts::TAU * f * t_us as f64 * 1e-6).sin();
     let g = clock(1_000_000, n);
     let s: Vec<i64> = g.iter().map(|t| t + STEP / 2).collect();
-    sensor_file(&dir, "g.csv", &g, &g.iter().map(|&t| wave(t)).collect::<Vec<_>>());
-    sensor_file(&dir, "s.csv", &s, &s.iter().map(|&t| wave(t)).collect::<Vec<_>>());
+    sensor_file(
+        &dir,
+        "g.csv",
+        &g,
+        &g.iter().map(|&t| wave(t)).collect::<Vec<_>>(),
+    );
+    sensor_file(
+        &dir,
+        "s.csv",
+        &s,
+        &s.iter().map(|&t| wave(t)).collect::<Vec<_>>(),
+    );
     let d = run(
         &dir,
-        &map("remove_mean = false\nclock_delay = \"measure\"", "g.csv", &["s.csv"]),
+        &map(
+            "remove_mean = false\nclock_delay = \"measure\"",
+            "g.csv",
+            &["s.csv"],
+        ),
     )
     .unwrap();
     let log = actions(&d.record);
@@ -981,14 +1009,61 @@ fn a_non_finite_value_is_refused_with_the_option_that_drops_its_row() {
     );
     let d = run(
         &dir,
-        &map("remove_mean = false\nnon_finite = \"drop\"", "g.csv", &["s.csv"]),
+        &map(
+            "remove_mean = false\nnon_finite = \"drop\"",
+            "g.csv",
+            &["s.csv"],
+        ),
     )
     .unwrap();
     let log = actions(&d.record);
-    assert!(log.contains("dropped 1 row with a non-finite value (line 109"), "{log}");
+    assert!(
+        log.contains("dropped 1 row with a non-finite value (line 109"),
+        "{log}"
+    );
     assert!(log.contains("filled a gap of 8.333 ms (1 sample)"), "{log}");
     let y = storey(&d, 0);
     assert_eq!(y.len(), 200);
     // The lost sample is the line between its neighbours.
     assert!((y[100] - 0.5 * (v[99] + v[101])).abs() < 1e-9);
+}
+
+#[test]
+fn the_vendored_stiff_frame_top_sensor_lags_by_19_5_ms_on_every_record() {
+    for event in [
+        "elcentro-1",
+        "elcentro-2",
+        "northridge-1",
+        "northridge-2",
+        "sine-1",
+        "sine-2",
+    ] {
+        let path = root().join(format!("experiments/real/unseen/stiff-{event}.toml"));
+        let d = import(&ChannelMap::load(&path).unwrap()).unwrap();
+        let (storey, x) = &d.record.clock_delays[0];
+        assert_eq!(*storey, 1);
+        assert!(x.removed, "{event}: {x:?}");
+        assert!((0.0192..0.0199).contains(&x.seconds), "{event}: {x:?}");
+        assert!((x.first_mode_hz - 22.0).abs() < 0.6, "{event}: {x:?}");
+    }
+    // Its `nan` row is refused without the map's `non_finite = "drop"`.
+    let text =
+        std::fs::read_to_string(root().join("experiments/real/unseen/stiff-northridge-2.toml"))
+            .unwrap()
+            .replace("non_finite = \"drop\"", "");
+    let (_tmp, dir) = scratch("stiff-nan");
+    let map = dir.join("map.toml");
+    let abs = root().join("experiments/real/unseen");
+    std::fs::write(
+        &map,
+        text.replace("../../../", &format!("{}/../../../", abs.display())),
+    )
+    .unwrap();
+    let e = import(&ChannelMap::load(&map).unwrap())
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("floor-1.csv:2703: field `Acc_X`: non-finite value `nan`"),
+        "{e}"
+    );
 }

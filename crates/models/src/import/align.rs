@@ -417,7 +417,11 @@ fn shift_band_limited(
     } else {
         let drop = (-first) as usize;
         if drop + 2 > values.len() {
-            return Err(refuse(c, c.lines[0], "fewer than 2 samples in the ground's span".into()));
+            return Err(refuse(
+                c,
+                c.lines[0],
+                "fewer than 2 samples in the ground's span".into(),
+            ));
         }
         values.drain(..drop);
         (0, drop)
@@ -428,7 +432,11 @@ fn shift_band_limited(
             "resampled onto the ground's samples by a band-limited shift of {frac:.3} sample: \
              its clock starts {} {} the ground's, at the ground's rate{}",
             ms(start_offset.abs()),
-            if start_offset >= 0.0 { "after" } else { "before" },
+            if start_offset >= 0.0 {
+                "after"
+            } else {
+                "before"
+            },
             if before > 0 {
                 format!("; its {before} samples before the ground's first are not used")
             } else {

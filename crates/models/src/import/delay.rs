@@ -58,9 +58,8 @@ impl Delay {
     /// The rule: unambiguous against the sampling, the estimate's noise and the structure's lag.
     fn decide(&mut self, dt: f64) {
         let t = self.seconds.abs();
-        self.removed = t > 0.25 * dt
-            && t > MARGIN * self.standard_error
-            && t > MARGIN * self.structural_bound;
+        self.removed =
+            t > 0.25 * dt && t > MARGIN * self.standard_error && t > MARGIN * self.structural_bound;
     }
 }
 
@@ -185,10 +184,7 @@ pub fn measure(dt: f64, ground: &[f64], y: &[f64], f1: f64) -> Option<Delay> {
     let sww: f64 = pts.iter().map(|&(w, _, c)| c * w * w).sum();
     let tau = -pts.iter().map(|&(w, p, c)| c * w * p).sum::<f64>() / sww;
     let sw: f64 = pts.iter().map(|&(_, _, c)| c).sum();
-    let rss: f64 = pts
-        .iter()
-        .map(|&(w, p, c)| c * (p + w * tau).powi(2))
-        .sum();
+    let rss: f64 = pts.iter().map(|&(w, p, c)| c * (p + w * tau).powi(2)).sum();
     if (rss / sw).sqrt() > MAX_RESIDUAL {
         return None;
     }
@@ -237,7 +233,11 @@ pub fn advance(x: &[f64], shift: f64) -> Vec<f64> {
     forward.process(&mut buf);
     for (k, z) in buf.iter_mut().enumerate() {
         // Signed frequency index; the Nyquist bin keeps a real factor.
-        let kk = if k <= m / 2 { k as f64 } else { k as f64 - m as f64 };
+        let kk = if k <= m / 2 {
+            k as f64
+        } else {
+            k as f64 - m as f64
+        };
         let a = 2.0 * PI * kk * shift / m as f64;
         *z *= if 2 * k == m {
             Complex64::new(a.cos(), 0.0)
@@ -325,7 +325,7 @@ mod tests {
         for (f1, zeta) in [(22.0, 0.01), (3.7, 0.1), (8.0, 0.05)] {
             let (ug, y) = frame(f1, zeta, dt, 0.0, 12000);
             let f1 = first_mode(dt, &ug, &y).expect("a mode");
-        let d = measure(dt, &ug, &y, f1).expect("measured");
+            let d = measure(dt, &ug, &y, f1).expect("measured");
             assert!(!d.removed, "{f1} {zeta}: {d:?}");
             assert!(d.seconds.abs() < 0.25 * dt, "{f1} {zeta}: {d:?}");
         }

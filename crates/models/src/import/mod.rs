@@ -227,7 +227,9 @@ fn remove_clock_delays(
         return found;
     };
     for (j, c) in channels.iter().enumerate() {
-        let Role::Storey(storey) = c.role else { continue };
+        let Role::Storey(storey) = c.role else {
+            continue;
+        };
         if !clocks_differ(c) {
             continue;
         }
