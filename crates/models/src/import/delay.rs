@@ -320,6 +320,18 @@ mod tests {
     }
 
     #[test]
+    fn a_late_sensor_on_a_frame_whose_first_mode_is_low_in_a_short_record() {
+        // A first mode at 7.8 Hz leaves the band below 3.9 Hz: about 8 bins of a 21 s record.
+        let dt = 1.0 / 120.0;
+        let (ug, y) = frame(7.8, 0.02, dt, 2.34, 2560);
+        let f1 = first_mode(dt, &ug, &y).expect("a mode");
+        let d = measure(dt, &ug, &y, f1).expect("measured");
+        eprintln!("{d:?}");
+        assert!((d.seconds / dt - 2.34).abs() < 0.15, "{d:?}");
+        assert!(d.removed, "{d:?}");
+    }
+
+    #[test]
     fn a_sensor_on_time_is_left_alone_even_with_much_damping() {
         let dt = 1.0 / 120.0;
         for (f1, zeta) in [(22.0, 0.01), (3.7, 0.1), (8.0, 0.05)] {
