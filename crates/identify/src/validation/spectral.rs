@@ -29,9 +29,9 @@ pub(crate) const MIN_SAMPLES: usize = 128;
 pub const MAX_SEGMENT: usize = 8192;
 /// The ground motion's band: P_xx above this fraction of its largest value (30 dB).
 pub(crate) const BAND_FRACTION: f64 = 1e-3;
-/// A peak needs this coherence on at least one channel, at its bin or a neighbour: at a lightly
-/// damped mode whose half-power band is about one bin wide, the Welch estimate's resolution bias
-/// lowers the coherence at the peak itself (the stiff one-storey frame, ζ ≈ 0.5 % at 22.0 Hz,
+/// A peak needs this coherence on at least one channel, at its bin or a neighbour (and no larger
+/// maximum within three bins): at a lightly damped mode whose half-power band is about
+/// one bin wide, the Welch estimate's resolution bias lowers the coherence at the peak itself (the stiff one-storey frame, ζ ≈ 0.5 % at 22.0 Hz,
 /// bins of 0.23 Hz: 0.40 at the peak, 0.77 one bin above, 0.98 three bins off; docs/real-frame.md).
 pub(crate) const MIN_COHERENCE: f64 = 0.5;
 
@@ -230,8 +230,8 @@ pub(crate) fn excitation_db(t: &TransferEstimate, f_hz: f64) -> Option<f64> {
 }
 
 /// The `count` largest local maxima of Σ_c |H1_c| inside the ground motion's band where at least
-/// one channel's coherence is at least `MIN_COHERENCE` at the peak or a neighbouring bin, by
-/// increasing frequency.
+/// one channel's coherence is at least `MIN_COHERENCE` at the peak or a neighbouring bin and no
+/// larger maximum lies within three bins, by increasing frequency.
 pub fn peaks(t: &TransferEstimate, count: usize) -> Vec<Peak> {
     let n = t.frequency_hz.len();
     let sum: Vec<f64> = (0..n)
@@ -241,9 +241,18 @@ pub fn peaks(t: &TransferEstimate, count: usize) -> Vec<Peak> {
     let mut found: Vec<Peak> = (1..n.saturating_sub(1))
         .filter(|&b| band[b] && sum[b] > sum[b - 1] && sum[b] >= sum[b + 1])
         .filter(|&b| {
-            t.coherence
-                .iter()
-                .any(|c| c[b - 1..=b + 1].iter().any(|&v| v >= MIN_COHERENCE))
+            let coherent = |lo: usize, hi: usize| {
+                t.coherence
+                    .iter()
+                    .any(|c| c[lo..=hi].iter().any(|&v| v >= MIN_COHERENCE))
+            };
+            coherent(b, b) || coherent(b - 1, b + 1)
+        })
+        // A maximum with a larger one within three bins is that peak split by noise, not a
+        // mode of its own.
+        .filter(|&b| {
+            let (lo, hi) = (b.saturating_sub(3), (b + 3).min(n - 1));
+            (lo..=hi).all(|j| !(sum[j] > sum[b]))
         })
         .filter(|&b| sum[b].is_finite() && sum[b - 1].is_finite() && sum[b + 1].is_finite())
         .map(|b| {
