@@ -31,22 +31,11 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 
 def shake_table(src):
     for event in EVENTS:
-        os.makedirs(os.path.join(HERE, "shake-table", event), exist_ok=True)
         for s in SENSORS:
-            path = os.path.join(src, "shake-table", "flexible-3-storey", event, s + ".csv")
-            with open(path, encoding="utf-8", newline="") as f:
-                lines = f.read().splitlines()
-            names = lines[7].split(",")
-            jt, ja = names.index("SampleTimeFine"), names.index("Acc_X")
-            out = lines[:7] + ["SampleTimeFine,Acc_X"]
-            for row in lines[8:]:
-                if not row.strip():
-                    continue
-                fields = row.split(",")
-                out.append("%s,%.5f" % (fields[jt], float(fields[ja])))
-            dst = os.path.join(HERE, "shake-table", event, s + ".csv")
-            with open(dst, "w", encoding="utf-8", newline="\n") as f:
-                f.write("\n".join(out) + "\n")
+            compact_xsens(
+                os.path.join(src, "shake-table", "flexible-3-storey", event, s + ".csv"),
+                os.path.join(HERE, "shake-table", event, s + ".csv"),
+            )
 
 
 def csmip(src):
@@ -55,13 +44,9 @@ def csmip(src):
     for c in V2_CHANNELS:
         name = "CHAN%03d.V2" % c
         with open(os.path.join(d, name), "rb") as f:
-            lines = f.read().split(b"\n")
-        npts = int(lines[15].split()[0])
-        acc_lines = (npts + 7) // 8
-        # lines 1..46 (header and the acceleration block's header), then the block.
-        kept = lines[: 46 + acc_lines]
+            raw = f.read()
         with open(os.path.join(HERE, "csmip", name), "wb") as f:
-            f.write(b"\n".join(kept) + b"\n")
+            f.write(v2_acceleration(raw))
 
 
 STIFF_EVENTS = {
@@ -98,7 +83,8 @@ def compact_xsens(path, dst):
 
 
 def v2_acceleration(raw):
-    """The text header and the acceleration block of one V2 record (bytes)."""
+    """The text header and the acceleration block of one V2 record (bytes): lines 1–46 (the
+    header and the acceleration block's own), then the block's ceil(npts / 8) lines."""
     lines = raw.split(b"\n")
     npts = int(lines[15].split()[0])
     return b"\n".join(lines[: 46 + (npts + 7) // 8]) + b"\n"
