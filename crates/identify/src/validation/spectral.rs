@@ -298,15 +298,17 @@ mod tests {
     }
 
     #[test]
-    fn a_peak_with_its_coherence_one_bin_off_is_kept_a_peak_without_any_is_not() {
-        // Two local maxima of |H1| at bins 10 and 30: the first with coherence 0.4 at the peak
-        // and 0.8 one bin above (a sharp resonance's resolution bias), the second incoherent
-        // everywhere near it (noise).
+    fn a_peak_with_its_coherence_one_bin_off_is_kept_a_split_or_incoherent_one_is_not() {
+        // Local maxima of |H1| at bins 10, 13 and 30: the first with coherence 0.4 at the peak
+        // and 0.8 one bin above (a sharp resonance's resolution bias), the second coherent but
+        // smaller than the first three bins away (the first split by noise), the third
+        // incoherent everywhere near it (noise).
         let n = 40;
         let magnitude: Vec<f64> = (0..n)
             .map(|b| {
                 1.0 + 5.0 / (1.0 + (b as f64 - 10.0).powi(2))
                     + 4.0 / (1.0 + (b as f64 - 30.0).powi(2))
+                    + if b == 13 { 0.6 } else { 0.0 }
             })
             .collect();
         let coherence: Vec<f64> = (0..n)
