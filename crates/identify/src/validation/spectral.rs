@@ -252,7 +252,7 @@ pub fn peaks(t: &TransferEstimate, count: usize) -> Vec<Peak> {
         // mode of its own.
         .filter(|&b| {
             let (lo, hi) = (b.saturating_sub(3), (b + 3).min(n - 1));
-            (lo..=hi).all(|j| !(sum[j] > sum[b]))
+            (lo..=hi).all(|j| sum[j] <= sum[b] || sum[j].is_nan())
         })
         .filter(|&b| sum[b].is_finite() && sum[b - 1].is_finite() && sum[b + 1].is_finite())
         .map(|b| {
