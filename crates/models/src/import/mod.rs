@@ -247,14 +247,14 @@ fn remove_clock_delays(
                 head = head.max((-shift).ceil() as usize);
             }
         }
-        let how = if d.removed {
-            "advanced by it (a band-limited shift; clock_delay = \"measure\" keeps it)"
-        } else if rule == ClockDelay::Measure {
-            "kept (clock_delay = \"measure\")"
-        } else {
-            "kept: not beyond the rule's margins"
-        };
+        // Logged where it was removed, or measured on request; a delay within the rule's
+        // margins is only recorded (`clock_delays`).
         if d.removed || rule == ClockDelay::Measure {
+            let how = if d.removed {
+                "advanced by it (a band-limited shift; clock_delay = \"measure\" keeps it)"
+            } else {
+                "kept (clock_delay = \"measure\")"
+            };
             a.repairs.push(Repair {
                 channel: names[j].clone(),
                 action: format!(
