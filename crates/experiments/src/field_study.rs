@@ -6,9 +6,10 @@
 //! `mdof`).
 //!
 //! The study is a description (this module's [`FieldStudy`], a TOML file) turned into the
-//! `sysid` commands a user would type (`plan_identify`, `plan_validate`); [`run`] executes them with
-//! the `sysid` binary it is given, so every number of the report comes from the same commands
-//! as a user's and from their records. The report is drawn from those records only
+//! `sysid` commands a user would type (`plan_identify`, `plan_validate`); [`run`] executes them in
+//! this process through the entry it is given ([`StepRunner`]: the command line's own), so every
+//! number of the report comes from the same commands as a user's and from their records, and
+//! every step's text is in its log. The report is drawn from those records only
 //! ([`report`]).
 
 pub mod report;
@@ -16,6 +17,8 @@ pub mod report;
 use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
 use std::process::Command;
+
+use crate::console::Console;
 
 use crate::error::{bail, Context, Result};
 use serde::Deserialize;
@@ -535,9 +538,17 @@ pub(crate) fn log_reason(log: &Path) -> String {
     }
 }
 
-/// Runs `step` with `sysid`; the command's output goes to its log. A required step that wrote
-/// nothing is an error.
-pub fn execute(sysid: &Path, step: &Step) -> Result<Ended> {
+/// Runs one step's command in this process: `args` as a user types them after `sysid`
+/// (`import …`, `filter …`, `validate …`), the command's text to the console. The command-line
+/// layer gives it (`sysid field-study` passes the entry its own subcommands run through), so a
+/// step runs the very code a user's command runs, with no second process.
+pub type StepRunner = fn(&[String], &mut Console) -> Result<()>;
+
+/// Runs `step` through `run_step`; the command's text, the library's log lines while it runs
+/// and the error it ends with (as `sysid` prints it) go to the step's log. A required step that
+/// wrote nothing is an error. A panic of the command is caught and ends the step like an
+/// error, so that one step cannot take the study down without a word in its log.
+pub fn execute(run_step: StepRunner, step: &Step) -> Result<Ended> {
     for p in [&step.writes, &step.log] {
         if let Some(d) = p.parent() {
             std::fs::create_dir_all(d).with_context(|| format!("creating {}", d.display()))?;
@@ -549,24 +560,49 @@ pub fn execute(sysid: &Path, step: &Step) -> Result<Ended> {
     }
     let log = std::fs::File::create(&step.log)
         .with_context(|| format!("creating {}", step.log.display()))?;
-    let status = Command::new(sysid)
-        .args(&step.args)
-        .stdout(log.try_clone()?)
-        .stderr(log)
-        .status()
-        .with_context(|| format!("starting {}", sysid.display()))?;
+    let mut con = Console::log_file(log.try_clone()?)?;
+    writeln!(con.err(), "sysid {}", step.args.join(" "))?;
+    let outcome = {
+        let _diverted = identify::logger::divert(Box::new(log));
+        std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+            run_step(&step.args, &mut con)
+        }))
+    };
+    let failure = match outcome {
+        Ok(Ok(())) => None,
+        Ok(Err(e)) => Some(e),
+        Err(panic) => Some(crate::error::invalid!(
+            "internal error (a bug, please report it): {}",
+            panic
+                .downcast_ref::<String>()
+                .map(String::as_str)
+                .or_else(|| panic.downcast_ref::<&str>().copied())
+                .unwrap_or("a panic without a message")
+        )),
+    };
+    if let Some(e) = &failure {
+        // As `sysid` prints an error: its message, then each cause on a line.
+        writeln!(con.err(), "Error: {e}")?;
+        let mut cause = std::error::Error::source(e);
+        while let Some(c) = cause {
+            writeln!(con.err(), "  caused by: {c}")?;
+            cause = c.source();
+        }
+    }
+    drop(con);
     if !step.writes.exists() && !step.required {
         return Ok(Ended::Refused(log_reason(&step.log)));
     }
     if !step.writes.exists() {
         bail!(
-            "`sysid {}` wrote no {} ({status}); its output is in {}",
+            "`sysid {}` wrote no {} ({}); its output is in {}",
             step.args.join(" "),
             step.writes.display(),
+            failure.map_or("no error".into(), |e| format!("{e:#}")),
             step.log.display()
         );
     }
-    Ok(if status.success() {
+    Ok(if failure.is_none() {
         Ended::Ok
     } else {
         Ended::Flagged
@@ -609,8 +645,8 @@ fn copy_figure(from: &Path, to: &Path) -> Result<()> {
 /// Options of [`run`].
 #[derive(Debug, Clone)]
 pub struct RunOptions {
-    /// The `sysid` binary.
-    pub sysid: PathBuf,
+    /// Runs each step's command ([`StepRunner`]).
+    pub run_step: StepRunner,
     pub out: PathBuf,
     /// A Python interpreter with `mdof` (and numpy) to recompute the baseline; without it the
     /// baseline file of the study is used as committed.
@@ -642,7 +678,7 @@ pub fn run(study: &FieldStudy, opts: &RunOptions) -> Result<()> {
                 continue;
             }
             let t = std::time::Instant::now();
-            let ended = execute(&opts.sysid, step)?;
+            let ended = execute(opts.run_step, step)?;
             log::info!(
                 "[{}/{total}] {}: sysid {} → {} ({:.1} s){}",
                 i + 1,
@@ -676,7 +712,7 @@ pub fn run(study: &FieldStudy, opts: &RunOptions) -> Result<()> {
                 if opts.resume && step.writes.exists() {
                     continue;
                 }
-                let ended = execute(&opts.sysid, &step)?;
+                let ended = execute(opts.run_step, &step)?;
                 log::info!(
                     "{}: sysid filter → {} ({ended:?})",
                     part.name,
@@ -889,6 +925,68 @@ group = "g"
             let e = load(&STUDY.replacen(from, to, 1)).unwrap_err();
             let msg = format!("{e:#}");
             assert!(msg.contains(why), "{msg}");
+        }
+    }
+
+    fn step(dir: &Path, required: bool) -> Step {
+        Step {
+            args: vec!["filter".into(), "--data".into(), "d".into()],
+            writes: dir.join("records/r.json"),
+            log: dir.join("logs/r.txt"),
+            required,
+            figures: None,
+        }
+    }
+
+    fn writes_and_says(args: &[String], con: &mut Console) -> Result<()> {
+        writeln!(con.out(), "summary of {}", args[0])?;
+        log::info!("a line of the library's log");
+        std::fs::write(
+            Path::new(&args[2]).parent().unwrap().join("records/r.json"),
+            "{}",
+        )?;
+        Ok(())
+    }
+
+    fn refuses(_: &[String], con: &mut Console) -> Result<()> {
+        writeln!(con.err(), "note: looked at it")?;
+        Err(crate::error::Error::from(std::io::Error::other("the disk")))
+            .context("reading the data set d")
+    }
+
+    fn panics(_: &[String], _: &mut Console) -> Result<()> {
+        panic!("an index out of bounds")
+    }
+
+    #[test]
+    fn a_step_runs_in_this_process_with_its_text_its_log_lines_and_its_error_in_its_log() {
+        identify::logger::install_logger();
+        let dir = tempfile::tempdir().unwrap();
+        let mut ok = step(dir.path(), true);
+        ok.args[2] = dir.path().join("d").display().to_string();
+        assert_eq!(execute(writes_and_says, &ok).unwrap(), Ended::Ok);
+        let log = std::fs::read_to_string(&ok.log).unwrap();
+        assert!(log.starts_with("sysid filter --data "), "{log}");
+        assert!(log.contains("summary of filter\n"), "{log}");
+        assert!(log.contains("a line of the library's log\n"), "{log}");
+
+        // Refused, not required: the reason is the error as `sysid` prints it, causes joined.
+        let no = step(dir.path(), false);
+        std::fs::remove_file(&no.writes).unwrap();
+        match execute(refuses, &no).unwrap() {
+            Ended::Refused(why) => {
+                assert!(why.contains("reading the data set d"), "{why}");
+                assert!(why.contains("the disk"), "{why}");
+            }
+            e => panic!("{e:?}"),
+        }
+        // A required step that wrote nothing stops the study, naming its log.
+        let e = execute(refuses, &step(dir.path(), true)).unwrap_err();
+        assert!(format!("{e:#}").contains("logs/r.txt"), "{e:#}");
+        // A panic is caught: an error in the log, the study told.
+        match execute(panics, &step(dir.path(), false)).unwrap() {
+            Ended::Refused(why) => assert!(why.contains("an index out of bounds"), "{why}"),
+            e => panic!("{e:?}"),
         }
     }
 }

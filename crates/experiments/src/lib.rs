@@ -25,6 +25,7 @@ pub mod calibration;
 pub mod cli;
 pub mod cli_reference;
 pub mod cluster;
+pub mod console;
 pub mod coverage;
 pub mod decimate;
 pub mod discretisation;

@@ -2,6 +2,7 @@
 
 use clap::{Parser, Subcommand};
 use experiments::cli;
+use experiments::console::Console;
 
 #[derive(Parser)]
 #[command(
@@ -104,8 +105,8 @@ fn main() -> std::process::ExitCode {
 fn run(cli: Cli) -> experiments::error::Result<()> {
     match cli.command {
         Command::Simulate(args) => cli::simulate::run(args),
-        Command::Filter(args) => cli::filter::run(args),
-        Command::Import(args) => cli::import::run(args),
+        Command::Filter(args) => cli::filter::run(args, &mut Console::standard()),
+        Command::Import(args) => cli::import::run(args, &mut Console::standard()),
         Command::Table1(args) => cli::table1::run(args),
         Command::Reference(args) => cli::reference::run(args),
         Command::Study(args) => cli::study::run(args),
@@ -119,7 +120,7 @@ fn run(cli: Cli) -> experiments::error::Result<()> {
         Command::Plot(args) => cli::plot::run(args),
         Command::Loglik(args) => cli::loglik::run(args),
         Command::Information(args) => cli::information::run(args),
-        Command::Validate(args) => cli::validate::run(args),
+        Command::Validate(args) => cli::validate::run(args, &mut Console::standard()),
         Command::FieldStudy(args) => cli::field_study::run(args),
     }
 }

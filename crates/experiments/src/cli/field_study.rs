@@ -3,7 +3,8 @@
 
 use std::path::PathBuf;
 
-use crate::error::{Context, Result};
+use crate::console::Console;
+use crate::error::Result;
 
 use crate::field_study::{run as run_study, FieldStudy, RunOptions};
 
@@ -52,11 +53,10 @@ pub fn run(args: Args) -> Result<()> {
         eprintln!("report {}", path.display());
         return Ok(());
     }
-    let sysid = std::env::current_exe().context("locating the sysid binary")?;
     run_study(
         &study,
         &RunOptions {
-            sysid,
+            run_step,
             out: args.out,
             python: args.python,
             baseline_script: Some(
@@ -66,4 +66,50 @@ pub fn run(args: Args) -> Result<()> {
             resume: args.resume,
         },
     )
+}
+
+/// The subcommands a study's step runs, parsed as `sysid` parses them.
+#[derive(clap::Parser)]
+#[command(no_binary_name = true, allow_negative_numbers = true)]
+enum Step {
+    Import(super::import::Args),
+    Filter(Box<super::filter::Args>),
+    Validate(super::validate::Args),
+}
+
+/// Runs one step of a study in this process (`crate::field_study::StepRunner`): `args` are what
+/// a user types after `sysid`, parsed and run by the same code as `sysid`'s.
+pub fn run_step(args: &[String], con: &mut Console) -> Result<()> {
+    let step = <Step as clap::Parser>::try_parse_from(args)
+        .map_err(|e| crate::error::invalid!("`sysid {}`: {e}", args.join(" ")))?;
+    match step {
+        Step::Import(a) => super::import::run(a, con),
+        Step::Filter(a) => super::filter::run(*a, con),
+        Step::Validate(a) => super::validate::run(a, con),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn log() -> Console {
+        Console::log_file(tempfile::tempfile().unwrap()).unwrap()
+    }
+
+    #[test]
+    fn a_step_is_parsed_as_sysid_parses_it() {
+        // An unknown flag or subcommand is refused with clap's message before anything runs.
+        let e = run_step(&["filter".into(), "--no-such-flag".into()], &mut log()).unwrap_err();
+        assert!(format!("{e}").contains("--no-such-flag"), "{e}");
+        let e = run_step(&["simulate".into()], &mut log()).unwrap_err();
+        assert!(format!("{e}").contains("simulate"), "{e}");
+        // A real command runs: `filter --print-config` writes the commented defaults.
+        let file = tempfile::NamedTempFile::new().unwrap();
+        let mut con = Console::log_file(file.reopen().unwrap()).unwrap();
+        run_step(&["filter".into(), "--print-config".into()], &mut con).unwrap();
+        drop(con);
+        let text = std::fs::read_to_string(file.path()).unwrap();
+        assert!(text.contains("particles"), "{text}");
+    }
 }

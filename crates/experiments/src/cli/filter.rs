@@ -2,6 +2,7 @@
 
 use std::path::{Path, PathBuf};
 
+use crate::console::Console;
 use crate::error::{bail, Result};
 use core_filters::resampling::Scheme;
 use core_filters::smc::storvik::StorvikUpdate;
@@ -138,10 +139,10 @@ fn parse_storvik(s: &str) -> Result<StorvikUpdate, String> {
     }
 }
 
-/// Runs `sysid filter`.
-pub fn run(args: Args) -> Result<()> {
+/// Runs `sysid filter`, its text to `con`.
+pub fn run(args: Args, con: &mut Console) -> Result<()> {
     if args.print_config {
-        print!("{}", commented_defaults());
+        write!(con.out(), "{}", commented_defaults())?;
         return Ok(());
     }
     let Some(data_dir) = args.data.clone() else {
@@ -168,11 +169,11 @@ pub fn run(args: Args) -> Result<()> {
         }
     };
     if args.plan_only {
-        print!("{}", plan.describe());
+        write!(con.out(), "{}", plan.describe())?;
         return Ok(());
     }
     if args.print_plan {
-        print!("{}", plan.to_toml()?);
+        write!(con.out(), "{}", plan.to_toml()?)?;
         return Ok(());
     }
     let Some(out) = args.out.clone() else {
@@ -188,10 +189,10 @@ pub fn run(args: Args) -> Result<()> {
     }
     identify::record::atomic::check_output(&out, "--out", &inputs)?;
     for d in &plan.decisions {
-        eprintln!("{d}");
+        writeln!(con.err(), "{d}")?;
     }
     let steps = data.len().saturating_sub(1);
-    let shown = Shown::new(&plan, steps, steps as f64 * data.dt);
+    let shown = Shown::new(&plan, steps, steps as f64 * data.dt, con.terminal());
     let progress = |done, total| shown.tell(done, total);
     let run = || identify_plan(&plan, &data, chain.as_ref(), &|| false, Some(&progress));
     let identified = match args.threads {
@@ -206,16 +207,21 @@ pub fn run(args: Args) -> Result<()> {
     shown.finish();
     let identified = identified?;
     if let Some(noise) = &identified.noise {
-        eprintln!("{noise}");
+        writeln!(con.err(), "{noise}")?;
     }
-    let outcome = report(identified.record, &out);
+    let outcome = report(identified.record, &out, con);
     // The figures of a failed or implausible run are drawn too: they show what went wrong.
     if let Some(dir) = &args.plot {
         let drawn = identify::plot::plot(&out, dir)?;
         for note in &drawn.skipped {
-            eprintln!("note: {note}");
+            writeln!(con.err(), "note: {note}")?;
         }
-        eprintln!("{} figures in {}", drawn.written.len(), dir.display());
+        writeln!(
+            con.err(),
+            "{} figures in {}",
+            drawn.written.len(),
+            dir.display()
+        )?;
     }
     outcome
 }
@@ -229,10 +235,10 @@ struct Shown {
 }
 
 impl Shown {
-    fn new(plan: &RunPlan, steps: usize, record_s: f64) -> Self {
+    fn new(plan: &RunPlan, steps: usize, record_s: f64, terminal: bool) -> Self {
         let total = steps * plan.settings.pool.max(1);
         let label = plan.algorithm.name();
-        let bar = std::io::IsTerminal::is_terminal(&std::io::stderr()).then(|| {
+        let bar = terminal.then(|| {
             let bar = indicatif::ProgressBar::new(total as u64);
             bar.set_style(
                 indicatif::ProgressStyle::with_template(
@@ -297,14 +303,14 @@ fn request(args: &Args, algorithm: Algorithm, data: PathBuf) -> FilterRequest {
 }
 
 /// Finishes a run ([`finish`]: warnings attached, record written), prints the summary table on
-/// stdout and the warnings on stderr, and returns the run's rejection, if any, as the error of a
-/// non-zero exit.
-fn report(record: RunRecord, out: &Path) -> Result<()> {
+/// the console's output and the warnings on its errors, and returns the run's rejection, if
+/// any, as the error of a non-zero exit.
+fn report(record: RunRecord, out: &Path, con: &mut Console) -> Result<()> {
     let finished = finish(record, out)?;
-    eprintln!("{}", finished.headline());
-    print!("{}", finished.summary());
+    writeln!(con.err(), "{}", finished.headline())?;
+    write!(con.out(), "{}", finished.summary())?;
     for w in &finished.record.warnings {
-        eprintln!("warning: {}", w.message);
+        writeln!(con.err(), "warning: {}", w.message)?;
     }
     finished.verdict()?;
     Ok(())

@@ -6,6 +6,7 @@
 //! runs on the result, naming what the recordings cannot say (storeys, masses, hysteretic
 //! storeys).
 
+use crate::console::Console;
 use crate::error::Context;
 use models::import::{self, channel_map::ChannelMap};
 use std::path::PathBuf;
@@ -22,13 +23,15 @@ pub struct Args {
     pub out: PathBuf,
 }
 
-pub fn run(args: Args) -> crate::error::Result<()> {
+/// Runs `sysid import`, its text to `con`.
+pub fn run(args: Args, con: &mut Console) -> crate::error::Result<()> {
     let map = ChannelMap::load(&crate::project::locate(&args.map, "channel map")?)?;
     let imported = import::import(&map)?;
     let record = imported
         .write_dir(&args.out)
         .with_context(|| format!("writing the data set {}", args.out.display()))?;
-    println!(
+    writeln!(
+        con.out(),
         "imported {} samples at dt = {} s ({:.3} Hz), {:.3} s; ground and storey{} {}",
         record.samples,
         record.dt,
@@ -41,9 +44,10 @@ pub fn run(args: Args) -> crate::error::Result<()> {
             .map(|s| s.to_string())
             .collect::<Vec<_>>()
             .join(", ")
-    );
+    )?;
     for c in &record.channels {
-        println!(
+        writeln!(
+            con.out(),
             "  {:<9} {} ({} samples read{})",
             c.channel,
             c.file.display(),
@@ -51,31 +55,33 @@ pub fn run(args: Args) -> crate::error::Result<()> {
             c.recorded_as
                 .as_ref()
                 .map_or(String::new(), |r| format!(", {r}"))
-        );
+        )?;
     }
     if record.repairs.is_empty() {
-        println!("repairs: none");
+        writeln!(con.out(), "repairs: none")?;
     } else {
-        println!("repairs:");
+        writeln!(con.out(), "repairs:")?;
         for r in &record.repairs {
-            println!("  {}: {}", r.channel, r.action);
+            writeln!(con.out(), "  {}: {}", r.channel, r.action)?;
         }
     }
     for w in &record.warnings {
-        println!("warning: {w}");
+        writeln!(con.out(), "warning: {w}")?;
     }
     let out = args.out.display();
-    println!(
+    writeln!(
+        con.out(),
         "wrote {out}/measured.csv and {out}/import.json (the sources, their SHA-256 and every \
          repair)"
-    );
-    println!(
+    )?;
+    writeln!(
+        con.out(),
         "{}; e.g. with unit masses (k and c per unit mass):\n  sysid filter --algorithm \
          mpf-ekf2 --data {out} --storeys {} --hysteretic none --masses 1 --measurement {} \
          --out run.json",
         record.not_recorded,
         record.sensors.iter().max().copied().unwrap_or(1),
         record.measurement
-    );
+    )?;
     Ok(())
 }

@@ -6,6 +6,7 @@
 
 use std::path::PathBuf;
 
+use crate::console::Console;
 use crate::error::Result;
 
 use identify::validation::cross::cross_validate;
@@ -31,8 +32,8 @@ pub struct Args {
     pub draws: usize,
 }
 
-/// Runs `sysid validate`.
-pub fn run(args: Args) -> Result<()> {
+/// Runs `sysid validate`, its text to `con`.
+pub fn run(args: Args, con: &mut Console) -> Result<()> {
     // Checked before the work, not only when written: a refused --out costs no run.
     if let Some(out) = &args.out {
         identify::record::atomic::check_output(
@@ -46,15 +47,21 @@ pub fn run(args: Args) -> Result<()> {
     // refused before a byte is read), complete, its fingerprint and the digest of its `config`
     // verified (an edited sensor kind would model another building).
     let _: identify::record::RunRecord = identify::record::read::read(&args.record)?;
+    let mut notes = Vec::new();
     let validated = cross_validate(&args.record, &args.data, args.draws, &mut |n| {
-        eprintln!("note: {n}")
-    })?;
+        notes.push(n.to_string())
+    });
+    // Said before an error too: a note may tell why the validation failed.
+    for n in notes {
+        writeln!(con.err(), "note: {n}")?;
+    }
+    let validated = validated?;
     let (record, result) = (&validated.record, &validated.result);
     // The files first, the summary after: a reader of standard output that has gone (`| head`)
     // ends the process at its next print, and must not cost the files asked for.
     if let Some(out) = &args.out {
         crate::sweep::write_atomic(out, result)?;
-        eprintln!("result written to {}", out.display());
+        writeln!(con.err(), "result written to {}", out.display())?;
     }
     let mut drawn = identify::plot::Plotted::default();
     if let Some(dir) = &args.plot {
@@ -73,23 +80,25 @@ pub fn run(args: Args) -> Result<()> {
             Ok(p)
         })?;
     }
-    println!(
+    writeln!(
+        con.out(),
         "cross-validation: {} ({}, seed {}) identified on {}, predicting {}",
         record.algorithm,
         record.experiment,
         record.seed,
         args.record.display(),
         args.data.display()
-    );
-    print!(
+    )?;
+    write!(
+        con.out(),
         "{}",
         validation::summary(Some(&result.free_run), Some(&result.modal))
-    );
+    )?;
     for s in drawn.skipped {
-        eprintln!("note: {s}");
+        writeln!(con.err(), "note: {s}")?;
     }
     for w in drawn.written {
-        println!("{}", w.display());
+        writeln!(con.out(), "{}", w.display())?;
     }
     Ok(())
 }
