@@ -899,4 +899,62 @@ mod tests {
             "docs/architecture.md's module layers have drifted; run `cargo xtask imports --write-doc`"
         );
     }
+
+    /// The print macros written in `code` outside comments, before its test module: (line,
+    /// macro).
+    fn print_macros(code: &str) -> Vec<(usize, String)> {
+        let mut found = Vec::new();
+        for (i, line) in code.lines().enumerate() {
+            if line.trim_start().starts_with("#[cfg(test)]") {
+                break;
+            }
+            let code = line.split("//").next().unwrap_or("");
+            for m in ["println!", "eprintln!", "print!", "eprint!", "dbg!"] {
+                let mut from = 0;
+                while let Some(at) = code[from..].find(m) {
+                    let start = from + at;
+                    let before = code[..start].chars().next_back();
+                    if !before.is_some_and(|c| is_ident(c) || c == '!') {
+                        found.push((i + 1, m.to_string()));
+                    }
+                    from = start + m.len();
+                }
+            }
+        }
+        found
+    }
+
+    /// The libraries never print: progress, notes and warnings are `log` records or text
+    /// written to the `Console` a command is given; only the binaries (`src/bin`, `xtask`)
+    /// print. Test modules (at the end of a file) may.
+    #[test]
+    fn the_libraries_never_print() {
+        assert_eq!(print_macros("fn a() { println!(\"x\"); }"), vec![(1, "println!".into())]);
+        assert!(print_macros("// eprintln!(\"x\")\nwriteln!(w, \"x\")?;").is_empty());
+        assert!(print_macros("#[cfg(test)]\nmod tests { fn t() { eprintln!(); } }").is_empty());
+        let root = workspace_root();
+        let mut prints = Vec::new();
+        for (name, src) in workspace_crates(&root) {
+            if name == "xtask" {
+                continue;
+            }
+            let mut stack = vec![src];
+            while let Some(dir) = stack.pop() {
+                for entry in fs::read_dir(&dir).unwrap() {
+                    let path = entry.unwrap().path();
+                    if path.is_dir() {
+                        if path.file_name().is_some_and(|n| n != "bin") {
+                            stack.push(path);
+                        }
+                    } else if path.extension().is_some_and(|e| e == "rs") {
+                        let code = fs::read_to_string(&path).unwrap();
+                        for (line, m) in print_macros(&code) {
+                            prints.push(format!("{}:{line}: {m}", path.display()));
+                        }
+                    }
+                }
+            }
+        }
+        assert!(prints.is_empty(), "the libraries print: {prints:#?}");
+    }
 }

@@ -101,30 +101,33 @@ pub struct CompareArgs {
 }
 
 /// Runs `sysid cluster`.
-pub fn run(args: Args) -> Result<()> {
+pub fn run(args: Args, con: &mut crate::console::Console) -> Result<()> {
     match args.command {
-        Command::Submit(a) => run_submit(a),
+        Command::Submit(a) => run_submit(a, con),
         Command::Status(a) => {
             let plan = Plan::load(&a.out)?;
-            print!("{}", status(&plan, true)?.render(&plan));
+            write!(con.out(), "{}", status(&plan, true)?.render(&plan))?;
             Ok(())
         }
         Command::Resubmit(a) => {
             let plan = Plan::load(&a.out)?;
             match resubmit(&plan, a.dry_run)? {
                 None => {
-                    print!("{}", status(&plan, true)?.render(&plan));
-                    eprintln!("no shard to submit again");
+                    write!(con.out(), "{}", status(&plan, true)?.render(&plan))?;
+                    writeln!(con.err(), "no shard to submit again")?;
                 }
                 Some(s) => {
                     for c in &s.commands {
-                        println!("{c}");
+                        writeln!(con.out(), "{c}")?;
                     }
                     if let Some(sub) = s.submission {
-                        eprintln!(
+                        writeln!(
+                            con.err(),
                             "submitted shards {:?} as array job {}, finish job {}",
-                            sub.shards, sub.array_job, sub.finish_job
-                        );
+                            sub.shards,
+                            sub.array_job,
+                            sub.finish_job
+                        )?;
                     }
                 }
             }
@@ -133,28 +136,30 @@ pub fn run(args: Args) -> Result<()> {
         Command::Finish(a) => {
             let plan = Plan::load(&a.out)?;
             let done = finish(&plan)?;
-            eprintln!(
+            writeln!(
+                con.err(),
                 "finished {}: {} runs; merge copied {}, replaced {}, {} already present",
                 plan.out.display(),
                 done.runs,
                 done.merged.copied,
                 done.merged.replaced.len(),
                 done.merged.present
-            );
+            )?;
             Ok(())
         }
         Command::Compare(a) => {
             let diffs = compare::compare(&a.a, &a.b)?;
             if diffs.is_empty() {
-                println!(
+                writeln!(
+                    con.out(),
                     "{} and {} hold the same result (timings aside)",
                     a.a.display(),
                     a.b.display()
-                );
+                )?;
                 return Ok(());
             }
             for d in &diffs {
-                println!("{d}");
+                writeln!(con.out(), "{d}")?;
             }
             bail!("{} difference(s)", diffs.len())
         }
@@ -165,7 +170,7 @@ fn absolute(path: &Path, what: &str) -> Result<PathBuf> {
     std::fs::canonicalize(path).with_context(|| format!("{what} {}", path.display()))
 }
 
-fn run_submit(a: SubmitArgs) -> Result<()> {
+fn run_submit(a: SubmitArgs, con: &mut crate::console::Console) -> Result<()> {
     let config = match (&a.config, a.kind.default_config()) {
         (Some(c), _) => c.clone(),
         (None, Some(d)) => PathBuf::from(d),
@@ -213,19 +218,34 @@ fn run_submit(a: SubmitArgs) -> Result<()> {
     };
     let (submitted, runs, scripts) = submit(&plan, a.dry_run)?;
     if a.dry_run {
-        println!("# {}\n{}", plan.shard_script().display(), scripts[0]);
-        println!("# {}\n{}", plan.finish_script().display(), scripts[1]);
-        println!("# {runs} runs in {} shards; would run:", plan.tasks);
+        writeln!(
+            con.out(),
+            "# {}\n{}",
+            plan.shard_script().display(),
+            scripts[0]
+        )?;
+        writeln!(
+            con.out(),
+            "# {}\n{}",
+            plan.finish_script().display(),
+            scripts[1]
+        )?;
+        writeln!(
+            con.out(),
+            "# {runs} runs in {} shards; would run:",
+            plan.tasks
+        )?;
         for c in &submitted.commands {
-            println!("{c}");
+            writeln!(con.out(), "{c}")?;
         }
         return Ok(());
     }
     for c in &submitted.commands {
-        println!("{c}");
+        writeln!(con.out(), "{c}")?;
     }
     if let Some(s) = submitted.submission {
-        eprintln!(
+        writeln!(
+            con.err(),
             "submitted {runs} runs in {} shards: array job {}, finish job {} (logs in {}); \
              follow with `sysid cluster status --out {}`",
             plan.tasks,
@@ -233,7 +253,7 @@ fn run_submit(a: SubmitArgs) -> Result<()> {
             s.finish_job,
             plan.logs().display(),
             plan.out.display()
-        );
+        )?;
     }
     Ok(())
 }

@@ -34,7 +34,7 @@ pub struct Args {
 }
 
 /// Runs `sysid field-study`.
-pub fn run(args: Args) -> Result<()> {
+pub fn run(args: Args, con: &mut crate::console::Console) -> Result<()> {
     let config = crate::project::locate(&args.config, "field study")?;
     let study = FieldStudy::load(&config)?;
     if args.report_only {
@@ -50,7 +50,7 @@ pub fn run(args: Args) -> Result<()> {
         let text = crate::field_study::report::render(&study, &args.out)?;
         let path = args.out.join("REPORT.md");
         identify::record::atomic::write_bytes_atomic(&path, text.as_bytes())?;
-        eprintln!("report {}", path.display());
+        writeln!(con.err(), "report {}", path.display())?;
         return Ok(());
     }
     run_study(

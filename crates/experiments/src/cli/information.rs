@@ -67,7 +67,7 @@ fn check_outputs(args: &Args) -> Result<()> {
     Ok(())
 }
 
-pub fn run(args: Args) -> Result<()> {
+pub fn run(args: Args, con: &mut crate::console::Console) -> Result<()> {
     check_outputs(&args)?;
     let records = read_records(&args.records)?;
     let text = if !args.limit.is_empty() {
@@ -88,7 +88,9 @@ pub fn run(args: Args) -> Result<()> {
             .as_ref()
             .map(|p| Candidate::from_record(p))
             .transpose()?;
-        let limit = information_limit(&on, start.as_ref(), args.step, &mut |l| eprintln!("{l}"))?;
+        let limit = information_limit(&on, start.as_ref(), args.step, &mut |l| {
+            let _ = writeln!(con.err(), "{l}");
+        })?;
         if let Some(out) = &args.out {
             let json = serde_json::to_string_pretty(&limit)?;
             crate::sweep::write_bytes_atomic(out, json.as_bytes())?;
@@ -100,6 +102,6 @@ pub fn run(args: Args) -> Result<()> {
     if let Some(out) = &args.table {
         crate::sweep::write_bytes_atomic(out, text.as_bytes())?;
     }
-    print!("{text}");
+    write!(con.out(), "{text}")?;
     Ok(())
 }

@@ -33,7 +33,7 @@ pub struct Args {
     pub out: Option<PathBuf>,
 }
 
-pub fn run(args: Args) -> Result<()> {
+pub fn run(args: Args, con: &mut crate::console::Console) -> Result<()> {
     // Checked before the scoring, not only when written: a refused --out costs no filter run.
     if let Some(out) = &args.out {
         let mut inputs: Vec<(&str, &std::path::Path)> = vec![("--data", &args.data)];
@@ -55,13 +55,15 @@ pub fn run(args: Args) -> Result<()> {
         seeds: args.seeds,
         truth: args.truth,
     };
-    let c = score(&req, &candidates, &mut |line| eprintln!("{line}"))?;
+    let c = score(&req, &candidates, &mut |line| {
+        let _ = writeln!(con.err(), "{line}");
+    })?;
     let t = table(&c);
     // Written before it is printed: a reader of standard output that has gone ends the process
     // at the print.
     if let Some(out) = &args.out {
         crate::sweep::write_bytes_atomic(out, t.as_bytes())?;
     }
-    print!("{t}");
+    write!(con.out(), "{t}")?;
     Ok(())
 }

@@ -26,25 +26,27 @@ pub struct Args {
 }
 
 /// Runs `sysid merge`.
-pub fn run(args: Args) -> Result<()> {
+pub fn run(args: Args, con: &mut crate::console::Console) -> Result<()> {
     let _lock = DirLock::acquire(&args.into)?;
     let pairs = study_pairs(&args.parts, &args.into)?;
     let report = merge::<RunRecord>(&pairs)?;
     for (path, why) in &report.replaced {
-        eprintln!("replaced {}: {why}", path.display());
+        writeln!(con.err(), "replaced {}: {why}", path.display())?;
     }
     if report.cleaned > 0 {
-        eprintln!(
+        writeln!(
+            con.err(),
             "removed {} temporary file(s) left by interrupted writers",
             report.cleaned
-        );
+        )?;
     }
-    eprintln!(
+    writeln!(
+        con.err(),
         "merged into {}: {} copied, {} replaced, {} already present",
         args.into.display(),
         report.copied,
         report.replaced.len(),
         report.present
-    );
+    )?;
     Ok(())
 }

@@ -27,19 +27,20 @@ pub struct Args {
 }
 
 /// Runs `sysid plot`.
-pub fn run(args: Args) -> Result<()> {
+pub fn run(args: Args, con: &mut crate::console::Console) -> Result<()> {
     let p = plot(&args.record, &args.out)?;
     for note in &p.skipped {
-        eprintln!("note: {note}");
+        writeln!(con.err(), "note: {note}")?;
     }
     for f in &p.written {
-        println!("{}", f.display());
+        writeln!(con.out(), "{}", f.display())?;
     }
     if p.written.is_empty() {
-        eprintln!(
+        writeln!(
+            con.err(),
             "note: nothing drawn: {} holds none of the data above",
             args.record.display()
-        );
+        )?;
     }
     Ok(())
 }

@@ -63,7 +63,7 @@ fn parse_estimator(s: &str) -> Result<Algorithm, String> {
     }
 }
 
-pub fn run(args: Args) -> Result<()> {
+pub fn run(args: Args, con: &mut crate::console::Console) -> Result<()> {
     // Checked before the chain runs: a refused --out costs no filter run, and the record never
     // replaces a file the chain reads.
     let mut inputs: Vec<(&str, &std::path::Path)> = vec![("--data", &args.data)];
@@ -88,16 +88,25 @@ pub fn run(args: Args) -> Result<()> {
         seed: args.seed,
         config: args.config,
     };
-    let record = reference_posterior(&request, &mut |line| eprintln!("{line}"))?;
+    let record = reference_posterior(&request, &mut |line| {
+        let _ = writeln!(con.err(), "{line}");
+    })?;
     // Written before the table is printed: a reader of standard output that has gone ends the
     // process at the print (SIGPIPE), and the record asked for is there by then.
     write_reference(&args.out, &record)?;
-    println!(
+    writeln!(
+        con.out(),
         "{:<8} {:>12} {:>10} {:>24} {:>8} {:>10}",
-        "param", "mean", "s.d.", "95% interval", "ESS", "truth"
-    );
+        "param",
+        "mean",
+        "s.d.",
+        "95% interval",
+        "ESS",
+        "truth"
+    )?;
     for p in &record.params {
-        println!(
+        writeln!(
+            con.out(),
             "{:<8} {:>12.5} {:>10.5} {:>24} {:>8.0} {:>10}",
             p.name,
             p.mean,
@@ -107,14 +116,18 @@ pub fn run(args: Args) -> Result<()> {
             p.truth
                 .map(|t| format!("{t:.4}"))
                 .unwrap_or_else(|| "-".into())
-        );
+        )?;
     }
-    println!(
+    writeln!(
+        con.out(),
         "acceptance {:.3} (burn-in {:.3}), {} failed estimates of {}",
-        record.acceptance, record.acceptance_burn_in, record.failed_estimates, record.evaluations
-    );
+        record.acceptance,
+        record.acceptance_burn_in,
+        record.failed_estimates,
+        record.evaluations
+    )?;
     for w in &record.warnings {
-        eprintln!("warning: {w}");
+        writeln!(con.err(), "warning: {w}")?;
     }
     Ok(())
 }
@@ -136,7 +149,7 @@ pub struct CompareArgs {
 }
 
 /// `sysid compare-reference`.
-pub fn compare(args: CompareArgs) -> Result<()> {
+pub fn compare(args: CompareArgs, con: &mut crate::console::Console) -> Result<()> {
     if let Some(out) = &args.out {
         let mut inputs: Vec<(&str, &std::path::Path)> = Vec::new();
         inputs.extend(args.reference.iter().map(|p| ("--reference", p.as_path())));
@@ -144,13 +157,13 @@ pub fn compare(args: CompareArgs) -> Result<()> {
         identify::record::atomic::check_output(out, "--out", &inputs)?;
     }
     let md = crate::reference::compare_files(&args.reference, &args.records, &mut |w| {
-        eprintln!("warning: {w}")
+        let _ = writeln!(con.err(), "warning: {w}");
     })?;
     // Written before it is printed (a closed standard output ends the process at the print),
     // and only as a new or regular file ([`crate::sweep::write_bytes_atomic`]).
     if let Some(out) = &args.out {
         crate::sweep::write_bytes_atomic(out, md.as_bytes()).context("--out")?;
     }
-    print!("{md}");
+    write!(con.out(), "{md}")?;
     Ok(())
 }

@@ -47,7 +47,7 @@ pub struct Args {
 }
 
 /// Runs `sysid regression`.
-pub fn run(args: Args) -> Result<()> {
+pub fn run(args: Args, con: &mut crate::console::Console) -> Result<()> {
     let start = Instant::now();
     let config = crate::project::locate(&args.config, "regression file")?;
     let file = RegressionFile::load(&config)?;
@@ -59,17 +59,22 @@ pub fn run(args: Args) -> Result<()> {
     };
     let outcome = crate::regression::run(&file, &options)?;
     let wall_s = start.elapsed().as_secs_f64();
-    print!("{}", format_table(&outcome.checks));
-    println!(
+    write!(con.out(), "{}", format_table(&outcome.checks))?;
+    writeln!(
+        con.out(),
         "{} runs of {} ({} executed, {} reused) in {wall_s:.1} s ({})",
         outcome.records.len(),
         file.study.name,
         outcome.executed,
         outcome.reused,
         args.config.display()
-    );
+    )?;
     outcome.write_summary(&args.out.join("regression.json"), &args.config, wall_s)?;
     outcome.verdict()?;
-    println!("all {} regression bounds met", outcome.checks.len());
+    writeln!(
+        con.out(),
+        "all {} regression bounds met",
+        outcome.checks.len()
+    )?;
     Ok(())
 }

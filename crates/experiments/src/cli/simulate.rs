@@ -94,7 +94,7 @@ impl Args {
 }
 
 /// Runs `sysid simulate`.
-pub fn run(args: Args) -> crate::error::Result<()> {
+pub fn run(args: Args, con: &mut crate::console::Console) -> crate::error::Result<()> {
     let config = dataset_config(&args.request())?;
     let ds = dataset::generate(&config)?;
     ds.write_dir(&args.out)
@@ -117,7 +117,8 @@ pub fn run(args: Args) -> crate::error::Result<()> {
         .zip(&ds.rms.acc)
         .map(|(c, a)| format!("{c} {a:.4}"))
         .collect();
-    println!(
+    writeln!(
+        con.out(),
         "{}: {} storeys, {} accelerations at storeys {:?}; {} samples, dt = {} s, {:.2} s; {}; \
          RMS ug = {:.4}, acc = [{}] m/s²",
         args.out.display(),
@@ -134,6 +135,6 @@ pub fn run(args: Args) -> crate::error::Result<()> {
         },
         ds.rms.ug,
         acc.join(", ")
-    );
+    )?;
     Ok(())
 }

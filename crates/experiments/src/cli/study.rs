@@ -21,14 +21,14 @@ pub struct Args {
 }
 
 /// Runs `sysid study`.
-pub fn run(args: Args) -> Result<()> {
+pub fn run(args: Args, con: &mut crate::console::Console) -> Result<()> {
     let report = crate::user_study::run(&crate::user_study::Options {
         config: crate::project::locate(&args.config, "study")?,
         out: args.out,
         mode: args.run.mode(),
     })?;
     if let Some(report) = report {
-        print!("{report}");
+        write!(con.out(), "{report}")?;
     }
     Ok(())
 }

@@ -11,7 +11,7 @@ pub struct Args {
 }
 
 /// Runs `sysid table1`.
-pub fn run(args: Args) -> crate::error::Result<()> {
-    print!("{}", crate::table1::write(&args.out)?);
+pub fn run(args: Args, con: &mut crate::console::Console) -> crate::error::Result<()> {
+    write!(con.out(), "{}", crate::table1::write(&args.out)?)?;
     Ok(())
 }

@@ -326,7 +326,6 @@ mod tests {
         let (ug, y) = frame(7.8, 0.02, dt, 2.34, 2560);
         let f1 = first_mode(dt, &ug, &y).expect("a mode");
         let d = measure(dt, &ug, &y, f1).expect("measured");
-        eprintln!("{d:?}");
         assert!((d.seconds / dt - 2.34).abs() < 0.15, "{d:?}");
         assert!(d.removed, "{d:?}");
     }
