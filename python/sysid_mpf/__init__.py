@@ -21,8 +21,9 @@ import os
 from dataclasses import dataclass
 from typing import Any, Mapping, Optional, Sequence, Union
 
-import numpy as np
-
+# numpy is imported where arrays are taken in (`field_data`, masses given as an array), not
+# here: the compiled module loads it when it first hands out an array, so a script that only
+# identifies and writes a record does not pay numpy's start-up (about 0.1 s, docs/python.md).
 from . import _core
 from ._core import (
     Dataset,
@@ -88,6 +89,8 @@ class Building:
     def _masses(self) -> Optional[list]:
         if self.masses is None:
             return None
+        import numpy as np
+
         if np.ndim(self.masses) == 0:
             return [float(self.masses)]
         return [float(m) for m in self.masses]
@@ -193,6 +196,8 @@ def field_data(
     """Field data from arrays: ü_g of shape (K,), accelerations of shape (K, channels) (or (K,)
     for one channel) at the 1-based storeys ``sensors``, sample interval ``dt`` (times k·dt).
     Write it with ``Dataset.write(dir)`` (``measured.csv``) for the command line."""
+    import numpy as np
+
     ug = np.ascontiguousarray(ug, dtype=np.float64)
     acc = np.asarray(acc, dtype=np.float64)
     if ug.ndim != 1:
