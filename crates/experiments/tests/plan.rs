@@ -406,3 +406,50 @@ fn a_pooled_run_is_the_same_on_any_number_of_threads() {
         assert_eq!(records[0], records[2], "{alg}: 1 and 7 threads");
     }
 }
+
+/// The held-out choice scores its candidates side by side: on field data of a linear building
+/// the record (the choice's evidence with it) is the same, byte for byte but for the timing, on
+/// 1, 2 and 7 threads, and `--threads 1` holds the choice to one thread too.
+#[test]
+fn the_held_out_choice_is_the_same_on_any_number_of_threads() {
+    let (_tmp, dir) = temp_dir("choice-threads");
+    let data = dir.join("d");
+    ok(
+        sysid()
+            .args(["simulate", "--storeys", "3", "--hysteretic", "none"])
+            .args(["--duration", "6", "--seed", "3", "--out"])
+            .arg(&data)
+            .output()
+            .unwrap(),
+        "simulate",
+    );
+    for f in ["dataset.json", "truth.csv"] {
+        std::fs::remove_file(data.join(f)).unwrap();
+    }
+    let records: Vec<serde_json::Value> = ["1", "2", "7"]
+        .iter()
+        .map(|threads| {
+            let out = dir.join(format!("run-{threads}.json"));
+            ran(
+                sysid()
+                    .args(["filter", "--algorithm", "mpf-ekf2", "--storeys", "3"])
+                    .args(["--hysteretic", "none", "--masses", "1"])
+                    .args(["--measurement", "relative", "--threads", threads, "--data"])
+                    .arg(&data)
+                    .arg("--out")
+                    .arg(&out)
+                    .output()
+                    .unwrap(),
+                "filter",
+            );
+            without_timing(&out)
+        })
+        .collect();
+    let held_out = &records[0]["plan"]["evidence"]["held_out"];
+    assert!(
+        held_out["candidates"].as_array().is_some_and(|c| c.len() >= 12),
+        "the held-out choice ran: {held_out}"
+    );
+    assert_eq!(records[0], records[1], "1 and 2 threads");
+    assert_eq!(records[0], records[2], "1 and 7 threads");
+}

@@ -149,6 +149,22 @@ pub fn run(args: Args, con: &mut Console) -> Result<()> {
         bail!("--data is required");
     };
     let (data, chain) = load_request_data(&data_dir)?;
+    // `--threads` holds the whole run to its pool: the held-out choice of the plan scores its
+    // candidates side by side, as the pooled filters run.
+    let pool = match args.threads {
+        Some(n) if n == 0 || n > 1024 => bail!("--threads {n}: give 1 to 1024 threads"),
+        Some(n) => Some(
+            rayon::ThreadPoolBuilder::new()
+                .num_threads(n)
+                .build()
+                .map_err(|e| crate::error::invalid!("--threads {n}: {e}"))?,
+        ),
+        None => None,
+    };
+    let on_threads = |f: &(dyn Fn() -> Result<RunPlan> + Sync)| match &pool {
+        Some(p) => p.install(f),
+        None => f(),
+    };
     let plan = match &args.plan {
         Some(file) => {
             let name = file.display().to_string();
@@ -161,11 +177,8 @@ pub fn run(args: Args, con: &mut Console) -> Result<()> {
             let Some(algorithm) = args.algorithm else {
                 bail!("--algorithm is required (or --plan FILE)");
             };
-            plan_request(
-                &request(&args, algorithm, data_dir.clone()),
-                &data,
-                chain.as_ref(),
-            )?
+            let asked = request(&args, algorithm, data_dir.clone());
+            on_threads(&|| plan_request(&asked, &data, chain.as_ref()))?
         }
     };
     if args.plan_only {
@@ -195,13 +208,8 @@ pub fn run(args: Args, con: &mut Console) -> Result<()> {
     let shown = Shown::new(&plan, steps, steps as f64 * data.dt, con.terminal());
     let progress = |done, total| shown.tell(done, total);
     let run = || identify_plan(&plan, &data, chain.as_ref(), &|| false, Some(&progress));
-    let identified = match args.threads {
-        Some(n) if n == 0 || n > 1024 => bail!("--threads {n}: give 1 to 1024 threads"),
-        Some(n) => rayon::ThreadPoolBuilder::new()
-            .num_threads(n)
-            .build()
-            .map_err(|e| crate::error::invalid!("--threads {n}: {e}"))?
-            .install(run),
+    let identified = match &pool {
+        Some(p) => p.install(run),
         None => run(),
     };
     shown.finish();
