@@ -3,7 +3,7 @@
 
 Usage: python3 data/real/convert.py SOURCE_DATA_DIR [MDOF_CHECKOUT]
 
-With MDOF_CHECKOUT (a checkout of chrystalchern/mdof at commit 4f0e831c) the two structures of
+With MDOF_CHECKOUT (a checkout of chrystalchern/mdof at commit 4f0e831c) the three structures of
 `unseen/` are made too, from its `notebooks/uploads` as they are there:
 
 - `unseen/stiff-one-storey/`: the Xsens exports of `mini_shake_table/Flexible vs. Stiff/Stiff 1
@@ -11,6 +11,8 @@ With MDOF_CHECKOUT (a checkout of chrystalchern/mdof at commit 4f0e831c) the two
   wrote `nan` stays `nan`).
 - `unseen/meloland/`: from three zipped CSMIP V2 sets of `meloland/`, the transverse channels 7
   (deck, middle of the bridge) and 11 (south embankment), kept as the V2 records above.
+- `unseen/capistrano/`: from four zipped CSMIP V2 sets of `capistrano/`, the transverse channels
+  4 (bent 4, bottom of column) and 10 (bent 4, deck level), kept as the V2 records above.
 
 - Shake table (Xsens DOT CSV exports): the seven header lines and the column-name line are
   kept; of the columns only SampleTimeFine (sensor clock, µs) and Acc_X (the shaking axis,
@@ -64,6 +66,13 @@ MELOLAND_EVENTS = {
     "borrego-springs-2010-07-07": "BorregoSprings_07Jul2010_CE01336P.ZIP",
 }
 MELOLAND_CHANNELS = [7, 11]
+CAPISTRANO_EVENTS = {
+    "inglewood-2009-05-17": "Inglewood_17May2009_CE13795P.zip",
+    "el-mayor-cucapah-2010-04-04": "calexico_04apr2010_14607652_CE13795P.zip",
+    "ocotillo-2010-06-14": "Ocotillo_14Jun2010_CE13795P.zip",
+    "borrego-springs-2010-07-07": "BorregoSprings_07Jul2010_CE13795P.zip",
+}
+CAPISTRANO_CHANNELS = [4, 10]
 
 
 def compact_xsens(path, dst):
@@ -107,14 +116,18 @@ def unseen(mdof):
             names.append("%s/%s.csv <- Stiff 1 story/%s/%s" % (event, sensor, folder, name))
     with open(os.path.join(HERE, "unseen", "stiff-one-storey", "ORIGINAL_NAMES.txt"), "w") as f:
         f.write("\n".join(names) + "\n")
-    for event, zname in MELOLAND_EVENTS.items():
-        with zipfile.ZipFile(os.path.join(up, "meloland", zname)) as z:
-            for c in MELOLAND_CHANNELS:
-                name = "CHAN%03d.V2" % c
-                dst = os.path.join(HERE, "unseen", "meloland", event, name)
-                os.makedirs(os.path.dirname(dst), exist_ok=True)
-                with open(dst, "wb") as f:
-                    f.write(v2_acceleration(z.read(name)))
+    for folder, events, channels, out in [
+        ("meloland", MELOLAND_EVENTS, MELOLAND_CHANNELS, "meloland"),
+        ("capistrano", CAPISTRANO_EVENTS, CAPISTRANO_CHANNELS, "capistrano"),
+    ]:
+        for event, zname in events.items():
+            with zipfile.ZipFile(os.path.join(up, folder, zname)) as z:
+                for c in channels:
+                    name = "CHAN%03d.V2" % c
+                    dst = os.path.join(HERE, "unseen", out, event, name)
+                    os.makedirs(os.path.dirname(dst), exist_ok=True)
+                    with open(dst, "wb") as f:
+                        f.write(v2_acceleration(z.read(name)))
 
 
 if __name__ == "__main__":

@@ -929,7 +929,10 @@ mod tests {
     /// print. Test modules (at the end of a file) may.
     #[test]
     fn the_libraries_never_print() {
-        assert_eq!(print_macros("fn a() { println!(\"x\"); }"), vec![(1, "println!".into())]);
+        assert_eq!(
+            print_macros("fn a() { println!(\"x\"); }"),
+            vec![(1, "println!".into())]
+        );
         assert!(print_macros("// eprintln!(\"x\")\nwriteln!(w, \"x\")?;").is_empty());
         assert!(print_macros("#[cfg(test)]\nmod tests { fn t() { eprintln!(); } }").is_empty());
         let root = workspace_root();

@@ -58,6 +58,10 @@ pub struct Part {
     /// three storeys — a one-storey structure wants 2–8).
     #[serde(default)]
     pub baseline_orders: Option<Vec<usize>>,
+    /// The baseline's horizon (`--horizon` of the script; absent: mdof's default, 300, which
+    /// finds no stable model of a record sampled far above its modes, e.g. a 3 Hz bent at 200 Hz).
+    #[serde(default)]
+    pub baseline_horizon: Option<usize>,
 }
 
 /// A recording of the structure, imported by `sysid import --map`.
@@ -734,6 +738,9 @@ pub fn run(study: &FieldStudy, opts: &RunOptions) -> Result<()> {
             if let Some(orders) = &part.baseline_orders {
                 let list: Vec<String> = orders.iter().map(usize::to_string).collect();
                 cmd.arg("--orders").arg(list.join(","));
+            }
+            if let Some(h) = part.baseline_horizon {
+                cmd.arg("--horizon").arg(h.to_string());
             }
             let status = cmd
                 .status()

@@ -447,7 +447,9 @@ fn the_held_out_choice_is_the_same_on_any_number_of_threads() {
         .collect();
     let held_out = &records[0]["plan"]["evidence"]["held_out"];
     assert!(
-        held_out["candidates"].as_array().is_some_and(|c| c.len() >= 12),
+        held_out["candidates"]
+            .as_array()
+            .is_some_and(|c| c.len() >= 12),
         "the held-out choice ran: {held_out}"
     );
     assert_eq!(records[0], records[1], "1 and 2 threads");

@@ -20,9 +20,9 @@
 //! particle run would cost one full run per candidate (24 with both damping forms open); its plan
 //! says so and keeps the default.
 
-use rayon::prelude::*;
 use models::dataset::LoadedDataset;
 use models::structure::Damping;
+use rayon::prelude::*;
 
 use crate::error::Result;
 use crate::field::StructureSettings;
