@@ -350,7 +350,18 @@ pub(crate) fn run_with(opts: &Options, write: &Writer<'_>) -> Result<Vec<Cell>> 
             .collect()
     };
     if opts.report_only {
+        let asked = jobs.len();
         let (jobs, records) = existing(&study, &jobs, &records_dir)?;
+        if records.is_empty() {
+            bail!(
+                "{}: none of the {asked} runs of {} has a record computed from its present \
+                 inputs (a record from another configuration or numerics version is left out, \
+                 the log above names each): nothing to report; run the study without \
+                 --report-only",
+                opts.out.display(),
+                opts.config.display()
+            );
+        }
         let cells = cells(&study, &jobs, &records, &cpu_of(&jobs))?;
         write_cells(&engine, &cells, f64::NAN)?;
         write(opts, &study, &cells, &jobs, &records)?;

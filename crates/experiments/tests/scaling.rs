@@ -377,4 +377,25 @@ fn small_study_end_to_end_and_resumed() {
         report.contains("**Incomplete: 13 of the 14 planned runs have a record.**"),
         "{report}"
     );
+    // Report only on records of other inputs (here: another seed): none is used, and the error
+    // says why instead of failing on a figure with no cell.
+    let other = dir.join("other-seed.toml");
+    let text = std::fs::read_to_string(&opts.config).unwrap();
+    assert!(text.contains("master_seed = 7"));
+    std::fs::write(
+        &other,
+        text.replacen("master_seed = 7", "master_seed = 8", 1),
+    )
+    .unwrap();
+    let e = scaling::run(&Options {
+        config: other,
+        report_only: true,
+        ..opts.clone()
+    })
+    .unwrap_err();
+    let msg = format!("{e:#}");
+    assert!(
+        msg.contains("none of the 14 runs") && msg.contains("without --report-only"),
+        "{msg}"
+    );
 }
