@@ -271,7 +271,25 @@ fn render_part(s: &mut String, part: &Part, out: &Path) -> Result<()> {
     };
     let best = baseline.as_ref().and_then(|b| b.best());
 
-    // Identification on the training record.
+    identified(s, part, &dirs, best)?;
+    if !validate.is_empty() {
+        cross_validation(s, part, &dirs, &validate, best)?;
+    }
+    if let Some(b) = &baseline {
+        baseline_orders(s, b, train, &validate)?;
+    }
+    selected_model(s, part, &dirs, &validate, best)
+}
+
+/// The variants identified on the training record, beside the baseline's best order; the
+/// measured peaks; links to the selected model's figures.
+fn identified(
+    s: &mut String,
+    part: &Part,
+    dirs: &PartDirs,
+    best: Option<&BaselineRun>,
+) -> Result<()> {
+    let train = &part.identify_record().name;
     writeln!(s, "### Identified on `{train}`\n")?;
     writeln!(
         s,
@@ -356,17 +374,28 @@ fn render_part(s: &mut String, part: &Part, out: &Path) -> Result<()> {
 
     writeln!(s)?;
 
-    // Cross-validation.
+    Ok(())
+}
+
+/// Every variant's free-run fit on each record kept out, beside the baseline's.
+fn cross_validation(
+    s: &mut String,
+    part: &Part,
+    dirs: &PartDirs,
+    validate: &[&str],
+    best: Option<&BaselineRun>,
+) -> Result<()> {
+    let train = &part.identify_record().name;
     if !validate.is_empty() {
         writeln!(s, "### Cross-validation: predicting the records kept out\n")?;
         write!(s, "| identified on `{train}` |")?;
-        for v in &validate {
+        for v in validate {
             write!(s, " fit % on `{v}` |")?;
         }
         writeln!(s, "\n|---|{}", "---|".repeat(validate.len()))?;
         for v in &part.variant {
             write!(s, "| {} |", v.label)?;
-            for r in &validate {
+            for r in validate {
                 let cell = match cross(&dirs.validation(&v.name, r))? {
                     Some(cv) => fit_cell(Some(&fits(&cv.free_run))),
                     None => {
@@ -382,7 +411,7 @@ fn render_part(s: &mut String, part: &Part, out: &Path) -> Result<()> {
         }
         if let Some(b) = best {
             write!(s, "| SRIM order {} (baseline) |", b.order)?;
-            for r in &validate {
+            for r in validate {
                 write!(s, " {} |", fit_cell(b.fits_on(r)))?;
             }
             writeln!(s)?;
@@ -390,42 +419,56 @@ fn render_part(s: &mut String, part: &Part, out: &Path) -> Result<()> {
         writeln!(s)?;
     }
 
-    if let Some(b) = &baseline {
-        writeln!(
-            s,
-            "### The baseline: {} (mdof {})\n\nTrained on `{train}`; the best order on `{train}` \
-             (largest mean fit) is the one compared above. Command: `{}`.\n",
-            b.method, b.mdof_version, b.command
-        )?;
-        write!(s, "| order | modes Hz (ζ %) |")?;
-        let names: Vec<&str> = std::iter::once(train.as_str())
-            .chain(validate.iter().copied())
-            .collect();
-        for n in &names {
-            write!(s, " fit % `{n}` |")?;
-        }
-        writeln!(s, " s |\n|---|---|{}---|", "---|".repeat(names.len()))?;
-        for r in &b.runs {
-            let modes: Vec<String> = r
-                .modes
-                .iter()
-                .map(|m| format!("{:.2} ({:.2})", m.frequency_hz, 100.0 * m.damping_ratio))
-                .collect();
-            write!(s, "| {} | {} |", r.order, modes.join(", "))?;
-            for n in &names {
-                write!(
-                    s,
-                    " {} |",
-                    r.fits_on(n)
-                        .map_or("unstable".into(), |f| fit_cell(Some(f)))
-                )?;
-            }
-            writeln!(s, " {:.1} |", r.seconds)?;
-        }
-        writeln!(s)?;
-    }
+    Ok(())
+}
 
-    // The selected model on every record.
+/// The baseline's every order: its modes and fits on every record.
+fn baseline_orders(s: &mut String, b: &Baseline, train: &str, validate: &[&str]) -> Result<()> {
+    writeln!(
+        s,
+        "### The baseline: {} (mdof {})\n\nTrained on `{train}`; the best order on `{train}` \
+         (largest mean fit) is the one compared above. Command: `{}`.\n",
+        b.method, b.mdof_version, b.command
+    )?;
+    write!(s, "| order | modes Hz (ζ %) |")?;
+    let names: Vec<&str> = std::iter::once(train)
+        .chain(validate.iter().copied())
+        .collect();
+    for n in &names {
+        write!(s, " fit % `{n}` |")?;
+    }
+    writeln!(s, " s |\n|---|---|{}---|", "---|".repeat(names.len()))?;
+    for r in &b.runs {
+        let modes: Vec<String> = r
+            .modes
+            .iter()
+            .map(|m| format!("{:.2} ({:.2})", m.frequency_hz, 100.0 * m.damping_ratio))
+            .collect();
+        write!(s, "| {} | {} |", r.order, modes.join(", "))?;
+        for n in &names {
+            write!(
+                s,
+                " {} |",
+                r.fits_on(n)
+                    .map_or("unstable".into(), |f| fit_cell(Some(f)))
+            )?;
+        }
+        writeln!(s, " {:.1} |", r.seconds)?;
+    }
+    writeln!(s)?;
+    Ok(())
+}
+
+/// The selected variant on every record: its parameters and intervals, whether they agree, its
+/// predictive band and the goals.
+fn selected_model(
+    s: &mut String,
+    part: &Part,
+    dirs: &PartDirs,
+    validate: &[&str],
+    best: Option<&BaselineRun>,
+) -> Result<()> {
+    let train = &part.identify_record().name;
     let selected = select(part, &dirs)?;
     if let (Some(sel), None) = (&part.selection, &selected) {
         writeln!(
@@ -466,7 +509,7 @@ fn render_part(s: &mut String, part: &Part, out: &Path) -> Result<()> {
             r0.loglik,
         )?;
         let mut on: Vec<(String, RunRecord)> = vec![(train.clone(), r0.clone())];
-        for v in &validate {
+        for v in validate {
             if let Some(r) = run_record(&dirs.selected_record(v))? {
                 on.push((v.to_string(), r));
             }
