@@ -351,7 +351,7 @@ fn identified(
             peaks.join(", ")
         )?;
     }
-    if let Some((chosen, _)) = select(part, &dirs)? {
+    if let Some((chosen, _)) = select(part, dirs)? {
         // Only the figures that are there are linked.
         let links: Vec<String> = [
             ("free run against the measured floors", "free_run"),
@@ -469,7 +469,7 @@ fn selected_model(
     best: Option<&BaselineRun>,
 ) -> Result<()> {
     let train = &part.identify_record().name;
-    let selected = select(part, &dirs)?;
+    let selected = select(part, dirs)?;
     if let (Some(sel), None) = (&part.selection, &selected) {
         writeln!(
             s,
@@ -540,10 +540,10 @@ fn selected_model(
         }
         writeln!(s, "\n")?;
         agreement(s, &on)?;
-        band(s, &dirs, chosen, r0, train, &validate)?;
+        band(s, dirs, chosen, r0, train, validate)?;
         // The goals compare with the baseline: only where the part has one.
         if part.baseline {
-            goals(s, part, &dirs, chosen, r0, best, &validate)?;
+            goals(s, part, dirs, chosen, r0, best, validate)?;
         }
     }
     Ok(())
