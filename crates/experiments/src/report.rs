@@ -72,12 +72,47 @@ pub(crate) fn write_report(
     summary: &BTreeMap<&str, Vec<AlgorithmStats>>,
     total_jobs: usize,
 ) -> Result<String> {
+    let x = Inputs {
+        opts,
+        studies,
+        records,
+        summary,
+        total_jobs,
+    };
     let mut o = String::new();
-    let first = |study: &str, alg: Algorithm| {
-        records[study]
+    provenance(&mut o, &x);
+    table1(&mut o, &x);
+    fig4(&mut o, &x);
+    fig5(&mut o, &x);
+    fig6(&mut o, &x);
+    fig7(&mut o, &x)?;
+    fig8(&mut o, &x);
+    findings(&mut o, &x);
+    performance(&mut o, &x);
+    Ok(o)
+}
+
+/// What every section of the report reads.
+struct Inputs<'a> {
+    opts: &'a Target<'a>,
+    studies: &'a BTreeMap<&'a str, Study>,
+    records: &'a BTreeMap<&'a str, Vec<RunRecord>>,
+    summary: &'a BTreeMap<&'a str, Vec<AlgorithmStats>>,
+    total_jobs: usize,
+}
+
+impl Inputs<'_> {
+    /// The first run's record of `alg` in `study`.
+    fn first(&self, study: &str, alg: Algorithm) -> Option<&RunRecord> {
+        self.records[study]
             .iter()
             .find(|r| r.algorithm == alg.name() && r.run == 0)
-    };
+    }
+}
+
+/// The title and the provenance: toolkit, numerics version, runs and every study's form.
+fn provenance(o: &mut String, x: &Inputs<'_>) {
+    let (opts, studies, total_jobs) = (x.opts, x.studies, x.total_jobs);
     let _ = writeln!(o, "# Reproduction of Olivier & Smyth (2016): report\n");
     let _ = writeln!(
         o,
@@ -95,20 +130,17 @@ pub(crate) fn write_report(
          is not committed: a reproduction that agrees with the committed records leaves every \
          committed file as it was.\n"
     );
-    header(&mut o, &["item", "value"]);
+    header(o, &["item", "value"]);
+    row(o, &["toolkit".into(), env!("CARGO_PKG_VERSION").into()]);
     row(
-        &mut o,
-        &["toolkit".into(), env!("CARGO_PKG_VERSION").into()],
-    );
-    row(
-        &mut o,
+        o,
         &[
             "numerics version".into(),
             identify::record::NUMERICS_VERSION.to_string(),
         ],
     );
     row(
-        &mut o,
+        o,
         &[
             "runs".into(),
             format!("{total_jobs} (every record's fingerprint names its inputs)"),
@@ -116,7 +148,7 @@ pub(crate) fn write_report(
     );
     for (name, s) in studies {
         row(
-            &mut o,
+            o,
             &[
                 format!("config `experiments/{name}.toml`"),
                 format!(
@@ -142,14 +174,21 @@ pub(crate) fn write_report(
         );
     }
     let _ = writeln!(o, "\nData: El Centro 1940 N-S × 3.0 (SPEC §2), dt = 0.005 s, 6237 samples; 10% RMS noise on every acceleration and on the excitation given to the filters. Each run index has its own data set; all algorithms of one run see the same data set.\n");
+}
 
-    // Table I
+/// Table I, as `table1` wrote it.
+fn table1(o: &mut String, x: &Inputs<'_>) {
+    let opts = x.opts;
     let _ = writeln!(o, "## Table I — moments of z = xᵀx, x ~ N(0, I)\n");
     let _ = writeln!(o, "Paper: T1 gives (0, 0), T2 gives (nx, 2nx), the UT (β = 2, κ = 0) gives (nx, 2nx²); exact is (nx, 2nx). Ours, computed by running each transform:\n");
     let t1 = std::fs::read_to_string(opts.out.join("table1").join("table1.md")).unwrap_or_default();
     let _ = writeln!(o, "{t1}\n");
+}
 
-    // Fig. 4
+/// Fig. 4: the bootstrap PF's collapse.
+fn fig4(o: &mut String, x: &Inputs<'_>) {
+    let summary = x.summary;
+    let first = |study: &str, alg: Algorithm| x.first(study, alg);
     let _ = writeln!(o, "## Fig. 4 — bootstrap PF (collapse)\n");
     let _ = writeln!(
         o,
@@ -157,7 +196,7 @@ pub(crate) fn write_report(
     );
     let _ = writeln!(o, "Paper: with 500 particles and no artificial parameter noise, the parameter means freeze early at wrong values (degeneracy) and the validation loop misses the true loop.\n");
     if let Some(r) = first("fig4", Algorithm::Bootstrap) {
-        theta_table(&mut o, &[("bootstrap", r)]);
+        theta_table(o, &[("bootstrap", r)]);
         let d: Vec<String> = r
             .distinct_sampled
             .iter()
@@ -177,8 +216,12 @@ pub(crate) fn write_report(
             .fold(0.0, f64::max);
         let _ = writeln!(o, "Over the {} runs of the Fig. 7 sweep: mean distinct values per parameter ≤ {maxd:.1}; mean relative error on k {:.1}% and on c {:.1}%; validation NRMSE {:.3}.\n", s.runs, 100.0 * group_error(s, 'k'), 100.0 * group_error(s, 'c'), s.validation_nrmse_mean);
     }
+}
 
-    // Fig. 5
+/// Fig. 5: MLN-RBPF against Storvik.
+fn fig5(o: &mut String, x: &Inputs<'_>) {
+    let summary = x.summary;
+    let first = |study: &str, alg: Algorithm| x.first(study, alg);
     let _ = writeln!(o, "## Fig. 5 — MLN-RBPF vs Storvik\n");
     let _ = writeln!(o, "![Fig. 5](fig5_mlnrbpf_vs_storvik.svg)\n");
     let _ = writeln!(o, "Paper: no collapse; k's and c's converge near the truth; MLN-RBPF slightly better than Storvik; β, γ, n poorly learnt.\n");
@@ -186,7 +229,7 @@ pub(crate) fn write_report(
         first("fig5", Algorithm::MlnRbpf),
         first("fig5", Algorithm::Storvik),
     ) {
-        theta_table(&mut o, &[("MLN-RBPF", a), ("Storvik", b)]);
+        theta_table(o, &[("MLN-RBPF", a), ("Storvik", b)]);
         let _ = writeln!(o);
     }
     if let (Some(m), Some(s)) = (
@@ -201,8 +244,12 @@ pub(crate) fn write_report(
         );
         let _ = writeln!(o, "Over the Fig. 7 runs: mean relative error on k — MLN-RBPF {:.2}%, Storvik {:.2}%; on c — MLN-RBPF {:.1}%, Storvik {:.1}%.\n", 100.0 * mk, 100.0 * sk, 100.0 * mc, 100.0 * sc);
     }
+}
 
-    // Fig. 6
+/// Fig. 6: MLN-RBPF against MPF-EKF2.
+fn fig6(o: &mut String, x: &Inputs<'_>) {
+    let summary = x.summary;
+    let first = |study: &str, alg: Algorithm| x.first(study, alg);
     let _ = writeln!(o, "## Fig. 6 — MLN-RBPF vs MPF-EKF2\n");
     let _ = writeln!(
         o,
@@ -217,7 +264,7 @@ pub(crate) fn write_report(
         first("fig6", Algorithm::MlnRbpf),
         first("fig6", Algorithm::MpfEkf2),
     ) {
-        theta_table(&mut o, &[("MLN-RBPF", a), ("MPF-EKF2", b)]);
+        theta_table(o, &[("MLN-RBPF", a), ("MPF-EKF2", b)]);
         let _ = writeln!(o);
     }
     if let (Some(m), Some(p)) = (
@@ -226,8 +273,11 @@ pub(crate) fn write_report(
     ) {
         let _ = writeln!(o, "Online state NRMSE (mean over states and the Fig. 7 runs; NRMSE = RMSE / RMS of the true state): MLN-RBPF {:.4}, MPF-EKF2 {:.4}. Validation-run NRMSE: MLN-RBPF {:.4}, MPF-EKF2 {:.4}.\n", m.online_nrmse_mean, p.online_nrmse_mean, m.validation_nrmse_mean, p.validation_nrmse_mean);
     }
+}
 
-    // Fig. 7
+/// Fig. 7: θ_val over the runs.
+fn fig7(o: &mut String, x: &Inputs<'_>) -> Result<()> {
+    let (studies, records, summary) = (x.studies, x.records, x.summary);
     let _ = writeln!(
         o,
         "## Fig. 7 — {} runs per algorithm: θ_val / θ_true, mean ± s.d.\n",
@@ -243,7 +293,7 @@ pub(crate) fn write_report(
                 .iter()
                 .map(|s| format!("{} (n = {}, failed {})", s.algorithm, s.runs, s.failed)),
         );
-        header(&mut o, &head);
+        header(o, &head);
         for (j, p) in first_alg.params.iter().enumerate() {
             let mut cells = vec![p.name.clone()];
             for s in &algs7 {
@@ -255,13 +305,17 @@ pub(crate) fn write_report(
                     100.0 * q.rel_error_mean
                 ));
             }
-            row(&mut o, &cells);
+            row(o, &cells);
         }
         let _ = writeln!(o);
     }
-    crate::coverage::report(&mut o, &crate::stats::STUDIES, studies, records)?;
+    crate::coverage::report(o, &crate::stats::STUDIES, studies, records)?;
+    Ok(())
+}
 
-    // Fig. 8
+/// Fig. 8: one MPF-EKF2 run.
+fn fig8(o: &mut String, x: &Inputs<'_>) {
+    let first = |study: &str, alg: Algorithm| x.first(study, alg);
     let _ = writeln!(o, "## Fig. 8 — one MPF-EKF2 run\n");
     let _ = writeln!(
         o,
@@ -270,7 +324,7 @@ pub(crate) fn write_report(
     let _ = writeln!(o, "Paper (eq. 31): θ_val = {PAPER_EQ31:?} for θ_true = [8, 8, 8, 0.25, 0.25, 0.25, 2, 1, 2] (k errors 0.3–1.1%, c errors 11–37%); the validation loop matches the true loop very well.\n");
     if let Some(r) = first("fig8", Algorithm::MpfEkf2) {
         header(
-            &mut o,
+            o,
             &[
                 "parameter",
                 "true",
@@ -282,7 +336,7 @@ pub(crate) fn write_report(
         for (j, name) in r.param_names.iter().enumerate() {
             let t = r.theta_true.as_ref().map_or(f64::NAN, |t| t[j]);
             row(
-                &mut o,
+                o,
                 &[
                     name.clone(),
                     format!("{t}"),
@@ -299,8 +353,11 @@ pub(crate) fn write_report(
             let _ = writeln!(o, "\nValidation run (θ_val, clean excitation, Dormand–Prince 5(4)): mean NRMSE over the states {:.4}{}.\n", v.states.mean_nrmse(), v.error.as_ref().map(|e| format!(" — {e}")).unwrap_or_default());
         }
     }
+}
 
-    // Findings
+/// The paper's statements, each decided by its test; the discretisation section.
+fn findings(o: &mut String, x: &Inputs<'_>) {
+    let (studies, records) = (x.studies, x.records);
     let _ = writeln!(o, "## What matches and what does not\n");
     let _ = writeln!(o, "Each statement of the paper (SPEC §8) is decided by the test written beside it, on the records of the Fig. 7 sweep (and the Fig. 4 study for the bootstrap collapse). s.e. is the standard error over runs; comparisons of two algorithms use the paired difference over the runs both completed (all algorithms of one run see the same data set). A statement **holds** when its ±2 s.e. interval lies on the stated side of the threshold (inside the stated band), **does not hold** when it lies entirely on the other side (outside the band), and is **not resolved** otherwise: the runs cannot tell.\n");
     let none: Vec<RunRecord> = Vec::new();
@@ -310,7 +367,7 @@ pub(crate) fn write_report(
         records.get("fig7").unwrap_or(&none),
     );
     findings_table(
-        &mut o,
+        o,
         ["statement (paper)", "on our data", "test", "evidence"],
         &findings,
     );
@@ -330,20 +387,23 @@ pub(crate) fn write_report(
     );
     let _ = writeln!(o, "\nWhere a statement does not hold we have not tuned towards it. Known causes of differences: the paper does not name its excitation record, noise realisation, priors' hyper-parameters or Q for displacements (SPEC fixes them, see each record's `config`); forward-Euler discretisation inside the filters biases damping and β (the paper's own explanation). The thresholds for \"good\" (|θ_val/θ_true − 1| < 0.1), \"fair\" (< 0.3), \"accurate\" stiffness (mean error < 5%) and a validation that matches \"very well\" (NRMSE < 0.1) are ours: the paper gives none.\n");
 
-    crate::discretisation::report_section(&mut o, studies, records);
+    crate::discretisation::report_section(o, studies, records);
+}
 
-    // Performance
+/// Cost per algorithm, from the records' own timings.
+fn performance(o: &mut String, x: &Inputs<'_>) {
+    let summary = x.summary;
     let _ = writeln!(
         o,
         "## Performance (this machine, from the records' own timings)\n"
     );
     header(
-        &mut o,
+        o,
         &["algorithm", "mean wall per run (s)", "particle-steps/s"],
     );
     for s in &summary["fig7"] {
         row(
-            &mut o,
+            o,
             &[
                 s.algorithm.clone(),
                 format!("{:.2}", s.wall_s_mean),
@@ -352,5 +412,4 @@ pub(crate) fn write_report(
         );
     }
     let _ = writeln!(o, "\nRuns execute in parallel (one per thread), so per-run rates are per core under a fully loaded machine.");
-    Ok(o)
 }
