@@ -613,6 +613,56 @@ pub fn execute(run_step: StepRunner, step: &Step) -> Result<Ended> {
     })
 }
 
+/// The part's black-box baseline: computed by the baseline script where a Python with `mdof` is
+/// given, else the committed file used (or none); the note the study ends with says which (none
+/// for a part without a baseline).
+fn baseline(part: &Part, dirs: &PartDirs, opts: &RunOptions) -> Result<Option<String>> {
+    let baseline = dirs.baseline();
+    if let (true, Some(python), Some(script)) = (part.baseline, &opts.python, &opts.baseline_script)
+    {
+        let train = dirs.data(&part.identify_record().name);
+        let mut cmd = Command::new(python);
+        cmd.arg(script).arg("--train").arg(&train).arg("--validate");
+        for r in part.validate_records() {
+            cmd.arg(dirs.data(&r.name));
+        }
+        cmd.arg("--out").arg(&baseline);
+        if let Some(orders) = &part.baseline_orders {
+            let list: Vec<String> = orders.iter().map(usize::to_string).collect();
+            cmd.arg("--orders").arg(list.join(","));
+        }
+        if let Some(h) = part.baseline_horizon {
+            cmd.arg("--horizon").arg(h.to_string());
+        }
+        let status = cmd
+            .status()
+            .with_context(|| format!("starting {}", python.display()))?;
+        if !status.success() {
+            bail!("the baseline script failed ({status}): {cmd:?}");
+        }
+        Ok(Some(format!(
+            "{}: baseline recomputed ({})",
+            part.name,
+            baseline.display()
+        )))
+    } else if part.baseline && baseline.exists() {
+        Ok(Some(format!(
+            "{}: baseline as committed in {} (not recomputed: no Python with mdof given)",
+            part.name,
+            baseline.display()
+        )))
+    } else if part.baseline {
+        Ok(Some(format!(
+            "{}: no baseline: {} is absent and no Python with mdof was given (--python), so \
+             the report compares with none (copy a computed srim.json there, or pass --python)",
+            part.name,
+            baseline.display()
+        )))
+    } else {
+        Ok(None)
+    }
+}
+
 /// On resume, a step whose record is kept has its figures drawn again from that record
 /// (`identify::plot::plot`, which puts each figure in place atomically): a figure cut short, a
 /// missing one or a lost figure directory of an interrupted study is not carried on. `false`
@@ -724,49 +774,7 @@ pub fn run(study: &FieldStudy, opts: &RunOptions) -> Result<()> {
                 );
             }
         }
-        let baseline = dirs.baseline();
-        if let (true, Some(python), Some(script)) =
-            (part.baseline, &opts.python, &opts.baseline_script)
-        {
-            let train = dirs.data(&part.identify_record().name);
-            let mut cmd = Command::new(python);
-            cmd.arg(script).arg("--train").arg(&train).arg("--validate");
-            for r in part.validate_records() {
-                cmd.arg(dirs.data(&r.name));
-            }
-            cmd.arg("--out").arg(&baseline);
-            if let Some(orders) = &part.baseline_orders {
-                let list: Vec<String> = orders.iter().map(usize::to_string).collect();
-                cmd.arg("--orders").arg(list.join(","));
-            }
-            if let Some(h) = part.baseline_horizon {
-                cmd.arg("--horizon").arg(h.to_string());
-            }
-            let status = cmd
-                .status()
-                .with_context(|| format!("starting {}", python.display()))?;
-            if !status.success() {
-                bail!("the baseline script failed ({status}): {cmd:?}");
-            }
-            notes.push(format!(
-                "{}: baseline recomputed ({})",
-                part.name,
-                baseline.display()
-            ));
-        } else if part.baseline && baseline.exists() {
-            notes.push(format!(
-                "{}: baseline as committed in {} (not recomputed: no Python with mdof given)",
-                part.name,
-                baseline.display()
-            ));
-        } else if part.baseline {
-            notes.push(format!(
-                "{}: no baseline: {} is absent and no Python with mdof was given (--python), so \
-                 the report compares with none (copy a computed srim.json there, or pass --python)",
-                part.name,
-                baseline.display()
-            ));
-        }
+        notes.extend(baseline(part, &dirs, opts)?);
     }
     let text = report::render(study, &opts.out)?;
     let path = opts.out.join("REPORT.md");
