@@ -192,62 +192,20 @@ pub fn identify_stoppable(
     execute(&plan, input, stop)
 }
 
-/// Runs a settled plan on its data (`input.data`; its seed, run and experiment are the plan's)
-/// and returns the run's record, whose configuration is the plan's. `stop` as in
-/// [`identify_stoppable`].
-pub fn execute(
+/// Runs the plan's filters on `input`: one (`filter`), or a pool of `settings.pool` filters side
+/// by side on every core, each with its share of the particles and its own stream, combined in
+/// pool order (`pool::combine`), so that the record is the same whatever the thread count.
+fn run_pool(
+    mut filter: Box<dyn Filter>,
     plan: &RunPlan,
+    spec: &ChainSpec,
     input: &RunInput,
+    pc: &SmcConfig,
+    predictor: &(dyn Fn() -> Result<Option<crate::residuals::Predictor>> + Sync),
     stop: &(dyn Fn() -> bool + Sync),
-) -> Result<RunRecord> {
-    let data = input.data;
-    if data.len() < 2 {
-        bail!(
-            "the data set has {} samples; at least 2 are needed",
-            data.len()
-        );
-    }
-    let s = &plan.settings;
-    let algorithm = plan.algorithm;
-    crate::limits::check_filter_settings(s)?;
-    let spec = plan.spec(data)?;
-    let input = &RunInput {
-        seed: plan.seed,
-        run: plan.run,
-        experiment: &plan.experiment,
-        ..*input
-    };
-    let pc = SmcConfig {
-        particles: s.particles,
-        resampling: ResamplePolicy {
-            scheme: s.resampling,
-            ess_threshold: s.ess_threshold,
-        },
-        rejuvenation: s.liu_west()?,
-    };
-    let mut filter = build_filter(algorithm, spec.clone(), s)?;
-    // One-step-ahead prediction errors when asked for (`sysid filter`): every filter of a pool
-    // computes its own (one noise-free step per time step), and the record keeps those of the
-    // first filter the pool keeps (`pool::combine`).
-    let predictor = || -> Result<Option<crate::residuals::Predictor>> {
-        if !input.residuals {
-            return Ok(None);
-        }
-        let ys = (1..data.len()).flat_map(|k| data.y(k).to_vec()).collect();
-        let channels = data.sensors.iter().map(|j| format!("a{j}")).collect();
-        Ok(Some(crate::residuals::Predictor::new(
-            spec.clone(),
-            ys,
-            channels,
-        )?))
-    };
-    // The pace of a long run is timed over all its pooled filters (the caller's pace).
-    let shape = filter.shape();
-    crate::limits::check_particle_cloud(
-        s.particles,
-        shape.sampled + shape.marginal * (shape.marginal + 1),
-    )?;
-    let d = if s.pool > 1 {
+) -> Result<Driven> {
+    let (s, algorithm, data) = (&plan.settings, plan.algorithm, input.data);
+    Ok(if s.pool > 1 {
         if s.particles < s.pool {
             bail!(
                 "field `pool`: {} particles cannot make {} filters",
@@ -272,7 +230,7 @@ pub fn execute(
             .map(|(m, mut own)| {
                 let member = SmcConfig {
                     particles: each + usize::from(m < extra),
-                    ..pc
+                    ..*pc
                 };
                 let p = predictor()?;
                 let who = Member { index: m, stop };
@@ -292,40 +250,17 @@ pub fn execute(
         }
         let who = Member { index: 0, stop };
         interrupted(
-            drive(filter.as_mut(), input, s, algorithm, &pc, who, predictor()?),
+            drive(filter.as_mut(), input, s, algorithm, pc, who, predictor()?),
             data.len() - 1,
         )?
-    };
+    })
+}
 
-    let steps = data.len() - 1;
-    let theta_true = data.meta.as_ref().map(|m| m.theta_true.clone());
-    if let Some(t) = &theta_true {
-        if t.len() != d.param_names.len() {
-            return Err(invalid!(
-                "the data set's true θ has {} entries, the filter's θ {}",
-                t.len(),
-                d.param_names.len()
-            ));
-        }
-    }
-    let validation_start = Instant::now();
-    let validation = match (s.validate, input.chain, &data.truth) {
-        (true, Some(chain), Some(truth)) if d.summary.failure.is_none() => {
-            Some(validate(chain, &d.theta_val, truth, data.dt, s.loop_every))
-        }
-        _ => None,
-    };
-    let validation_s = validation_start.elapsed().as_secs_f64();
-    let mut failures = BTreeMap::new();
-    if let Some(f) = &d.summary.failure {
-        failures.insert(f.kind().to_string(), 1);
-    }
-    // A pooled filter's failure is counted even when the pool's answer stands without it.
-    if d.summary.failure.is_none() {
-        for kind in d.left_out.iter().filter_map(|l| l.failure_kind.clone()) {
-            *failures.entry(kind).or_insert(0) += 1;
-        }
-    }
+/// The configuration a record keeps: the algorithm, the filter settings, the data's, the
+/// building and noise the filter ran with, and each rule's evidence (sub-steps, the data-scaled
+/// prior) where it applied.
+fn recorded_config(plan: &RunPlan, spec: &ChainSpec, data: &LoadedDataset) -> serde_json::Value {
+    let (s, algorithm) = (&plan.settings, plan.algorithm);
     let mut config = serde_json::json!({
         "algorithm": algorithm.name(),
         "filter": s,
@@ -360,6 +295,96 @@ pub fn execute(
     if let Some(p) = &plan.evidence.prior_from_data {
         config["prior_from_data"] = serde_json::to_value(p).expect("serialisable");
     }
+    config
+}
+
+/// Runs a settled plan on its data (`input.data`; its seed, run and experiment are the plan's)
+/// and returns the run's record, whose configuration is the plan's. `stop` as in
+/// [`identify_stoppable`].
+pub fn execute(
+    plan: &RunPlan,
+    input: &RunInput,
+    stop: &(dyn Fn() -> bool + Sync),
+) -> Result<RunRecord> {
+    let data = input.data;
+    if data.len() < 2 {
+        bail!(
+            "the data set has {} samples; at least 2 are needed",
+            data.len()
+        );
+    }
+    let s = &plan.settings;
+    let algorithm = plan.algorithm;
+    crate::limits::check_filter_settings(s)?;
+    let spec = plan.spec(data)?;
+    let input = &RunInput {
+        seed: plan.seed,
+        run: plan.run,
+        experiment: &plan.experiment,
+        ..*input
+    };
+    let pc = SmcConfig {
+        particles: s.particles,
+        resampling: ResamplePolicy {
+            scheme: s.resampling,
+            ess_threshold: s.ess_threshold,
+        },
+        rejuvenation: s.liu_west()?,
+    };
+    let filter = build_filter(algorithm, spec.clone(), s)?;
+    // One-step-ahead prediction errors when asked for (`sysid filter`): every filter of a pool
+    // computes its own (one noise-free step per time step), and the record keeps those of the
+    // first filter the pool keeps (`pool::combine`).
+    let predictor = || -> Result<Option<crate::residuals::Predictor>> {
+        if !input.residuals {
+            return Ok(None);
+        }
+        let ys = (1..data.len()).flat_map(|k| data.y(k).to_vec()).collect();
+        let channels = data.sensors.iter().map(|j| format!("a{j}")).collect();
+        Ok(Some(crate::residuals::Predictor::new(
+            spec.clone(),
+            ys,
+            channels,
+        )?))
+    };
+    // The pace of a long run is timed over all its pooled filters (the caller's pace).
+    let shape = filter.shape();
+    crate::limits::check_particle_cloud(
+        s.particles,
+        shape.sampled + shape.marginal * (shape.marginal + 1),
+    )?;
+    let d = run_pool(filter, plan, &spec, input, &pc, &predictor, stop)?;
+
+    let steps = data.len() - 1;
+    let theta_true = data.meta.as_ref().map(|m| m.theta_true.clone());
+    if let Some(t) = &theta_true {
+        if t.len() != d.param_names.len() {
+            return Err(invalid!(
+                "the data set's true θ has {} entries, the filter's θ {}",
+                t.len(),
+                d.param_names.len()
+            ));
+        }
+    }
+    let validation_start = Instant::now();
+    let validation = match (s.validate, input.chain, &data.truth) {
+        (true, Some(chain), Some(truth)) if d.summary.failure.is_none() => {
+            Some(validate(chain, &d.theta_val, truth, data.dt, s.loop_every))
+        }
+        _ => None,
+    };
+    let validation_s = validation_start.elapsed().as_secs_f64();
+    let mut failures = BTreeMap::new();
+    if let Some(f) = &d.summary.failure {
+        failures.insert(f.kind().to_string(), 1);
+    }
+    // A pooled filter's failure is counted even when the pool's answer stands without it.
+    if d.summary.failure.is_none() {
+        for kind in d.left_out.iter().filter_map(|l| l.failure_kind.clone()) {
+            *failures.entry(kind).or_insert(0) += 1;
+        }
+    }
+    let config = recorded_config(plan, &spec, data);
     let fingerprint = Fingerprint::of_run(algorithm.name(), input.seed, input.run, s, data);
     let mut record = RunRecord {
         experiment: input.experiment.to_string(),
