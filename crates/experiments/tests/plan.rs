@@ -375,6 +375,30 @@ fn a_linear_building_runs_one_gaussian_filter() {
     assert!((r.loglik - many.loglik).abs() <= 1e-9 * many.loglik.abs());
 }
 
+/// `sysid filter` with `flags` on `data` with `--threads` 1, 2 and 7: the three records, timing
+/// left out.
+fn on_threads(dir: &Path, data: &Path, tag: &str, flags: &[&str]) -> Vec<serde_json::Value> {
+    ["1", "2", "7"]
+        .iter()
+        .map(|threads| {
+            let out = dir.join(format!("{tag}-{threads}.json"));
+            ran(
+                sysid()
+                    .arg("filter")
+                    .args(flags)
+                    .args(["--threads", threads, "--data"])
+                    .arg(data)
+                    .arg("--out")
+                    .arg(&out)
+                    .output()
+                    .unwrap(),
+                "filter",
+            );
+            without_timing(&out)
+        })
+        .collect()
+}
+
 /// The pooled filters of one run run side by side; the record is the same, byte for byte but
 /// for the timing, on 1, 2 and 7 threads (`--threads`), for a marginalised and a sampled filter.
 #[test]
@@ -383,24 +407,12 @@ fn a_pooled_run_is_the_same_on_any_number_of_threads() {
     let data = dir.join("d");
     simulate(&data, "2", false);
     for alg in ["mpf-ekf2", "storvik"] {
-        let records: Vec<serde_json::Value> = ["1", "2", "7"]
-            .iter()
-            .map(|threads| {
-                let out = dir.join(format!("{alg}-{threads}.json"));
-                ran(
-                    sysid()
-                        .args(["filter", "--algorithm", alg, "--particles", "500"])
-                        .args(["--threads", threads, "--data"])
-                        .arg(&data)
-                        .arg("--out")
-                        .arg(&out)
-                        .output()
-                        .unwrap(),
-                    "filter",
-                );
-                without_timing(&out)
-            })
-            .collect();
+        let records = on_threads(
+            &dir,
+            &data,
+            alg,
+            &["--algorithm", alg, "--particles", "500"],
+        );
         assert_eq!(records[0]["config"]["filter"]["pool"], 4, "{alg}");
         assert_eq!(records[0], records[1], "{alg}: 1 and 2 threads");
         assert_eq!(records[0], records[2], "{alg}: 1 and 7 threads");
@@ -426,25 +438,16 @@ fn the_held_out_choice_is_the_same_on_any_number_of_threads() {
     for f in ["dataset.json", "truth.csv"] {
         std::fs::remove_file(data.join(f)).unwrap();
     }
-    let records: Vec<serde_json::Value> = ["1", "2", "7"]
-        .iter()
-        .map(|threads| {
-            let out = dir.join(format!("run-{threads}.json"));
-            ran(
-                sysid()
-                    .args(["filter", "--algorithm", "mpf-ekf2", "--storeys", "3"])
-                    .args(["--hysteretic", "none", "--masses", "1"])
-                    .args(["--measurement", "relative", "--threads", threads, "--data"])
-                    .arg(&data)
-                    .arg("--out")
-                    .arg(&out)
-                    .output()
-                    .unwrap(),
-                "filter",
-            );
-            without_timing(&out)
-        })
-        .collect();
+    let flags = [
+        "--algorithm",
+        "mpf-ekf2",
+        "--storeys",
+        "3",
+        "--hysteretic",
+        "none",
+    ];
+    let more = ["--masses", "1", "--measurement", "relative"];
+    let records = on_threads(&dir, &data, "run", &[&flags[..], &more[..]].concat());
     let held_out = &records[0]["plan"]["evidence"]["held_out"];
     assert!(
         held_out["candidates"]
