@@ -438,16 +438,10 @@ fn the_held_out_choice_is_the_same_on_any_number_of_threads() {
     for f in ["dataset.json", "truth.csv"] {
         std::fs::remove_file(data.join(f)).unwrap();
     }
-    let flags = [
-        "--algorithm",
-        "mpf-ekf2",
-        "--storeys",
-        "3",
-        "--hysteretic",
-        "none",
-    ];
-    let more = ["--masses", "1", "--measurement", "relative"];
-    let records = on_threads(&dir, &data, "run", &[&flags[..], &more[..]].concat());
+    let flags =
+        "--algorithm mpf-ekf2 --storeys 3 --hysteretic none --masses 1 --measurement relative";
+    let flags: Vec<&str> = flags.split(' ').collect();
+    let records = on_threads(&dir, &data, "run", &flags);
     let held_out = &records[0]["plan"]["evidence"]["held_out"];
     assert!(
         held_out["candidates"]
