@@ -271,25 +271,44 @@ fn render_part(s: &mut String, part: &Part, out: &Path) -> Result<()> {
     };
     let best = baseline.as_ref().and_then(|b| b.best());
 
-    identified(s, part, &dirs, best)?;
+    let x = Section {
+        part,
+        dirs: &dirs,
+        train,
+        validate: &validate,
+        best,
+    };
+    identified(s, x)?;
     if !validate.is_empty() {
-        cross_validation(s, part, &dirs, &validate, best)?;
+        cross_validation(s, x)?;
     }
     if let Some(b) = &baseline {
         baseline_orders(s, b, train, &validate)?;
     }
-    selected_model(s, part, &dirs, &validate, best)
+    selected_model(s, x)
+}
+
+/// What the sections of a part's report read: the part, its directories, the record every
+/// choice is made on, those kept out, and the baseline's best order.
+#[derive(Clone, Copy)]
+struct Section<'a> {
+    part: &'a Part,
+    dirs: &'a PartDirs,
+    train: &'a str,
+    validate: &'a [&'a str],
+    best: Option<&'a BaselineRun>,
 }
 
 /// The variants identified on the training record, beside the baseline's best order; the
 /// measured peaks; links to the selected model's figures.
-fn identified(
-    s: &mut String,
-    part: &Part,
-    dirs: &PartDirs,
-    best: Option<&BaselineRun>,
-) -> Result<()> {
-    let train = &part.identify_record().name;
+fn identified(s: &mut String, x: Section<'_>) -> Result<()> {
+    let Section {
+        part,
+        dirs,
+        train,
+        best,
+        ..
+    } = x;
     writeln!(s, "### Identified on `{train}`\n")?;
     writeln!(
         s,
@@ -378,14 +397,14 @@ fn identified(
 }
 
 /// Every variant's free-run fit on each record kept out, beside the baseline's.
-fn cross_validation(
-    s: &mut String,
-    part: &Part,
-    dirs: &PartDirs,
-    validate: &[&str],
-    best: Option<&BaselineRun>,
-) -> Result<()> {
-    let train = &part.identify_record().name;
+fn cross_validation(s: &mut String, x: Section<'_>) -> Result<()> {
+    let Section {
+        part,
+        dirs,
+        train,
+        validate,
+        best,
+    } = x;
     if !validate.is_empty() {
         writeln!(s, "### Cross-validation: predicting the records kept out\n")?;
         write!(s, "| identified on `{train}` |")?;
@@ -461,14 +480,14 @@ fn baseline_orders(s: &mut String, b: &Baseline, train: &str, validate: &[&str])
 
 /// The selected variant on every record: its parameters and intervals, whether they agree, its
 /// predictive band and the goals.
-fn selected_model(
-    s: &mut String,
-    part: &Part,
-    dirs: &PartDirs,
-    validate: &[&str],
-    best: Option<&BaselineRun>,
-) -> Result<()> {
-    let train = &part.identify_record().name;
+fn selected_model(s: &mut String, x: Section<'_>) -> Result<()> {
+    let Section {
+        part,
+        dirs,
+        train,
+        validate,
+        best,
+    } = x;
     let selected = select(part, dirs)?;
     if let (Some(sel), None) = (&part.selection, &selected) {
         writeln!(
@@ -508,7 +527,7 @@ fn selected_model(
             chosen.label,
             r0.loglik,
         )?;
-        let mut on: Vec<(String, RunRecord)> = vec![(train.clone(), r0.clone())];
+        let mut on: Vec<(String, RunRecord)> = vec![(train.to_string(), r0.clone())];
         for v in validate {
             if let Some(r) = run_record(&dirs.selected_record(v))? {
                 on.push((v.to_string(), r));
