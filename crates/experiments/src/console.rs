@@ -42,6 +42,18 @@ impl Console {
         &mut self.err
     }
 
+    /// Writes `e` as `sysid` shows an error on exit: its message, then each cause on a line —
+    /// never a stack trace (an error is a message to the user, not a bug report).
+    pub fn error(&mut self, e: &(dyn std::error::Error + 'static)) -> std::io::Result<()> {
+        writeln!(self.err, "Error: {e}")?;
+        let mut cause = e.source();
+        while let Some(c) = cause {
+            writeln!(self.err, "  caused by: {c}")?;
+            cause = c.source();
+        }
+        Ok(())
+    }
+
     /// Whether a person watches standard error (a progress bar is drawn there).
     pub fn terminal(&self) -> bool {
         self.terminal

@@ -585,13 +585,7 @@ pub fn execute(run_step: StepRunner, step: &Step) -> Result<Ended> {
         )),
     };
     if let Some(e) = &failure {
-        // As `sysid` prints an error: its message, then each cause on a line.
-        writeln!(con.err(), "Error: {e}")?;
-        let mut cause = std::error::Error::source(e);
-        while let Some(c) = cause {
-            writeln!(con.err(), "  caused by: {c}")?;
-            cause = c.source();
-        }
+        con.error(e)?;
     }
     drop(con);
     if !step.writes.exists() && !step.required {

@@ -91,12 +91,8 @@ fn main() -> std::process::ExitCode {
     match run(Cli::parse()) {
         Ok(()) => std::process::ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("Error: {e}");
-            let mut cause = std::error::Error::source(&e);
-            while let Some(c) = cause {
-                eprintln!("  caused by: {c}");
-                cause = c.source();
-            }
+            // A closed stderr loses the message; the exit status still says it failed.
+            let _ = Console::standard().error(&e);
             std::process::ExitCode::FAILURE
         }
     }
