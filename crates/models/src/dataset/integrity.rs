@@ -4,6 +4,7 @@
 //! rebuilds a structure the data do not belong to.
 
 use super::{DatasetError, DatasetMeta};
+use crate::description::StructureDescription;
 use crate::limits;
 use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
@@ -98,20 +99,51 @@ pub(crate) fn check_meta(
     measured: &Path,
     sensors: &[usize],
 ) -> Result<(), DatasetError> {
-    let channels = sensors.len();
-    let bad = |field: &str, message: String| DatasetError::Mismatch {
-        file: file.to_path_buf(),
-        line: json_line(text, field.rsplit('.').next().unwrap_or(field)),
-        field: field.to_string(),
-        message,
-    };
-    let lim = |field: &str, r: Result<f64, limits::LimitError>| -> Result<(), DatasetError> {
-        r.map(|_| ()).map_err(|e| bad(field, e.to_string()))
-    };
-    lim("dt", limits::check_dt(meta.dt))?;
-    lim("config.dt", limits::check_dt(meta.config.dt))?;
+    let at = MetaErrors { file, text };
+    check_step_and_size(&at, meta, samples, measured)?;
+    let structure = recorded_structure(&at, meta)?;
+    check_sensors(file, measured, &structure, sensors)?;
+    check_noise_and_scale(&at, meta)?;
+    check_lengths(&at, meta, sensors.len())?;
+    check_magnitudes(&at, meta)?;
+    check_against_preset(&at, meta)
+}
+
+/// Where a metadata error points: `dataset.json` (`file`) and its text, to find the field's line.
+struct MetaErrors<'a> {
+    file: &'a Path,
+    text: &'a str,
+}
+
+impl MetaErrors<'_> {
+    /// A mismatch of `field` (dotted path; its line is that of its last component).
+    fn bad(&self, field: &str, message: String) -> DatasetError {
+        DatasetError::Mismatch {
+            file: self.file.to_path_buf(),
+            line: json_line(self.text, field.rsplit('.').next().unwrap_or(field)),
+            field: field.to_string(),
+            message,
+        }
+    }
+
+    /// A limit check of `field`, as a mismatch of that field when it fails.
+    fn lim(&self, field: &str, r: Result<f64, limits::LimitError>) -> Result<(), DatasetError> {
+        r.map(|_| ()).map_err(|e| self.bad(field, e.to_string()))
+    }
+}
+
+/// The time steps within limits, the sample count that of the data, the storey counts within
+/// limits.
+fn check_step_and_size(
+    at: &MetaErrors,
+    meta: &DatasetMeta,
+    samples: usize,
+    measured: &Path,
+) -> Result<(), DatasetError> {
+    at.lim("dt", limits::check_dt(meta.dt))?;
+    at.lim("config.dt", limits::check_dt(meta.config.dt))?;
     if meta.samples != samples {
-        return Err(bad(
+        return Err(at.bad(
             "samples",
             format!(
                 "{} samples, but {} has {samples}",
@@ -121,20 +153,30 @@ pub(crate) fn check_meta(
         ));
     }
     if let Some(n) = meta.config.storeys {
-        limits::check_storeys(n).map_err(|e| bad("config.storeys", e.to_string()))?;
+        limits::check_storeys(n).map_err(|e| at.bad("config.storeys", e.to_string()))?;
     }
-    limits::check_storeys(meta.storeys).map_err(|e| bad("storeys", e.to_string()))?;
-    // The structure it records, valid and the one its config generates.
+    limits::check_storeys(meta.storeys).map_err(|e| at.bad("storeys", e.to_string()))?;
+    Ok(())
+}
+
+/// The structure it records, valid and the one its config generates (that one when none is
+/// recorded), with the recorded storey count.
+fn recorded_structure(
+    at: &MetaErrors,
+    meta: &DatasetMeta,
+) -> Result<StructureDescription, DatasetError> {
     let generated = meta.config.description().map_err(|e| match e {
-        DatasetError::InvalidConfig { field, message } => bad(&format!("config.{field}"), message),
-        other => bad("preset", other.to_string()),
+        DatasetError::InvalidConfig { field, message } => {
+            at.bad(&format!("config.{field}"), message)
+        }
+        other => at.bad("preset", other.to_string()),
     })?;
     let structure = match &meta.structure {
         Some(d) => {
             d.validate()
-                .map_err(|e| bad(&format!("structure.{}", e.field), e.message))?;
+                .map_err(|e| at.bad(&format!("structure.{}", e.field), e.message))?;
             if *d != generated {
-                return Err(bad(
+                return Err(at.bad(
                     "structure",
                     format!("{d:?} is not the structure its config generates ({generated:?})"),
                 ));
@@ -144,7 +186,7 @@ pub(crate) fn check_meta(
         None => generated,
     };
     if meta.storeys != structure.storeys {
-        return Err(bad(
+        return Err(at.bad(
             "storeys",
             format!(
                 "{} storeys, but its structure has {}",
@@ -152,41 +194,61 @@ pub(crate) fn check_meta(
             ),
         ));
     }
-    // The measured storeys: the header of measured.csv against the recorded sensors.
-    if structure.sensors != sensors {
-        let column = structure
-            .sensors
-            .iter()
-            .zip(sensors)
-            .find(|(a, b)| a != b)
-            .map(|(_, b)| format!("a{b}"))
-            .or_else(|| {
-                sensors
-                    .get(structure.sensors.len())
-                    .map(|b| format!("a{b}"))
-            })
-            .unwrap_or_else(|| "header".to_string());
-        return Err(DatasetError::Mismatch {
-            file: measured.to_path_buf(),
-            line: 1,
-            field: column,
-            message: format!(
-                "the header measures storeys {sensors:?}, but {} records sensors {:?} \
-                 (files of different data sets mixed?)",
-                file.display(),
-                structure.sensors
-            ),
-        });
+    Ok(structure)
+}
+
+/// The measured storeys: the header of `measured` (`sensors`) against the sensors recorded in
+/// `file`; a mismatch points at the first differing column of the header.
+fn check_sensors(
+    file: &Path,
+    measured: &Path,
+    structure: &StructureDescription,
+    sensors: &[usize],
+) -> Result<(), DatasetError> {
+    if structure.sensors == sensors {
+        return Ok(());
     }
-    lim(
+    let column = structure
+        .sensors
+        .iter()
+        .zip(sensors)
+        .find(|(a, b)| a != b)
+        .map(|(_, b)| format!("a{b}"))
+        .or_else(|| {
+            sensors
+                .get(structure.sensors.len())
+                .map(|b| format!("a{b}"))
+        })
+        .unwrap_or_else(|| "header".to_string());
+    Err(DatasetError::Mismatch {
+        file: measured.to_path_buf(),
+        line: 1,
+        field: column,
+        message: format!(
+            "the header measures storeys {sensors:?}, but {} records sensors {:?} \
+             (files of different data sets mixed?)",
+            file.display(),
+            structure.sensors
+        ),
+    })
+}
+
+/// The noise fractions and the excitation scale within limits.
+fn check_noise_and_scale(at: &MetaErrors, meta: &DatasetMeta) -> Result<(), DatasetError> {
+    at.lim(
         "noise.fraction",
         limits::check_noise_fraction(meta.noise.fraction),
     )?;
-    lim(
+    at.lim(
         "config.noise_fraction",
         limits::check_noise_fraction(meta.config.noise_fraction),
     )?;
-    lim("config.scale", limits::check_scale(meta.config.scale))?;
+    at.lim("config.scale", limits::check_scale(meta.config.scale))
+}
+
+/// Each per-channel, per-storey and per-element array as long as the structure makes it
+/// (`channels` measured storeys).
+fn check_lengths(at: &MetaErrors, meta: &DatasetMeta, channels: usize) -> Result<(), DatasetError> {
     let n = meta.storeys;
     let nbw = meta.bouc_wen_storeys.len();
     let lengths: [(&str, usize, usize); 9] = [
@@ -202,7 +264,7 @@ pub(crate) fn check_meta(
     ];
     for (field, found, want) in lengths {
         if found != want {
-            return Err(bad(
+            return Err(at.bad(
                 field,
                 format!(
                     "{found} entries, {want} expected ({n} storeys, {channels} measured, \
@@ -211,7 +273,12 @@ pub(crate) fn check_meta(
             ));
         }
     }
-    // Non-negative finite magnitudes (an RMS or a s.d.), bounded like data values.
+    Ok(())
+}
+
+/// Non-negative finite magnitudes (an RMS or a s.d.), bounded like data values; the true
+/// parameters finite and bounded likewise.
+fn check_magnitudes(at: &MetaErrors, meta: &DatasetMeta) -> Result<(), DatasetError> {
     let magnitudes = [
         ("rms.acc", &meta.rms.acc[..]),
         ("rms.vel", &meta.rms.vel[..]),
@@ -224,22 +291,28 @@ pub(crate) fn check_meta(
     ];
     for (field, values) in magnitudes {
         for &v in values {
-            lim(field, limits::check_range(v, 0.0, limits::MAX_ABS_VALUE))?;
+            at.lim(field, limits::check_range(v, 0.0, limits::MAX_ABS_VALUE))?;
         }
     }
     for &v in &meta.theta_true {
-        lim(
+        at.lim(
             "theta_true",
             limits::check_range(v, -limits::MAX_ABS_VALUE, limits::MAX_ABS_VALUE),
         )?;
     }
-    // The structure the metadata names must be the one the data were generated with.
+    Ok(())
+}
+
+/// The structure the metadata names must be the one the data were generated with: storeys,
+/// Bouc–Wen elements, parameter and state names of its preset, and true parameters it accepts.
+fn check_against_preset(at: &MetaErrors, meta: &DatasetMeta) -> Result<(), DatasetError> {
+    let n = meta.storeys;
     let chain = meta
         .config
         .chain()
-        .map_err(|e| bad("preset", e.to_string()))?;
+        .map_err(|e| at.bad("preset", e.to_string()))?;
     if chain.storeys() != n {
-        return Err(bad(
+        return Err(at.bad(
             "storeys",
             format!(
                 "{n} storeys, but its config (preset `{}`) has {}",
@@ -250,7 +323,7 @@ pub(crate) fn check_meta(
     }
     let bw: Vec<usize> = chain.bouc_wen().iter().map(|b| b.storey).collect();
     if bw != meta.bouc_wen_storeys {
-        return Err(bad(
+        return Err(at.bad(
             "bouc_wen_storeys",
             format!(
                 "{:?}, but preset `{}` has Bouc–Wen elements at {bw:?}",
@@ -259,7 +332,7 @@ pub(crate) fn check_meta(
         ));
     }
     if chain.theta_names() != meta.theta_names {
-        return Err(bad(
+        return Err(at.bad(
             "theta_names",
             format!(
                 "{:?}, but preset `{}` has {:?}",
@@ -270,7 +343,7 @@ pub(crate) fn check_meta(
         ));
     }
     if chain.state_names() != meta.state_names {
-        return Err(bad(
+        return Err(at.bad(
             "state_names",
             format!(
                 "{:?}, but preset `{}` has {:?}",
@@ -282,6 +355,6 @@ pub(crate) fn check_meta(
     }
     chain
         .with_theta(&meta.theta_true)
-        .map_err(|e| bad("theta_true", e.to_string()))?;
+        .map_err(|e| at.bad("theta_true", e.to_string()))?;
     Ok(())
 }
