@@ -523,6 +523,13 @@ use identify::figures::{
 
 const LEGEND_ROW: i32 = 34;
 
+/// A chart of one panel of the coverage figure: nominal level against coverage, both in [0, 1].
+type CoverageChart<'a, 'b> = ChartContext<
+    'a,
+    SVGBackend<'b>,
+    Cartesian2d<plotters::coord::types::RangedCoordf64, plotters::coord::types::RangedCoordf64>,
+>;
+
 /// Coverage figure of a sweep: one panel per parameter, coverage (y) against nominal level (x),
 /// one colour and marker per algorithm with ± 2 s.e. bars (s.e. at the observed coverage), the
 /// diagonal of perfect calibration dashed, and a grey band where the test of [`LevelCoverage`]
@@ -543,79 +550,120 @@ pub fn coverage_figure(sweep: &SweepCalibration, path: &Path, title: &str) -> Re
     let height = 60 + legend_h + 330 * rows as u32;
     let (root, grid, legend) = open_figure(path, height, title, legend_h)?;
     let panels = grid.split_evenly((rows, cols));
-    // Nominal levels spread over [0, 1]; algorithms side by side around each level.
-    let offset = |i: usize| (i as f64 - (g as f64 - 1.0) / 2.0) * 0.012;
-
     for (name, area) in names.iter().zip(&panels) {
-        let per_alg: Vec<Option<&ParamCalibration>> = sweep
-            .algorithms
-            .iter()
-            .map(|a| a.params.iter().find(|p| p.parameter == *name))
-            .collect();
-        let mut chart = ChartBuilder::on(area)
-            .caption(*name, (FONT, CAPTION_SIZE))
-            .margin(10)
-            .x_label_area_size(48)
-            .y_label_area_size(62)
-            .build_cartesian_2d(0.0..1.0, 0.0..1.0)?;
-        draw_mesh(
-            chart
-                .configure_mesh()
-                .x_desc("nominal level")
-                .y_desc("coverage")
-                .x_labels(6)
-                .y_labels(6)
-                .x_label_formatter(&|v| format!("{v:.1}"))
-                .y_label_formatter(&|v| format!("{v:.1}")),
-        )?;
-        let n_min = per_alg
-            .iter()
-            .flatten()
-            .map(|p| p.runs)
-            .filter(|&n| n > 0)
-            .min();
-        if let Some(n) = n_min {
-            let half = |q: f64| VERDICT_SE * (q * (1.0 - q) / n as f64).sqrt();
-            let qs: Vec<f64> = (1..100).map(|k| k as f64 / 100.0).collect();
-            let upper = qs.iter().map(|&q| (q, (q + half(q)).min(1.0)));
-            let lower = qs.iter().rev().map(|&q| (q, (q - half(q)).max(0.0)));
-            chart.draw_series(std::iter::once(Polygon::new(
-                upper.chain(lower).collect::<Vec<_>>(),
-                BLACK.mix(0.10).filled(),
-            )))?;
-        }
-        chart.draw_series(DashedLineSeries::new(
-            vec![(0.0, 0.0), (1.0, 1.0)],
-            10,
-            6,
-            BLACK.stroke_width(2),
-        ))?;
-        for (i, p) in per_alg.iter().enumerate() {
-            let Some(p) = p else { continue };
-            let st = style::for_label(sweep.algorithms[i].algorithm.as_str(), i);
-            let c = st.colour;
-            let points: Vec<(f64, f64, f64)> = p
-                .coverage
-                .iter()
-                .filter_map(|lc| Some((lc.level + offset(i), lc.coverage?, lc.se?)))
-                .collect();
-            chart.draw_series(LineSeries::new(
-                points.iter().map(|&(x, y, _)| (x, y)),
-                c.stroke_width(2),
-            ))?;
-            for &(x, y, se) in &points {
-                let (lo, hi) = ((y - 2.0 * se).max(0.0), (y + 2.0 * se).min(1.0));
-                chart.draw_series(std::iter::once(PathElement::new(
-                    vec![(x, lo), (x, hi)],
-                    c.stroke_width(2),
-                )))?;
-                let px = chart.backend_coord(&(x, y));
-                root.draw(&marker(st, px))?;
-            }
-        }
+        coverage_panel(sweep, name, area, &root)?;
     }
+    coverage_legend(sweep, &legend)?;
+    present(&root, path)
+}
 
-    // Legend: algorithms, then the diagonal and the band, two per row.
+/// Where algorithm `i` of `g` is drawn beside a nominal level: the algorithms side by side
+/// around it, so that their bars do not hide one another.
+fn level_offset(i: usize, g: usize) -> f64 {
+    (i as f64 - (g as f64 - 1.0) / 2.0) * 0.012
+}
+
+/// The panel of one parameter: axes, the band of coverage consistent with nominal, the
+/// diagonal, and each algorithm's coverage with its bars (markers drawn on `root`).
+fn coverage_panel(
+    sweep: &SweepCalibration,
+    name: &str,
+    area: &DrawingArea<SVGBackend<'_>, plotters::coord::Shift>,
+    root: &DrawingArea<SVGBackend<'_>, plotters::coord::Shift>,
+) -> Result<()> {
+    let per_alg: Vec<Option<&ParamCalibration>> = sweep
+        .algorithms
+        .iter()
+        .map(|a| a.params.iter().find(|p| p.parameter == name))
+        .collect();
+    let mut chart = ChartBuilder::on(area)
+        .caption(name, (FONT, CAPTION_SIZE))
+        .margin(10)
+        .x_label_area_size(48)
+        .y_label_area_size(62)
+        .build_cartesian_2d(0.0..1.0, 0.0..1.0)?;
+    draw_mesh(
+        chart
+            .configure_mesh()
+            .x_desc("nominal level")
+            .y_desc("coverage")
+            .x_labels(6)
+            .y_labels(6)
+            .x_label_formatter(&|v| format!("{v:.1}"))
+            .y_label_formatter(&|v| format!("{v:.1}")),
+    )?;
+    let n_min = per_alg
+        .iter()
+        .flatten()
+        .map(|p| p.runs)
+        .filter(|&n| n > 0)
+        .min();
+    if let Some(n) = n_min {
+        consistency_band(&mut chart, n)?;
+    }
+    chart.draw_series(DashedLineSeries::new(
+        vec![(0.0, 0.0), (1.0, 1.0)],
+        10,
+        6,
+        BLACK.stroke_width(2),
+    ))?;
+    for (i, p) in per_alg.iter().enumerate() {
+        let Some(p) = p else { continue };
+        algorithm_coverage(sweep, i, p, &mut chart, root)?;
+    }
+    Ok(())
+}
+
+/// The grey band of coverages the test of [`LevelCoverage`] calls consistent with nominal,
+/// for `n` runs: nominal ± [`VERDICT_SE`] s.e., clipped to [0, 1].
+fn consistency_band(chart: &mut CoverageChart<'_, '_>, n: usize) -> Result<()> {
+    let half = |q: f64| VERDICT_SE * (q * (1.0 - q) / n as f64).sqrt();
+    let qs: Vec<f64> = (1..100).map(|k| k as f64 / 100.0).collect();
+    let upper = qs.iter().map(|&q| (q, (q + half(q)).min(1.0)));
+    let lower = qs.iter().rev().map(|&q| (q, (q - half(q)).max(0.0)));
+    chart.draw_series(std::iter::once(Polygon::new(
+        upper.chain(lower).collect::<Vec<_>>(),
+        BLACK.mix(0.10).filled(),
+    )))?;
+    Ok(())
+}
+
+/// Algorithm `i`'s coverage at each level of one parameter: a line, ± 2 s.e. bars and a
+/// marker per level (drawn on `root`, in pixels).
+fn algorithm_coverage(
+    sweep: &SweepCalibration,
+    i: usize,
+    p: &ParamCalibration,
+    chart: &mut CoverageChart<'_, '_>,
+    root: &DrawingArea<SVGBackend<'_>, plotters::coord::Shift>,
+) -> Result<()> {
+    let g = sweep.algorithms.len();
+    let st = style::for_label(sweep.algorithms[i].algorithm.as_str(), i);
+    let c = st.colour;
+    let points: Vec<(f64, f64, f64)> = p
+        .coverage
+        .iter()
+        .filter_map(|lc| Some((lc.level + level_offset(i, g), lc.coverage?, lc.se?)))
+        .collect();
+    chart.draw_series(LineSeries::new(
+        points.iter().map(|&(x, y, _)| (x, y)),
+        c.stroke_width(2),
+    ))?;
+    for &(x, y, se) in &points {
+        let (lo, hi) = ((y - 2.0 * se).max(0.0), (y + 2.0 * se).min(1.0));
+        chart.draw_series(std::iter::once(PathElement::new(
+            vec![(x, lo), (x, hi)],
+            c.stroke_width(2),
+        )))?;
+        let px = chart.backend_coord(&(x, y));
+        root.draw(&marker(st, px))?;
+    }
+    Ok(())
+}
+
+/// The legend's entries: each algorithm (by its index), then the diagonal and the band, whose
+/// words say the number of runs it was drawn for.
+fn legend_entries(sweep: &SweepCalibration) -> Vec<(Option<usize>, String)> {
     let ns = || {
         sweep
             .algorithms
@@ -649,6 +697,15 @@ pub fn coverage_figure(sweep: &SweepCalibration, path: &Path, title: &str) -> Re
             _ => "grey: no runs".to_string(),
         },
     ));
+    entries
+}
+
+/// Legend: algorithms, then the diagonal and the band, two per row.
+fn coverage_legend(
+    sweep: &SweepCalibration,
+    legend: &DrawingArea<SVGBackend<'_>, plotters::coord::Shift>,
+) -> Result<()> {
+    let entries = legend_entries(sweep);
     let (w, _) = legend.dim_in_pixel();
     let slot = (w as i32 - 40) / 2;
     let text =
@@ -683,7 +740,7 @@ pub fn coverage_figure(sweep: &SweepCalibration, path: &Path, title: &str) -> Re
         }
         legend.draw(&Text::new(label.clone(), (x + 48, y), text.clone()))?;
     }
-    present(&root, path)
+    Ok(())
 }
 
 #[cfg(test)]
