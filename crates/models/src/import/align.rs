@@ -225,6 +225,42 @@ fn to_grid(
     opts: &Options,
     log: &mut Vec<Repair>,
 ) -> Result<OnGrid, ImportError> {
+    check_clocks_overlap(c, t0, dt, n, opts)?;
+    let step = check_sampling_rate(c, dt)?;
+    let first = c.times[0];
+    let start_offset = first - t0;
+    let shift = start_offset / dt;
+    let same_rate = (step - dt).abs() <= 1e-4 * dt;
+    // Whole samples apart (within `clock_tolerance` of a sample) and ticking together: a
+    // shift moves no value between samples.
+    let tol = opts.clock_tolerance;
+    let jitter_ok = c
+        .times
+        .iter()
+        .enumerate()
+        .all(|(i, &t)| (t - (first + i as f64 * dt)).abs() <= tol * dt);
+    if same_rate && (shift - shift.round()).abs() <= tol && jitter_ok {
+        return shift_whole_samples(c, shift.round() as i64, start_offset, tol, log);
+    }
+    // A clock at the ground's rate to a hundredth of a sample over the whole record: one
+    // shift holds for every sample.
+    let drift = (step / dt - 1.0).abs() * c.times.len() as f64;
+    if same_rate && jitter_ok && drift <= 0.01 {
+        return shift_band_limited(c, shift, start_offset, log);
+    }
+    resample_linear(c, t0, dt, n, step, log)
+}
+
+/// Refuses a channel whose clock starts more than `max_clock_offset` from the ground's, or
+/// overlaps it for less than half the shorter record: pairing its rows with the ground's
+/// would pair samples that were not simultaneous.
+fn check_clocks_overlap(
+    c: &Recorded,
+    t0: f64,
+    dt: f64,
+    n: usize,
+    opts: &Options,
+) -> Result<(), ImportError> {
     let (first, last) = (c.times[0], c.times[c.times.len() - 1]);
     let g_last = t0 + (n - 1) as f64 * dt;
     let start_offset = first - t0;
@@ -254,6 +290,13 @@ fn to_grid(
             ),
         ));
     }
+    Ok(())
+}
+
+/// The channel's mean sample spacing (s), refused when it is another sampling rate than the
+/// ground's `dt` (beyond the clock difference [`MAX_RATE_DIFFERENCE`]): that is not resampled.
+fn check_sampling_rate(c: &Recorded, dt: f64) -> Result<f64, ImportError> {
+    let (first, last) = (c.times[0], c.times[c.times.len() - 1]);
     let step = (last - first) / (c.times.len() - 1) as f64;
     if (step / dt - 1.0).abs() > MAX_RATE_DIFFERENCE {
         return Err(refuse(
@@ -268,81 +311,89 @@ fn to_grid(
             ),
         ));
     }
-    let shift = start_offset / dt;
-    let same_rate = (step - dt).abs() <= 1e-4 * dt;
-    // Whole samples apart (within `clock_tolerance` of a sample) and ticking together: a
-    // shift moves no value between samples.
-    let tol = opts.clock_tolerance;
-    let jitter_ok = c
-        .times
-        .iter()
-        .enumerate()
-        .all(|(i, &t)| (t - (first + i as f64 * dt)).abs() <= tol * dt);
-    if same_rate && (shift - shift.round()).abs() <= tol && jitter_ok {
-        let s = shift.round() as i64;
-        let mut values = c.values.clone();
-        let mut before = String::new();
-        let first_index = if s >= 0 {
-            s as usize
-        } else {
-            let drop = (-s) as usize;
-            if drop >= values.len() {
-                return Err(refuse(
-                    c,
-                    c.lines[0],
-                    "no sample in the ground's span".into(),
-                ));
-            }
-            values.drain(..drop);
-            before = format!(
-                "; its {drop} sample{} before the ground's first {} not used",
-                if drop == 1 { "" } else { "s" },
-                if drop == 1 { "is" } else { "are" }
-            );
-            0
-        };
-        if s == 0 && start_offset != 0.0 {
-            log.push(Repair {
-                channel: c.name(),
-                action: format!(
-                    "its clock starts {} {} the ground's, within clock_tolerance = {tol} of a \
-                     sample: rows paired by time stamp without interpolation",
-                    ms(start_offset.abs()),
-                    if start_offset > 0.0 {
-                        "after"
-                    } else {
-                        "before"
-                    },
-                ),
-            });
+    Ok(step)
+}
+
+/// A channel ticking with the ground's clock and `s` whole samples after it (before, when
+/// negative; within `tol` of a sample): its values as they are, from grid index `s`, those
+/// before the ground's first sample dropped; the shift logged.
+fn shift_whole_samples(
+    c: &Recorded,
+    s: i64,
+    start_offset: f64,
+    tol: f64,
+    log: &mut Vec<Repair>,
+) -> Result<OnGrid, ImportError> {
+    let mut values = c.values.clone();
+    let mut before = String::new();
+    let first_index = if s >= 0 {
+        s as usize
+    } else {
+        let drop = (-s) as usize;
+        if drop >= values.len() {
+            return Err(refuse(
+                c,
+                c.lines[0],
+                "no sample in the ground's span".into(),
+            ));
         }
-        if s != 0 {
-            log.push(Repair {
-                channel: c.name(),
-                action: format!(
-                    "its clock starts {} {} the ground's: matched by time stamp, shifted by {} \
-                     sample{} against row numbers{before}",
-                    ms(start_offset.abs()),
-                    if s > 0 { "after" } else { "before" },
-                    s.abs(),
-                    if s.abs() == 1 { "" } else { "s" }
-                ),
-            });
-        }
-        // Samples beyond the ground's last one stay: the common span below trims them, and
-        // says so.
-        return Ok(OnGrid {
-            first: first_index,
-            values,
+        values.drain(..drop);
+        before = format!(
+            "; its {drop} sample{} before the ground's first {} not used",
+            if drop == 1 { "" } else { "s" },
+            if drop == 1 { "is" } else { "are" }
+        );
+        0
+    };
+    if s == 0 && start_offset != 0.0 {
+        log.push(Repair {
+            channel: c.name(),
+            action: format!(
+                "its clock starts {} {} the ground's, within clock_tolerance = {tol} of a \
+                 sample: rows paired by time stamp without interpolation",
+                ms(start_offset.abs()),
+                if start_offset > 0.0 {
+                    "after"
+                } else {
+                    "before"
+                },
+            ),
         });
     }
-    // A clock at the ground's rate to a hundredth of a sample over the whole record: one
-    // shift holds for every sample.
-    let drift = (step / dt - 1.0).abs() * c.times.len() as f64;
-    if same_rate && jitter_ok && drift <= 0.01 {
-        return shift_band_limited(c, shift, start_offset, log);
+    if s != 0 {
+        log.push(Repair {
+            channel: c.name(),
+            action: format!(
+                "its clock starts {} {} the ground's: matched by time stamp, shifted by {} \
+                 sample{} against row numbers{before}",
+                ms(start_offset.abs()),
+                if s > 0 { "after" } else { "before" },
+                s.abs(),
+                if s.abs() == 1 { "" } else { "s" }
+            ),
+        });
     }
-    // Resample: linear interpolation at the grid times inside the channel's span.
+    // Samples beyond the ground's last one stay: the common span below trims them, and
+    // says so.
+    Ok(OnGrid {
+        first: first_index,
+        values,
+    })
+}
+
+/// Resample: linear interpolation at the grid times inside the channel's span, for a clock
+/// that does not tick with the ground's (`step`, its mean sample spacing); logged with the
+/// clocks' offset and rates and the samples left outside the ground's span.
+fn resample_linear(
+    c: &Recorded,
+    t0: f64,
+    dt: f64,
+    n: usize,
+    step: f64,
+    log: &mut Vec<Repair>,
+) -> Result<OnGrid, ImportError> {
+    let (first, last) = (c.times[0], c.times[c.times.len() - 1]);
+    let start_offset = first - t0;
     let k0 = ((first - t0) / dt).ceil().max(0.0) as usize;
     let k1 = (((last - t0) / dt).floor() as i64).min(n as i64 - 1);
     if k1 < k0 as i64 + 1 {
@@ -530,21 +581,7 @@ pub fn align(
         warnings: Vec::new(),
     };
     if opts.align == Align::Start {
-        let g0 = ground.times[0];
-        for c in &mut storeys {
-            let d = c.times[0] - g0;
-            if d != 0.0 {
-                c.times.iter_mut().for_each(|t| *t -= d);
-                out.repairs.push(Repair {
-                    channel: c.name(),
-                    action: format!(
-                        "its clock moved by {:.6} s so that its first row is simultaneous with \
-                         the ground's (align = \"start\": an assumption, not a measurement)",
-                        -d
-                    ),
-                });
-            }
-        }
+        align_starts(&ground, &mut storeys, &mut out.repairs);
     }
     for c in std::iter::once(&mut ground).chain(storeys.iter_mut()) {
         if opts.drop_leading_zeros {
@@ -552,16 +589,98 @@ pub fn align(
         }
         fill_gaps(c, opts.max_gap, &mut out.repairs)?;
     }
-    let n = ground.times.len();
-    let t0 = ground.times[0];
-    let dt = (ground.times[n - 1] - t0) / (n - 1) as f64;
-    limits::check_dt(dt)
-        .map_err(|e| refuse(&ground, ground.lines[n - 1], format!("time step: {e} (s)")))?;
+    let (n, t0, dt) = ground_grid(&ground)?;
     let mut grids = Vec::with_capacity(storeys.len());
     for c in &storeys {
         grids.push(to_grid(c, t0, dt, n, opts, &mut out.repairs)?);
     }
-    // The span every channel covers.
+    let span = common_span(&ground, &storeys, &grids, n)?;
+    let (lo, hi) = (span.lo, span.hi);
+    log_different_spans(&span, t0, dt, &mut out.repairs);
+    span.log_trim(ground.name(), 0, n, &mut out.repairs);
+    let mut ug = ground.values[lo..hi].to_vec();
+    refuse_stuck(&ground, ground.lines[lo], &ug)?;
+    let gname = ground.name();
+    remove_offsets(&mut ug, &gname, opts, &mut out);
+    for (c, g) in storeys.iter().zip(&grids) {
+        span.log_trim(c.name(), g.first, g.values.len(), &mut out.repairs);
+        let mut v = g.values[lo - g.first..hi - g.first].to_vec();
+        refuse_stuck(c, c.lines[0], &v)?;
+        remove_offsets(&mut v, &c.name(), opts, &mut out);
+        out.storeys.push(v);
+    }
+    check_values_within_limits(gname, &ug, &storeys, &out.storeys)?;
+    out.ug = ug;
+    out.dt = dt;
+    out.t0 = t0 + lo as f64 * dt;
+    Ok(out)
+}
+
+/// `align = "start"`: moves each storey channel's clock so that its first row is simultaneous
+/// with the ground's, and logs it as the assumption it is.
+fn align_starts(ground: &Recorded, storeys: &mut [Recorded], repairs: &mut Vec<Repair>) {
+    let g0 = ground.times[0];
+    for c in storeys {
+        let d = c.times[0] - g0;
+        if d != 0.0 {
+            c.times.iter_mut().for_each(|t| *t -= d);
+            repairs.push(Repair {
+                channel: c.name(),
+                action: format!(
+                    "its clock moved by {:.6} s so that its first row is simultaneous with \
+                     the ground's (align = \"start\": an assumption, not a measurement)",
+                    -d
+                ),
+            });
+        }
+    }
+}
+
+/// The ground's grid: its sample count, first time stamp and mean time step (s), the step
+/// within limits.
+fn ground_grid(ground: &Recorded) -> Result<(usize, f64, f64), ImportError> {
+    let n = ground.times.len();
+    let t0 = ground.times[0];
+    let dt = (ground.times[n - 1] - t0) / (n - 1) as f64;
+    limits::check_dt(dt)
+        .map_err(|e| refuse(ground, ground.lines[n - 1], format!("time step: {e} (s)")))?;
+    Ok((n, t0, dt))
+}
+
+/// The span of the ground's grid every channel covers, `lo..hi`, with the length each channel
+/// covers (the ground's first).
+struct CommonSpan {
+    lo: usize,
+    hi: usize,
+    lengths: Vec<usize>,
+}
+
+impl CommonSpan {
+    /// Logs what trimming the channel `name` (on the grid from `first`, `len` samples) to the
+    /// common span drops, if anything.
+    fn log_trim(&self, name: String, first: usize, len: usize, repairs: &mut Vec<Repair>) {
+        let (a, b) = (self.lo - first, first + len - self.hi);
+        if a + b > 0 {
+            repairs.push(Repair {
+                channel: name,
+                action: format!(
+                    "trimmed to the span all channels share: {a} sample{} dropped at the start, \
+                     {b} at the end",
+                    if a == 1 { "" } else { "s" }
+                ),
+            });
+        }
+    }
+}
+
+/// The span every channel covers (`n`, the ground's sample count); refused when there is none,
+/// or when it keeps less than [`MIN_KEPT_SHARE`] of the longest channel (a file cut short).
+fn common_span(
+    ground: &Recorded,
+    storeys: &[Recorded],
+    grids: &[OnGrid],
+    n: usize,
+) -> Result<CommonSpan, ImportError> {
     let lo = grids.iter().map(|g| g.first).max().unwrap_or(0);
     let hi = grids
         .iter()
@@ -571,8 +690,8 @@ pub fn align(
         .min(n);
     if hi < lo + 2 {
         return Err(ImportError::NoCommonSpan {
-            channels: std::iter::once(&ground)
-                .chain(&storeys)
+            channels: std::iter::once(ground)
+                .chain(storeys)
                 .map(Recorded::name)
                 .collect::<Vec<_>>()
                 .join(", "),
@@ -584,7 +703,7 @@ pub fn align(
     let longest = lengths.iter().copied().max().unwrap_or(n);
     if ((hi - lo) as f64) < MIN_KEPT_SHARE * longest as f64 {
         // The channel that covers least of the ground's grid.
-        let (c, len) = std::iter::once((&ground, n))
+        let (c, len) = std::iter::once((ground, n))
             .chain(storeys.iter().zip(grids.iter().map(|g| g.values.len())))
             .min_by_key(|&(_, len)| len)
             .expect("the ground at least");
@@ -600,21 +719,15 @@ pub fn align(
             ),
         ));
     }
-    let trim = |name: String, first: usize, len: usize, out: &mut Aligned| {
-        let (a, b) = (lo - first, first + len - hi);
-        if a + b > 0 {
-            out.repairs.push(Repair {
-                channel: name,
-                action: format!(
-                    "trimmed to the span all channels share: {a} sample{} dropped at the start, \
-                     {b} at the end",
-                    if a == 1 { "" } else { "s" }
-                ),
-            });
-        }
-    };
+    Ok(CommonSpan { lo, hi, lengths })
+}
+
+/// Logs, for all channels, that they cover different spans of the ground's grid (`t0`, `dt`)
+/// and which span is kept — when they do.
+fn log_different_spans(span: &CommonSpan, t0: f64, dt: f64, repairs: &mut Vec<Repair>) {
+    let (lo, hi, lengths) = (span.lo, span.hi, &span.lengths);
     if lengths.iter().any(|&l| l != lengths[0]) {
-        out.repairs.push(Repair {
+        repairs.push(Repair {
             channel: "all".into(),
             action: format!(
                 "the channels cover different spans of the ground's grid ({} samples); kept \
@@ -630,21 +743,22 @@ pub fn align(
             ),
         });
     }
-    trim(ground.name(), 0, n, &mut out);
-    let mut ug = ground.values[lo..hi].to_vec();
-    refuse_stuck(&ground, ground.lines[lo], &ug)?;
-    let gname = ground.name();
-    remove_offsets(&mut ug, &gname, opts, &mut out);
-    for (c, g) in storeys.iter().zip(&grids) {
-        trim(c.name(), g.first, g.values.len(), &mut out);
-        let mut v = g.values[lo - g.first..hi - g.first].to_vec();
-        refuse_stuck(c, c.lines[0], &v)?;
-        remove_offsets(&mut v, &c.name(), opts, &mut out);
-        out.storeys.push(v);
-    }
-    for (name, v) in std::iter::once((gname, &ug))
-        .chain(storeys.iter().map(Recorded::name).zip(out.storeys.iter()))
-    {
+}
+
+/// Refuses a channel with a value beyond the limit on data values after conversion: the ground
+/// (`gname`, `ug`) first, then the storey channels (their `values`) in order.
+fn check_values_within_limits(
+    gname: String,
+    ug: &[f64],
+    storeys: &[Recorded],
+    values: &[Vec<f64>],
+) -> Result<(), ImportError> {
+    for (name, v) in std::iter::once((gname, ug)).chain(
+        storeys
+            .iter()
+            .map(Recorded::name)
+            .zip(values.iter().map(|v| &v[..])),
+    ) {
         if let Some(x) = v.iter().find(|x| limits::check_value(**x).is_err()) {
             return Err(ImportError::Value {
                 channel: name,
@@ -656,8 +770,5 @@ pub fn align(
             });
         }
     }
-    out.ug = ug;
-    out.dt = dt;
-    out.t0 = t0 + lo as f64 * dt;
-    Ok(out)
+    Ok(())
 }
