@@ -5,9 +5,9 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use crate::error::{bail, Context, Result};
-use core_filters::pmmh::PmmhConfig;
-use core_filters::rng::stream;
-use models::dataset::load_dir;
+use core_filters::pmmh::{PmmhChain, PmmhConfig};
+use core_filters::rng::{stream, StreamRng};
+use models::dataset::{load_dir, LoadedDataset};
 
 use super::{chain_warnings, run_chain, summarise, FilterLikelihood, ReferenceRecord, ThetaMap};
 use identify::pipeline::{chain_spec, Algorithm, FilterSettings};
@@ -52,26 +52,7 @@ pub(crate) fn reference_posterior(
     let chain = data
         .true_chain()
         .context("rebuilding the data set's structure")?;
-    let mut settings = match &args.config {
-        Some(path) => identify::limits::load_filter_settings(path)?,
-        None => FilterSettings::default(),
-    };
-    let config_name = args
-        .config
-        .as_ref()
-        .map_or_else(|| "--config".to_string(), |p| p.display().to_string());
-    let table_name = |key: &str| format!("[structure] `{key}` in {config_name}");
-    let measured = args.data.join(models::dataset::MEASURED);
-    if data.meta.is_some() {
-        // Simulated data carry their structure: a stated key must agree with it.
-        identify::field::resolve(&data, None, &settings.structure, &measured, &table_name)?;
-        settings.structure = identify::field::StructureSettings::default();
-    } else {
-        identify::field::resolve(&data, None, &settings.structure, &measured, &table_name)
-            .context(
-                "field data: give the building with --config FILE and its [structure] table",
-            )?;
-    }
+    let settings = structure_settings(args, &data)?;
     let mut spec = chain_spec(&data, chain.as_ref(), &settings)?;
     // `substeps = "auto"` in a config is resolved as in `sysid filter`, not silently one.
     let scaled = identify::pipeline::prior_from_data(&data, chain.as_ref(), &settings)?;
@@ -79,26 +60,7 @@ pub(crate) fn reference_posterior(
     let names = spec.prior.names();
     let map = ThetaMap::new(&spec.prior)?;
     let truth = data.meta.as_ref().map(|m| m.theta_true.clone());
-    let start: Vec<f64> = match (&truth, args.start_at_truth, &args.start_from) {
-        (Some(t), true, _) => t.clone(),
-        (None, true, _) => bail!("--start-at-truth: {} has no true θ", args.data.display()),
-        (_, false, Some(path)) => {
-            let r: identify::record::RunRecord = crate::sweep::read_record(path)?;
-            if r.param_names != names {
-                bail!(
-                    "--start-from {}: its parameters {:?} are not this data set's {:?}",
-                    path.display(),
-                    r.param_names,
-                    names
-                );
-            }
-            r.theta_val
-        }
-        _ => {
-            // Prior medians (the middle of uniform priors; β, γ at the triangle's centre line).
-            map.theta(&vec![0.0; map.dim()])
-        }
-    };
+    let start = start_point(args, truth.as_deref(), &names, &map)?;
     let steps = data.len() - 1;
     let ys: Vec<f64> = (1..=steps).flat_map(|k| data.y(k).to_vec()).collect();
     let mut target = FilterLikelihood {
@@ -112,13 +74,7 @@ pub(crate) fn reference_posterior(
         evaluations: 0,
     };
     let mut rng = stream(args.seed, 0, "reference/pmmh");
-    let probes: Vec<f64> = (0..args.probe)
-        .map(|_| target.estimate(&start, &mut rng))
-        .collect();
-    let pm = probes.iter().sum::<f64>() / probes.len().max(1) as f64;
-    let psd = (probes.iter().map(|v| (v - pm).powi(2)).sum::<f64>()
-        / (probes.len().max(2) - 1) as f64)
-        .sqrt();
+    let (pm, psd, probes) = likelihood_at_start(&mut target, &start, args.probe, &mut rng);
     note(format!(
         "reference: {} steps, {} free parameters, estimator {} × {} particles; log-likelihood \
          at the start {pm:.2} ± {psd:.2} (s.d. of {} estimates)",
@@ -126,40 +82,16 @@ pub(crate) fn reference_posterior(
         map.dim(),
         args.estimator.name(),
         args.particles,
-        probes.len()
+        probes
     ));
-    // Initial random walk: 2% in the log coordinates, 0.2 in the logistic ones; adapted in the
-    // burn-in.
-    let initial_sd: Vec<f64> = {
-        let u0 = map.unconstrained(&start);
-        let mut sd = vec![0.2; u0.len()];
-        for (i, idx) in map.free_indices().into_iter().enumerate() {
-            if names[idx].starts_with('k') || names[idx].starts_with('c') {
-                sd[i] = 0.02;
-            }
-        }
-        sd
-    };
     let config = PmmhConfig {
         iterations: args.iterations,
         burn_in: args.burn_in,
-        initial_sd,
+        initial_sd: initial_step_sd(&map, &start, &names),
         adapt_every: 100,
     };
     let started = Instant::now();
-    let total = args.burn_in + args.iterations;
-    let mut last_print = Instant::now();
-    let chain_out = run_chain(&mut target, &start, &config, &mut rng, &mut |i, n| {
-        if last_print.elapsed().as_secs() >= 30 || i == n {
-            last_print = Instant::now();
-            let el = started.elapsed().as_secs_f64();
-            note(format!(
-                "reference: iteration {i}/{total} ({:.0} s elapsed, ~{:.0} s left)",
-                el,
-                el / i as f64 * (n - i) as f64
-            ));
-        }
-    });
+    let chain_out = chain_with_progress(&mut target, &start, &config, &mut rng, started, note);
     let params = summarise(&chain_out, &map, &names, truth.as_deref());
     let warnings = chain_warnings(
         chain_out.acceptance,
@@ -192,6 +124,116 @@ pub(crate) fn reference_posterior(
         warnings,
     };
     Ok(record)
+}
+
+/// The filter settings of a request (its `--config`, or the defaults) with the building
+/// resolved: simulated data carry their structure, which a stated key must agree with; field
+/// data need the config's `[structure]` table.
+fn structure_settings(args: &ReferenceRequest, data: &LoadedDataset) -> Result<FilterSettings> {
+    let mut settings = match &args.config {
+        Some(path) => identify::limits::load_filter_settings(path)?,
+        None => FilterSettings::default(),
+    };
+    let config_name = args
+        .config
+        .as_ref()
+        .map_or_else(|| "--config".to_string(), |p| p.display().to_string());
+    let table_name = |key: &str| format!("[structure] `{key}` in {config_name}");
+    let measured = args.data.join(models::dataset::MEASURED);
+    if data.meta.is_some() {
+        // Simulated data carry their structure: a stated key must agree with it.
+        identify::field::resolve(data, None, &settings.structure, &measured, &table_name)?;
+        settings.structure = identify::field::StructureSettings::default();
+    } else {
+        identify::field::resolve(data, None, &settings.structure, &measured, &table_name).context(
+            "field data: give the building with --config FILE and its [structure] table",
+        )?;
+    }
+    Ok(settings)
+}
+
+/// Where the chain starts: the true θ (`--start-at-truth`), the θ_val of a run record of the
+/// same parameters (`--start-from`), or the prior medians.
+fn start_point(
+    args: &ReferenceRequest,
+    truth: Option<&[f64]>,
+    names: &[String],
+    map: &ThetaMap,
+) -> Result<Vec<f64>> {
+    Ok(match (truth, args.start_at_truth, &args.start_from) {
+        (Some(t), true, _) => t.to_vec(),
+        (None, true, _) => bail!("--start-at-truth: {} has no true θ", args.data.display()),
+        (_, false, Some(path)) => {
+            let r: identify::record::RunRecord = crate::sweep::read_record(path)?;
+            if r.param_names != names {
+                bail!(
+                    "--start-from {}: its parameters {:?} are not this data set's {:?}",
+                    path.display(),
+                    r.param_names,
+                    names
+                );
+            }
+            r.theta_val
+        }
+        _ => {
+            // Prior medians (the middle of uniform priors; β, γ at the triangle's centre line).
+            map.theta(&vec![0.0; map.dim()])
+        }
+    })
+}
+
+/// The mean and s.d. of `probe` estimates of the log-likelihood at the start point (how noisy
+/// the estimator is there), and their number.
+fn likelihood_at_start(
+    target: &mut FilterLikelihood,
+    start: &[f64],
+    probe: usize,
+    rng: &mut StreamRng,
+) -> (f64, f64, usize) {
+    let probes: Vec<f64> = (0..probe).map(|_| target.estimate(start, rng)).collect();
+    let pm = probes.iter().sum::<f64>() / probes.len().max(1) as f64;
+    let psd = (probes.iter().map(|v| (v - pm).powi(2)).sum::<f64>()
+        / (probes.len().max(2) - 1) as f64)
+        .sqrt();
+    (pm, psd, probes.len())
+}
+
+/// Initial random walk: 2% in the log coordinates, 0.2 in the logistic ones; adapted in the
+/// burn-in.
+fn initial_step_sd(map: &ThetaMap, start: &[f64], names: &[String]) -> Vec<f64> {
+    let u0 = map.unconstrained(start);
+    let mut sd = vec![0.2; u0.len()];
+    for (i, idx) in map.free_indices().into_iter().enumerate() {
+        if names[idx].starts_with('k') || names[idx].starts_with('c') {
+            sd[i] = 0.02;
+        }
+    }
+    sd
+}
+
+/// Runs the chain, telling `note` where it is every 30 s and at its last iteration, with the
+/// time elapsed since `started` and an estimate of the time left.
+fn chain_with_progress(
+    target: &mut FilterLikelihood,
+    start: &[f64],
+    config: &PmmhConfig,
+    rng: &mut StreamRng,
+    started: Instant,
+    note: &mut dyn FnMut(String),
+) -> PmmhChain {
+    let total = config.burn_in + config.iterations;
+    let mut last_print = Instant::now();
+    run_chain(target, start, config, rng, &mut |i, n| {
+        if last_print.elapsed().as_secs() >= 30 || i == n {
+            last_print = Instant::now();
+            let el = started.elapsed().as_secs_f64();
+            note(format!(
+                "reference: iteration {i}/{total} ({:.0} s elapsed, ~{:.0} s left)",
+                el,
+                el / i as f64 * (n - i) as f64
+            ));
+        }
+    })
 }
 
 /// Writes a reference record to `out`; an error (after writing) when its chain did not move
