@@ -12,7 +12,7 @@ use std::time::Instant;
 
 use crate::error::{bail, Result};
 
-use crate::engine::{load, write_json, Reuse, RunMode};
+use crate::engine::{load, write_json, Engine, Reuse, RunMode};
 use crate::run_dir::open;
 use crate::study::Study;
 use crate::sweep::progress::clock;
@@ -63,15 +63,78 @@ fn by_algorithm<'a>(
         .collect()
 }
 
+/// The studies of a reproduction by name, and their records.
+type StudiesAndRecords = (
+    BTreeMap<&'static str, Study>,
+    BTreeMap<&'static str, Vec<RunRecord>>,
+);
+
 /// Runs the reproduction. With a shard other than `0/1`, only runs this shard's records (no
 /// figures, no report): merge the shards' `records/` and run again without `--shard` (with
 /// `--resume`) to draw. Returns what was done.
 pub fn reproduce(opts: &Options) -> Result<Done> {
     let start = Instant::now();
     let (_lock, engine) = open(&opts.out, opts.mode)?;
+    let mut done = Done::default();
+    let (studies, records) = run_studies(opts, &engine, &mut done)?;
+    let (executed, total_jobs) = (done.executed, done.total);
+    if engine.sharded() {
+        engine.shard_note(&format!(
+            "{total_jobs} runs, {executed} executed ({} failed), {} reused, {}",
+            done.failed,
+            done.reused,
+            clock(start.elapsed())
+        ));
+        return Ok(done);
+    }
+    let sweep_s = start.elapsed().as_secs_f64();
+
+    crate::table1::write(&opts.out.join("table1"))?;
+    let mut summary = paper_summary(&studies, &records);
+    let coverage = draw_figures(opts, &studies, &records)?;
+    summary.extend(crate::discretisation::summary(&records));
+    let total_s = start.elapsed().as_secs_f64();
+    write_json(
+        &opts.out.join("summary.json"),
+        &serde_json::json!({
+            "quick": opts.mode.quick,
+            "studies": summary,
+            "coverage": coverage,
+        }),
+    )?;
+    let report = crate::report::write_report(
+        &crate::report::Target {
+            out: &opts.out,
+            quick: opts.mode.quick,
+        },
+        &studies,
+        &records,
+        &summary,
+        total_jobs,
+    )?;
+    let path = opts.out.join("REPORT.md");
+    write_bytes_atomic(&path, report.as_bytes())?;
+    // What this invocation did, beside the committed results but not among them: timings and
+    // counts change from run to run even when every record agrees.
+    engine.last_run(serde_json::json!({
+            "wall_s": { "sweeps": sweep_s, "total": total_s },
+        "runs": { "executed": executed, "reused": done.reused, "failed": done.failed, "total": total_jobs },
+    }))?;
+    log::info!(
+        "wrote {}; {total_jobs} runs: {executed} executed ({} failed), {} reused; {}",
+        path.display(),
+        done.failed,
+        done.reused,
+        clock(start.elapsed())
+    );
+    Ok(done)
+}
+
+/// Runs (or reuses the records of) every study of `opts.experiments`: the paper's, then the
+/// discretisation studies when they are configured. Adds each sweep's counts to `done`.
+fn run_studies(opts: &Options, engine: &Engine<'_>, done: &mut Done) -> Result<StudiesAndRecords> {
     let mut studies = BTreeMap::new();
     let mut records = BTreeMap::new();
-    let mut done = Done::default();
     for &name in STUDIES.iter().chain(&crate::discretisation::STUDIES) {
         let path = opts.experiments.join(format!("{name}.toml"));
         // The section beyond the paper runs when its studies are configured.
@@ -118,20 +181,15 @@ pub fn reproduce(opts: &Options) -> Result<Done> {
         records.insert(name, outcome.records);
         studies.insert(name, study);
     }
-    let (executed, total_jobs) = (done.executed, done.total);
-    if engine.sharded() {
-        engine.shard_note(&format!(
-            "{total_jobs} runs, {executed} executed ({} failed), {} reused, {}",
-            done.failed,
-            done.reused,
-            clock(start.elapsed())
-        ));
-        return Ok(done);
-    }
-    let sweep_s = start.elapsed().as_secs_f64();
+    Ok((studies, records))
+}
 
-    crate::table1::write(&opts.out.join("table1"))?;
-    let mut summary: BTreeMap<&str, Vec<AlgorithmStats>> = STUDIES
+/// The statistics of each algorithm in each of the paper's studies, by study.
+fn paper_summary<'a>(
+    studies: &BTreeMap<&str, Study>,
+    records: &BTreeMap<&str, Vec<RunRecord>>,
+) -> BTreeMap<&'a str, Vec<AlgorithmStats>> {
+    STUDIES
         .iter()
         .map(|name| {
             let groups = by_algorithm(&studies[name], &records[name]);
@@ -143,8 +201,16 @@ pub fn reproduce(opts: &Options) -> Result<Done> {
                     .collect(),
             )
         })
-        .collect();
-    // Coverage of every study with a known truth (SPEC §9), and its figure for the Fig. 7 sweep.
+        .collect()
+}
+
+/// The coverage of every study with a known truth (SPEC §9), returned, and every figure drawn
+/// from the records, its figure for the Fig. 7 sweep among them.
+fn draw_figures(
+    opts: &Options,
+    studies: &BTreeMap<&'static str, Study>,
+    records: &BTreeMap<&'static str, Vec<RunRecord>>,
+) -> Result<BTreeMap<&'static str, crate::coverage::SweepCoverage>> {
     let mut coverage = BTreeMap::new();
     for name in STUDIES {
         if let Some(c) = crate::coverage::study_coverage(&studies[name], &records[name])? {
@@ -154,8 +220,8 @@ pub fn reproduce(opts: &Options) -> Result<Done> {
     // Every figure is drawn aside and put in place whole (an interrupted reproduction leaves
     // each figure as it was or complete; a resumed one draws them all again from the records).
     identify::plot::figures_in_place(&opts.out, |dir| {
-        draw(dir, &studies, &records)?;
-        crate::discretisation::draw(dir, &records)?;
+        draw(dir, studies, records)?;
+        crate::discretisation::draw(dir, records)?;
         if let Some(c) = coverage.get("fig7") {
             crate::calibration::coverage_figure(
                 &c.calibration,
@@ -165,42 +231,7 @@ pub fn reproduce(opts: &Options) -> Result<Done> {
         }
         Ok(())
     })?;
-    summary.extend(crate::discretisation::summary(&records));
-    let total_s = start.elapsed().as_secs_f64();
-    write_json(
-        &opts.out.join("summary.json"),
-        &serde_json::json!({
-            "quick": opts.mode.quick,
-            "studies": summary,
-            "coverage": coverage,
-        }),
-    )?;
-    let report = crate::report::write_report(
-        &crate::report::Target {
-            out: &opts.out,
-            quick: opts.mode.quick,
-        },
-        &studies,
-        &records,
-        &summary,
-        total_jobs,
-    )?;
-    let path = opts.out.join("REPORT.md");
-    write_bytes_atomic(&path, report.as_bytes())?;
-    // What this invocation did, beside the committed results but not among them: timings and
-    // counts change from run to run even when every record agrees.
-    engine.last_run(serde_json::json!({
-            "wall_s": { "sweeps": sweep_s, "total": total_s },
-        "runs": { "executed": executed, "reused": done.reused, "failed": done.failed, "total": total_jobs },
-    }))?;
-    log::info!(
-        "wrote {}; {total_jobs} runs: {executed} executed ({} failed), {} reused; {}",
-        path.display(),
-        done.failed,
-        done.reused,
-        clock(start.elapsed())
-    );
-    Ok(done)
+    Ok(coverage)
 }
 
 /// Draws the paper's figures from the records into `dir`.
