@@ -376,85 +376,20 @@ pub fn summary(limits: &[InformationLimit], records: &[RunRecord]) -> Result<Str
     algorithms.dedup();
     let mut used = vec![false; records.len()];
     let mut o = String::new();
-    write!(
-        o,
-        "| data set | θ̂ \\|k error\\| | θ̂ \\|c error\\| | s.d. of k | s.d. of c |"
-    )?;
-    for a in &algorithms {
-        write!(o, " {a} \\|k\\| | {a} \\|c\\| | {a} k, c covered |")?;
-    }
-    writeln!(o)?;
-    writeln!(
-        o,
-        "|---|---:|---:|---:|---:|{}",
-        "---:|---:|---:|".repeat(algorithms.len())
-    )?;
+    summary_header(&mut o, &algorithms)?;
     // Per column: the values of every data set, for the mean row.
     let mut cols: Vec<Vec<f64>> = vec![Vec::new(); 4 + 2 * algorithms.len()];
     let mut covered = vec![(0usize, 0usize); algorithms.len()];
     for l in limits {
-        let Some(truth) = &l.truth else {
-            bail!("{}: no truth, so no error to summarise", l.data);
-        };
-        let err = l.mle_error().unwrap_or_default();
-        let of = |kind: char, xs: &[f64]| {
-            let v: Vec<f64> = l
-                .names
-                .iter()
-                .zip(xs)
-                .filter(|(n, _)| in_group(n, kind))
-                .map(|(_, x)| x.abs())
-                .collect();
-            mean(&v)
-        };
-        let rel_sd: Vec<f64> = l.sd.iter().zip(truth).map(|(s, t)| s / t.abs()).collect();
-        let row = [
-            of('k', &err),
-            of('c', &err),
-            of('k', &rel_sd),
-            of('c', &rel_sd),
-        ];
-        write!(o, "| {} |", l.data)?;
-        for (c, v) in row.iter().enumerate() {
-            cols[c].push(*v);
-            write!(o, " {:.2} % |", 100.0 * v)?;
+        let (row, values, counts) = data_set_row(l, &algorithms, records, &mut used)?;
+        o.push_str(&row);
+        for (c, v) in values.into_iter().enumerate() {
+            cols[c].push(v);
         }
-        for (ai, a) in algorithms.iter().enumerate() {
-            let mut errs = (Vec::new(), Vec::new());
-            let (mut cov, mut pairs) = (0usize, 0usize);
-            for (ri, r) in records.iter().enumerate() {
-                if &r.algorithm != a || r.is_failure() {
-                    continue;
-                }
-                if !on_data(r, l) {
-                    continue;
-                }
-                used[ri] = true;
-                let ans = answer(l, truth, r)?;
-                errs.0.push(of('k', &ans.error));
-                errs.1.push(of('c', &ans.error));
-                for (j, c) in ans.covers.iter().enumerate() {
-                    if let (Some(c), true) =
-                        (c, in_group(&l.names[j], 'k') || in_group(&l.names[j], 'c'))
-                    {
-                        pairs += 1;
-                        cov += usize::from(*c);
-                    }
-                }
-            }
-            let (k, c) = (mean(&errs.0), mean(&errs.1));
-            cols[4 + 2 * ai].push(k);
-            cols[5 + 2 * ai].push(c);
+        for (ai, (cov, pairs)) in counts.into_iter().enumerate() {
             covered[ai].0 += cov;
             covered[ai].1 += pairs;
-            write!(
-                o,
-                " {:.2} % | {:.2} % | {cov}/{pairs} |",
-                100.0 * k,
-                100.0 * c
-            )?;
         }
-        writeln!(o)?;
     }
     if let Some(i) = used.iter().position(|u| !u) {
         let r = &records[i];
@@ -466,12 +401,135 @@ pub fn summary(limits: &[InformationLimit], records: &[RunRecord]) -> Result<Str
             );
         }
     }
-    write!(o, "| mean of {} |", limits.len())?;
+    mean_row(&mut o, limits.len(), &cols, &covered)?;
+    let failed = records.iter().filter(|r| r.is_failure()).count();
+    if failed > 0 {
+        writeln!(o, "\n{failed} failed runs left out.")?;
+    }
+    per_parameter_comparison(&mut o, limits, records)?;
+    Ok(o)
+}
+
+/// The summary table's header: θ̂'s four columns, then three per algorithm.
+fn summary_header(o: &mut String, algorithms: &[String]) -> Result<()> {
+    write!(
+        o,
+        "| data set | θ̂ \\|k error\\| | θ̂ \\|c error\\| | s.d. of k | s.d. of c |"
+    )?;
+    for a in algorithms {
+        write!(o, " {a} \\|k\\| | {a} \\|c\\| | {a} k, c covered |")?;
+    }
+    writeln!(o)?;
+    writeln!(
+        o,
+        "|---|---:|---:|---:|---:|{}",
+        "---:|---:|---:|".repeat(algorithms.len())
+    )?;
+    Ok(())
+}
+
+/// The mean |value| of the parameters of `limit` in group `kind` ('k' or 'c'), from one value
+/// per parameter.
+fn group_mean(limit: &InformationLimit, kind: char, xs: &[f64]) -> f64 {
+    let v: Vec<f64> = limit
+        .names
+        .iter()
+        .zip(xs)
+        .filter(|(n, _)| in_group(n, kind))
+        .map(|(_, x)| x.abs())
+        .collect();
+    mean(&v)
+}
+
+/// One data set's row of the summary: its text, its value in each column (θ̂'s errors and
+/// relative s.d.s, then each algorithm's k and c errors) and, per algorithm, how many of its
+/// 95 % intervals of k and c hold the truth out of how many. Marks in `used` the records on
+/// this data set. An error when the data set has no truth.
+fn data_set_row(
+    l: &InformationLimit,
+    algorithms: &[String],
+    records: &[RunRecord],
+    used: &mut [bool],
+) -> Result<(String, Vec<f64>, Vec<(usize, usize)>)> {
+    let Some(truth) = &l.truth else {
+        bail!("{}: no truth, so no error to summarise", l.data);
+    };
+    let err = l.mle_error().unwrap_or_default();
+    let rel_sd: Vec<f64> = l.sd.iter().zip(truth).map(|(s, t)| s / t.abs()).collect();
+    let mut values = vec![
+        group_mean(l, 'k', &err),
+        group_mean(l, 'c', &err),
+        group_mean(l, 'k', &rel_sd),
+        group_mean(l, 'c', &rel_sd),
+    ];
+    let mut o = String::new();
+    write!(o, "| {} |", l.data)?;
+    for v in &values {
+        write!(o, " {:.2} % |", 100.0 * v)?;
+    }
+    let mut counts = Vec::new();
+    for a in algorithms {
+        let (k, c, cov, pairs) = algorithm_on_data(l, truth, a, records, used)?;
+        values.push(k);
+        values.push(c);
+        counts.push((cov, pairs));
+        write!(
+            o,
+            " {:.2} % | {:.2} % | {cov}/{pairs} |",
+            100.0 * k,
+            100.0 * c
+        )?;
+    }
+    writeln!(o)?;
+    Ok((o, values, counts))
+}
+
+/// What algorithm `a`'s successful runs on the data set of `l` answer: their mean k and c
+/// errors, and how many of their 95 % intervals of k and c hold the truth out of how many.
+/// Marks those records in `used`.
+fn algorithm_on_data(
+    l: &InformationLimit,
+    truth: &[f64],
+    a: &str,
+    records: &[RunRecord],
+    used: &mut [bool],
+) -> Result<(f64, f64, usize, usize)> {
+    let mut errs = (Vec::new(), Vec::new());
+    let (mut cov, mut pairs) = (0usize, 0usize);
+    for (ri, r) in records.iter().enumerate() {
+        if r.algorithm != a || r.is_failure() {
+            continue;
+        }
+        if !on_data(r, l) {
+            continue;
+        }
+        used[ri] = true;
+        let ans = answer(l, truth, r)?;
+        errs.0.push(group_mean(l, 'k', &ans.error));
+        errs.1.push(group_mean(l, 'c', &ans.error));
+        for (j, c) in ans.covers.iter().enumerate() {
+            if let (Some(c), true) = (c, in_group(&l.names[j], 'k') || in_group(&l.names[j], 'c')) {
+                pairs += 1;
+                cov += usize::from(*c);
+            }
+        }
+    }
+    Ok((mean(&errs.0), mean(&errs.1), cov, pairs))
+}
+
+/// The row of means over the data sets, with each algorithm's share of intervals that hold
+/// the truth.
+fn mean_row(
+    o: &mut String,
+    data_sets: usize,
+    cols: &[Vec<f64>],
+    covered: &[(usize, usize)],
+) -> Result<()> {
+    write!(o, "| mean of {} |", data_sets)?;
     for c in &cols[..4] {
         write!(o, " {:.2} % |", 100.0 * mean(c))?;
     }
-    for (ai, _) in algorithms.iter().enumerate() {
-        let (cov, pairs) = covered[ai];
+    for (ai, &(cov, pairs)) in covered.iter().enumerate() {
         write!(
             o,
             " {:.2} % | {:.2} % | {cov}/{pairs} = {:.3} |",
@@ -481,10 +539,16 @@ pub fn summary(limits: &[InformationLimit], records: &[RunRecord]) -> Result<Str
         )?;
     }
     writeln!(o)?;
-    let failed = records.iter().filter(|r| r.is_failure()).count();
-    if failed > 0 {
-        writeln!(o, "\n{failed} failed runs left out.")?;
-    }
+    Ok(())
+}
+
+/// The online answers against the limit, per parameter, and the goal "within 10 % of the
+/// limit's error" decided from them.
+fn per_parameter_comparison(
+    o: &mut String,
+    limits: &[InformationLimit],
+    records: &[RunRecord],
+) -> Result<()> {
     let groups: Vec<DataSetRuns> = limits
         .iter()
         .map(|l| {
@@ -504,7 +568,7 @@ pub fn summary(limits: &[InformationLimit], records: &[RunRecord]) -> Result<Str
          parameter), decided by the difference's ±2 s.e. interval against the margin:\n\n{}",
         goal_markdown(&goal_rows(&groups))
     )?;
-    Ok(o)
+    Ok(())
 }
 
 /// [`summary`] of several limits and the run records on their data, then each limit's
