@@ -114,19 +114,7 @@ pub fn parse_v2(file: &Path, text: &str) -> Result<V2Record, ReadError> {
         .lines()
         .map(|l| l.trim_end_matches('\r'))
         .collect();
-    let line = |n: usize| -> Result<&str, ReadError> {
-        lines.get(n - 1).copied().ok_or_else(|| {
-            header_error(
-                file,
-                lines.len() + 1,
-                "header",
-                format!(
-                    "the file ends at line {}, a V2 header has {ACC_LINE} lines",
-                    lines.len()
-                ),
-            )
-        })
-    };
+    let line = |n: usize| header_line(file, &lines, n);
     let first = line(1)?;
     if !first.trim_start().starts_with("Corrected accelerogram") {
         return Err(header_error(
@@ -137,7 +125,44 @@ pub fn parse_v2(file: &Path, text: &str) -> Result<V2Record, ReadError> {
              accelerogram`)",
         ));
     }
-    let npts_text = line(NPTS_LINE)?;
+    let npts = sample_count(file, line(NPTS_LINE)?)?;
+    let dt_text = line(DT_LINE)?;
+    let dt = number_after(file, DT_LINE, dt_text, "intervals of")?;
+    let dt = limits::check_dt(dt).map_err(|e| limit_error(file, DT_LINE, "DT", e))?;
+
+    let (channel, direction) = channel_name(first);
+    let orientation = orientation(file, &lines)?;
+
+    check_acc_header(file, line(ACC_LINE)?, npts, dt)?;
+    let acc = acc_values(file, &lines, npts)?;
+    Ok(V2Record {
+        channel,
+        direction,
+        orientation,
+        dt,
+        acc,
+        first_line: ACC_LINE + 1,
+    })
+}
+
+/// Line `n` (1-based) of the header, refused as a file that ends before the header does.
+fn header_line<'a>(file: &Path, lines: &[&'a str], n: usize) -> Result<&'a str, ReadError> {
+    lines.get(n - 1).copied().ok_or_else(|| {
+        header_error(
+            file,
+            lines.len() + 1,
+            "header",
+            format!(
+                "the file ends at line {}, a V2 header has {ACC_LINE} lines",
+                lines.len()
+            ),
+        )
+    })
+}
+
+/// The sample count NPTS from its line `npts_text`, refused when that line is not the one of
+/// the V2 layout read here (an older layout or another format).
+fn sample_count(file: &Path, npts_text: &str) -> Result<usize, ReadError> {
     if !npts_text.contains("points of instrument- and baseline-corrected") {
         return Err(header_error(
             file,
@@ -151,29 +176,32 @@ pub fn parse_v2(file: &Path, text: &str) -> Result<V2Record, ReadError> {
             ),
         ));
     }
-    let npts = leading_count(file, NPTS_LINE, npts_text)?;
-    let dt_text = line(DT_LINE)?;
-    let dt = number_after(file, DT_LINE, dt_text, "intervals of")?;
-    let dt = limits::check_dt(dt).map_err(|e| limit_error(file, DT_LINE, "DT", e))?;
+    leading_count(file, NPTS_LINE, npts_text)
+}
 
-    let (channel, direction) = channel_name(first);
+/// The orientation of the sensor: integer [`ORIENTATION_INT`] of the header's integer block.
+fn orientation(file: &Path, lines: &[&str]) -> Result<i64, ReadError> {
     // Integer k (1-based) sits on line INT_LINE + (k−1)/16, columns 5·((k−1)%16) ..+5.
     let k = ORIENTATION_INT - 1;
     let int_line = INT_LINE + k / 16;
     let col = 5 * (k % 16);
-    let raw = line(int_line)?.get(col..col + 5).unwrap_or("");
+    let raw = header_line(file, lines, int_line)?
+        .get(col..col + 5)
+        .unwrap_or("");
     let field = format!("integer {ORIENTATION_INT} (orientation)");
-    let orientation = raw
-        .trim()
+    raw.trim()
         .parse::<i64>()
         .map_err(|_| ReadError::NotNumeric {
             file: file.to_path_buf(),
             line: int_line,
             field,
             value: raw.trim().to_string(),
-        })?;
+        })
+}
 
-    let acc_text = line(ACC_LINE)?;
+/// The acceleration block's header line `acc_text`: its sample count that of NPTS (`npts`),
+/// its step that of line [`DT_LINE`] (`dt`), its unit cm/sec2.
+fn check_acc_header(file: &Path, acc_text: &str, npts: usize, dt: f64) -> Result<(), ReadError> {
     if !acc_text.contains("points of accel data") {
         return Err(header_error(
             file,
@@ -212,6 +240,12 @@ pub fn parse_v2(file: &Path, text: &str) -> Result<V2Record, ReadError> {
             format!("the acceleration is not in cm/sec2: `{}`", acc_text.trim()),
         ));
     }
+    Ok(())
+}
+
+/// The `npts` accelerations (m/s²) of the block after line [`ACC_LINE`]: 8 fields of 10
+/// characters a line, in cm/s², and nothing else on a line.
+fn acc_values(file: &Path, lines: &[&str], npts: usize) -> Result<Vec<f64>, ReadError> {
     let mut acc = Vec::with_capacity(npts);
     let mut n = ACC_LINE;
     while acc.len() < npts {
@@ -252,14 +286,7 @@ pub fn parse_v2(file: &Path, text: &str) -> Result<V2Record, ReadError> {
             });
         }
     }
-    Ok(V2Record {
-        channel,
-        direction,
-        orientation,
-        dt,
-        acc,
-        first_line: ACC_LINE + 1,
-    })
+    Ok(acc)
 }
 
 /// `("7", "Tran")` from line 1's `… Chan  7:  Tran  …` (empty when absent).
