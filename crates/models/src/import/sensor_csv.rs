@@ -90,17 +90,43 @@ pub fn parse_sensor_csv(
     columns: &CsvColumns,
 ) -> Result<SensorColumn, ReadError> {
     let lines: Vec<&str> = strip_bom(text).lines().collect();
-    // Spreadsheet exports announce their separator on a first line `sep=,`.
-    let sep = lines
+    let sep = separator(&lines);
+    // The 0-based index of the line of column names.
+    let header = header_index(file, &lines, sep, columns)?;
+    let names = split_names(lines[header], sep);
+    let jt = column_index(file, header, &names, &columns.time)?;
+    let jv = column_index(file, header, &names, &columns.column)?;
+    let out = read_rows(file, &lines, header, names.len(), sep, (jt, jv), columns)?;
+    check_time_series(file, &out)?;
+    Ok(out)
+}
+
+/// The field separator: `,` unless a first line `sep=X` announces another (as spreadsheet
+/// exports do).
+fn separator(lines: &[&str]) -> char {
+    lines
         .first()
         .and_then(|l| l.trim().strip_prefix("sep="))
         .and_then(|s| s.chars().next())
-        .unwrap_or(',');
-    let split = |l: &str| -> Vec<String> { l.split(sep).map(|f| f.trim().to_string()).collect() };
+        .unwrap_or(',')
+}
+
+/// The fields of a line of column names, trimmed.
+fn split_names(l: &str, sep: char) -> Vec<String> {
+    l.split(sep).map(|f| f.trim().to_string()).collect()
+}
+
+/// The 0-based index of the line of column names: the one the map gives, or the first (among
+/// the first [`HEADER_SEARCH_LINES`]) that names both columns.
+fn header_index(
+    file: &Path,
+    lines: &[&str],
+    sep: char,
+    columns: &CsvColumns,
+) -> Result<usize, ReadError> {
     let names_both =
         |names: &[String]| names.contains(&columns.time) && names.contains(&columns.column);
-    // The 0-based index of the line of column names.
-    let header = match columns.header_lines {
+    match columns.header_lines {
         Some(h) => {
             if h >= lines.len() {
                 return Err(header_error(
@@ -114,12 +140,12 @@ pub fn parse_sensor_csv(
                     ),
                 ));
             }
-            h
+            Ok(h)
         }
         None => lines
             .iter()
             .take(HEADER_SEARCH_LINES)
-            .position(|l| names_both(&split(l)))
+            .position(|l| names_both(&split_names(l, sep)))
             .ok_or_else(|| {
                 header_error(
                     file,
@@ -131,31 +157,50 @@ pub fn parse_sensor_csv(
                         columns.time, columns.column
                     ),
                 )
-            })?,
-    };
-    let names = split(lines[header]);
-    let find = |name: &str| -> Result<usize, ReadError> {
-        let mut at = names.iter().enumerate().filter(|(_, n)| *n == name);
-        let first = at.next().map(|(j, _)| j).ok_or_else(|| {
-            header_error(
-                file,
-                header + 1,
-                name,
-                format!("no such column (columns: {})", names.join(",")),
-            )
-        })?;
-        if at.next().is_some() {
-            return Err(header_error(
-                file,
-                header + 1,
-                name,
-                "the column name appears twice".to_string(),
-            ));
-        }
-        Ok(first)
-    };
-    let jt = find(&columns.time)?;
-    let jv = find(&columns.column)?;
+            }),
+    }
+}
+
+/// The index of the column `name` among `names` (the line of column names, 0-based index
+/// `header`), refused when absent or named twice.
+fn column_index(
+    file: &Path,
+    header: usize,
+    names: &[String],
+    name: &str,
+) -> Result<usize, ReadError> {
+    let mut at = names.iter().enumerate().filter(|(_, n)| *n == name);
+    let first = at.next().map(|(j, _)| j).ok_or_else(|| {
+        header_error(
+            file,
+            header + 1,
+            name,
+            format!("no such column (columns: {})", names.join(",")),
+        )
+    })?;
+    if at.next().is_some() {
+        return Err(header_error(
+            file,
+            header + 1,
+            name,
+            "the column name appears twice".to_string(),
+        ));
+    }
+    Ok(first)
+}
+
+/// The rows after the line of column names (`header`; `width` columns): the time stamps (s,
+/// column `jt`) and values (column `jv`) with their lines; blank lines skipped, a non-finite
+/// value dropped or refused as the map says.
+fn read_rows(
+    file: &Path,
+    lines: &[&str],
+    header: usize,
+    width: usize,
+    sep: char,
+    (jt, jv): (usize, usize),
+    columns: &CsvColumns,
+) -> Result<SensorColumn, ReadError> {
     let to_s = columns.time_units.to_seconds();
     let mut out = SensorColumn {
         times: Vec::new(),
@@ -169,11 +214,11 @@ pub fn parse_sensor_csv(
             continue;
         }
         let fields: Vec<&str> = l.split(sep).collect();
-        if fields.len() != names.len() {
+        if fields.len() != width {
             return Err(ReadError::ColumnCount {
                 file: file.to_path_buf(),
                 line,
-                expected: names.len(),
+                expected: width,
                 found: fields.len(),
             });
         }
@@ -206,6 +251,11 @@ pub fn parse_sensor_csv(
         out.values.push(v);
         out.lines.push(line);
     }
+    Ok(out)
+}
+
+/// At least two samples, with increasing time stamps.
+fn check_time_series(file: &Path, out: &SensorColumn) -> Result<(), ReadError> {
     if out.values.len() < 2 {
         return Err(ReadError::Empty {
             file: file.to_path_buf(),
@@ -223,7 +273,7 @@ pub fn parse_sensor_csv(
             });
         }
     }
-    Ok(out)
+    Ok(())
 }
 
 #[cfg(test)]
