@@ -768,3 +768,65 @@ fn mpf_lanes_equal_one_particle_at_a_time_with_hessians() {
         assert_eq!(out[0], out[1], "np {np}");
     }
 }
+
+/// One run's output, to the bit: the log-likelihood, every step's posterior row, the repairs.
+fn run_bits<M>(f: &mut MpfEkf2<M>, ys: &[f64], np: usize, seed: u64) -> (u64, Vec<Vec<u64>>, u64)
+where
+    M: core_filters::smc::model::ConditionallyQuadratic,
+{
+    let mut t = Trace::default();
+    let s = run(
+        f,
+        &config(np),
+        ys,
+        1,
+        &mut stream(seed, np as u64, "blocks"),
+        &mut t,
+    );
+    let bits =
+        t.0.iter()
+            .map(|r| r.iter().map(|v| v.to_bits()).collect())
+            .collect();
+    (s.loglik.to_bits(), bits, s.health.repairs())
+}
+
+/// Blocks of particles advanced on 1, 2 and 7 threads give the particles of one thread to the
+/// bit, with lanes and without, for particle counts that leave a short last block.
+#[test]
+fn particle_blocks_on_any_number_of_threads_equal_one_thread() {
+    let coupled = Coupled::new();
+    let ys_coupled = simulate(&coupled.joint(), 25, 8);
+    let ys_bilinear: Vec<f64> = (0..20).map(|k| (k as f64 * 0.3).sin()).collect();
+    for np in [3, 13, 37] {
+        for lanes in [false, true] {
+            let one = (
+                run_bits(
+                    &mut MpfEkf2::with_lanes(coupled.clone(), lanes).with_blocks(false),
+                    &ys_coupled,
+                    np,
+                    1,
+                ),
+                run_bits(
+                    &mut MpfEkf2::with_lanes(Bilinear::new(), lanes).with_blocks(false),
+                    &ys_bilinear,
+                    np,
+                    3,
+                ),
+            );
+            for threads in [1, 2, 7] {
+                let pool = rayon::ThreadPoolBuilder::new()
+                    .num_threads(threads)
+                    .build()
+                    .unwrap();
+                let blocks = pool.install(|| {
+                    let mut f = MpfEkf2::with_lanes(coupled.clone(), lanes).with_blocks(true);
+                    assert!(f.uses_blocks());
+                    let a = run_bits(&mut f, &ys_coupled, np, 1);
+                    let mut g = MpfEkf2::with_lanes(Bilinear::new(), lanes).with_blocks(true);
+                    (a, run_bits(&mut g, &ys_bilinear, np, 3))
+                });
+                assert_eq!(one, blocks, "np {np}, lanes {lanes}, {threads} threads");
+            }
+        }
+    }
+}

@@ -18,6 +18,7 @@
 //! lanes' covariances no longer fit the caches: [`Batch::new`] then runs particles one at a time.
 
 use rand_distr::{Distribution, StandardNormal};
+use rayon::prelude::*;
 
 use crate::error::FilterError;
 use crate::health::Health;
@@ -30,7 +31,7 @@ use crate::rng::StreamRng;
 use super::model::{Marginalised, Partition};
 use super::rejuvenation::StaticParam;
 use super::runner::{Filter, StepInput, StepOutput};
-use super::store::{Particles, Shape};
+use super::store::{Block, Particles, Shape};
 
 /// Largest marginalised dimension processed in lanes: 40 storeys with a Bouc–Wen element
 /// (n = 161), whose pack's covariance takes 161² × 32 bytes = 810 KiB. The limit was 48 (a pack
@@ -125,9 +126,26 @@ pub trait ParticleStep: Sync + Send {
     ) -> (T, T::Mask);
 }
 
-/// The buffers of the batch layer for one filter.
+/// Smallest marginalised dimension at which one filter advances its particles in blocks on
+/// several threads (the rayon pool it runs in). Below it a particle-step costs a microsecond or
+/// two and the pooled filters already fill the cores (`identify::pool`); from 10 storeys with a
+/// Bouc–Wen element (n = 41, 11 µs a particle-step) a step of 125 particles is long enough that
+/// sharing it costs nothing measurable (docs/performance.md, "Particle blocks in parallel").
+pub const PARALLEL_MIN_DIM: usize = 32;
+
+/// The buffers of the batch layer for one filter: the draws of every particle of a step, and one
+/// [`Worker`] per block of particles advanced side by side.
 pub struct Batch<S: ParticleStep> {
     lanes: bool,
+    parallel: bool,
+    workers: Vec<Worker<S>>,
+    /// The draws of every particle of the step, particle after particle.
+    draws: Vec<f64>,
+}
+
+/// What one thread needs to advance a block of particles: the scratch of the `f64` step and of
+/// the pack, the pack's blocks, and the repairs counted in the current step.
+struct Worker<S: ParticleStep> {
     scalar: S::Scratch<f64>,
     packed: S::Scratch<Pack>,
     prev: Vec<Pack>,
@@ -135,29 +153,22 @@ pub struct Batch<S: ParticleStep> {
     mean: Vec<Pack>,
     cov: Vec<Pack>,
     xi: Vec<Pack>,
-    /// The draws of the particles of one group, particle after particle.
-    draws: Vec<f64>,
+    /// Repairs of the current step, added to the filter's once the step is over.
+    health: Health,
 }
 
 impl<S: ParticleStep> Batch<S> {
     /// Buffers for `step`; lanes are used when the marginalised dimension is at most
-    /// [`MAX_LANE_DIM`] and `lanes` is asked for.
+    /// [`MAX_LANE_DIM`] and `lanes` is asked for; blocks of particles go to several threads from
+    /// [`PARALLEL_MIN_DIM`] on.
     pub fn new(step: &S, lanes: bool) -> Self {
         let shape = step.shape();
-        let nd = step.draws();
         let use_lanes = lanes && shape.marginal <= MAX_LANE_DIM;
-        let z = Pack::splat(0.0);
-        let n = |len: usize| if use_lanes { vec![z; len] } else { Vec::new() };
         Self {
             lanes: use_lanes,
-            scalar: step.scratch(),
-            packed: step.scratch(),
-            prev: n(shape.sampled),
-            sampled: n(shape.sampled),
-            mean: n(shape.marginal),
-            cov: n(shape.marginal * shape.marginal),
-            xi: n(nd),
-            draws: vec![0.0; PACK_LANES * nd],
+            parallel: shape.marginal >= PARALLEL_MIN_DIM && shape.sampled > 0,
+            workers: vec![Worker::new(step, use_lanes)],
+            draws: Vec::new(),
         }
     }
 
@@ -166,12 +177,54 @@ impl<S: ParticleStep> Batch<S> {
         self.lanes
     }
 
-    /// [`ParticleStep::broken_pattern`] of the one-particle and the pack scratch.
-    fn broken_pattern(&self) -> Option<&'static str> {
-        S::broken_pattern(&self.scalar).or_else(|| S::broken_pattern(&self.packed))
+    /// Whether blocks of particles are advanced on several threads.
+    pub fn uses_blocks(&self) -> bool {
+        self.parallel
     }
 
-    /// One step of every particle (the contract of [`super::Filter::step`]).
+    /// [`ParticleStep::broken_pattern`] of every worker's one-particle and pack scratch.
+    fn broken_pattern(&self) -> Option<&'static str> {
+        self.workers
+            .iter()
+            .find_map(|w| S::broken_pattern(&w.scalar).or_else(|| S::broken_pattern(&w.packed)))
+    }
+
+    /// The group of particles that go through the step together.
+    fn group(&self) -> usize {
+        if self.lanes {
+            PACK_LANES
+        } else {
+            1
+        }
+    }
+
+    /// Particles per block for `np` particles: whole groups, one block per thread of the pool
+    /// the step runs in (one block when the filter does not share its steps).
+    fn block_size(&self, np: usize) -> usize {
+        let group = self.group();
+        let threads = if self.parallel {
+            rayon::current_num_threads().max(1)
+        } else {
+            1
+        };
+        np.div_ceil(group).div_ceil(threads).max(1) * group
+    }
+
+    /// Sizes the buffers for `np` particles in the pool the run is in (set-up: a step then
+    /// allocates nothing unless the pool grew).
+    fn prepare(&mut self, step: &S, np: usize) {
+        self.draws.resize(np * step.draws(), 0.0);
+        let blocks = np.div_ceil(self.block_size(np)).max(1);
+        while self.workers.len() < blocks {
+            self.workers.push(Worker::new(step, self.lanes));
+        }
+    }
+
+    /// One step of every particle (the contract of [`super::Filter::step`]). The draws are taken
+    /// first, particle after particle, so the stream is consumed as one particle at a time would
+    /// consume it; a particle's result depends only on its ancestor and its draws, and blocks
+    /// start at whole groups, so the particles come out the same to the bit whatever the number
+    /// of blocks or threads.
     pub fn step(
         &mut self,
         step: &S,
@@ -181,48 +234,101 @@ impl<S: ParticleStep> Batch<S> {
         health: &mut Health,
     ) {
         let np = out.log_w.len();
+        self.prepare(step, np);
         let nd = step.draws();
-        let group = if self.lanes { PACK_LANES } else { 1 };
-        let mut first = 0;
-        while first < np {
-            let count = group.min(np - first);
-            for v in &mut self.draws[..count * nd] {
-                *v = StandardNormal.sample(rng);
-            }
-            if self.lanes && count > 1 {
-                self.pack_group(step, input, out, first, count, health);
+        for v in &mut self.draws[..np * nd] {
+            *v = StandardNormal.sample(rng);
+        }
+        let per = self.block_size(np);
+        let blocks = np.div_ceil(per).max(1);
+        let (lanes, draws) = (self.lanes, &self.draws[..]);
+        if blocks == 1 {
+            let mut block = out.dst.as_block();
+            self.workers[0].advance(step, input, &mut block, out.log_w, draws, lanes);
+        } else {
+            out.dst
+                .blocks_mut(per)
+                .zip(out.log_w.par_chunks_mut(per))
+                .zip(self.workers.par_iter_mut())
+                .for_each(|((mut block, log_w), worker)| {
+                    worker.advance(step, input, &mut block, log_w, draws, lanes)
+                });
+        }
+        for w in &mut self.workers[..blocks] {
+            health.absorb(&w.health);
+            w.health = Health::default();
+        }
+    }
+}
+
+impl<S: ParticleStep> Worker<S> {
+    fn new(step: &S, lanes: bool) -> Self {
+        let shape = step.shape();
+        let z = Pack::splat(0.0);
+        let n = |len: usize| if lanes { vec![z; len] } else { Vec::new() };
+        Self {
+            scalar: step.scratch(),
+            packed: step.scratch(),
+            prev: n(shape.sampled),
+            sampled: n(shape.sampled),
+            mean: n(shape.marginal),
+            cov: n(shape.marginal * shape.marginal),
+            xi: n(step.draws()),
+            health: Health::default(),
+        }
+    }
+
+    /// Advances the particles of `block` (log-weights `log_w`), group after group: the groups
+    /// one worker would form over the whole store, since the block starts at a whole group.
+    fn advance(
+        &mut self,
+        step: &S,
+        input: &StepInput<'_>,
+        block: &mut Block<'_>,
+        log_w: &mut [f64],
+        draws: &[f64],
+        lanes: bool,
+    ) {
+        let group = if lanes { PACK_LANES } else { 1 };
+        let end = block.first() + log_w.len();
+        let mut first = block.first();
+        while first < end {
+            let count = group.min(end - first);
+            if lanes && count > 1 {
+                self.pack_group(step, input, block, log_w, draws, first, count);
             } else {
-                for b in 0..count {
-                    self.one(step, input, out, first + b, b, health);
+                for i in first..first + count {
+                    self.one(step, input, block, log_w, draws, i);
                 }
             }
             first += count;
         }
     }
 
-    /// Particle `i` through the `f64` step, with the draws of row `row` of the group.
+    /// Particle `i` through the `f64` step, with its draws.
     fn one(
         &mut self,
         step: &S,
         input: &StepInput<'_>,
-        out: &mut StepOutput<'_>,
+        block: &mut Block<'_>,
+        log_w: &mut [f64],
+        draws: &[f64],
         i: usize,
-        row: usize,
-        health: &mut Health,
     ) {
         let a = input.ancestors[i];
-        out.dst.copy_from(i, input.src, a);
-        if out.log_w[i] == f64::NEG_INFINITY {
+        block.copy_from(i, input.src, a);
+        let w = &mut log_w[i - block.first()];
+        if *w == f64::NEG_INFINITY {
             return;
         }
         let nd = step.draws();
-        let d = out.dst.particle_mut(i);
+        let d = block.particle_mut(i);
         let (ll, ok) = step.advance(
             Ancestry {
                 k: input.k,
                 y: input.y,
                 prev: input.src.sampled(a),
-                xi: &self.draws[row * nd..(row + 1) * nd],
+                xi: &draws[i * nd..(i + 1) * nd],
             },
             Slots {
                 sampled: d.sampled,
@@ -230,37 +336,43 @@ impl<S: ParticleStep> Batch<S> {
                 cov: d.cov,
             },
             &mut self.scalar,
-            health,
+            &mut self.health,
         );
-        out.log_w[i] += if ok { ll } else { f64::NAN };
+        *w += if ok { ll } else { f64::NAN };
     }
 
     /// The `count ≤ 4` particles from `first` on in lanes (lanes past `count` repeat the group's
     /// first particle and are discarded).
+    #[allow(clippy::too_many_arguments)]
     fn pack_group(
         &mut self,
         step: &S,
         input: &StepInput<'_>,
-        out: &mut StepOutput<'_>,
+        block: &mut Block<'_>,
+        log_w: &mut [f64],
+        draws: &[f64],
         first: usize,
         count: usize,
-        health: &mut Health,
     ) {
         let StepInput { src, ancestors, .. } = *input;
         let nd = step.draws();
-        let source = |b: usize| ancestors[first + if b < count { b } else { 0 }];
+        let particle = |b: usize| first + if b < count { b } else { 0 };
         gather(
             &mut self.prev,
-            std::array::from_fn(|b| src.sampled(source(b))),
+            std::array::from_fn(|b| src.sampled(ancestors[particle(b)])),
         );
         self.sampled.copy_from_slice(&self.prev);
-        gather(&mut self.mean, std::array::from_fn(|b| src.mean(source(b))));
-        gather(&mut self.cov, std::array::from_fn(|b| src.cov(source(b))));
-        let row = |b: usize| if b < count { b } else { 0 };
-        let draws = &self.draws;
+        gather(
+            &mut self.mean,
+            std::array::from_fn(|b| src.mean(ancestors[particle(b)])),
+        );
+        gather(
+            &mut self.cov,
+            std::array::from_fn(|b| src.cov(ancestors[particle(b)])),
+        );
         gather(
             &mut self.xi,
-            std::array::from_fn(|b| &draws[row(b) * nd..(row(b) + 1) * nd]),
+            std::array::from_fn(|b| &draws[particle(b) * nd..(particle(b) + 1) * nd]),
         );
         let (ll, ok) = step.advance(
             Ancestry {
@@ -275,14 +387,15 @@ impl<S: ParticleStep> Batch<S> {
                 cov: &mut self.cov,
             },
             &mut self.packed,
-            health,
+            &mut self.health,
         );
+        let offset = block.first();
         for b in 0..count {
             let i = first + b;
-            if out.log_w[i] == f64::NEG_INFINITY {
-                out.dst.copy_from(i, src, ancestors[i]);
+            if log_w[i - offset] == f64::NEG_INFINITY {
+                block.copy_from(i, src, ancestors[i]);
             } else if Pack::mask_lane(ok, b) {
-                let d = out.dst.particle_mut(i);
+                let d = block.particle_mut(i);
                 for (o, v) in d.sampled.iter_mut().zip(&self.sampled) {
                     *o = v.lane(b);
                 }
@@ -292,9 +405,9 @@ impl<S: ParticleStep> Batch<S> {
                 for (o, v) in d.cov.iter_mut().zip(&self.cov) {
                     *o = v.lane(b);
                 }
-                out.log_w[i] += ll.lane(b);
+                log_w[i - offset] += ll.lane(b);
             } else {
-                self.one(step, input, out, i, b, health);
+                self.one(step, input, block, log_w, draws, i);
             }
         }
     }
@@ -337,6 +450,18 @@ impl<S: ParticleStep> Marginalized<S> {
     pub fn uses_lanes(&self) -> bool {
         self.batch.uses_lanes()
     }
+
+    /// Whether blocks of particles are advanced on several threads ([`PARALLEL_MIN_DIM`]).
+    pub fn uses_blocks(&self) -> bool {
+        self.batch.uses_blocks()
+    }
+
+    /// The filter with blocks of particles on several threads (`true`) or one thread (`false`)
+    /// whatever its size; the particles are the same either way (tested).
+    pub fn with_blocks(mut self, on: bool) -> Self {
+        self.batch.parallel = on && self.step.shape().sampled > 0;
+        self
+    }
 }
 
 impl<S: ParticleStep> Filter for Marginalized<S> {
@@ -358,6 +483,7 @@ impl<S: ParticleStep> Filter for Marginalized<S> {
 
     fn initialise(&mut self, rng: &mut StreamRng, particles: &mut Particles) {
         self.health = Health::default();
+        self.batch.prepare(&self.step, particles.len());
         for i in 0..particles.len() {
             let p = particles.particle_mut(i);
             self.step.initialise(rng, p.sampled, p.mean, p.cov);

@@ -4,6 +4,8 @@
 //! each particle's ancestor from one and writes the particle to the other, so resampling costs no
 //! extra copy.
 
+use rayon::prelude::*;
+
 /// Sizes of one particle's blocks.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Shape {
@@ -85,6 +87,85 @@ impl Particles {
     }
 
     /// Copies particle `from` of `src` into particle `to` of `self`.
+    #[inline]
+    pub fn copy_from(&mut self, to: usize, src: &Particles, from: usize) {
+        let d = self.particle_mut(to);
+        d.sampled.copy_from_slice(src.sampled(from));
+        d.mean.copy_from_slice(src.mean(from));
+        d.cov.copy_from_slice(src.cov(from));
+    }
+
+    /// The particles in consecutive blocks of `per` (the last may be shorter), each writable on
+    /// its own, so that blocks can be advanced on several threads. Both block sizes must be
+    /// non-zero.
+    pub fn blocks_mut(&mut self, per: usize) -> impl IndexedParallelIterator<Item = Block<'_>> {
+        let shape = self.shape;
+        let (s, n) = (shape.sampled, shape.marginal);
+        assert!(per > 0 && s > 0 && n > 0, "blocks of non-empty particles");
+        self.sampled
+            .par_chunks_mut(per * s)
+            .zip(self.mean.par_chunks_mut(per * n))
+            .zip(self.cov.par_chunks_mut(per * n * n))
+            .enumerate()
+            .map(move |(b, ((sampled, mean), cov))| Block {
+                first: b * per,
+                shape,
+                sampled,
+                mean,
+                cov,
+            })
+    }
+
+    /// All the particles as one block.
+    pub fn as_block(&mut self) -> Block<'_> {
+        Block {
+            first: 0,
+            shape: self.shape,
+            sampled: &mut self.sampled,
+            mean: &mut self.mean,
+            cov: &mut self.cov,
+        }
+    }
+}
+
+/// Consecutive particles `first, first + 1, …` of a [`Particles`], writable; addressed by the
+/// particles' indices in the whole store.
+pub struct Block<'a> {
+    first: usize,
+    shape: Shape,
+    sampled: &'a mut [f64],
+    mean: &'a mut [f64],
+    cov: &'a mut [f64],
+}
+
+impl Block<'_> {
+    /// Index of the block's first particle.
+    pub fn first(&self) -> usize {
+        self.first
+    }
+
+    /// Number of particles in the block.
+    pub fn len(&self) -> usize {
+        self.sampled.len() / self.shape.sampled.max(1)
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// Particle `i`'s three blocks (`i` indexes the whole store).
+    #[inline]
+    pub fn particle_mut(&mut self, i: usize) -> ParticleMut<'_> {
+        let (s, n) = (self.shape.sampled, self.shape.marginal);
+        let j = i - self.first;
+        ParticleMut {
+            sampled: &mut self.sampled[j * s..(j + 1) * s],
+            mean: &mut self.mean[j * n..(j + 1) * n],
+            cov: &mut self.cov[j * n * n..(j + 1) * n * n],
+        }
+    }
+
+    /// Copies particle `from` of `src` into particle `to` (indexing the whole store).
     #[inline]
     pub fn copy_from(&mut self, to: usize, src: &Particles, from: usize) {
         let d = self.particle_mut(to);
