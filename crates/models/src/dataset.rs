@@ -492,106 +492,19 @@ pub fn generate(config: &DatasetConfig) -> Result<Dataset, DatasetError> {
     let dt = config.dt;
     let ug_clean = gm.acc;
     let kk = ug_clean.len();
-    let n = chain.storeys();
-    let m = sensors.len();
-    // The truth table (t, ug and the states) is the widest one allocated.
-    limits::check_table(kk, chain.dim() + 2).map_err(|e| {
-        invalid(
-            "duration",
-            format!("{kk} samples × {} columns of truth: {e}", chain.dim() + 2),
-        )
-    })?;
-    // What is written must load back: every value within the limit on data values, the input
-    // first.
-    let beyond = |row: &[f64]| {
-        row.iter()
-            .copied()
-            .find(|v| limits::check_value(*v).is_err())
-    };
-    if let Some(k) = ug_clean
-        .iter()
-        .position(|u| limits::check_value(*u).is_err())
-    {
-        return Err(DatasetError::Unbounded {
-            t: k as f64 * dt,
-            value: ug_clean[k],
-        });
-    }
-    // Tall chains with stiffness-proportional damping have overdamped top modes too fast for
-    // one RK4 step per sample (the 130-storey `building-chain` diverged at dt = 0.005 s): they
-    // are integrated with the sub-steps that keep RK4 stable; every other chain with one.
-    let truth = simulate_rk4_substeps(&chain, &ug_clean, dt, rk4_substeps(&chain, dt));
-    if let Some(k) = truth
-        .rows()
-        .position(|row| row.iter().any(|v| !v.is_finite()))
-    {
-        return Err(DatasetError::NonFinite { t: k as f64 * dt });
-    }
-    // Every storey's acceleration, then the measured storeys' channels.
-    let mut all = vec![0.0; n];
-    let mut y_clean = vec![0.0; kk * m];
-    for (k, row) in y_clean.chunks_exact_mut(m).enumerate() {
-        chain.relative_accelerations(truth.state(k), ug_clean[k], &mut all);
-        for (y, &s) in row.iter_mut().zip(sensors.storeys()) {
-            *y = all[s];
-            if config.measurement == MeasurementKind::Absolute {
-                *y += ug_clean[k];
-            }
-        }
-    }
-    let first_beyond = truth
-        .rows()
-        .zip(y_clean.chunks_exact(m))
-        .enumerate()
-        .find_map(|(k, (x, y))| beyond(x).or_else(|| beyond(y)).map(|v| (k, v)));
-    if let Some((k, value)) = first_beyond {
-        return Err(DatasetError::Unbounded {
-            t: k as f64 * dt,
-            value,
-        });
-    }
-    let column_rms = |buf: &[f64], cols: usize, j: usize| -> f64 {
-        rms(&buf
-            .iter()
-            .skip(j)
-            .step_by(cols)
-            .copied()
-            .collect::<Vec<_>>())
-    };
-    let d = chain.dim();
-    let rms_values = RmsValues {
-        acc: (0..m).map(|j| column_rms(&y_clean, m, j)).collect(),
-        ug: rms(&ug_clean),
-        vel: (0..n)
-            .map(|j| column_rms(truth.as_flat(), d, n + j))
-            .collect(),
-        disp: (0..n).map(|j| column_rms(truth.as_flat(), d, j)).collect(),
-        r: (2 * n..d)
-            .map(|j| column_rms(truth.as_flat(), d, j))
-            .collect(),
-    };
+    check_input(&chain, &ug_clean, dt)?;
+    let truth = simulate_truth(&chain, &ug_clean, dt)?;
+    let y_clean = clean_measurements(config, &chain, &sensors, &truth, &ug_clean);
+    check_written_values(&truth, &y_clean, sensors.len(), dt)?;
+    let rms_values = rms_of_signals(&chain, &truth, &y_clean, sensors.len(), &ug_clean);
     let f = config.noise_fraction;
     let noise = NoiseLevels {
         fraction: f,
         acc_sd: rms_values.acc.iter().map(|r| f * r).collect(),
         ug_sd: f * rms_values.ug,
     };
-    let mut rng = stream(config.seed, config.run, purpose::MEASUREMENT_NOISE);
-    let mut y_meas = y_clean.clone();
-    for row in y_meas.chunks_exact_mut(m) {
-        for (y, sd) in row.iter_mut().zip(&noise.acc_sd) {
-            let z: f64 = StandardNormal.sample(&mut rng);
-            *y += sd * z;
-        }
-    }
-    let mut rng = stream(config.seed, config.run, purpose::EXCITATION_NOISE);
-    let ug_meas = ug_clean
-        .iter()
-        .map(|u| {
-            let z: f64 = StandardNormal.sample(&mut rng);
-            u + noise.ug_sd * z
-        })
-        .collect();
+    let y_meas = with_measurement_noise(config, &y_clean, &noise.acc_sd);
+    let ug_meas = with_excitation_noise(config, &ug_clean, noise.ug_sd);
     Ok(Dataset {
         config: config.clone(),
         dt,
@@ -609,6 +522,161 @@ pub fn generate(config: &DatasetConfig) -> Result<Dataset, DatasetError> {
         rms: rms_values,
         noise,
     })
+}
+
+/// The truth table (t, ug and the states), the widest one allocated, within the limits on
+/// tables; and the input `ug_clean` within the limit on data values, since what is written
+/// must load back.
+fn check_input(chain: &ShearChain, ug_clean: &[f64], dt: f64) -> Result<(), DatasetError> {
+    let kk = ug_clean.len();
+    limits::check_table(kk, chain.dim() + 2).map_err(|e| {
+        invalid(
+            "duration",
+            format!("{kk} samples × {} columns of truth: {e}", chain.dim() + 2),
+        )
+    })?;
+    if let Some(k) = ug_clean
+        .iter()
+        .position(|u| limits::check_value(*u).is_err())
+    {
+        return Err(DatasetError::Unbounded {
+            t: k as f64 * dt,
+            value: ug_clean[k],
+        });
+    }
+    Ok(())
+}
+
+/// The true response of `chain` to `ug_clean`, refused when it is not finite.
+fn simulate_truth(
+    chain: &ShearChain,
+    ug_clean: &[f64],
+    dt: f64,
+) -> Result<Trajectory, DatasetError> {
+    // Tall chains with stiffness-proportional damping have overdamped top modes too fast for
+    // one RK4 step per sample (the 130-storey `building-chain` diverged at dt = 0.005 s): they
+    // are integrated with the sub-steps that keep RK4 stable; every other chain with one.
+    let truth = simulate_rk4_substeps(chain, ug_clean, dt, rk4_substeps(chain, dt));
+    if let Some(k) = truth
+        .rows()
+        .position(|row| row.iter().any(|v| !v.is_finite()))
+    {
+        return Err(DatasetError::NonFinite { t: k as f64 * dt });
+    }
+    Ok(truth)
+}
+
+/// The noise-free measured channels, row-major (K × sensors): every storey's acceleration
+/// from the truth, then the measured storeys' (absolute when the config says so).
+fn clean_measurements(
+    config: &DatasetConfig,
+    chain: &ShearChain,
+    sensors: &SensorLayout,
+    truth: &Trajectory,
+    ug_clean: &[f64],
+) -> Vec<f64> {
+    let n = chain.storeys();
+    let m = sensors.len();
+    let mut all = vec![0.0; n];
+    let mut y_clean = vec![0.0; ug_clean.len() * m];
+    for (k, row) in y_clean.chunks_exact_mut(m).enumerate() {
+        chain.relative_accelerations(truth.state(k), ug_clean[k], &mut all);
+        for (y, &s) in row.iter_mut().zip(sensors.storeys()) {
+            *y = all[s];
+            if config.measurement == MeasurementKind::Absolute {
+                *y += ug_clean[k];
+            }
+        }
+    }
+    y_clean
+}
+
+/// What is written must load back: the first row of the truth or of the channels (`m` a row)
+/// with a value beyond the limit on data values is refused, at its time.
+fn check_written_values(
+    truth: &Trajectory,
+    y_clean: &[f64],
+    m: usize,
+    dt: f64,
+) -> Result<(), DatasetError> {
+    let beyond = |row: &[f64]| {
+        row.iter()
+            .copied()
+            .find(|v| limits::check_value(*v).is_err())
+    };
+    let first_beyond = truth
+        .rows()
+        .zip(y_clean.chunks_exact(m))
+        .enumerate()
+        .find_map(|(k, (x, y))| beyond(x).or_else(|| beyond(y)).map(|v| (k, v)));
+    if let Some((k, value)) = first_beyond {
+        return Err(DatasetError::Unbounded {
+            t: k as f64 * dt,
+            value,
+        });
+    }
+    Ok(())
+}
+
+/// RMS of column `j` of the row-major table `buf` of `cols` columns.
+fn column_rms(buf: &[f64], cols: usize, j: usize) -> f64 {
+    rms(&buf
+        .iter()
+        .skip(j)
+        .step_by(cols)
+        .copied()
+        .collect::<Vec<_>>())
+}
+
+/// RMS of each noise-free signal: the channels (`m` of them), the input and, from the truth,
+/// each storey's velocity and displacement and each Bouc–Wen element's `r`.
+fn rms_of_signals(
+    chain: &ShearChain,
+    truth: &Trajectory,
+    y_clean: &[f64],
+    m: usize,
+    ug_clean: &[f64],
+) -> RmsValues {
+    let n = chain.storeys();
+    let d = chain.dim();
+    RmsValues {
+        acc: (0..m).map(|j| column_rms(y_clean, m, j)).collect(),
+        ug: rms(ug_clean),
+        vel: (0..n)
+            .map(|j| column_rms(truth.as_flat(), d, n + j))
+            .collect(),
+        disp: (0..n).map(|j| column_rms(truth.as_flat(), d, j)).collect(),
+        r: (2 * n..d)
+            .map(|j| column_rms(truth.as_flat(), d, j))
+            .collect(),
+    }
+}
+
+/// The measured channels: `y_clean` plus Gaussian noise of s.d. `acc_sd` per channel, from the
+/// measurement-noise stream of the config's seed and run.
+fn with_measurement_noise(config: &DatasetConfig, y_clean: &[f64], acc_sd: &[f64]) -> Vec<f64> {
+    let mut rng = stream(config.seed, config.run, purpose::MEASUREMENT_NOISE);
+    let mut y_meas = y_clean.to_vec();
+    for row in y_meas.chunks_exact_mut(acc_sd.len()) {
+        for (y, sd) in row.iter_mut().zip(acc_sd) {
+            let z: f64 = StandardNormal.sample(&mut rng);
+            *y += sd * z;
+        }
+    }
+    y_meas
+}
+
+/// The measured input: `ug_clean` plus Gaussian noise of s.d. `ug_sd`, from the
+/// excitation-noise stream of the config's seed and run.
+fn with_excitation_noise(config: &DatasetConfig, ug_clean: &[f64], ug_sd: f64) -> Vec<f64> {
+    let mut rng = stream(config.seed, config.run, purpose::EXCITATION_NOISE);
+    ug_clean
+        .iter()
+        .map(|u| {
+            let z: f64 = StandardNormal.sample(&mut rng);
+            u + ug_sd * z
+        })
+        .collect()
 }
 
 impl Dataset {
@@ -1107,85 +1175,23 @@ pub fn load_dir(dir: &Path) -> Result<LoadedDataset, DatasetError> {
     let digests = meta_file.as_ref().and_then(|(m, _)| m.files.clone());
 
     let Some(mbytes) = read_bytes(&mpath)? else {
-        let mut message = "not found".to_string();
-        if !dir.exists() {
-            if let Some(aside) = replace::aside_copies(dir).last() {
-                message = format!(
-                    "not found; an interrupted write left the previous data set at {}",
-                    aside.display()
-                );
-            }
-        }
-        return Err(ReadError::Io {
-            file: mpath,
-            source: std::io::Error::new(std::io::ErrorKind::NotFound, message),
-        }
-        .into());
+        return Err(measured_not_found(dir, mpath));
     };
     let tbytes = read_bytes(&tpath)?;
     if let Some(files) = &digests {
-        // Every file it lists is checked: a name other than the two data files is one this
-        // reader would never open, so it is refused rather than passed over.
-        if let Some(name) = files
-            .keys()
-            .find(|n| ![MEASURED, TRUTH].contains(&n.as_str()))
-        {
-            let path = dir.join(name);
-            return Err(DatasetError::Checksum {
-                message: format!(
-                    "listed in {} (`files`), but a data set holds only {MEASURED} and {TRUTH}{}",
-                    jpath.display(),
-                    if path.exists() {
-                        ""
-                    } else {
-                        "; it is missing too"
-                    }
-                ),
-                file: path,
-            });
-        }
-        for (name, content, path) in [
-            (MEASURED, Some(&mbytes), &mpath),
-            (TRUTH, tbytes.as_ref(), &tpath),
-        ] {
-            match (files.get(name), content) {
-                (Some(d), Some(c)) => integrity::verify(&jpath, path, name, c, d)?,
-                (Some(_), None) => {
-                    return Err(DatasetError::Checksum {
-                        file: path.clone(),
-                        message: format!("missing, but {} records it", jpath.display()),
-                    })
-                }
-                (None, Some(_)) => {
-                    return Err(DatasetError::Checksum {
-                        file: path.clone(),
-                        message: format!(
-                            "not recorded in {}: it does not belong with this dataset.json",
-                            jpath.display()
-                        ),
-                    })
-                }
-                (None, None) => {}
-            }
-        }
+        verify_digests(
+            dir,
+            &jpath,
+            files,
+            [
+                (MEASURED, Some(&mbytes), &mpath),
+                (TRUTH, tbytes.as_ref(), &tpath),
+            ],
+        )?;
     }
 
-    let mtext = utf8(&mpath, mbytes)?;
-    let m = parse_table(&mpath, &mtext, 2 + limits::MAX_STOREYS)?;
-    drop(mtext);
-    let sensors = measured_storeys(&mpath, &m.names)?;
-    let channels = sensors.len();
-    let t = m.column(0);
-    let times: Vec<(usize, f64)> = m.lines.iter().copied().zip(t.iter().copied()).collect();
-    let dt_grid = uniform_step(&mpath, &times)?;
-    let ug_meas = m.column(1);
-    let w = m.names.len();
-    let y_meas: Vec<f64> = m
-        .values
-        .chunks_exact(w)
-        .flat_map(|row| row[2..].iter().copied())
-        .collect();
-
+    let measured = read_measured(&mpath, mbytes)?;
+    let (t, sensors) = (measured.t, measured.sensors);
     let meta = match meta_file {
         Some((mf, text)) => {
             integrity::check_meta(&jpath, &text, &mf.meta, t.len(), &mpath, &sensors)?;
@@ -1193,22 +1199,7 @@ pub fn load_dir(dir: &Path) -> Result<LoadedDataset, DatasetError> {
         }
         None => None,
     };
-    // The metadata carries dt exactly; the grid estimate (t_last − t_0)/(K − 1) may differ in
-    // the last bit.
-    let dt = match &meta {
-        Some(meta) => {
-            if (meta.dt - dt_grid).abs() > 1e-6 * meta.dt {
-                return Err(DatasetError::Mismatch {
-                    file: jpath,
-                    line: 1,
-                    field: "dt".to_string(),
-                    message: format!("dt = {} but {MEASURED} has dt = {dt_grid}", meta.dt),
-                });
-            }
-            meta.dt
-        }
-        None => dt_grid,
-    };
+    let dt = recorded_dt(jpath, meta.as_ref(), measured.dt_grid)?;
 
     let truth = match tbytes {
         Some(tbytes) => {
@@ -1224,13 +1215,144 @@ pub fn load_dir(dir: &Path) -> Result<LoadedDataset, DatasetError> {
     Ok(LoadedDataset {
         dt,
         t,
-        ug_meas,
-        y_meas,
-        channels,
+        ug_meas: measured.ug_meas,
+        y_meas: measured.y_meas,
+        channels: sensors.len(),
         sensors,
         truth,
         meta,
     })
+}
+
+/// The error for a missing `measured.csv` at `mpath`; when the directory itself is missing,
+/// it points at the copy an interrupted write left aside, if any.
+fn measured_not_found(dir: &Path, mpath: PathBuf) -> DatasetError {
+    let mut message = "not found".to_string();
+    if !dir.exists() {
+        if let Some(aside) = replace::aside_copies(dir).last() {
+            message = format!(
+                "not found; an interrupted write left the previous data set at {}",
+                aside.display()
+            );
+        }
+    }
+    ReadError::Io {
+        file: mpath,
+        source: std::io::Error::new(std::io::ErrorKind::NotFound, message),
+    }
+    .into()
+}
+
+/// Checks the data files (name, content if present, path) against the digests `files` that
+/// `dataset.json` (`jpath`) records: a file it lists other than the data files, a recorded
+/// file missing, an unrecorded one present or one with another digest is refused.
+fn verify_digests(
+    dir: &Path,
+    jpath: &Path,
+    files: &BTreeMap<String, FileDigest>,
+    data: [(&str, Option<&Vec<u8>>, &PathBuf); 2],
+) -> Result<(), DatasetError> {
+    // Every file it lists is checked: a name other than the two data files is one this
+    // reader would never open, so it is refused rather than passed over.
+    if let Some(name) = files
+        .keys()
+        .find(|n| ![MEASURED, TRUTH].contains(&n.as_str()))
+    {
+        let path = dir.join(name);
+        return Err(DatasetError::Checksum {
+            message: format!(
+                "listed in {} (`files`), but a data set holds only {MEASURED} and {TRUTH}{}",
+                jpath.display(),
+                if path.exists() {
+                    ""
+                } else {
+                    "; it is missing too"
+                }
+            ),
+            file: path,
+        });
+    }
+    for (name, content, path) in data {
+        match (files.get(name), content) {
+            (Some(d), Some(c)) => integrity::verify(jpath, path, name, c, d)?,
+            (Some(_), None) => {
+                return Err(DatasetError::Checksum {
+                    file: path.clone(),
+                    message: format!("missing, but {} records it", jpath.display()),
+                })
+            }
+            (None, Some(_)) => {
+                return Err(DatasetError::Checksum {
+                    file: path.clone(),
+                    message: format!(
+                        "not recorded in {}: it does not belong with this dataset.json",
+                        jpath.display()
+                    ),
+                })
+            }
+            (None, None) => {}
+        }
+    }
+    Ok(())
+}
+
+/// The content of `measured.csv`: the measured storeys its header names, the time column and
+/// its uniform step, the input and the channels (row-major).
+struct MeasuredTable {
+    sensors: Vec<usize>,
+    t: Vec<f64>,
+    dt_grid: f64,
+    ug_meas: Vec<f64>,
+    y_meas: Vec<f64>,
+}
+
+/// Parses `measured.csv` (`mpath`, its bytes `mbytes`): header, uniform time grid, columns.
+fn read_measured(mpath: &Path, mbytes: Vec<u8>) -> Result<MeasuredTable, DatasetError> {
+    let mtext = utf8(mpath, mbytes)?;
+    let m = parse_table(mpath, &mtext, 2 + limits::MAX_STOREYS)?;
+    drop(mtext);
+    let sensors = measured_storeys(mpath, &m.names)?;
+    let t = m.column(0);
+    let times: Vec<(usize, f64)> = m.lines.iter().copied().zip(t.iter().copied()).collect();
+    let dt_grid = uniform_step(mpath, &times)?;
+    let ug_meas = m.column(1);
+    let w = m.names.len();
+    let y_meas: Vec<f64> = m
+        .values
+        .chunks_exact(w)
+        .flat_map(|row| row[2..].iter().copied())
+        .collect();
+    Ok(MeasuredTable {
+        sensors,
+        t,
+        dt_grid,
+        ug_meas,
+        y_meas,
+    })
+}
+
+/// The time step: the metadata's (it carries dt exactly; the grid estimate (t_last − t_0)/(K − 1)
+/// may differ in the last bit), refused when it is not the grid's `dt_grid`; the grid's when
+/// there is no metadata.
+fn recorded_dt(
+    jpath: PathBuf,
+    meta: Option<&DatasetMeta>,
+    dt_grid: f64,
+) -> Result<f64, DatasetError> {
+    match meta {
+        Some(meta) => {
+            if (meta.dt - dt_grid).abs() > 1e-6 * meta.dt {
+                return Err(DatasetError::Mismatch {
+                    file: jpath,
+                    line: 1,
+                    field: "dt".to_string(),
+                    message: format!("dt = {} but {MEASURED} has dt = {dt_grid}", meta.dt),
+                });
+            }
+            Ok(meta.dt)
+        }
+        None => Ok(dt_grid),
+    }
 }
 
 /// The 1-based measured storeys named by the header of `measured.csv`: `t,ug,a<s>...` with at
