@@ -324,105 +324,156 @@ pub fn simulate_adaptive<S: ForcedSystem + ?Sized>(
     if ug.len() < 2 {
         return Ok(Trajectory::from_flat(n, dt, states));
     }
-    let mut y = vec![0.0; n];
-    let mut ynew = vec![0.0; n];
-    let mut tmp = vec![0.0; n];
-    let mut k: [Vec<f64>; 7] = std::array::from_fn(|_| vec![0.0; n]);
-    sys.rhs(&y, ug[0], &mut k[0]);
-    let mut h = 0.1 * dt;
-    let h_min = 1e-12 * dt;
+    let mut st = DpState {
+        y: vec![0.0; n],
+        ynew: vec![0.0; n],
+        tmp: vec![0.0; n],
+        k: std::array::from_fn(|_| vec![0.0; n]),
+        h: 0.1 * dt,
+        h_min: 1e-12 * dt,
+    };
+    sys.rhs(&st.y, ug[0], &mut st.k[0]);
     for step in 1..ug.len() {
-        let (u0, u1) = (ug[step - 1], ug[step]);
         let t0 = (step - 1) as f64 * dt;
-        // Input inside the interval, as a function of the offset s ∈ [0, dt].
-        let u_at = |s: f64| u0 + (u1 - u0) * (s / dt);
-        let mut s = 0.0;
-        while s < dt {
-            let last = s + 1.01 * h >= dt; // no sliver steps before a sample time
-            let hh = if last { dt - s } else { h };
-            let stage = |coef: &[(usize, f64)], k: &[Vec<f64>; 7], tmp: &mut [f64]| {
-                for i in 0..n {
-                    let mut acc = 0.0;
-                    for &(j, a) in coef {
-                        acc += a * k[j][i];
-                    }
-                    tmp[i] = y[i] + hh * acc;
-                }
-            };
-            stage(&[(0, A21)], &k, &mut tmp);
-            sys.rhs(&tmp, u_at(s + C2 * hh), &mut k[1]);
-            stage(&[(0, A31), (1, A32)], &k, &mut tmp);
-            sys.rhs(&tmp, u_at(s + C3 * hh), &mut k[2]);
-            stage(&[(0, A41), (1, A42), (2, A43)], &k, &mut tmp);
-            sys.rhs(&tmp, u_at(s + C4 * hh), &mut k[3]);
-            stage(&[(0, A51), (1, A52), (2, A53), (3, A54)], &k, &mut tmp);
-            sys.rhs(&tmp, u_at(s + C5 * hh), &mut k[4]);
-            stage(
-                &[(0, A61), (1, A62), (2, A63), (3, A64), (4, A65)],
-                &k,
-                &mut tmp,
-            );
-            sys.rhs(&tmp, u_at(s + hh), &mut k[5]);
-            for i in 0..n {
-                ynew[i] = y[i]
-                    + hh * (B1 * k[0][i]
-                        + B3 * k[2][i]
-                        + B4 * k[3][i]
-                        + B5 * k[4][i]
-                        + B6 * k[5][i]);
-            }
-            let u_end = if last { u1 } else { u_at(s + hh) };
-            sys.rhs(&ynew, u_end, &mut k[6]);
-            let mut err2 = 0.0;
-            for i in 0..n {
-                let e = hh
-                    * (E1 * k[0][i]
-                        + E3 * k[2][i]
-                        + E4 * k[3][i]
-                        + E5 * k[4][i]
-                        + E6 * k[5][i]
-                        + E7 * k[6][i]);
-                let sc = tol.atol + tol.rtol * y[i].abs().max(ynew[i].abs());
-                err2 += (e / sc) * (e / sc);
-            }
-            let err = (err2 / n as f64).sqrt();
-            if !err.is_finite() {
-                // A non-finite error estimate: shrink hard, fail if it cannot be resolved.
-                h = 0.1 * hh;
-                if h < h_min {
-                    return Err(IntegrateError::NonFinite { t: t0 + s });
-                }
-                continue;
-            }
-            let fac = if err == 0.0 {
-                5.0
-            } else {
-                (0.9 * err.powf(-0.2)).clamp(0.2, 5.0)
-            };
-            if err <= 1.0 {
-                s = if last { dt } else { s + hh };
-                y.copy_from_slice(&ynew);
-                k.swap(0, 6);
-                // Only grow the step beyond the shortened last step of an interval if the
-                // full step also succeeded; keep the previous step size otherwise.
-                if !last || hh >= h {
-                    h = hh * fac;
-                }
-            } else {
-                h = hh * fac.min(1.0);
-                if h < h_min {
-                    return Err(IntegrateError::StepSizeUnderflow { t: t0 + s, h });
-                }
-            }
-        }
-        if y.iter().any(|v| !v.is_finite()) {
+        advance_interval(sys, &mut st, (ug[step - 1], ug[step]), t0, dt, tol)?;
+        if st.y.iter().any(|v| !v.is_finite()) {
             return Err(IntegrateError::NonFinite {
                 t: step as f64 * dt,
             });
         }
-        states[step * n..(step + 1) * n].copy_from_slice(&y);
+        states[step * n..(step + 1) * n].copy_from_slice(&st.y);
     }
     Ok(Trajectory::from_flat(n, dt, states))
+}
+
+/// What the adaptive integrator carries from step to step: the state `y`, the candidate
+/// `ynew`, a stage input `tmp`, the stage derivatives `k` (`k[0]` the derivative at `y`,
+/// `k[6]` the one at `ynew`: FSAL), the step size `h` and its floor `h_min`.
+struct DpState {
+    y: Vec<f64>,
+    ynew: Vec<f64>,
+    tmp: Vec<f64>,
+    k: [Vec<f64>; 7],
+    h: f64,
+    h_min: f64,
+}
+
+/// Integrates over one sample interval `[t0, t0 + dt]`, the input linear from `u0` to `u1`:
+/// adaptive steps that never cross its end (no sliver step before it), rejected and retried
+/// smaller when the error is above tolerance; the step size carries in and out in `st.h`.
+fn advance_interval<S: ForcedSystem + ?Sized>(
+    sys: &S,
+    st: &mut DpState,
+    (u0, u1): (f64, f64),
+    t0: f64,
+    dt: f64,
+    tol: Tolerance,
+) -> Result<(), IntegrateError> {
+    // Input inside the interval, as a function of the offset s ∈ [0, dt].
+    let u_at = |s: f64| u0 + (u1 - u0) * (s / dt);
+    let mut s = 0.0;
+    while s < dt {
+        let last = s + 1.01 * st.h >= dt; // no sliver steps before a sample time
+        let hh = if last { dt - s } else { st.h };
+        let u_end = if last { u1 } else { u_at(s + hh) };
+        dormand_prince_step(sys, st, s, hh, u_at, u_end);
+        let err = error_norm(st, hh, tol);
+        if !err.is_finite() {
+            // A non-finite error estimate: shrink hard, fail if it cannot be resolved.
+            st.h = 0.1 * hh;
+            if st.h < st.h_min {
+                return Err(IntegrateError::NonFinite { t: t0 + s });
+            }
+            continue;
+        }
+        let fac = if err == 0.0 {
+            5.0
+        } else {
+            (0.9 * err.powf(-0.2)).clamp(0.2, 5.0)
+        };
+        if err <= 1.0 {
+            s = if last { dt } else { s + hh };
+            st.y.copy_from_slice(&st.ynew);
+            st.k.swap(0, 6);
+            // Only grow the step beyond the shortened last step of an interval if the
+            // full step also succeeded; keep the previous step size otherwise.
+            if !last || hh >= st.h {
+                st.h = hh * fac;
+            }
+        } else {
+            st.h = hh * fac.min(1.0);
+            if st.h < st.h_min {
+                return Err(IntegrateError::StepSizeUnderflow { t: t0 + s, h: st.h });
+            }
+        }
+    }
+    Ok(())
+}
+
+/// The stage input `y + hh·Σ a_j·k_j` (`coef`: the pairs `(j, a_j)`), into `tmp`.
+fn stage_state(y: &[f64], k: &[Vec<f64>; 7], coef: &[(usize, f64)], hh: f64, tmp: &mut [f64]) {
+    for i in 0..y.len() {
+        let mut acc = 0.0;
+        for &(j, a) in coef {
+            acc += a * k[j][i];
+        }
+        tmp[i] = y[i] + hh * acc;
+    }
+}
+
+/// One Dormand–Prince step of size `hh` from the offset `s` (input `u_at`): the stage
+/// derivatives `k[1..6]`, the 5th-order solution `ynew` and its derivative `k[6]` at the
+/// input `u_end`.
+fn dormand_prince_step<S: ForcedSystem + ?Sized>(
+    sys: &S,
+    st: &mut DpState,
+    s: f64,
+    hh: f64,
+    u_at: impl Fn(f64) -> f64,
+    u_end: f64,
+) {
+    let (y, k, tmp) = (&st.y, &mut st.k, &mut st.tmp);
+    stage_state(y, k, &[(0, A21)], hh, tmp);
+    sys.rhs(tmp, u_at(s + C2 * hh), &mut k[1]);
+    stage_state(y, k, &[(0, A31), (1, A32)], hh, tmp);
+    sys.rhs(tmp, u_at(s + C3 * hh), &mut k[2]);
+    stage_state(y, k, &[(0, A41), (1, A42), (2, A43)], hh, tmp);
+    sys.rhs(tmp, u_at(s + C4 * hh), &mut k[3]);
+    stage_state(y, k, &[(0, A51), (1, A52), (2, A53), (3, A54)], hh, tmp);
+    sys.rhs(tmp, u_at(s + C5 * hh), &mut k[4]);
+    stage_state(
+        y,
+        k,
+        &[(0, A61), (1, A62), (2, A63), (3, A64), (4, A65)],
+        hh,
+        tmp,
+    );
+    sys.rhs(tmp, u_at(s + hh), &mut k[5]);
+    for i in 0..y.len() {
+        st.ynew[i] =
+            y[i] + hh * (B1 * k[0][i] + B3 * k[2][i] + B4 * k[3][i] + B5 * k[4][i] + B6 * k[5][i]);
+    }
+    sys.rhs(&st.ynew, u_end, &mut k[6]);
+}
+
+/// The step's error estimate (5th- minus embedded 4th-order solution) as the RMS over the
+/// state of `err_i / (atol + rtol·max(|y_i|, |ynew_i|))`.
+fn error_norm(st: &DpState, hh: f64, tol: Tolerance) -> f64 {
+    let (y, ynew, k) = (&st.y, &st.ynew, &st.k);
+    let n = y.len();
+    let mut err2 = 0.0;
+    for i in 0..n {
+        let e = hh
+            * (E1 * k[0][i]
+                + E3 * k[2][i]
+                + E4 * k[3][i]
+                + E5 * k[4][i]
+                + E6 * k[5][i]
+                + E7 * k[6][i]);
+        let sc = tol.atol + tol.rtol * y[i].abs().max(ynew[i].abs());
+        err2 += (e / sc) * (e / sc);
+    }
+    (err2 / n as f64).sqrt()
 }
 
 #[cfg(test)]
