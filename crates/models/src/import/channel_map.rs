@@ -338,109 +338,12 @@ impl ChannelMap {
     /// Parses and checks map text; files are resolved against `path`'s directory.
     pub fn parse(path: &Path, text: &str) -> Result<Self, ImportError> {
         let text = crate::readers::strip_bom(text);
-        let err = |line: usize, key: &str, message: String| ImportError::Map {
-            file: path.to_path_buf(),
-            line,
-            key: key.to_string(),
-            message,
-        };
-        let raw: MapFile = toml::from_str(text).map_err(|e| {
-            let line = e.span().map_or(1, |s| line_of(text, s.start));
-            let msg = e.message().trim().to_string();
-            // A missing or unknown key is named by toml in backquotes; otherwise the key is
-            // the one written on the line of the error (toml quotes the value there, not the
-            // key), within its table.
-            let named = msg.starts_with("missing field") || msg.starts_with("unknown field");
-            let key = match (named, e.span()) {
-                (true, _) | (false, None) => msg.split('`').nth(1).map(str::to_string),
-                (false, Some(s)) => key_at(text, s.start),
-            };
-            err(line, key.as_deref().unwrap_or("(the map's top level)"), msg)
-        })?;
+        let raw = map_file(path, text)?;
         let dir = path.parent().unwrap_or(Path::new("")).to_path_buf();
-        let options = match raw.options {
-            Some(o) => {
-                let line = line_of(text, o.span().start);
-                let o = o.into_inner();
-                let check = |key: &str, v: f64, max: f64| {
-                    limits::check_range(v, 0.0, max)
-                        .map(|_| ())
-                        .map_err(|e| err(line, &format!("options.{key}"), format!("{e} (s)")))
-                };
-                check("max_gap", o.max_gap, 3600.0)?;
-                check("max_clock_offset", o.max_clock_offset, limits::MAX_ABS_TIME)?;
-                limits::check_range(o.clock_tolerance, 0.0, 0.5)
-                    .map_err(|e| err(line, "options.clock_tolerance", format!("{e} (samples)")))?;
-                o
-            }
-            None => Options::default(),
-        };
+        let options = checked_options(path, text, raw.options)?;
         let ground = check_channel(path, text, &dir, Role::Ground, raw.ground)?;
-        if raw.storey.is_empty() {
-            return Err(err(
-                line_of(text, text.len()),
-                "storey",
-                "no [[storey]] table: at least one storey's sensor is needed".to_string(),
-            ));
-        }
-        let mut storeys = Vec::with_capacity(raw.storey.len());
-        for s in raw.storey {
-            let line = line_of(text, s.span().start);
-            let Some(n) = s.get_ref().storey else {
-                return Err(err(
-                    line,
-                    "storey.storey",
-                    "missing: which storey (1-based) this sensor is on".to_string(),
-                ));
-            };
-            if n == 0 || n > limits::MAX_STOREYS {
-                return Err(err(
-                    line,
-                    "storey.storey",
-                    format!(
-                        "{n} is not a storey (storeys are numbered 1 to {})",
-                        limits::MAX_STOREYS
-                    ),
-                ));
-            }
-            storeys.push(check_channel(path, text, &dir, Role::Storey(n), s)?);
-        }
-        storeys.sort_by_key(|c| c.role);
-        for w in storeys.windows(2) {
-            if w[0].role == w[1].role {
-                return Err(err(
-                    w[1].line.max(w[0].line),
-                    "storey.storey",
-                    format!(
-                        "{} is mapped twice (lines {} and {})",
-                        w[0].role, w[0].line, w[1].line
-                    ),
-                ));
-            }
-        }
-        // One recorded signal cannot be two channels: a copy-paste slip, or swapped files.
-        let all: Vec<&Channel> = std::iter::once(&ground).chain(&storeys).collect();
-        for (i, a) in all.iter().enumerate() {
-            for b in &all[..i] {
-                // The same file also through another name (a symbolic or hard link).
-                if same_file(&a.path, &b.path) && a.spec.column == b.spec.column {
-                    return Err(err(
-                        a.line,
-                        "file",
-                        format!(
-                            "{} reads the same signal as {} ({}{}): each channel needs its own",
-                            a.role,
-                            b.role,
-                            a.path.display(),
-                            a.spec
-                                .column
-                                .as_ref()
-                                .map_or(String::new(), |c| format!(", column {c}"))
-                        ),
-                    ));
-                }
-            }
-        }
+        let storeys = storey_channels(path, text, &dir, raw.storey)?;
+        check_distinct_signals(path, &ground, &storeys)?;
         Ok(ChannelMap {
             path: path.to_path_buf(),
             options,
@@ -448,6 +351,155 @@ impl ChannelMap {
             storeys,
         })
     }
+}
+
+/// An error of the map `path` at `line`, naming `key`.
+fn map_error(path: &Path, line: usize, key: &str, message: String) -> ImportError {
+    ImportError::Map {
+        file: path.to_path_buf(),
+        line,
+        key: key.to_string(),
+        message,
+    }
+}
+
+/// The map's TOML as read, its syntax and key errors naming the line and key.
+fn map_file(path: &Path, text: &str) -> Result<MapFile, ImportError> {
+    toml::from_str(text).map_err(|e| {
+        let line = e.span().map_or(1, |s| line_of(text, s.start));
+        let msg = e.message().trim().to_string();
+        // A missing or unknown key is named by toml in backquotes; otherwise the key is
+        // the one written on the line of the error (toml quotes the value there, not the
+        // key), within its table.
+        let named = msg.starts_with("missing field") || msg.starts_with("unknown field");
+        let key = match (named, e.span()) {
+            (true, _) | (false, None) => msg.split('`').nth(1).map(str::to_string),
+            (false, Some(s)) => key_at(text, s.start),
+        };
+        map_error(
+            path,
+            line,
+            key.as_deref().unwrap_or("(the map's top level)"),
+            msg,
+        )
+    })
+}
+
+/// The `[options]` table, its gap, clock offset and clock tolerance within limits; the
+/// defaults when there is none.
+fn checked_options(
+    path: &Path,
+    text: &str,
+    options: Option<toml::Spanned<Options>>,
+) -> Result<Options, ImportError> {
+    let Some(o) = options else {
+        return Ok(Options::default());
+    };
+    let line = line_of(text, o.span().start);
+    let o = o.into_inner();
+    let check = |key: &str, v: f64, max: f64| {
+        limits::check_range(v, 0.0, max)
+            .map(|_| ())
+            .map_err(|e| map_error(path, line, &format!("options.{key}"), format!("{e} (s)")))
+    };
+    check("max_gap", o.max_gap, 3600.0)?;
+    check("max_clock_offset", o.max_clock_offset, limits::MAX_ABS_TIME)?;
+    limits::check_range(o.clock_tolerance, 0.0, 0.5).map_err(|e| {
+        map_error(
+            path,
+            line,
+            "options.clock_tolerance",
+            format!("{e} (samples)"),
+        )
+    })?;
+    Ok(o)
+}
+
+/// The `[[storey]]` tables as channels, sorted by storey: at least one, each naming a storey
+/// within limits, no storey twice.
+fn storey_channels(
+    path: &Path,
+    text: &str,
+    dir: &Path,
+    tables: Vec<toml::Spanned<ChannelSpec>>,
+) -> Result<Vec<Channel>, ImportError> {
+    let err = |line: usize, key: &str, message: String| map_error(path, line, key, message);
+    if tables.is_empty() {
+        return Err(err(
+            line_of(text, text.len()),
+            "storey",
+            "no [[storey]] table: at least one storey's sensor is needed".to_string(),
+        ));
+    }
+    let mut storeys = Vec::with_capacity(tables.len());
+    for s in tables {
+        let line = line_of(text, s.span().start);
+        let Some(n) = s.get_ref().storey else {
+            return Err(err(
+                line,
+                "storey.storey",
+                "missing: which storey (1-based) this sensor is on".to_string(),
+            ));
+        };
+        if n == 0 || n > limits::MAX_STOREYS {
+            return Err(err(
+                line,
+                "storey.storey",
+                format!(
+                    "{n} is not a storey (storeys are numbered 1 to {})",
+                    limits::MAX_STOREYS
+                ),
+            ));
+        }
+        storeys.push(check_channel(path, text, dir, Role::Storey(n), s)?);
+    }
+    storeys.sort_by_key(|c| c.role);
+    for w in storeys.windows(2) {
+        if w[0].role == w[1].role {
+            return Err(err(
+                w[1].line.max(w[0].line),
+                "storey.storey",
+                format!(
+                    "{} is mapped twice (lines {} and {})",
+                    w[0].role, w[0].line, w[1].line
+                ),
+            ));
+        }
+    }
+    Ok(storeys)
+}
+
+/// One recorded signal cannot be two channels: a copy-paste slip, or swapped files. Refuses
+/// two channels reading the same column of the same file (also through another name: a
+/// symbolic or hard link).
+fn check_distinct_signals(
+    path: &Path,
+    ground: &Channel,
+    storeys: &[Channel],
+) -> Result<(), ImportError> {
+    let all: Vec<&Channel> = std::iter::once(ground).chain(storeys).collect();
+    for (i, a) in all.iter().enumerate() {
+        for b in &all[..i] {
+            if same_file(&a.path, &b.path) && a.spec.column == b.spec.column {
+                return Err(map_error(
+                    path,
+                    a.line,
+                    "file",
+                    format!(
+                        "{} reads the same signal as {} ({}{}): each channel needs its own",
+                        a.role,
+                        b.role,
+                        a.path.display(),
+                        a.spec
+                            .column
+                            .as_ref()
+                            .map_or(String::new(), |c| format!(", column {c}"))
+                    ),
+                ));
+            }
+        }
+    }
+    Ok(())
 }
 
 /// Checks one channel table; errors name the key as `ground.<key>` or `storey.<key>`.
@@ -460,111 +512,143 @@ fn check_channel(
 ) -> Result<Channel, ImportError> {
     let line = line_of(text, spanned.span().start);
     let spec = spanned.into_inner();
-    let table = match role {
-        Role::Ground => "ground",
-        Role::Storey(_) => "storey",
-    };
-    let what = match role {
-        Role::Ground => String::new(),
-        Role::Storey(s) => format!(" (storey {s})"),
-    };
-    let err = |key: &str, message: String| ImportError::Map {
-        file: path.to_path_buf(),
+    let at = ChannelErrors {
+        path,
         line,
-        key: format!("{table}.{key}"),
-        message: format!("{message}{what}"),
+        table: match role {
+            Role::Ground => "ground",
+            Role::Storey(_) => "storey",
+        },
+        what: match role {
+            Role::Ground => String::new(),
+            Role::Storey(s) => format!(" (storey {s})"),
+        },
     };
     if role == Role::Ground && spec.storey.is_some() {
-        return Err(err(
+        return Err(at.err(
             "storey",
             "the ground is not a storey; remove the key".to_string(),
         ));
     }
     if spec.file.as_os_str().is_empty() {
-        return Err(err("file", "empty file name".to_string()));
+        return Err(at.err("file", "empty file name".to_string()));
     }
     match spec.format {
-        Format::SensorCsv => {
-            for (key, present) in [
-                ("time", spec.time.is_some()),
-                ("time_units", spec.time_units.is_some()),
-                ("column", spec.column.is_some()),
-                ("units", spec.units.is_some()),
-            ] {
-                if !present {
-                    return Err(err(
-                        key,
-                        format!("missing: a sensor-csv channel needs `{key}`"),
-                    ));
-                }
-            }
-            for (key, v) in [("time", &spec.time), ("column", &spec.column)] {
-                if v.as_deref().is_some_and(|s| s.trim().is_empty()) {
-                    return Err(err(key, "empty column name".to_string()));
-                }
-            }
-            if spec
-                .header_lines
-                .is_some_and(|h| h > super::sensor_csv::HEADER_SEARCH_LINES)
-            {
-                return Err(err(
-                    "header_lines",
-                    format!(
-                        "at most {} lines before the column names",
-                        super::sensor_csv::HEADER_SEARCH_LINES
-                    ),
-                ));
-            }
-        }
-        Format::CsmipV2 => {
-            for (key, present) in [
-                ("time", spec.time.is_some()),
-                ("time_units", spec.time_units.is_some()),
-                ("column", spec.column.is_some()),
-                ("header_lines", spec.header_lines.is_some()),
-            ] {
-                if present {
-                    return Err(err(
-                        key,
-                        "a csmip-v2 file holds one channel on a uniform step; remove the key"
-                            .to_string(),
-                    ));
-                }
-            }
-            if spec
-                .units
-                .is_some_and(|u| u != AccUnits::CentimetersPerSecond2)
-            {
-                return Err(err(
-                    "units",
-                    "a V2 record is in cm/s2, as its header says; remove the key".to_string(),
-                ));
-            }
-            if let Some(d) = &spec.direction {
-                let d = d.to_ascii_lowercase();
-                if !["long", "tran", "up"].contains(&d.as_str()) {
-                    return Err(err(
-                        "direction",
-                        format!("`{d}`: a V2 direction is long, tran or up"),
-                    ));
-                }
-            }
-        }
+        Format::SensorCsv => check_sensor_csv_keys(&spec, &at)?,
+        Format::CsmipV2 => check_csmip_v2_keys(&spec, &at)?,
     }
-    limits::check_scale(spec.scale).map_err(|e| err("scale", e.to_string()))?;
-    if spec.scale == 0.0 {
-        return Err(err("scale", "0 would erase the channel".to_string()));
-    }
-    if spec.sign != 1 && spec.sign != -1 {
-        return Err(err("sign", format!("{} is not +1 or -1", spec.sign)));
-    }
-    limits::check_time(spec.offset).map_err(|e| err("offset", format!("{e} (s)")))?;
+    check_conversion(&spec, &at)?;
     Ok(Channel {
         role,
         path: normalise(&dir.join(&spec.file)),
         spec,
         line,
     })
+}
+
+/// Where an error of a channel table points: the map `path`, the table's `line`, the table
+/// (`ground` or `storey`) and what follows the message (which storey).
+struct ChannelErrors<'a> {
+    path: &'a Path,
+    line: usize,
+    table: &'static str,
+    what: String,
+}
+
+impl ChannelErrors<'_> {
+    /// An error of the table's `key`.
+    fn err(&self, key: &str, message: String) -> ImportError {
+        ImportError::Map {
+            file: self.path.to_path_buf(),
+            line: self.line,
+            key: format!("{}.{key}", self.table),
+            message: format!("{message}{}", self.what),
+        }
+    }
+}
+
+/// A sensor-csv channel names its time and value columns (not blank), their units, and at
+/// most [`super::sensor_csv::HEADER_SEARCH_LINES`] lines before the column names.
+fn check_sensor_csv_keys(spec: &ChannelSpec, at: &ChannelErrors) -> Result<(), ImportError> {
+    for (key, present) in [
+        ("time", spec.time.is_some()),
+        ("time_units", spec.time_units.is_some()),
+        ("column", spec.column.is_some()),
+        ("units", spec.units.is_some()),
+    ] {
+        if !present {
+            return Err(at.err(key, format!("missing: a sensor-csv channel needs `{key}`")));
+        }
+    }
+    for (key, v) in [("time", &spec.time), ("column", &spec.column)] {
+        if v.as_deref().is_some_and(|s| s.trim().is_empty()) {
+            return Err(at.err(key, "empty column name".to_string()));
+        }
+    }
+    if spec
+        .header_lines
+        .is_some_and(|h| h > super::sensor_csv::HEADER_SEARCH_LINES)
+    {
+        return Err(at.err(
+            "header_lines",
+            format!(
+                "at most {} lines before the column names",
+                super::sensor_csv::HEADER_SEARCH_LINES
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// A csmip-v2 channel has no column keys (one channel on a uniform step), no units but
+/// cm/s², and a direction V2 knows.
+fn check_csmip_v2_keys(spec: &ChannelSpec, at: &ChannelErrors) -> Result<(), ImportError> {
+    for (key, present) in [
+        ("time", spec.time.is_some()),
+        ("time_units", spec.time_units.is_some()),
+        ("column", spec.column.is_some()),
+        ("header_lines", spec.header_lines.is_some()),
+    ] {
+        if present {
+            return Err(at.err(
+                key,
+                "a csmip-v2 file holds one channel on a uniform step; remove the key".to_string(),
+            ));
+        }
+    }
+    if spec
+        .units
+        .is_some_and(|u| u != AccUnits::CentimetersPerSecond2)
+    {
+        return Err(at.err(
+            "units",
+            "a V2 record is in cm/s2, as its header says; remove the key".to_string(),
+        ));
+    }
+    if let Some(d) = &spec.direction {
+        let d = d.to_ascii_lowercase();
+        if !["long", "tran", "up"].contains(&d.as_str()) {
+            return Err(at.err(
+                "direction",
+                format!("`{d}`: a V2 direction is long, tran or up"),
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// The conversion of the channel's values and clock: a non-zero scale within limits, a sign
+/// of ±1, a clock offset within limits.
+fn check_conversion(spec: &ChannelSpec, at: &ChannelErrors) -> Result<(), ImportError> {
+    limits::check_scale(spec.scale).map_err(|e| at.err("scale", e.to_string()))?;
+    if spec.scale == 0.0 {
+        return Err(at.err("scale", "0 would erase the channel".to_string()));
+    }
+    if spec.sign != 1 && spec.sign != -1 {
+        return Err(at.err("sign", format!("{} is not +1 or -1", spec.sign)));
+    }
+    limits::check_time(spec.offset).map_err(|e| at.err("offset", format!("{e} (s)")))?;
+    Ok(())
 }
 
 /// `a/b/../c` as `a/c`, so that messages name a file as a person would (lexical only: a
