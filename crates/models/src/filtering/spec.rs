@@ -234,6 +234,15 @@ impl<L: HysteresisLaw> ChainSpecOf<L> {
 
     /// Checks every field; the partitions' constructors call it.
     pub fn validate(&self) -> Result<(), SpecError> {
+        self.check_storey_counts()?;
+        self.check_time_and_input()?;
+        self.check_noise()?;
+        self.check_prior_against_building()
+    }
+
+    /// The sensor layout and the prior made for the building's storeys; the layout itself
+    /// valid.
+    fn check_storey_counts(&self) -> Result<(), SpecError> {
         let n = self.n_storeys();
         if self.sensors.n_storeys() != n {
             return Err(invalid(
@@ -256,6 +265,11 @@ impl<L: HysteresisLaw> ChainSpecOf<L> {
         }
         // Re-validate the layout itself (it may come from deserialisation of a changed file).
         SensorLayout::new(n, &self.sensors.one_based(), self.sensors.kind())?;
+        Ok(())
+    }
+
+    /// A positive step, sub-steps within limits, and an input of at least one step, finite.
+    fn check_time_and_input(&self) -> Result<(), SpecError> {
         if !(self.dt.is_finite() && self.dt > 0.0) {
             return Err(invalid("dt", format!("{} is not positive", self.dt)));
         }
@@ -274,6 +288,12 @@ impl<L: HysteresisLaw> ChainSpecOf<L> {
         if let Some(k) = self.ug.iter().position(|u| !u.is_finite()) {
             return Err(invalid("ug", format!("sample {k} is not finite")));
         }
+        Ok(())
+    }
+
+    /// Process noise s.d.s non-negative (one per hysteretic element for `q_r`), measurement
+    /// variances positive (one per sensor).
+    fn check_noise(&self) -> Result<(), SpecError> {
         for (field, v) in [("q_disp", self.q_disp), ("q_vel", self.q_vel)] {
             if !(v.is_finite() && v >= 0.0) {
                 return Err(invalid(field, format!("{v} is not a non-negative s.d.")));
@@ -306,7 +326,13 @@ impl<L: HysteresisLaw> ChainSpecOf<L> {
         if let Some(r) = self.r_diag.iter().find(|r| !(r.is_finite() && **r > 0.0)) {
             return Err(invalid("r_diag", format!("variance {r} is not positive")));
         }
-        if self.prior.hysteretic_storeys() != hysteretic {
+        Ok(())
+    }
+
+    /// The prior describes the building's elements and damping form, is valid itself, and
+    /// its per-particle spread (if any) is a non-negative number.
+    fn check_prior_against_building(&self) -> Result<(), SpecError> {
+        if self.prior.hysteretic_storeys() != self.building.hysteretic() {
             return Err(invalid(
                 "prior",
                 "the element priors are not at the hysteretic storeys, in order",
