@@ -51,8 +51,26 @@ struct Planned {
 /// fingerprint but other results is a conflict. Any unreadable source record or conflict stops
 /// the merge before anything is written.
 pub fn merge<R: SweepRecord>(pairs: &[(PathBuf, PathBuf)]) -> Result<MergeReport> {
-    let mut report = MergeReport::default();
     let mut problems: Vec<String> = Vec::new();
+    let mut plan = plan_sources::<R>(pairs, &mut problems)?;
+    classify_destinations::<R>(&mut plan, &mut problems);
+    if !problems.is_empty() {
+        bail!(
+            "{} problem(s) found; nothing was written:\n  {}",
+            problems.len(),
+            problems.join("\n  ")
+        );
+    }
+    write_plan(pairs, plan)
+}
+
+/// The first phase's first half: every `*.json` of every source read, parsed and planned for
+/// its destination, by destination path. A record that does not read, has no fingerprint, or
+/// differs from another source's record of the same name is a problem, not planned.
+fn plan_sources<R: SweepRecord>(
+    pairs: &[(PathBuf, PathBuf)],
+    problems: &mut Vec<String>,
+) -> Result<BTreeMap<PathBuf, Planned>> {
     let mut plan: BTreeMap<PathBuf, Planned> = BTreeMap::new();
     for (src_dir, dst_dir) in pairs {
         let mut names: Vec<PathBuf> = fs::read_dir(src_dir)
@@ -104,6 +122,17 @@ pub fn merge<R: SweepRecord>(pairs: &[(PathBuf, PathBuf)]) -> Result<MergeReport
             );
         }
     }
+    Ok(plan)
+}
+
+/// The first phase's second half: each planned record whose destination already holds one is
+/// marked as present (same run), or to replace (unreadable, or from other inputs, with the
+/// reason); a destination that cannot be read, or holds the same fingerprint with other
+/// results, is a problem.
+fn classify_destinations<R: SweepRecord>(
+    plan: &mut BTreeMap<PathBuf, Planned>,
+    problems: &mut Vec<String>,
+) {
     for p in plan.values_mut() {
         if !p.dst.exists() {
             continue;
@@ -141,13 +170,15 @@ pub fn merge<R: SweepRecord>(pairs: &[(PathBuf, PathBuf)]) -> Result<MergeReport
             )),
         }
     }
-    if !problems.is_empty() {
-        bail!(
-            "{} problem(s) found; nothing was written:\n  {}",
-            problems.len(),
-            problems.join("\n  ")
-        );
-    }
+}
+
+/// The second phase: the destinations created and cleaned of stale temporaries, then each
+/// planned record written (unless already present) with its sidecars. Returns what was done.
+fn write_plan(
+    pairs: &[(PathBuf, PathBuf)],
+    plan: BTreeMap<PathBuf, Planned>,
+) -> Result<MergeReport> {
+    let mut report = MergeReport::default();
     let mut dst_dirs: Vec<&PathBuf> = pairs.iter().map(|(_, d)| d).collect();
     dst_dirs.sort();
     dst_dirs.dedup();
