@@ -18,6 +18,7 @@ use crate::engine::{load, write_json, RunMode};
 use crate::markdown::compact_header;
 use crate::run_dir::open;
 use crate::stats::{completed, truth};
+use crate::study::Study;
 use crate::sweep::write_bytes_atomic;
 use crate::verdict::{findings_table, Finding};
 use identify::metrics::mean_spread;
@@ -309,19 +310,8 @@ pub fn run(args: &Options) -> Result<Option<String>> {
     // Per structure of the structure axis (their parameters differ), else over the whole sweep:
     // the declared verdicts and, with a known truth (a preset), how often the intervals hold it.
     let jobs = study.jobs();
-    let groups: Vec<(String, Option<usize>)> = if study.sweep.structures.is_empty() {
-        vec![(String::new(), None)]
-    } else {
-        study
-            .sweep
-            .structures
-            .iter()
-            .enumerate()
-            .map(|(i, s)| (format!(", structure `{}`", s.label), Some(i)))
-            .collect()
-    };
     let mut all_findings = Vec::new();
-    for (suffix, structure) in groups {
+    for (suffix, structure) in structure_groups(&study) {
         let records: Vec<&RunRecord> = outcome
             .records
             .iter()
@@ -329,50 +319,10 @@ pub fn run(args: &Options) -> Result<Option<String>> {
             .filter(|(_, j)| j.structure == structure)
             .map(|(r, _)| r)
             .collect();
-        let by_algorithm: Vec<(&str, Vec<&RunRecord>)> = study
-            .sweep
-            .algorithms
-            .iter()
-            .map(|a| {
-                let recs = records.iter().copied().filter(|r| r.algorithm == a.name());
-                (a.name(), recs.collect())
-            })
-            .collect();
-        // The statements the study declares, decided on this group's records.
-        let findings: Vec<Finding> = study
-            .verdicts
-            .iter()
-            .filter_map(|d| d.decide(&records, &[]))
-            .collect();
-        if !findings.is_empty() {
-            let _ = writeln!(report, "\n### Verdicts{suffix}\n");
-            findings_table(
-                &mut report,
-                ["statement", "verdict", "test", "evidence"],
-                &findings,
-            );
-            let _ = writeln!(report, "\nA statement holds when its ±2 s.e. interval lies on the stated side of the threshold (inside the band), does not hold when it lies entirely on the other side, and is not resolved otherwise; comparisons of two algorithms use the paired difference over the runs both completed.");
-            all_findings.push(serde_json::json!({
-                "structure": structure.map(|i| study.sweep.structures[i].label.clone()),
-                "findings": findings,
-            }));
+        if let Some(f) = verdicts_section(&mut report, &study, &records, &suffix, structure) {
+            all_findings.push(f);
         }
-        if let Some(c) = crate::coverage::sweep_coverage(&study.name, &by_algorithm)? {
-            let _ = writeln!(report);
-            let title = format!("Coverage of the credible intervals{suffix}");
-            crate::coverage::report_section(&mut report, &title, &c);
-            for (name, recs) in &by_algorithm {
-                let (fraction, pairs) = crate::coverage::stiffness_damping_coverage(recs, 0.95);
-                if pairs > 0 {
-                    let _ = writeln!(
-                        report,
-                        "{name}: the 95 % intervals of the stiffnesses and dampings hold the truth in {} of {} (run, parameter) pairs ({fraction:.2}).",
-                        (fraction * pairs as f64).round() as usize,
-                        pairs
-                    );
-                }
-            }
-        }
+        coverage_section(&mut report, &study, &records, &suffix)?;
     }
     let mut summary = serde_json::json!({
         "study": study.name,
@@ -395,4 +345,87 @@ pub fn run(args: &Options) -> Result<Option<String>> {
         args.out.display()
     );
     Ok(Some(report))
+}
+
+/// The groups the report's verdicts and coverage are given for: one per structure of the
+/// structure axis (a heading suffix naming it, and its index), else the whole sweep.
+fn structure_groups(study: &Study) -> Vec<(String, Option<usize>)> {
+    if study.sweep.structures.is_empty() {
+        vec![(String::new(), None)]
+    } else {
+        study
+            .sweep
+            .structures
+            .iter()
+            .enumerate()
+            .map(|(i, s)| (format!(", structure `{}`", s.label), Some(i)))
+            .collect()
+    }
+}
+
+/// The statements the study declares, decided on one group's records: their section of the
+/// report, and their entry of `summary.json` (none when no statement is decided).
+fn verdicts_section(
+    report: &mut String,
+    study: &Study,
+    records: &[&RunRecord],
+    suffix: &str,
+    structure: Option<usize>,
+) -> Option<serde_json::Value> {
+    let findings: Vec<Finding> = study
+        .verdicts
+        .iter()
+        .filter_map(|d| d.decide(records, &[]))
+        .collect();
+    if findings.is_empty() {
+        return None;
+    }
+    let _ = writeln!(report, "\n### Verdicts{suffix}\n");
+    findings_table(
+        report,
+        ["statement", "verdict", "test", "evidence"],
+        &findings,
+    );
+    let _ = writeln!(report, "\nA statement holds when its ±2 s.e. interval lies on the stated side of the threshold (inside the band), does not hold when it lies entirely on the other side, and is not resolved otherwise; comparisons of two algorithms use the paired difference over the runs both completed.");
+    Some(serde_json::json!({
+        "structure": structure.map(|i| study.sweep.structures[i].label.clone()),
+        "findings": findings,
+    }))
+}
+
+/// With a known truth, the coverage of one group's credible intervals per algorithm, and the
+/// share of the 95 % intervals of the stiffnesses and dampings that hold it.
+fn coverage_section(
+    report: &mut String,
+    study: &Study,
+    records: &[&RunRecord],
+    suffix: &str,
+) -> Result<()> {
+    let by_algorithm: Vec<(&str, Vec<&RunRecord>)> = study
+        .sweep
+        .algorithms
+        .iter()
+        .map(|a| {
+            let recs = records.iter().copied().filter(|r| r.algorithm == a.name());
+            (a.name(), recs.collect())
+        })
+        .collect();
+    let Some(c) = crate::coverage::sweep_coverage(&study.name, &by_algorithm)? else {
+        return Ok(());
+    };
+    let _ = writeln!(report);
+    let title = format!("Coverage of the credible intervals{suffix}");
+    crate::coverage::report_section(report, &title, &c);
+    for (name, recs) in &by_algorithm {
+        let (fraction, pairs) = crate::coverage::stiffness_damping_coverage(recs, 0.95);
+        if pairs > 0 {
+            let _ = writeln!(
+                report,
+                "{name}: the 95 % intervals of the stiffnesses and dampings hold the truth in {} of {} (run, parameter) pairs ({fraction:.2}).",
+                (fraction * pairs as f64).round() as usize,
+                pairs
+            );
+        }
+    }
+    Ok(())
 }
