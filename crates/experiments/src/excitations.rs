@@ -228,6 +228,17 @@ pub fn report(
     quick: bool,
 ) -> String {
     let mut o = String::new();
+    preamble(&mut o, study, quick);
+    ground_motions(&mut o, values);
+    measurement(&mut o, rows);
+    let _ = writeln!(o, "\n![errors](errors_by_excitation.svg)\n");
+    verdict_tables(&mut o, verdicts);
+    o
+}
+
+/// The title and where the report comes from: the study's description, seed, particles and
+/// discretisation.
+fn preamble(o: &mut String, study: &Study, quick: bool) {
     let _ = writeln!(
         o,
         "# Excitations study{}\n",
@@ -244,6 +255,11 @@ pub fn report(
         joined(&study.sweep.particles, ", "),
         study.filter.discretisation.name(),
     );
+}
+
+/// The paper's remark, how the ground motions are scaled, and one row per ground motion: its
+/// record, scale, PGA, duration and how far the Bouc–Wen element yields.
+fn ground_motions(o: &mut String, values: &[StructureValues]) {
     let _ = writeln!(
         o,
         "## Beyond the paper: other ground motions\n\n**The paper's remark** (Olivier & Smyth \
@@ -255,7 +271,7 @@ pub fn report(
          duration. The first row is the paper's data (the control).\n"
     );
     compact_header(
-        &mut o,
+        o,
         &[
             "ground motion",
             "record",
@@ -274,6 +290,11 @@ pub fn report(
             v.label, v.excitation, v.scale, v.pga, v.duration, y
         );
     }
+}
+
+/// What is measured, and one row per ground motion and algorithm: errors, ratios of the
+/// Bouc–Wen parameters, coverage and failed runs.
+fn measurement(o: &mut String, rows: &[Row]) {
     let _ = writeln!(
         o,
         "\n**The measurement.** Per ground motion and algorithm: the storey-averaged stiffness \
@@ -282,7 +303,7 @@ pub fn report(
          the failed runs.\n"
     );
     compact_header(
-        &mut o,
+        o,
         &[
             "ground motion",
             "algorithm",
@@ -312,8 +333,11 @@ pub fn report(
             r.failed
         );
     }
-    let _ = writeln!(o, "\n![errors](errors_by_excitation.svg)\n");
-    // One paragraph and table per statement and test (the file declares one, per algorithm).
+}
+
+/// One paragraph and table per statement and test (the file declares one, per algorithm):
+/// each algorithm's differences from the control and its verdict.
+fn verdict_tables(o: &mut String, verdicts: &[(&Declared, Finding)]) {
     for group in
         verdicts.chunk_by(|(_, f), (_, g)| (&f.statement, &f.test) == (&g.statement, &g.test))
     {
@@ -328,12 +352,11 @@ pub fn report(
             .filter(|m| *m == Metric::CError)
             .map_or("k", |_| "c");
         let columns = format!("differences from the control ({k} error)");
-        compact_header(&mut o, &["algorithm", &columns, "verdict"], "lll");
+        compact_header(o, &["algorithm", &columns, "verdict"], "lll");
         for (d, f) in group {
             let a = d.algorithms.join(", ");
             let _ = writeln!(o, "| {a} | {} | **{}** |", f.evidence, f.verdict.label());
         }
         let _ = writeln!(o);
     }
-    o
 }
