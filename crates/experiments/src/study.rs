@@ -289,6 +289,26 @@ impl Study {
     }
 
     fn check(&self) -> Result<()> {
+        self.check_sweep_counts()?;
+        self.check_filter_tables()?;
+        if self
+            .sweep
+            .discretisations
+            .as_ref()
+            .is_some_and(Vec::is_empty)
+        {
+            bail!("field `sweep.discretisations`: give at least one discretisation");
+        }
+        if let Some(f) = self.data.decimate {
+            crate::decimate::check_factor(f).context("field `data.decimate`")?;
+        }
+        self.check_data()?;
+        self.check_verdicts()?;
+        self.check_structures()
+    }
+
+    /// The sweep has an algorithm, a run, and counts of particles and runs within the limits.
+    fn check_sweep_counts(&self) -> Result<()> {
         if self.sweep.algorithms.is_empty() || self.sweep.runs == 0 {
             bail!("the sweep needs at least one algorithm and one run");
         }
@@ -301,6 +321,12 @@ impl Study {
         }
         identify::limits::check_count(self.sweep.runs as usize, 1, MAX_RUNS)
             .context("field `sweep.runs`")?;
+        Ok(())
+    }
+
+    /// Every filter setting a run can take is valid: the `[filter]` table, each algorithm's
+    /// `[filter_for.*]` table, and each structure's own `filter` keys for each of its algorithms.
+    fn check_filter_tables(&self) -> Result<()> {
         identify::limits::check_filter_settings(&self.filter).context("table `filter`")?;
         for name in self.filter_for.keys() {
             let algorithm: Algorithm = name
@@ -331,17 +357,12 @@ impl Study {
                 identify::limits::check_filter_settings(&settings).with_context(ctx)?;
             }
         }
-        if self
-            .sweep
-            .discretisations
-            .as_ref()
-            .is_some_and(Vec::is_empty)
-        {
-            bail!("field `sweep.discretisations`: give at least one discretisation");
-        }
-        if let Some(f) = self.data.decimate {
-            crate::decimate::check_factor(f).context("field `data.decimate`")?;
-        }
+        Ok(())
+    }
+
+    /// The `[data]` table names one source: a preset whose generated data set is valid, or a
+    /// data directory that loads (without the keys of generated data or a structure axis).
+    fn check_data(&self) -> Result<()> {
         match (&self.data.dir, self.data.preset.is_empty()) {
             (Some(_), false) => {
                 bail!("table `data`: give either `preset` or `dir`, not both")
@@ -371,6 +392,12 @@ impl Study {
                     .context("table `data`")?;
             }
         }
+        Ok(())
+    }
+
+    /// The declared verdicts can be decided: one particle count and one resampling scheme (runs
+    /// are compared run by run), and each statement names what the sweep runs.
+    fn check_verdicts(&self) -> Result<()> {
         if !self.verdicts.is_empty()
             && (self.sweep.particles.len() > 1 || self.sweep.resampling.len() > 1)
         {
@@ -385,6 +412,12 @@ impl Study {
         for v in &self.verdicts {
             v.check(&algorithms, &self.discretisations())?;
         }
+        Ok(())
+    }
+
+    /// Each structure of the axis is valid, its label is unique, and the data set it
+    /// generates (when the toolkit can run it) is valid.
+    fn check_structures(&self) -> Result<()> {
         let mut labels = std::collections::BTreeSet::new();
         for (i, st) in self.sweep.structures.iter().enumerate() {
             st.check(&self.sweep)?;
