@@ -382,13 +382,6 @@ impl Declared {
         present: &[&str],
     ) -> Option<(String, Verdict, String)> {
         let metric = self.metric.expect("checked: the test has a metric");
-        let (scale, decimals, unit) = metric.display();
-        // The runs of an arm: of one discretisation (any with `None`), of this study or beside.
-        let arm = |recs: &[&'a RunRecord], d: Option<Discretisation>, study: Option<&String>| {
-            let keep = |r: &&RunRecord| d.is_none_or(|d| scheme(r) == Some(d));
-            let keep = |r: &&RunRecord| keep(r) && study.is_none_or(|s| &r.experiment == s);
-            recs.iter().copied().filter(keep).collect::<Vec<_>>()
-        };
         let (this, that) = match (self.schemes, &self.against) {
             (Some([x, y]), _) => (arm(records, Some(x), None), arm(records, Some(y), None)),
             (None, against) => (
@@ -413,51 +406,12 @@ impl Declared {
                     true => paired_difference(&runs(&this), &runs(&that)),
                     false => Estimate::of(&runs(&this).into_values().collect::<Vec<_>>()),
                 };
-                verdicts.push(match (self.test, self.threshold, self.band) {
-                    (Test::Below, Some(t), _) => below(&e, t),
-                    (Test::Above, Some(t), _) => above(&e, t),
-                    (Test::Within, _, Some([lo, hi])) => within(&e, lo, hi),
-                    (Test::Outside, _, Some([lo, hi])) => match within(&e, lo, hi) {
-                        Verdict::Holds => Verdict::DoesNotHold,
-                        Verdict::DoesNotHold => Verdict::Holds,
-                        Verdict::NotResolved => Verdict::NotResolved,
-                    },
-                    _ => unreachable!("checked: the test has its threshold or band"),
-                });
-                let mut who = Vec::new();
-                if self.algorithms.len() > 1 {
-                    who.push(label(a).to_string());
-                }
-                if params.len() > 1 {
-                    who.push(p.to_string());
-                }
-                let value = if metric == Metric::Ratio && !self.on_arms() {
-                    format!("{:.3} ± {:.3}", e.mean, e.se)
-                } else {
-                    e.show(scale, decimals, unit)
-                };
-                who.push(value);
-                evidence.push(who.join(" "));
+                verdicts.push(self.single_verdict(&e));
+                evidence.push(self.single_evidence(metric, &e, a, p, params.len()));
             }
         }
         let (verdict, evidence) = (Verdict::all(verdicts), evidence.join("; "));
-        let what = metric.words(&self.params);
-        let (over, every, any) = match &self.algorithms[..] {
-            [a] => (format!("the {} runs", label(a)), String::new(), ""),
-            _ => (
-                "runs".to_string(),
-                format!(
-                    " for {}{}",
-                    group(&self.algorithms),
-                    if params.len() > 1 {
-                        " and parameter"
-                    } else {
-                        ""
-                    }
-                ),
-                " for any",
-            ),
-        };
+        let (over, every, any) = self.subjects(params.len());
         if self.on_arms() {
             return Some((
                 self.brief(metric, records, &that, &every),
@@ -465,8 +419,75 @@ impl Declared {
                 evidence,
             ));
         }
+        let test = self.single_test_words(metric, &over, &every, any);
+        Some((test, verdict, evidence))
+    }
+
+    /// The verdict of one estimate under the test's threshold or band.
+    fn single_verdict(&self, e: &Estimate) -> Verdict {
+        match (self.test, self.threshold, self.band) {
+            (Test::Below, Some(t), _) => below(e, t),
+            (Test::Above, Some(t), _) => above(e, t),
+            (Test::Within, _, Some([lo, hi])) => within(e, lo, hi),
+            (Test::Outside, _, Some([lo, hi])) => match within(e, lo, hi) {
+                Verdict::Holds => Verdict::DoesNotHold,
+                Verdict::DoesNotHold => Verdict::Holds,
+                Verdict::NotResolved => Verdict::NotResolved,
+            },
+            _ => unreachable!("checked: the test has its threshold or band"),
+        }
+    }
+
+    /// The evidence of one estimate: the algorithm and parameter when the statement has several,
+    /// then the value (a ratio of one arm as a bare number, otherwise in the metric's unit).
+    fn single_evidence(
+        &self,
+        metric: Metric,
+        e: &Estimate,
+        algorithm: &str,
+        param: &str,
+        params: usize,
+    ) -> String {
+        let (scale, decimals, unit) = metric.display();
+        let mut who = Vec::new();
+        if self.algorithms.len() > 1 {
+            who.push(label(algorithm).to_string());
+        }
+        if params > 1 {
+            who.push(param.to_string());
+        }
+        let value = if metric == Metric::Ratio && !self.on_arms() {
+            format!("{:.3} ± {:.3}", e.mean, e.se)
+        } else {
+            e.show(scale, decimals, unit)
+        };
+        who.push(value);
+        who.join(" ")
+    }
+
+    /// Whose runs a test is over, in words: the runs of the one algorithm, or "runs" with " for
+    /// each algorithm (and parameter)" and " for any" to say that every one must pass.
+    fn subjects(&self, params: usize) -> (String, String, &'static str) {
+        match &self.algorithms[..] {
+            [a] => (format!("the {} runs", label(a)), String::new(), ""),
+            _ => (
+                "runs".to_string(),
+                format!(
+                    " for {}{}",
+                    group(&self.algorithms),
+                    if params > 1 { " and parameter" } else { "" }
+                ),
+                " for any",
+            ),
+        }
+    }
+
+    /// The words of a test on one arm: the rule at ±2 s.e. against the threshold or band, and
+    /// when it does not hold.
+    fn single_test_words(&self, metric: Metric, over: &str, every: &str, any: &str) -> String {
+        let what = metric.words(&self.params);
         let meaning = self.meaning();
-        let test = match (self.test, self.threshold, self.band) {
+        match (self.test, self.threshold, self.band) {
             (Test::Below, Some(t), _) => {
                 let t = metric.threshold(t, false);
                 format!("mean over {over} of {what} + 2 s.e. < {t}{meaning}{every}; does not hold if − 2 s.e. > {t}{any}")
@@ -484,8 +505,7 @@ impl Declared {
                 format!("mean over {over} of {what} ± 2 s.e. entirely outside [{lo}, {hi}]{meaning}{every}; does not hold if it lies entirely inside{any}")
             }
             _ => unreachable!("checked: the test has its threshold or band"),
-        };
-        Some((test, verdict, evidence))
+        }
     }
 
     /// The short words of a test on arms (the rule at ±2 s.e. is stated beside the table);
@@ -764,6 +784,18 @@ fn no_failures(records: &[&RunRecord], present: &[&str]) -> (String, Verdict, St
         },
         format!("failed runs: {}", counts.join(", ")),
     )
+}
+
+/// The runs of an arm: of one discretisation (any with `None`), of this study or, with `study`,
+/// of the study of that name beside it.
+fn arm<'a>(
+    recs: &[&'a RunRecord],
+    d: Option<Discretisation>,
+    study: Option<&String>,
+) -> Vec<&'a RunRecord> {
+    let keep = |r: &&RunRecord| d.is_none_or(|d| scheme(r) == Some(d));
+    let keep = |r: &&RunRecord| keep(r) && study.is_none_or(|s| &r.experiment == s);
+    recs.iter().copied().filter(keep).collect::<Vec<_>>()
 }
 
 /// Records of one algorithm.
