@@ -419,9 +419,49 @@ pub fn compare_files(
     records: &[PathBuf],
     warn: &mut dyn FnMut(String),
 ) -> Result<String> {
-    let mut groups: Vec<DataSetGroup> = Vec::new();
     // The chains' warnings go into the table's file as well, so that a reference resting on few
     // effective samples is not read as exact.
+    let (mut groups, chain_notes) = reference_groups(references, warn)?;
+    assign_records(&mut groups, records)?;
+    let several = groups.len() > 1;
+    let mut md = String::new();
+    let mut compared = Vec::new();
+    for g in groups {
+        let pooled = pool_chains(&g.chains)?;
+        if several {
+            md.push_str(&format!(
+                "## Data set {} (sha256 {})\n\n",
+                g.data,
+                g.sha.as_deref().map_or("?", |s| &s[..s.len().min(12)])
+            ));
+        }
+        md.push_str(&compare_markdown(&pooled, &g.records));
+        if several {
+            md.push('\n');
+        }
+        compared.push((pooled, g.records));
+    }
+    if several {
+        limit_and_goal(&mut md, &compared);
+    }
+    if !chain_notes.is_empty() {
+        md.push_str(&format!(
+            "\nWarnings on the reference chains:\n\n{}\n",
+            chain_notes.join("\n")
+        ));
+    }
+    Ok(md)
+}
+
+/// The reference records read and grouped by data set (several chains of one data set are
+/// pooled later), with the notes of their chains' warnings, each also told to `warn`. An error
+/// for a chain that did not move, or when references of several data sets include one that does
+/// not name its data set.
+fn reference_groups(
+    references: &[PathBuf],
+    warn: &mut dyn FnMut(String),
+) -> Result<(Vec<DataSetGroup>, Vec<String>)> {
+    let mut groups: Vec<DataSetGroup> = Vec::new();
     let mut chain_notes = Vec::new();
     for path in references {
         let r: ReferenceRecord = identify::record::read::read(path)?;
@@ -453,10 +493,16 @@ pub fn compare_files(
              recorded their data set: compare those one data set at a time"
         );
     }
+    Ok((groups, chain_notes))
+}
+
+/// Each online run record read and put with the reference of its data set; an error for a
+/// record whose data set has no reference.
+fn assign_records(groups: &mut [DataSetGroup], records: &[PathBuf]) -> Result<()> {
     for p in records {
         let r: identify::record::RunRecord = crate::sweep::read_record(p)?;
         let sha = record_data_sha(&r);
-        let group = match groups.as_mut_slice() {
+        let group = match &mut *groups {
             // A reference that does not name its data set is compared with every record, as
             // before references recorded it.
             [g] if g.sha.is_none() => g,
@@ -473,45 +519,24 @@ pub fn compare_files(
         };
         group.records.push(r);
     }
-    let several = groups.len() > 1;
-    let mut md = String::new();
-    let mut compared = Vec::new();
-    for g in groups {
-        let pooled = pool_chains(&g.chains)?;
-        if several {
-            md.push_str(&format!(
-                "## Data set {} (sha256 {})\n\n",
-                g.data,
-                g.sha.as_deref().map_or("?", |s| &s[..s.len().min(12)])
-            ));
-        }
-        md.push_str(&compare_markdown(&pooled, &g.records));
-        if several {
-            md.push('\n');
-        }
-        compared.push((pooled, g.records));
-    }
-    if several {
-        md.push_str(&format!(
-            "## Across the {} data sets: the information limit\n\n",
-            compared.len()
-        ));
-        md.push_str(&limit_markdown(&information_limit(&compared)));
-        md.push_str(&format!(
-            "\n## The goal against the limit\n\nThe online mean |error| of the storeys' \
-             stiffnesses and dampings within {:.0} % of the reference posterior's: the paired \
-             difference online − reference over (data set, parameter) must lie below the margin \
-             with its ±2 s.e. interval (holds), above it (does not hold), or the goal is not \
-             resolved.\n\n",
-            100.0 * GOAL_MARGIN
-        ));
-        md.push_str(&goal_markdown(&goal_rows(&compared)));
-    }
-    if !chain_notes.is_empty() {
-        md.push_str(&format!(
-            "\nWarnings on the reference chains:\n\n{}\n",
-            chain_notes.join("\n")
-        ));
-    }
-    Ok(md)
+    Ok(())
+}
+
+/// Across several data sets: the information limit, and the goal "online error within the
+/// margin of the reference's" decided against it.
+fn limit_and_goal(md: &mut String, compared: &[DataSetRuns]) {
+    md.push_str(&format!(
+        "## Across the {} data sets: the information limit\n\n",
+        compared.len()
+    ));
+    md.push_str(&limit_markdown(&information_limit(compared)));
+    md.push_str(&format!(
+        "\n## The goal against the limit\n\nThe online mean |error| of the storeys' \
+         stiffnesses and dampings within {:.0} % of the reference posterior's: the paired \
+         difference online − reference over (data set, parameter) must lie below the margin \
+         with its ±2 s.e. interval (holds), above it (does not hold), or the goal is not \
+         resolved.\n\n",
+        100.0 * GOAL_MARGIN
+    ));
+    md.push_str(&goal_markdown(&goal_rows(compared)));
 }
