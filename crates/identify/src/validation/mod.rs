@@ -67,121 +67,24 @@ pub fn free_run(
     error: prediction::ErrorBand<'_>,
 ) -> Result<FreeRun, FreeRunError> {
     let chain = chain_of(d, theta)?;
-    let sensors = &data.sensors;
     let kind = d.measurement;
-    let sim = |c: &models::structure::ShearChain| {
-        simulate_channels(
-            c,
-            &data.ug_meas,
-            data.dt,
-            sensors,
-            kind,
-            FREE_RUN_INTEGRATOR,
-        )
+    let compared = Compared {
+        names: data.sensors.iter().map(|s| format!("a{s}")).collect(),
+        simulated: simulate_record(&chain, data, kind)?,
+        measured: measured_channels(data),
     };
-    let simulated = sim(&chain)?;
-    let measured = measured_channels(data);
-    let names: Vec<String> = sensors.iter().map(|s| format!("a{s}")).collect();
-    let k = data.len();
-    let every = k.div_ceil(MAX_POINTS).max(1);
-    let keep = |v: &[f64]| -> Vec<f64> { v.iter().step_by(every).copied().collect() };
-    let mut channels: Vec<ChannelFit> = names
-        .iter()
-        .enumerate()
-        .map(|(c, name)| ChannelFit {
-            channel: name.clone(),
-            fit_percent: fit_percent(&measured[c], &simulated[c]),
-            nrmse: nrmse(&measured[c], &simulated[c]),
-            fit_draws: None,
-            coverage_percent: None,
-        })
-        .collect();
-    let (mut band, mut band_error) = (None, None);
-    let (mut band_lo, mut band_hi) = (Vec::new(), Vec::new());
-    match posterior {
-        None => band_error = Some("no posterior to draw from".into()),
-        Some((q, seed, run)) => {
-            let mut rng = core_filters::rng::stream(seed, run, BAND_PURPOSE);
-            let thetas: Vec<Vec<f64>> = (0..draws).map(|_| q.draw(&mut rng)).collect();
-            // Each draw: its fit per channel and its kept series (or why it is invalid).
-            let results: Vec<DrawResult> = thetas
-                .par_iter()
-                .map(|th| {
-                    let c = chain_of(d, th).map_err(|e| e.to_string())?;
-                    let y = sim(&c).map_err(|e| e.to_string())?;
-                    let fits = (0..y.len())
-                        .map(|i| fit_percent(&measured[i], &y[i]))
-                        .collect();
-                    Ok((fits, y.iter().map(|v| keep(v)).collect()))
-                })
-                .collect();
-            let invalid_reason = results.iter().find_map(|r| r.as_ref().err().cloned());
-            let ok: Vec<&(Vec<f64>, Vec<Vec<f64>>)> = results.iter().flatten().collect();
-            if ok.len() < 2 {
-                band_error = Some(format!(
-                    "{} of {draws} draws were valid{}",
-                    ok.len(),
-                    invalid_reason
-                        .as_ref()
-                        .map_or(String::new(), |r| format!(" ({r})"))
-                ));
-            } else {
-                for (c, ch) in channels.iter_mut().enumerate() {
-                    let mut f: Vec<f64> = ok.iter().map(|(fits, _)| fits[c]).collect();
-                    f.sort_by(f64::total_cmp);
-                    ch.fit_draws = Some(
-                        [0.025, 0.5, 0.975]
-                            .iter()
-                            .map(|&p| percentile_sorted(&f, p))
-                            .collect(),
-                    );
-                    let points = ok[0].1[c].len();
-                    let (mut lo, mut hi) = (Vec::with_capacity(points), Vec::with_capacity(points));
-                    let mut col = Vec::with_capacity(ok.len());
-                    for i in 0..points {
-                        col.clear();
-                        col.extend(ok.iter().map(|(_, s)| s[c][i]));
-                        col.sort_by(f64::total_cmp);
-                        lo.push(percentile_sorted(&col, 0.025));
-                        hi.push(percentile_sorted(&col, 0.975));
-                    }
-                    band_lo.push(lo);
-                    band_hi.push(hi);
-                }
-                band = Some(BandInfo {
-                    method: "θ drawn from the record's credible intervals (quantile function \
-                             interpolated through its 2.5/5/25/75/95/97.5 % points, so draws stay \
-                             inside the 95 % intervals), parameters drawn independently (the \
-                             record keeps no correlations); pointwise 2.5–97.5 % of the draws"
-                        .into(),
-                    purpose: BAND_PURPOSE.into(),
-                    draws,
-                    valid: ok.len(),
-                    invalid_reason,
-                });
-            }
+    let every = data.len().div_ceil(MAX_POINTS).max(1);
+    let mut channels = channel_fits(&compared);
+    let mut spread = match posterior {
+        None => ParameterBand::failed("no posterior to draw from".into()),
+        Some(posterior) => {
+            parameter_band(d, data, &compared, posterior, draws, every, &mut channels)
         }
-    }
-    let model_error = match error {
-        prediction::ErrorBand::Without => None,
-        prediction::ErrorBand::InSample => prediction::learn(
-            &names,
-            &measured,
-            &simulated,
-            data.dt,
-            prediction::window_seconds(d, theta),
-            0,
-            ErrorSource::InSample,
-        ),
-        prediction::ErrorBand::Given(m) if m.channels == names => Some(m.clone()),
-        prediction::ErrorBand::Given(m) => {
-            let why = format!(
-                "the model error was learned on channels {} and this record has {}: the band \
-                 holds the parameters' spread only",
-                m.channels.join(", "),
-                names.join(", ")
-            );
-            band_error = Some(match band_error {
+    };
+    let model_error = match model_error_for(error, d, data, theta, &compared) {
+        Ok(model_error) => model_error,
+        Err(why) => {
+            spread.error = Some(match spread.error {
                 Some(e) => format!("{e}; {why}"),
                 None => why,
             });
@@ -189,25 +92,9 @@ pub fn free_run(
         }
     };
     if let Some(me) = &model_error {
-        let with_param = !band_lo.is_empty();
-        let (mut lo_all, mut hi_all) = (Vec::new(), Vec::new());
-        for c in 0..names.len() {
-            let scale = prediction::local_scale(&simulated[c], data.dt, me.window_s, me.floor[c]);
-            let (lo, hi): (Vec<f64>, Vec<f64>) = (0..k)
-                .step_by(every)
-                .enumerate()
-                .map(|(i, t)| {
-                    let param = with_param.then(|| (band_lo[c][i], band_hi[c][i]));
-                    prediction::widen(simulated[c][t], param, me.quantile[c] * scale[t])
-                })
-                .unzip();
-            lo_all.push(lo);
-            hi_all.push(hi);
-        }
-        band_lo = lo_all;
-        band_hi = hi_all;
+        (spread.lo, spread.hi) = widen_by_model_error(me, data, &compared, every, &spread);
     }
-    if let (Some(b), Some(me)) = (&mut band, &model_error) {
+    if let (Some(b), Some(me)) = (&mut spread.info, &model_error) {
         let _ = write!(
             b.method,
             "; widened in quadrature by the model error learned {} (docs/validation.md)",
@@ -217,12 +104,12 @@ pub fn free_run(
             }
         );
     }
-    if !band_lo.is_empty() {
+    if !spread.lo.is_empty() {
         for (c, ch) in channels.iter_mut().enumerate() {
             ch.coverage_percent = Some(prediction::coverage_percent(
-                &keep(&measured[c]),
-                &band_lo[c],
-                &band_hi[c],
+                &thin(&compared.measured[c], every),
+                &spread.lo[c],
+                &spread.hi[c],
             ));
         }
     }
@@ -236,16 +123,244 @@ pub fn free_run(
         integrator: FREE_RUN_INTEGRATOR,
         measurement: kind,
         channels,
-        band,
-        band_error,
+        band: spread.info,
+        band_error: spread.error,
         model_error,
         every,
-        t: keep(&data.t),
-        measured: measured.iter().map(|v| keep(v)).collect(),
-        simulated: simulated.iter().map(|v| keep(v)).collect(),
-        band_lo,
-        band_hi,
+        t: thin(&data.t, every),
+        measured: compared.measured.iter().map(|v| thin(v, every)).collect(),
+        simulated: compared.simulated.iter().map(|v| thin(v, every)).collect(),
+        band_lo: spread.lo,
+        band_hi: spread.hi,
     })
+}
+
+/// What a free run compares, channel by channel: the record's measured channels beside the
+/// identified model's simulation of them.
+struct Compared {
+    names: Vec<String>,
+    measured: Vec<Vec<f64>>,
+    simulated: Vec<Vec<f64>>,
+}
+
+/// The band of the parameters' spread: how it was drawn (or why there is none) and its
+/// pointwise bounds per channel, thinned like the kept series (empty without a band).
+struct ParameterBand {
+    info: Option<BandInfo>,
+    error: Option<String>,
+    lo: Vec<Vec<f64>>,
+    hi: Vec<Vec<f64>>,
+}
+
+impl ParameterBand {
+    /// No band, for the reason `why`.
+    fn failed(why: String) -> Self {
+        ParameterBand {
+            info: None,
+            error: Some(why),
+            lo: Vec::new(),
+            hi: Vec::new(),
+        }
+    }
+}
+
+/// The channels of building `chain` under the measured ground motion of `data`, as its sensors
+/// record them (`kind`), with the free run's integrator.
+fn simulate_record(
+    chain: &models::structure::ShearChain,
+    data: &LoadedDataset,
+    kind: MeasurementKind,
+) -> Result<Vec<Vec<f64>>, FreeRunError> {
+    simulate_channels(
+        chain,
+        &data.ug_meas,
+        data.dt,
+        &data.sensors,
+        kind,
+        FREE_RUN_INTEGRATOR,
+    )
+}
+
+/// Every `every`-th point of a series: what a record keeps of it.
+fn thin(v: &[f64], every: usize) -> Vec<f64> {
+    v.iter().step_by(every).copied().collect()
+}
+
+/// The fit % and NRMSE of θ_val's simulation against each measured channel.
+fn channel_fits(compared: &Compared) -> Vec<ChannelFit> {
+    let (measured, simulated) = (&compared.measured, &compared.simulated);
+    compared
+        .names
+        .iter()
+        .enumerate()
+        .map(|(c, name)| ChannelFit {
+            channel: name.clone(),
+            fit_percent: fit_percent(&measured[c], &simulated[c]),
+            nrmse: nrmse(&measured[c], &simulated[c]),
+            fit_draws: None,
+            coverage_percent: None,
+        })
+        .collect()
+}
+
+/// The band of `draws` θ from the record's posterior on the stream (seed, run, `BAND_PURPOSE`):
+/// each draw simulated, the spread of its fit written into `channels`, and the pointwise
+/// 2.5–97.5 % of the kept series; no band when fewer than two draws are valid.
+fn parameter_band(
+    d: &StructureDescription,
+    data: &LoadedDataset,
+    compared: &Compared,
+    (q, seed, run): (&QuantileDraw, u64, u64),
+    draws: usize,
+    every: usize,
+    channels: &mut [ChannelFit],
+) -> ParameterBand {
+    let mut rng = core_filters::rng::stream(seed, run, BAND_PURPOSE);
+    let thetas: Vec<Vec<f64>> = (0..draws).map(|_| q.draw(&mut rng)).collect();
+    let results = simulate_draws(d, data, &compared.measured, &thetas, every);
+    let invalid_reason = results.iter().find_map(|r| r.as_ref().err().cloned());
+    let ok: Vec<&(Vec<f64>, Vec<Vec<f64>>)> = results.iter().flatten().collect();
+    if ok.len() < 2 {
+        return ParameterBand::failed(format!(
+            "{} of {draws} draws were valid{}",
+            ok.len(),
+            invalid_reason
+                .as_ref()
+                .map_or(String::new(), |r| format!(" ({r})"))
+        ));
+    }
+    let (lo, hi) = spread_of_draws(&ok, channels);
+    ParameterBand {
+        info: Some(BandInfo {
+            method: "θ drawn from the record's credible intervals (quantile function \
+                     interpolated through its 2.5/5/25/75/95/97.5 % points, so draws stay \
+                     inside the 95 % intervals), parameters drawn independently (the \
+                     record keeps no correlations); pointwise 2.5–97.5 % of the draws"
+                .into(),
+            purpose: BAND_PURPOSE.into(),
+            draws,
+            valid: ok.len(),
+            invalid_reason,
+        }),
+        error: None,
+        lo,
+        hi,
+    }
+}
+
+/// Each drawn θ simulated on the record, side by side: its fit per channel and its kept series
+/// (or why it is invalid).
+fn simulate_draws(
+    d: &StructureDescription,
+    data: &LoadedDataset,
+    measured: &[Vec<f64>],
+    thetas: &[Vec<f64>],
+    every: usize,
+) -> Vec<DrawResult> {
+    thetas
+        .par_iter()
+        .map(|th| {
+            let c = chain_of(d, th).map_err(|e| e.to_string())?;
+            let y = simulate_record(&c, data, d.measurement).map_err(|e| e.to_string())?;
+            let fits = (0..y.len())
+                .map(|i| fit_percent(&measured[i], &y[i]))
+                .collect();
+            Ok((fits, y.iter().map(|v| thin(v, every)).collect()))
+        })
+        .collect()
+}
+
+/// The spread of the valid draws `ok`: the 2.5/50/97.5 % of each channel's fit (written into
+/// `channels`) and each channel's pointwise 2.5 % and 97.5 % series.
+fn spread_of_draws(
+    ok: &[&(Vec<f64>, Vec<Vec<f64>>)],
+    channels: &mut [ChannelFit],
+) -> (Vec<Vec<f64>>, Vec<Vec<f64>>) {
+    let (mut band_lo, mut band_hi) = (Vec::new(), Vec::new());
+    for (c, ch) in channels.iter_mut().enumerate() {
+        let mut f: Vec<f64> = ok.iter().map(|(fits, _)| fits[c]).collect();
+        f.sort_by(f64::total_cmp);
+        ch.fit_draws = Some(
+            [0.025, 0.5, 0.975]
+                .iter()
+                .map(|&p| percentile_sorted(&f, p))
+                .collect(),
+        );
+        let points = ok[0].1[c].len();
+        let (mut lo, mut hi) = (Vec::with_capacity(points), Vec::with_capacity(points));
+        let mut col = Vec::with_capacity(ok.len());
+        for i in 0..points {
+            col.clear();
+            col.extend(ok.iter().map(|(_, s)| s[c][i]));
+            col.sort_by(f64::total_cmp);
+            lo.push(percentile_sorted(&col, 0.025));
+            hi.push(percentile_sorted(&col, 0.975));
+        }
+        band_lo.push(lo);
+        band_hi.push(hi);
+    }
+    (band_lo, band_hi)
+}
+
+/// The model error that widens the band: none, learned in-sample on this record, or the one
+/// given when it was learned on these channels; `Err` says why a given one does not apply.
+fn model_error_for(
+    error: prediction::ErrorBand<'_>,
+    d: &StructureDescription,
+    data: &LoadedDataset,
+    theta: &[f64],
+    compared: &Compared,
+) -> Result<Option<ModelError>, String> {
+    let names = &compared.names;
+    Ok(match error {
+        prediction::ErrorBand::Without => None,
+        prediction::ErrorBand::InSample => prediction::learn(
+            names,
+            &compared.measured,
+            &compared.simulated,
+            data.dt,
+            prediction::window_seconds(d, theta),
+            0,
+            ErrorSource::InSample,
+        ),
+        prediction::ErrorBand::Given(m) if &m.channels == names => Some(m.clone()),
+        prediction::ErrorBand::Given(m) => {
+            return Err(format!(
+                "the model error was learned on channels {} and this record has {}: the band \
+                 holds the parameters' spread only",
+                m.channels.join(", "),
+                names.join(", ")
+            ))
+        }
+    })
+}
+
+/// The band widened in quadrature by the model error `me` around θ_val's simulation, per
+/// channel at the kept points (around the parameters' band where there is one).
+fn widen_by_model_error(
+    me: &ModelError,
+    data: &LoadedDataset,
+    compared: &Compared,
+    every: usize,
+    spread: &ParameterBand,
+) -> (Vec<Vec<f64>>, Vec<Vec<f64>>) {
+    let simulated = &compared.simulated;
+    let with_param = !spread.lo.is_empty();
+    let (mut lo_all, mut hi_all) = (Vec::new(), Vec::new());
+    for c in 0..compared.names.len() {
+        let scale = prediction::local_scale(&simulated[c], data.dt, me.window_s, me.floor[c]);
+        let (lo, hi): (Vec<f64>, Vec<f64>) = (0..data.len())
+            .step_by(every)
+            .enumerate()
+            .map(|(i, t)| {
+                let param = with_param.then(|| (spread.lo[c][i], spread.hi[c][i]));
+                prediction::widen(simulated[c][t], param, me.quantile[c] * scale[t])
+            })
+            .unzip();
+        lo_all.push(lo);
+        hi_all.push(hi);
+    }
+    (lo_all, hi_all)
 }
 
 /// The modes of building `d` with θ (linearised at rest) beside the peaks of the measured
@@ -584,175 +699,206 @@ pub(crate) fn modal_with_intervals(
 pub fn summary(free: Option<&FreeRun>, modal: Option<&ModalComparison>) -> String {
     let mut o = String::new();
     if let Some(f) = free {
-        let _ = writeln!(
-            o,
-            "free run of the identified model (θ_val, from rest, driven by the measured ground \
-             motion) against the measured {} accelerations:",
-            f.measurement
-        );
-        let _ = writeln!(
-            o,
-            "{:<8}  {:>8}  {:>7}  {:>26}  {:>12}",
-            "channel",
-            "fit %",
-            "NRMSE",
-            format!(
-                "fit of {} draws 2.5/50/97.5",
-                f.band.as_ref().map_or(0, |b| b.valid)
-            ),
-            "band covers"
-        );
-        for c in &f.channels {
-            let draws = match &c.fit_draws {
-                Some(p) if p.len() == 3 => format!("{:.1} / {:.1} / {:.1}", p[0], p[1], p[2]),
-                _ => "–".into(),
-            };
-            let covers = c
-                .coverage_percent
-                .map_or("–".to_string(), |v| format!("{v:.1} %"));
-            let _ = writeln!(
-                o,
-                "{:<8}  {:>8.1}  {:>7.3}  {draws:>26}  {covers:>12}",
-                c.channel, c.fit_percent, c.nrmse
-            );
-        }
-        if let Some(me) = &f.model_error {
-            let _ = writeln!(
-                o,
-                "95 % predictive band: the parameters' spread and the model's error, learned {} \
-                 (|error| ≤ {} × √(m + (f·RMS)²), m the predicted motion's mean square over \
-                 {:.2} s, f = {}; channels in order). On the record it was learned on, its \
-                 coverage is not an independent test: `sysid validate` on another record gives \
-                 one — docs/validation.md",
-                match me.source {
-                    ErrorSource::HeldOut { samples } =>
-                        format!("on the {samples} held-out samples the identification did not fit"),
-                    ErrorSource::InSample =>
-                        "in-sample on this record (narrower than a new record needs)".to_string(),
-                },
-                me.quantile
-                    .iter()
-                    .map(|q| format!("{q:.2}"))
-                    .collect::<Vec<_>>()
-                    .join(" / "),
-                me.window_s,
-                me.floor
-                    .iter()
-                    .map(|q| format!("{q:.2}"))
-                    .collect::<Vec<_>>()
-                    .join(" / "),
-            );
-        }
-        match (&f.band, &f.band_error) {
-            (Some(b), _) => {
-                let _ = writeln!(
-                    o,
-                    "band: {} of {} draws valid; θ drawn inside each parameter's 95 % interval, \
-                     parameters independently (the record keeps no correlations) — \
-                     docs/validation.md",
-                    b.valid, b.draws
-                );
-            }
-            (None, Some(e)) => {
-                let _ = writeln!(o, "no band: {e}");
-            }
-            (None, None) => {}
-        }
+        write_free_run(&mut o, f);
     }
     if let Some(m) = modal {
-        let _ = writeln!(
-            o,
-            "modes of the identified model linearised at rest (Bouc–Wen at its initial tangent) \
-             beside the peaks of the measured transfer functions (Welch H1, resolution {:.3} Hz):",
-            m.resolution_hz
-        );
-        let _ = writeln!(
-            o,
-            "{:<5}  {:>12}  {:>18}  {:>8}  {:>18}  {:>16}  {:>10}",
-            "mode", "model [Hz]", "95 % [Hz]", "ζ", "ζ 95 %", "measured [Hz]", "difference"
-        );
-        let span = |v: Option<[f64; 2]>, digits: usize| {
-            v.map_or("–".to_string(), |[a, b]| {
-                format!("[{a:.digits$}, {b:.digits$}]")
-            })
-        };
-        for p in &m.pairs {
-            let _ = writeln!(
-                o,
-                "{:<5}  {:>12.3}  {:>18}  {:>8.4}  {:>18}  {:>16}  {:>10}",
-                p.mode,
-                p.model_hz,
-                span(p.model_hz_95, 3),
-                p.damping_ratio,
-                span(p.damping_ratio_95, 4),
-                p.measured_hz.map_or(
-                    if p.model_hz < 2.0 * m.resolution_hz {
-                        "below resolution".to_string()
-                    } else if let Some(db) = p.excitation_db.filter(|db| *db < not_excited_db()) {
-                        format!("not excited ({db:.0} dB)")
-                    } else {
-                        "no peak near".to_string()
-                    },
-                    |f| format!("{f:.3}")
-                ),
-                p.difference_percent
-                    .map_or("–".to_string(), |d| format!("{d:+.1} %")),
-            );
-        }
-        if m.pairs.iter().any(|p| p.model_hz_95.is_some()) {
-            let _ = writeln!(
-                o,
-                "95 %: the central 95 % of each mode over {MODAL_DRAWS} θ drawn as the band's \
-                 (each parameter inside its 95 % interval, independently: the record keeps no \
-                 correlations) — docs/validation.md"
-            );
-        }
-        if m.pairs.iter().any(|p| {
-            p.measured_hz.is_none() && p.excitation_db.is_some_and(|db| db < not_excited_db())
-        }) {
-            let _ = writeln!(
-                o,
-                "not excited: the record's ground motion near that mode is more than {:.0} dB \
-                 below its strongest frequency, so the record cannot show it (a sine or a narrow \
-                 band excites only its own frequencies); its measured peaks there are bumps of \
-                 the input's spectrum",
-                -not_excited_db()
-            );
-        }
-        if m.pairs.iter().any(|p| p.damping_ratio < 0.0) {
-            let _ = writeln!(
-                o,
-                "a negative ζ: that mode of the identified model grows (a negative damping): \
-                 not a physical model"
-            );
-        }
-        if m.overdamped > 0 {
-            let _ = writeln!(
-                o,
-                "{} over-damped mode(s) of the model (no resonance)",
-                m.overdamped
-            );
-        }
-        let unpaired: Vec<String> = m
-            .peaks
-            .iter()
-            .filter(|p| {
-                !m.pairs
-                    .iter()
-                    .any(|q| q.measured_hz == Some(p.frequency_hz))
-            })
-            .map(|p| format!("{:.3}", p.frequency_hz))
-            .collect();
-        if !unpaired.is_empty() {
-            let _ = writeln!(
-                o,
-                "measured peaks without a model mode: {} Hz",
-                unpaired.join(", ")
-            );
-        }
-        for e in &m.errors {
-            let _ = writeln!(o, "not computed: {e}");
-        }
+        write_modal_table(&mut o, m);
+        write_modal_notes(&mut o, m);
     }
     o
+}
+
+/// The free run's part of [`summary`]: the fit of every channel, the model error that widens
+/// the band, and how the band was drawn (or why there is none).
+fn write_free_run(o: &mut String, f: &FreeRun) {
+    let _ = writeln!(
+        o,
+        "free run of the identified model (θ_val, from rest, driven by the measured ground \
+         motion) against the measured {} accelerations:",
+        f.measurement
+    );
+    let _ = writeln!(
+        o,
+        "{:<8}  {:>8}  {:>7}  {:>26}  {:>12}",
+        "channel",
+        "fit %",
+        "NRMSE",
+        format!(
+            "fit of {} draws 2.5/50/97.5",
+            f.band.as_ref().map_or(0, |b| b.valid)
+        ),
+        "band covers"
+    );
+    for c in &f.channels {
+        let draws = match &c.fit_draws {
+            Some(p) if p.len() == 3 => format!("{:.1} / {:.1} / {:.1}", p[0], p[1], p[2]),
+            _ => "–".into(),
+        };
+        let covers = c
+            .coverage_percent
+            .map_or("–".to_string(), |v| format!("{v:.1} %"));
+        let _ = writeln!(
+            o,
+            "{:<8}  {:>8.1}  {:>7.3}  {draws:>26}  {covers:>12}",
+            c.channel, c.fit_percent, c.nrmse
+        );
+    }
+    if let Some(me) = &f.model_error {
+        write_model_error(o, me);
+    }
+    match (&f.band, &f.band_error) {
+        (Some(b), _) => {
+            let _ = writeln!(
+                o,
+                "band: {} of {} draws valid; θ drawn inside each parameter's 95 % interval, \
+                 parameters independently (the record keeps no correlations) — \
+                 docs/validation.md",
+                b.valid, b.draws
+            );
+        }
+        (None, Some(e)) => {
+            let _ = writeln!(o, "no band: {e}");
+        }
+        (None, None) => {}
+    }
+}
+
+/// How the model error `me` widens the predictive band, where it was learned, and why its
+/// coverage on the identifying record is no independent test.
+fn write_model_error(o: &mut String, me: &ModelError) {
+    let _ = writeln!(
+        o,
+        "95 % predictive band: the parameters' spread and the model's error, learned {} \
+         (|error| ≤ {} × √(m + (f·RMS)²), m the predicted motion's mean square over \
+         {:.2} s, f = {}; channels in order). On the record it was learned on, its \
+         coverage is not an independent test: `sysid validate` on another record gives \
+         one — docs/validation.md",
+        match me.source {
+            ErrorSource::HeldOut { samples } =>
+                format!("on the {samples} held-out samples the identification did not fit"),
+            ErrorSource::InSample =>
+                "in-sample on this record (narrower than a new record needs)".to_string(),
+        },
+        me.quantile
+            .iter()
+            .map(|q| format!("{q:.2}"))
+            .collect::<Vec<_>>()
+            .join(" / "),
+        me.window_s,
+        me.floor
+            .iter()
+            .map(|q| format!("{q:.2}"))
+            .collect::<Vec<_>>()
+            .join(" / "),
+    );
+}
+
+/// The modal part of [`summary`]: each model mode with its 95 % interval and damping ratio
+/// beside the measured peak it is paired with.
+fn write_modal_table(o: &mut String, m: &ModalComparison) {
+    let _ = writeln!(
+        o,
+        "modes of the identified model linearised at rest (Bouc–Wen at its initial tangent) \
+         beside the peaks of the measured transfer functions (Welch H1, resolution {:.3} Hz):",
+        m.resolution_hz
+    );
+    let _ = writeln!(
+        o,
+        "{:<5}  {:>12}  {:>18}  {:>8}  {:>18}  {:>16}  {:>10}",
+        "mode", "model [Hz]", "95 % [Hz]", "ζ", "ζ 95 %", "measured [Hz]", "difference"
+    );
+    let span = |v: Option<[f64; 2]>, digits: usize| {
+        v.map_or("–".to_string(), |[a, b]| {
+            format!("[{a:.digits$}, {b:.digits$}]")
+        })
+    };
+    for p in &m.pairs {
+        let _ = writeln!(
+            o,
+            "{:<5}  {:>12.3}  {:>18}  {:>8.4}  {:>18}  {:>16}  {:>10}",
+            p.mode,
+            p.model_hz,
+            span(p.model_hz_95, 3),
+            p.damping_ratio,
+            span(p.damping_ratio_95, 4),
+            measured_peak_cell(p, m.resolution_hz),
+            p.difference_percent
+                .map_or("–".to_string(), |d| format!("{d:+.1} %")),
+        );
+    }
+}
+
+/// The measured column of a mode's row: the paired peak's frequency, or why there is none
+/// (below the resolution, not excited by the record, or no peak near).
+fn measured_peak_cell(p: &ModePair, resolution_hz: f64) -> String {
+    p.measured_hz.map_or(
+        if p.model_hz < 2.0 * resolution_hz {
+            "below resolution".to_string()
+        } else if let Some(db) = p.excitation_db.filter(|db| *db < not_excited_db()) {
+            format!("not excited ({db:.0} dB)")
+        } else {
+            "no peak near".to_string()
+        },
+        |f| format!("{f:.3}"),
+    )
+}
+
+/// The notes under the modal table: what its intervals and "not excited" mean, modes that are
+/// not physical or not resonant, measured peaks without a mode, and what was not computed.
+fn write_modal_notes(o: &mut String, m: &ModalComparison) {
+    if m.pairs.iter().any(|p| p.model_hz_95.is_some()) {
+        let _ = writeln!(
+            o,
+            "95 %: the central 95 % of each mode over {MODAL_DRAWS} θ drawn as the band's \
+             (each parameter inside its 95 % interval, independently: the record keeps no \
+             correlations) — docs/validation.md"
+        );
+    }
+    if m.pairs
+        .iter()
+        .any(|p| p.measured_hz.is_none() && p.excitation_db.is_some_and(|db| db < not_excited_db()))
+    {
+        let _ = writeln!(
+            o,
+            "not excited: the record's ground motion near that mode is more than {:.0} dB \
+             below its strongest frequency, so the record cannot show it (a sine or a narrow \
+             band excites only its own frequencies); its measured peaks there are bumps of \
+             the input's spectrum",
+            -not_excited_db()
+        );
+    }
+    if m.pairs.iter().any(|p| p.damping_ratio < 0.0) {
+        let _ = writeln!(
+            o,
+            "a negative ζ: that mode of the identified model grows (a negative damping): \
+             not a physical model"
+        );
+    }
+    if m.overdamped > 0 {
+        let _ = writeln!(
+            o,
+            "{} over-damped mode(s) of the model (no resonance)",
+            m.overdamped
+        );
+    }
+    let unpaired: Vec<String> = m
+        .peaks
+        .iter()
+        .filter(|p| {
+            !m.pairs
+                .iter()
+                .any(|q| q.measured_hz == Some(p.frequency_hz))
+        })
+        .map(|p| format!("{:.3}", p.frequency_hz))
+        .collect();
+    if !unpaired.is_empty() {
+        let _ = writeln!(
+            o,
+            "measured peaks without a model mode: {} Hz",
+            unpaired.join(", ")
+        );
+    }
+    for e in &m.errors {
+        let _ = writeln!(o, "not computed: {e}");
+    }
 }
