@@ -461,12 +461,6 @@ pub fn convergence(runs: &[(&str, &RunRecord)], path: &Path, title: &str) -> Res
             path.display()
         );
     }
-    // A true value is drawn when some record knows it (they come from the same data).
-    let truth = |j: usize| {
-        runs.iter()
-            .find_map(|(_, r)| r.theta_true.as_ref().and_then(|t| t.get(j).copied()))
-            .filter(|t| t.is_finite())
-    };
     let (t0, t1) = padded(
         finite_range(runs.iter().flat_map(|(_, r)| r.trace.t.iter().copied()))
             .unwrap_or((0.0, 1.0)),
@@ -484,7 +478,7 @@ pub fn convergence(runs: &[(&str, &RunRecord)], path: &Path, title: &str) -> Res
         })
         .collect();
     entries.push((Swatch::Band(colour(6), 0.25), "mean ± 2 s.d.".to_string()));
-    if (0..names.len()).any(|j| truth(j).is_some()) {
+    if (0..names.len()).any(|j| known_truth(runs, j).is_some()) {
         entries.push((Swatch::Dashed(BLACK), "true value".to_string()));
     }
     let (_, legend_h) = legend_layout(&entries);
@@ -495,77 +489,123 @@ pub fn convergence(runs: &[(&str, &RunRecord)], path: &Path, title: &str) -> Res
     let panels = grid.split_evenly((rows, cols));
 
     for (j, (name, area)) in names.iter().zip(&panels).enumerate() {
-        let truth_j = truth(j);
-        let ((lo, hi), clipped) = convergence_y_range(runs, j, truth_j);
-        let caption = if clipped {
-            format!("{name} {} (bands clipped)", param_unit(name))
-        } else {
-            format!("{name} {}", param_unit(name))
-        };
-        let mut chart = panel_chart(area, &caption, 70, t0..t1, lo..hi)?;
-        let (tspan, yspan) = (t1 - t0, hi - lo);
-        draw_mesh(
-            chart
-                .configure_mesh()
-                .x_desc("t [s]")
-                .x_labels(6)
-                .y_labels(5)
-                .x_label_formatter(&|v| tick(*v, tspan))
-                .y_label_formatter(&|v| tick(*v, yspan)),
-        )?;
-        let clamp = |v: f64| v.clamp(lo, hi);
-        // Bands first so that no mean line is hidden under another run's band.
-        for (i, (_, r)) in runs.iter().enumerate() {
-            let tr = &r.trace;
-            let ok = |k: usize| {
-                tr.t[k].is_finite()
-                    && at(&tr.param_mean, k, j).is_finite()
-                    && at(&tr.param_sd, k, j).is_finite()
-            };
-            for seg in segments(tr.t.len(), ok) {
-                let upper = seg.clone().map(|k| {
-                    (
-                        tr.t[k],
-                        clamp(at(&tr.param_mean, k, j) + 2.0 * at(&tr.param_sd, k, j)),
-                    )
-                });
-                let lower = seg.clone().rev().map(|k| {
-                    (
-                        tr.t[k],
-                        clamp(at(&tr.param_mean, k, j) - 2.0 * at(&tr.param_sd, k, j)),
-                    )
-                });
-                let outline: Vec<(f64, f64)> = upper.chain(lower).collect();
-                chart.draw_series(std::iter::once(Polygon::new(
-                    outline,
-                    style::for_label(runs[i].0, i).colour.mix(0.18).filled(),
-                )))?;
-            }
-        }
-        for (i, (_, r)) in runs.iter().enumerate() {
-            let tr = &r.trace;
-            let ok = |k: usize| tr.t[k].is_finite() && at(&tr.param_mean, k, j).is_finite();
-            for seg in segments(tr.t.len(), ok) {
-                let points: Vec<(f64, f64)> = seg
-                    .map(|k| (tr.t[k], clamp(at(&tr.param_mean, k, j))))
-                    .collect();
-                chart.draw_series(LineSeries::new(
-                    points,
-                    style::for_label(runs[i].0, i).colour.stroke_width(2),
-                ))?;
-            }
-        }
-        if let Some(t) = truth_j.filter(|t| *t >= lo && *t <= hi) {
-            chart.draw_series(DashedLineSeries::new(
-                vec![(t0, t), (t1, t)],
-                10,
-                6,
-                BLACK.stroke_width(2),
-            ))?;
-        }
+        draw_convergence_panel(area, runs, j, name, (t0, t1))?;
     }
 
     finish(&root, &legend, &entries, path)
+}
+
+/// The true value of parameter `j`, drawn when some record knows it (they come from the same
+/// data).
+fn known_truth(runs: &[(&str, &RunRecord)], j: usize) -> Option<f64> {
+    runs.iter()
+        .find_map(|(_, r)| r.theta_true.as_ref().and_then(|t| t.get(j).copied()))
+        .filter(|t| t.is_finite())
+}
+
+/// The convergence panel of parameter `j` (`name`) over the time axis `t0..t1`: every run's
+/// ±2 s.d. band and mean, and the true value where it is known and inside the axis.
+fn draw_convergence_panel(
+    area: &Area<'_>,
+    runs: &[(&str, &RunRecord)],
+    j: usize,
+    name: &str,
+    (t0, t1): (f64, f64),
+) -> Result<()> {
+    let truth_j = known_truth(runs, j);
+    let ((lo, hi), clipped) = convergence_y_range(runs, j, truth_j);
+    let caption = if clipped {
+        format!("{name} {} (bands clipped)", param_unit(name))
+    } else {
+        format!("{name} {}", param_unit(name))
+    };
+    let mut chart = panel_chart(area, &caption, 70, t0..t1, lo..hi)?;
+    let (tspan, yspan) = (t1 - t0, hi - lo);
+    draw_mesh(
+        chart
+            .configure_mesh()
+            .x_desc("t [s]")
+            .x_labels(6)
+            .y_labels(5)
+            .x_label_formatter(&|v| tick(*v, tspan))
+            .y_label_formatter(&|v| tick(*v, yspan)),
+    )?;
+    // Bands first so that no mean line is hidden under another run's band.
+    draw_sd_bands(&mut chart, runs, j, (lo, hi))?;
+    draw_mean_lines(&mut chart, runs, j, (lo, hi))?;
+    if let Some(t) = truth_j.filter(|t| *t >= lo && *t <= hi) {
+        chart.draw_series(DashedLineSeries::new(
+            vec![(t0, t), (t1, t)],
+            10,
+            6,
+            BLACK.stroke_width(2),
+        ))?;
+    }
+    Ok(())
+}
+
+/// Every run's shaded band of mean ± 2 s.d. of parameter `j`, clamped to the axis `lo..hi`, one
+/// polygon per stretch of finite values.
+fn draw_sd_bands(
+    chart: &mut Chart<'_>,
+    runs: &[(&str, &RunRecord)],
+    j: usize,
+    (lo, hi): (f64, f64),
+) -> Result<()> {
+    let clamp = |v: f64| v.clamp(lo, hi);
+    for (i, (_, r)) in runs.iter().enumerate() {
+        let tr = &r.trace;
+        let ok = |k: usize| {
+            tr.t[k].is_finite()
+                && at(&tr.param_mean, k, j).is_finite()
+                && at(&tr.param_sd, k, j).is_finite()
+        };
+        for seg in segments(tr.t.len(), ok) {
+            let upper = seg.clone().map(|k| {
+                (
+                    tr.t[k],
+                    clamp(at(&tr.param_mean, k, j) + 2.0 * at(&tr.param_sd, k, j)),
+                )
+            });
+            let lower = seg.clone().rev().map(|k| {
+                (
+                    tr.t[k],
+                    clamp(at(&tr.param_mean, k, j) - 2.0 * at(&tr.param_sd, k, j)),
+                )
+            });
+            let outline: Vec<(f64, f64)> = upper.chain(lower).collect();
+            chart.draw_series(std::iter::once(Polygon::new(
+                outline,
+                style::for_label(runs[i].0, i).colour.mix(0.18).filled(),
+            )))?;
+        }
+    }
+    Ok(())
+}
+
+/// Every run's posterior mean of parameter `j` against time, clamped to the axis `lo..hi`, one
+/// line per stretch of finite values.
+fn draw_mean_lines(
+    chart: &mut Chart<'_>,
+    runs: &[(&str, &RunRecord)],
+    j: usize,
+    (lo, hi): (f64, f64),
+) -> Result<()> {
+    let clamp = |v: f64| v.clamp(lo, hi);
+    for (i, (_, r)) in runs.iter().enumerate() {
+        let tr = &r.trace;
+        let ok = |k: usize| tr.t[k].is_finite() && at(&tr.param_mean, k, j).is_finite();
+        for seg in segments(tr.t.len(), ok) {
+            let points: Vec<(f64, f64)> = seg
+                .map(|k| (tr.t[k], clamp(at(&tr.param_mean, k, j))))
+                .collect();
+            chart.draw_series(LineSeries::new(
+                points,
+                style::for_label(runs[i].0, i).colour.stroke_width(2),
+            ))?;
+        }
+    }
+    Ok(())
 }
 
 /// Hysteresis figure (SPEC §7 validation, Figs. 4 (b) and 8): restoring force k1·r1 against the
@@ -684,56 +724,86 @@ pub fn crosses(groups: &[(&str, Vec<&RunRecord>)], path: &Path, title: &str) -> 
             path.display()
         );
     }
-    struct Summary {
-        mean: Vec<f64>,
-        sd: Vec<f64>,
-        used: usize,
-        failed: usize,
-        no_truth: usize,
+    let summaries = groups
+        .iter()
+        .map(|(label, runs)| ratio_summary(label, runs, names, path))
+        .collect::<Result<Vec<_>>>()?;
+    let entries = cross_legend(groups, &summaries);
+    let (_, legend_h) = legend_layout(&entries);
+
+    // One panel per parameter group, each on its own scale, so that the stiffnesses' small
+    // differences are not flattened by the hysteresis parameters' large ones.
+    let panels = parameter_groups(names);
+    let (root, body, legend) = open_figure(path, 760 + legend_h, title, legend_h)?;
+    let areas = panel_areas(&body, &panels);
+    for ((group, idx), area) in panels.iter().zip(&areas) {
+        let labels: Vec<&str> = groups.iter().map(|(label, _)| *label).collect();
+        let sub: Vec<String> = idx.iter().map(|&j| names[j].clone()).collect();
+        draw_cross_panel(&root, area, group, idx, &sub, &labels, &summaries)?;
     }
-    let mut summaries = Vec::with_capacity(groups.len());
-    for (label, runs) in groups {
-        if let Some(r) = runs.iter().find(|r| &r.param_names != names) {
-            bail!(
-                "cross figure {}: a run of '{label}' (seed {}, run {}) has different parameters",
-                path.display(),
-                r.seed,
-                r.run
-            );
-        }
-        let failed = runs.iter().filter(|r| r.is_failure()).count();
-        let ratios: Vec<Vec<f64>> = runs
+    finish(&root, &legend, &entries, path)
+}
+
+/// θ_val / θ_true over the usable runs of one algorithm: mean and s.d. per parameter, and how
+/// many runs were used, failed or had no true θ.
+struct RatioSummary {
+    mean: Vec<f64>,
+    sd: Vec<f64>,
+    used: usize,
+    failed: usize,
+    no_truth: usize,
+}
+
+/// The [`RatioSummary`] of the runs of algorithm `label`, which must all have the parameters
+/// `names`.
+fn ratio_summary(
+    label: &str,
+    runs: &[&RunRecord],
+    names: &[String],
+    path: &Path,
+) -> Result<RatioSummary> {
+    if let Some(r) = runs.iter().find(|r| r.param_names != names) {
+        bail!(
+            "cross figure {}: a run of '{label}' (seed {}, run {}) has different parameters",
+            path.display(),
+            r.seed,
+            r.run
+        );
+    }
+    let failed = runs.iter().filter(|r| r.is_failure()).count();
+    let ratios: Vec<Vec<f64>> = runs
+        .iter()
+        .filter(|r| !r.is_failure())
+        .filter_map(|r| r.normalised_theta_val())
+        .collect();
+    let no_truth = runs.len() - failed - ratios.len();
+    let (mut mean, mut sd) = (Vec::new(), Vec::new());
+    for j in 0..names.len() {
+        let column: Vec<f64> = ratios
             .iter()
-            .filter(|r| !r.is_failure())
-            .filter_map(|r| r.normalised_theta_val())
+            .map(|r| r.get(j).copied().unwrap_or(f64::NAN))
             .collect();
-        let no_truth = runs.len() - failed - ratios.len();
-        let (mut mean, mut sd) = (Vec::new(), Vec::new());
-        for j in 0..names.len() {
-            let column: Vec<f64> = ratios
-                .iter()
-                .map(|r| r.get(j).copied().unwrap_or(f64::NAN))
-                .collect();
-            let (m, s, _) = mean_sd(&column);
-            mean.push(m);
-            sd.push(s);
-        }
-        summaries.push(Summary {
-            mean,
-            sd,
-            used: ratios.len(),
-            failed,
-            no_truth,
-        });
+        let (m, s, _) = mean_sd(&column);
+        mean.push(m);
+        sd.push(s);
     }
+    Ok(RatioSummary {
+        mean,
+        sd,
+        used: ratios.len(),
+        failed,
+        no_truth,
+    })
+}
 
-    let g = groups.len().max(1);
-    let width = 0.7 / g as f64;
-    let offset = |i: usize| (i as f64 - (g as f64 - 1.0) / 2.0) * width;
-
+/// The cross figure's legend: each algorithm with the runs it used and skipped, and the truth.
+fn cross_legend(
+    groups: &[(&str, Vec<&RunRecord>)],
+    summaries: &[RatioSummary],
+) -> Vec<(Swatch, String)> {
     let mut entries: Vec<(Swatch, String)> = groups
         .iter()
-        .zip(&summaries)
+        .zip(summaries)
         .enumerate()
         .map(|(i, ((label, _), s))| {
             let mut text = format!("{label} (n = {}", s.used);
@@ -748,14 +818,13 @@ pub fn crosses(groups: &[(&str, Vec<&RunRecord>)], path: &Path, title: &str) -> 
         })
         .collect();
     entries.push((Swatch::Dashed(BLACK), "truth".to_string()));
-    let (_, legend_h) = legend_layout(&entries);
+    entries
+}
 
-    // One panel per parameter group, each on its own scale, so that the stiffnesses' small
-    // differences are not flattened by the hysteresis parameters' large ones.
-    let panels = parameter_groups(names);
-    let (root, body, legend) = open_figure(path, 760 + legend_h, title, legend_h)?;
+/// The body split side by side into one area per parameter group, widths in proportion to the
+/// parameters shown plus room for each panel's y labels.
+fn panel_areas<'a>(body: &Area<'a>, panels: &[(String, Vec<usize>)]) -> Vec<Area<'a>> {
     let (body_w, _) = body.dim_in_pixel();
-    // Widths in proportion to the parameters shown, plus room for each panel's y labels.
     let weight = |p: &(String, Vec<usize>)| p.1.len() as f64 + 1.2;
     let total: f64 = panels.iter().map(weight).sum();
     let mut cuts = Vec::new();
@@ -764,70 +833,109 @@ pub fn crosses(groups: &[(&str, Vec<&RunRecord>)], path: &Path, title: &str) -> 
         acc += weight(p);
         cuts.push((acc / total * body_w as f64).round() as i32);
     }
-    let areas = body.split_by_breakpoints(cuts, Vec::<i32>::new());
-    for ((group, idx), area) in panels.iter().zip(&areas) {
-        // Every drawn value is inside the axis: mean ± s.d. of every algorithm, and 1.
-        let values = summaries.iter().flat_map(|s| {
-            idx.iter()
-                .flat_map(|&j| {
-                    let sd = if s.sd[j].is_finite() { s.sd[j] } else { 0.0 };
-                    [s.mean[j] - sd, s.mean[j] + sd]
-                })
-                .collect::<Vec<_>>()
-        });
-        let (lo, hi) = padded(finite_range(values.chain([1.0])).unwrap_or((0.0, 2.0)));
-        let k = idx.len();
-        let mut chart = ChartBuilder::on(area)
-            .caption(group.clone(), (FONT, CAPTION_SIZE))
-            .margin(14)
-            .x_label_area_size(50)
-            .y_label_area_size(80)
-            .build_cartesian_2d(-0.5..(k as f64 - 0.5), lo..hi)?;
-        let yspan = hi - lo;
-        draw_mesh(
-            chart
-                .configure_mesh()
-                .disable_x_mesh()
-                .x_labels(0)
-                .y_labels(8)
-                .y_label_formatter(&|v| tick(*v, yspan))
-                .y_desc("θ_val / θ_true [-]"),
+    body.split_by_breakpoints(cuts, Vec::<i32>::new())
+}
+
+/// Where the `i`-th of `g` algorithms sits beside a category's centre, slots `width` apart.
+fn slot_offset(i: usize, g: usize, width: f64) -> f64 {
+    (i as f64 - (g as f64 - 1.0) / 2.0) * width
+}
+
+/// One panel of the cross figure: the parameters `idx` (named `sub`) of group `group` on their
+/// own scale, the truth at 1 and every algorithm's crosses.
+fn draw_cross_panel(
+    root: &Area<'_>,
+    area: &Area<'_>,
+    group: &str,
+    idx: &[usize],
+    sub: &[String],
+    labels: &[&str],
+    summaries: &[RatioSummary],
+) -> Result<()> {
+    // Every drawn value is inside the axis: mean ± s.d. of every algorithm, and 1.
+    let values = summaries.iter().flat_map(|s| {
+        idx.iter()
+            .flat_map(|&j| {
+                let sd = if s.sd[j].is_finite() { s.sd[j] } else { 0.0 };
+                [s.mean[j] - sd, s.mean[j] + sd]
+            })
+            .collect::<Vec<_>>()
+    });
+    let (lo, hi) = padded(finite_range(values.chain([1.0])).unwrap_or((0.0, 2.0)));
+    let k = idx.len();
+    let mut chart = ChartBuilder::on(area)
+        .caption(group, (FONT, CAPTION_SIZE))
+        .margin(14)
+        .x_label_area_size(50)
+        .y_label_area_size(80)
+        .build_cartesian_2d(-0.5..(k as f64 - 0.5), lo..hi)?;
+    let yspan = hi - lo;
+    draw_mesh(
+        chart
+            .configure_mesh()
+            .disable_x_mesh()
+            .x_labels(0)
+            .y_labels(8)
+            .y_label_formatter(&|v| tick(*v, yspan))
+            .y_desc("θ_val / θ_true [-]"),
+    )?;
+    category_labels(root, &chart, sub, lo)?;
+    chart.draw_series(DashedLineSeries::new(
+        vec![(-0.5, 1.0), (k as f64 - 0.5, 1.0)],
+        10,
+        6,
+        BLACK.stroke_width(2),
+    ))?;
+    for (i, s) in summaries.iter().enumerate() {
+        draw_crosses(
+            root,
+            &chart,
+            idx,
+            style::for_label(labels[i], i),
+            i,
+            summaries.len(),
+            s,
         )?;
-        let sub: Vec<String> = idx.iter().map(|&j| names[j].clone()).collect();
-        category_labels(&root, &chart, &sub, lo)?;
-        chart.draw_series(DashedLineSeries::new(
-            vec![(-0.5, 1.0), (k as f64 - 0.5, 1.0)],
-            10,
-            6,
-            BLACK.stroke_width(2),
-        ))?;
-        for (i, s) in summaries.iter().enumerate() {
-            let st = style::for_label(groups[i].0, i);
-            let c = st.colour;
-            let arm = 0.35 * width;
-            for (x0, &j) in idx.iter().enumerate() {
-                let (m, sd) = (s.mean[j], s.sd[j]);
-                if !m.is_finite() {
-                    continue;
-                }
-                let x = x0 as f64 + offset(i);
-                let sd = if sd.is_finite() { sd } else { 0.0 };
-                // The arms in pixels, so that a dashed (non-Euler) series is dashed on screen.
-                let px = |p: (f64, f64)| chart.backend_coord(&p);
-                let arms = [
-                    (px((x, m - sd)), px((x, m + sd))),
-                    (px((x - arm, m)), px((x + arm, m))),
-                ];
-                for a in arms {
-                    for seg in arm_segments(a, st.dashed) {
-                        root.draw(&PathElement::new(seg, c.stroke_width(3)))?;
-                    }
-                }
-                root.draw(&marker(st, px((x, m))))?;
+    }
+    Ok(())
+}
+
+/// The crosses of the `i`-th of `g` algorithms (summary `s`, style `st`) at the parameters
+/// `idx`: a marker at the mean, a vertical arm of ± one s.d. and a short horizontal arm.
+fn draw_crosses(
+    root: &Area<'_>,
+    chart: &Chart<'_>,
+    idx: &[usize],
+    st: SeriesStyle,
+    i: usize,
+    g: usize,
+    s: &RatioSummary,
+) -> Result<()> {
+    let g = g.max(1);
+    let width = 0.7 / g as f64;
+    let c = st.colour;
+    let arm = 0.35 * width;
+    for (x0, &j) in idx.iter().enumerate() {
+        let (m, sd) = (s.mean[j], s.sd[j]);
+        if !m.is_finite() {
+            continue;
+        }
+        let x = x0 as f64 + slot_offset(i, g, width);
+        let sd = if sd.is_finite() { sd } else { 0.0 };
+        // The arms in pixels, so that a dashed (non-Euler) series is dashed on screen.
+        let px = |p: (f64, f64)| chart.backend_coord(&p);
+        let arms = [
+            (px((x, m - sd)), px((x, m + sd))),
+            (px((x - arm, m)), px((x + arm, m))),
+        ];
+        for a in arms {
+            for seg in arm_segments(a, st.dashed) {
+                root.draw(&PathElement::new(seg, c.stroke_width(3)))?;
             }
         }
+        root.draw(&marker(st, px((x, m))))?;
     }
-    finish(&root, &legend, &entries, path)
+    Ok(())
 }
 
 /// Parameters grouped for separate panels, in order of first appearance: stiffnesses `k…`,
@@ -880,7 +988,54 @@ fn quartiles(sorted: &[f64]) -> Option<[f64; 5]> {
 /// each algorithm can rank them either way; the distributions show whether the difference is
 /// systematic. Failed runs and runs without online errors are skipped and counted in the legend.
 pub fn state_errors(groups: &[(&str, Vec<&RunRecord>)], path: &Path, title: &str) -> Result<()> {
-    // State names in order of first appearance over all records.
+    let names = online_state_names(groups);
+    if names.is_empty() {
+        bail!(
+            "state-error figure {}: no run has online state errors",
+            path.display()
+        );
+    }
+    let errors = state_error_values(groups, &names);
+    // Every drawn value (every run) is inside the axis.
+    let top =
+        finite_range(errors.values.iter().flatten().flatten().copied()).map_or(1.0, |(_, hi)| hi);
+    let top = if top > 0.0 { 1.05 * top } else { 1.0 };
+
+    let n = names.len();
+    let entries = state_error_legend(groups, &errors);
+    let (_, legend_h) = legend_layout(&entries);
+
+    let (root, body, legend) = open_figure(path, 760 + legend_h, title, legend_h)?;
+    let mut chart = ChartBuilder::on(&body)
+        .margin(20)
+        .x_label_area_size(60)
+        .y_label_area_size(90)
+        .build_cartesian_2d(-0.5..(n as f64 - 0.5), 0.0..top)?;
+    draw_mesh(
+        chart
+            .configure_mesh()
+            .disable_x_mesh()
+            .x_labels(0)
+            .y_label_formatter(&|v| tick(*v, top))
+            .x_desc("state")
+            .y_desc("online NRMSE [-]"),
+    )?;
+    category_labels(&root, &chart, &names, 0.0)?;
+
+    let g = groups.len().max(1);
+    let width = 0.8 / g as f64;
+    for (i, per_state) in errors.values.iter().enumerate() {
+        let c = style::for_label(groups[i].0, i).colour;
+        for (j, v) in per_state.iter().enumerate() {
+            let x = j as f64 + slot_offset(i, g, width);
+            draw_box(&mut chart, x, 0.4 * width, c, v)?;
+        }
+    }
+    finish(&root, &legend, &entries, path)
+}
+
+/// The online states of the usable runs, in order of first appearance over all records.
+fn online_state_names(groups: &[(&str, Vec<&RunRecord>)]) -> Vec<String> {
     let mut names: Vec<String> = Vec::new();
     for (_, runs) in groups {
         for r in runs.iter().filter(|r| !r.is_failure()) {
@@ -891,13 +1046,20 @@ pub fn state_errors(groups: &[(&str, Vec<&RunRecord>)], path: &Path, title: &str
             }
         }
     }
-    if names.is_empty() {
-        bail!(
-            "state-error figure {}: no run has online state errors",
-            path.display()
-        );
-    }
-    // values[i][j]: the NRMSE of state j in every usable run of algorithm i.
+    names
+}
+
+/// The online state errors of every algorithm, and how many of its runs were used and skipped.
+struct StateErrors {
+    /// `values[i][j]`: the NRMSE of state j in every usable run of algorithm i.
+    values: Vec<Vec<Vec<f64>>>,
+    used: Vec<usize>,
+    skipped: Vec<usize>,
+}
+
+/// The finite NRMSE of each state `names` in the usable runs (not failed, with online errors)
+/// of every algorithm.
+fn state_error_values(groups: &[(&str, Vec<&RunRecord>)], names: &[String]) -> StateErrors {
     let mut values: Vec<Vec<Vec<f64>>> = Vec::new();
     let mut used = Vec::new();
     let mut skipped = Vec::new();
@@ -928,22 +1090,26 @@ pub fn state_errors(groups: &[(&str, Vec<&RunRecord>)], path: &Path, title: &str
         used.push(usable.len());
         skipped.push(runs.len() - usable.len());
     }
-    // Every drawn value (every run) is inside the axis.
-    let top = finite_range(values.iter().flatten().flatten().copied()).map_or(1.0, |(_, hi)| hi);
-    let top = if top > 0.0 { 1.05 * top } else { 1.0 };
+    StateErrors {
+        values,
+        used,
+        skipped,
+    }
+}
 
-    let n = names.len();
-    let g = groups.len().max(1);
-    let width = 0.8 / g as f64;
-    let offset = |i: usize| (i as f64 - (g as f64 - 1.0) / 2.0) * width;
-
+/// The state-error figure's legend: each algorithm with the runs it used and skipped, and what
+/// a box, its whiskers and its dots mean.
+fn state_error_legend(
+    groups: &[(&str, Vec<&RunRecord>)],
+    errors: &StateErrors,
+) -> Vec<(Swatch, String)> {
     let mut entries: Vec<(Swatch, String)> = groups
         .iter()
         .enumerate()
         .map(|(i, (label, _))| {
-            let mut text = format!("{label} (n = {}", used[i]);
-            if skipped[i] > 0 {
-                text.push_str(&format!(", {} skipped", skipped[i]));
+            let mut text = format!("{label} (n = {}", errors.used[i]);
+            if errors.skipped[i] > 0 {
+                text.push_str(&format!(", {} skipped", errors.skipped[i]));
             }
             text.push(')');
             (Swatch::Bar(style::for_label(label, i).colour), text)
@@ -953,62 +1119,43 @@ pub fn state_errors(groups: &[(&str, Vec<&RunRecord>)], path: &Path, title: &str
         Swatch::Line(BLACK),
         "box: quartiles and median; whiskers: min–max; dots: runs".to_string(),
     ));
-    let (_, legend_h) = legend_layout(&entries);
+    entries
+}
 
-    let (root, body, legend) = open_figure(path, 760 + legend_h, title, legend_h)?;
-    let mut chart = ChartBuilder::on(&body)
-        .margin(20)
-        .x_label_area_size(60)
-        .y_label_area_size(90)
-        .build_cartesian_2d(-0.5..(n as f64 - 0.5), 0.0..top)?;
-    draw_mesh(
-        chart
-            .configure_mesh()
-            .disable_x_mesh()
-            .x_labels(0)
-            .y_label_formatter(&|v| tick(*v, top))
-            .x_desc("state")
-            .y_desc("online NRMSE [-]"),
-    )?;
-    category_labels(&root, &chart, &names, 0.0)?;
-
-    for (i, per_state) in values.iter().enumerate() {
-        let c = style::for_label(groups[i].0, i).colour;
-        let half = 0.4 * width;
-        for (j, v) in per_state.iter().enumerate() {
-            let mut sorted = v.clone();
-            sorted.sort_by(f64::total_cmp);
-            let Some([min, q1, med, q3, max]) = quartiles(&sorted) else {
-                continue;
-            };
-            let x = j as f64 + offset(i);
-            chart.draw_series(std::iter::once(Rectangle::new(
-                [(x - half, q1), (x + half, q3)],
-                c.mix(0.35).filled(),
-            )))?;
-            chart.draw_series(std::iter::once(Rectangle::new(
-                [(x - half, q1), (x + half, q3)],
-                c.stroke_width(2),
-            )))?;
-            for (a, b) in [(min, q1), (q3, max)] {
-                chart.draw_series(std::iter::once(PathElement::new(
-                    vec![(x, a), (x, b)],
-                    c.stroke_width(2),
-                )))?;
-            }
-            chart.draw_series(std::iter::once(PathElement::new(
-                vec![(x - half, med), (x + half, med)],
-                BLACK.stroke_width(3),
-            )))?;
-            // Runs as dots, spread deterministically across the box's width.
-            let m = v.len().max(1) as f64;
-            chart.draw_series(v.iter().enumerate().map(|(k, &y)| {
-                let jitter = ((k as f64 + 0.5) / m - 0.5) * 1.6 * half;
-                Circle::new((x + jitter, y), 2, c.filled())
-            }))?;
-        }
+/// One box of the state-error figure at `x`, `half` wide on each side, in colour `c`: the
+/// quartiles of the runs' values `v` with the median, whiskers to min and max, and every run as
+/// a dot (nothing without values).
+fn draw_box(chart: &mut Chart<'_>, x: f64, half: f64, c: RGBColor, v: &[f64]) -> Result<()> {
+    let mut sorted = v.to_vec();
+    sorted.sort_by(f64::total_cmp);
+    let Some([min, q1, med, q3, max]) = quartiles(&sorted) else {
+        return Ok(());
+    };
+    chart.draw_series(std::iter::once(Rectangle::new(
+        [(x - half, q1), (x + half, q3)],
+        c.mix(0.35).filled(),
+    )))?;
+    chart.draw_series(std::iter::once(Rectangle::new(
+        [(x - half, q1), (x + half, q3)],
+        c.stroke_width(2),
+    )))?;
+    for (a, b) in [(min, q1), (q3, max)] {
+        chart.draw_series(std::iter::once(PathElement::new(
+            vec![(x, a), (x, b)],
+            c.stroke_width(2),
+        )))?;
     }
-    finish(&root, &legend, &entries, path)
+    chart.draw_series(std::iter::once(PathElement::new(
+        vec![(x - half, med), (x + half, med)],
+        BLACK.stroke_width(3),
+    )))?;
+    // Runs as dots, spread deterministically across the box's width.
+    let m = v.len().max(1) as f64;
+    chart.draw_series(v.iter().enumerate().map(|(k, &y)| {
+        let jitter = ((k as f64 + 0.5) / m - 0.5) * 1.6 * half;
+        Circle::new((x + jitter, y), 2, c.filled())
+    }))?;
+    Ok(())
 }
 
 /// One line of a [`time_series`] panel.
