@@ -314,7 +314,6 @@ pub fn execute(
         );
     }
     let s = &plan.settings;
-    let algorithm = plan.algorithm;
     crate::limits::check_filter_settings(s)?;
     let spec = plan.spec(data)?;
     let input = &RunInput {
@@ -331,22 +330,11 @@ pub fn execute(
         },
         rejuvenation: s.liu_west()?,
     };
-    let filter = build_filter(algorithm, spec.clone(), s)?;
+    let filter = build_filter(plan.algorithm, spec.clone(), s)?;
     // One-step-ahead prediction errors when asked for (`sysid filter`): every filter of a pool
     // computes its own (one noise-free step per time step), and the record keeps those of the
     // first filter the pool keeps (`pool::combine`).
-    let predictor = || -> Result<Option<crate::residuals::Predictor>> {
-        if !input.residuals {
-            return Ok(None);
-        }
-        let ys = (1..data.len()).flat_map(|k| data.y(k).to_vec()).collect();
-        let channels = data.sensors.iter().map(|j| format!("a{j}")).collect();
-        Ok(Some(crate::residuals::Predictor::new(
-            spec.clone(),
-            ys,
-            channels,
-        )?))
-    };
+    let predictor = || prediction_errors(input, &spec);
     // The pace of a long run is timed over all its pooled filters (the caller's pace).
     let shape = filter.shape();
     crate::limits::check_particle_cloud(
@@ -355,7 +343,6 @@ pub fn execute(
     )?;
     let d = run_pool(filter, plan, &spec, input, &pc, &predictor, stop)?;
 
-    let steps = data.len() - 1;
     let theta_true = data.meta.as_ref().map(|m| m.theta_true.clone());
     if let Some(t) = &theta_true {
         if t.len() != d.param_names.len() {
@@ -374,6 +361,41 @@ pub fn execute(
         _ => None,
     };
     let validation_s = validation_start.elapsed().as_secs_f64();
+    let mut record = run_record(
+        plan,
+        input,
+        &spec,
+        d,
+        theta_true,
+        (validation, validation_s),
+    );
+    // A result that is physically impossible or rests on few particles says so (issue 16).
+    record.warnings = crate::checks::check(&record);
+    Ok(record)
+}
+
+/// The one-step prediction errors' predictor of a run that records them (`input.residuals`),
+/// for each pooled filter to compute its own.
+fn prediction_errors(
+    input: &RunInput,
+    spec: &ChainSpec,
+) -> Result<Option<crate::residuals::Predictor>> {
+    if !input.residuals {
+        return Ok(None);
+    }
+    let data = input.data;
+    let ys = (1..data.len()).flat_map(|k| data.y(k).to_vec()).collect();
+    let channels = data.sensors.iter().map(|j| format!("a{j}")).collect();
+    Ok(Some(crate::residuals::Predictor::new(
+        spec.clone(),
+        ys,
+        channels,
+    )?))
+}
+
+/// The failures of a driven pool by kind: the answer's own, or else those of the pooled filters
+/// left out (counted even when the pool's answer stands without them).
+fn failure_counts(d: &Driven) -> BTreeMap<String, u64> {
     let mut failures = BTreeMap::new();
     if let Some(f) = &d.summary.failure {
         failures.insert(f.kind().to_string(), 1);
@@ -384,9 +406,25 @@ pub fn execute(
             *failures.entry(kind).or_insert(0) += 1;
         }
     }
-    let config = recorded_config(plan, &spec, data);
+    failures
+}
+
+/// The record of a driven pool `d` run by `plan` on `input`: its answer, trace, failures,
+/// validation run (with the seconds it took), configuration, fingerprint and timing (no
+/// warnings yet).
+fn run_record(
+    plan: &RunPlan,
+    input: &RunInput,
+    spec: &ChainSpec,
+    d: Driven,
+    theta_true: Option<Vec<f64>>,
+    (validation, validation_s): (Option<Validation>, f64),
+) -> RunRecord {
+    let (s, algorithm, data) = (&plan.settings, plan.algorithm, input.data);
+    let failures = failure_counts(&d);
+    let config = recorded_config(plan, spec, data);
     let fingerprint = Fingerprint::of_run(algorithm.name(), input.seed, input.run, s, data);
-    let mut record = RunRecord {
+    RunRecord {
         experiment: input.experiment.to_string(),
         algorithm: algorithm.name().to_string(),
         seed: input.seed,
@@ -401,7 +439,7 @@ pub fn execute(
         window: s.window,
         theta_sd_final: d.theta_sd_final,
         loglik: d.summary.loglik,
-        steps_total: steps,
+        steps_total: data.len() - 1,
         steps_completed: d.summary.steps_completed,
         ess_min: d.summary.ess_min.unwrap_or(f64::NAN),
         ess_mean: d.summary.ess_mean.unwrap_or(f64::NAN),
@@ -436,12 +474,9 @@ pub fn execute(
         modal: None,
         pool_left_out: d.left_out,
         plan: None,
-        one_gaussian_filter: crate::rules::samples_nothing(algorithm, &spec)
+        one_gaussian_filter: crate::rules::samples_nothing(algorithm, spec)
             && (s.particles, s.pool) == (1, 1),
-    };
-    // A result that is physically impossible or rests on few particles says so (issue 16).
-    record.warnings = crate::checks::check(&record);
-    Ok(record)
+    }
 }
 
 /// A driven filter, or [`Interrupted`] when it was stopped.
