@@ -441,6 +441,10 @@ fn group_mean(limit: &InformationLimit, kind: char, xs: &[f64]) -> f64 {
     mean(&v)
 }
 
+/// A row of [`summary`]: its text, its value in each column, and per algorithm how many of its
+/// intervals hold the truth out of how many.
+type SummaryRow = (String, Vec<f64>, Vec<(usize, usize)>);
+
 /// One data set's row of the summary: its text, its value in each column (θ̂'s errors and
 /// relative s.d.s, then each algorithm's k and c errors) and, per algorithm, how many of its
 /// 95 % intervals of k and c hold the truth out of how many. Marks in `used` the records on
@@ -450,7 +454,7 @@ fn data_set_row(
     algorithms: &[String],
     records: &[RunRecord],
     used: &mut [bool],
-) -> Result<(String, Vec<f64>, Vec<(usize, usize)>)> {
+) -> Result<SummaryRow> {
     let Some(truth) = &l.truth else {
         bail!("{}: no truth, so no error to summarise", l.data);
     };
