@@ -6,7 +6,9 @@
 //! particle-steps.
 //!
 //! Cases: the paper's 3-storey preset (13 marginalised states in the MPF-EKF2) and a 10-storey
-//! chain (Bouc–Wen at storey 1, every storey measured), 500 particles each.
+//! chain (Bouc–Wen at storey 1, every storey measured), 500 particles each; and the particle
+//! blocks of one filter (`core_filters::smc::batch::PARALLEL_MIN_DIM`) on one and two threads:
+//! the MPF-EKF2 on 10- and 20-storey chains (n = 41 and 81).
 
 use std::time::{Duration, Instant};
 
@@ -112,5 +114,28 @@ fn filter_steps(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, filter_steps);
+/// One filter's particle blocks on pools of one and two threads (the same particles either way;
+/// `tests/plan.rs`): what a single run of a tall building gains from a second core.
+fn particle_blocks(c: &mut Criterion) {
+    let mut group = c.benchmark_group("filter_step_blocks");
+    group.throughput(Throughput::Elements(PARTICLES as u64));
+    group.sample_size(20);
+    for storeys in [10, 20] {
+        for threads in [1, 2] {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .expect("thread pool");
+            let mut case =
+                pool.install(|| Case::new("shear-chain", Some(storeys), Algorithm::MpfEkf2));
+            let label = format!("chain-{storeys}/{threads}-threads");
+            group.bench_function(BenchmarkId::new("mpf-ekf2", label), |b| {
+                b.iter_custom(|iters| pool.install(|| case.time_steps(iters)))
+            });
+        }
+    }
+    group.finish();
+}
+
+criterion_group!(benches, filter_steps, particle_blocks);
 criterion_main!(benches);

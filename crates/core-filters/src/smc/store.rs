@@ -98,7 +98,10 @@ impl Particles {
     /// The particles in consecutive blocks of `per` (the last may be shorter), each writable on
     /// its own, so that blocks can be advanced on several threads. Both block sizes must be
     /// non-zero.
-    pub fn blocks_mut(&mut self, per: usize) -> impl IndexedParallelIterator<Item = Block<'_>> {
+    pub(crate) fn blocks_mut(
+        &mut self,
+        per: usize,
+    ) -> impl IndexedParallelIterator<Item = Block<'_>> {
         let shape = self.shape;
         let (s, n) = (shape.sampled, shape.marginal);
         assert!(per > 0 && s > 0 && n > 0, "blocks of non-empty particles");
@@ -117,7 +120,7 @@ impl Particles {
     }
 
     /// All the particles as one block.
-    pub fn as_block(&mut self) -> Block<'_> {
+    pub(crate) fn as_block(&mut self) -> Block<'_> {
         Block {
             first: 0,
             shape: self.shape,
@@ -130,7 +133,7 @@ impl Particles {
 
 /// Consecutive particles `first, first + 1, …` of a [`Particles`], writable; addressed by the
 /// particles' indices in the whole store.
-pub struct Block<'a> {
+pub(crate) struct Block<'a> {
     first: usize,
     shape: Shape,
     sampled: &'a mut [f64],
