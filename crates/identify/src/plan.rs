@@ -537,131 +537,162 @@ fn one_gaussian_filter(s: &mut FilterSettings, decisions: &mut Vec<Decision>) {
 
 /// What `substeps = "auto"` chose, as decisions (the lines `sysid filter` prints).
 fn substep_decisions(auto: &AutoChoice, algorithm: Algorithm, spec: &ChainSpec) -> Vec<Decision> {
-    use models::filtering::substeps::{LAG_NOTED_ABOVE, SUBSTEP_ABOVE};
     let mut out = Vec::new();
     if let Some(h) = auto.hysteretic.filter(|h| h.substeps > 1) {
-        out.push(Decision {
-            rule: "scaled_prior::hysteretic_substeps".into(),
-            set: format!("substeps = {}", spec.substeps),
-            level: Level::Info,
-            why: {
-                let per = h.omega1_dt / h.substeps as f64;
-                let reached = if per <= h.max_omega1_h {
-                    format!("ω₁·dt/{} = {per:.4} ≤ {}", h.substeps, h.max_omega1_h)
-                } else {
-                    format!(
-                        "ω₁·dt/{} = {per:.4}, still above {}: {} is the most this rule takes \
-                         (sample faster, or give --substeps)",
-                        h.substeps,
-                        h.max_omega1_h,
-                        crate::scaled_prior::HYSTERETIC_MAX_SUBSTEPS
-                    )
-                };
-                format!(
-                    "sub-steps: {} per sample (auto: Bouc–Wen elements and ω₁·dt = {:.4} above \
-                     {}; {reached})",
-                    spec.substeps, h.omega1_dt, h.above
-                )
-            },
-        });
+        out.push(hysteretic_substeps_decision(&h, spec));
     }
     if let Some(l) = auto.lag {
-        out.push(Decision {
-            rule: "rules::LAG_SUBSTEPS".into(),
-            set: format!("substeps = {}", spec.substeps),
-            level: Level::Info,
-            why: format!(
-                "sub-steps: {} per sample (auto: the MPF-EKF2 with one shared prior Gaussian on a \
-                 hysteretic building below {PER_PARTICLE_MIN_STOREYS} storeys, whose velocity \
-                 lag with one step, {:.1} %, is above {:.0} %; measured to lower the stiffness \
-                 error at 5 storeys at about 3 times the cost: docs/calibration.md, \"The prior \
-                 or the size?\"; --substeps 1 to keep one step)",
-                spec.substeps,
-                100.0 * l.lag_one,
-                100.0 * l.above
-            ),
-        });
+        out.push(lag_substeps_decision(&l, spec));
     }
     if let Some(f) = auto.field {
+        out.push(field_substeps_decision(&f, spec));
+    }
+    if let Some(a) = auto.linear {
+        linear_substep_decisions(&a, auto.field.is_some(), algorithm, spec, &mut out);
+    }
+    out
+}
+
+/// The Bouc–Wen rule's sub-steps: ω₁·dt above its limit, and whether the count it took
+/// brought it under.
+fn hysteretic_substeps_decision(h: &HystereticSubsteps, spec: &ChainSpec) -> Decision {
+    Decision {
+        rule: "scaled_prior::hysteretic_substeps".into(),
+        set: format!("substeps = {}", spec.substeps),
+        level: Level::Info,
+        why: {
+            let per = h.omega1_dt / h.substeps as f64;
+            let reached = if per <= h.max_omega1_h {
+                format!("ω₁·dt/{} = {per:.4} ≤ {}", h.substeps, h.max_omega1_h)
+            } else {
+                format!(
+                    "ω₁·dt/{} = {per:.4}, still above {}: {} is the most this rule takes \
+                     (sample faster, or give --substeps)",
+                    h.substeps,
+                    h.max_omega1_h,
+                    crate::scaled_prior::HYSTERETIC_MAX_SUBSTEPS
+                )
+            };
+            format!(
+                "sub-steps: {} per sample (auto: Bouc–Wen elements and ω₁·dt = {:.4} above \
+                 {}; {reached})",
+                spec.substeps, h.omega1_dt, h.above
+            )
+        },
+    }
+}
+
+/// The velocity-lag rule's sub-steps (MPF-EKF2, one shared prior Gaussian, a small
+/// hysteretic building).
+fn lag_substeps_decision(l: &LagSubsteps, spec: &ChainSpec) -> Decision {
+    Decision {
+        rule: "rules::LAG_SUBSTEPS".into(),
+        set: format!("substeps = {}", spec.substeps),
+        level: Level::Info,
+        why: format!(
+            "sub-steps: {} per sample (auto: the MPF-EKF2 with one shared prior Gaussian on a \
+             hysteretic building below {PER_PARTICLE_MIN_STOREYS} storeys, whose velocity \
+             lag with one step, {:.1} %, is above {:.0} %; measured to lower the stiffness \
+             error at 5 storeys at about 3 times the cost: docs/calibration.md, \"The prior \
+             or the size?\"; --substeps 1 to keep one step)",
+            spec.substeps,
+            100.0 * l.lag_one,
+            100.0 * l.above
+        ),
+    }
+}
+
+/// The field-data rule's sub-steps (a linear building run as one Gaussian filter): the highest
+/// mode's frequency shift with one step and with the count taken.
+fn field_substeps_decision(f: &crate::rules::FieldSubsteps, spec: &ChainSpec) -> Decision {
+    Decision {
+        rule: "rules::FIELD_FREQUENCY_ERROR".into(),
+        set: format!("substeps = {}", spec.substeps),
+        level: Level::Info,
+        why: format!(
+            "sub-steps: {} per sample (auto, field data of a linear building, one Gaussian \
+             filter: the highest mode's frequency shift {:.2} % with one step, {:.3} % with \
+             {}, at most {:.2} %, because the free run's phase over a lightly damped mode's \
+             many cycles is that shift over ζ: docs/real-frame.md)",
+            spec.substeps,
+            100.0 * f.error_one,
+            100.0 * f.error_chosen,
+            f.substeps,
+            100.0 * crate::rules::FIELD_FREQUENCY_ERROR
+        ),
+    }
+}
+
+/// The linear rule's decisions: a warning when an algorithm that cannot sub-step keeps a
+/// biasing single step, the count it raised (unless the field rule says so: `field_raised`),
+/// and a note of the stiffness bias left by the run's step's velocity lag.
+fn linear_substep_decisions(
+    a: &models::filtering::substeps::AutoSubsteps,
+    field_raised: bool,
+    algorithm: Algorithm,
+    spec: &ChainSpec,
+    out: &mut Vec<Decision>,
+) {
+    use models::filtering::substeps::{LAG_NOTED_ABOVE, SUBSTEP_ABOVE};
+    if a.substeps == 1 && a.error_one > SUBSTEP_ABOVE {
         out.push(Decision {
-            rule: "rules::FIELD_FREQUENCY_ERROR".into(),
-            set: format!("substeps = {}", spec.substeps),
-            level: Level::Info,
+            rule: "models::filtering::substeps::auto_substeps".into(),
+            set: String::new(),
+            level: Level::Warning,
             why: format!(
-                "sub-steps: {} per sample (auto, field data of a linear building, one Gaussian \
-                 filter: the highest mode's frequency shift {:.2} % with one step, {:.3} % with \
-                 {}, at most {:.2} %, because the free run's phase over a lightly damped mode's \
-                 many cycles is that shift over ζ: docs/real-frame.md)",
-                spec.substeps,
-                100.0 * f.error_one,
-                100.0 * f.error_chosen,
-                f.substeps,
-                100.0 * crate::rules::FIELD_FREQUENCY_ERROR
+                "the prior's building has modes up to {:.2} Hz (ω·dt = {:.2}): one step per \
+                 sample shifts that mode by {:.1} %, and {} cannot sub-step; its \
+                 frequencies and stiffnesses carry that bias (MPF-EKF2 and the bootstrap \
+                 PF sub-step)",
+                a.omega_max / std::f64::consts::TAU,
+                a.omega_max * spec.dt,
+                100.0 * a.error_one,
+                algorithm.label()
             ),
         });
     }
-    if let Some(a) = auto.linear {
-        if a.substeps == 1 && a.error_one > SUBSTEP_ABOVE {
-            out.push(Decision {
-                rule: "models::filtering::substeps::auto_substeps".into(),
-                set: String::new(),
-                level: Level::Warning,
-                why: format!(
-                    "the prior's building has modes up to {:.2} Hz (ω·dt = {:.2}): one step per \
-                     sample shifts that mode by {:.1} %, and {} cannot sub-step; its \
-                     frequencies and stiffnesses carry that bias (MPF-EKF2 and the bootstrap \
-                     PF sub-step)",
-                    a.omega_max / std::f64::consts::TAU,
-                    a.omega_max * spec.dt,
-                    100.0 * a.error_one,
-                    algorithm.label()
-                ),
-            });
-        }
-        // The field rule's message says what the run takes when it raised the count.
-        if a.substeps > 1 && auto.field.is_none() {
-            out.push(Decision {
-                rule: "models::filtering::substeps::auto_substeps".into(),
-                set: format!("substeps = {}", spec.substeps),
-                level: Level::Info,
-                why: format!(
-                    "sub-steps: {} per sample (auto: the prior's building has modes up to {:.2} \
-                     Hz, ω·dt = {:.2}; one step per sample would shift that mode by {:.1} %, {} \
-                     by {:.2} %)",
-                    a.substeps,
-                    a.omega_max / std::f64::consts::TAU,
-                    a.omega_max * spec.dt,
-                    100.0 * a.error_one,
-                    a.substeps,
-                    100.0 * a.error_chosen
-                ),
-            });
-        }
-        // The lag of the run's step (proportional to it): the Bouc–Wen rule may have raised
-        // the sub-steps beyond the linear rule's.
-        let lag = a.lag_one / spec.substeps as f64;
-        if lag > LAG_NOTED_ABOVE {
-            out.push(Decision {
-                rule: "models::filtering::substeps::damping_lag_error".into(),
-                set: String::new(),
-                level: Level::Note,
-                why: format!(
-                    "with {} step(s) per sample the model favours stiffnesses up to {:.1} % low \
-                     (with the prior's central dashpots and springs), most at the top storeys \
-                     (the semi-implicit step's velocity lag; docs/calibration.md, \"The top \
-                     storeys' bias\"). --substeps M divides it by M; on the scaling study's \
-                     buildings 4 took the MPF-EKF2's mean stiffness error from 3.5 to 2.0 % at \
-                     5 storeys with one shared prior Gaussian (which is why `auto` takes them \
-                     there) and did not pay with per-particle prior means (5 and 10 storeys; \
-                     worse at 20), at about 3 times the cost (docs/calibration.md, \"The prior \
-                     or the size?\")",
-                    spec.substeps,
-                    100.0 * lag
-                ),
-            });
-        }
+    // The field rule's message says what the run takes when it raised the count.
+    if a.substeps > 1 && !field_raised {
+        out.push(Decision {
+            rule: "models::filtering::substeps::auto_substeps".into(),
+            set: format!("substeps = {}", spec.substeps),
+            level: Level::Info,
+            why: format!(
+                "sub-steps: {} per sample (auto: the prior's building has modes up to {:.2} \
+                 Hz, ω·dt = {:.2}; one step per sample would shift that mode by {:.1} %, {} \
+                 by {:.2} %)",
+                a.substeps,
+                a.omega_max / std::f64::consts::TAU,
+                a.omega_max * spec.dt,
+                100.0 * a.error_one,
+                a.substeps,
+                100.0 * a.error_chosen
+            ),
+        });
     }
-    out
+    // The lag of the run's step (proportional to it): the Bouc–Wen rule may have raised
+    // the sub-steps beyond the linear rule's.
+    let lag = a.lag_one / spec.substeps as f64;
+    if lag > LAG_NOTED_ABOVE {
+        out.push(Decision {
+            rule: "models::filtering::substeps::damping_lag_error".into(),
+            set: String::new(),
+            level: Level::Note,
+            why: format!(
+                "with {} step(s) per sample the model favours stiffnesses up to {:.1} % low \
+                 (with the prior's central dashpots and springs), most at the top storeys \
+                 (the semi-implicit step's velocity lag; docs/calibration.md, \"The top \
+                 storeys' bias\"). --substeps M divides it by M; on the scaling study's \
+                 buildings 4 took the MPF-EKF2's mean stiffness error from 3.5 to 2.0 % at \
+                 5 storeys with one shared prior Gaussian (which is why `auto` takes them \
+                 there) and did not pay with per-particle prior means (5 and 10 storeys; \
+                 worse at 20), at about 3 times the cost (docs/calibration.md, \"The prior \
+                 or the size?\")",
+                spec.substeps,
+                100.0 * lag
+            ),
+        });
+    }
 }
 
 impl RunPlan {
