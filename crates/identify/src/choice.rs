@@ -263,16 +263,7 @@ pub fn choose(
     // The damping forms: the user's, or both when the flags and table leave it open; the noise
     // levels: the stated ones, or the grids.
     let open = t.flags.damping.is_none() && settings.structure.damping.is_none();
-    let fractions: Vec<f64> = if stated.noise_fraction {
-        vec![settings.noise_fraction]
-    } else {
-        NOISE_FRACTIONS.to_vec()
-    };
-    let factors: Vec<f64> = if stated.process_noise_factor {
-        vec![settings.process_noise_factor]
-    } else {
-        PROCESS_NOISE_FACTORS.to_vec()
-    };
+    let (fractions, factors) = noise_grids(settings, stated);
     if !open && fractions.len() * factors.len() == 1 {
         kept(
             &mut plan,
@@ -283,30 +274,7 @@ pub fn choose(
     }
     let mut bases = vec![plan.clone()];
     if open {
-        let other = match plan.building.damping {
-            Damping::Storey => Damping::StoreyMass,
-            Damping::StoreyMass => Damping::Storey,
-        };
-        let flags = StructureSettings {
-            damping: Some(other),
-            ..t.flags.clone()
-        };
-        let target = Target {
-            algorithm: t.algorithm,
-            data: t.data,
-            chain: t.chain,
-            measured: t.measured,
-            flags: &flags,
-            config: t.config,
-            particles_asked: t.particles_asked,
-        };
-        let p = crate::plan::settle(target.request(
-            settings.clone(),
-            plan.seed,
-            plan.run,
-            &plan.experiment,
-        ))?;
-        bases.push(p);
+        bases.push(with_other_damping(&plan, t, settings)?);
     }
     let ident = head(data, split_point(data));
     let held_out = data.len() - ident.len();
@@ -324,15 +292,7 @@ pub fn choose(
         .par_iter()
         .map(|p| score(p, &ident, data))
         .collect::<Result<Vec<_>>>()?;
-    let best = candidates
-        .iter()
-        .enumerate()
-        .filter_map(|(i, c)| c.score.map(|s| (i, s)))
-        .fold(None, |acc: Option<(usize, f64)>, (i, s)| match acc {
-            Some((_, b)) if b >= s => acc,
-            _ => Some((i, s)),
-        });
-    let Some((chosen, _)) = best else {
+    let Some(chosen) = best_scored(&candidates) else {
         let why = format!(
             "no candidate of the held-out choice predicted the record (noise fraction {} kept): {}",
             plan.settings.noise_fraction,
@@ -351,8 +311,65 @@ pub fn choose(
         candidates,
         chosen,
     };
-    let mut out = plans.swap_remove(chosen);
-    let c = &choice.candidates[chosen];
+    Ok(with_choice(plans.swap_remove(chosen), choice, open))
+}
+
+/// The noise fractions and process-noise factors to choose among: each the stated value, or
+/// its grid.
+fn noise_grids(settings: &FilterSettings, stated: Stated) -> (Vec<f64>, Vec<f64>) {
+    let fractions: Vec<f64> = if stated.noise_fraction {
+        vec![settings.noise_fraction]
+    } else {
+        NOISE_FRACTIONS.to_vec()
+    };
+    let factors: Vec<f64> = if stated.process_noise_factor {
+        vec![settings.process_noise_factor]
+    } else {
+        PROCESS_NOISE_FACTORS.to_vec()
+    };
+    (fractions, factors)
+}
+
+/// `plan` settled again for `t` with the other damping form (storey ↔ storey+mass): the second
+/// base of the candidates when the damping form is left open.
+fn with_other_damping(plan: &RunPlan, t: &Target, settings: &FilterSettings) -> Result<RunPlan> {
+    let other = match plan.building.damping {
+        Damping::Storey => Damping::StoreyMass,
+        Damping::StoreyMass => Damping::Storey,
+    };
+    let flags = StructureSettings {
+        damping: Some(other),
+        ..t.flags.clone()
+    };
+    let target = Target {
+        algorithm: t.algorithm,
+        data: t.data,
+        chain: t.chain,
+        measured: t.measured,
+        flags: &flags,
+        config: t.config,
+        particles_asked: t.particles_asked,
+    };
+    crate::plan::settle(target.request(settings.clone(), plan.seed, plan.run, &plan.experiment))
+}
+
+/// The candidate with the highest held-out score (the first of equals), if any was scored.
+fn best_scored(candidates: &[Candidate]) -> Option<usize> {
+    let best = candidates
+        .iter()
+        .enumerate()
+        .filter_map(|(i, c)| c.score.map(|s| (i, s)))
+        .fold(None, |acc: Option<(usize, f64)>, (i, s)| match acc {
+            Some((_, b)) if b >= s => acc,
+            _ => Some((i, s)),
+        });
+    best.map(|(chosen, _)| chosen)
+}
+
+/// The chosen candidate's plan `out` with the choice's decision (the damping form named when it
+/// was `open`) and the choice as its evidence.
+fn with_choice(mut out: RunPlan, choice: HeldOutChoice, open: bool) -> RunPlan {
+    let c = &choice.candidates[choice.chosen];
     out.decisions.push(Decision {
         rule: "choice::choose".into(),
         set: format!(
@@ -369,5 +386,5 @@ pub fn choose(
         why: choice.describe(),
     });
     out.evidence.held_out = Some(choice);
-    Ok(out)
+    out
 }
