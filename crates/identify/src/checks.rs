@@ -98,27 +98,58 @@ pub fn check(r: &RunRecord) -> Vec<Warning> {
     // instead of one per parameter.
     let no_estimate = r.failure.is_some() && r.theta_val.iter().all(|v| v.is_nan());
     if let Some(f) = &r.failure {
-        let window_done = (r.steps_completed + r.window).saturating_sub(r.steps_total);
+        out.push(failure_warning(r, f, no_estimate));
+    }
+    left_out_warnings(r, &mut out);
+    impossible_value_warnings(r, no_estimate, &mut out);
+    if r.health.truncated > 0 && !no_estimate {
+        at_bound_warnings(r, &mut out);
+    }
+    few_distinct_warnings(r, &mut out);
+    let tiny = TINY_ESS_ABS.max(TINY_ESS_FRACTION * particles_per_filter(r) as f64);
+    // One Gaussian filter has one particle, whose ESS of 1 says nothing.
+    if r.ess_min.is_finite() && r.ess_min < tiny && r.steps_completed > 0 && !r.one_gaussian_filter
+    {
         out.push(Warning {
-            kind: WarningKind::Failed,
+            kind: WarningKind::TinyEss,
             parameter: None,
-            message: if no_estimate {
-                format!(
-                    "the run failed after {} of {} steps: {f}; it failed before its averaging \
-                     window (the last {} steps), so it gives no θ_val",
-                    r.steps_completed, r.steps_total, r.window
-                )
-            } else {
-                format!(
-                    "the run failed after {} of {} steps: {f}; θ_val averages only the {} \
-                     steps of the averaging window completed before the failure",
-                    r.steps_completed,
-                    r.steps_total,
-                    window_done.min(r.window)
-                )
-            },
+            message: format!(
+                "the effective sample size fell to {:.1} of {} particles (mean {:.1}): at that step the estimate rested on a few particles",
+                r.ess_min, particles_per_filter(r), r.ess_mean
+            ),
         });
     }
+    out
+}
+
+/// The warning of a failed run (failure `f`): how far it came, and how much of the averaging
+/// window θ_val rests on (none: `no_estimate`).
+fn failure_warning(r: &RunRecord, f: &str, no_estimate: bool) -> Warning {
+    let window_done = (r.steps_completed + r.window).saturating_sub(r.steps_total);
+    Warning {
+        kind: WarningKind::Failed,
+        parameter: None,
+        message: if no_estimate {
+            format!(
+                "the run failed after {} of {} steps: {f}; it failed before its averaging \
+                 window (the last {} steps), so it gives no θ_val",
+                r.steps_completed, r.steps_total, r.window
+            )
+        } else {
+            format!(
+                "the run failed after {} of {} steps: {f}; θ_val averages only the {} \
+                 steps of the averaging window completed before the failure",
+                r.steps_completed,
+                r.steps_total,
+                window_done.min(r.window)
+            )
+        },
+    }
+}
+
+/// One warning per filter of the pool left out of the answer, with why and how many filters
+/// the answer rests on.
+fn left_out_warnings(r: &RunRecord, out: &mut Vec<Warning>) {
     let pool = pooled_filters(r);
     for l in &r.pool_left_out {
         out.push(Warning {
@@ -138,6 +169,11 @@ pub fn check(r: &RunRecord) -> Vec<Warning> {
             ),
         });
     }
+}
+
+/// The parameters whose θ_val is not finite or physically impossible (none when the run gave
+/// `no_estimate`).
+fn impossible_value_warnings(r: &RunRecord, no_estimate: bool, out: &mut Vec<Warning>) {
     let mass_form = r
         .param_names
         .iter()
@@ -165,23 +201,30 @@ pub fn check(r: &RunRecord) -> Vec<Warning> {
             });
         }
     }
-    if r.health.truncated > 0 && !no_estimate {
-        let means = prior_means(r).unwrap_or_default();
-        for (j, (name, v)) in r.param_names.iter().zip(&r.theta_val).enumerate() {
-            let bounded = is_stiffness_or_damping(name) || name == models::structure::ALPHA_NAME;
-            let Some(&m) = means.get(j) else { continue };
-            if bounded && v.is_finite() && *v >= 0.0 && m > 0.0 && *v < AT_BOUND_FRACTION * m {
-                out.push(Warning {
-                    kind: WarningKind::AtBound,
-                    parameter: Some(name.clone()),
-                    message: format!(
-                        "{name}: θ_val {v:.4} is held at its physical bound 0 ({:.2} % of its prior mean {m:.4}): the data pushed it below zero, so the model (masses, damping form, storeys) likely does not fit these data",
-                        100.0 * v / m
-                    ),
-                });
-            }
+}
+
+/// The bounded parameters (stiffness, damping, α) of a run whose values were truncated at 0
+/// that θ_val holds at the bound: far below their prior mean.
+fn at_bound_warnings(r: &RunRecord, out: &mut Vec<Warning>) {
+    let means = prior_means(r).unwrap_or_default();
+    for (j, (name, v)) in r.param_names.iter().zip(&r.theta_val).enumerate() {
+        let bounded = is_stiffness_or_damping(name) || name == models::structure::ALPHA_NAME;
+        let Some(&m) = means.get(j) else { continue };
+        if bounded && v.is_finite() && *v >= 0.0 && m > 0.0 && *v < AT_BOUND_FRACTION * m {
+            out.push(Warning {
+                kind: WarningKind::AtBound,
+                parameter: Some(name.clone()),
+                message: format!(
+                    "{name}: θ_val {v:.4} is held at its physical bound 0 ({:.2} % of its prior mean {m:.4}): the data pushed it below zero, so the model (masses, damping form, storeys) likely does not fit these data",
+                    100.0 * v / m
+                ),
+            });
         }
     }
+}
+
+/// The sampled parameters (not fixed) whose posterior rests on few distinct particle values.
+fn few_distinct_warnings(r: &RunRecord, out: &mut Vec<Warning>) {
     for (name, &d) in &r.distinct_sampled {
         if d < FEW_DISTINCT && !is_fixed(r, name) {
             out.push(Warning {
@@ -194,20 +237,6 @@ pub fn check(r: &RunRecord) -> Vec<Warning> {
             });
         }
     }
-    let tiny = TINY_ESS_ABS.max(TINY_ESS_FRACTION * particles_per_filter(r) as f64);
-    // One Gaussian filter has one particle, whose ESS of 1 says nothing.
-    if r.ess_min.is_finite() && r.ess_min < tiny && r.steps_completed > 0 && !r.one_gaussian_filter
-    {
-        out.push(Warning {
-            kind: WarningKind::TinyEss,
-            parameter: None,
-            message: format!(
-                "the effective sample size fell to {:.1} of {} particles (mean {:.1}): at that step the estimate rested on a few particles",
-                r.ess_min, particles_per_filter(r), r.ess_mean
-            ),
-        });
-    }
-    out
 }
 
 /// Whether any warning makes the answer unusable.
@@ -250,76 +279,7 @@ pub fn summary_table(r: &RunRecord) -> String {
     let mut approximated = false;
     let pool = pooled_filters(r);
     for (j, name) in r.param_names.iter().enumerate() {
-        let v = r.theta_val.get(j).copied().unwrap_or(f64::NAN);
-        if !v.is_finite() {
-            // No estimate (a run that failed before its averaging window): no number at all.
-            let _ = writeln!(o, "{name:<name_w$}  {:>12}  {:>27}  no estimate", "–", "–");
-            continue;
-        }
-        // The central 95 % interval of the last step's particle posterior; a record without it
-        // (written before intervals were recorded, or a failed run) falls back to ±1.96 s.d.,
-        // marked with `*`.
-        let interval = match r
-            .credible
-            .iter()
-            .find(|p| &p.parameter == name)
-            .and_then(|p| p.at(0.95))
-        {
-            Some(ci) => format!("[{:.4}, {:.4}]", ci.lo, ci.hi),
-            None => {
-                approximated = true;
-                let sd = r.theta_sd_final.get(j).copied().unwrap_or(f64::NAN);
-                format!("*[{:.4}, {:.4}]", v - 1.96 * sd, v + 1.96 * sd)
-            }
-        };
-        if is_fixed(r, name) {
-            let _ = writeln!(
-                o,
-                "{name:<name_w$}  {v:>12.4}  {:>27}  fixed (point-mass prior)",
-                "–"
-            );
-            continue;
-        }
-        let mut reliability = match r.distinct_sampled.get(name) {
-            Some(&d) if d < FEW_DISTINCT => {
-                format!("sampled, {d} distinct value(s): RESTS ON FEW PARTICLES")
-            }
-            Some(&d) => format!("sampled, {d} distinct values"),
-            None if r.one_gaussian_filter => "Gaussian (one EKF2: nothing sampled)".to_string(),
-            None => "marginalised (Gaussian per particle)".to_string(),
-        };
-        // Pooled filters measure the Monte-Carlo error of θ_val.
-        if let Some(se) = r
-            .credible
-            .iter()
-            .find(|p| &p.parameter == name)
-            .and_then(|p| p.mc_se)
-        {
-            let _ = write!(reliability, "; θ_val MC s.e. {se:.4}");
-        }
-        let true_cell = match truth {
-            Some(t) => {
-                let inside = r
-                    .credible
-                    .iter()
-                    .find(|p| &p.parameter == name)
-                    .and_then(|p| p.at(0.95))
-                    .map(|ci| ci.lo <= t[j] && t[j] <= ci.hi);
-                format!(
-                    "{:>12}  ",
-                    format!(
-                        "{:.4}{}",
-                        t[j],
-                        if inside == Some(false) { " ✗" } else { "" }
-                    )
-                )
-            }
-            None => String::new(),
-        };
-        let _ = writeln!(
-            o,
-            "{name:<name_w$}  {v:>12.4}  {interval:>27}  {true_cell}{reliability}"
-        );
+        approximated |= write_parameter_row(&mut o, r, j, name, name_w, truth.map(Vec::as_slice));
     }
     let reliability = if r.one_gaussian_filter {
         "One Gaussian filter (EKF2): the building has no hysteretic element and the prior is one \
@@ -343,6 +303,98 @@ pub fn summary_table(r: &RunRecord) -> String {
         let _ = writeln!(o, "{line}");
     }
     o
+}
+
+/// The summary's row of parameter `j` (`name`, its column `name_w` wide): θ_val, its 95 %
+/// interval, the true value when the data know it (`truth`) and its Monte-Carlo reliability.
+/// Returns whether the interval is the ±1.96 s.d. stand-in for one the record lacks.
+fn write_parameter_row(
+    o: &mut String,
+    r: &RunRecord,
+    j: usize,
+    name: &str,
+    name_w: usize,
+    truth: Option<&[f64]>,
+) -> bool {
+    let v = r.theta_val.get(j).copied().unwrap_or(f64::NAN);
+    if !v.is_finite() {
+        // No estimate (a run that failed before its averaging window): no number at all.
+        let _ = writeln!(o, "{name:<name_w$}  {:>12}  {:>27}  no estimate", "–", "–");
+        return false;
+    }
+    // The central 95 % interval of the last step's particle posterior; a record without it
+    // (written before intervals were recorded, or a failed run) falls back to ±1.96 s.d.,
+    // marked with `*`.
+    let mut approximated = false;
+    let interval = match r
+        .credible
+        .iter()
+        .find(|p| p.parameter == name)
+        .and_then(|p| p.at(0.95))
+    {
+        Some(ci) => format!("[{:.4}, {:.4}]", ci.lo, ci.hi),
+        None => {
+            approximated = true;
+            let sd = r.theta_sd_final.get(j).copied().unwrap_or(f64::NAN);
+            format!("*[{:.4}, {:.4}]", v - 1.96 * sd, v + 1.96 * sd)
+        }
+    };
+    if is_fixed(r, name) {
+        let _ = writeln!(
+            o,
+            "{name:<name_w$}  {v:>12.4}  {:>27}  fixed (point-mass prior)",
+            "–"
+        );
+        return approximated;
+    }
+    let reliability = reliability_cell(r, name);
+    let true_cell = match truth {
+        Some(t) => {
+            let inside = r
+                .credible
+                .iter()
+                .find(|p| p.parameter == name)
+                .and_then(|p| p.at(0.95))
+                .map(|ci| ci.lo <= t[j] && t[j] <= ci.hi);
+            format!(
+                "{:>12}  ",
+                format!(
+                    "{:.4}{}",
+                    t[j],
+                    if inside == Some(false) { " ✗" } else { "" }
+                )
+            )
+        }
+        None => String::new(),
+    };
+    let _ = writeln!(
+        o,
+        "{name:<name_w$}  {v:>12.4}  {interval:>27}  {true_cell}{reliability}"
+    );
+    approximated
+}
+
+/// How reliable parameter `name`'s estimate is as Monte-Carlo: its distinct particle values
+/// when sampled (flagged when few), or how it is carried, and the pool's Monte-Carlo s.e.
+fn reliability_cell(r: &RunRecord, name: &str) -> String {
+    let mut reliability = match r.distinct_sampled.get(name) {
+        Some(&d) if d < FEW_DISTINCT => {
+            format!("sampled, {d} distinct value(s): RESTS ON FEW PARTICLES")
+        }
+        Some(&d) => format!("sampled, {d} distinct values"),
+        None if r.one_gaussian_filter => "Gaussian (one EKF2: nothing sampled)".to_string(),
+        None => "marginalised (Gaussian per particle)".to_string(),
+    };
+    // Pooled filters measure the Monte-Carlo error of θ_val.
+    if let Some(se) = r
+        .credible
+        .iter()
+        .find(|p| p.parameter == name)
+        .and_then(|p| p.mc_se)
+    {
+        let _ = write!(reliability, "; θ_val MC s.e. {se:.4}");
+    }
+    reliability
 }
 
 /// The line on the particles behind the answer: the ESS over the run (per filter of a pool),
