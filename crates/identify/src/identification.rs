@@ -77,7 +77,19 @@ pub fn parse_fix(s: &str) -> Result<BTreeMap<String, f64>, FixError> {
 pub fn commented_defaults() -> String {
     let d = FilterSettings::recommended();
     let paper = FilterSettings::default();
-    let q = |v: &dyn erased::Show| v.show();
+    [
+        defaults_preamble(&paper),
+        sampling_and_noise_keys(&d),
+        model_and_record_keys(&d),
+        marginal_prior_keys(),
+        TABLE_KEYS.to_string(),
+    ]
+    .concat()
+}
+
+/// The preamble of [`commented_defaults`]: what the file is, where its values come from, and
+/// that a config turns off the building's rules (`paper`: the paper's settings, for absent keys).
+fn defaults_preamble(paper: &FilterSettings) -> String {
     format!(
         r#"# Filter settings of `sysid filter --config FILE.toml` (and the [filter] table of a study).
 # Shown with the values `sysid filter` uses without --config (the recommended settings, whose
@@ -88,7 +100,17 @@ pub fn commented_defaults() -> String {
 # do not apply: this file does not run exactly what no config runs. To rerun a run exactly,
 # write its plan (`sysid filter … --print-plan > plan.toml`) and run `--plan plan.toml`.
 
-# Number of particles Np (SPEC §3).
+"#,
+        paper_disc = paper.discretisation.name(),
+    )
+}
+
+/// The keys of the particles, resampling, pooling and noise levels with their recommended
+/// values `d`.
+fn sampling_and_noise_keys(d: &FilterSettings) -> String {
+    let q = |v: &dyn erased::Show| v.show();
+    format!(
+        r#"# Number of particles Np (SPEC §3).
 particles = {particles}
 # Resampling scheme: "systematic", "stratified", "multinomial" or "residual".
 resampling = {resampling}
@@ -107,7 +129,25 @@ storvik_update = {storvik}
 noise_fraction = {nf}
 # The velocities' process noise relative to SPEC §3's (s.d. factor × dt × nf × RMS ü_g).
 process_noise_factor = {pnf}
-# Hold the marginalised stiffnesses, dampings and α at ≥ 0 after every step (moment-matched
+"#,
+        ess = q(&d
+            .ess_threshold
+            .expect("the recommended settings resample on the ESS")),
+        pool = d.pool,
+        particles = d.particles,
+        resampling = q(&d.resampling),
+        storvik = q(&d.storvik_update),
+        nf = q(&d.noise_fraction),
+        pnf = q(&d.process_noise_factor),
+    )
+}
+
+/// The keys of the model inside the filter (support, r's noise, discretisation, sub-steps) and
+/// of what the record keeps, with their recommended values `d`.
+fn model_and_record_keys(d: &FilterSettings) -> String {
+    let q = |v: &dyn erased::Show| v.show();
+    format!(
+        r#"# Hold the marginalised stiffnesses, dampings and α at ≥ 0 after every step (moment-matched
 # truncation of each Gaussian): answers physical by construction. The paper's filters: false.
 physical_support = {physical}
 # Process noise of each hysteretic variable r: s.d. per step r_noise_fraction × dt × RMS drift
@@ -130,7 +170,22 @@ trace_every = {trace}
 validate = {validate}
 # Keep one hysteresis-loop point in `loop_every` in the record (0: no loops).
 loop_every = {loops}
-# Gaussian prior of the marginalised block: {{ kind = "moment_matched" }} (one moment-matched
+"#,
+        rnf = q(&d.r_noise_fraction),
+        physical = d.physical_support,
+        disc = q(&d.discretisation),
+        substeps = d.substeps,
+        window = d.window,
+        trace = d.trace_every,
+        validate = d.validate,
+        loops = d.loop_every,
+    )
+}
+
+/// The keys of the marginalised block's prior and of the rejuvenation of the sampled exponents.
+fn marginal_prior_keys() -> String {
+    format!(
+        r#"# Gaussian prior of the marginalised block: {{ kind = "moment_matched" }} (one moment-matched
 # Gaussian) or {{ kind = "per_particle", rel_sd = 0.1 }} (means drawn per particle). Without
 # --config the MPF-EKF2 takes per_particle when a storey carries no sensor (docs/scaling.md) or
 # the building has 10 storeys or more (docs/calibration.md).
@@ -141,7 +196,14 @@ marginal_prior = {{ kind = "moment_matched" }}
 # others none (docs/calibration.md).
 # rejuvenation = {mpf_rejuvenation}
 
-# Point-mass priors: parameter name = value (k1..kN, c1..cN, alpha with the storey+mass damping
+"#,
+        mpf_rejuvenation = crate::pipeline::MPF_REJUVENATION,
+    )
+}
+
+/// The tables of a config, commented out: point-mass priors, the building of field data and the
+/// prior of θ.
+const TABLE_KEYS: &str = r#"# Point-mass priors: parameter name = value (k1..kN, c1..cN, alpha with the storey+mass damping
 # form, beta, gamma, n; with several hysteretic elements beta4, gamma4, n4 for the element at
 # storey 4).
 [fix]
@@ -166,32 +228,11 @@ marginal_prior = {{ kind = "moment_matched" }}
 # 0.5), per element (β, γ) uniform on the triangle 0 ≤ β ≤ 5, |γ| ≤ β, n ~ U(1, 5)). When given,
 # it has one entry per storey in k and c and one element per hysteretic storey (0-based storey):
 # [prior]
-# k = [{{ kind = "log_normal", median = 10.0, log_sd = 0.3 }}, ...]
-# c = [{{ kind = "log_normal", median = 0.4, log_sd = 0.5 }}, ...]
-# alpha = {{ kind = "log_normal", median = 0.5, log_sd = 1.0 }}  (storey+mass damping only)
-# elements = [{{ storey = 0, beta_gamma = {{ kind = "triangle", beta_max = 5.0 }}, n = {{ kind = "uniform", lo = 1.0, hi = 5.0 }} }}]
-"#,
-        paper_disc = paper.discretisation.name(),
-        ess = q(&d
-            .ess_threshold
-            .expect("the recommended settings resample on the ESS")),
-        pool = d.pool,
-        particles = d.particles,
-        resampling = q(&d.resampling),
-        storvik = q(&d.storvik_update),
-        nf = q(&d.noise_fraction),
-        rnf = q(&d.r_noise_fraction),
-        pnf = q(&d.process_noise_factor),
-        physical = d.physical_support,
-        disc = q(&d.discretisation),
-        substeps = d.substeps,
-        window = d.window,
-        trace = d.trace_every,
-        validate = d.validate,
-        loops = d.loop_every,
-        mpf_rejuvenation = crate::pipeline::MPF_REJUVENATION,
-    )
-}
+# k = [{ kind = "log_normal", median = 10.0, log_sd = 0.3 }, ...]
+# c = [{ kind = "log_normal", median = 0.4, log_sd = 0.5 }, ...]
+# alpha = { kind = "log_normal", median = 0.5, log_sd = 1.0 }  (storey+mass damping only)
+# elements = [{ storey = 0, beta_gamma = { kind = "triangle", beta_max = 5.0 }, n = { kind = "uniform", lo = 1.0, hi = 5.0 } }]
+"#;
 
 /// A value as TOML writes it (through serde, so the printed defaults are the real ones).
 mod erased {
