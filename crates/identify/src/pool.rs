@@ -151,13 +151,7 @@ pub(crate) fn combine(layout: &Layout, members: Vec<Driven>, channels: usize) ->
     for d in &members {
         health.absorb(&d.summary.health);
     }
-    let mut kept: Vec<Driven> = Vec::with_capacity(pool_size);
-    for (i, d) in members.into_iter().enumerate() {
-        if !left.iter().any(|l| l.filter == i) {
-            kept.push(d);
-        }
-    }
-    let mut members = kept;
+    let mut members = kept_members(members, &left);
     let m = members.len();
     let finals: Vec<_> = members
         .iter()
@@ -167,16 +161,7 @@ pub(crate) fn combine(layout: &Layout, members: Vec<Driven>, channels: usize) ->
                 .expect("a completed run keeps its particles")
         })
         .collect();
-    let shape = finals[0].particles.shape();
-    let total: usize = finals.iter().map(|f| f.particles.len()).sum();
-    let mut particles = Particles::new(total, shape);
-    let mut w = Vec::with_capacity(total);
-    for f in &finals {
-        for i in 0..f.particles.len() {
-            particles.copy_from(w.len(), &f.particles, i);
-            w.push(f.w[i] / m as f64);
-        }
-    }
+    let (particles, w) = pooled_particles(&finals);
     let pooled = WeightedParticles {
         layout,
         w: &w,
@@ -198,32 +183,7 @@ pub(crate) fn combine(layout: &Layout, members: Vec<Driven>, channels: usize) ->
         .iter()
         .map(|&slot| slot_moments(slot, &w, &particles).1)
         .collect();
-    // log (1/M) Σ exp(ℓ_m), by log-sum-exp.
-    let max = members
-        .iter()
-        .map(|d| d.summary.loglik)
-        .fold(f64::NEG_INFINITY, f64::max);
-    let loglik = max
-        + (members
-            .iter()
-            .map(|d| (d.summary.loglik - max).exp())
-            .sum::<f64>()
-            / m as f64)
-            .ln();
-    let ess_min = members
-        .iter()
-        .filter_map(|d| d.summary.ess_min)
-        .fold(None, |a: Option<f64>, e| Some(a.map_or(e, |a| a.min(e))));
-    let ess_means: Vec<f64> = members.iter().filter_map(|d| d.summary.ess_mean).collect();
-    let summary = RunSummary {
-        steps_completed: members[0].summary.steps_completed,
-        loglik,
-        ess_min,
-        ess_mean: (!ess_means.is_empty())
-            .then(|| ess_means.iter().sum::<f64>() / ess_means.len() as f64),
-        failure: None,
-        health,
-    };
+    let summary = pooled_summary(&members, health);
     let distinct = pooled.distinct_sampled_params();
     let (tail_loglik, tail_steps) = (members[0].tail_loglik, members[0].tail_steps);
     let trace = pooled_trace(&members);
@@ -244,6 +204,66 @@ pub(crate) fn combine(layout: &Layout, members: Vec<Driven>, channels: usize) ->
         tail_loglik,
         tail_steps,
         left_out: left,
+    }
+}
+
+/// The members the pool keeps (those `left` does not name), in stream order.
+fn kept_members(members: Vec<Driven>, left: &[LeftOutFilter]) -> Vec<Driven> {
+    let mut kept: Vec<Driven> = Vec::with_capacity(members.len());
+    for (i, d) in members.into_iter().enumerate() {
+        if !left.iter().any(|l| l.filter == i) {
+            kept.push(d);
+        }
+    }
+    kept
+}
+
+/// The final particles of the kept filters as one weighted cloud: every filter's particles in
+/// order, each weight divided by the number of filters.
+fn pooled_particles(finals: &[&crate::observe::FinalParticles]) -> (Particles, Vec<f64>) {
+    let m = finals.len();
+    let shape = finals[0].particles.shape();
+    let total: usize = finals.iter().map(|f| f.particles.len()).sum();
+    let mut particles = Particles::new(total, shape);
+    let mut w = Vec::with_capacity(total);
+    for f in finals {
+        for i in 0..f.particles.len() {
+            particles.copy_from(w.len(), &f.particles, i);
+            w.push(f.w[i] / m as f64);
+        }
+    }
+    (particles, w)
+}
+
+/// The pool's run summary: the log-likelihood of the mixture of the kept filters, their
+/// smallest ESS and mean ESS, and the repairs of every filter (`health`).
+fn pooled_summary(members: &[Driven], health: Health) -> RunSummary {
+    let m = members.len();
+    // log (1/M) Σ exp(ℓ_m), by log-sum-exp.
+    let max = members
+        .iter()
+        .map(|d| d.summary.loglik)
+        .fold(f64::NEG_INFINITY, f64::max);
+    let loglik = max
+        + (members
+            .iter()
+            .map(|d| (d.summary.loglik - max).exp())
+            .sum::<f64>()
+            / m as f64)
+            .ln();
+    let ess_min = members
+        .iter()
+        .filter_map(|d| d.summary.ess_min)
+        .fold(None, |a: Option<f64>, e| Some(a.map_or(e, |a| a.min(e))));
+    let ess_means: Vec<f64> = members.iter().filter_map(|d| d.summary.ess_mean).collect();
+    RunSummary {
+        steps_completed: members[0].summary.steps_completed,
+        loglik,
+        ess_min,
+        ess_mean: (!ess_means.is_empty())
+            .then(|| ess_means.iter().sum::<f64>() / ess_means.len() as f64),
+        failure: None,
+        health,
     }
 }
 
