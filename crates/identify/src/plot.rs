@@ -16,7 +16,7 @@ use crate::error::{Context, Result};
 
 use crate::figures::{self, Panel, Series};
 use crate::record::RunRecord;
-use crate::residuals::{whiteness, Residuals};
+use crate::residuals::{whiteness, Residuals, Whiteness};
 
 /// What `plot` drew and what it skipped (and why).
 #[derive(Debug, Default)]
@@ -224,6 +224,9 @@ fn column(rows: &[Vec<f64>], i: usize) -> Vec<f64> {
         .collect()
 }
 
+/// The residual figures of a record's one-step prediction errors `res`: the measured and
+/// predicted accelerations, the normalised innovations, and their autocorrelation with a
+/// whiteness check per channel.
 fn draw_residuals(res: &Residuals, who: &str, out: &Path, p: &mut Plotted) -> Result<()> {
     let channels = &res.channels;
     let measured: Vec<Vec<f64>> = (0..channels.len())
@@ -235,8 +238,24 @@ fn draw_residuals(res: &Residuals, who: &str, out: &Path, p: &mut Plotted) -> Re
     let innov: Vec<Vec<f64>> = (0..channels.len())
         .map(|i| column(&res.normalised_innovation, i))
         .collect();
+    draw_accelerations(res, &measured, &predicted, who, out, p)?;
+    let checks: Vec<_> = innov.iter().map(|x| whiteness(x, MAX_LAG)).collect();
+    draw_innovations(res, &innov, &checks, who, out, p)?;
+    draw_innovation_acf(channels, &checks, who, out, p)
+}
 
-    let panels: Vec<Panel<'_>> = channels
+/// `accelerations.svg`: each channel's measured acceleration beside its one-step-ahead
+/// prediction.
+fn draw_accelerations(
+    res: &Residuals,
+    measured: &[Vec<f64>],
+    predicted: &[Vec<f64>],
+    who: &str,
+    out: &Path,
+    p: &mut Plotted,
+) -> Result<()> {
+    let panels: Vec<Panel<'_>> = res
+        .channels
         .iter()
         .enumerate()
         .map(|(i, name)| Panel {
@@ -266,9 +285,21 @@ fn draw_residuals(res: &Residuals, who: &str, out: &Path, p: &mut Plotted) -> Re
         &format!("{who}: measured and predicted accelerations"),
     )?;
     p.written.push(path);
+    Ok(())
+}
 
-    let checks: Vec<_> = innov.iter().map(|x| whiteness(x, MAX_LAG)).collect();
-    let panels: Vec<Panel<'_>> = channels
+/// `innovations.svg`: each channel's normalised innovations with the ±2 lines, captioned with
+/// their mean and variance (`checks`).
+fn draw_innovations(
+    res: &Residuals,
+    innov: &[Vec<f64>],
+    checks: &[Option<Whiteness>],
+    who: &str,
+    out: &Path,
+    p: &mut Plotted,
+) -> Result<()> {
+    let panels: Vec<Panel<'_>> = res
+        .channels
         .iter()
         .enumerate()
         .map(|(i, name)| Panel {
@@ -292,10 +323,21 @@ fn draw_residuals(res: &Residuals, who: &str, out: &Path, p: &mut Plotted) -> Re
     let path = out.join("innovations.svg");
     figures::time_series(&panels, &path, &format!("{who}: normalised innovations"))?;
     p.written.push(path);
+    Ok(())
+}
 
+/// `innovation_acf.svg`: the autocorrelation of each channel's innovations with its Ljung–Box
+/// verdict (`checks`), or why it is skipped.
+fn draw_innovation_acf(
+    channels: &[String],
+    checks: &[Option<Whiteness>],
+    who: &str,
+    out: &Path,
+    p: &mut Plotted,
+) -> Result<()> {
     let acf: Vec<(String, Vec<f64>)> = channels
         .iter()
-        .zip(&checks)
+        .zip(checks)
         .filter_map(|(name, w)| {
             w.as_ref().map(|w| {
                 (
