@@ -143,6 +143,28 @@ pub struct Batch<S: ParticleStep> {
     draws: Vec<f64>,
 }
 
+/// What every worker reads in a step: the filter's per-particle step, the step's input, every
+/// particle's draws (particle after particle) and whether particles go four at a time.
+struct StepContext<'c, 'i, S> {
+    step: &'c S,
+    input: &'c StepInput<'i>,
+    draws: &'c [f64],
+    lanes: bool,
+}
+
+/// What one worker writes: its block of consecutive particles and their log-weights.
+struct BlockOut<'b, 'p> {
+    block: Block<'p>,
+    log_w: &'b mut [f64],
+}
+
+impl BlockOut<'_, '_> {
+    /// The log-weight of particle `i` (indexing the whole store).
+    fn log_w(&mut self, i: usize) -> &mut f64 {
+        &mut self.log_w[i - self.block.first()]
+    }
+}
+
 /// What one thread needs to advance a block of particles: the scratch of the `f64` step and of
 /// the pack, the pack's blocks, and the repairs counted in the current step.
 struct Worker<S: ParticleStep> {
@@ -241,17 +263,25 @@ impl<S: ParticleStep> Batch<S> {
         }
         let per = self.block_size(np);
         let blocks = np.div_ceil(per).max(1);
-        let (lanes, draws) = (self.lanes, &self.draws[..]);
+        let cx = StepContext {
+            step,
+            input,
+            draws: &self.draws[..],
+            lanes: self.lanes,
+        };
         if blocks == 1 {
-            let mut block = out.dst.as_block();
-            self.workers[0].advance(step, input, &mut block, out.log_w, draws, lanes);
+            let mut out = BlockOut {
+                block: out.dst.as_block(),
+                log_w: out.log_w,
+            };
+            self.workers[0].advance(&cx, &mut out);
         } else {
             out.dst
                 .blocks_mut(per)
                 .zip(out.log_w.par_chunks_mut(per))
                 .zip(self.workers.par_iter_mut())
-                .for_each(|((mut block, log_w), worker)| {
-                    worker.advance(step, input, &mut block, log_w, draws, lanes)
+                .for_each(|((block, log_w), worker)| {
+                    worker.advance(&cx, &mut BlockOut { block, log_w })
                 });
         }
         for w in &mut self.workers[..blocks] {
@@ -278,27 +308,19 @@ impl<S: ParticleStep> Worker<S> {
         }
     }
 
-    /// Advances the particles of `block` (log-weights `log_w`), group after group: the groups
-    /// one worker would form over the whole store, since the block starts at a whole group.
-    fn advance(
-        &mut self,
-        step: &S,
-        input: &StepInput<'_>,
-        block: &mut Block<'_>,
-        log_w: &mut [f64],
-        draws: &[f64],
-        lanes: bool,
-    ) {
-        let group = if lanes { PACK_LANES } else { 1 };
-        let end = block.first() + log_w.len();
-        let mut first = block.first();
+    /// Advances the particles of `out`, group after group: the groups one worker would form
+    /// over the whole store, since a block starts at a whole group.
+    fn advance(&mut self, cx: &StepContext<'_, '_, S>, out: &mut BlockOut<'_, '_>) {
+        let group = if cx.lanes { PACK_LANES } else { 1 };
+        let end = out.block.first() + out.log_w.len();
+        let mut first = out.block.first();
         while first < end {
             let count = group.min(end - first);
-            if lanes && count > 1 {
-                self.pack_group(step, input, block, log_w, draws, first, count);
+            if cx.lanes && count > 1 {
+                self.pack_group(cx, out, first, count);
             } else {
                 for i in first..first + count {
-                    self.one(step, input, block, log_w, draws, i);
+                    self.one(cx, out, i);
                 }
             }
             first += count;
@@ -306,29 +328,26 @@ impl<S: ParticleStep> Worker<S> {
     }
 
     /// Particle `i` through the `f64` step, with its draws.
-    fn one(
-        &mut self,
-        step: &S,
-        input: &StepInput<'_>,
-        block: &mut Block<'_>,
-        log_w: &mut [f64],
-        draws: &[f64],
-        i: usize,
-    ) {
-        let a = input.ancestors[i];
-        block.copy_from(i, input.src, a);
-        let w = &mut log_w[i - block.first()];
-        if *w == f64::NEG_INFINITY {
+    fn one(&mut self, cx: &StepContext<'_, '_, S>, out: &mut BlockOut<'_, '_>, i: usize) {
+        let StepInput {
+            k,
+            y,
+            src,
+            ancestors,
+        } = *cx.input;
+        let a = ancestors[i];
+        out.block.copy_from(i, src, a);
+        if *out.log_w(i) == f64::NEG_INFINITY {
             return;
         }
-        let nd = step.draws();
-        let d = block.particle_mut(i);
-        let (ll, ok) = step.advance(
+        let nd = cx.step.draws();
+        let d = out.block.particle_mut(i);
+        let (ll, ok) = cx.step.advance(
             Ancestry {
-                k: input.k,
-                y: input.y,
-                prev: input.src.sampled(a),
-                xi: &draws[i * nd..(i + 1) * nd],
+                k,
+                y,
+                prev: src.sampled(a),
+                xi: &cx.draws[i * nd..(i + 1) * nd],
             },
             Slots {
                 sampled: d.sampled,
@@ -338,24 +357,25 @@ impl<S: ParticleStep> Worker<S> {
             &mut self.scalar,
             &mut self.health,
         );
-        *w += if ok { ll } else { f64::NAN };
+        *out.log_w(i) += if ok { ll } else { f64::NAN };
     }
 
     /// The `count ≤ 4` particles from `first` on in lanes (lanes past `count` repeat the group's
     /// first particle and are discarded).
-    #[allow(clippy::too_many_arguments)]
     fn pack_group(
         &mut self,
-        step: &S,
-        input: &StepInput<'_>,
-        block: &mut Block<'_>,
-        log_w: &mut [f64],
-        draws: &[f64],
+        cx: &StepContext<'_, '_, S>,
+        out: &mut BlockOut<'_, '_>,
         first: usize,
         count: usize,
     ) {
-        let StepInput { src, ancestors, .. } = *input;
-        let nd = step.draws();
+        let StepInput {
+            k,
+            y,
+            src,
+            ancestors,
+        } = *cx.input;
+        let nd = cx.step.draws();
         let particle = |b: usize| first + if b < count { b } else { 0 };
         gather(
             &mut self.prev,
@@ -372,12 +392,12 @@ impl<S: ParticleStep> Worker<S> {
         );
         gather(
             &mut self.xi,
-            std::array::from_fn(|b| &draws[particle(b) * nd..(particle(b) + 1) * nd]),
+            std::array::from_fn(|b| &cx.draws[particle(b) * nd..(particle(b) + 1) * nd]),
         );
-        let (ll, ok) = step.advance(
+        let (ll, ok) = cx.step.advance(
             Ancestry {
-                k: input.k,
-                y: input.y,
+                k,
+                y,
                 prev: &self.prev,
                 xi: &self.xi,
             },
@@ -389,13 +409,12 @@ impl<S: ParticleStep> Worker<S> {
             &mut self.packed,
             &mut self.health,
         );
-        let offset = block.first();
         for b in 0..count {
             let i = first + b;
-            if log_w[i - offset] == f64::NEG_INFINITY {
-                block.copy_from(i, src, ancestors[i]);
+            if *out.log_w(i) == f64::NEG_INFINITY {
+                out.block.copy_from(i, src, ancestors[i]);
             } else if Pack::mask_lane(ok, b) {
-                let d = block.particle_mut(i);
+                let d = out.block.particle_mut(i);
                 for (o, v) in d.sampled.iter_mut().zip(&self.sampled) {
                     *o = v.lane(b);
                 }
@@ -405,9 +424,9 @@ impl<S: ParticleStep> Worker<S> {
                 for (o, v) in d.cov.iter_mut().zip(&self.cov) {
                     *o = v.lane(b);
                 }
-                log_w[i - offset] += ll.lane(b);
+                *out.log_w(i) += ll.lane(b);
             } else {
-                self.one(step, input, block, log_w, draws, i);
+                self.one(cx, out, i);
             }
         }
     }

@@ -78,21 +78,19 @@ impl Particles {
     /// Particle `i`'s three blocks, mutable.
     #[inline]
     pub fn particle_mut(&mut self, i: usize) -> ParticleMut<'_> {
-        let (s, n) = (self.shape.sampled, self.shape.marginal);
-        ParticleMut {
-            sampled: &mut self.sampled[i * s..(i + 1) * s],
-            mean: &mut self.mean[i * n..(i + 1) * n],
-            cov: &mut self.cov[i * n * n..(i + 1) * n * n],
-        }
+        particle_at(
+            self.shape,
+            i,
+            &mut self.sampled,
+            &mut self.mean,
+            &mut self.cov,
+        )
     }
 
     /// Copies particle `from` of `src` into particle `to` of `self`.
     #[inline]
     pub fn copy_from(&mut self, to: usize, src: &Particles, from: usize) {
-        let d = self.particle_mut(to);
-        d.sampled.copy_from_slice(src.sampled(from));
-        d.mean.copy_from_slice(src.mean(from));
-        d.cov.copy_from_slice(src.cov(from));
+        self.particle_mut(to).copy(src, from);
     }
 
     /// The particles in consecutive blocks of `per` (the last may be shorter), each writable on
@@ -147,33 +145,43 @@ impl Block<'_> {
         self.first
     }
 
-    /// Number of particles in the block.
-    pub fn len(&self) -> usize {
-        self.sampled.len() / self.shape.sampled.max(1)
-    }
-
-    pub fn is_empty(&self) -> bool {
-        self.len() == 0
-    }
-
     /// Particle `i`'s three blocks (`i` indexes the whole store).
     #[inline]
     pub fn particle_mut(&mut self, i: usize) -> ParticleMut<'_> {
-        let (s, n) = (self.shape.sampled, self.shape.marginal);
         let j = i - self.first;
-        ParticleMut {
-            sampled: &mut self.sampled[j * s..(j + 1) * s],
-            mean: &mut self.mean[j * n..(j + 1) * n],
-            cov: &mut self.cov[j * n * n..(j + 1) * n * n],
-        }
+        particle_at(self.shape, j, self.sampled, self.mean, self.cov)
     }
 
     /// Copies particle `from` of `src` into particle `to` (indexing the whole store).
     #[inline]
     pub fn copy_from(&mut self, to: usize, src: &Particles, from: usize) {
-        let d = self.particle_mut(to);
-        d.sampled.copy_from_slice(src.sampled(from));
-        d.mean.copy_from_slice(src.mean(from));
-        d.cov.copy_from_slice(src.cov(from));
+        self.particle_mut(to).copy(src, from);
+    }
+}
+
+/// The blocks of the `j`-th particle of flat storage of particles of `shape`.
+#[inline]
+fn particle_at<'a>(
+    shape: Shape,
+    j: usize,
+    sampled: &'a mut [f64],
+    mean: &'a mut [f64],
+    cov: &'a mut [f64],
+) -> ParticleMut<'a> {
+    let (s, n) = (shape.sampled, shape.marginal);
+    ParticleMut {
+        sampled: &mut sampled[j * s..(j + 1) * s],
+        mean: &mut mean[j * n..(j + 1) * n],
+        cov: &mut cov[j * n * n..(j + 1) * n * n],
+    }
+}
+
+impl ParticleMut<'_> {
+    /// Overwrites these blocks with particle `from` of `src`.
+    #[inline]
+    fn copy(self, src: &Particles, from: usize) {
+        self.sampled.copy_from_slice(src.sampled(from));
+        self.mean.copy_from_slice(src.mean(from));
+        self.cov.copy_from_slice(src.cov(from));
     }
 }
