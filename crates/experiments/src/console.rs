@@ -24,7 +24,7 @@ impl Console {
 
     /// Both streams into one log file (the two handles share its offset, so the lines keep
     /// their order); no progress bar.
-    pub fn log_file(file: std::fs::File) -> std::io::Result<Self> {
+    pub(crate) fn log_file(file: std::fs::File) -> std::io::Result<Self> {
         Ok(Self {
             out: Box::new(file.try_clone()?),
             err: Box::new(file),

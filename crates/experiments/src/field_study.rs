@@ -5,9 +5,9 @@
 //! intervals agree, and set the toolkit beside a black-box baseline (SRIM, by the PyPI package
 //! `mdof`).
 //!
-//! The study is a description (this module's [`FieldStudy`], a TOML file) turned into the
-//! `sysid` commands a user would type (`plan_identify`, `plan_validate`); [`run`] executes them in
-//! this process through the entry it is given ([`StepRunner`]: the command line's own), so every
+//! The study is a description (this module's `FieldStudy`, a TOML file) turned into the
+//! `sysid` commands a user would type (`plan_identify`, `plan_validate`); `run` executes them in
+//! this process through the entry it is given (`StepRunner`: the command line's own), so every
 //! number of the report comes from the same commands as a user's and from their records, and
 //! every step's text is in its log. The report is drawn from those records only
 //! ([`report`]).
@@ -29,7 +29,7 @@ use identify::record::RunRecord;
 /// The whole study: its parts (one structure each).
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
-pub struct FieldStudy {
+pub(crate) struct FieldStudy {
     pub title: String,
     pub part: Vec<Part>,
 }
@@ -37,7 +37,7 @@ pub struct FieldStudy {
 /// One structure and its records.
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
-pub struct Part {
+pub(crate) struct Part {
     /// Directory name under the output (`results/real/<name>`).
     pub name: String,
     pub title: String,
@@ -67,7 +67,7 @@ pub struct Part {
 /// A recording of the structure, imported by `sysid import --map`.
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
-pub struct RecordSpec {
+pub(crate) struct RecordSpec {
     pub name: String,
     /// Channel map, relative to the study file.
     pub map: PathBuf,
@@ -77,7 +77,7 @@ pub struct RecordSpec {
 /// What a record is used for.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
 #[serde(rename_all = "lowercase")]
-pub enum Role {
+pub(crate) enum Role {
     /// Every choice of the study (variants, selection, priors) is made on this record.
     Identify,
     /// Kept out of every choice: predicted only (cross-validation) and identified again with
@@ -88,7 +88,7 @@ pub enum Role {
 /// One model and algorithm identified on the identification record.
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
-pub struct Variant {
+pub(crate) struct Variant {
     /// File stem of its record (`records/<name>.json`).
     pub name: String,
     pub label: String,
@@ -107,7 +107,7 @@ pub struct Variant {
 /// selected variant is then identified on every other record.
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
-pub struct Selection {
+pub(crate) struct Selection {
     pub group: String,
     /// Extra arguments for the identifications on the other records (e.g. the prior scaled from
     /// the identification record, written out in a config file).
@@ -230,7 +230,7 @@ impl Part {
 
 /// Where a part's files go.
 #[derive(Debug, Clone)]
-pub struct PartDirs {
+pub(crate) struct PartDirs {
     pub root: PathBuf,
 }
 
@@ -276,7 +276,7 @@ impl PartDirs {
 
 /// One `sysid` command of the study and the file it writes.
 #[derive(Debug, Clone, PartialEq)]
-pub struct Step {
+pub(crate) struct Step {
     pub args: Vec<String>,
     pub writes: PathBuf,
     /// Log of the command's output (stdout and stderr), kept beside the records.
@@ -426,7 +426,10 @@ pub(crate) fn plan_validate(part: &Part, dirs: &PartDirs) -> Vec<Step> {
 
 /// The selected variant (largest log-likelihood among the group's completed, physically
 /// possible runs) and why; `None` when no candidate qualifies.
-pub fn select<'a>(part: &'a Part, dirs: &PartDirs) -> Result<Option<(&'a Variant, RunRecord)>> {
+pub(crate) fn select<'a>(
+    part: &'a Part,
+    dirs: &PartDirs,
+) -> Result<Option<(&'a Variant, RunRecord)>> {
     let Some(sel) = &part.selection else {
         return Ok(None);
     };
@@ -511,7 +514,7 @@ pub(crate) fn plan_selected(part: &Part, dirs: &PartDirs, chosen: &Variant) -> V
 
 /// How a step ended.
 #[derive(Debug, Clone, PartialEq, Eq)]
-pub enum Ended {
+pub(crate) enum Ended {
     /// Exit 0.
     Ok,
     /// Non-zero exit, file written (a run whose answer is physically impossible writes its
@@ -546,13 +549,13 @@ pub(crate) fn log_reason(log: &Path) -> String {
 /// (`import …`, `filter …`, `validate …`), the command's text to the console. The command-line
 /// layer gives it (`sysid field-study` passes the entry its own subcommands run through), so a
 /// step runs the very code a user's command runs, with no second process.
-pub type StepRunner = fn(&[String], &mut Console) -> Result<()>;
+pub(crate) type StepRunner = fn(&[String], &mut Console) -> Result<()>;
 
 /// Runs `step` through `run_step`; the command's text, the library's log lines while it runs
 /// and the error it ends with (as `sysid` prints it) go to the step's log. A required step that
 /// wrote nothing is an error. A panic of the command is caught and ends the step like an
 /// error, so that one step cannot take the study down without a word in its log.
-pub fn execute(run_step: StepRunner, step: &Step) -> Result<Ended> {
+pub(crate) fn execute(run_step: StepRunner, step: &Step) -> Result<Ended> {
     for p in [&step.writes, &step.log] {
         if let Some(d) = p.parent() {
             std::fs::create_dir_all(d).with_context(|| format!("creating {}", d.display()))?;
@@ -692,7 +695,7 @@ fn copy_figure(from: &Path, to: &Path) -> Result<()> {
 
 /// Options of [`run`].
 #[derive(Debug, Clone)]
-pub struct RunOptions {
+pub(crate) struct RunOptions {
     /// Runs each step's command ([`StepRunner`]).
     pub run_step: StepRunner,
     pub out: PathBuf,
@@ -707,7 +710,7 @@ pub struct RunOptions {
 }
 
 /// Runs every part of the study and writes `REPORT.md` into `out`.
-pub fn run(study: &FieldStudy, opts: &RunOptions) -> Result<()> {
+pub(crate) fn run(study: &FieldStudy, opts: &RunOptions) -> Result<()> {
     let started = std::time::Instant::now();
     let mut notes = Vec::new();
     for part in &study.part {

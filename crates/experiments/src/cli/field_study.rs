@@ -79,7 +79,7 @@ enum Step {
 
 /// Runs one step of a study in this process (`crate::field_study::StepRunner`): `args` are what
 /// a user types after `sysid`, parsed and run by the same code as `sysid`'s.
-pub fn run_step(args: &[String], con: &mut Console) -> Result<()> {
+pub(crate) fn run_step(args: &[String], con: &mut Console) -> Result<()> {
     let step = <Step as clap::Parser>::try_parse_from(args)
         .map_err(|e| crate::error::invalid!("`sysid {}`: {e}", args.join(" ")))?;
     match step {

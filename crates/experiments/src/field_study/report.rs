@@ -223,7 +223,7 @@ fn damping_positive(r: &RunRecord) -> bool {
 }
 
 /// Writes the report of the whole study from the records under `out`.
-pub fn render(study: &FieldStudy, out: &Path) -> Result<String> {
+pub(crate) fn render(study: &FieldStudy, out: &Path) -> Result<String> {
     let mut s = String::new();
     writeln!(s, "# {}\n", study.title)?;
     writeln!(
