@@ -17,7 +17,7 @@ use crate::sweep::write_bytes_atomic;
 
 /// One submission of the array (the first, or a resubmission of some shards) and its finish job.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
-pub struct Submission {
+pub(crate) struct Submission {
     pub array_job: String,
     pub finish_job: String,
     /// The shards this array runs.
@@ -93,7 +93,7 @@ pub fn scancel(jobs: &[String]) -> Result<(), ClusterError> {
 
 /// A job or array task still known to `squeue`: its state and the scheduler's reason.
 #[derive(Debug, Clone, PartialEq, Eq)]
-pub struct Queued {
+pub(crate) struct Queued {
     pub state: String,
     pub reason: String,
 }

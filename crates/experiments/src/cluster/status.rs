@@ -18,7 +18,7 @@ use identify::record::RunRecord;
 
 /// Where a run stands.
 #[derive(Debug, Clone, PartialEq, Eq)]
-pub enum RunState {
+pub(crate) enum RunState {
     /// Its record is in the merged output.
     Merged,
     /// Its record is in its shard's part directory, not merged yet.
@@ -37,7 +37,7 @@ impl RunState {
 
 /// One shard: its runs, how many are done, and where it is.
 #[derive(Debug, Clone)]
-pub struct ShardStatus {
+pub(crate) struct ShardStatus {
     pub index: usize,
     pub runs: usize,
     pub done: usize,
@@ -66,9 +66,9 @@ pub struct Status {
     pub total: usize,
     pub merged: usize,
     pub in_parts: usize,
-    pub shards: Vec<ShardStatus>,
+    pub(crate) shards: Vec<ShardStatus>,
     /// Finish jobs still queued, with their state.
-    pub finish_queued: Vec<(String, Queued)>,
+    pub(crate) finish_queued: Vec<(String, Queued)>,
     /// Why the queue could not be read (then no shard counts as queued).
     pub scheduler_error: Option<String>,
 }
@@ -192,7 +192,7 @@ fn usable(
 }
 
 /// Every run of the plan's study, with its shard and state.
-pub fn runs(plan: &Plan) -> Result<Vec<(usize, PathBuf, RunState)>, ClusterError> {
+pub(crate) fn runs(plan: &Plan) -> Result<Vec<(usize, PathBuf, RunState)>, ClusterError> {
     let sweeps = plan.sweeps()?;
     let items: Vec<(usize, usize)> = sweeps
         .iter()

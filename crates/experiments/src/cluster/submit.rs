@@ -18,7 +18,7 @@ pub struct Submitted {
     /// The `sbatch` command lines, in order (`<array job>` stands for the array's id).
     pub commands: Vec<String>,
     /// The submission, when it was made (not on a dry run).
-    pub submission: Option<Submission>,
+    pub(crate) submission: Option<Submission>,
 }
 
 /// `0-3,7,9-10` for the shards 0, 1, 2, 3, 7, 9, 10 (sorted), with `%K` when at most K may run.
