@@ -20,7 +20,7 @@ pub(crate) const MAX_FACTOR: usize = 1000;
 
 /// A decimation that cannot be applied.
 #[derive(Debug, Clone, PartialEq, Eq, Error)]
-pub enum DecimateError {
+pub(crate) enum DecimateError {
     #[error("decimation factor {0} is not in [1, {MAX_FACTOR}]")]
     Factor(usize),
     #[error("decimating {samples} samples by {factor} leaves {kept}; at least 2 are needed")]
@@ -51,7 +51,10 @@ fn every<T: Copy>(v: &[T], width: usize, factor: usize) -> Vec<T> {
 }
 
 /// The data set with samples 0, factor, 2·factor, … kept; `factor = 1` returns it unchanged.
-pub fn decimate(data: &LoadedDataset, factor: usize) -> Result<LoadedDataset, DecimateError> {
+pub(crate) fn decimate(
+    data: &LoadedDataset,
+    factor: usize,
+) -> Result<LoadedDataset, DecimateError> {
     check_factor(factor)?;
     if factor == 1 {
         return Ok(data.clone());

@@ -28,14 +28,14 @@ use crate::error::{bail, Result};
 
 /// The storey stiffnesses (per unit mass of floor 1) of the corpus's base building: modes near
 /// 1.9, 5.3 and 7.9 Hz, where earthquake records carry energy, with 200 Hz sampling.
-pub const STIFFNESS: [f64; 3] = [1200.0, 1000.0, 800.0];
+pub(crate) const STIFFNESS: [f64; 3] = [1200.0, 1000.0, 800.0];
 
 /// Rayleigh damping, this ratio in the base chain's first and third modes.
 pub const DAMPING_RATIO: f64 = 0.02;
 
 /// Measurement noise: this fraction of each clean channel's RMS (the ground sensor's too, in
 /// the case that has one).
-pub const NOISE_FRACTION: f64 = 0.05;
+pub(crate) const NOISE_FRACTION: f64 = 0.05;
 
 /// What a user knows of every building of the corpus: `sysid filter`'s minimal flags (the seed
 /// is [`SEED`]).

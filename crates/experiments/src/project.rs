@@ -22,7 +22,7 @@ pub fn root() -> PathBuf {
 
 /// `path` when it exists; else, for a relative path, the same path in the project's checkout
 /// ([`root`]) when it exists there; else an error naming `what` and both places looked in.
-pub fn locate(path: &Path, what: &str) -> Result<PathBuf> {
+pub(crate) fn locate(path: &Path, what: &str) -> Result<PathBuf> {
     if path.exists() {
         return Ok(path.to_path_buf());
     }

@@ -38,11 +38,12 @@ use identify::pipeline::{build_filter, Algorithm, FilterSettings};
 pub mod comparison;
 pub mod posterior;
 mod record;
+pub(crate) use comparison::compare_files;
 pub use comparison::{
-    compare, compare_files, compare_markdown, goal_markdown, goal_rows, information_limit,
-    limit_markdown, reference_covers, Comparison, DataSetRuns, GoalRow, LimitRow, GOAL_MARGIN,
+    compare, goal_rows, information_limit, reference_covers, Comparison, DataSetRuns, GoalRow,
+    LimitRow, GOAL_MARGIN,
 };
-pub use record::{chain_warnings, ReferenceRecord, MIN_ACCEPTANCE, MIN_CHAIN_ESS};
+pub use record::{chain_warnings, ReferenceRecord};
 
 fn sigmoid(x: f64) -> f64 {
     1.0 / (1.0 + (-x).exp())

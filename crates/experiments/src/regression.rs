@@ -379,7 +379,7 @@ pub fn format_table(checks: &[Check]) -> String {
 
 /// How to run a regression check: where its records go and how the sweep runs.
 #[derive(Debug, Clone)]
-pub struct RegressionOptions<'a> {
+pub(crate) struct RegressionOptions<'a> {
     /// Output directory: `records/` (one JSON per run) and the summary.
     pub out: &'a Path,
     /// Worker threads (0: one per core).
@@ -393,7 +393,7 @@ pub struct RegressionOptions<'a> {
 /// A finished regression sweep: its records, per-algorithm statistics and checks. Holds the
 /// lock of the output directory until dropped.
 #[derive(Debug)]
-pub struct RegressionRun {
+pub(crate) struct RegressionRun {
     pub records: Vec<RunRecord>,
     /// Runs computed by this check.
     pub executed: usize,
@@ -410,13 +410,13 @@ pub struct RegressionRun {
 /// measured > bound`).
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 #[error("{} regression bound(s) breached:\n  {}", .0.len(), .0.join("\n  "))]
-pub struct Breaches(pub Vec<String>);
+pub(crate) struct Breaches(pub Vec<String>);
 
 crate::error::domain_error!(Breaches);
 
 /// Runs the study of `file` into `options.out` (locked for the lifetime of the result) and
 /// compares its statistics with the bounds.
-pub fn run(file: &RegressionFile, options: &RegressionOptions) -> Result<RegressionRun> {
+pub(crate) fn run(file: &RegressionFile, options: &RegressionOptions) -> Result<RegressionRun> {
     let study = &file.study;
     let lock = DirLock::acquire(options.out)?;
     let dir = options.out.join("records");

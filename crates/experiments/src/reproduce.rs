@@ -21,7 +21,8 @@ use identify::figures;
 use identify::pipeline::Algorithm;
 use identify::record::RunRecord;
 
-pub use crate::stats::{algorithm_stats, AlgorithmStats, ParamStats, PAPER_EQ31, STUDIES};
+pub(crate) use crate::stats::algorithm_stats;
+pub use crate::stats::{AlgorithmStats, ParamStats, STUDIES};
 
 /// Options of a reproduction.
 #[derive(Debug, Clone)]

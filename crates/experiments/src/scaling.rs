@@ -173,7 +173,7 @@ pub(crate) fn read_cpu(records: &Path, id: &str) -> Option<f64> {
 }
 
 /// What a cell is of: one algorithm on one structure of the study's axis, as planned.
-pub struct CellOf<'a> {
+pub(crate) struct CellOf<'a> {
     pub structure: &'a str,
     pub storeys: usize,
     /// 1-based hysteretic storeys and measured storeys.
@@ -188,7 +188,7 @@ pub struct CellOf<'a> {
 
 /// The statistics of `records` (the runs of one algorithm on one structure) and their CPU
 /// times.
-pub fn cell(of: &CellOf, records: &[&RunRecord], cpu_s: &[Option<f64>]) -> Cell {
+pub(crate) fn cell(of: &CellOf, records: &[&RunRecord], cpu_s: &[Option<f64>]) -> Cell {
     let &CellOf {
         structure,
         storeys,

@@ -12,7 +12,7 @@ use identify::record::RunRecord;
 pub const STUDIES: [&str; 5] = ["fig4", "fig5", "fig6", "fig8", "fig7"];
 
 /// The paper's θ_val for its Fig. 8 run (eq. 31).
-pub const PAPER_EQ31: [f64; 9] = [
+pub(crate) const PAPER_EQ31: [f64; 9] = [
     7.973, 7.912, 7.943, 0.277, 0.342, 0.278, 3.418, 0.960, 2.488,
 ];
 
@@ -67,7 +67,7 @@ pub(crate) fn truth(ok: &[&RunRecord], j: usize) -> Option<f64> {
 }
 
 /// Statistics of one algorithm's records.
-pub fn algorithm_stats(algorithm: &str, records: &[&RunRecord]) -> AlgorithmStats {
+pub(crate) fn algorithm_stats(algorithm: &str, records: &[&RunRecord]) -> AlgorithmStats {
     let (ok, names) = completed(records);
     let params = names
         .iter()

@@ -1,6 +1,6 @@
 //! The online filters against a reference posterior: per data set ([`compare`]), the
 //! information limit across data sets ([`information_limit`]) and the accuracy goal against it,
-//! decided by a stated test ([`goal_rows`]); [`compare_files`] is `sysid compare-reference`.
+//! decided by a stated test ([`goal_rows`]); `compare_files` is `sysid compare-reference`.
 
 use std::path::PathBuf;
 
@@ -71,7 +71,7 @@ pub fn compare(
 }
 
 /// The comparison as a markdown table, with the reference beside it.
-pub fn compare_markdown(
+pub(crate) fn compare_markdown(
     reference: &[ParamSummary],
     records: &[identify::record::RunRecord],
 ) -> String {
@@ -301,7 +301,7 @@ pub fn goal_rows(groups: &[DataSetRuns]) -> Vec<GoalRow> {
 }
 
 /// The goal rows as a markdown table.
-pub fn goal_markdown(rows: &[GoalRow]) -> String {
+pub(crate) fn goal_markdown(rows: &[GoalRow]) -> String {
     use crate::markdown::{compact_header, num, row};
     let mut o = String::new();
     compact_header(
@@ -343,7 +343,7 @@ pub fn goal_markdown(rows: &[GoalRow]) -> String {
 
 /// The information limit as a markdown table ("–" where a ratio has no finite value, e.g. a
 /// reference error of exactly zero).
-pub fn limit_markdown(rows: &[LimitRow]) -> String {
+pub(crate) fn limit_markdown(rows: &[LimitRow]) -> String {
     use crate::markdown::{compact_header, num, row};
     let mut o = String::new();
     compact_header(
@@ -414,7 +414,7 @@ struct DataSetGroup {
 /// references of several data sets, each online record against the reference of its own data
 /// set, the information limit across them and the goal against it. Returns the markdown; `warn`
 /// hears each reference chain's warnings (which the markdown lists too).
-pub fn compare_files(
+pub(crate) fn compare_files(
     references: &[PathBuf],
     records: &[PathBuf],
     warn: &mut dyn FnMut(String),

@@ -75,10 +75,10 @@ impl identify::record::read::Checked for ReferenceRecord {
 
 /// Chain ESS below which a reference mean is flagged: its Monte-Carlo s.e. is then more than a
 /// tenth of the posterior s.d.
-pub const MIN_CHAIN_ESS: f64 = 100.0;
+pub(crate) const MIN_CHAIN_ESS: f64 = 100.0;
 
 /// Acceptance rate below which the chain is flagged as (nearly) stuck.
-pub const MIN_ACCEPTANCE: f64 = 0.02;
+pub(crate) const MIN_ACCEPTANCE: f64 = 0.02;
 
 /// The reasons a chain's summary is not a trustworthy posterior: a chain that did not move
 /// after its burn-in (one point, not a distribution), a nearly stuck one, too few effective
