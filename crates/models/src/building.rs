@@ -181,7 +181,7 @@ impl Building {
 
     /// [`Building::new`] with the hysteretic storeys 1-based, as users write them
     /// (`[1, 6]`: an element between the ground and storey 1 and one between storeys 5 and 6).
-    pub fn from_one_based(
+    pub(crate) fn from_one_based(
         masses: Vec<f64>,
         hysteretic: &[usize],
         damping: Damping,
@@ -219,13 +219,13 @@ impl Building {
     }
 
     /// 1-based storeys of the hysteretic elements, as users write them.
-    pub fn hysteretic_one_based(&self) -> Vec<usize> {
+    pub(crate) fn hysteretic_one_based(&self) -> Vec<usize> {
         self.hysteretic.iter().map(|j| j + 1).collect()
     }
 
     /// The hysteretic element at storey `j`, if any.
     #[inline]
-    pub fn element_at(&self, j: usize) -> Option<usize> {
+    pub(crate) fn element_at(&self, j: usize) -> Option<usize> {
         self.element[j]
     }
 
@@ -236,7 +236,7 @@ impl Building {
 }
 
 /// Checks storey masses as a user states them: each positive, finite and within
-/// [`limits::MAX_ABS_VALUE`] (1-based storeys in the message). [`Building::new`] checks every
+/// `limits::MAX_ABS_VALUE` (10¹²; 1-based storeys in the message). [`Building::new`] checks every
 /// building's masses here; a config's `[structure] masses` is checked here when it is read.
 pub fn check_masses(masses: &[f64]) -> Result<(), BuildingError> {
     for (j, &m) in masses.iter().enumerate() {

@@ -9,10 +9,10 @@ use rand_distr::{Distribution, StandardNormal};
 pub const G: f64 = 9.81;
 
 /// Time step of the data and of the filters (SPEC §2–3).
-pub const DEFAULT_DT: f64 = 0.005;
+pub(crate) const DEFAULT_DT: f64 = 0.005;
 
 /// Amplitude scale of El Centro in the paper preset (SPEC §2).
-pub const EL_CENTRO_SCALE: f64 = 3.0;
+pub(crate) const EL_CENTRO_SCALE: f64 = 3.0;
 
 /// A uniformly sampled ground acceleration, `acc[k]` at `t = k·dt`, in m/s².
 #[derive(Debug, Clone, PartialEq)]
@@ -161,7 +161,7 @@ pub fn envelope(t: f64) -> f64 {
 /// integrated with RK4 (ω_g·dt = 0.08 at dt = 0.005 s, well inside RK4's accurate range).
 /// Callers bound the `floor(duration/dt) + 1` samples first with
 /// [`crate::limits::samples_for_duration`].
-pub fn kanai_tajimi<R: Rng + ?Sized>(
+pub(crate) fn kanai_tajimi<R: Rng + ?Sized>(
     params: &KanaiTajimi,
     duration: f64,
     dt: f64,

@@ -1,7 +1,7 @@
 //! Named real ground motions (SPEC §2: user records): the PEER NGA `.AT2` records vendored in
 //! `data/ground_motions/peer/` (provenance, licence and SHA-256 of each file in
 //! `data/ground_motions/PROVENANCE.md`), embedded in the binary and parsed by
-//! [`crate::readers::parse_at2`].
+//! the PEER `.AT2` reader of [`crate::readers`].
 //!
 //! The paper identifies its structure under one record only and remarks that the results "would
 //! most likely vary with the excitation"; these records let a study try other ones. Each name

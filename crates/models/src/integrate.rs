@@ -174,7 +174,7 @@ pub fn simulate_rk4<S: ForcedSystem + ?Sized>(sys: &S, ug: &[f64], dt: f64) -> T
 
 /// Largest `|λ|·h` on the negative real axis for which a classical RK4 step of size `h` is stable
 /// (the exact bound is 2.7853; the margin keeps rounding on the stable side).
-pub const RK4_REAL_STABILITY: f64 = 2.78;
+pub(crate) const RK4_REAL_STABILITY: f64 = 2.78;
 
 /// An upper bound of the fastest decay rate `|λ|` (s⁻¹) of a shear chain's damping:
 /// Gershgorin's bound of the eigenvalues of `M⁻¹C`, `max_i (|c_i| + |c_{i+1}|)·2 / m_i`. The
@@ -192,7 +192,7 @@ pub fn fastest_damping_rate<L: HysteresisLaw>(chain: &ShearChainOf<L>) -> f64 {
 }
 
 /// RK4 steps per sample interval that keep the truth integration of `chain` at step `dt`
-/// stable: 1 while [`fastest_damping_rate`]`·dt ≤` [`RK4_REAL_STABILITY`] (every chain of the
+/// stable: 1 while [`fastest_damping_rate`]`·dt ≤ RK4_REAL_STABILITY` (2.78; every chain of the
 /// paper and of the scaling study, whose data are unchanged), else the smallest count that
 /// brings the sub-step inside the bound (2 for the 200-storey `building-chain`).
 pub fn rk4_substeps<L: HysteresisLaw>(chain: &ShearChainOf<L>, dt: f64) -> usize {

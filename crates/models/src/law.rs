@@ -29,9 +29,9 @@ use thiserror::Error;
 /// Largest number of linear parameters of a law (the partitions keep a law's basis
 /// `[g₀, g₁, …]` in a stack array of `1 + MAX_LINEAR` entries); checked at compile time for
 /// every law a partition is built with.
-pub const MAX_LINEAR: usize = 4;
+pub(crate) const MAX_LINEAR: usize = 4;
 /// Largest number of parameters (linear and nonlinear) of a law.
-pub const MAX_PARAMS: usize = 8;
+pub(crate) const MAX_PARAMS: usize = 8;
 
 /// An impossible parameter of one element, named by the law, the element's storey (0-based) and
 /// the parameter.

@@ -6,7 +6,7 @@
 //!
 //! Each limit lies far beyond any real use (the paper's data set is 6,237 samples × 3 storeys
 //! at dt = 0.005 s, SPEC §2) and well inside what the machine can hold: the largest data set
-//! the limits admit is [`MAX_CELLS`] numbers per table (400 MB of `f64`).
+//! the limits admit is `MAX_CELLS` (5·10⁷) numbers per table (400 MB of `f64`).
 //!
 //! The check functions return a [`LimitError`], which says which limit is broken and by which
 //! value; the caller wraps it with the place the value came from (file, line and field, or the
@@ -19,20 +19,20 @@ pub const MAX_SAMPLES: usize = 10_000_000;
 
 /// Most numbers of one table, samples × columns (5·10⁷, 400 MB of `f64`): a 200-storey chain
 /// with its 401 true states fits for 1.2·10⁵ samples, the paper's for 10⁷.
-pub const MAX_CELLS: usize = 50_000_000;
+pub(crate) const MAX_CELLS: usize = 50_000_000;
 
 /// Smallest and largest time step, in seconds (strong-motion records use 0.001–0.02 s).
-pub const MIN_DT: f64 = 1e-5;
-pub const MAX_DT: f64 = 1.0;
+pub(crate) const MIN_DT: f64 = 1e-5;
+pub(crate) const MAX_DT: f64 = 1.0;
 
 /// Largest |time| in a CSV time column, in seconds (3.2 centuries: room for absolute time
 /// stamps, none for the values that only a typo produces).
-pub const MAX_ABS_TIME: f64 = 1e10;
+pub(crate) const MAX_ABS_TIME: f64 = 1e10;
 
 /// Largest |value| of a data sample (accelerations, displacements, velocities, hysteretic
 /// variables, in SI units). A real record stays below 10³; the bound keeps every sum of squares
 /// over [`MAX_SAMPLES`] samples finite, so an RMS can never become ∞.
-pub const MAX_ABS_VALUE: f64 = 1e12;
+pub(crate) const MAX_ABS_VALUE: f64 = 1e12;
 
 /// Most storeys of a shear chain.
 pub const MAX_STOREYS: usize = 200;
@@ -42,7 +42,7 @@ pub const MAX_ABS_SCALE: f64 = 1e3;
 
 /// Largest noise fraction (noise s.d. / signal RMS) of a generated data set; 0 (noiseless) is
 /// valid.
-pub const MAX_NOISE_FRACTION: f64 = 10.0;
+pub(crate) const MAX_NOISE_FRACTION: f64 = 10.0;
 
 /// Range of the noise fraction a filter assumes (SPEC §3: 0.1). Below 10⁻³ the likelihood is
 /// so sharp that a particle cloud collapses onto one particle at the first step and the
@@ -60,23 +60,23 @@ pub const MAX_PARTICLES: usize = 10_000_000;
 
 /// Most `f64` a filter's particle cloud may hold, particles × numbers per particle
 /// (2·10⁸, 1.6 GB).
-pub const MAX_PARTICLE_CELLS: usize = 200_000_000;
+pub(crate) const MAX_PARTICLE_CELLS: usize = 200_000_000;
 
 /// Most kept iterations, and most burn-in iterations, of a reference chain (`sysid reference`,
 /// 10⁶ each): every iteration runs one particle filter over the record (about 1.4 ms for the
 /// paper's 3-storey record with 200 particles, so 10⁶ iterations are half an hour), and the kept
 /// samples are held in memory (10⁶ × the free parameters).
-pub const MAX_CHAIN_ITERATIONS: usize = 1_000_000;
+pub(crate) const MAX_CHAIN_ITERATIONS: usize = 1_000_000;
 
 /// Most repeated likelihood estimates at a chain's start point (`sysid reference --probe`):
 /// they only measure the estimator's s.d., for which 20 suffice.
-pub const MAX_PROBES: usize = 10_000;
+pub(crate) const MAX_PROBES: usize = 10_000;
 
 /// Most worker threads of a sweep (`--threads`): far beyond the cores of any machine the runs
 /// share; a larger count only asks the system for threads it cannot give.
 pub const MAX_THREADS: usize = 1024;
 
-/// Largest input file the readers accept (2 GiB): a table of [`MAX_CELLS`] numbers, each
+/// Largest input file the readers accept (2 GiB): a table of `MAX_CELLS` (5·10⁷) numbers, each
 /// printed in at most 24 characters plus a separator, is 1.25 GB, so every data set
 /// `simulate` can write loads back.
 pub const MAX_FILE_BYTES: u64 = 1 << 31;
@@ -106,7 +106,7 @@ pub fn num(v: f64) -> String {
 }
 
 /// `value` is finite and within `[min, max]`.
-pub fn check_range(value: f64, min: f64, max: f64) -> Result<f64, LimitError> {
+pub(crate) fn check_range(value: f64, min: f64, max: f64) -> Result<f64, LimitError> {
     if !value.is_finite() {
         return Err(LimitError::NotFinite { value });
     }
@@ -208,7 +208,7 @@ pub fn max_duration(dt: f64) -> f64 {
     (MAX_SAMPLES - 1) as f64 * dt
 }
 
-/// A table of `rows × columns` numbers within [`MAX_SAMPLES`] rows and [`MAX_CELLS`] numbers.
+/// A table of `rows × columns` numbers within [`MAX_SAMPLES`] rows and `MAX_CELLS` (5·10⁷) numbers.
 pub fn check_table(rows: usize, columns: usize) -> Result<(), LimitError> {
     check_count(rows, 0, MAX_SAMPLES)?;
     let cells = (rows as u128) * (columns as u128);
@@ -222,7 +222,7 @@ pub fn check_table(rows: usize, columns: usize) -> Result<(), LimitError> {
 }
 
 /// A particle count in `1..=MAX_PARTICLES` whose cloud, `per_particle` numbers each, stays
-/// within [`MAX_PARTICLE_CELLS`].
+/// within `MAX_PARTICLE_CELLS` (2·10⁸) numbers.
 pub fn check_particles(particles: usize, per_particle: usize) -> Result<usize, LimitError> {
     check_count(particles, 1, MAX_PARTICLES)?;
     let cells = (particles as u128) * (per_particle.max(1) as u128);

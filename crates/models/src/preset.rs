@@ -4,7 +4,7 @@
 //!   ground and storey 1 (β = 2, γ = 1, n = 2); El Centro × 3.0 at dt = 0.005 s.
 //! - `paper-3dof-harmonic`: the same structure under `3·sin(4t)` m/s² for 31.18 s.
 //! - `shear-chain` with a storey count N: the same per-storey values for N storeys, Bouc–Wen
-//!   element at storey 1, El Centro × 3.0 ([`Preset::with_storeys`]).
+//!   element at storey 1, El Centro × 3.0 ([`Preset::from_name`]).
 //! - `building-chain` with a storey count N: a chain with the modal periods of a real building
 //!   (T₁ from 0.32 s at 3 storeys to 3.6 s at 40), 2 % damping in its first mode, the paper's
 //!   Bouc–Wen law at storey 1 and El Centro scaled so that the element yields
@@ -18,11 +18,11 @@ use thiserror::Error;
 /// Amplitude (m/s²), frequency (rad/s) and duration (s) of the harmonic preset (SPEC §2).
 pub const HARMONIC_AMPLITUDE: f64 = 3.0;
 pub const HARMONIC_OMEGA: f64 = 4.0;
-pub const HARMONIC_DURATION: f64 = 31.18;
+pub(crate) const HARMONIC_DURATION: f64 = 31.18;
 
 /// The default excitation of a preset.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub enum DefaultExcitation {
+pub(crate) enum DefaultExcitation {
     /// El Centro 1940 N-S at this amplitude scale.
     ElCentro { scale: f64 },
     /// `amplitude·sin(omega·t)` for `duration` seconds.
@@ -54,7 +54,7 @@ impl DefaultExcitation {
 pub struct Preset {
     pub name: String,
     pub chain: ShearChain,
-    pub excitation: DefaultExcitation,
+    pub(crate) excitation: DefaultExcitation,
     pub dt: f64,
 }
 
@@ -71,9 +71,9 @@ pub enum PresetError {
 
 /// The Bouc–Wen element of every preset (SPEC §1): β = 2, γ = 1, n = 2. An element placed at
 /// another storey ([`Preset::set_hysteretic`]) gets the same parameters.
-pub const BOUC_WEN_BETA: f64 = 2.0;
-pub const BOUC_WEN_GAMMA: f64 = 1.0;
-pub const BOUC_WEN_N: f64 = 2.0;
+pub(crate) const BOUC_WEN_BETA: f64 = 2.0;
+pub(crate) const BOUC_WEN_GAMMA: f64 = 1.0;
+pub(crate) const BOUC_WEN_N: f64 = 2.0;
 
 /// Storey stiffness of `building-chain` over a unit mass (s⁻²).
 pub const BUILDING_K: f64 = 2000.0;
@@ -83,7 +83,7 @@ pub const BUILDING_ZETA1: f64 = 0.02;
 /// length unit taken as 1/BUILDING_SCALE m, so that the Bouc–Wen element's saturation
 /// (β + γ)^(−1/n) = 0.577 units is a yield drift of 0.577/BUILDING_SCALE m (see
 /// `docs/scaling.md` for the measured yielding at each N).
-pub const BUILDING_SCALE: f64 = 50.0;
+pub(crate) const BUILDING_SCALE: f64 = 50.0;
 
 /// Circular frequency of mode `i` (1-based) of a uniform fixed-free chain of `storeys` equal
 /// masses `m` and springs `k`: ω_i = 2√(k/m) sin((2i − 1)π / (2(2N + 1))).
@@ -136,7 +136,7 @@ impl Preset {
     }
 
     /// `paper-3dof-harmonic` (SPEC §2).
-    pub fn paper_3dof_harmonic() -> Self {
+    pub(crate) fn paper_3dof_harmonic() -> Self {
         Self {
             excitation: DefaultExcitation::Harmonic {
                 amplitude: HARMONIC_AMPLITUDE,
@@ -149,7 +149,7 @@ impl Preset {
     }
 
     /// `shear-chain`: the paper's per-storey values for `storeys` storeys, El Centro × 3.0.
-    pub fn with_storeys(storeys: usize) -> Result<Self, PresetError> {
+    pub(crate) fn with_storeys(storeys: usize) -> Result<Self, PresetError> {
         Ok(Self {
             name: "shear-chain".to_string(),
             chain: Self::chain(storeys)?,
@@ -172,7 +172,7 @@ impl Preset {
         Self::uniform_chain(storeys, BUILDING_K, c)
     }
 
-    /// `building-chain` of `storeys` storeys under El Centro × [`BUILDING_SCALE`].
+    /// `building-chain` of `storeys` storeys under El Centro × `BUILDING_SCALE` (50).
     pub fn building(storeys: usize) -> Result<Self, PresetError> {
         Ok(Self {
             name: "building-chain".to_string(),
@@ -217,7 +217,7 @@ impl Preset {
     /// each with the preset element's β, γ, n (SPEC §1). Masses, k and c are unchanged. The
     /// same law everywhere is the neutral choice: an element higher up sees smaller drifts and
     /// may stay nearly elastic, which `sysid simulate` shows as `max|r|/sat` per element.
-    pub fn set_hysteretic(&mut self, storeys: &[usize]) -> Result<(), PresetError> {
+    pub(crate) fn set_hysteretic(&mut self, storeys: &[usize]) -> Result<(), PresetError> {
         let elements = storeys
             .iter()
             .map(|&s| BoucWen {
@@ -239,7 +239,7 @@ impl Preset {
     /// The default prior of the filters on this preset's data, for a chain with the 0-based
     /// `hysteretic` storeys: SPEC §3's for the paper's presets (whose medians are tied to the
     /// paper's values: 10 for k = 8, 0.4 for c = 0.25); for `building-chain` the same prior
-    /// carried to the building's values ([`ChainPrior::relative_to`]: medians 1.25 k and 1.6 c,
+    /// carried to the building's values (medians 1.25 k and 1.6 c,
     /// as SPEC §3's are to the paper's).
     pub fn default_prior(name: &str, chain: &ShearChain, hysteretic: &[usize]) -> ChainPrior {
         match name {

@@ -53,7 +53,7 @@ pub enum Units {
 
 impl Units {
     /// Factor converting to m/s².
-    pub fn to_si(self) -> f64 {
+    pub(crate) fn to_si(self) -> f64 {
         match self {
             Units::G => G,
             Units::MetersPerSecond2 => 1.0,
@@ -423,7 +423,7 @@ pub fn read_csv(path: &Path, units: Units) -> Result<GroundMotion, ReadError> {
 }
 
 /// Parses CSV text as [`read_csv`] does; `file` is used in error messages only.
-pub fn parse_csv(file: &Path, text: &str, units: Units) -> Result<GroundMotion, ReadError> {
+pub(crate) fn parse_csv(file: &Path, text: &str, units: Units) -> Result<GroundMotion, ReadError> {
     let mut times = Vec::new();
     let mut acc = Vec::new();
     let mut seen_first = false;
@@ -538,7 +538,7 @@ fn parse_at2_header(file: &Path, line: &str) -> Result<(usize, f64), ReadError> 
 }
 
 /// Parses AT2 text as [`read_at2`] does; `file` is used in error messages only.
-pub fn parse_at2(file: &Path, text: &str) -> Result<GroundMotion, ReadError> {
+pub(crate) fn parse_at2(file: &Path, text: &str) -> Result<GroundMotion, ReadError> {
     let lines: Vec<&str> = strip_bom(text).lines().collect();
     if lines.len() < 4 {
         return Err(ReadError::Header {

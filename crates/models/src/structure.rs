@@ -20,7 +20,7 @@
 //! `c_1..c_N` and named `alpha`.
 //!
 //! One physics source: the forces and accelerations are evaluated by one kernel, that of the
-//! [`Building`] (over any [`ChainView`] of a point), and the hysteretic rate by one
+//! [`Building`] (over any `ChainView` of a point), and the hysteretic rate by one
 //! implementation of a [`HysteresisLaw`] ([`BoucWenLaw`] for the toolkit's chains); the truth
 //! simulator ([`ShearChainOf::rhs`]) and every filter partition (`crate::filtering`) use both,
 //! generic over one particle (`f64`) or a SIMD pack of particles, and over the law.
@@ -90,7 +90,7 @@ pub type ShearChain = ShearChainOf<BoucWenLaw>;
 /// A point of the chain (states and parameters) seen through one representation's storage.
 /// Storeys `j` and elements are 0-based; `r(e)` is the hysteretic variable of element `e` (in
 /// the order of [`Building::hysteretic`]).
-pub trait ChainView<T: Real> {
+pub(crate) trait ChainView<T: Real> {
     fn x(&self, j: usize) -> T;
     fn v(&self, j: usize) -> T;
     fn r(&self, e: usize) -> T;
@@ -110,7 +110,7 @@ pub trait ChainView<T: Real> {
 impl Building {
     /// Drift velocity `δv_j = v_j − v_{j−1}` (`v_{−1} = 0`).
     #[inline]
-    pub fn drift_velocity<T: Real>(p: &impl ChainView<T>, j: usize) -> T {
+    pub(crate) fn drift_velocity<T: Real>(p: &impl ChainView<T>, j: usize) -> T {
         if j == 0 {
             p.v(0)
         } else {
@@ -121,7 +121,7 @@ impl Building {
     /// `(d_j, δv_j)` with `F_j = k_j d_j + c_j δv_j`: `d_j = r_e` for a hysteretic element, the
     /// drift `x_j − x_{j−1}` otherwise.
     #[inline]
-    pub fn element_coordinates<T: Real>(&self, p: &impl ChainView<T>, j: usize) -> (T, T) {
+    pub(crate) fn element_coordinates<T: Real>(&self, p: &impl ChainView<T>, j: usize) -> (T, T) {
         let d = match self.element_at(j) {
             Some(e) => p.r(e),
             None if j == 0 => p.x(0),
@@ -132,7 +132,7 @@ impl Building {
 
     /// Force `F_j = k_j d_j + c_j δv_j` carried by element `j`.
     #[inline]
-    pub fn force<T: Real>(&self, p: &impl ChainView<T>, j: usize) -> T {
+    pub(crate) fn force<T: Real>(&self, p: &impl ChainView<T>, j: usize) -> T {
         let (d, dv) = self.element_coordinates(p, j);
         p.k(j) * d + p.c(j) * dv
     }
@@ -140,7 +140,7 @@ impl Building {
     /// `a_j = ground + (F_{j+1} − F_j) / m_j` (`F_N = 0`), minus `α v_j` with mass damping:
     /// the relative acceleration for `ground = −ü_g`.
     #[inline]
-    pub fn acceleration<T: Real>(&self, p: &impl ChainView<T>, j: usize, ground: T) -> T {
+    pub(crate) fn acceleration<T: Real>(&self, p: &impl ChainView<T>, j: usize, ground: T) -> T {
         let f = self.force(p, j);
         let f_next = if j + 1 < self.storeys() {
             self.force(p, j + 1)
@@ -170,7 +170,7 @@ impl Building {
 
     /// Every storey's acceleration, each element force evaluated once; `out` has length N.
     #[inline]
-    pub fn accelerations<T: Real>(&self, p: &impl ChainView<T>, ground: T, out: &mut [T]) {
+    pub(crate) fn accelerations<T: Real>(&self, p: &impl ChainView<T>, ground: T, out: &mut [T]) {
         // The damping form is decided once, not per storey: the loop without the mass term is
         // the bootstrap PF's hot path and stays free of a branch it never takes.
         if self.damping().has_mass_term() {
@@ -217,7 +217,7 @@ pub fn theta_names<L: HysteresisLaw>(n_storeys: usize, hysteretic: &[usize]) -> 
 
 /// [`theta_names`] for damping form `damping`: with [`Damping::StoreyMass`], `alpha` follows
 /// `c1..cN`.
-pub fn theta_names_damped<L: HysteresisLaw>(
+pub(crate) fn theta_names_damped<L: HysteresisLaw>(
     n_storeys: usize,
     hysteretic: &[usize],
     damping: Damping,
@@ -397,7 +397,7 @@ impl<L: HysteresisLaw> ShearChainOf<L> {
 
     /// The same chain with mass-proportional damping `α M` besides its per-storey dashpots
     /// ([`Damping::StoreyMass`]); `alpha` must be non-negative and finite.
-    pub fn with_mass_damping(mut self, alpha: f64) -> Result<Self, StructureError> {
+    pub(crate) fn with_mass_damping(mut self, alpha: f64) -> Result<Self, StructureError> {
         if !(alpha >= 0.0 && alpha.is_finite()) {
             return Err(StructureError::NegativeAlpha(alpha));
         }
