@@ -869,7 +869,7 @@ impl std::fmt::Display for Num {
 
 /// File names inside a data-set directory.
 pub const MEASURED: &str = "measured.csv";
-pub const TRUTH: &str = "truth.csv";
+pub(crate) const TRUTH: &str = "truth.csv";
 pub const META: &str = "dataset.json";
 
 /// Writes and flushes one file of a staged directory; errors name the real file.

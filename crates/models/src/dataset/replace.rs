@@ -27,7 +27,7 @@ use std::ffi::OsString;
 use std::path::{Path, PathBuf};
 
 /// The import log `sysid import` writes beside `measured.csv` (see `crate::import`).
-pub const IMPORT: &str = "import.json";
+pub(crate) const IMPORT: &str = "import.json";
 
 /// The files a data-set directory may hold (`import.json`: the record of `sysid import`).
 pub const DATASET_FILES: [&str; 4] = [MEASURED, TRUTH, META, IMPORT];

@@ -203,14 +203,14 @@ impl<L: HysteresisLaw> ChainCore<L> {
     /// samples when `substeps` is 1, the sub-steps otherwise).
     #[inline]
     #[track_caller]
-    pub fn transition_ground(&self, k: usize) -> f64 {
+    pub(crate) fn transition_ground(&self, k: usize) -> f64 {
         assert!(k >= 1, "the transition to step k needs k >= 1");
         -self.ug[k - 1]
     }
 
     /// Ground term of the measurement at filter step k (relative: `−ü_g,meas(k)`, absolute: 0).
     #[inline]
-    pub fn measurement_ground(&self, k: usize) -> f64 {
+    pub(crate) fn measurement_ground(&self, k: usize) -> f64 {
         self.spec.sensors.ground(self.ug[k])
     }
 
@@ -269,7 +269,7 @@ impl<L: HysteresisLaw> ChainCore<L> {
     // optimiser it stayed a call whose branches on the declared columns ran every time
     // (docs/performance.md, "Speed across builds").
     #[inline(always)]
-    pub fn write_force_gradient<T: Real>(
+    pub(crate) fn write_force_gradient<T: Real>(
         &self,
         out: &mut Sparse<T>,
         row: usize,
@@ -312,7 +312,7 @@ impl<L: HysteresisLaw> ChainCore<L> {
     // optimiser it stayed a call whose branches on the declared columns ran every time
     // (docs/performance.md, "Speed across builds").
     #[inline(always)]
-    pub fn write_acceleration_gradient<T: Real>(
+    pub(crate) fn write_acceleration_gradient<T: Real>(
         &self,
         out: &mut Sparse<T>,
         row: usize,
@@ -344,20 +344,20 @@ impl<L: HysteresisLaw> ChainCore<L> {
 
     /// Index of α in θ (`2N`), when the chain has mass damping.
     #[inline]
-    pub fn theta_alpha(&self) -> Option<usize> {
+    pub(crate) fn theta_alpha(&self) -> Option<usize> {
         self.mass_damping().then_some(2 * self.n)
     }
 
     /// Index of the first θ entry of element `e` (Bouc–Wen: β_e) in θ.
     #[inline]
-    pub fn theta_element(&self, e: usize) -> usize {
+    pub(crate) fn theta_element(&self, e: usize) -> usize {
         2 * self.n + self.spec.building.damping().extra_parameters() + L::NPARAMS * e
     }
 
     /// Mean and variance of the Gaussian prior of θ for one particle (SPEC §3): moment-matched,
     /// or per-particle means drawn from the prior with variances `(rel_sd·mean)²` (zero for a
     /// point mass). Start-up only.
-    pub fn theta_prior(&self, rng: &mut StreamRng) -> (Vec<f64>, Vec<f64>) {
+    pub(crate) fn theta_prior(&self, rng: &mut StreamRng) -> (Vec<f64>, Vec<f64>) {
         match self.spec.marginal_prior {
             MarginalPrior::MomentMatched => (self.theta_mean.clone(), self.theta_var.clone()),
             MarginalPrior::PerParticle { rel_sd } => {
@@ -419,7 +419,7 @@ impl<L: HysteresisLaw> ChainCore<L> {
     /// Appends the slots of every element's θ entries in θ order: its linear parameters at
     /// `linear(e) + i` of the marginal block, its nonlinear ones (Bouc–Wen: n) at
     /// `n_index(e) + i` of the sampled block (the MLN and MPF partitions).
-    pub fn push_element_slots(
+    pub(crate) fn push_element_slots(
         &self,
         params: &mut Vec<Slot>,
         linear: impl Fn(usize) -> usize,

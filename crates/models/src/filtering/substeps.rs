@@ -86,7 +86,7 @@ pub fn damping_lag_error(k: &[f64], c: &[f64], omega: f64, h: f64) -> f64 {
 /// and masses `m`: the square root of the largest eigenvalue of M⁻¹K, computed as that of the
 /// symmetric M^(−1/2) K M^(−1/2) (K tridiagonal: row j holds k_j + k_{j+1} on the diagonal and
 /// −k_{j+1} beside it; the roof has no k_{N+1}).
-pub fn highest_frequency(k: &[f64], m: &[f64]) -> f64 {
+pub(crate) fn highest_frequency(k: &[f64], m: &[f64]) -> f64 {
     let n = k.len();
     let mut a = nalgebra::DMatrix::<f64>::zeros(n, n);
     for j in 0..n {

@@ -19,7 +19,7 @@ use std::path::PathBuf;
 /// One channel as read: time stamps of its clock (s) and values in m/s², with the 1-based line
 /// of each row.
 #[derive(Debug, Clone, PartialEq)]
-pub struct Recorded {
+pub(crate) struct Recorded {
     pub role: Role,
     pub file: PathBuf,
     pub times: Vec<f64>,
@@ -43,7 +43,7 @@ pub struct Repair {
 
 /// The channels on the ground's time grid.
 #[derive(Debug, Clone, PartialEq)]
-pub struct Aligned {
+pub(crate) struct Aligned {
     pub dt: f64,
     /// The ground clock's time of the first kept sample (s): the origin of `t`.
     pub t0: f64,
@@ -567,7 +567,7 @@ fn remove_offsets(values: &mut [f64], name: &str, opts: &Options, out: &mut Alig
 }
 
 /// Puts the ground and storey channels on the ground's grid; see the module documentation.
-pub fn align(
+pub(crate) fn align(
     mut ground: Recorded,
     mut storeys: Vec<Recorded>,
     opts: &Options,

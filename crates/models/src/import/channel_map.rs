@@ -70,7 +70,7 @@ pub enum AccUnits {
 
 impl AccUnits {
     /// Factor converting to m/s².
-    pub fn to_si(self) -> f64 {
+    pub(crate) fn to_si(self) -> f64 {
         match self {
             AccUnits::MetersPerSecond2 => 1.0,
             AccUnits::CentimetersPerSecond2 => 0.01,
@@ -244,7 +244,7 @@ pub struct Channel {
 
 impl Channel {
     /// The columns to read from a sensor CSV file (checked present by [`ChannelMap::parse`]).
-    pub fn csv_columns(&self) -> Option<CsvColumns> {
+    pub(crate) fn csv_columns(&self) -> Option<CsvColumns> {
         Some(CsvColumns {
             time: self.spec.time.clone()?,
             time_units: self.spec.time_units?,

@@ -301,7 +301,7 @@ fn channel_name(first: &str) -> (String, String) {
 }
 
 /// The direction word a map may expect of an orientation code.
-pub fn orientation_name(code: i64) -> Option<&'static str> {
+pub(crate) fn orientation_name(code: i64) -> Option<&'static str> {
     match code {
         800 => Some("long"),
         900 => Some("tran"),

@@ -15,8 +15,8 @@
 //! at the frequencies below half the first mode where the coherence exceeds
 //! [`MIN_COHERENCE`], weighted by the inverse of the phase estimate's variance. The delay is
 //! removed ([`Delay::removed`]) only where it is unambiguous: larger than a quarter sample,
-//! than [`MARGIN`] standard errors and than [`MARGIN`] times the lag a mode with
-//! [`ZETA_BOUND`] damping would put into the same fit. Removing it advances the storey's
+//! than `MARGIN` (3) standard errors and than `MARGIN` times the lag a mode with
+//! `ZETA_BOUND` (10 %) damping would put into the same fit. Removing it advances the storey's
 //! samples by `τ` with a band-limited (FFT) shift — linear interpolation would cut the
 //! amplitude of a mode near the Nyquist frequency by 15 % — and drops the samples at the ends
 //! that the shift leaves without data.
@@ -27,14 +27,14 @@ use std::f64::consts::PI;
 /// Coherence above which a frequency enters the fit.
 pub const MIN_COHERENCE: f64 = 0.9;
 /// Damping ratio of the structure's own lag the rule allows for (a generous one: 10 %).
-pub const ZETA_BOUND: f64 = 0.1;
+pub(crate) const ZETA_BOUND: f64 = 0.1;
 /// How many standard errors, and how many times the structure's possible lag, a delay must
 /// exceed to be removed.
-pub const MARGIN: f64 = 3.0;
+pub(crate) const MARGIN: f64 = 3.0;
 /// Frequencies a fit needs.
-pub const MIN_BINS: usize = 5;
+pub(crate) const MIN_BINS: usize = 5;
 /// Residual phase (rad, RMS) above which the phase is not a straight line: no delay measured.
-pub const MAX_RESIDUAL: f64 = 0.15;
+pub(crate) const MAX_RESIDUAL: f64 = 0.15;
 
 /// A measured delay of one channel against the ground.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -43,7 +43,7 @@ pub struct Delay {
     pub seconds: f64,
     /// Its standard error (s).
     pub standard_error: f64,
-    /// The delay a mode of [`ZETA_BOUND`] damping at `first_mode_hz` would put into the fit (s).
+    /// The delay a mode of `ZETA_BOUND` (10 %) damping at `first_mode_hz` would put into the fit (s).
     pub structural_bound: f64,
     /// The first mode the band is set by (Hz) and the band fitted (Hz).
     pub first_mode_hz: f64,
@@ -125,7 +125,7 @@ fn segment(n: usize) -> Option<usize> {
 
 /// The first mode (Hz): the peak of the top storey's transfer function from the ground
 /// (`top`: its absolute acceleration, on the ground's grid), where the first mode dominates.
-pub fn first_mode(dt: f64, ground: &[f64], top: &[f64]) -> Option<f64> {
+pub(crate) fn first_mode(dt: f64, ground: &[f64], top: &[f64]) -> Option<f64> {
     let n = ground.len().min(top.len());
     let nper = segment(n)?;
     let s = spectra(&ground[..n], &top[..n], nper);
@@ -141,7 +141,7 @@ pub fn first_mode(dt: f64, ground: &[f64], top: &[f64]) -> Option<f64> {
 }
 
 /// The delay of `y` against `ground` (same grid, step `dt`) from the phase below half the
-/// first mode `f1` (Hz, [`first_mode`]), or `None` where the record does not show one (too
+/// first mode `f1` (Hz, estimated from the ground and top storey records), or `None` where the record does not show one (too
 /// short, too few coherent frequencies, or a phase that is not a straight line).
 pub fn measure(dt: f64, ground: &[f64], y: &[f64], f1: f64) -> Option<Delay> {
     let n = ground.len().min(y.len());

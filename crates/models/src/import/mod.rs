@@ -28,7 +28,7 @@ use std::path::{Path, PathBuf};
 use thiserror::Error;
 
 /// The record of an import, written beside `measured.csv`.
-pub use crate::dataset::replace::IMPORT;
+pub(crate) use crate::dataset::replace::IMPORT;
 
 /// Why an import could not be made.
 #[derive(Debug, Error)]

@@ -79,7 +79,7 @@ fn transfer_magnitudes(input: &[f64], outputs: &[&[f64]], nper: usize) -> Vec<Ve
 
 /// A warning when, at the first mode (the peak of the top storey's transfer function from the
 /// ground), a storey's transfer function is smaller than the one of the storey below it.
-pub fn swapped_storeys_warning(
+pub(crate) fn swapped_storeys_warning(
     dt: f64,
     ground: &[f64],
     sensors: &[usize],

@@ -14,7 +14,7 @@ use crate::readers::{
 use std::path::Path;
 
 /// How far into a file the line of column names is looked for when the map does not say.
-pub const HEADER_SEARCH_LINES: usize = 100;
+pub(crate) const HEADER_SEARCH_LINES: usize = 100;
 
 /// Units of a time stamp column.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
@@ -31,7 +31,7 @@ pub enum TimeUnits {
 
 impl TimeUnits {
     /// Factor converting to seconds.
-    pub fn to_seconds(self) -> f64 {
+    pub(crate) fn to_seconds(self) -> f64 {
         match self {
             TimeUnits::Seconds => 1.0,
             TimeUnits::Milliseconds => 1e-3,
@@ -50,7 +50,7 @@ pub struct CsvColumns {
     /// Name of the value column.
     pub column: String,
     /// Lines before the line of column names; `None`: the first line (among the first
-    /// [`HEADER_SEARCH_LINES`]) that names both columns.
+    /// `HEADER_SEARCH_LINES`, 100) that names both columns.
     pub header_lines: Option<usize>,
     /// Drop a row whose value is `nan` or `inf` (its line goes to [`SensorColumn::dropped`])
     /// instead of refusing the file.
@@ -84,7 +84,7 @@ fn header_error(file: &Path, line: usize, field: &str, message: String) -> ReadE
 }
 
 /// Parses sensor CSV text as [`read_sensor_csv`] does; `file` is used in messages only.
-pub fn parse_sensor_csv(
+pub(crate) fn parse_sensor_csv(
     file: &Path,
     text: &str,
     columns: &CsvColumns,
