@@ -46,15 +46,6 @@ pub enum PriorError {
     },
 }
 
-/// Names of θ in order: `k1..kN, c1..cN, beta, gamma, n` (length 2N+3).
-pub fn parameter_names(n_storeys: usize) -> Vec<String> {
-    let mut names = Vec::with_capacity(2 * n_storeys + 3);
-    names.extend((1..=n_storeys).map(|j| format!("k{j}")));
-    names.extend((1..=n_storeys).map(|j| format!("c{j}")));
-    names.extend(["beta", "gamma", "n"].map(String::from));
-    names
-}
-
 /// Prior of one scalar parameter.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]

@@ -56,8 +56,8 @@ pub fn alpha_prior(omega1: f64) -> Prior {
 }
 
 /// Prior median over the true value in SPEC §3: 10 / 8 for k, 0.4 / 0.25 for c.
-pub const K_PRIOR_RATIO: f64 = 1.25;
-pub const C_PRIOR_RATIO: f64 = 1.6;
+pub(crate) const K_PRIOR_RATIO: f64 = 1.25;
+pub(crate) const C_PRIOR_RATIO: f64 = 1.6;
 
 impl<L: HysteresisLaw> ChainPriorOf<L> {
     /// SPEC §3 defaults for N storeys and hysteretic elements at the 0-based `hysteretic` storeys
@@ -88,7 +88,7 @@ impl<L: HysteresisLaw> ChainPriorOf<L> {
     /// 10 for k = 8, i.e. 1.25 k_j; 0.4 for c = 0.25, i.e. 1.6 c_j); the law's parameters as
     /// SPEC §3 (they do not depend on the storey values). `k`, `c`: the structure's per-storey
     /// values.
-    pub fn relative_to(k: &[f64], c: &[f64], hysteretic: &[usize]) -> Self {
+    pub(crate) fn relative_to(k: &[f64], c: &[f64], hysteretic: &[usize]) -> Self {
         let mut p = Self::paper(k.len(), hysteretic);
         for (prior, &kj) in p.k.iter_mut().zip(k) {
             *prior = Prior::LogNormal {
@@ -118,20 +118,14 @@ impl<L: HysteresisLaw> ChainPriorOf<L> {
         }
     }
 
-    /// The same prior with mass-proportional damping whose α has prior `alpha`.
-    pub fn with_alpha(mut self, alpha: Prior) -> Self {
-        self.alpha = Some(alpha);
-        self
-    }
-
     /// Index of the first element parameter (β_0) in θ: `2N`, or `2N + 1` with α.
     #[inline]
-    pub fn element_offset(&self) -> usize {
+    pub(crate) fn element_offset(&self) -> usize {
         2 * self.n_storeys() + self.damping().extra_parameters()
     }
 
     /// 0-based storeys of the elements, in order.
-    pub fn hysteretic_storeys(&self) -> Vec<usize> {
+    pub(crate) fn hysteretic_storeys(&self) -> Vec<usize> {
         self.elements.iter().map(L::prior_storey).collect()
     }
 
@@ -145,7 +139,8 @@ impl<L: HysteresisLaw> ChainPriorOf<L> {
         self.len() == 0
     }
 
-    /// Names of θ in order (see [`theta_names_damped`]).
+    /// Names of θ in order (as [`crate::structure::theta_names`], with `alpha` after the
+    /// dampings when α has a prior).
     pub fn names(&self) -> Vec<String> {
         theta_names_damped::<L>(self.n_storeys(), &self.hysteretic_storeys(), self.damping())
     }
@@ -244,7 +239,7 @@ impl<L: HysteresisLaw> ChainPriorOf<L> {
     }
 
     /// Writes one draw of θ into `out` (length [`ChainPrior::len`]) without allocating.
-    pub fn sample_into<G: Rng + ?Sized>(&self, rng: &mut G, out: &mut [f64]) {
+    pub(crate) fn sample_into<G: Rng + ?Sized>(&self, rng: &mut G, out: &mut [f64]) {
         let n = self.n_storeys();
         assert_eq!(out.len(), self.len(), "θ buffer has the wrong length");
         for (o, p) in out[..n].iter_mut().zip(&self.k) {
@@ -299,7 +294,10 @@ mod tests {
     #[test]
     fn single_element_prior_is_named_like_the_paper() {
         let p = ChainPrior::paper(3, &[0]);
-        assert_eq!(p.names(), crate::priors::parameter_names(3));
+        assert_eq!(
+            p.names(),
+            ["k1", "k2", "k3", "c1", "c2", "c3", "beta", "gamma", "n"]
+        );
     }
 
     #[test]
@@ -340,7 +338,8 @@ mod tests {
             median: 0.5,
             log_sd: 0.7,
         };
-        let mut p = ChainPrior::paper(3, &[0]).with_alpha(alpha);
+        let mut p = ChainPrior::paper(3, &[0]);
+        p.alpha = Some(alpha);
         assert_eq!(p.damping(), Damping::StoreyMass);
         assert_eq!(p.len(), 10);
         assert_eq!(

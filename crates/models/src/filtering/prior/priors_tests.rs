@@ -241,7 +241,7 @@ fn serde_form_is_readable_and_round_trips() {
 #[test]
 fn parameter_names_follow_theta_order() {
     assert_eq!(
-        parameter_names(2),
+        paper(2).names(),
         ["k1", "k2", "c1", "c2", "beta", "gamma", "n"]
     );
 }
