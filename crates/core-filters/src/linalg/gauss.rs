@@ -22,7 +22,7 @@
 //!
 //! Numerical policy (SPEC §4): the generic functions here compute the *straight path* and report,
 //! per lane, whether it was valid (a pivot clearly positive, every result finite). For one
-//! particle [`factorise`] adds the documented repair ([`jittered_cholesky`]: bounded diagonal
+//! particle [`factorise`] adds the documented repair (`jittered_cholesky`: bounded diagonal
 //! jitter, counted in [`Health`]); a pack lane whose straight path fails is redone by that scalar
 //! code. [`cholesky_repaired`] is the same repair with typed errors for one-off factorisations.
 
@@ -36,20 +36,20 @@ use crate::real::Real;
 use super::sparse::Sparse;
 
 /// `ln(2π)`.
-pub const LN_2PI: f64 = 1.837_877_066_409_345_5;
+pub(crate) const LN_2PI: f64 = 1.837_877_066_409_345_5;
 
 /// A Cholesky pivot is accepted only if it exceeds this fraction of its own diagonal entry: a
 /// smaller pivot is round-off, not information (the matrix is numerically singular).
-pub const PIVOT_REL_TOL: f64 = 16.0 * f64::EPSILON;
+pub(crate) const PIVOT_REL_TOL: f64 = 16.0 * f64::EPSILON;
 
 /// Relative diagonal jitter tried in turn when a factorisation fails: the diagonal is scaled by
 /// `1 + τ`. The largest value bounds the perturbation of the covariance to one part in a million.
-pub const JITTER_STEPS: [f64; 4] = [1e-12, 1e-10, 1e-8, 1e-6];
+pub(crate) const JITTER_STEPS: [f64; 4] = [1e-12, 1e-10, 1e-8, 1e-6];
 
 /// A pivot below this fraction of the largest diagonal entry is a direction of zero variance in a
 /// positive *semi*-definite factorisation ([`psd_cholesky`]); below minus this fraction the
 /// matrix is indefinite.
-pub const PSD_PIVOT_REL_TOL: f64 = 1e-12;
+pub(crate) const PSD_PIVOT_REL_TOL: f64 = 1e-12;
 
 #[inline(always)]
 fn zero<T: Real>() -> T {
@@ -109,7 +109,7 @@ pub fn cholesky<T: Real>(a: &[T], q: usize, l: &mut [T]) -> T::Mask {
 /// within `±1e-12 · max_j a_jj` of zero gives a zero column (that direction has no spread). Returns
 /// the lanes where `a` was finite and no pivot clearly negative.
 #[inline]
-pub fn psd_cholesky<T: Real>(a: &[T], q: usize, l: &mut [T]) -> T::Mask {
+pub(crate) fn psd_cholesky<T: Real>(a: &[T], q: usize, l: &mut [T]) -> T::Mask {
     let mut finite = zero::<T>();
     let mut max_diag = zero::<T>();
     for j in 0..q {
@@ -138,7 +138,7 @@ pub fn psd_cholesky<T: Real>(a: &[T], q: usize, l: &mut [T]) -> T::Mask {
 
 /// Solves `l x = b` in place for the lower-triangular `l` (`q × q`).
 #[inline]
-pub fn solve_lower<T: Real>(l: &[T], q: usize, b: &mut [T]) {
+pub(crate) fn solve_lower<T: Real>(l: &[T], q: usize, b: &mut [T]) {
     for i in 0..q {
         let mut s = b[i];
         for k in 0..i {
@@ -150,7 +150,7 @@ pub fn solve_lower<T: Real>(l: &[T], q: usize, b: &mut [T]) {
 
 /// `out = l x` for the lower-triangular `l` (`q × q`), summed over the columns in order.
 #[inline]
-pub fn lower_mul<T: Real>(l: &[T], q: usize, x: &[T], out: &mut [T]) {
+pub(crate) fn lower_mul<T: Real>(l: &[T], q: usize, x: &[T], out: &mut [T]) {
     out[..q].fill(zero());
     for j in 0..q {
         let xj = x[j];
@@ -163,7 +163,7 @@ pub fn lower_mul<T: Real>(l: &[T], q: usize, x: &[T], out: &mut [T]) {
 /// `Σ_j ln l_jj = ½ ln det(l lᵀ)`: one logarithm of the product of the pivots, the sum of
 /// logarithms when that product under- or overflows (lane by lane).
 #[inline]
-pub fn log_det_half<T: Real>(l: &[T], q: usize) -> T {
+pub(crate) fn log_det_half<T: Real>(l: &[T], q: usize) -> T {
     let mut prod = T::splat(1.0);
     for j in 0..q {
         prod *= l[j + j * q];
@@ -180,7 +180,7 @@ pub fn log_det_half<T: Real>(l: &[T], q: usize) -> T {
 
 /// `log N(r; 0, l lᵀ)` from the whitened residual `e = l⁻¹ r`: `−½|e|² − Σ ln l_jj − (q/2) ln 2π`.
 #[inline]
-pub fn whitened_loglik<T: Real>(e: &[T], l: &[T], q: usize) -> T {
+pub(crate) fn whitened_loglik<T: Real>(e: &[T], l: &[T], q: usize) -> T {
     let mut sq = zero::<T>();
     for v in &e[..q] {
         sq += *v * *v;
@@ -191,7 +191,7 @@ pub fn whitened_loglik<T: Real>(e: &[T], l: &[T], q: usize) -> T {
 /// `out = P Jᵀ` (`n × q`) over the entries of `J` (`q × n`): column `r` of the product
 /// accumulates `J[r, c] · P[:, c]`, a contiguous column of the symmetric `P`.
 #[inline]
-pub fn pjt<T: Real>(j: &Sparse<T>, p: &[T], n: usize, out: &mut [T]) {
+pub(crate) fn pjt<T: Real>(j: &Sparse<T>, p: &[T], n: usize, out: &mut [T]) {
     out[..n * j.nrows()].fill(zero());
     for e in 0..j.nnz() {
         let (r, c, v) = j.entry(e);
@@ -206,7 +206,13 @@ pub fn pjt<T: Real>(j: &Sparse<T>, p: &[T], n: usize, out: &mut [T]) {
 /// `out = J (P Jᵀ) + S` (`q × q`) with the lower triangle of `J P Jᵀ` computed over the entries of
 /// `J` and `S` added before mirroring, so that for symmetric `S` the result is exactly symmetric.
 #[inline]
-pub fn innovation_cov<T: Real>(j: &Sparse<T>, pjt: &[T], n: usize, s_add: &[T], out: &mut [T]) {
+pub(crate) fn innovation_cov<T: Real>(
+    j: &Sparse<T>,
+    pjt: &[T],
+    n: usize,
+    s_add: &[T],
+    out: &mut [T],
+) {
     let q = j.nrows();
     out[..q * q].fill(zero());
     for e in 0..j.nnz() {
@@ -228,7 +234,7 @@ pub fn innovation_cov<T: Real>(j: &Sparse<T>, pjt: &[T], n: usize, s_add: &[T], 
 /// `Wᵀ = (P Jᵀ) C⁻ᵀ` in place on `pjt` (`n × q`), column by column:
 /// `Wᵀ_i = (P Jᵀ_i − Σ_{k<i} C_ik Wᵀ_k) / C_ii`.
 #[inline]
-pub fn whiten_gain<T: Real>(chol: &[T], q: usize, wt: &mut [T], n: usize) {
+pub(crate) fn whiten_gain<T: Real>(chol: &[T], q: usize, wt: &mut [T], n: usize) {
     for i in 0..q {
         for k in 0..i {
             let c = chol[i + k * q];
@@ -250,7 +256,7 @@ pub fn whiten_gain<T: Real>(chol: &[T], q: usize, wt: &mut [T], n: usize) {
 /// whose new mean, gain and covariance are all finite; in a lane that is not, `mean` and `p`
 /// hold meaningless values (the particle is given weight zero by its filter).
 #[inline]
-pub fn apply_whitened<T: Real>(
+pub(crate) fn apply_whitened<T: Real>(
     mean: &mut [T],
     p: &mut [T],
     n: usize,
@@ -292,7 +298,7 @@ pub fn apply_whitened<T: Real>(
 pub struct Factor<T> {
     n: usize,
     q: usize,
-    /// `P Jᵀ` (`n × q`); after [`whiten_gain`], `Wᵀ`.
+    /// `P Jᵀ` (`n × q`); after `whiten_gain`, `Wᵀ`.
     pub pjt: Vec<T>,
     /// `L` (`q × q`).
     pub cov: Vec<T>,
@@ -373,7 +379,7 @@ impl<T: Real> Factor<T> {
 }
 
 /// [`Factor::compute`], and for one particle (`T::LANES == 1`) whose straight path failed the
-/// documented repair of [`jittered_cholesky`] (counted in `health`). A pack returns its
+/// documented repair of `jittered_cholesky` (counted in `health`). A pack returns its
 /// straight-path mask: the batch layer redoes a failing lane as one particle. Returns the lanes
 /// that have a factor; a particle without one gets weight zero from its filter (a per-particle
 /// failure is counted, not returned as an error: it does not end the run). A non-finite `L` is
@@ -425,7 +431,7 @@ fn all_finite<T: Real>(a: &[T]) -> bool {
 ///
 /// `jittered` is `q × q` scratch. This is the only jitter loop of the crate: the particle
 /// filters ([`factorise`]) and the one-off factorisations ([`cholesky_repaired`]) both use it.
-pub fn jittered_cholesky<T: Real>(
+pub(crate) fn jittered_cholesky<T: Real>(
     a: &[T],
     q: usize,
     jittered: &mut [T],
@@ -462,7 +468,7 @@ pub fn jittered_cholesky<T: Real>(
 /// 1. a non-finite entry → `Err(NonFinite { step, which })`;
 /// 2. an asymmetry beyond round-off (`|a_ij − a_ji| > 1e-9 sqrt(a_ii a_jj)`) is counted in
 ///    `health.symmetrised` and `(A + Aᵀ)/2` is factorised;
-/// 3. Cholesky with the relative pivot test, then the repair of [`jittered_cholesky`];
+/// 3. Cholesky with the relative pivot test, then the repair of `jittered_cholesky`;
 /// 4. if that fails too, `Err(NotPositiveDefinite { step, which })`.
 pub fn cholesky_repaired(
     a: &[f64],
@@ -501,7 +507,7 @@ pub fn cholesky_repaired(
 /// A constant Gaussian noise `N(0, R)` factorised once (the measurement noise of the bootstrap
 /// PF and of Storvik's weights): every density costs one triangular solve and no logarithm.
 #[derive(Debug, Clone)]
-pub struct FactoredNoise {
+pub(crate) struct FactoredNoise {
     q: usize,
     chol: Vec<f64>,
     /// `1 / C_ii`.
@@ -537,7 +543,7 @@ impl FactoredNoise {
     /// A noise factorised once at set-up ([`FactoredNoise::new`]), as step `k` of a filter sees
     /// it: the factor, or the failure of its factorisation dated at step `k` (a filter whose `R`
     /// could not be factorised fails every step with it).
-    pub fn at_step(
+    pub(crate) fn at_step(
         noise: &Result<FactoredNoise, FilterError>,
         k: usize,
     ) -> Result<&FactoredNoise, FilterError> {
@@ -555,7 +561,7 @@ impl FactoredNoise {
 
     /// `log N(r; 0, R)`; `scratch` has length `q` and is overwritten.
     #[inline]
-    pub fn log_density<T: Real>(&self, residual: &[T], scratch: &mut [T]) -> T {
+    pub(crate) fn log_density<T: Real>(&self, residual: &[T], scratch: &mut [T]) -> T {
         let q = self.q;
         if self.diagonal {
             let mut sq = zero::<T>();
@@ -578,11 +584,6 @@ impl FactoredNoise {
             sq += *v * *v;
         }
         T::splat(-0.5) * sq + T::splat(self.log_norm)
-    }
-
-    /// The lower factor of `R`.
-    pub fn chol(&self) -> &[f64] {
-        &self.chol
     }
 }
 

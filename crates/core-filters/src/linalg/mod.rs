@@ -18,7 +18,8 @@ pub mod second_order;
 pub mod sparse;
 pub mod support;
 
-pub use gauss::{Factor, FactoredNoise};
+pub use gauss::Factor;
+pub(crate) use gauss::FactoredNoise;
 pub use propagate::{ekf2_propagate_near_identity, PropagateScratch, Propagation, SymEntries};
 pub use second_order::SecondOrder;
 pub use sparse::Sparse;

@@ -52,7 +52,7 @@ impl<T: Real> Sparse<T> {
     }
 
     /// A matrix with the pattern of `other` (recorded already) and zero values.
-    pub fn with_pattern_of<U: Real>(other: &Sparse<U>) -> Self {
+    pub(crate) fn with_pattern_of<U: Real>(other: &Sparse<U>) -> Self {
         assert!(other.frozen, "the pattern has not been recorded yet");
         Self {
             nrows: other.nrows,
@@ -90,11 +90,6 @@ impl<T: Real> Sparse<T> {
     /// Number of entries (structural non-zeros, repeats included).
     pub fn nnz(&self) -> usize {
         self.rows.len()
-    }
-
-    /// Whether the pattern is recorded.
-    pub fn is_frozen(&self) -> bool {
-        self.frozen
     }
 
     /// Whether some evaluation wrote another `(row, col)` sequence than the recorded pattern

@@ -27,7 +27,7 @@ pub struct LowerBound {
 
 /// The truncated moments of a standard normal cut below at `alpha`: the mean shift `λ` (the
 /// inverse Mills ratio) and the variance factor `1 + αλ − λ²`, stable far into the tail.
-pub fn truncated_standard(alpha: f64) -> (f64, f64) {
+pub(crate) fn truncated_standard(alpha: f64) -> (f64, f64) {
     let lambda = if alpha < 25.0 {
         crate::credible::normal_pdf(alpha) / crate::credible::normal_sf(alpha)
     } else {
@@ -47,7 +47,7 @@ pub fn truncated_standard(alpha: f64) -> (f64, f64) {
 /// merely reaches past its bound would push the mean of a static parameter away from the bound
 /// step after step, with a shrinking variance (to about 8 s.d. above it). A truncation moves the
 /// other entries through their covariance and can push another bounded mean out, so the bounds
-/// are swept again (at most [`MAX_SWEEPS`] times); a mean still outside after that is set on its
+/// are swept again (at most `MAX_SWEEPS` times); a mean still outside after that is set on its
 /// bound. Returns how many truncations were made. Allocates nothing.
 pub fn truncate_below(mean: &mut [f64], cov: &mut [f64], bounds: &[LowerBound]) -> usize {
     let n = mean.len();
@@ -74,7 +74,7 @@ pub fn truncate_below(mean: &mut [f64], cov: &mut [f64], bounds: &[LowerBound]) 
 }
 
 /// Sweeps of [`truncate_below`] over its bounds before a mean left outside is set on its bound.
-pub const MAX_SWEEPS: usize = 8;
+pub(crate) const MAX_SWEEPS: usize = 8;
 
 /// One bound's truncation when the mean is outside; whether it was made.
 fn truncate_one(mean: &mut [f64], cov: &mut [f64], n: usize, b: &LowerBound) -> bool {
