@@ -42,7 +42,7 @@ pub const STANDARD_LEVELS: [f64; 3] = [0.5, 0.9, 0.95];
 
 /// Tolerance of a mixture quantile relative to the smallest component s.d. (the scale on which
 /// the CDF varies fastest): a root finder stops within `REL_TOL · min σ_i + 4 ε |x|`.
-pub const REL_TOL: f64 = 1e-12;
+pub(crate) const REL_TOL: f64 = 1e-12;
 
 /// Half-width of the initial bracket of a mixture quantile, in component standard deviations:
 /// Φ(−10) ≈ 7.6e−24, below any probability a credible interval asks for.
@@ -327,12 +327,12 @@ pub fn normal_cdf(z: f64) -> f64 {
 }
 
 /// 1 − Φ(z) = Φ(−z), without cancellation for large z.
-pub fn normal_sf(z: f64) -> f64 {
+pub(crate) fn normal_sf(z: f64) -> f64 {
     0.5 * libm::erfc(z * std::f64::consts::FRAC_1_SQRT_2)
 }
 
 /// φ(z), the standard normal density.
-pub fn normal_pdf(z: f64) -> f64 {
+pub(crate) fn normal_pdf(z: f64) -> f64 {
     const INV_SQRT_2PI: f64 = 0.398_942_280_401_432_7;
     INV_SQRT_2PI * (-0.5 * z * z).exp()
 }
@@ -539,7 +539,7 @@ impl<'a> GaussianMixture<'a> {
     /// `Q(p) = inf {x : F(x) ≥ p}` by safeguarded Newton iteration (Newton steps on F with the
     /// mixture density, bisection whenever a step leaves the bracket or does not shrink fast
     /// enough). The result lies in a certified bracket `F(a) < p ≤ F(b)` at most three
-    /// tolerances wide, a tolerance being [`REL_TOL`] times the smallest component s.d. plus four
+    /// tolerances wide, a tolerance being `REL_TOL` times the smallest component s.d. plus four
     /// ulps of x. A point mass where F jumps across p is returned exactly.
     pub fn quantile(&self, p: f64) -> Result<f64, CredibleError> {
         check_probability(p)?;

@@ -103,7 +103,7 @@ impl Laplace {
 
 /// The points whose values give the central-difference gradient at `x`: `x`, then `x ± hᵢeᵢ`
 /// for each i (plus before minus).
-pub fn gradient_points(x: &[f64], h: &[f64]) -> Vec<Vec<f64>> {
+pub(crate) fn gradient_points(x: &[f64], h: &[f64]) -> Vec<Vec<f64>> {
     let mut pts = Vec::with_capacity(1 + 2 * x.len());
     pts.push(x.to_vec());
     for i in 0..x.len() {
@@ -119,7 +119,7 @@ pub fn gradient_points(x: &[f64], h: &[f64]) -> Vec<Vec<f64>> {
 /// The points whose values give the central-difference Hessian (and gradient) at `x`: the
 /// [`gradient_points`], then for each pair i < j the corners `x + a·hᵢeᵢ + b·hⱼeⱼ` with
 /// (a, b) = (+,+), (+,−), (−,+), (−,−). `1 + 2p + 2p(p − 1)` points.
-pub fn hessian_points(x: &[f64], h: &[f64]) -> Vec<Vec<f64>> {
+pub(crate) fn hessian_points(x: &[f64], h: &[f64]) -> Vec<Vec<f64>> {
     let p = x.len();
     let mut pts = gradient_points(x, h);
     pts.reserve(2 * p * p.saturating_sub(1));
@@ -138,7 +138,7 @@ pub fn hessian_points(x: &[f64], h: &[f64]) -> Vec<Vec<f64>> {
 
 /// The gradient from the values at [`gradient_points`] (or the first `1 + 2p` of
 /// [`hessian_points`]): `gᵢ = (f(x + hᵢeᵢ) − f(x − hᵢeᵢ)) / 2hᵢ`.
-pub fn gradient_from(values: &[f64], h: &[f64]) -> DVector<f64> {
+pub(crate) fn gradient_from(values: &[f64], h: &[f64]) -> DVector<f64> {
     DVector::from_fn(h.len(), |i, _| {
         (values[1 + 2 * i] - values[2 + 2 * i]) / (2.0 * h[i])
     })
@@ -146,7 +146,7 @@ pub fn gradient_from(values: &[f64], h: &[f64]) -> DVector<f64> {
 
 /// The Hessian from the values at [`hessian_points`]: `Hᵢᵢ = (f₊ − 2f + f₋) / hᵢ²` and
 /// `Hᵢⱼ = (f₊₊ − f₊₋ − f₋₊ + f₋₋) / 4hᵢhⱼ`.
-pub fn hessian_from(values: &[f64], h: &[f64]) -> DMatrix<f64> {
+pub(crate) fn hessian_from(values: &[f64], h: &[f64]) -> DMatrix<f64> {
     let p = h.len();
     let mut m = DMatrix::zeros(p, p);
     for i in 0..p {

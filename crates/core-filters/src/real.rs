@@ -115,7 +115,7 @@ pub trait Real:
 
 /// The loop form of [`Real::downdate_lower`], the same order of operations for every lane type.
 #[inline]
-pub fn downdate_lower_loops<T: Real>(p: &mut [T], n: usize, wt: &[T], q: usize) {
+pub(crate) fn downdate_lower_loops<T: Real>(p: &mut [T], n: usize, wt: &[T], q: usize) {
     for c in 0..n {
         let col = &mut p[c * n..(c + 1) * n];
         for d in 0..q {
@@ -238,7 +238,7 @@ impl Real for f64 {
 pub struct Pack(pub f64x4);
 
 /// Lanes of a [`Pack`].
-pub const PACK_LANES: usize = 4;
+pub(crate) const PACK_LANES: usize = 4;
 
 impl Debug for Pack {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {

@@ -3,7 +3,7 @@
 //! Every scheme has the same signature: given normalised weights `w` it writes `M = ancestors.len()`
 //! ancestor indices into a buffer the caller owns, drawing from the generator it is given. The
 //! schemes differ only in how they produce the sorted points `u_1 ≤ … ≤ u_M` in `[0, 1)` that the
-//! kernel [`inverse_cdf`] maps through the cumulative weights:
+//! kernel `inverse_cdf` maps through the cumulative weights:
 //! - systematic: `u_j = (j + U) / M`, one uniform (the default, SPEC §3);
 //! - stratified: `u_j = (j + U_j) / M`, one uniform per stratum;
 //! - multinomial: `M` sorted i.i.d. uniforms, generated already sorted from exponential spacings;
@@ -76,7 +76,7 @@ impl Default for ResamplePolicy {
 
 impl ResamplePolicy {
     /// Whether to resample at a step with effective sample size `ess` among `np` particles.
-    pub fn should_resample(&self, ess: f64, np: usize) -> bool {
+    pub(crate) fn should_resample(&self, ess: f64, np: usize) -> bool {
         match self.ess_threshold {
             None => true,
             Some(t) => ess < t * np as f64,
@@ -182,7 +182,7 @@ fn sorted_uniforms<G: Rng + ?Sized>(m: usize, buf: &mut Vec<f64>, rng: &mut G) {
 /// The shared kernel: maps sorted points `u(0) ≤ u(1) ≤ …` in `[0, 1)` through the cumulative
 /// weights and writes the ancestor of each point. Indices never point at a zero-weight particle,
 /// even when the cumulative sum falls short of 1 by round-off.
-pub fn inverse_cdf(w: &[f64], ancestors: &mut [usize], u: impl FnMut(usize) -> f64) {
+pub(crate) fn inverse_cdf(w: &[f64], ancestors: &mut [usize], u: impl FnMut(usize) -> f64) {
     inverse_cdf_by(w.len(), |i| w[i], ancestors, u)
 }
 

@@ -31,7 +31,7 @@ pub fn splitmix64(state: &mut u64) -> u64 {
 }
 
 /// FNV-1a 64-bit hash of a purpose string (fixed algorithm, stable across versions).
-pub fn purpose_hash(purpose: &str) -> u64 {
+pub(crate) fn purpose_hash(purpose: &str) -> u64 {
     let mut h: u64 = 0xcbf2_9ce4_8422_2325;
     for b in purpose.as_bytes() {
         h ^= u64::from(*b);
@@ -52,14 +52,6 @@ pub fn stream(master_seed: u64, run: u64, purpose: &str) -> StreamRng {
         chunk.copy_from_slice(&splitmix64(&mut state).to_le_bytes());
     }
     StreamRng::from_seed(seed)
-}
-
-/// A sub-stream of `(master_seed, run, purpose)` for block `block` (e.g. a fixed-size block of
-/// particles), so that parallel work draws from streams fixed by the data, never by the thread.
-pub fn substream(master_seed: u64, run: u64, purpose: &str, block: u64) -> StreamRng {
-    let mut state = block ^ 0xA076_1D64_78BD_642F;
-    let salt = splitmix64(&mut state);
-    stream(master_seed ^ salt, run, purpose)
 }
 
 #[cfg(test)]
@@ -83,9 +75,6 @@ mod tests {
             let xc: Vec<u64> = (0..8).map(|_| c.random()).collect();
             assert_ne!(xa, xc, "key ({s},{r},{p}) collides");
         }
-        let mut d = substream(7, 3, purpose::FILTER, 1);
-        let xd: Vec<u64> = (0..8).map(|_| d.random()).collect();
-        assert_ne!(xa, xd);
     }
 
     #[test]

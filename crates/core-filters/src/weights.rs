@@ -1,7 +1,7 @@
 //! The one weight routine every particle filter uses (STYLE lesson 5, SPEC §3).
 //!
 //! Weights live in the log domain. After a filter has added each particle's log-likelihood
-//! increment to its (normalised) log-weight, [`normalise_log_weights`] normalises them with the
+//! increment to its (normalised) log-weight, `normalise_log_weights` normalises them with the
 //! log-sum-exp trick, maps NaN to −∞ (counted), and returns the log-likelihood increment
 //! `log Σ_i w_{k-1}^i p(y_k | particle i)` and the effective sample size. All weights zero is a typed
 //! error carrying the time step, never a panic.
@@ -11,7 +11,7 @@ use crate::health::Health;
 
 /// What normalising the weights of one step produced.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct WeightSummary {
+pub(crate) struct WeightSummary {
     /// `log Σ_i exp(log_w_i)` of the un-normalised log-weights: the log-likelihood increment
     /// `log p̂(y_k | y_{1:k-1})` when the incoming log-weights were normalised.
     pub loglik_increment: f64,
@@ -24,7 +24,7 @@ pub struct WeightSummary {
 /// non-finite too (a density cannot be infinite for a non-degenerate covariance).
 ///
 /// Returns [`FilterError::AllWeightsZero`] when no weight is finite.
-pub fn normalise_log_weights(
+pub(crate) fn normalise_log_weights(
     log_w: &mut [f64],
     w: &mut [f64],
     step: usize,
@@ -64,7 +64,7 @@ pub fn normalise_log_weights(
 }
 
 /// Sets uniform normalised weights (after resampling or at initialisation).
-pub fn reset_uniform(log_w: &mut [f64], w: &mut [f64]) {
+pub(crate) fn reset_uniform(log_w: &mut [f64], w: &mut [f64]) {
     let n = log_w.len();
     let lw = -(n as f64).ln();
     let wi = 1.0 / n as f64;

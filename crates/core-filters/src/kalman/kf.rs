@@ -29,7 +29,7 @@ pub struct Innovation<const NY: usize> {
 
 /// Where a step reports to: its time index `k` (carried by every [`FilterError`] it returns) and
 /// the [`Health`] counters its repairs are added to. Handed by value to each step function;
-/// [`StepLog::reborrow`] lends it to a sub-step.
+/// `StepLog::reborrow` lends it to a sub-step.
 #[derive(Debug)]
 pub struct StepLog<'a> {
     /// The time step `k`.
@@ -40,7 +40,7 @@ pub struct StepLog<'a> {
 
 impl StepLog<'_> {
     /// The same log for a shorter borrow, so that one step can hand it to several sub-steps.
-    pub fn reborrow(&mut self) -> StepLog<'_> {
+    pub(crate) fn reborrow(&mut self) -> StepLog<'_> {
         StepLog {
             step: self.step,
             health: self.health,
