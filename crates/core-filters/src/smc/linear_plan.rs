@@ -11,7 +11,7 @@ use super::model::{ConditionallyLinear, LinearDims, Stage};
 use super::store::Shape;
 
 /// One stage of the transition with what both filters need of its rows.
-pub struct StagePlan {
+pub(crate) struct StagePlan {
     pub stage: Stage,
     /// Per row of the stage: its index among the stage's linked rows, if linked.
     pub linked_index: Vec<Option<usize>>,
@@ -25,7 +25,7 @@ pub struct StagePlan {
 }
 
 /// What the MLN-RBPF and Storvik read once from the model.
-pub struct LinearPlan {
+pub(crate) struct LinearPlan {
     pub dims: LinearDims,
     pub stages: Vec<StagePlan>,
     /// Recorded pattern of `F` per stage (over its linked rows).
@@ -122,7 +122,7 @@ impl LinearPlan {
 
 /// Per-particle scratch both filters use: `F` and the factor of each stage's pseudo-measurement,
 /// `h`, `H`, the measurement residual and its factor.
-pub struct LinearScratch<T> {
+pub(crate) struct LinearScratch<T> {
     pub F: Vec<Sparse<T>>,
     pub q_l: Vec<Vec<T>>,
     pub factors: Vec<Factor<T>>,
@@ -135,7 +135,7 @@ pub struct LinearScratch<T> {
 
 impl<T: Real> LinearScratch<T> {
     /// Which Jacobian, if any, was written with another pattern than the recorded one.
-    pub fn broken_pattern(&self) -> Option<&'static str> {
+    pub(crate) fn broken_pattern(&self) -> Option<&'static str> {
         if self.F.iter().any(Sparse::pattern_broken) {
             Some("transition matrix F")
         } else if self.H.pattern_broken() {

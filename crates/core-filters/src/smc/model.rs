@@ -107,7 +107,7 @@ pub struct Stage {
 impl Stage {
     /// Position in [`Stage::rows`] of each linked row.
     #[track_caller]
-    pub fn linked_positions(&self) -> Vec<usize> {
+    pub(crate) fn linked_positions(&self) -> Vec<usize> {
         self.linked
             .iter()
             .map(|l| {
@@ -121,7 +121,7 @@ impl Stage {
 
     /// Process-noise covariance of the linked rows (`l × l`, diagonal, column-major) from the
     /// s.d. `sd` of every row of `u`: the noise of the stage's pseudo-measurement of `z`.
-    pub fn linked_noise_cov(&self, sd: &[f64]) -> Vec<f64> {
+    pub(crate) fn linked_noise_cov(&self, sd: &[f64]) -> Vec<f64> {
         let l = self.linked.len();
         let mut q_l = vec![0.0; l * l];
         for (i, &r) in self.linked.iter().enumerate() {

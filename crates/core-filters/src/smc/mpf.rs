@@ -67,7 +67,7 @@ pub struct MpfStep<M> {
 }
 
 /// Scratch of one stage.
-pub struct StageScratch<T> {
+pub(crate) struct StageScratch<T> {
     value: Vec<T>,
     jac: Sparse<T>,
     mean2: Vec<T>,

@@ -31,7 +31,7 @@ use super::store::Particles;
 /// which a value enters the transform: a value on a bound (the prior `U(lo, hi)` can draw `lo`)
 /// or within this margin of it is moved this far inside, so that its logit is finite
 /// (|u| ≤ 20.8).
-pub const BOUND_MARGIN: f64 = 1e-9;
+pub(crate) const BOUND_MARGIN: f64 = 1e-9;
 
 /// Support of a static parameter, from its prior, and the transform to an unbounded coordinate.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -44,7 +44,7 @@ pub enum Support {
 
 impl Support {
     /// `u = T(θ)`. A value on or outside a bound is first brought inside: within
-    /// [`BOUND_MARGIN`]·(hi − lo) of a bound of an interval, at least the smallest positive
+    /// `BOUND_MARGIN`·(hi − lo) of a bound of an interval, at least the smallest positive
     /// normal number above `lo` for a half-line. Finite for every finite `θ`.
     #[inline]
     pub fn to_unbounded(self, theta: f64) -> f64 {
@@ -57,7 +57,7 @@ impl Support {
         }
     }
 
-    /// `θ = T⁻¹(u)`, strictly inside the support: for an interval within [`BOUND_MARGIN`] of
+    /// `θ = T⁻¹(u)`, strictly inside the support: for an interval within `BOUND_MARGIN` of
     /// the bounds as [`Support::to_unbounded`] and never on a bound (also where the width is
     /// below the rounding of `lo`); for a half-line above `lo` and at most `f64::MAX`.
     #[inline]

@@ -295,7 +295,7 @@ pub fn slot_moments(slot: Slot, w: &[f64], p: &Particles) -> (f64, f64) {
 }
 
 /// Fills `out` from the layout with [`slot_moments`].
-pub fn fill_posterior(layout: &Layout, w: &[f64], p: &Particles, out: &mut Posterior) {
+pub(crate) fn fill_posterior(layout: &Layout, w: &[f64], p: &Particles, out: &mut Posterior) {
     for (j, slot) in layout.params.iter().enumerate() {
         (out.param_mean[j], out.param_sd[j]) = slot_moments(*slot, w, p);
     }
