@@ -627,8 +627,11 @@ impl Finished {
     /// The line on the run (algorithm, steps, log-likelihood, pace, record path).
     pub fn headline(&self) -> String {
         let record = &self.record;
-        let realtime =
+        let mut realtime =
             realtime_factor(record).map_or(String::new(), |f| format!(", {f:.1}× real time"));
+        if let (true, Some(n)) = (record.timing.particle_blocks, record.timing.threads) {
+            realtime += &format!(", particle blocks on {n} threads");
+        }
         format!(
             "{}: {} of {} steps, loglik {:.2}, {:.2} s ({:.2} M particle-steps/s{realtime}); record {}",
             record.algorithm,

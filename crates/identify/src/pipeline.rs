@@ -369,6 +369,9 @@ pub fn execute(
         theta_true,
         (validation, validation_s),
     );
+    // Each filter shared its steps among the run's threads where it is tall enough.
+    record.timing.particle_blocks =
+        core_filters::smc::batch::shares_steps(shape) && rayon::current_num_threads() > 1;
     // A result that is physically impossible or rests on few particles says so (issue 16).
     record.warnings = crate::checks::check(&record);
     Ok(record)
@@ -460,6 +463,8 @@ fn run_record(
             validation_s,
             realtime_factor: (d.wall_s > 0.0)
                 .then(|| d.summary.steps_completed as f64 * spec.dt / d.wall_s),
+            threads: Some(rayon::current_num_threads()),
+            particle_blocks: false,
         },
         warnings: Vec::new(),
         credible: d.credible,

@@ -94,6 +94,15 @@ pub struct Timing {
         skip_serializing_if = "Option::is_none"
     )]
     pub realtime_factor: Option<f64>,
+    /// Worker threads of the run: its pooled filters side by side and, with
+    /// `particle_blocks`, each filter's particles in blocks. Absent in older records.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub threads: Option<usize>,
+    /// Each filter advanced its particles in blocks on those threads (a marginalised dimension
+    /// of at least `core_filters::smc::batch::PARALLEL_MIN_DIM`); the particles are the same on
+    /// any number of threads.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub particle_blocks: bool,
 }
 
 /// A hysteresis loop: restoring force of element 1 (k1·r1) against its drift x1, decimated.

@@ -512,6 +512,8 @@ fn synthetic_run() -> RunRecord {
             particle_steps_per_s: 1.0,
             validation_s: 0.0,
             realtime_factor: None,
+            threads: None,
+            particle_blocks: false,
         },
         warnings: Vec::new(),
         credible: Vec::new(),

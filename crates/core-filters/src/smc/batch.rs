@@ -133,8 +133,14 @@ pub trait ParticleStep: Sync + Send {
 /// sharing it costs nothing measurable (docs/performance.md, "Particle blocks in parallel").
 pub const PARALLEL_MIN_DIM: usize = 32;
 
+/// Whether a marginalized filter of particles of `shape` advances them in blocks on the threads
+/// of the pool it runs in ([`PARALLEL_MIN_DIM`]).
+pub fn shares_steps(shape: Shape) -> bool {
+    shape.marginal >= PARALLEL_MIN_DIM && shape.sampled > 0
+}
+
 /// The buffers of the batch layer for one filter: the draws of every particle of a step, and one
-/// [`Worker`] per block of particles advanced side by side.
+/// `Worker` per block of particles advanced side by side.
 pub struct Batch<S: ParticleStep> {
     lanes: bool,
     parallel: bool,
@@ -188,7 +194,7 @@ impl<S: ParticleStep> Batch<S> {
         let use_lanes = lanes && shape.marginal <= MAX_LANE_DIM;
         Self {
             lanes: use_lanes,
-            parallel: shape.marginal >= PARALLEL_MIN_DIM && shape.sampled > 0,
+            parallel: shares_steps(shape),
             workers: vec![Worker::new(step, use_lanes)],
             draws: Vec::new(),
         }
