@@ -141,7 +141,7 @@ pub fn shares_steps(shape: Shape) -> bool {
 
 /// The buffers of the batch layer for one filter: the draws of every particle of a step, and one
 /// `Worker` per block of particles advanced side by side.
-pub struct Batch<S: ParticleStep> {
+pub(crate) struct Batch<S: ParticleStep> {
     lanes: bool,
     parallel: bool,
     workers: Vec<Worker<S>>,
