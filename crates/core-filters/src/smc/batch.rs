@@ -15,7 +15,7 @@
 //! Why lanes: one Gaussian update of a small marginalised block is a short chain of dependent
 //! operations that leaves most of the processor idle; four independent particles fill it. For a
 //! large block (hundreds of entries) one particle's update is long enough on its own, and the four
-//! lanes' covariances no longer fit the caches: [`Batch::new`] then runs particles one at a time.
+//! lanes' covariances no longer fit the caches: the batch layer then runs particles one at a time.
 
 use rand_distr::{Distribution, StandardNormal};
 use rayon::prelude::*;

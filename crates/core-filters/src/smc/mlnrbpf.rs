@@ -190,7 +190,7 @@ impl<M: ConditionallyLinear> ParticleStep for MlnStep<M> {
 pub type MlnRbpf<M> = Marginalized<MlnStep<M>>;
 
 impl<M: ConditionallyLinear> MlnRbpf<M> {
-    /// The filter with the batch layer's lanes where they pay ([`crate::smc::batch::Batch::new`]).
+    /// The filter with the batch layer's lanes where they pay (up to `batch::MAX_LANE_DIM`).
     pub fn new(model: M) -> Self {
         Self::with_lanes(model, true)
     }
