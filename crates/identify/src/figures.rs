@@ -43,18 +43,18 @@ pub const WIDTH: u32 = 1200;
 /// Average advance of one character of the figures' text, in em: about DejaVu Sans's (among the
 /// widest sans-serif fonts; a narrower one only leaves more room). The SVG backend writes no
 /// text metrics and the viewer lays the text out, so its width is estimated from its length.
-pub const EM_PER_CHAR: f64 = 0.6;
+pub(crate) const EM_PER_CHAR: f64 = 0.6;
 
 /// Estimated width in px of `text` at plotters font size `size` (the SVG backend writes
 /// `size / 1.24` px).
-pub fn text_width(text: &str, size: f64) -> f64 {
+pub(crate) fn text_width(text: &str, size: f64) -> f64 {
     text.chars().count() as f64 * EM_PER_CHAR * size / 1.24
 }
 
-/// The font size, at most `size`, at which `text` fits in `avail` px ([`text_width`]): a
+/// The font size, at most `size`, at which `text` fits in `avail` px (`text_width`): a
 /// caption longer than its panel is drawn smaller instead of running past the panel's edge
 /// (or the figure's, where the viewer cuts it).
-pub fn fitted_size(text: &str, size: f64, avail: f64) -> f64 {
+pub(crate) fn fitted_size(text: &str, size: f64, avail: f64) -> f64 {
     let w = text_width(text, size);
     if w > avail && avail > 0.0 {
         size * avail / w
@@ -210,7 +210,7 @@ pub fn present(root: &Area<'_>, path: &Path) -> Result<()> {
 type Chart<'a> = ChartContext<'a, SVGBackend<'a>, Cartesian2d<RangedCoordf64, RangedCoordf64>>;
 
 /// The chart of one panel of a figure of several: its caption above (sized to fit the panel's
-/// width, [`fitted_size`]), an 8 px margin, an x label area 48 px high and a y label area
+/// width, `fitted_size`), an 8 px margin, an x label area 48 px high and a y label area
 /// `y_label_area` px wide.
 pub(crate) fn panel_chart<'a>(
     area: &Area<'a>,

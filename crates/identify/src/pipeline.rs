@@ -32,7 +32,7 @@ use crate::pool::Driven;
 use crate::record::{Fingerprint, Loop, RunRecord, Timing, Validation, Versions};
 
 pub use crate::algorithm::Algorithm;
-pub use crate::plan::{chain_spec, is_field_data, prior_from_data, resolve_substeps, AutoChoice};
+pub use crate::plan::{chain_spec, prior_from_data, resolve_substeps, AutoChoice};
 pub use crate::rules::{
     per_particle_reason, unmeasured_storeys, LagSubsteps, HYSTERETIC_PARTICLES, LAG_SUBSTEPS,
     MPF_REJUVENATION, PER_PARTICLE_MIN_STOREYS, SPARSE_REL_SD,

@@ -1051,7 +1051,7 @@ fn assemble_spec(
 }
 
 /// Field data: neither `dataset.json` nor a known true structure.
-pub fn is_field_data(data: &LoadedDataset, chain: Option<&ShearChain>) -> bool {
+pub(crate) fn is_field_data(data: &LoadedDataset, chain: Option<&ShearChain>) -> bool {
     data.meta.is_none() && chain.is_none()
 }
 

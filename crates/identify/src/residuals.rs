@@ -9,7 +9,7 @@
 //! noise s.d. √R_ii. This is the plug-in prediction at the posterior mean, not the filter's
 //! exact predictive distribution: its variance is at least R_ii, so the normalised errors have
 //! a variance of at least 1 when the model and its noise levels are right — a variance far
-//! above 1, or errors correlated in time (Ljung–Box, [`whiteness`]), say that the
+//! above 1, or errors correlated in time (Ljung–Box, `whiteness`), say that the
 //! model or its noise levels do not fit the record.
 
 use crate::error::Result;
@@ -207,7 +207,7 @@ pub fn describe(checks: &[ChannelCheck]) -> Vec<String> {
 
 /// Whiteness check of one channel's normalised innovations.
 #[derive(Debug, Clone, PartialEq, Serialize)]
-pub struct Whiteness {
+pub(crate) struct Whiteness {
     pub n: usize,
     pub mean: f64,
     pub variance: f64,
@@ -244,7 +244,7 @@ pub fn chi2_95(dof: usize) -> f64 {
 
 /// Whiteness check of a sequence (finite values only) up to `max_lag` lags (fewer when the
 /// sequence is short: at most n/4). `None` with fewer than 8 finite values.
-pub fn whiteness(x: &[f64], max_lag: usize) -> Option<Whiteness> {
+pub(crate) fn whiteness(x: &[f64], max_lag: usize) -> Option<Whiteness> {
     let v: Vec<f64> = x.iter().copied().filter(|v| v.is_finite()).collect();
     let n = v.len();
     if n < 8 {

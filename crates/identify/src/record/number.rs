@@ -5,7 +5,7 @@
 //! record written by this tool is always readable by it and never silently loses a value.
 //!
 //! Used field by field through `#[serde(with = "…")]` (modules [`scalar`], [`opt_scalar`],
-//! [`vec`](mod@vec), [`opt_vec`], [`vec_vec`], [`array`](mod@array)) on every `f64` of every record type (run
+//! [`vec`](mod@vec), `opt_vec`, `vec_vec`, [`array`](mod@array)) on every `f64` of every record type (run
 //! records with their residuals, checks and intervals, reference records); the property test
 //! `record_numbers.rs` writes non-finite values into each of them and reads them back.
 
@@ -134,30 +134,32 @@ pub mod vec {
 }
 
 /// `Option<Vec<f64>>` fields.
-pub mod opt_vec {
+pub(crate) mod opt_vec {
     use super::*;
 
-    pub fn serialize<S: Serializer>(x: &Option<Vec<f64>>, s: S) -> Result<S::Ok, S::Error> {
+    pub(crate) fn serialize<S: Serializer>(x: &Option<Vec<f64>>, s: S) -> Result<S::Ok, S::Error> {
         x.as_ref()
             .map(|v| v.iter().map(|v| Num(*v)).collect::<Vec<_>>())
             .serialize(s)
     }
-    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<Option<Vec<f64>>, D::Error> {
+    pub(crate) fn deserialize<'de, D: Deserializer<'de>>(
+        d: D,
+    ) -> Result<Option<Vec<f64>>, D::Error> {
         Ok(Option::<Vec<Num>>::deserialize(d)?.map(|v| v.into_iter().map(|n| n.0).collect()))
     }
 }
 
 /// `Vec<Vec<f64>>` fields.
-pub mod vec_vec {
+pub(crate) mod vec_vec {
     use super::*;
 
-    pub fn serialize<S: Serializer>(x: &[Vec<f64>], s: S) -> Result<S::Ok, S::Error> {
+    pub(crate) fn serialize<S: Serializer>(x: &[Vec<f64>], s: S) -> Result<S::Ok, S::Error> {
         s.collect_seq(
             x.iter()
                 .map(|row| row.iter().map(|v| Num(*v)).collect::<Vec<_>>()),
         )
     }
-    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<Vec<Vec<f64>>, D::Error> {
+    pub(crate) fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<Vec<Vec<f64>>, D::Error> {
         Ok(Vec::<Vec<Num>>::deserialize(d)?
             .into_iter()
             .map(|row| row.into_iter().map(|n| n.0).collect())

@@ -3,7 +3,7 @@
 //! - `free_run.svg`: per channel the measured acceleration, the free run at θ_val and the
 //!   pointwise 95 % predictive band (the posterior draws' spread, widened by the model error
 //!   where the record has one) over the whole record, with the share of the record it covers,
-//!   and below it the same enlarged on the window of strongest shaking ([`zoom_window`]); the
+//!   and below it the same enlarged on the window of strongest shaking (`zoom_window`); the
 //!   band is shaded underneath and the free run drawn last, so that no line hides it;
 //! - `transfer.svg`: per channel the measured |H1| (log scale) with the identified model's
 //!   modes as dashed vertical lines and the peaks read from the data as dots; the legend is a
@@ -23,7 +23,7 @@ use crate::figures::{
 /// Length (s) of the enlarged window of `free_run.svg`: at 3–20 Hz (the modes of the frames
 /// and bridges the toolkit meets) 15 to 100 cycles, each wide enough on a 1200 px figure to
 /// tell the measured from the predicted.
-pub const ZOOM_S: f64 = 5.0;
+pub(crate) const ZOOM_S: f64 = 5.0;
 
 /// Right margin (px) of the panels: half of the widest tick label ("100.0" at 16 px) and more,
 /// for a tick on the axis's right end.
@@ -34,11 +34,11 @@ const BAND_ALPHA: f64 = 0.25;
 /// Opacity of the zoom window's shade on the whole-record panels.
 const WINDOW_ALPHA: f64 = 0.15;
 
-/// The window of strongest shaking of a record: the [`ZOOM_S`]-second window `[t_i, t_i +
+/// The window of strongest shaking of a record: the `ZOOM_S`-second window `[t_i, t_i +
 /// ZOOM_S]` in which the measured accelerations, squared and summed over every channel, add up
 /// to the most (the earliest such window on a tie; non-finite values count 0). `None` when the
-/// record is not longer than 2 × [`ZOOM_S`]: its panels already show every cycle.
-pub fn zoom_window(t: &[f64], measured: &[Vec<f64>]) -> Option<(f64, f64)> {
+/// record is not longer than 2 × `ZOOM_S`: its panels already show every cycle.
+pub(crate) fn zoom_window(t: &[f64], measured: &[Vec<f64>]) -> Option<(f64, f64)> {
     let (first, last) = (*t.first()?, *t.last()?);
     let span = last - first;
     if span.is_nan() || span <= 2.0 * ZOOM_S {
@@ -217,7 +217,7 @@ fn free_run_legend(f: &FreeRun, zoom: Option<(f64, f64)>) -> Vec<(Swatch, String
 }
 
 /// Draws `free_run.svg`: per channel a panel of the whole record and, when the record is
-/// longer than 2 × [`ZOOM_S`], one of its window of strongest shaking ([`zoom_window`]) below.
+/// longer than 2 × `ZOOM_S`, one of its window of strongest shaking (`zoom_window`) below.
 pub fn free_run(f: &FreeRun, out: &Path, who: &str) -> Result<PathBuf> {
     let n = f.channels.len();
     if n == 0 || f.measured.len() < n || f.simulated.len() < n {
