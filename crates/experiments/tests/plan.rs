@@ -430,7 +430,15 @@ fn one_tall_filter_is_the_same_on_any_number_of_threads() {
     ok(
         sysid()
             .args(["simulate", "--preset", "building-chain", "--storeys", "20"])
-            .args(["--hysteretic", "1", "--duration", "0.6", "--seed", "2", "--out"])
+            .args([
+                "--hysteretic",
+                "1",
+                "--duration",
+                "0.6",
+                "--seed",
+                "2",
+                "--out",
+            ])
             .arg(&data)
             .output()
             .unwrap(),
@@ -443,8 +451,14 @@ fn one_tall_filter_is_the_same_on_any_number_of_threads() {
             alg,
             &["--algorithm", alg, "--particles", "125"],
         );
-        assert!(records[0]["config"]["filter"]["pool"].is_null(), "{alg}: one filter");
-        assert!(records[0]["steps_completed"].as_u64().unwrap() > 100, "{alg}");
+        assert!(
+            records[0]["config"]["filter"]["pool"].is_null(),
+            "{alg}: one filter"
+        );
+        assert!(
+            records[0]["steps_completed"].as_u64().unwrap() > 100,
+            "{alg}"
+        );
         assert_eq!(records[0], records[1], "{alg}: 1 and 2 threads");
         assert_eq!(records[0], records[2], "{alg}: 1 and 7 threads");
     }
