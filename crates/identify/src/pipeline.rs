@@ -369,9 +369,11 @@ pub fn execute(
         theta_true,
         (validation, validation_s),
     );
-    // Each filter shared its steps among the run's threads where it is tall enough.
+    // Each filter shared its steps among the run's threads where it is tall enough and has the
+    // particles to fill two blocks (not a one-particle Gaussian filter).
+    let per_filter = s.particles.div_ceil(s.pool.max(1));
     record.timing.particle_blocks =
-        core_filters::smc::batch::shares_steps(shape) && rayon::current_num_threads() > 1;
+        core_filters::smc::batch::blocks(shape, per_filter, rayon::current_num_threads()) > 1;
     // A result that is physically impossible or rests on few particles says so (issue 16).
     record.warnings = crate::checks::check(&record);
     Ok(record)

@@ -139,6 +139,33 @@ pub fn shares_steps(shape: Shape) -> bool {
     shape.marginal >= PARALLEL_MIN_DIM && shape.sampled > 0
 }
 
+/// The particles that go through the step together: four in lanes, else one.
+fn group_size(lanes: bool) -> usize {
+    if lanes {
+        PACK_LANES
+    } else {
+        1
+    }
+}
+
+/// Particles per block when `np` particles are shared by `threads` threads: whole groups, one
+/// block per thread.
+fn block_size(lanes: bool, np: usize, threads: usize) -> usize {
+    let group = group_size(lanes);
+    np.div_ceil(group).div_ceil(threads.max(1)).max(1) * group
+}
+
+/// How many blocks a filter with the default lanes (lanes where they
+/// pay) advances side by side for `np` particles on `threads` threads: 1 when it does not share
+/// its steps ([`shares_steps`]) or has too few particles to fill two blocks.
+pub fn blocks(shape: Shape, np: usize, threads: usize) -> usize {
+    if !shares_steps(shape) {
+        return 1;
+    }
+    let lanes = shape.marginal <= MAX_LANE_DIM;
+    np.div_ceil(block_size(lanes, np, threads)).max(1)
+}
+
 /// The buffers of the batch layer for one filter: the draws of every particle of a step, and one
 /// `Worker` per block of particles advanced side by side.
 pub(crate) struct Batch<S: ParticleStep> {
@@ -217,25 +244,15 @@ impl<S: ParticleStep> Batch<S> {
             .find_map(|w| S::broken_pattern(&w.scalar).or_else(|| S::broken_pattern(&w.packed)))
     }
 
-    /// The group of particles that go through the step together.
-    fn group(&self) -> usize {
-        if self.lanes {
-            PACK_LANES
-        } else {
-            1
-        }
-    }
-
-    /// Particles per block for `np` particles: whole groups, one block per thread of the pool
-    /// the step runs in (one block when the filter does not share its steps).
+    /// Particles per block for `np` particles: one block per thread of the pool the step runs
+    /// in (one block when the filter does not share its steps).
     fn block_size(&self, np: usize) -> usize {
-        let group = self.group();
         let threads = if self.parallel {
-            rayon::current_num_threads().max(1)
+            rayon::current_num_threads()
         } else {
             1
         };
-        np.div_ceil(group).div_ceil(threads).max(1) * group
+        block_size(self.lanes, np, threads)
     }
 
     /// Sizes the buffers for `np` particles in the pool the run is in (set-up: a step then
@@ -317,7 +334,7 @@ impl<S: ParticleStep> Worker<S> {
     /// Advances the particles of `out`, group after group: the groups one worker would form
     /// over the whole store, since a block starts at a whole group.
     fn advance(&mut self, cx: &StepContext<'_, '_, S>, out: &mut BlockOut<'_, '_>) {
-        let group = if cx.lanes { PACK_LANES } else { 1 };
+        let group = group_size(cx.lanes);
         let end = out.block.first() + out.log_w.len();
         let mut first = out.block.first();
         while first < end {
