@@ -1,6 +1,6 @@
 //! The study engine: one way to run any study description ([`Study`], `experiments/*.toml`).
 //! Every study command (the paper reproduction, the discretisation, excitations and scaling
-//! studies, a user's study) runs its jobs through `Engine::sweep` — records written as runs
+//! studies, a user's study, the regression check) runs its jobs through `Engine::sweep` — records written as runs
 //! finish, resumable by fingerprint, shardable — and then turns the records into its summary
 //! and report; only that last step is the study's own.
 
@@ -18,7 +18,7 @@ use identify::record::RunRecord;
 /// How a study command runs, whatever the study: its `[quick]` form or the full one, with how
 /// many threads, which part of the sweep, with progress on stderr or not, and whether existing
 /// records are reused. Every study command takes one (`sysid reproduce`, `scaling`,
-/// `excitations`, `study`, and the cluster path's final report).
+/// `excitations`, `study`, `regression`, and the cluster path's final report).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct RunMode {
     /// The study's `[quick]` form: fewer runs and particles, a shorter record.

@@ -24,10 +24,11 @@ use std::path::Path;
 use crate::error::{bail, Context, Result};
 use serde::{Deserialize, Serialize};
 
+use crate::engine::RunMode;
 use crate::reproduce::{algorithm_stats, AlgorithmStats};
 use crate::study::Study;
 use crate::sweep::lock::DirLock;
-use crate::sweep::{run_sweep, Shard, SweepOptions};
+use crate::sweep::Shard;
 use identify::metrics::mean_sd;
 use identify::record::RunRecord;
 
@@ -418,31 +419,22 @@ crate::error::domain_error!(Breaches);
 /// compares its statistics with the bounds.
 pub(crate) fn run(file: &RegressionFile, options: &RegressionOptions) -> Result<RegressionRun> {
     let study = &file.study;
-    let lock = DirLock::acquire(options.out)?;
+    // Through the engine every study runs by: the output directory locked for the whole check,
+    // records written as runs finish, resumable by fingerprint.
+    let mode = RunMode {
+        quick: false,
+        threads: options.threads,
+        shard: Shard::default(),
+        progress: true,
+        resume: options.resume,
+    };
+    let (lock, engine) = crate::run_dir::open(options.out, mode)?;
     let dir = options.out.join("records");
     if options.fresh && dir.exists() {
         std::fs::remove_dir_all(&dir).with_context(|| format!("removing {}", dir.display()))?;
     }
     let jobs = study.jobs();
-    let sweep = SweepOptions {
-        threads: options.threads,
-        shard: Shard::default(),
-        progress: true,
-        label: study.name.clone(),
-        resume: options.resume,
-    };
-    let outcome = run_sweep(
-        &jobs,
-        Study::job_id,
-        |job| study.job_fingerprint(job),
-        &dir,
-        &sweep,
-        |job| {
-            study
-                .run_job(job)
-                .with_context(|| format!("{}: {}", study.name, Study::job_id(job)))
-        },
-    )?;
+    let outcome = engine.sweep(study, &jobs, &dir, Study::job_id, |job| study.run_job(job))?;
     let records = outcome.records;
     // Each algorithm's records, in the sweep's order.
     let groups: Vec<(&str, Vec<&RunRecord>)> = study
