@@ -28,7 +28,7 @@ use crate::error::Result;
 use crate::field::StructureSettings;
 use crate::plan::{Candidate, Decision, HeldOutChoice, Level, RunPlan, Target};
 use crate::settings::FilterSettings;
-use crate::validation::free_run::{chain_of, fit_percent, simulate_channels, FREE_RUN_INTEGRATOR};
+use crate::validation::free_run::{chain_of, fit_percent, free_run_integrator, simulate_channels};
 use crate::validation::prediction;
 
 /// The noise fractions tried, in order of preference on a tie (SPEC §3's 0.1 first).
@@ -201,7 +201,7 @@ fn score(plan: &RunPlan, ident: &LoadedDataset, data: &LoadedDataset) -> Result<
         data.dt,
         &data.sensors,
         plan.building.measurement,
-        FREE_RUN_INTEGRATOR,
+        free_run_integrator(&chain),
     ) {
         Ok(sim) => sim,
         Err(e) => {

@@ -169,6 +169,10 @@ pub enum Integrator {
     Adaptive(Tolerance),
     /// Classical RK4, one step per sample ([`models::integrate::simulate_rk4`], the data generator's scheme).
     Rk4,
+    /// A building without hysteretic element: the exact solution under the ground motion linear
+    /// between samples ([`models::integrate::simulate_linear_exact`]), the solution the adaptive
+    /// integrator approaches to its tolerance.
+    ExactLinear,
 }
 
 /// A peak of the summed transfer magnitude.

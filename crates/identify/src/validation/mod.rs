@@ -32,8 +32,8 @@ pub use crate::record::validation::{
 };
 use crate::record::RunRecord;
 use free_run::{
-    chain_of, fit_percent, nrmse, percentile_sorted, simulate_channels, FreeRunError, QuantileDraw,
-    FREE_RUN_INTEGRATOR,
+    chain_of, fit_percent, free_run_integrator, nrmse, percentile_sorted, simulate_channels,
+    FreeRunError, QuantileDraw,
 };
 use spectral::Peak;
 
@@ -120,7 +120,7 @@ pub fn free_run(
              100·(1 − ‖y − ŷ‖/‖y − ȳ‖), NRMSE = RMSE/RMS(y)",
             kind
         ),
-        integrator: FREE_RUN_INTEGRATOR,
+        integrator: free_run_integrator(&chain),
         measurement: kind,
         channels,
         band: spread.info,
@@ -177,7 +177,7 @@ fn simulate_record(
         data.dt,
         &data.sensors,
         kind,
-        FREE_RUN_INTEGRATOR,
+        free_run_integrator(chain),
     )
 }
 
