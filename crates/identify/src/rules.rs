@@ -225,6 +225,18 @@ pub fn help_particles() -> String {
     )
 }
 
+/// `sysid filter --threads`'s help, from the batch layer's limit for particle blocks (so that
+/// the help cannot disagree with it).
+pub fn help_threads() -> String {
+    format!(
+        "Worker threads for the pooled filters of the run, which run side by side, and for the \
+         particle blocks of each filter of a tall building (marginalised dimension {} or more) \
+         (default: every core, or RAYON_NUM_THREADS where it is set); the record is the same \
+         for any count",
+        core_filters::smc::batch::PARALLEL_MIN_DIM
+    )
+}
+
 /// `sysid filter --rejuvenation`'s help, from [`MPF_REJUVENATION`] and the rule that applies
 /// it.
 pub fn help_rejuvenation() -> String {

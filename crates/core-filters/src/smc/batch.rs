@@ -155,6 +155,11 @@ fn block_size(lanes: bool, np: usize, threads: usize) -> usize {
     np.div_ceil(group).div_ceil(threads.max(1)).max(1) * group
 }
 
+/// Whether particles of this shape go through the step in lanes when lanes are asked for.
+fn lanes_fit(shape: Shape) -> bool {
+    shape.marginal <= MAX_LANE_DIM
+}
+
 /// How many blocks a filter with the default lanes (lanes where they
 /// pay) advances side by side for `np` particles on `threads` threads: 1 when it does not share
 /// its steps ([`shares_steps`]) or has too few particles to fill two blocks.
@@ -162,8 +167,8 @@ pub fn blocks(shape: Shape, np: usize, threads: usize) -> usize {
     if !shares_steps(shape) {
         return 1;
     }
-    let lanes = shape.marginal <= MAX_LANE_DIM;
-    np.div_ceil(block_size(lanes, np, threads)).max(1)
+    np.div_ceil(block_size(lanes_fit(shape), np, threads))
+        .max(1)
 }
 
 /// The buffers of the batch layer for one filter: the draws of every particle of a step, and one
@@ -218,7 +223,7 @@ impl<S: ParticleStep> Batch<S> {
     /// [`PARALLEL_MIN_DIM`] on.
     pub fn new(step: &S, lanes: bool) -> Self {
         let shape = step.shape();
-        let use_lanes = lanes && shape.marginal <= MAX_LANE_DIM;
+        let use_lanes = lanes && lanes_fit(shape);
         Self {
             lanes: use_lanes,
             parallel: shares_steps(shape),

@@ -33,11 +33,7 @@ pub struct Args {
     /// Run index (with the seed, selects the filter's stream; default 0).
     #[arg(long)]
     pub run: Option<u64>,
-    /// Worker threads for the pooled filters of the run, which run side by side, and for the
-    /// particle blocks of each filter of a tall building (marginalised dimension 32 or more)
-    /// (default: every core, or RAYON_NUM_THREADS where it is set); the record is the same for
-    /// any count.
-    #[arg(long)]
+    #[arg(long, help = identify::rules::help_threads())]
     pub threads: Option<usize>,
     /// Where to write the run record (JSON).
     #[arg(long, required_unless_present_any = ["print_config", "plan_only", "print_plan"])]
