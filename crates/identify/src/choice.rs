@@ -29,7 +29,7 @@ use crate::field::StructureSettings;
 use crate::plan::{Candidate, Decision, HeldOutChoice, Level, RunPlan, Target};
 use crate::settings::FilterSettings;
 use crate::validation::free_run::{chain_of, fit_percent, free_run_integrator, simulate_channels};
-use crate::validation::prediction;
+use crate::validation::{discrepancy, prediction};
 
 /// The noise fractions tried, in order of preference on a tie (SPEC §3's 0.1 first).
 pub const NOISE_FRACTIONS: [f64; 4] = [0.1, 0.3, 1.0, 3.0];
@@ -162,9 +162,12 @@ fn head(data: &LoadedDataset, len: usize) -> LoadedDataset {
     }
 }
 
+/// A candidate with its free run over the whole record (per channel), when it has one.
+type Scored = (Candidate, Option<Vec<Vec<f64>>>);
+
 /// Scores `plan` on the held-out part: identified on `ident` (the first samples of `data`), its
 /// θ_val run freely over all of `data`, fit over the samples from `ident.len()` on.
-fn score(plan: &RunPlan, ident: &LoadedDataset, data: &LoadedDataset) -> Result<Candidate> {
+fn score(plan: &RunPlan, ident: &LoadedDataset, data: &LoadedDataset) -> Result<Scored> {
     let mut c = Candidate {
         damping: plan.building.damping,
         noise_fraction: plan.settings.noise_fraction,
@@ -186,13 +189,13 @@ fn score(plan: &RunPlan, ident: &LoadedDataset, data: &LoadedDataset) -> Result<
     let record = crate::pipeline::execute(plan, &input, &|| false)?;
     if let Some(f) = &record.failure {
         c.note = Some(format!("the run failed: {f}"));
-        return Ok(c);
+        return Ok((c, None));
     }
     let chain = match chain_of(&plan.building, &record.theta_val) {
         Ok(chain) => chain,
         Err(e) => {
             c.note = Some(format!("no building to simulate: {e}"));
-            return Ok(c);
+            return Ok((c, None));
         }
     };
     let sim = match simulate_channels(
@@ -206,7 +209,7 @@ fn score(plan: &RunPlan, ident: &LoadedDataset, data: &LoadedDataset) -> Result<
         Ok(sim) => sim,
         Err(e) => {
             c.note = Some(format!("the free run failed: {e}"));
-            return Ok(c);
+            return Ok((c, None));
         }
     };
     let from = ident.len();
@@ -236,10 +239,11 @@ fn score(plan: &RunPlan, ident: &LoadedDataset, data: &LoadedDataset) -> Result<
     let fits = &c.held_out_fit;
     if fits.iter().all(|f| f.is_finite()) {
         c.score = Some(fits.iter().sum::<f64>() / fits.len() as f64);
+        Ok((c, Some(sim)))
     } else {
         c.note = Some("the free run left the record (non-finite fit)".into());
+        Ok((c, None))
     }
-    Ok(c)
 }
 
 /// Chooses the noise fraction (and, where the user left it open, the damping form) of `plan` —
@@ -288,10 +292,12 @@ pub fn choose(
     }
     // The candidates are independent Gaussian filters that draw nothing: scored side by side on
     // every core, collected in the order above, so the choice is the same for any thread count.
-    let candidates = plans
+    let (mut candidates, mut sims): (Vec<Candidate>, Vec<_>) = plans
         .par_iter()
         .map(|p| score(p, &ident, data))
-        .collect::<Result<Vec<_>>>()?;
+        .collect::<Result<Vec<_>>>()?
+        .into_iter()
+        .unzip();
     let Some(chosen) = best_scored(&candidates) else {
         let why = format!(
             "no candidate of the held-out choice predicted the record (noise fraction {} kept): {}",
@@ -305,13 +311,67 @@ pub fn choose(
         kept(&mut plan, Level::Warning, why);
         return Ok(plan);
     };
+    let discrepancy = sims[chosen]
+        .take()
+        .and_then(|sim| with_discrepancy(&mut candidates[chosen], &sim, data, ident.len()));
     let choice = HeldOutChoice {
         identified_samples: ident.len(),
         held_out_samples: held_out,
         candidates,
         chosen,
     };
-    Ok(with_choice(plans.swap_remove(chosen), choice, open))
+    let mut out = with_choice(plans.swap_remove(chosen), choice, open);
+    if let Some(d) = discrepancy {
+        out.decisions.push(Decision {
+            rule: "discrepancy::choose".into(),
+            set: format!(
+                "discrepancy = {}",
+                d.candidates[d.chosen].discrepancy.describe_modes()
+            ),
+            level: Level::Note,
+            why: d.describe(),
+        });
+        out.evidence.discrepancy = Some(d);
+    }
+    Ok(out)
+}
+
+/// The discrepancy modes of the chosen candidate `c` (its free run `sim` over `data`, identified
+/// on the samples `..from`), chosen on the held-out part ([`discrepancy::choose`]); with modes,
+/// `c`'s model error is learned again on the held-out part with the discrepancy added, since the
+/// band is drawn around the prediction that includes it.
+fn with_discrepancy(
+    c: &mut Candidate,
+    sim: &[Vec<f64>],
+    data: &LoadedDataset,
+    from: usize,
+) -> Option<discrepancy::DiscrepancyChoice> {
+    let names: Vec<String> = data.sensors.iter().map(|s| format!("a{s}")).collect();
+    let measured = crate::validation::measured_channels(data);
+    let choice = discrepancy::choose(&names, &measured, sim, &data.ug_meas, data.dt, from)?;
+    let chosen = &choice.candidates[choice.chosen].discrepancy;
+    if !chosen.modes.is_empty() {
+        let add = discrepancy::contribution(chosen, &data.ug_meas, data.dt);
+        let with: Vec<Vec<f64>> = sim
+            .iter()
+            .zip(&add)
+            .map(|(s, a)| s.iter().zip(a).map(|(x, y)| x + y).collect())
+            .collect();
+        if let Some(window_s) = c.held_out_error.as_ref().map(|e| e.window_s) {
+            c.held_out_error = prediction::learn(
+                &names,
+                &measured,
+                &with,
+                data.dt,
+                window_s,
+                from,
+                prediction::ErrorSource::HeldOut {
+                    samples: data.len() - from,
+                },
+            );
+        }
+    }
+    Some(choice)
 }
 
 /// The noise fractions and process-noise factors to choose among: each the stated value, or

@@ -566,7 +566,12 @@ pub fn identify_plan(
             .as_ref()
             .and_then(|h| h.candidates.get(h.chosen))
             .and_then(|c| c.held_out_error.as_ref());
-        crate::validation::attach(&mut record, data, &plan.building, held_out);
+        let modes = plan
+            .evidence
+            .discrepancy
+            .as_ref()
+            .map_or(&[][..], |c| c.modes());
+        crate::validation::attach(&mut record, data, &plan.building, held_out, modes);
         // The noise levels were chosen from the measured signals (SPEC §3).
         noise = Some(NoiseLevels::of(plan));
     }

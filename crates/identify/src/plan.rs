@@ -97,6 +97,101 @@ pub struct Evidence {
     /// score ([`crate::choice`]).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub held_out: Option<HeldOutChoice>,
+    /// The discrepancy modes chosen by held-out prediction on the chosen candidate's free run
+    /// ([`crate::validation::discrepancy`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub discrepancy: Option<DiscrepancyChoice>,
+}
+
+/// A number of discrepancy modes and how well it predicted the held-out part
+/// ([`crate::validation::discrepancy`]).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DiscrepancyCandidate {
+    /// Its modes, with the coefficients fitted on the identified part.
+    pub discrepancy: crate::record::validation::Discrepancy,
+    /// Free-run fit (%) of each channel over the held-out samples, the discrepancy added.
+    pub held_out_fit: Vec<f64>,
+    /// Their mean (absent when a fit is not finite).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub score: Option<f64>,
+    /// Whether every mode's frequency and damping were searched again with the new one (else
+    /// the new one's alone): the one of the two that predicted the held-out part better.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub every_mode_refined: bool,
+}
+
+impl DiscrepancyCandidate {
+    /// The candidate `discrepancy` with its held-out fits.
+    pub fn new(
+        discrepancy: crate::record::validation::Discrepancy,
+        held_out_fit: Vec<f64>,
+    ) -> Self {
+        let score = held_out_fit
+            .iter()
+            .all(|f| f.is_finite())
+            .then(|| held_out_fit.iter().sum::<f64>() / held_out_fit.len().max(1) as f64);
+        DiscrepancyCandidate {
+            discrepancy,
+            held_out_fit,
+            score,
+            every_mode_refined: false,
+        }
+    }
+}
+
+/// The evidence of the discrepancy's choice: the chosen noise candidate's free run, 0 to
+/// `max_modes` discrepancy modes found on the identified part, scored on the held-out part.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DiscrepancyChoice {
+    pub identified_samples: usize,
+    pub held_out_samples: usize,
+    /// Held-out fit (points) each mode must gain to be kept.
+    pub mode_cost: f64,
+    /// Candidate `m` has `m` modes.
+    pub candidates: Vec<DiscrepancyCandidate>,
+    pub chosen: usize,
+}
+
+impl DiscrepancyChoice {
+    /// The chosen modes.
+    pub fn modes(&self) -> &[crate::record::validation::DiscrepancyMode] {
+        &self.candidates[self.chosen].discrepancy.modes
+    }
+
+    /// One line per candidate, the chosen one marked.
+    pub fn describe(&self) -> String {
+        let mut s = format!(
+            "discrepancy modes chosen by the free-run fit of the held-out {} samples (each mode \
+             must gain {} points), found and fitted on the first {}:",
+            self.held_out_samples, self.mode_cost, self.identified_samples
+        );
+        for (m, c) in self.candidates.iter().enumerate() {
+            let mark = if m == self.chosen { " ← chosen" } else { "" };
+            let fit = match c.score {
+                Some(v) => format!(
+                    "held-out fit {v:.1} % ({})",
+                    c.held_out_fit
+                        .iter()
+                        .map(|f| format!("{f:.1}"))
+                        .collect::<Vec<_>>()
+                        .join(" / ")
+                ),
+                None => "no score".into(),
+            };
+            s.push_str(&format!(
+                "\n  {m} mode(s){}: {}: {fit}{mark}",
+                if c.every_mode_refined {
+                    " (all searched again)"
+                } else {
+                    ""
+                },
+                c.discrepancy.describe_modes()
+            ));
+        }
+        s
+    }
 }
 
 /// One candidate and how well it predicted the held-out part.
@@ -361,6 +456,7 @@ pub fn settle(req: PlanRequest) -> Result<RunPlan> {
             prior_from_data: scaled,
             substeps: auto,
             held_out: None,
+            discrepancy: None,
         },
         decisions,
     })

@@ -398,6 +398,7 @@ fn synthetic_free_run() -> FreeRun {
             channel: format!("a{}", c + 1),
             fit_percent: 67.7 + c as f64,
             nrmse: 0.323,
+            physical_fit_percent: None,
             fit_draws: Some(vec![35.5, 60.0, 67.7]),
             coverage_percent: Some(93.5),
         });
@@ -410,6 +411,7 @@ fn synthetic_free_run() -> FreeRun {
         band: None,
         band_error: None,
         model_error: None,
+        discrepancy: None,
         every: 1,
         t,
         measured,

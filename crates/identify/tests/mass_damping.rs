@@ -114,7 +114,7 @@ fn field_data_take_the_form_from_the_structure_table_and_validate_with_it() {
     );
     let d = resolve_for_run(&data, None, &s.structure).unwrap();
     assert_eq!(d.damping, Damping::StoreyMass);
-    identify::validation::attach(&mut r, &data, &d, None);
+    identify::validation::attach(&mut r, &data, &d, None, &[]);
     // The free run simulates θ_val with its αM: the clean response it was generated from, up to
     // the 10 % measurement noise.
     let f = r.free_run.as_ref().expect("a free run");

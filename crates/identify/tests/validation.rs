@@ -56,6 +56,7 @@ fn the_free_run_with_the_true_theta_fits_noise_free_data_perfectly() {
             None,
             0,
             validation::prediction::ErrorBand::Without,
+            validation::DiscrepancyUse::Without,
         )
         .unwrap();
         assert_eq!(f.channels.len(), data.channels);
@@ -112,6 +113,7 @@ fn the_fit_on_data_with_known_noise_is_the_value_the_noise_level_predicts() {
         None,
         0,
         validation::prediction::ErrorBand::Without,
+        validation::DiscrepancyUse::Without,
     )
     .unwrap();
     for (c, ch) in f.channels.iter().enumerate() {
@@ -251,6 +253,7 @@ fn the_band_is_reproducible_and_collapses_on_a_point_posterior() {
         Some((&q, 1, 0)),
         5,
         validation::prediction::ErrorBand::Without,
+        validation::DiscrepancyUse::Without,
     )
     .unwrap();
     for c in &f.channels {
@@ -267,6 +270,7 @@ fn the_band_is_reproducible_and_collapses_on_a_point_posterior() {
         Some((&q, 1, 0)),
         20,
         validation::prediction::ErrorBand::Without,
+        validation::DiscrepancyUse::Without,
     )
     .unwrap();
     let b = validation::free_run(
@@ -276,6 +280,7 @@ fn the_band_is_reproducible_and_collapses_on_a_point_posterior() {
         Some((&q, 1, 0)),
         20,
         validation::prediction::ErrorBand::Without,
+        validation::DiscrepancyUse::Without,
     )
     .unwrap();
     let c = validation::free_run(
@@ -285,6 +290,7 @@ fn the_band_is_reproducible_and_collapses_on_a_point_posterior() {
         Some((&q, 2, 0)),
         20,
         validation::prediction::ErrorBand::Without,
+        validation::DiscrepancyUse::Without,
     )
     .unwrap();
     assert_eq!(a, b);
@@ -304,6 +310,7 @@ fn bad_inputs_are_refused_with_a_reason() {
         None,
         0,
         validation::prediction::ErrorBand::Without,
+        validation::DiscrepancyUse::Without,
     )
     .unwrap_err();
     assert!(e.to_string().contains("θ has 5 entries"), "{e}");
@@ -316,6 +323,7 @@ fn bad_inputs_are_refused_with_a_reason() {
         None,
         0,
         validation::prediction::ErrorBand::Without,
+        validation::DiscrepancyUse::Without,
     )
     .unwrap_err();
     assert!(e.to_string().contains("damping"), "{e}");

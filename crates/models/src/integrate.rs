@@ -526,8 +526,11 @@ pub fn simulate_linear_exact<L: HysteresisLaw>(
     Ok(Trajectory::from_flat(n, dt, states))
 }
 
-/// `Φ`, `Γ₀`, `Γ₁` of [`simulate_linear_exact`]: the first n rows of `exp(Z·dt)`.
-fn first_order_hold<L: HysteresisLaw>(
+/// `Φ`, `Γ₀`, `Γ₁` of [`simulate_linear_exact`] for a linear `chain` of `n` = `chain.dim()`
+/// states: the first n rows of `exp(Z·dt)`, so that `s[k] = Φ s[k−1] + Γ₀ ü_g[k−1] + Γ₁
+/// (ü_g[k] − ü_g[k−1])/dt` exactly. Public for callers that run many small chains and keep
+/// their own states (the discrepancy modes of a free run).
+pub fn first_order_hold<L: HysteresisLaw>(
     chain: &ShearChainOf<L>,
     n: usize,
     dt: f64,

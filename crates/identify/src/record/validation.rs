@@ -19,6 +19,14 @@ pub struct ChannelFit {
     /// NRMSE of the free run at θ_val (RMSE / RMS of the measured channel).
     #[serde(with = "number::scalar")]
     pub nrmse: f64,
+    /// Fit of the physical model alone (without the discrepancy term), in %; absent when the
+    /// free run has no discrepancy.
+    #[serde(
+        default,
+        with = "number::opt_scalar",
+        skip_serializing_if = "Option::is_none"
+    )]
+    pub physical_fit_percent: Option<f64>,
     /// Fit of the band's draws: 2.5, 50 and 97.5 % percentiles (absent without a band).
     #[serde(
         default,
@@ -94,6 +102,10 @@ pub struct FreeRun {
     /// the parameters' spread only).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub model_error: Option<ModelError>,
+    /// The discrepancy term added to the physical model's prediction (absent: none was chosen
+    /// or none applies); `simulated` and the fits include it, `physical_fit_percent` does not.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub discrepancy: Option<Discrepancy>,
     /// The series below keep one sample in `every`.
     pub every: usize,
     #[serde(with = "number::vec")]
@@ -109,6 +121,55 @@ pub struct FreeRun {
     pub band_lo: Vec<Vec<f64>>,
     #[serde(default, with = "number::vec_vec")]
     pub band_hi: Vec<Vec<f64>>,
+}
+
+/// One mode of a discrepancy term (`crate::validation::discrepancy`).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DiscrepancyMode {
+    pub frequency_hz: f64,
+    pub damping_ratio: f64,
+}
+
+/// The discrepancy term of a free run: linear modes driven by the ground motion, added to the
+/// physical model's prediction of each channel (`crate::validation::discrepancy`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Discrepancy {
+    /// The channels it was fitted to, in the order of `coefficients`.
+    pub channels: Vec<String>,
+    pub modes: Vec<DiscrepancyMode>,
+    /// Per channel, per mode: the coefficients of `ω² q` and `ω q̇`.
+    pub coefficients: Vec<Vec<[f64; 2]>>,
+}
+
+impl Discrepancy {
+    /// No mode, on `channels`.
+    pub fn none(channels: &[String]) -> Self {
+        Discrepancy {
+            channels: channels.to_vec(),
+            modes: Vec::new(),
+            coefficients: vec![Vec::new(); channels.len()],
+        }
+    }
+
+    /// Its modes as `f Hz (ζ %)`, or "none".
+    pub fn describe_modes(&self) -> String {
+        if self.modes.is_empty() {
+            return "none".into();
+        }
+        self.modes
+            .iter()
+            .map(|m| {
+                format!(
+                    "{:.2} Hz ({:.2} %)",
+                    m.frequency_hz,
+                    100.0 * m.damping_ratio
+                )
+            })
+            .collect::<Vec<_>>()
+            .join(", ")
+    }
 }
 
 /// A model mode beside the measured peak it is paired with.

@@ -160,7 +160,15 @@ pub fn cross_validate(
             super::prediction::ErrorBand::Without
         }
     };
-    let free = super::free_run(&d, &data, &record.theta_val, q, draws, error)
+    let disc = match record
+        .free_run
+        .as_ref()
+        .and_then(|f| f.discrepancy.as_ref())
+    {
+        Some(dd) => super::DiscrepancyUse::Given(dd),
+        None => super::DiscrepancyUse::Without,
+    };
+    let free = super::free_run(&d, &data, &record.theta_val, q, draws, error, disc)
         .with_context(|| format!("the free run on {}", data_dir.display()))?;
     let modal = super::modal_with_intervals(&d, &data, &record.theta_val, q);
     let result = CrossValidation {

@@ -13,6 +13,7 @@
 //! validate` applies them to another record of the same building (cross-validation).
 
 pub mod cross;
+pub mod discrepancy;
 pub mod figures;
 pub mod free_run;
 pub mod prediction;
@@ -54,10 +55,22 @@ pub(crate) fn measured_channels(data: &LoadedDataset) -> Vec<Vec<f64>> {
         .collect()
 }
 
+/// The discrepancy term of a free run ([`discrepancy`]).
+#[derive(Debug, Clone, Copy)]
+pub enum DiscrepancyUse<'a> {
+    /// None: the physical model alone.
+    Without,
+    /// These modes, their coefficients fitted on this record (the identifying one).
+    Fit(&'a [discrepancy::DiscrepancyMode]),
+    /// This discrepancy as identified (on another record of the same channels).
+    Given(&'a discrepancy::Discrepancy),
+}
+
 /// The free run of building `d` with θ on record `data` (its measured ü_g and channels; the
-/// channels' storeys from its header, their kind from `d`), with a band of `draws` θ from
-/// `posterior` on the stream (seed, run, `BAND_PURPOSE`) when given, widened by the model error
-/// `error` ([`prediction`]); each channel's coverage by the band.
+/// channels' storeys from its header, their kind from `d`), the discrepancy term `disc` added,
+/// with a band of `draws` θ from `posterior` on the stream (seed, run, `BAND_PURPOSE`) when
+/// given, widened by the model error `error` ([`prediction`]); each channel's coverage by the
+/// band.
 pub fn free_run(
     d: &StructureDescription,
     data: &LoadedDataset,
@@ -65,21 +78,43 @@ pub fn free_run(
     posterior: Option<(&QuantileDraw, u64, u64)>,
     draws: usize,
     error: prediction::ErrorBand<'_>,
+    disc: DiscrepancyUse<'_>,
 ) -> Result<FreeRun, FreeRunError> {
     let chain = chain_of(d, theta)?;
     let kind = d.measurement;
+    let names: Vec<String> = data.sensors.iter().map(|s| format!("a{s}")).collect();
+    let measured = measured_channels(data);
+    let physical = simulate_record(&chain, data, kind)?;
+    let (discrepancy, disc_note) = discrepancy_of(disc, &names, &measured, &physical, data);
+    let added = discrepancy
+        .as_ref()
+        .map(|dd| discrepancy::contribution(dd, &data.ug_meas, data.dt));
     let compared = Compared {
-        names: data.sensors.iter().map(|s| format!("a{s}")).collect(),
-        simulated: simulate_record(&chain, data, kind)?,
-        measured: measured_channels(data),
+        simulated: match &added {
+            Some(a) => plus(&physical, a),
+            None => physical.clone(),
+        },
+        names,
+        measured,
     };
     let every = data.len().div_ceil(MAX_POINTS).max(1);
     let mut channels = channel_fits(&compared);
+    if discrepancy.is_some() {
+        for (c, ch) in channels.iter_mut().enumerate() {
+            ch.physical_fit_percent = Some(fit_percent(&compared.measured[c], &physical[c]));
+        }
+    }
     let mut spread = match posterior {
         None => ParameterBand::failed("no posterior to draw from".into()),
-        Some(posterior) => {
-            parameter_band(d, data, &compared, posterior, draws, every, &mut channels)
-        }
+        Some(posterior) => parameter_band(
+            d,
+            data,
+            &compared,
+            (posterior, added.as_deref()),
+            draws,
+            every,
+            &mut channels,
+        ),
     };
     let model_error = match model_error_for(error, d, data, theta, &compared) {
         Ok(model_error) => model_error,
@@ -117,8 +152,16 @@ pub fn free_run(
         method: format!(
             "the identified model (posterior mean θ_val) simulated from rest under the measured \
              ground acceleration, {} accelerations compared with each measured channel; fit = \
-             100·(1 − ‖y − ŷ‖/‖y − ȳ‖), NRMSE = RMSE/RMS(y)",
-            kind
+             100·(1 − ‖y − ŷ‖/‖y − ȳ‖), NRMSE = RMSE/RMS(y){}{}",
+            kind,
+            match &discrepancy {
+                Some(dd) => format!(
+                    "; the discrepancy term ({}) added (docs/validation.md)",
+                    dd.describe_modes()
+                ),
+                None => String::new(),
+            },
+            disc_note.map_or(String::new(), |n| format!("; {n}"))
         ),
         integrator: free_run_integrator(&chain),
         measurement: kind,
@@ -126,6 +169,7 @@ pub fn free_run(
         band: spread.info,
         band_error: spread.error,
         model_error,
+        discrepancy,
         every,
         t: thin(&data.t, every),
         measured: compared.measured.iter().map(|v| thin(v, every)).collect(),
@@ -133,6 +177,51 @@ pub fn free_run(
         band_lo: spread.lo,
         band_hi: spread.hi,
     })
+}
+
+/// Channel by channel, `a + b`.
+fn plus(a: &[Vec<f64>], b: &[Vec<f64>]) -> Vec<Vec<f64>> {
+    a.iter()
+        .zip(b)
+        .map(|(x, y)| x.iter().zip(y).map(|(p, q)| p + q).collect())
+        .collect()
+}
+
+/// The discrepancy `disc` asks for on a record of channels `names` (`physical`: the physical
+/// model's free run of `measured`), or none and why not.
+fn discrepancy_of(
+    disc: DiscrepancyUse<'_>,
+    names: &[String],
+    measured: &[Vec<f64>],
+    physical: &[Vec<f64>],
+    data: &LoadedDataset,
+) -> (Option<discrepancy::Discrepancy>, Option<String>) {
+    match disc {
+        DiscrepancyUse::Without => (None, None),
+        DiscrepancyUse::Fit([]) => (None, None),
+        DiscrepancyUse::Fit(modes) => (
+            Some(discrepancy::refit(
+                modes,
+                names,
+                measured,
+                physical,
+                &data.ug_meas,
+                data.dt,
+            )),
+            None,
+        ),
+        DiscrepancyUse::Given(dd) if dd.modes.is_empty() => (None, None),
+        DiscrepancyUse::Given(dd) if dd.channels == names => (Some(dd.clone()), None),
+        DiscrepancyUse::Given(dd) => (
+            None,
+            Some(format!(
+                "the discrepancy term was learned on channels {} and this record has {}: the \
+                 physical model alone",
+                dd.channels.join(", "),
+                names.join(", ")
+            )),
+        ),
+    }
 }
 
 /// What a free run compares, channel by channel: the record's measured channels beside the
@@ -197,6 +286,7 @@ fn channel_fits(compared: &Compared) -> Vec<ChannelFit> {
             channel: name.clone(),
             fit_percent: fit_percent(&measured[c], &simulated[c]),
             nrmse: nrmse(&measured[c], &simulated[c]),
+            physical_fit_percent: None,
             fit_draws: None,
             coverage_percent: None,
         })
@@ -204,20 +294,21 @@ fn channel_fits(compared: &Compared) -> Vec<ChannelFit> {
 }
 
 /// The band of `draws` θ from the record's posterior on the stream (seed, run, `BAND_PURPOSE`):
-/// each draw simulated, the spread of its fit written into `channels`, and the pointwise
-/// 2.5–97.5 % of the kept series; no band when fewer than two draws are valid.
+/// each draw simulated (the discrepancy's contribution `added` added), the spread of its fit
+/// written into `channels`, and the pointwise 2.5–97.5 % of the kept series; no band when fewer
+/// than two draws are valid.
 fn parameter_band(
     d: &StructureDescription,
     data: &LoadedDataset,
     compared: &Compared,
-    (q, seed, run): (&QuantileDraw, u64, u64),
+    ((q, seed, run), added): ((&QuantileDraw, u64, u64), Option<&[Vec<f64>]>),
     draws: usize,
     every: usize,
     channels: &mut [ChannelFit],
 ) -> ParameterBand {
     let mut rng = core_filters::rng::stream(seed, run, BAND_PURPOSE);
     let thetas: Vec<Vec<f64>> = (0..draws).map(|_| q.draw(&mut rng)).collect();
-    let results = simulate_draws(d, data, &compared.measured, &thetas, every);
+    let results = simulate_draws(d, data, &compared.measured, &thetas, every, added);
     let invalid_reason = results.iter().find_map(|r| r.as_ref().err().cloned());
     let ok: Vec<&(Vec<f64>, Vec<Vec<f64>>)> = results.iter().flatten().collect();
     if ok.len() < 2 {
@@ -248,20 +339,24 @@ fn parameter_band(
     }
 }
 
-/// Each drawn θ simulated on the record, side by side: its fit per channel and its kept series
-/// (or why it is invalid).
+/// Each drawn θ simulated on the record (with `added`, the discrepancy's contribution), side by
+/// side: its fit per channel and its kept series (or why it is invalid).
 fn simulate_draws(
     d: &StructureDescription,
     data: &LoadedDataset,
     measured: &[Vec<f64>],
     thetas: &[Vec<f64>],
     every: usize,
+    added: Option<&[Vec<f64>]>,
 ) -> Vec<DrawResult> {
     thetas
         .par_iter()
         .map(|th| {
             let c = chain_of(d, th).map_err(|e| e.to_string())?;
-            let y = simulate_record(&c, data, d.measurement).map_err(|e| e.to_string())?;
+            let mut y = simulate_record(&c, data, d.measurement).map_err(|e| e.to_string())?;
+            if let Some(a) = added {
+                y = plus(&y, a);
+            }
             let fits = (0..y.len())
                 .map(|i| fit_percent(&measured[i], &y[i]))
                 .collect();
@@ -628,12 +723,14 @@ pub(crate) fn check_identified(r: &RunRecord) -> Result<()> {
 /// Attaches the free run and the modal comparison to the record of a field-data run on
 /// `data` with building `d` (nothing when the run failed: the record says why). The band's
 /// model error is `held_out` (learned by the held-out choice) or, without one, learned
-/// in-sample on `data`.
+/// in-sample on `data`; the discrepancy term has the `modes` the choice kept (none: none), its
+/// coefficients fitted on `data` ([`discrepancy::refit`]).
 pub fn attach(
     r: &mut RunRecord,
     data: &LoadedDataset,
     d: &StructureDescription,
     held_out: Option<&ModelError>,
+    modes: &[discrepancy::DiscrepancyMode],
 ) {
     r.warnings = crate::checks::check(r);
     if let Err(e) = check_identified(r) {
@@ -651,7 +748,15 @@ pub fn attach(
         prediction::ErrorBand::InSample,
         prediction::ErrorBand::Given,
     );
-    match free_run(d, data, &r.theta_val, q, BAND_DRAWS, error) {
+    match free_run(
+        d,
+        data,
+        &r.theta_val,
+        q,
+        BAND_DRAWS,
+        error,
+        DiscrepancyUse::Fit(modes),
+    ) {
         Ok(mut f) => {
             if let Err(e) = &posterior {
                 f.band_error = Some(e.clone());
@@ -741,6 +846,24 @@ fn write_free_run(o: &mut String, f: &FreeRun) {
             o,
             "{:<8}  {:>8.1}  {:>7.3}  {draws:>26}  {covers:>12}",
             c.channel, c.fit_percent, c.nrmse
+        );
+    }
+    if let Some(dd) = &f.discrepancy {
+        let physical: Vec<String> = f
+            .channels
+            .iter()
+            .map(|c| {
+                c.physical_fit_percent
+                    .map_or("–".into(), |v| format!("{v:.1}"))
+            })
+            .collect();
+        let _ = writeln!(
+            o,
+            "the fits include a discrepancy term of {} mode(s) — {} — driven by the ground \
+             motion, beside the building (docs/validation.md); the building alone: {} %",
+            dd.modes.len(),
+            dd.describe_modes(),
+            physical.join(" / ")
         );
     }
     if let Some(me) = &f.model_error {
