@@ -1,0 +1,131 @@
+//! The discrepancy term end to end (`identify::validation::discrepancy`, docs/validation.md): on
+//! records of the filter's own class `sysid filter` with the minimal flags keeps no discrepancy
+//! mode (a mode fitted to the noise gains nothing on the held-out part), and on a structure with
+//! an unmeasured fourth mode it keeps at least one, which improves the held-out fit. The
+//! structures are our own, not the foreign corpus's.
+
+mod common;
+
+use std::path::Path;
+use std::process::Command;
+
+use experiments::foreign::{self, Sensing, Structure};
+use nalgebra::{DMatrix, DVector};
+
+fn sysid() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_sysid"))
+}
+
+/// The clean ground motion of `sysid simulate --excitation <name>` (20 s at 200 Hz).
+fn ground(name: &str, dir: &Path) -> (Vec<f64>, f64) {
+    let o = sysid()
+        .args(["simulate", "--storeys", "3", "--hysteretic", "none", "--seed", "1"])
+        .args(["--excitation", name, "--duration", "20", "--out"])
+        .arg(dir)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    foreign::clean_ground(dir).unwrap()
+}
+
+/// A shear chain of storey stiffnesses `k` (unit masses) with Rayleigh damping of 3 % in its
+/// first and last modes, floors measured; with `appendage`, a mass of that share on floor 3
+/// tuned 10 % above the first mode (a fourth, unmeasured degree of freedom).
+fn building(k: &[f64], appendage: Option<f64>) -> Structure {
+    let base = foreign::chain(k);
+    let mut w: Vec<f64> = base
+        .clone()
+        .symmetric_eigen()
+        .eigenvalues
+        .iter()
+        .map(|v| v.sqrt())
+        .collect();
+    w.sort_by(f64::total_cmp);
+    let (m, kk, n) = match appendage {
+        None => (DMatrix::identity(3, 3), base, 3),
+        Some(ma) => {
+            let ka = ma * (1.1 * w[0]).powi(2);
+            let mut k4 = DMatrix::zeros(4, 4);
+            k4.view_mut((0, 0), (3, 3)).copy_from(&base);
+            for (a, b, s) in [(2, 2, ka), (3, 3, ka), (2, 3, -ka), (3, 2, -ka)] {
+                k4[(a, b)] += s;
+            }
+            let mut m4 = DMatrix::identity(4, 4);
+            m4[(3, 3)] = ma;
+            (m4, k4, 4)
+        }
+    };
+    let (w1, w3) = (w[0], w[2]);
+    let z = 0.03;
+    Structure {
+        c: &m * (2.0 * z * w1 * w3 / (w1 + w3)) + &kk * (2.0 * z / (w1 + w3)),
+        m,
+        k: kk,
+        joint: None,
+        r: DVector::from_element(n, 1.0),
+        sensors: DMatrix::identity(3, n),
+    }
+}
+
+/// `sysid filter` with the minimal flags on the record of `s` under `ug`: the number of
+/// discrepancy modes its plan chose, and the held-out mean fit without and with them.
+fn chosen_modes(s: &Structure, ug: &[f64], dt: f64, i: u64, dir: &Path) -> (usize, f64, f64) {
+    let clean = foreign::respond(s, ug, dt);
+    let mut rng = core_filters::rng::stream(11, i, "discrepancy test");
+    let rec = foreign::measure(&Sensing::default(), ug, clean, &mut rng);
+    foreign::write(&rec, dt, dir).unwrap();
+    let out = dir.join("r.json");
+    let o = sysid()
+        .arg("filter")
+        .args(foreign::MINIMAL_FLAGS)
+        .args(["--seed", "11", "--data"])
+        .arg(dir)
+        .arg("--out")
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert_eq!(
+        o.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    let r: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
+    let choice = &r["plan"]["evidence"]["discrepancy"];
+    assert!(choice.is_object(), "the plan records the discrepancy's choice");
+    let chosen = choice["chosen"].as_u64().unwrap() as usize;
+    let score = |m: usize| choice["candidates"][m]["score"].as_f64().unwrap();
+    // The record holds the term exactly when modes were chosen.
+    let term = &r["free_run"]["discrepancy"];
+    assert_eq!(term.is_object(), chosen > 0, "{term}");
+    (chosen, score(0), score(chosen))
+}
+
+#[test]
+fn no_discrepancy_mode_on_the_filters_own_class_and_one_for_an_unmeasured_mode() {
+    let (_tmp, root) = common::temp_dir("sysid-discrepancy-");
+    let (ug, dt) = ground("san-fernando-1971", &root.join("ground"));
+    for (i, k) in [[1500.0, 1100.0, 900.0], [800.0, 800.0, 600.0]]
+        .iter()
+        .enumerate()
+    {
+        let (m, without, with) = chosen_modes(
+            &building(k, None),
+            &ug,
+            dt,
+            i as u64,
+            &root.join(format!("in-class-{i}")),
+        );
+        assert_eq!(m, 0, "in-class {k:?}: {m} modes ({without} → {with})");
+    }
+    let (m, without, with) = chosen_modes(
+        &building(&[1500.0, 1100.0, 900.0], Some(0.08)),
+        &ug,
+        dt,
+        9,
+        &root.join("appendage"),
+    );
+    assert!(m >= 1, "appendage: no mode chosen ({without})");
+    assert!(with > without + 0.5 * m as f64, "{without} → {with}");
+}
