@@ -19,7 +19,15 @@ fn sysid() -> Command {
 /// The clean ground motion of `sysid simulate --excitation <name>` (20 s at 200 Hz).
 fn ground(name: &str, dir: &Path) -> (Vec<f64>, f64) {
     let o = sysid()
-        .args(["simulate", "--storeys", "3", "--hysteretic", "none", "--seed", "1"])
+        .args([
+            "simulate",
+            "--storeys",
+            "3",
+            "--hysteretic",
+            "none",
+            "--seed",
+            "1",
+        ])
         .args(["--excitation", name, "--duration", "20", "--out"])
         .arg(dir)
         .output()
@@ -93,7 +101,10 @@ fn chosen_modes(s: &Structure, ug: &[f64], dt: f64, i: u64, dir: &Path) -> (usiz
     let r: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
     let choice = &r["plan"]["evidence"]["discrepancy"];
-    assert!(choice.is_object(), "the plan records the discrepancy's choice");
+    assert!(
+        choice.is_object(),
+        "the plan records the discrepancy's choice"
+    );
     let chosen = choice["chosen"].as_u64().unwrap() as usize;
     let score = |m: usize| choice["candidates"][m]["score"].as_f64().unwrap();
     // The record holds the term exactly when modes were chosen.

@@ -38,6 +38,9 @@ use free_run::{
 };
 use spectral::Peak;
 
+/// A record's θ distribution with its seed and run (the band's stream).
+type Posterior<'a> = (&'a QuantileDraw, u64, u64);
+
 /// One draw of the band: its fit per channel and its kept series, or why it is invalid.
 type DrawResult = Result<(Vec<f64>, Vec<Vec<f64>>), String>;
 
@@ -301,7 +304,7 @@ fn parameter_band(
     d: &StructureDescription,
     data: &LoadedDataset,
     compared: &Compared,
-    ((q, seed, run), added): ((&QuantileDraw, u64, u64), Option<&[Vec<f64>]>),
+    ((q, seed, run), added): (Posterior<'_>, Option<&[Vec<f64>]>),
     draws: usize,
     every: usize,
     channels: &mut [ChannelFit],
