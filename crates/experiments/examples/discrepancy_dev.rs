@@ -52,22 +52,9 @@ fn run(args: &[&str], out: &Path) -> Result<String> {
 
 /// The clean ground motion of earthquake `name`, 30 s at 200 Hz.
 fn ground(name: &str, dir: &Path) -> Result<(Vec<f64>, f64)> {
-    run(
-        &[
-            "simulate",
-            "--storeys",
-            "3",
-            "--hysteretic",
-            "none",
-            "--seed",
-            "1",
-            "--excitation",
-            name,
-            "--duration",
-            "30",
-        ],
-        dir,
-    )?;
+    let mut args = foreign::GROUND.to_vec();
+    args.extend(["--excitation", name, "--duration", "30"]);
+    run(&args, dir)?;
     foreign::clean_ground(dir)
 }
 
@@ -75,22 +62,11 @@ fn chain(k: &[f64]) -> DMatrix<f64> {
     foreign::chain(k)
 }
 
-fn rayleigh(m: &DMatrix<f64>, k: &DMatrix<f64>, z: f64) -> DMatrix<f64> {
-    let mut w: Vec<f64> = k
-        .clone()
-        .symmetric_eigen()
-        .eigenvalues
-        .iter()
-        .map(|v| v.sqrt())
-        .collect();
-    w.sort_by(f64::total_cmp);
-    let (w1, w3) = (w[0], w[w.len() - 1]);
-    m * (2.0 * z * w1 * w3 / (w1 + w3)) + k * (2.0 * z / (w1 + w3))
-}
-
+/// A structure of mass `m` and stiffness `k` with Rayleigh damping of 3 % in the first and last
+/// modes of `k`, the ground's influence `r`, the sensors' rows `sensors`.
 fn planar(m: DMatrix<f64>, k: DMatrix<f64>, sensors: DMatrix<f64>, r: DVector<f64>) -> Structure {
     Structure {
-        c: rayleigh(&m, &k, 0.03),
+        c: foreign::rayleigh(&m, &k, 0.03, foreign::band(&k)),
         m,
         k,
         joint: None,
@@ -134,22 +110,8 @@ fn structures() -> Vec<(&'static str, Structure)> {
     }
     out.push(("torsion 0.2", planar(m6, k6, s6, r6)));
     // An 8 % mass on floor 2 tuned 10 % above the first mode.
-    let mut w: Vec<f64> = chain(&base)
-        .symmetric_eigen()
-        .eigenvalues
-        .iter()
-        .copied()
-        .collect();
-    w.sort_by(f64::total_cmp);
-    let (ma, wa) = (0.08, 1.1 * w[0].sqrt());
-    let ka = ma * wa * wa;
-    let mut k4 = DMatrix::zeros(4, 4);
-    k4.view_mut((0, 0), (3, 3)).copy_from(&chain(&base));
-    for (a, b, s) in [(1, 1, ka), (3, 3, ka), (1, 3, -ka), (3, 1, -ka)] {
-        k4[(a, b)] += s;
-    }
-    let mut m4 = DMatrix::identity(4, 4);
-    m4[(3, 3)] = ma;
+    let (m4, k4) =
+        foreign::with_mass_on(&chain(&base), 1, 0.08, 1.1 * foreign::band(&chain(&base)).0);
     out.push((
         "appendage floor 2",
         planar(
@@ -295,9 +257,8 @@ fn main() -> Result<()> {
             .collect();
         let from = identify::choice::split_point(&a);
         for (v, (vname, search)) in variants.iter().enumerate() {
-            let choice =
-                discrepancy::choose_with(search, &names, &ya, &sim_a, &a.ug_meas, dt, from)
-                    .with_context(|| format!("{name}: the record is too short to choose"))?;
+            let choice = discrepancy::choose(search, &names, &ya, &sim_a, &a.ug_meas, dt, from)
+                .with_context(|| format!("{name}: the record is too short to choose"))?;
             let modes = choice.modes().to_vec();
             let disc = discrepancy::refit(&modes, &names, &ya, &sim_a, &a.ug_meas, dt);
             let add = discrepancy::contribution(&disc, &b.ug_meas, dt);

@@ -132,19 +132,49 @@ pub fn chain(k: &[f64]) -> DMatrix<f64> {
     m
 }
 
-/// Rayleigh damping a₀ M + a₁ K with `DAMPING_RATIO` at circular frequencies w1 and w2.
-fn rayleigh(m: &DMatrix<f64>, k: &DMatrix<f64>, w1: f64, w2: f64) -> DMatrix<f64> {
-    let z = DAMPING_RATIO;
+/// Rayleigh damping a₀ M + a₁ K with damping ratio `z` at circular frequencies w1 and w2.
+pub fn rayleigh(m: &DMatrix<f64>, k: &DMatrix<f64>, z: f64, (w1, w2): (f64, f64)) -> DMatrix<f64> {
     m * (2.0 * z * w1 * w2 / (w1 + w2)) + k * (2.0 * z / (w1 + w2))
 }
 
-/// The base chain's lowest and highest circular frequencies (unit masses).
-fn base_band() -> (f64, f64) {
-    let e = chain(&STIFFNESS).symmetric_eigen().eigenvalues;
+/// The lowest and highest circular frequencies of stiffness `k` with unit masses.
+pub fn band(k: &DMatrix<f64>) -> (f64, f64) {
+    let e = k.clone().symmetric_eigen().eigenvalues;
     let (lo, hi) = e
         .iter()
         .fold((f64::INFINITY, 0.0_f64), |(l, h), &v| (l.min(v), h.max(v)));
     (lo.sqrt(), hi.sqrt())
+}
+
+/// The base chain's lowest and highest circular frequencies (unit masses).
+fn base_band() -> (f64, f64) {
+    band(&chain(&STIFFNESS))
+}
+
+/// The mass and stiffness of a unit-mass structure of stiffness `base` with a mass `mass` on
+/// 0-based floor `floor`, its spring tuned to circular frequency `w`: one more degree of freedom,
+/// unmeasured.
+pub fn with_mass_on(
+    base: &DMatrix<f64>,
+    floor: usize,
+    mass: f64,
+    w: f64,
+) -> (DMatrix<f64>, DMatrix<f64>) {
+    let n = base.nrows();
+    let ka = mass * w * w;
+    let mut k = DMatrix::zeros(n + 1, n + 1);
+    k.view_mut((0, 0), (n, n)).copy_from(base);
+    for (a, b, s) in [
+        (floor, floor, ka),
+        (n, n, ka),
+        (floor, n, -ka),
+        (n, floor, -ka),
+    ] {
+        k[(a, b)] += s;
+    }
+    let mut m = DMatrix::identity(n + 1, n + 1);
+    m[(n, n)] = mass;
+    (m, k)
 }
 
 /// A planar three-storey building of mass matrix `m` and stiffness `k`, floors measured.
@@ -152,7 +182,7 @@ fn planar(m: DMatrix<f64>, k: DMatrix<f64>) -> Structure {
     let n = m.nrows();
     let (w1, w3) = base_band();
     Structure {
-        c: rayleigh(&m, &k, w1, w3),
+        c: rayleigh(&m, &k, DAMPING_RATIO, (w1, w3)),
         sensors: DMatrix::identity(3, n),
         r: DVector::from_element(n, 1.0),
         m,
@@ -186,7 +216,7 @@ fn torsional(e: f64, twist_ratio: f64) -> Structure {
         sensors[(j, j + 3)] = 1.0;
     }
     Structure {
-        c: rayleigh(&m, &k, w1, w3),
+        c: rayleigh(&m, &k, DAMPING_RATIO, (w1, w3)),
         m,
         k,
         joint: None,
@@ -289,16 +319,7 @@ fn with_appendage(base: &DMatrix<f64>) -> (DMatrix<f64>, DMatrix<f64>) {
         .as_slice()
         .to_vec();
     w2.sort_by(f64::total_cmp);
-    let ma = 0.05;
-    let ka = ma * (0.95 * w2[1].sqrt()).powi(2);
-    let mut app_k = DMatrix::zeros(4, 4);
-    app_k.view_mut((0, 0), (3, 3)).copy_from(base);
-    for (a, b, s) in [(2, 2, ka), (3, 3, ka), (2, 3, -ka), (3, 2, -ka)] {
-        app_k[(a, b)] += s;
-    }
-    let mut app_m = DMatrix::identity(4, 4);
-    app_m[(3, 3)] = ma;
-    (app_m, app_k)
+    with_mass_on(base, 2, 0.05, 0.95 * w2[1].sqrt())
 }
 
 /// The chain with storey 1's linear spring replaced by a hardening joint (+50 % stiffness at

@@ -19,15 +19,7 @@ fn sysid() -> Command {
 /// The clean ground motion of `sysid simulate --excitation <name>` (20 s at 200 Hz).
 fn ground(name: &str, dir: &Path) -> (Vec<f64>, f64) {
     let o = sysid()
-        .args([
-            "simulate",
-            "--storeys",
-            "3",
-            "--hysteretic",
-            "none",
-            "--seed",
-            "1",
-        ])
+        .args(foreign::GROUND)
         .args(["--excitation", name, "--duration", "20", "--out"])
         .arg(dir)
         .output()
@@ -41,32 +33,14 @@ fn ground(name: &str, dir: &Path) -> (Vec<f64>, f64) {
 /// tuned 10 % above the first mode (a fourth, unmeasured degree of freedom).
 fn building(k: &[f64], appendage: Option<f64>) -> Structure {
     let base = foreign::chain(k);
-    let mut w: Vec<f64> = base
-        .clone()
-        .symmetric_eigen()
-        .eigenvalues
-        .iter()
-        .map(|v| v.sqrt())
-        .collect();
-    w.sort_by(f64::total_cmp);
-    let (m, kk, n) = match appendage {
-        None => (DMatrix::identity(3, 3), base, 3),
-        Some(ma) => {
-            let ka = ma * (1.1 * w[0]).powi(2);
-            let mut k4 = DMatrix::zeros(4, 4);
-            k4.view_mut((0, 0), (3, 3)).copy_from(&base);
-            for (a, b, s) in [(2, 2, ka), (3, 3, ka), (2, 3, -ka), (3, 2, -ka)] {
-                k4[(a, b)] += s;
-            }
-            let mut m4 = DMatrix::identity(4, 4);
-            m4[(3, 3)] = ma;
-            (m4, k4, 4)
-        }
+    let band = foreign::band(&base);
+    let (m, kk) = match appendage {
+        None => (DMatrix::identity(3, 3), base),
+        Some(ma) => foreign::with_mass_on(&base, 2, ma, 1.1 * band.0),
     };
-    let (w1, w3) = (w[0], w[2]);
-    let z = 0.03;
+    let n = m.nrows();
     Structure {
-        c: &m * (2.0 * z * w1 * w3 / (w1 + w3)) + &kk * (2.0 * z / (w1 + w3)),
+        c: foreign::rayleigh(&m, &kk, 0.03, band),
         m,
         k: kk,
         joint: None,

@@ -348,7 +348,15 @@ fn with_discrepancy(
 ) -> Option<discrepancy::DiscrepancyChoice> {
     let names: Vec<String> = data.sensors.iter().map(|s| format!("a{s}")).collect();
     let measured = crate::validation::measured_channels(data);
-    let choice = discrepancy::choose(&names, &measured, sim, &data.ug_meas, data.dt, from)?;
+    let choice = discrepancy::choose(
+        &discrepancy::SEARCH,
+        &names,
+        &measured,
+        sim,
+        &data.ug_meas,
+        data.dt,
+        from,
+    )?;
     let chosen = &choice.candidates[choice.chosen].discrepancy;
     if !chosen.modes.is_empty() {
         let add = discrepancy::contribution(chosen, &data.ug_meas, data.dt);

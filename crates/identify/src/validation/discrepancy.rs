@@ -39,7 +39,7 @@ pub struct Search {
     pub refine_all: bool,
 }
 
-/// The search `sysid filter` uses. On records simulated from the filter's own class a fitted
+/// The search `sysid filter` uses ([`choose`]). On records simulated from the filter's own class a fitted
 /// mode gains nothing out of sample (it fits noise), so the cost keeps it out
 /// (`crates/experiments/tests/discrepancy.rs`); the other settings were chosen on the
 /// development structures of `crates/experiments/examples/discrepancy_dev.rs` (docs/validation.md).
@@ -391,7 +391,7 @@ fn refine(
 /// (ln f, ln ζ) of it alone — and, with `search.refine_all`, a second answer: then of every
 /// mode together. Searching every mode fits the identified part better but can overfit it (two
 /// lightly damped modes 1 % apart cancelling each other on the shake-table frame), so the
-/// held-out part decides between the two ([`choose_with`]).
+/// held-out part decides between the two ([`choose`]).
 fn add_mode(
     known: &[DiscrepancyMode],
     search: &Search,
@@ -461,24 +461,12 @@ fn add_mode(
 pub use crate::plan::DiscrepancyCandidate;
 pub use crate::plan::DiscrepancyChoice;
 
-/// [`choose_with`] the search `sysid filter` uses ([`SEARCH`]).
-pub fn choose(
-    channels: &[String],
-    measured: &[Vec<f64>],
-    simulated: &[Vec<f64>],
-    ug: &[f64],
-    dt: f64,
-    from: usize,
-) -> Option<DiscrepancyChoice> {
-    choose_with(&SEARCH, channels, measured, simulated, ug, dt, from)
-}
-
 /// Chooses the discrepancy of a free run `simulated` (per channel, over the whole record) of
 /// `measured`: 0 to `search.max_modes` modes, each found on the samples `..from` and their
 /// coefficients fitted there, scored by the free-run fit of the samples `from..` with the
 /// discrepancy added; the number kept maximises the mean held-out fit less `search.mode_cost`
 /// per mode. `None` when the parts are too short to fit a mode.
-pub fn choose_with(
+pub fn choose(
     search: &Search,
     channels: &[String],
     measured: &[Vec<f64>],
@@ -649,7 +637,16 @@ mod tests {
             .zip(&add)
             .map(|(s, a)| s.iter().zip(a).map(|(x, y)| x + y).collect())
             .collect();
-        let choice = choose(&truth.channels, &measured, &simulated, &ug, dt, 2500).unwrap();
+        let choice = choose(
+            &SEARCH,
+            &truth.channels,
+            &measured,
+            &simulated,
+            &ug,
+            dt,
+            2500,
+        )
+        .unwrap();
         assert_eq!(choice.chosen, 1, "{choice:?}");
         let m = &choice.candidates[1].discrepancy.modes[0];
         assert!((m.frequency_hz - 6.3).abs() < 0.01, "{m:?}");
@@ -689,7 +686,7 @@ mod tests {
             })
             .collect();
         let names = vec!["a1".to_string(), "a2".to_string()];
-        let choice = choose(&names, &measured, &simulated, &ug, dt, 2500).unwrap();
+        let choice = choose(&SEARCH, &names, &measured, &simulated, &ug, dt, 2500).unwrap();
         assert_eq!(choice.chosen, 0, "{choice:?}");
     }
 }
