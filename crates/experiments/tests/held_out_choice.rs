@@ -115,6 +115,16 @@ fn a_linear_field_identification_chooses_its_noise_by_held_out_prediction() {
     assert_eq!(direct["theta_val"], again["theta_val"]);
     assert_eq!(direct["loglik"], again["loglik"]);
     assert_eq!(direct["plan"], again["plan"]);
+    // The discrepancy term's choice is in the plan, and the rerun fits the same term.
+    assert!(direct["plan"]["evidence"]["discrepancy"]["candidates"].is_array());
+    assert_eq!(
+        direct["free_run"]["discrepancy"],
+        again["free_run"]["discrepancy"]
+    );
+    assert_eq!(
+        direct["free_run"]["channels"],
+        again["free_run"]["channels"]
+    );
     // A damping form given is kept: only the noise is chosen.
     let (plan, _) = print_plan(&data, &["--damping", "storey"]);
     let choice = plan.evidence.held_out.unwrap();
