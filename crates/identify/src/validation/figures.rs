@@ -195,7 +195,16 @@ fn fit_caption(f: &FreeRun, i: usize) -> String {
 fn free_run_legend(f: &FreeRun, zoom: Option<(f64, f64)>) -> Vec<(Swatch, String)> {
     let mut entries = vec![
         (Swatch::Line(BLACK), "measured".to_string()),
-        (Swatch::Line(colour(1)), "free run at θ_val".to_string()),
+        (
+            Swatch::Line(colour(1)),
+            match &f.discrepancy {
+                Some(d) => format!(
+                    "free run at θ_val with the discrepancy term ({} mode(s) beside the building)",
+                    d.modes.len()
+                ),
+                None => "free run at θ_val".to_string(),
+            },
+        ),
     ];
     if has_band(f) {
         let what = if f.model_error.is_some() {
