@@ -52,6 +52,18 @@ pub const RECORD_SCHEMA: u32 = 2;
 /// numbers of 3.
 pub const NUMERICS_VERSION: u32 = 4;
 
+/// Version of what the record of a **field-data** run carries beyond the filter's numbers — the
+/// free run, its band and the discrepancy term ([`crate::validation`]): bump it whenever a change
+/// of the code changes them. It is part of the fingerprint of field-data runs only (a data set
+/// without `dataset.json`), so a resumed field study never reuses a record whose validation was
+/// computed otherwise, while the studies' simulated runs, which carry none of it, keep their
+/// fingerprints.
+///
+/// History: 1 — the discrepancy term beside the building, chosen by the held-out part of the
+/// record (`crate::validation::discrepancy`, 2026-11-30); field-data records without this key
+/// were computed before it.
+pub const FIELD_VALIDATION_VERSION: u32 = 1;
+
 /// Versions and provenance written into every record.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Versions {

@@ -15,6 +15,9 @@
 //! - `filter` is every filter setting ([`FilterSettings`](crate::settings::FilterSettings)), particles and resampling included;
 //! - `numerics` is [`NUMERICS_VERSION`](super::NUMERICS_VERSION), bumped by hand whenever a code
 //!   change alters results;
+//! - `field_validation`, on field data only, is
+//!   [`FIELD_VALIDATION_VERSION`](super::FIELD_VALIDATION_VERSION): the version of the free run,
+//!   band and discrepancy term such a record carries;
 //! - canonical JSON: object keys sorted by their UTF-8 bytes, no whitespace, strings and numbers
 //!   as `serde_json` writes them (numbers in their shortest round-trip form; a non-finite
 //!   number, which JSON cannot hold, as `null`). The text therefore depends on no map's iteration
@@ -74,7 +77,8 @@ impl Fingerprint {
     }
 
     /// The fingerprint of one run of `algorithm` with `settings` on `data`, seeded by
-    /// `(seed, run)`, by the numerics of this build.
+    /// `(seed, run)`, by the numerics of this build (and, on field data, the version of its
+    /// validation, [`FIELD_VALIDATION_VERSION`](super::FIELD_VALIDATION_VERSION)).
     pub fn of_run(
         algorithm: &str,
         seed: u64,
@@ -82,14 +86,18 @@ impl Fingerprint {
         settings: &(impl serde::Serialize + ?Sized),
         data: &LoadedDataset,
     ) -> Self {
-        Self::new(serde_json::json!({
+        let mut inputs = serde_json::json!({
             "numerics": super::NUMERICS_VERSION,
             "algorithm": algorithm,
             "seed": seed,
             "run": run,
             "filter": settings,
             "data": data_identity(data),
-        }))
+        });
+        if data.meta.is_none() {
+            inputs["field_validation"] = super::FIELD_VALIDATION_VERSION.into();
+        }
+        Self::new(inputs)
     }
 
     /// Whether `sha256` is the hash of `inputs` (a record whose fingerprint was altered or
@@ -241,5 +249,37 @@ mod tests {
         let mut g = f.clone();
         g.inputs["seed"] = 3.into();
         assert!(g.verify().is_err());
+    }
+
+    #[test]
+    fn only_field_data_carries_the_validation_version() {
+        let field = LoadedDataset {
+            dt: 0.01,
+            t: vec![0.0, 0.01],
+            ug_meas: vec![0.0, 1.0],
+            y_meas: vec![0.0, 1.0],
+            channels: 1,
+            sensors: vec![1],
+            truth: None,
+            meta: None,
+        };
+        let f = Fingerprint::of_run("mpf-ekf2", 1, 0, &serde_json::json!({}), &field);
+        assert_eq!(
+            f.inputs["field_validation"],
+            serde_json::json!(super::super::FIELD_VALIDATION_VERSION)
+        );
+        // A simulated data set (with its `dataset.json`): the inputs of the committed studies'
+        // records, unchanged by the field validation's version.
+        let mut config = models::dataset::DatasetConfig::from_preset("paper-3dof", 3).unwrap();
+        config.duration = Some(0.1);
+        let simulated = models::dataset::generate(&config).unwrap().to_loaded();
+        assert!(simulated.meta.is_some());
+        let g = Fingerprint::of_run("mpf-ekf2", 1, 0, &serde_json::json!({}), &simulated);
+        assert!(g.inputs.get("field_validation").is_none(), "{}", g.inputs);
+        assert_eq!(
+            g.inputs.as_object().unwrap().len(),
+            6,
+            "numerics, algorithm, seed, run, filter, data"
+        );
     }
 }
