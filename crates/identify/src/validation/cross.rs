@@ -165,7 +165,21 @@ pub fn cross_validate(
         .as_ref()
         .and_then(|f| f.discrepancy.as_ref())
     {
-        Some(dd) => super::DiscrepancyUse::Given(dd),
+        Some(dd) => {
+            // Said where the user reads it, not only in the result's method: the prediction is
+            // then the building's alone.
+            let names: Vec<String> = data.sensors.iter().map(|s| format!("a{s}")).collect();
+            if !dd.modes.is_empty() && dd.channels != names {
+                note(&format!(
+                    "the record's discrepancy term was fitted to channels {} and {} has {}: \
+                     the building alone predicts it",
+                    dd.channels.join(", "),
+                    data_dir.display(),
+                    names.join(", ")
+                ));
+            }
+            super::DiscrepancyUse::Given(dd)
+        }
         None => super::DiscrepancyUse::Without,
     };
     let free = super::free_run(&d, &data, &record.theta_val, q, draws, error, disc)
