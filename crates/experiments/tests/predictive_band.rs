@@ -53,6 +53,25 @@ fn the_band_learned_on_one_record_covers_95_percent_of_another() {
         .expect("the held-out choice is in the plan") as usize;
     assert_eq!(me.source, ErrorSource::HeldOut { samples: held_out });
     assert_eq!(me.channels, ["a1", "a2", "a3"]);
+    // The band draws θ with the posterior's correlations, which the record keeps: a symmetric
+    // matrix of unit diagonal, and the storeys' stiffnesses correlated (the data fix the modes'
+    // frequencies, combinations of them, better than each alone).
+    let n = r.param_names.len();
+    let rho = &r.theta_correlation;
+    assert_eq!(rho.len(), n);
+    for (a, row) in rho.iter().enumerate() {
+        assert_eq!(row.len(), n);
+        assert_eq!(row[a], 1.0);
+        for (b, v) in row.iter().enumerate() {
+            assert_eq!(*v, rho[b][a]);
+        }
+    }
+    let k = |name: &str| r.param_names.iter().position(|p| p == name).unwrap();
+    assert!(
+        rho[k("k1")][k("k2")].abs() > 0.1 || rho[k("k2")][k("k3")].abs() > 0.1,
+        "{rho:?}"
+    );
+    assert!(f.band.as_ref().expect("a band").correlated);
 
     let out = root.join("v.json");
     run(
@@ -61,6 +80,7 @@ fn the_band_learned_on_one_record_covers_95_percent_of_another() {
     );
     let v: CrossValidation = serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
     assert_eq!(v.free_run.model_error.as_ref(), Some(me));
+    assert!(v.free_run.band.as_ref().expect("a band").correlated);
     // The errors here are the white measurement noise: the coverage's Monte-Carlo error is that
     // of the 95 % quantile learned from `held_out` samples, √(0.95·0.05/m), and of the coverage
     // counted over the record's samples, √(0.95·0.05/n) (independent samples): 4 s.d. of both.

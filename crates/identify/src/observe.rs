@@ -78,6 +78,8 @@ pub(crate) struct Recorder<'a> {
     pub distinct: Vec<(String, usize)>,
     /// Central credible intervals of θ at the end of a completed run ([`ParamIntervals`]).
     pub credible: Vec<ParamIntervals>,
+    /// The final posterior's correlation matrix of θ (row-major; empty before the end).
+    pub correlation: Vec<f64>,
     /// Keep a copy of the final weighted particles (for pooling several filters).
     pub keep_final: bool,
     pub final_particles: Option<FinalParticles>,
@@ -126,6 +128,7 @@ impl<'a> Recorder<'a> {
             progress: None,
             distinct: Vec::new(),
             credible: Vec::new(),
+            correlation: Vec::new(),
             keep_final: false,
             final_particles: None,
             predictor: None,
@@ -165,6 +168,7 @@ impl Observer for Recorder<'_> {
     fn on_finish(&mut self, last: &WeightedParticles<'_>) {
         self.distinct = last.distinct_sampled_params();
         self.credible = final_intervals(last);
+        self.correlation = last.param_correlation();
         if self.keep_final {
             self.final_particles = Some(FinalParticles {
                 w: last.w.to_vec(),

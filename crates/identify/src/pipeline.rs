@@ -145,6 +145,7 @@ fn drive(
     Driven {
         distinct: std::mem::take(&mut recorder.distinct),
         credible: std::mem::take(&mut recorder.credible),
+        correlation: std::mem::take(&mut recorder.correlation),
         param_names: layout.param_names.clone(),
         theta_val: recorder.theta_val(),
         theta_sd_final: recorder.last.param_sd.clone(),
@@ -429,6 +430,11 @@ fn run_record(
     let failures = failure_counts(&d);
     let config = recorded_config(plan, spec, data);
     let fingerprint = Fingerprint::of_run(algorithm.name(), input.seed, input.run, s, data);
+    let theta_correlation = d
+        .correlation
+        .chunks(d.param_names.len().max(1))
+        .map(<[f64]>::to_vec)
+        .collect();
     RunRecord {
         experiment: input.experiment.to_string(),
         algorithm: algorithm.name().to_string(),
@@ -469,6 +475,7 @@ fn run_record(
             particle_blocks: false,
         },
         warnings: Vec::new(),
+        theta_correlation,
         credible: d.credible,
         segment_spread: None,
         innovation_checks: d

@@ -59,6 +59,8 @@ pub(crate) struct Driven {
     pub(crate) summary: RunSummary,
     pub(crate) distinct: Vec<(String, usize)>,
     pub(crate) credible: Vec<crate::observe::ParamIntervals>,
+    /// The final posterior's correlation matrix of θ (row-major; empty when no step completed).
+    pub(crate) correlation: Vec<f64>,
     pub(crate) param_names: Vec<String>,
     pub(crate) theta_val: Vec<f64>,
     pub(crate) theta_sd_final: Vec<f64>,
@@ -143,6 +145,7 @@ pub(crate) fn combine(layout: &Layout, members: Vec<Driven>, channels: usize) ->
             let mut failed = members.swap_remove(i);
             failed.wall_s = wall_s;
             failed.credible.clear();
+            failed.correlation.clear();
             return failed;
         }
     }
@@ -173,6 +176,7 @@ pub(crate) fn combine(layout: &Layout, members: Vec<Driven>, channels: usize) ->
         .map(|j| members.iter().map(|d| d.theta_val[j]).sum::<f64>() / m as f64)
         .collect();
     let mut credible = final_intervals(&pooled);
+    let correlation = pooled.param_correlation();
     for (j, c) in credible.iter_mut().enumerate() {
         let vals: Vec<f64> = members.iter().map(|d| d.theta_val[j]).collect();
         let (_, sd, _) = mean_sd(&vals);
@@ -193,6 +197,7 @@ pub(crate) fn combine(layout: &Layout, members: Vec<Driven>, channels: usize) ->
         summary,
         distinct,
         credible,
+        correlation,
         param_names: first.param_names,
         theta_val,
         theta_sd_final,
@@ -398,6 +403,7 @@ mod tests {
             },
             distinct: vec![],
             credible: vec![],
+            correlation: vec![],
             param_names: vec!["k1".into()],
             theta_val: vec![if failed { f64::NAN } else { theta }],
             theta_sd_final: vec![0.0],

@@ -207,6 +207,12 @@ pub struct RunRecord {
     /// written before intervals were recorded.
     #[serde(default)]
     pub credible: Vec<trace::ParamIntervals>,
+    /// The last step's posterior correlation matrix of θ, one row per parameter in
+    /// `param_names`' order (the weighted particles' for sampled entries, the Gaussian
+    /// mixture's for marginalised ones); the free-run band draws θ with it. Empty for a failed
+    /// run and in records written before it was recorded (their draws are independent).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub theta_correlation: Vec<Vec<f64>>,
     /// Field records: the spread of θ between the record's parts that widened `credible`
     /// (model error, `crate::spread`), with the filter's own intervals.
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -333,6 +339,18 @@ impl RunRecord {
         sized("theta_val", self.theta_val.len())?;
         if !self.theta_sd_final.is_empty() {
             sized("theta_sd_final", self.theta_sd_final.len())?;
+        }
+        if !self.theta_correlation.is_empty() {
+            sized("theta_correlation", self.theta_correlation.len())?;
+            for (j, row) in self.theta_correlation.iter().enumerate() {
+                sized(&format!("theta_correlation row {}", j + 1), row.len())?;
+                if row.iter().any(|r| !(-1.0..=1.0).contains(r)) {
+                    return Err(format!(
+                        "theta_correlation row {} holds a value outside [-1, 1]",
+                        j + 1
+                    ));
+                }
+            }
         }
         if let Some(t) = &self.theta_true {
             sized("theta_true", t.len())?;

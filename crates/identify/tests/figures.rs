@@ -125,6 +125,7 @@ fn record(algorithm: &str, run: u64, bias: f64) -> RunRecord {
         },
         warnings: Vec::new(),
         credible: Vec::new(),
+        theta_correlation: Vec::new(),
         segment_spread: None,
         innovation_checks: Vec::new(),
         residuals: None,

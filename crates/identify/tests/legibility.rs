@@ -519,6 +519,7 @@ fn synthetic_run() -> RunRecord {
         },
         warnings: Vec::new(),
         credible: Vec::new(),
+        theta_correlation: Vec::new(),
         segment_spread: None,
         innovation_checks: Vec::new(),
         residuals: None,

@@ -209,6 +209,16 @@ impl WeightedParticles<'_> {
         Ok(out)
     }
 
+    /// The posterior correlation matrix of the parameters θ (the layout's order, row-major
+    /// `n × n`): the covariance of the sampled entries over the weighted particles, of the
+    /// marginalised ones the Gaussian mixture's `Σ w (C + μμᵀ) − m mᵀ`, of a sampled and a
+    /// marginalised entry `Σ w x μ − m_x m_μ`, each scaled by the two s.d.s. A parameter of zero
+    /// variance is uncorrelated with every other (its row and column are the identity's). Meant
+    /// for the end of a run.
+    pub fn param_correlation(&self) -> Vec<f64> {
+        slot_correlation(&self.layout.params, self.w, self.particles)
+    }
+
     /// Distinct-value counts of every parameter held in the sampled block.
     pub fn distinct_sampled_params(&self) -> Vec<(String, usize)> {
         self.layout
@@ -292,6 +302,56 @@ pub fn slot_moments(slot: Slot, w: &[f64], p: &Particles) -> (f64, f64) {
     }
     // Round-off can make a zero variance slightly negative.
     (m1, (m2 - m1 * m1).max(0.0).sqrt())
+}
+
+/// The correlation matrix of `slots` over the weighted particles (row-major; see
+/// [`WeightedParticles::param_correlation`]).
+pub fn slot_correlation(slots: &[Slot], w: &[f64], p: &Particles) -> Vec<f64> {
+    let n = slots.len();
+    let nm = p.shape().marginal;
+    let value = |i: usize, slot: Slot| match slot {
+        Slot::Sampled(j) => p.sampled(i)[j],
+        Slot::Marginal(j) => p.mean(i)[j],
+    };
+    let mean: Vec<f64> = slots
+        .iter()
+        .map(|&slot| {
+            w.iter()
+                .enumerate()
+                .map(|(i, wi)| wi * value(i, slot))
+                .sum()
+        })
+        .collect();
+    let mut cov = vec![0.0; n * n];
+    for a in 0..n {
+        for b in a..n {
+            let mut s = 0.0;
+            for (i, wi) in w.iter().enumerate() {
+                let within = match (slots[a], slots[b]) {
+                    (Slot::Marginal(ja), Slot::Marginal(jb)) => p.cov(i)[ja + jb * nm],
+                    _ => 0.0,
+                };
+                s +=
+                    wi * ((value(i, slots[a]) - mean[a]) * (value(i, slots[b]) - mean[b]) + within);
+            }
+            cov[a * n + b] = s;
+            cov[b * n + a] = s;
+        }
+    }
+    let sd: Vec<f64> = (0..n).map(|a| cov[a * n + a].max(0.0).sqrt()).collect();
+    let mut r = vec![0.0; n * n];
+    for a in 0..n {
+        for b in 0..n {
+            r[a * n + b] = if a == b {
+                1.0
+            } else if sd[a] > 0.0 && sd[b] > 0.0 && cov[a * n + b].is_finite() {
+                (cov[a * n + b] / (sd[a] * sd[b])).clamp(-1.0, 1.0)
+            } else {
+                0.0
+            };
+        }
+    }
+    r
 }
 
 /// Fills `out` from the layout with [`slot_moments`].
@@ -435,5 +495,84 @@ pub fn run(
         ess_mean: (done > 0).then(|| ess_sum / done as f64),
         failure,
         health,
+    }
+}
+
+#[cfg(test)]
+mod correlation_tests {
+    use super::*;
+    use crate::smc::store::{Particles, Shape};
+
+    /// Two particles, one sampled entry and a two-dimensional marginal Gaussian each: the
+    /// correlation is the mixture's, written out by hand.
+    #[test]
+    fn the_correlation_is_the_weighted_mixtures() {
+        let mut p = Particles::new(
+            2,
+            Shape {
+                sampled: 1,
+                marginal: 2,
+            },
+        );
+        let blocks = [
+            (1.0, [0.0, 1.0], [1.0, 0.5, 0.5, 2.0]),
+            (3.0, [2.0, -1.0], [0.5, -0.2, -0.2, 1.0]),
+        ];
+        for (i, (s, m, c)) in blocks.iter().enumerate() {
+            let q = p.particle_mut(i);
+            q.sampled[0] = *s;
+            q.mean.copy_from_slice(m);
+            q.cov.copy_from_slice(c);
+        }
+        let w = [0.25, 0.75];
+        let slots = [Slot::Sampled(0), Slot::Marginal(0), Slot::Marginal(1)];
+        let r = slot_correlation(&slots, &w, &p);
+        // Means: s 2.5, a 1.5, b −0.5.
+        let (ms, ma, mb): (f64, f64, f64) = (2.5, 1.5, -0.5);
+        let var_s = 0.25 * (1.0 - ms).powi(2) + 0.75 * (3.0 - ms).powi(2);
+        let var_a = 0.25 * (1.0 + (0.0 - ma).powi(2)) + 0.75 * (0.5 + (2.0 - ma).powi(2));
+        let var_b = 0.25 * (2.0 + (1.0 - mb).powi(2)) + 0.75 * (1.0 + (-1.0 - mb).powi(2));
+        let cov_sa = 0.25 * (1.0 - ms) * (0.0 - ma) + 0.75 * (3.0 - ms) * (2.0 - ma);
+        let cov_sb = 0.25 * (1.0 - ms) * (1.0 - mb) + 0.75 * (3.0 - ms) * (-1.0 - mb);
+        let cov_ab =
+            0.25 * (0.5 + (0.0 - ma) * (1.0 - mb)) + 0.75 * (-0.2 + (2.0 - ma) * (-1.0 - mb));
+        let (r_sa, r_sb, r_ab) = (
+            cov_sa / (var_s * var_a).sqrt(),
+            cov_sb / (var_s * var_b).sqrt(),
+            cov_ab / (var_a * var_b).sqrt(),
+        );
+        let want = [1.0, r_sa, r_sb, r_sa, 1.0, r_ab, r_sb, r_ab, 1.0];
+        for (k, (got, want)) in r.iter().zip(want).enumerate() {
+            assert!((got - want).abs() < 1e-12, "entry {k}: {got} vs {want}");
+        }
+        // A parameter of no variance is uncorrelated with the others.
+        let one = Particles::new(
+            1,
+            Shape {
+                sampled: 1,
+                marginal: 0,
+            },
+        );
+        assert_eq!(
+            slot_correlation(&[Slot::Sampled(0)], &[1.0], &one),
+            vec![1.0]
+        );
+        let r0 = slot_correlation(&[Slot::Sampled(0), Slot::Marginal(0)], &w, &{
+            let mut q = Particles::new(
+                2,
+                Shape {
+                    sampled: 1,
+                    marginal: 1,
+                },
+            );
+            for i in 0..2 {
+                let b = q.particle_mut(i);
+                b.sampled[0] = 7.0;
+                b.mean[0] = i as f64;
+                b.cov[0] = 1.0;
+            }
+            q
+        });
+        assert_eq!(r0, vec![1.0, 0.0, 0.0, 1.0]);
     }
 }

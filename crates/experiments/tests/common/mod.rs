@@ -167,6 +167,7 @@ pub fn record(algorithm: &str, run: u64, ratios: [f64; 9], nrmse: f64) -> RunRec
         },
         warnings: Vec::new(),
         credible: Vec::new(),
+        theta_correlation: Vec::new(),
         segment_spread: None,
         innovation_checks: Vec::new(),
         residuals: None,

@@ -83,6 +83,10 @@ pub struct BandInfo {
     pub valid: usize,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub invalid_reason: Option<String>,
+    /// Whether θ was drawn with the posterior's correlations (`theta_correlation`), else
+    /// independently (records without correlations).
+    #[serde(default)]
+    pub correlated: bool,
 }
 
 /// The free run of an identified model on one record.

@@ -186,17 +186,23 @@ pub(crate) fn percentile_sorted(sorted: &[f64], p: f64) -> f64 {
 /// A record holds, per parameter, the central 50, 90 and 95 % credible intervals of the final
 /// posterior (for marginalised parameters a Gaussian mixture over the particles, for sampled
 /// ones the weighted particle sample): six quantiles, 2.5, 5, 25, 75, 95 and 97.5 %. A draw
-/// takes u ~ U(0.025, 0.975) and returns the quantile function interpolated linearly between
+/// takes u in (0.025, 0.975) and returns the quantile function interpolated linearly between
 /// these six points — a distribution with the record's own quantiles (skewness included, no
-/// Gaussian or log-normal shape assumed). Its two limits, stated wherever the band is shown:
-/// the 2.5 % tails on each side are left out (draws stay inside the 95 % interval), and the
-/// parameters are drawn **independently**, because the record keeps no correlations: where the
-/// posterior correlates parameters (e.g. neighbouring stiffnesses), the band is wider or
-/// narrower than the joint posterior's.
+/// Gaussian or log-normal shape assumed). The 2.5 % tails on each side are left out (draws stay
+/// inside the 95 % interval), as is stated wherever the band is shown.
+///
+/// The parameters are drawn together through a Gaussian copula of the record's posterior
+/// correlation matrix ([`QuantileDraw::with_correlation`]): z ~ N(0, R), u_j = 0.025 +
+/// 0.95 Φ(z_j). A posterior constrains combinations of parameters (a mode's frequency) far more
+/// than each alone (neighbouring stiffnesses); drawn independently, the draws leave that ridge
+/// and the band shows a spread the data exclude. A record without correlations (written before
+/// they were recorded) is drawn independently, u ~ U(0.025, 0.975), and says so.
 #[derive(Debug, Clone)]
 pub struct QuantileDraw {
     /// Per parameter, (probability, quantile) increasing in both.
     tables: Vec<Vec<(f64, f64)>>,
+    /// The lower Cholesky factor of the correlation matrix, when the draws are correlated.
+    chol: Option<nalgebra::DMatrix<f64>>,
 }
 
 impl QuantileDraw {
@@ -240,15 +246,55 @@ impl QuantileDraw {
                 Ok(t)
             })
             .collect::<Result<_, _>>()?;
-        Ok(Self { tables })
+        Ok(Self { tables, chol: None })
+    }
+
+    /// The same marginals drawn through the Gaussian copula of `correlation` (one row per
+    /// parameter, in the order of [`QuantileDraw::new`]'s `names`). An empty matrix, one of
+    /// another size or one that is not a correlation matrix (no Cholesky factor even with a
+    /// diagonal of 1 + 10⁻⁸, after round-off) leaves the draws independent:
+    /// [`QuantileDraw::correlated`] says which.
+    pub fn with_correlation(mut self, correlation: &[Vec<f64>]) -> Self {
+        let n = self.tables.len();
+        if n == 0 || correlation.len() != n || correlation.iter().any(|r| r.len() != n) {
+            return self;
+        }
+        let r = nalgebra::DMatrix::from_fn(n, n, |a, b| {
+            // Symmetrised: the record's rows are written from one triangle, but a hand-edited
+            // record need not be.
+            0.5 * (correlation[a][b] + correlation[b][a]) + if a == b { 1e-8 } else { 0.0 }
+        });
+        if r.iter().all(|v| v.is_finite()) {
+            self.chol = r.cholesky().map(|c| c.l());
+        }
+        self
+    }
+
+    /// Whether the draws follow the posterior's correlations (else they are independent).
+    pub fn correlated(&self) -> bool {
+        self.chol.is_some()
     }
 
     /// One θ.
     pub fn draw<R: Rng + ?Sized>(&self, rng: &mut R) -> Vec<f64> {
+        let u: Vec<f64> = match &self.chol {
+            None => (0..self.tables.len())
+                .map(|_| 0.025 + 0.95 * rng.random::<f64>())
+                .collect(),
+            Some(l) => {
+                let e = nalgebra::DVector::from_fn(self.tables.len(), |_, _| {
+                    rng.sample::<f64, _>(rand_distr::StandardNormal)
+                });
+                (l * e)
+                    .iter()
+                    .map(|&z| 0.025 + 0.95 * core_filters::credible::normal_cdf(z))
+                    .collect()
+            }
+        };
         self.tables
             .iter()
-            .map(|t| {
-                let u = 0.025 + 0.95 * rng.random::<f64>();
+            .zip(u)
+            .map(|(t, u)| {
                 let i = t
                     .windows(2)
                     .position(|w| u <= w[1].0)
@@ -302,5 +348,107 @@ mod tests {
         assert!(v[0] >= 7.5 && v[m - 1] <= 16.0);
         let missing = QuantileDraw::new(&["c1".into()], &[]).unwrap_err();
         assert!(missing.contains("c1"), "{missing}");
+    }
+
+    /// With a correlation matrix the draws keep each parameter's recorded quantiles and take the
+    /// matrix's correlation: the normal scores Φ⁻¹((u − 0.025)/0.95) of the draws' levels u
+    /// correlate as asked, within a few Monte-Carlo standard errors; a matrix that is not a
+    /// correlation matrix leaves the draws independent, and says so.
+    #[test]
+    fn correlated_draws_keep_the_quantiles_and_take_the_correlation() {
+        let ci = |level: f64, lo: f64, hi: f64| CredibleInterval { level, lo, hi };
+        let param = |name: &str, scale: f64| ParamIntervals {
+            parameter: name.into(),
+            shape: crate::observe::PosteriorShape::GaussianMixture,
+            intervals: vec![
+                ci(0.5, 9.0 * scale, 11.0 * scale),
+                ci(0.9, 8.0 * scale, 14.0 * scale),
+                ci(0.95, 7.5 * scale, 16.0 * scale),
+            ],
+            error: None,
+            mc_se: None,
+        };
+        let names: Vec<String> = vec!["k1".into(), "k2".into()];
+        let credible = [param("k1", 1.0), param("k2", 2.0)];
+        let rho = 0.9;
+        let q = QuantileDraw::new(&names, &credible)
+            .unwrap()
+            .with_correlation(&[vec![1.0, rho], vec![rho, 1.0]]);
+        assert!(q.correlated());
+        let mut rng = core_filters::rng::stream(1, 0, "test");
+        let m = 20_000;
+        let draws: Vec<Vec<f64>> = (0..m).map(|_| q.draw(&mut rng)).collect();
+        // Marginals: the recorded quantiles, as independent draws have them.
+        for (j, scale) in [(0, 1.0), (1, 2.0)] {
+            let mut v: Vec<f64> = draws.iter().map(|d| d[j]).collect();
+            v.sort_by(f64::total_cmp);
+            for (p, want) in [(0.05, 8.0), (0.25, 9.0), (0.75, 11.0), (0.95, 14.0)] {
+                let r = (p - 0.025) / 0.95;
+                let se = (r * (1.0 - r) / m as f64).sqrt();
+                let below = v.partition_point(|x| *x < want * scale) as f64 / m as f64;
+                assert!((below - r).abs() < 4.0 * se, "{j} at {p}: {below} vs {r}");
+            }
+        }
+        // The level of a draw, back through the piecewise-linear quantile function, then its
+        // normal score.
+        let table = [
+            (0.025, 7.5),
+            (0.05, 8.0),
+            (0.25, 9.0),
+            (0.75, 11.0),
+            (0.95, 14.0),
+            (0.975, 16.0),
+        ];
+        let score = |x: f64| {
+            let i = table.windows(2).position(|w| x <= w[1].1).unwrap_or(4);
+            let ((p0, q0), (p1, q1)) = (table[i], table[i + 1]);
+            let u = p0 + (p1 - p0) * (x - q0) / (q1 - q0);
+            inverse_normal_cdf((u - 0.025) / 0.95)
+        };
+        let (a, b): (Vec<f64>, Vec<f64>) = draws
+            .iter()
+            .map(|d| (score(d[0]), score(d[1] / 2.0)))
+            .unzip();
+        let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len() as f64;
+        let (ma, mb) = (mean(&a), mean(&b));
+        let cov: f64 = a
+            .iter()
+            .zip(&b)
+            .map(|(x, y)| (x - ma) * (y - mb))
+            .sum::<f64>()
+            / m as f64;
+        let sd = |v: &[f64], mv: f64| {
+            (v.iter().map(|x| (x - mv).powi(2)).sum::<f64>() / m as f64).sqrt()
+        };
+        let r = cov / (sd(&a, ma) * sd(&b, mb));
+        // s.e. of a sample correlation: (1 − ρ²)/√m.
+        let se = (1.0 - rho * rho) / (m as f64).sqrt();
+        assert!(
+            (r - rho).abs() < 4.0 * se,
+            "correlation {r} against {rho} (s.e. {se})"
+        );
+        // Not a correlation matrix: independent draws.
+        let q = QuantileDraw::new(&names, &credible)
+            .unwrap()
+            .with_correlation(&[vec![1.0, 2.0], vec![2.0, 1.0]]);
+        assert!(!q.correlated());
+        let q = QuantileDraw::new(&names, &credible)
+            .unwrap()
+            .with_correlation(&[]);
+        assert!(!q.correlated());
+    }
+
+    /// Φ⁻¹ by bisection on [`core_filters::credible::normal_cdf`] (tests only).
+    fn inverse_normal_cdf(p: f64) -> f64 {
+        let (mut lo, mut hi) = (-10.0, 10.0);
+        for _ in 0..100 {
+            let mid = 0.5 * (lo + hi);
+            if core_filters::credible::normal_cdf(mid) < p {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+        }
+        0.5 * (lo + hi)
     }
 }

@@ -326,11 +326,13 @@ fn parameter_band(
     let (lo, hi) = spread_of_draws(&ok, channels);
     ParameterBand {
         info: Some(BandInfo {
-            method: "θ drawn from the record's credible intervals (quantile function \
-                     interpolated through its 2.5/5/25/75/95/97.5 % points, so draws stay \
-                     inside the 95 % intervals), parameters drawn independently (the \
-                     record keeps no correlations); pointwise 2.5–97.5 % of the draws"
-                .into(),
+            method: format!(
+                "θ drawn from the record's credible intervals (quantile function \
+                 interpolated through its 2.5/5/25/75/95/97.5 % points, so draws stay inside \
+                 the 95 % intervals), {}; pointwise 2.5–97.5 % of the draws",
+                how_drawn(q.correlated())
+            ),
+            correlated: q.correlated(),
             purpose: BAND_PURPOSE.into(),
             draws,
             valid: ok.len(),
@@ -614,7 +616,7 @@ pub(crate) const MODAL_DRAWS: usize = 400;
 
 /// The central 95 % of each mode's natural frequency and damping ratio over `MODAL_DRAWS` θ
 /// drawn from `q` as the free-run band draws them (each parameter inside its 95 % interval,
-/// parameters independently: the record keeps no correlations) on the stream (seed, run,
+/// with the posterior's correlations where the record keeps them) on the stream (seed, run,
 /// `MODAL_PURPOSE`); one entry per mode of θ_val (`count`), `None` for all when fewer than
 /// half the draws give a building with as many under-damped modes (mode `r` of a draw is its
 /// `r`-th by frequency).
@@ -691,7 +693,7 @@ pub(crate) fn description_of(r: &RunRecord) -> Result<StructureDescription> {
 
 /// The band's θ distribution for a record, or why there is none.
 pub(crate) fn posterior_of(r: &RunRecord) -> Result<QuantileDraw, String> {
-    QuantileDraw::new(&r.param_names, &r.credible)
+    Ok(QuantileDraw::new(&r.param_names, &r.credible)?.with_correlation(&r.theta_correlation))
 }
 
 /// Checks that a record's θ_val can be simulated: a completed run with finite values and no
@@ -877,9 +879,10 @@ fn write_free_run(o: &mut String, f: &FreeRun) {
             let _ = writeln!(
                 o,
                 "band: {} of {} draws valid; θ drawn inside each parameter's 95 % interval, \
-                 parameters independently (the record keeps no correlations) — \
-                 docs/validation.md",
-                b.valid, b.draws
+                 {} — docs/validation.md",
+                b.valid,
+                b.draws,
+                how_drawn(b.correlated)
             );
         }
         (None, Some(e)) => {
@@ -969,6 +972,15 @@ fn measured_peak_cell(p: &ModePair, resolution_hz: f64) -> String {
     )
 }
 
+/// How the band's θ were drawn, for its method and the summary.
+fn how_drawn(correlated: bool) -> &'static str {
+    if correlated {
+        "parameters drawn jointly with the posterior's correlations (a Gaussian copula)"
+    } else {
+        "parameters drawn independently (the record keeps no correlations)"
+    }
+}
+
 /// The notes under the modal table: what its intervals and "not excited" mean, modes that are
 /// not physical or not resonant, measured peaks without a mode, and what was not computed.
 fn write_modal_notes(o: &mut String, m: &ModalComparison) {
@@ -976,8 +988,8 @@ fn write_modal_notes(o: &mut String, m: &ModalComparison) {
         let _ = writeln!(
             o,
             "95 %: the central 95 % of each mode over {MODAL_DRAWS} θ drawn as the band's \
-             (each parameter inside its 95 % interval, independently: the record keeps no \
-             correlations) — docs/validation.md"
+             (each parameter inside its 95 % interval, jointly through the posterior's \
+             correlations where the record keeps them) — docs/validation.md"
         );
     }
     if m.pairs
