@@ -16,7 +16,7 @@
 //! (±0.052 at 90 %) still rejects the over-confidence of a posterior only 25 % too narrow
 //! (coverage 0.82 instead of 0.9), as the control at the end shows.
 
-mod smc_common;
+use crate::smc_common;
 
 use core_filters::credible::{normal_cdf, CredibleInterval, STANDARD_LEVELS};
 use core_filters::kalman::kalman_filter;

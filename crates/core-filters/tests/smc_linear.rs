@@ -6,7 +6,7 @@
 //! `exp(ℓ̂ − ℓ)` has expectation 1; we require it within 4.5 Monte-Carlo standard errors
 //! (estimated from the same `R` ratios) of 1.
 
-mod smc_common;
+use crate::smc_common;
 
 use core_filters::kalman::kalman_filter;
 use core_filters::resampling::ResamplePolicy;

@@ -2,7 +2,7 @@
 //! the Kalman filter, a coupled linear model has an unbiased likelihood, and the batch layer gives
 //! the bits of one particle at a time.
 
-mod smc_common;
+use crate::smc_common;
 
 use core_filters::kalman::{kalman_filter, LinearGaussian};
 use core_filters::linalg::{Sparse, SymEntries};

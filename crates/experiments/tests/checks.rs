@@ -1,7 +1,7 @@
 //! Plausibility warnings and the exit decision of `sysid filter` (`identification::finish` and
 //! `Finished::verdict`, what the binary calls after a run) on constructed records.
 
-mod common;
+use crate::common;
 
 use common::record;
 use core_filters::credible::CredibleInterval;

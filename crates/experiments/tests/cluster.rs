@@ -4,7 +4,7 @@
 //! finish before the report and is named; a dry run writes nothing. The same path against a
 //! real Slurm, with a cancelled and resubmitted task: `tests/cluster/run.sh`.
 
-mod common;
+use crate::common;
 
 use std::path::{Path, PathBuf};
 use std::process::Command;

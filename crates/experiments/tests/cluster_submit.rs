@@ -6,7 +6,7 @@
 //! finish job wait for the new array and for the earlier one that still has a queued shard.
 #![cfg(unix)]
 
-mod common;
+use crate::common;
 
 use std::os::unix::fs::PermissionsExt;
 use std::path::{Path, PathBuf};

@@ -2,7 +2,7 @@
 //! answers are known, read back from JSON like the records of a sweep, through the one
 //! record → posterior extraction that `summary.json` and `REPORT.md` use.
 
-mod common;
+use crate::common;
 
 use common::{record, NAMES, THETA_TRUE};
 use core_filters::credible::{CredibleInterval, STANDARD_LEVELS};

@@ -4,7 +4,7 @@
 //! an unmeasured fourth mode it keeps at least one, which improves the held-out fit. The
 //! structures are our own, not the foreign corpus's.
 
-mod common;
+use crate::common;
 
 use std::path::Path;
 use std::process::Command;

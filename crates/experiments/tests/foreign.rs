@@ -4,7 +4,7 @@
 //! without its held-out record and SRIM. Every answer must be physical (exit 0, every k, c, α
 //! > 0) and predict the floors better than saying they move with the ground.
 
-mod common;
+use crate::common;
 
 use std::path::Path;
 use std::process::Command;

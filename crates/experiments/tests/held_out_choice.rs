@@ -3,7 +3,7 @@
 //! the plan rerun to the same record; a candidate plan equal to the plan settled with its
 //! settings; the split holding the record's second half by energy.
 
-mod common;
+use crate::common;
 
 use std::path::Path;
 use std::process::Command;

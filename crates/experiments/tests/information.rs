@@ -3,7 +3,7 @@
 //! exact likelihood itself), the same request gives the same numbers, and a hysteretic record or
 //! another data set's run record is refused by name.
 
-mod common;
+use crate::common;
 
 use std::path::{Path, PathBuf};
 

@@ -3,7 +3,7 @@
 //! the parts of the shake-table frame's record disagree on every stiffness, and its intervals
 //! widen by their spread.
 
-mod common;
+use crate::common;
 
 use std::path::Path;
 

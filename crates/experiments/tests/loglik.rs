@@ -3,7 +3,7 @@
 //! own values not, the same request gives the same numbers, and bad requests are refused by
 //! name.
 
-mod common;
+use crate::common;
 
 use std::path::{Path, PathBuf};
 

@@ -2,7 +2,7 @@
 //! (`--plan-only`), written as TOML (`--print-plan`) and run again from that file (`--plan`) to
 //! the same record; refused on other data.
 
-mod common;
+use crate::common;
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};

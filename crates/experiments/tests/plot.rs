@@ -1,7 +1,7 @@
 //! `sysid plot` on a record with truth (trace, loops, residuals: every panel) and on a field
 //! record without truth (what is there is drawn, the rest skipped with a note).
 
-mod common;
+use crate::common;
 
 use std::path::{Path, PathBuf};
 use std::process::Command;

@@ -3,7 +3,7 @@
 //! independent record of the same building, within the Monte-Carlo error of that coverage; the
 //! record says where its model error was learned.
 
-mod common;
+use crate::common;
 
 use std::path::Path;
 use std::process::Command;

@@ -7,7 +7,7 @@
 //! non-integer number in a written record is replaced by `"NaN"` in turn, and the record must
 //! still parse.
 
-mod common;
+use crate::common;
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};

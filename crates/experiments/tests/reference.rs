@@ -2,7 +2,7 @@
 //! MPF-EKF2 is an exact Rao–Blackwellised particle filter, so its likelihood estimate and the
 //! bootstrap PF's (the textbook unbiased estimator) estimate the same p(y | θ).
 
-mod common;
+use crate::common;
 
 use core_filters::rng::stream;
 use experiments::reference::{

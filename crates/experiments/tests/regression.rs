@@ -1,7 +1,7 @@
 //! The regression file parses, covers every algorithm and parameter of its sweep, and its bounds
 //! flag a statistic that moved past them.
 
-mod common;
+use crate::common;
 
 use std::collections::BTreeMap;
 use std::path::PathBuf;

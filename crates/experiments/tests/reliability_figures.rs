@@ -6,7 +6,7 @@
 //! or a link is refused by name instead of waited on or written through.
 #![cfg(unix)]
 
-mod common;
+use crate::common;
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};

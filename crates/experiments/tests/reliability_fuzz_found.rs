@@ -9,7 +9,7 @@
 //! `reliability_figures.rs`; values quoted by the readers in `models`' fuzz corpus.)
 #![cfg(unix)]
 
-mod common;
+use crate::common;
 
 use std::os::unix::process::ExitStatusExt;
 use std::path::Path;

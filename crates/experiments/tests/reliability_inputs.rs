@@ -4,7 +4,7 @@
 //! being read without bound or waiting forever for a writer.
 #![cfg(unix)]
 
-mod common;
+use crate::common;
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};

@@ -5,7 +5,7 @@
 //! belongs.
 #![cfg(unix)]
 
-mod common;
+use crate::common;
 
 use std::os::unix::process::ExitStatusExt;
 use std::path::{Path, PathBuf};

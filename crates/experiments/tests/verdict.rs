@@ -3,7 +3,7 @@
 //! smaller than their standard error (not resolved). The statements are the ones
 //! `experiments/fig7.toml` declares.
 
-mod common;
+use crate::common;
 
 use common::{record, wiggle};
 use experiments::study::Study;

@@ -2,7 +2,7 @@
 //! on records of the model's own class it flags channels at about its nominal 5 %, and on the
 //! shake-table frame, which the shear model does not fully explain, it flags every channel.
 
-mod common;
+use crate::common;
 
 use std::ffi::OsStr;
 use std::path::Path;

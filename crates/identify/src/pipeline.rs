@@ -430,11 +430,16 @@ fn run_record(
     let failures = failure_counts(&d);
     let config = recorded_config(plan, spec, data);
     let fingerprint = Fingerprint::of_run(algorithm.name(), input.seed, input.run, s, data);
-    let theta_correlation = d
-        .correlation
-        .chunks(d.param_names.len().max(1))
-        .map(<[f64]>::to_vec)
-        .collect();
+    // Kept where the free run's band draws with it, field data; the studies' records of
+    // generated data sets (with `dataset.json`) stay what they were, number for number.
+    let theta_correlation = match data.meta {
+        None => d
+            .correlation
+            .chunks(d.param_names.len().max(1))
+            .map(<[f64]>::to_vec)
+            .collect(),
+        Some(_) => Vec::new(),
+    };
     RunRecord {
         experiment: input.experiment.to_string(),
         algorithm: algorithm.name().to_string(),

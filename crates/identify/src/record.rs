@@ -209,8 +209,9 @@ pub struct RunRecord {
     pub credible: Vec<trace::ParamIntervals>,
     /// The last step's posterior correlation matrix of θ, one row per parameter in
     /// `param_names`' order (the weighted particles' for sampled entries, the Gaussian
-    /// mixture's for marginalised ones); the free-run band draws θ with it. Empty for a failed
-    /// run and in records written before it was recorded (their draws are independent).
+    /// mixture's for marginalised ones); the free-run band draws θ with it. Kept in records of
+    /// field data (no `dataset.json`); empty for a failed run, for generated data sets and in
+    /// records written before it was recorded (their draws are independent).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub theta_correlation: Vec<Vec<f64>>,
     /// Field records: the spread of θ between the record's parts that widened `credible`

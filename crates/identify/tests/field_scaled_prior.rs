@@ -302,7 +302,7 @@ fn env<T: std::str::FromStr>(name: &str, default: T) -> T {
 /// settings instead), `STIFF_K_MEDIAN_AT=f` (the prior's k medians at f × the true k),
 /// `STIFF_TRUTH=zoh` (ü_g held over each sample in the simulation), `STIFF_R_NOISE`
 /// (`r_noise_fraction`). Run with
-/// `cargo test --release -p experiments --test field_scaled_prior -- --ignored --nocapture`.
+/// `cargo test --release -p identify --test suite field_scaled_prior -- --ignored --nocapture`.
 #[test]
 #[ignore = "a measurement (minutes), not a check"]
 fn stiff_sweep() {

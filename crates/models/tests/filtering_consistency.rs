@@ -3,7 +3,7 @@
 //! earlier compile-time partitions of the paper's chain was checked to 1e-13 before those were
 //! retired; the full reproduction gave the same θ_val to 6.2e-11.)
 
-mod filtering_support;
+use crate::filtering_support;
 
 use core_filters::linalg::Sparse;
 use core_filters::model::Slot;

@@ -11,7 +11,7 @@
 //! tolerance 1e−7 (relative to max(1, |value|)) is two orders above that and far below any real
 //! error (a wrong entry is off by O(dt) = 5e−3 or more).
 
-mod filtering_support;
+use crate::filtering_support;
 
 use core_filters::linalg::Sparse;
 use core_filters::model::Slot;

@@ -7,7 +7,7 @@
 //!   `1 − c·dt/m + k·dt²/m`), to round-off.
 //! - Malformed specs get errors naming the field.
 
-mod filtering_support;
+use crate::filtering_support;
 
 use core_filters::rng::stream;
 use core_filters::smc::model::{Partition, StateSpace};

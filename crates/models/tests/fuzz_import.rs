@@ -9,7 +9,7 @@
 //! Fixed seeds, 5,000 cases in all. Inputs that once crashed a reader are kept in
 //! `tests/fuzz_corpus/<target>/` and replayed by `import_corpus_inputs_are_handled`.
 
-mod fuzz_common;
+use crate::fuzz_common;
 
 use fuzz_common::{apply, mutations, run, scratch};
 use models::import::channel_map::ChannelMap;

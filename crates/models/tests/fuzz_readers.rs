@@ -8,7 +8,7 @@
 //! profile). Inputs that once crashed a reader are kept in `tests/fuzz_corpus/<target>/` and
 //! replayed by `corpus_inputs_are_handled`.
 
-mod fuzz_common;
+use crate::fuzz_common;
 
 use fuzz_common::{apply, mutations, run, scratch};
 use models::dataset::{generate, ground_motion, load_dir, DatasetConfig, ExcitationSource};

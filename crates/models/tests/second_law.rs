@@ -14,7 +14,7 @@
 //! their tolerances (see `filtering_derivatives.rs`: central differences of maps that are affine
 //! or bilinear in the differentiated variables, round-off ≈ 1e−9, tolerance 1e−7).
 
-mod filtering_support;
+use crate::filtering_support;
 
 use core_filters::linalg::Sparse;
 use core_filters::rng::{stream, StreamRng};
