@@ -816,6 +816,20 @@ impl PyRecord {
             .reshape([self.r.credible.len(), levels, 3])
             .map(Bound::into_any)
     }
+    /// The last step's posterior correlation matrix of θ, array (parameters, parameters), with
+    /// which the free-run band draws θ; None where the record keeps none (generated data sets,
+    /// failed runs, older records).
+    #[getter]
+    fn theta_correlation<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyAny>>> {
+        let rows = &self.r.theta_correlation;
+        if rows.is_empty() {
+            return Ok(None);
+        }
+        let flat: Vec<f64> = rows.iter().flatten().copied().collect();
+        PyArray1::from_vec(py, flat)
+            .reshape([rows.len(), rows.len()])
+            .map(|a| Some(a.into_any()))
+    }
     /// Monte-Carlo s.e. of θ_val from the spread of pooled filters (NaN for one filter).
     #[getter]
     fn mc_se<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {

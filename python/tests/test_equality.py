@@ -38,6 +38,8 @@ def test_simulated_data_same_bits_as_cli(sysid, tmp_path, short_data, short_dir,
         assert bits([got.loglik]) == bits([want["loglik"]])
         assert bits(got.theta_sd) == bits(want["theta_sd_final"])
         assert bits(got.trace_mean) == bits(read.trace_mean)
+        # Generated data sets keep no correlation matrix (only field records' bands use one).
+        assert got.theta_correlation is None and "theta_correlation" not in want
         assert got.steps_completed == want["steps_completed"] == len(short_data) - 1
         # Everything but the timings is the CLI's record.
         mine, theirs = got.to_dict(), read.to_dict()
@@ -66,6 +68,13 @@ def test_field_arrays_same_bits_as_cli(sysid, tmp_path, short_data, algorithm):
     )
     assert bits(got.theta_val) == bits(want["theta_val"])
     assert bits([got.loglik]) == bits([want["loglik"]])
+    # Field data: the posterior's correlation matrix, the CLI's to the bit (a failed run has
+    # none).
+    if want.get("failure") is None:
+        p = len(got.param_names)
+        assert got.theta_correlation.shape == (p, p)
+        assert bits(got.theta_correlation) == bits(want["theta_correlation"])
+        assert np.all(np.diag(got.theta_correlation) == 1.0)
 
 
 def test_config_file_and_dict_and_options_as_cli(sysid, tmp_path, short_dir):
