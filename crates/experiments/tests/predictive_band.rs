@@ -81,6 +81,36 @@ fn the_band_learned_on_one_record_covers_95_percent_of_another() {
     let v: CrossValidation = serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
     assert_eq!(v.free_run.model_error.as_ref(), Some(me));
     assert!(v.free_run.band.as_ref().expect("a band").correlated);
+    // A matrix that is no correlation matrix (every pair −1 among more than two parameters has
+    // no Cholesky factor): the record's intervals drawn independently, and the band says so.
+    let mut bad: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&record).unwrap()).unwrap();
+    bad["theta_correlation"] = serde_json::json!((0..n)
+        .map(|a| (0..n)
+            .map(|b| if a == b { 1.0 } else { -1.0 })
+            .collect::<Vec<f64>>())
+        .collect::<Vec<_>>());
+    let bad_record = root.join("bad.json");
+    std::fs::write(&bad_record, bad.to_string()).unwrap();
+    let out_bad = root.join("v-bad.json");
+    run(
+        &["validate"],
+        &[
+            ("--record", &bad_record),
+            ("--data", &b),
+            ("--out", &out_bad),
+        ],
+    );
+    let vb: CrossValidation =
+        serde_json::from_str(&std::fs::read_to_string(&out_bad).unwrap()).unwrap();
+    let band = vb.free_run.band.as_ref().expect("a band");
+    assert!(!band.correlated);
+    assert!(
+        band.method.contains("the record's credible intervals"),
+        "{}",
+        band.method
+    );
+    assert!(band.method.contains("independently"), "{}", band.method);
     // The errors here are the white measurement noise: the coverage's Monte-Carlo error is that
     // of the 95 % quantile learned from `held_out` samples, √(0.95·0.05/m), and of the coverage
     // counted over the record's samples, √(0.95·0.05/n) (independent samples): 4 s.d. of both.

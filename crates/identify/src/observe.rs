@@ -168,7 +168,11 @@ impl Observer for Recorder<'_> {
     fn on_finish(&mut self, last: &WeightedParticles<'_>) {
         self.distinct = last.distinct_sampled_params();
         self.credible = final_intervals(last);
-        self.correlation = last.param_correlation();
+        // A pool's member is pooled before its answer is read: the pool's correlation is the
+        // pooled particles' (`pool::combine`), so a member's own would be thrown away.
+        if !self.keep_final {
+            self.correlation = last.param_correlation();
+        }
         if self.keep_final {
             self.final_particles = Some(FinalParticles {
                 w: last.w.to_vec(),

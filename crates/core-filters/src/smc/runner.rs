@@ -313,15 +313,7 @@ pub fn slot_correlation(slots: &[Slot], w: &[f64], p: &Particles) -> Vec<f64> {
         Slot::Sampled(j) => p.sampled(i)[j],
         Slot::Marginal(j) => p.mean(i)[j],
     };
-    let mean: Vec<f64> = slots
-        .iter()
-        .map(|&slot| {
-            w.iter()
-                .enumerate()
-                .map(|(i, wi)| wi * value(i, slot))
-                .sum()
-        })
-        .collect();
+    let mean: Vec<f64> = slots.iter().map(|&s| slot_moments(s, w, p).0).collect();
     let mut cov = vec![0.0; n * n];
     for a in 0..n {
         for b in a..n {

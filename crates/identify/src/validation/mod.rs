@@ -701,14 +701,19 @@ pub(crate) fn description_of(r: &RunRecord) -> Result<StructureDescription> {
 /// sums far above it, and a mode's drawn damping ratios excluded its own). A record without
 /// correlations (written before they were kept) draws its intervals independently, as then.
 pub(crate) fn posterior_of(r: &RunRecord) -> Result<QuantileDraw, String> {
-    if r.theta_correlation.is_empty() {
-        return QuantileDraw::new(&r.param_names, &r.credible);
+    if !r.theta_correlation.is_empty() {
+        let own = r
+            .segment_spread
+            .as_ref()
+            .map_or(&r.credible, |s| &s.filter_credible);
+        let q = QuantileDraw::new(&r.param_names, own)?.with_correlation(&r.theta_correlation);
+        if q.correlated() {
+            return Ok(q);
+        }
     }
-    let own = r
-        .segment_spread
-        .as_ref()
-        .map_or(&r.credible, |s| &s.filter_credible);
-    Ok(QuantileDraw::new(&r.param_names, own)?.with_correlation(&r.theta_correlation))
+    // No usable matrix (none recorded, or not a correlation matrix): the record's intervals,
+    // independently, as the band then says.
+    QuantileDraw::new(&r.param_names, &r.credible)
 }
 
 /// Checks that a record's θ_val can be simulated: a completed run with finite values and no
@@ -1004,7 +1009,7 @@ fn how_drawn(correlated: bool) -> &'static str {
     if correlated {
         "parameters drawn jointly with the posterior's correlations (a Gaussian copula)"
     } else {
-        "parameters drawn independently (the record keeps no correlations)"
+        "parameters drawn independently (the record keeps no usable correlation matrix)"
     }
 }
 
@@ -1015,7 +1020,8 @@ fn write_modal_notes(o: &mut String, m: &ModalComparison) {
         let _ = writeln!(
             o,
             "95 %: the central 95 % of each mode over {MODAL_DRAWS} θ drawn as the band's \
-             (from the filter's posterior with its correlations where the record keeps them) \
+             (from the filter's posterior with its correlations where the record keeps them: \
+             its statistical uncertainty, without the model's error) \
              — docs/validation.md"
         );
     }
