@@ -20,6 +20,8 @@
 //! particle run would cost one full run per candidate (24 with both damping forms open); its plan
 //! says so and keeps the default.
 
+pub mod masses;
+
 use models::dataset::LoadedDataset;
 use models::structure::Damping;
 use rayon::prelude::*;
@@ -163,11 +165,11 @@ fn head(data: &LoadedDataset, len: usize) -> LoadedDataset {
 }
 
 /// A candidate with its free run over the whole record (per channel), when it has one.
-type Scored = (Candidate, Option<Vec<Vec<f64>>>);
+pub(crate) type Scored = (Candidate, Option<Vec<Vec<f64>>>);
 
 /// Scores `plan` on the held-out part: identified on `ident` (the first samples of `data`), its
 /// θ_val run freely over all of `data`, fit over the samples from `ident.len()` on.
-fn score(plan: &RunPlan, ident: &LoadedDataset, data: &LoadedDataset) -> Result<Scored> {
+pub(crate) fn score(plan: &RunPlan, ident: &LoadedDataset, data: &LoadedDataset) -> Result<Scored> {
     let mut c = Candidate {
         damping: plan.building.damping,
         noise_fraction: plan.settings.noise_fraction,
@@ -311,16 +313,64 @@ pub fn choose(
         kept(&mut plan, Level::Warning, why);
         return Ok(plan);
     };
-    let discrepancy = sims[chosen]
+    // The discrepancy on the chosen candidate's free run; then the masses, where the data
+    // inform them, each with its own discrepancy term: the run takes the better on the
+    // held-out part.
+    let mut out = plans.swap_remove(chosen);
+    let mut error = candidates[chosen].held_out_error.clone();
+    let mut discrepancy = sims[chosen]
         .take()
-        .and_then(|sim| with_discrepancy(&mut candidates[chosen], &sim, data, ident.len()));
+        .and_then(|sim| with_discrepancy(&mut error, &sim, data, ident.len()));
+    candidates[chosen].held_out_error = error;
+    let mut masses = None;
+    match masses::not_informed(&out, data) {
+        Some(why) => {
+            if out.building.storeys > 1 {
+                kept(&mut out, Level::Info, why);
+            }
+        }
+        None => {
+            let (mut m, moved) =
+                masses::identify(&out, t, settings, (&ident, data), &candidates[chosen])?;
+            if let Some((plan_m, sim_m)) = moved {
+                let mut error_m = m.held_out_error.take();
+                let disc_m =
+                    sim_m.and_then(|sim| with_discrepancy(&mut error_m, &sim, data, ident.len()));
+                m.held_out_error = error_m;
+                let stated_fits =
+                    final_fits(discrepancy.as_ref(), &candidates[chosen].held_out_fit);
+                let fits = final_fits(disc_m.as_ref(), &m.held_out_fit);
+                m.stated_final_fit = stated_fits.to_vec();
+                m.final_fit = fits.to_vec();
+                m.kept = better_everywhere(fits, stated_fits);
+                if m.kept {
+                    out = plan_m;
+                    discrepancy = disc_m;
+                }
+            }
+            masses = Some(m);
+        }
+    }
     let choice = HeldOutChoice {
         identified_samples: ident.len(),
         held_out_samples: held_out,
         candidates,
         chosen,
     };
-    let mut out = with_choice(plans.swap_remove(chosen), choice, open);
+    let mut out = with_choice(out, choice, open);
+    if let Some(m) = masses {
+        out.decisions.push(Decision {
+            rule: "masses::identify".into(),
+            set: if m.kept {
+                format!("masses = {:?}", m.identified)
+            } else {
+                String::new()
+            },
+            level: Level::Note,
+            why: m.describe(),
+        });
+        out.evidence.masses = Some(m);
+    }
     if let Some(d) = discrepancy {
         out.decisions.push(Decision {
             rule: "discrepancy::choose".into(),
@@ -336,12 +386,12 @@ pub fn choose(
     Ok(out)
 }
 
-/// The discrepancy modes of the chosen candidate `c` (its free run `sim` over `data`, identified
-/// on the samples `..from`), chosen on the held-out part ([`discrepancy::choose`]); with modes,
-/// `c`'s model error is learned again on the held-out part with the discrepancy added, since the
+/// The discrepancy modes of the free run `sim` over `data` the run takes (identified on the
+/// samples `..from`), chosen on the held-out part ([`discrepancy::choose`]); with modes, its
+/// model `error` is learned again on the held-out part with the discrepancy added, since the
 /// band is drawn around the prediction that includes it.
 fn with_discrepancy(
-    c: &mut Candidate,
+    error: &mut Option<crate::record::validation::ModelError>,
     sim: &[Vec<f64>],
     data: &LoadedDataset,
     from: usize,
@@ -365,8 +415,8 @@ fn with_discrepancy(
             .zip(&add)
             .map(|(s, a)| s.iter().zip(a).map(|(x, y)| x + y).collect())
             .collect();
-        if let Some(window_s) = c.held_out_error.as_ref().map(|e| e.window_s) {
-            c.held_out_error = prediction::learn(
+        if let Some(window_s) = error.as_ref().map(|e| e.window_s) {
+            *error = prediction::learn(
                 &names,
                 &measured,
                 &with,
@@ -380,6 +430,29 @@ fn with_discrepancy(
         }
     }
     Some(choice)
+}
+
+/// The held-out fits (per channel) of a free run with its chosen discrepancy term, or (no term
+/// searched) its own `fits`.
+fn final_fits<'a>(d: Option<&'a discrepancy::DiscrepancyChoice>, fits: &'a [f64]) -> &'a [f64] {
+    match d {
+        Some(d) => &d.candidates[d.chosen].held_out_fit,
+        None => fits,
+    }
+}
+
+/// Whether `fits` beat `than` on every channel (a channel without a finite fit beats nothing).
+/// Masses that trade one floor's fit for another's are fitting something else: on the foreign
+/// corpus's hardening joint (`docs/foreign.md`) the identified masses 1 : 0.75 : 0.94 raised the
+/// held-out part's mean fit by 2.1 points, floor 1 by 6.5 and floor 3 down by 1.2, and predicted
+/// the case's other earthquake 15 points worse on floor 1.
+fn better_everywhere(fits: &[f64], than: &[f64]) -> bool {
+    !fits.is_empty()
+        && fits.len() == than.len()
+        && fits
+            .iter()
+            .zip(than)
+            .all(|(f, t)| f.is_finite() && (!t.is_finite() || f > t))
 }
 
 /// The noise fractions and process-noise factors to choose among: each the stated value, or
@@ -455,4 +528,23 @@ fn with_choice(mut out: RunPlan, choice: HeldOutChoice, open: bool) -> RunPlan {
     });
     out.evidence.held_out = Some(choice);
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::better_everywhere;
+
+    #[test]
+    fn identified_masses_must_predict_every_channel_better() {
+        assert!(better_everywhere(&[72.0, 80.0], &[71.9, 79.0]));
+        // The joint's case: a better mean from one floor at another's cost.
+        assert!(!better_everywhere(&[31.7, 27.8, 26.1], &[25.2, 26.9, 27.3]));
+        // Equal is not better; a non-finite fit beats nothing; a non-finite rival is beaten.
+        assert!(!better_everywhere(&[72.0], &[72.0]));
+        assert!(!better_everywhere(&[f64::NAN, 90.0], &[10.0, 10.0]));
+        assert!(better_everywhere(&[20.0, 90.0], &[f64::NAN, 10.0]));
+        // Nothing to compare, or channels that do not match.
+        assert!(!better_everywhere(&[], &[]));
+        assert!(!better_everywhere(&[90.0], &[10.0, 10.0]));
+    }
 }

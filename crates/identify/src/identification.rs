@@ -560,12 +560,7 @@ pub fn identify_plan(
         // Field data: validation without the truth (free run, modes; docs/validation.md).
         // The band's model error: the chosen candidate's, learned on the part of the record
         // it did not fit (in-sample when the held-out choice did not run).
-        let held_out = plan
-            .evidence
-            .held_out
-            .as_ref()
-            .and_then(|h| h.candidates.get(h.chosen))
-            .and_then(|c| c.held_out_error.as_ref());
+        let held_out = plan.evidence.held_out_error();
         let modes = plan
             .evidence
             .discrepancy

@@ -101,6 +101,26 @@ pub struct Evidence {
     /// ([`crate::validation::discrepancy`]).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub discrepancy: Option<DiscrepancyChoice>,
+    /// The mass ratios identified after the held-out choice, and whether the run takes them
+    /// ([`crate::choice::masses`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub masses: Option<MassChoice>,
+}
+
+impl Evidence {
+    /// The model error the run's predictive band takes: learned on the held-out part with the
+    /// masses and discrepancy the run takes (the identified masses' when kept, else the chosen
+    /// candidate's); `None` when the held-out choice did not run.
+    pub fn held_out_error(&self) -> Option<&crate::record::validation::ModelError> {
+        match &self.masses {
+            Some(m) if m.kept => m.held_out_error.as_ref(),
+            _ => self
+                .held_out
+                .as_ref()
+                .and_then(|h| h.candidates.get(h.chosen))
+                .and_then(|c| c.held_out_error.as_ref()),
+        }
+    }
 }
 
 /// "held-out fit 70.9 % (68.0 / 72.1 / 72.6)": a candidate's score and its channels' fits.
@@ -195,6 +215,105 @@ impl DiscrepancyChoice {
             ));
         }
         s
+    }
+}
+
+/// The evidence of the masses' identification ([`crate::choice::masses`]).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MassChoice {
+    /// The masses stated, and those that maximise the log-likelihood (m_1 kept).
+    pub stated: Vec<f64>,
+    pub identified: Vec<f64>,
+    /// The chosen filter's log-likelihood of the identified part under each.
+    pub loglik_stated: f64,
+    pub loglik_identified: f64,
+    /// Filter runs the search took, and how many of them failed (scored −∞).
+    pub evaluations: usize,
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub failed_evaluations: usize,
+    /// The held-out part's free-run fit with the stated masses (the chosen candidate's score)
+    /// and with the identified ones, with its channels' fits.
+    pub stated_score: f64,
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub held_out_fit: Vec<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub score: Option<f64>,
+    /// The held-out fits (per channel) of each with its own discrepancy term (the fits again
+    /// when no term was searched): what decides.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub stated_final_fit: Vec<f64>,
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub final_fit: Vec<f64>,
+    /// Whether the run takes the identified masses: their free run, with its discrepancy term,
+    /// predicts every channel of the held-out part better than the stated masses' with theirs.
+    pub kept: bool,
+    /// The identified masses' model error learned on the held-out part (the band's, when kept).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub held_out_error: Option<crate::record::validation::ModelError>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub note: Option<String>,
+}
+
+fn is_zero(n: &usize) -> bool {
+    *n == 0
+}
+
+/// "1 : 1.02 : 1.38".
+fn ratios(m: &[f64]) -> String {
+    m.iter()
+        .map(|x| format!("{:.3}", x / m[0]))
+        .collect::<Vec<_>>()
+        .join(" : ")
+}
+
+impl MassChoice {
+    /// What was found and what the run takes.
+    pub fn describe(&self) -> String {
+        let list = |v: &[f64]| {
+            v.iter()
+                .map(|f| format!("{f:.1}"))
+                .collect::<Vec<_>>()
+                .join(" / ")
+        };
+        let with = if self.final_fit.is_empty() {
+            String::new()
+        } else {
+            format!(
+                "; per channel, each with its discrepancy term, {} % against {} %",
+                list(&self.final_fit),
+                list(&self.stated_final_fit)
+            )
+        };
+        let held = match self.score {
+            Some(s) => format!(
+                "held-out fit {s:.1} % against {:.1} %{with}",
+                self.stated_score
+            ),
+            None => format!(
+                "no held-out fit ({})",
+                self.note.as_deref().unwrap_or("no free run")
+            ),
+        };
+        let failed = if self.failed_evaluations > 0 {
+            format!(", {} of them failed", self.failed_evaluations)
+        } else {
+            String::new()
+        };
+        format!(
+            "mass ratios identified by the chosen filter's log-likelihood of the first part of the record \
+             ({} runs{failed}): {} (log-likelihood {:.1}) against the stated {} ({:.1}); {held}: {}",
+            self.evaluations,
+            ratios(&self.identified),
+            self.loglik_identified,
+            ratios(&self.stated),
+            self.loglik_stated,
+            if self.kept {
+                "the identified masses are taken"
+            } else {
+                "the stated masses are kept (the identified ones do not predict every channel of the held-out part better)"
+            }
+        )
     }
 }
 
@@ -454,6 +573,7 @@ pub fn settle(req: PlanRequest) -> Result<RunPlan> {
             substeps: auto,
             held_out: None,
             discrepancy: None,
+            masses: None,
         },
         decisions,
     })

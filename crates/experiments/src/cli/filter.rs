@@ -108,7 +108,11 @@ pub struct Args {
     /// Field data: 1-based storeys with a Bouc–Wen element, e.g. `1,4`, or `none`.
     #[arg(long)]
     pub hysteretic: Option<String>,
-    /// Field data: storey masses `m1,...,mN`, or one value for every storey.
+    /// Field data: storey masses `m1,...,mN`, or one value for every storey. Approximate: m1
+    /// sets the scale, and where the noise levels are chosen on held-out data (a linear
+    /// building, no config) with a sensor on every storey, the ratios m_j/m1 are identified by
+    /// the likelihood and taken when they predict every floor of the held-out part better
+    /// (docs/validation.md).
     #[arg(long)]
     pub masses: Option<String>,
     /// Field data: what the accelerometers record, absolute (ẍ + ü_g, real accelerometers) or
