@@ -28,7 +28,7 @@ use rayon::prelude::*;
 
 use crate::error::Result;
 use crate::field::StructureSettings;
-use crate::plan::{Candidate, Decision, HeldOutChoice, Level, RunPlan, Target};
+use crate::plan::{Candidate, Decision, HeldOutChoice, Level, MassChoice, RunPlan, Target};
 use crate::settings::FilterSettings;
 use crate::validation::free_run::{chain_of, fit_percent, free_run_integrator, simulate_channels};
 use crate::validation::{discrepancy, prediction};
@@ -284,14 +284,15 @@ pub fn choose(
     }
     let ident = head(data, split_point(data));
     let held_out = data.len() - ident.len();
-    let mut plans = Vec::new();
-    for base in &bases {
-        for &nf in &fractions {
-            for &pf in &factors {
-                plans.push(with_noise(base, nf, pf));
-            }
-        }
-    }
+    let factors = &factors;
+    let mut plans: Vec<RunPlan> = bases
+        .iter()
+        .flat_map(|b| {
+            fractions
+                .iter()
+                .flat_map(move |&nf| factors.iter().map(move |&pf| with_noise(b, nf, pf)))
+        })
+        .collect();
     // The candidates are independent Gaussian filters that draw nothing: scored side by side on
     // every core, collected in the order above, so the choice is the same for any thread count.
     let (mut candidates, mut sims): (Vec<Candidate>, Vec<_>) = plans
@@ -322,42 +323,71 @@ pub fn choose(
         .take()
         .and_then(|sim| with_discrepancy(&mut error, &sim, data, ident.len()));
     candidates[chosen].held_out_error = error;
-    let mut masses = None;
-    match masses::not_informed(&out, data) {
+    let masses = match masses::not_informed(&out, data) {
         Some(why) => {
             if out.building.storeys > 1 {
                 kept(&mut out, Level::Info, why);
             }
+            None
         }
         None => {
-            let (mut m, moved) =
-                masses::identify(&out, t, settings, (&ident, data), &candidates[chosen])?;
-            if let Some((plan_m, sim_m)) = moved {
-                let mut error_m = m.held_out_error.take();
-                let disc_m =
-                    sim_m.and_then(|sim| with_discrepancy(&mut error_m, &sim, data, ident.len()));
-                m.held_out_error = error_m;
-                let stated_fits =
-                    final_fits(discrepancy.as_ref(), &candidates[chosen].held_out_fit);
-                let fits = final_fits(disc_m.as_ref(), &m.held_out_fit);
-                m.stated_final_fit = stated_fits.to_vec();
-                m.final_fit = fits.to_vec();
-                m.kept = better_everywhere(fits, stated_fits);
-                if m.kept {
-                    out = plan_m;
-                    discrepancy = disc_m;
-                }
-            }
-            masses = Some(m);
+            let c = &candidates[chosen];
+            let m;
+            (out, m) = identify_masses(out, t, settings, (&ident, data), c, &mut discrepancy)?;
+            Some(m)
         }
-    }
+    };
     let choice = HeldOutChoice {
         identified_samples: ident.len(),
         held_out_samples: held_out,
         candidates,
         chosen,
     };
-    let mut out = with_choice(out, choice, open);
+    Ok(with_evidence(
+        with_choice(out, choice, open),
+        masses,
+        discrepancy,
+    ))
+}
+
+/// The masses of the chosen candidate's plan `out` identified ([`masses::identify`]) and, when
+/// their free run with its own discrepancy term predicts every channel of the held-out part
+/// better than `chosen`'s with `discrepancy`, taken: then the plan and the discrepancy are
+/// theirs.
+fn identify_masses(
+    out: RunPlan,
+    t: &Target,
+    settings: &FilterSettings,
+    (ident, data): (&LoadedDataset, &LoadedDataset),
+    chosen: &Candidate,
+    discrepancy: &mut Option<discrepancy::DiscrepancyChoice>,
+) -> Result<(RunPlan, MassChoice)> {
+    let (mut m, moved) = masses::identify(&out, t, settings, (ident, data), chosen)?;
+    let Some((plan_m, sim_m)) = moved else {
+        return Ok((out, m));
+    };
+    let mut error_m = m.held_out_error.take();
+    let disc_m = sim_m.and_then(|sim| with_discrepancy(&mut error_m, &sim, data, ident.len()));
+    m.held_out_error = error_m;
+    let stated_fits = final_fits(discrepancy.as_ref(), &chosen.held_out_fit);
+    let fits = final_fits(disc_m.as_ref(), &m.held_out_fit);
+    m.stated_final_fit = stated_fits.to_vec();
+    m.final_fit = fits.to_vec();
+    m.kept = better_everywhere(fits, stated_fits);
+    Ok(if m.kept {
+        *discrepancy = disc_m;
+        (plan_m, m)
+    } else {
+        (out, m)
+    })
+}
+
+/// `out` with the masses' and the discrepancy's evidence and decisions, in that order.
+fn with_evidence(
+    mut out: RunPlan,
+    masses: Option<MassChoice>,
+    discrepancy: Option<discrepancy::DiscrepancyChoice>,
+) -> RunPlan {
     if let Some(m) = masses {
         out.decisions.push(Decision {
             rule: "masses::identify".into(),
@@ -383,7 +413,7 @@ pub fn choose(
         });
         out.evidence.discrepancy = Some(d);
     }
-    Ok(out)
+    out
 }
 
 /// The discrepancy modes of the free run `sim` over `data` the run takes (identified on the
