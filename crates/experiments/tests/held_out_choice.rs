@@ -262,25 +262,7 @@ fn wrong_masses_are_identified_and_taken_on_the_filters_own_class() {
 fn masses_stay_as_stated_without_a_sensor_on_every_storey() {
     let (_tmp, root) = common::temp_dir("sysid-masses-");
     let data = root.join("d");
-    common::sysid_ok([
-        "simulate",
-        "--storeys",
-        "3",
-        "--hysteretic",
-        "none",
-        "--duration",
-        "10",
-        "--seed",
-        "3",
-        "--absolute",
-        "--sensors",
-        "1,3",
-        "--out",
-        data.to_str().unwrap(),
-    ]);
-    for f in ["dataset.json", "truth.csv"] {
-        std::fs::remove_file(data.join(f)).unwrap();
-    }
+    common::linear_field_data_with(&data, "3", "10", &["--sensors", "1,3"]);
     let (plan, _) = print_plan_with_masses(&data, "1,1,1.5", &["--damping", "storey"]);
     assert!(plan.evidence.masses.is_none());
     assert_eq!(plan.building.masses, vec![1.0, 1.0, 1.5]);

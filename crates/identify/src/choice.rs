@@ -167,6 +167,20 @@ fn head(data: &LoadedDataset, len: usize) -> LoadedDataset {
 /// A candidate with its free run over the whole record (per channel), when it has one.
 pub(crate) type Scored = (Candidate, Option<Vec<Vec<f64>>>);
 
+/// `plan` run on the identified part `ident` (no progress, no residuals kept).
+pub(crate) fn run_on(plan: &RunPlan, ident: &LoadedDataset) -> Result<crate::record::RunRecord> {
+    let input = crate::pipeline::RunInput {
+        data: ident,
+        chain: None,
+        experiment: &plan.experiment,
+        seed: plan.seed,
+        run: plan.run,
+        progress: None,
+        residuals: false,
+    };
+    crate::pipeline::execute(plan, &input, &|| false)
+}
+
 /// Scores `plan` on the held-out part: identified on `ident` (the first samples of `data`), its
 /// θ_val run freely over all of `data`, fit over the samples from `ident.len()` on.
 pub(crate) fn score(plan: &RunPlan, ident: &LoadedDataset, data: &LoadedDataset) -> Result<Scored> {
@@ -179,16 +193,7 @@ pub(crate) fn score(plan: &RunPlan, ident: &LoadedDataset, data: &LoadedDataset)
         held_out_error: None,
         note: None,
     };
-    let input = crate::pipeline::RunInput {
-        data: ident,
-        chain: None,
-        experiment: &plan.experiment,
-        seed: plan.seed,
-        run: plan.run,
-        progress: None,
-        residuals: false,
-    };
-    let record = crate::pipeline::execute(plan, &input, &|| false)?;
+    let record = run_on(plan, ident)?;
     if let Some(f) = &record.failure {
         c.note = Some(format!("the run failed: {f}"));
         return Ok((c, None));

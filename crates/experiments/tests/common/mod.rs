@@ -77,20 +77,29 @@ pub fn import_frame_northridge(dir: &std::path::Path) {
 /// `sysid simulate` of a linear 3-storey building (`duration` s, absolute accelerations, the
 /// noise stream of `seed`) written into `dir` as field data: only `measured.csv`.
 pub fn linear_field_data(dir: &std::path::Path, seed: &str, duration: &str) {
-    sysid_ok([
-        std::ffi::OsStr::new("simulate"),
-        "--storeys".as_ref(),
-        "3".as_ref(),
-        "--hysteretic".as_ref(),
-        "none".as_ref(),
-        "--duration".as_ref(),
-        duration.as_ref(),
-        "--seed".as_ref(),
-        seed.as_ref(),
-        "--absolute".as_ref(),
-        "--out".as_ref(),
-        dir.as_os_str(),
-    ]);
+    linear_field_data_with(dir, seed, duration, &[]);
+}
+
+/// [`linear_field_data`] with more `sysid simulate` arguments (`--sensors 1,3`, …).
+pub fn linear_field_data_with(dir: &std::path::Path, seed: &str, duration: &str, extra: &[&str]) {
+    let mut args: Vec<&std::ffi::OsStr> = [
+        "simulate",
+        "--storeys",
+        "3",
+        "--hysteretic",
+        "none",
+        "--duration",
+        duration,
+        "--seed",
+        seed,
+        "--absolute",
+    ]
+    .iter()
+    .chain(extra)
+    .map(|a| std::ffi::OsStr::new(*a))
+    .collect();
+    args.extend(["--out".as_ref(), dir.as_os_str()]);
+    sysid_ok(args);
     for f in ["dataset.json", "truth.csv"] {
         std::fs::remove_file(dir.join(f)).unwrap();
     }

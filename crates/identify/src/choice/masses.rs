@@ -90,17 +90,7 @@ fn with_masses(
 /// The log-likelihood of `ident` under `plan`'s filter; `None` when the settling or the run
 /// failed.
 fn loglik(plan: Result<RunPlan>, ident: &LoadedDataset) -> Option<f64> {
-    let plan = plan.ok()?;
-    let input = crate::pipeline::RunInput {
-        data: ident,
-        chain: None,
-        experiment: &plan.experiment,
-        seed: plan.seed,
-        run: plan.run,
-        progress: None,
-        residuals: false,
-    };
-    let record = crate::pipeline::execute(&plan, &input, &|| false).ok()?;
+    let record = super::run_on(&plan.ok()?, ident).ok()?;
     (record.failure.is_none() && record.loglik.is_finite()).then_some(record.loglik)
 }
 
