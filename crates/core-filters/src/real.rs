@@ -131,7 +131,7 @@ pub(crate) fn downdate_lower_loops<T: Real>(p: &mut [T], n: usize, wt: &[T], q: 
 /// Smallest dimension whose downdate [`Real::downdate_lower`] hands to faer for one particle.
 /// Below it the plain loops are as fast (the blocked kernel's set-up dominates); above it faer's
 /// cache-blocked, vectorised product wins (measured in `benches/`).
-pub const FAER_MIN_DIM: usize = 64;
+pub(crate) const FAER_MIN_DIM: usize = 64;
 
 impl Real for f64 {
     const LANES: usize = 1;

@@ -111,7 +111,7 @@ impl Evidence {
     /// The model error the run's predictive band takes: learned on the held-out part with the
     /// masses and discrepancy the run takes (the identified masses' when kept, else the chosen
     /// candidate's); `None` when the held-out choice did not run.
-    pub fn held_out_error(&self) -> Option<&crate::record::validation::ModelError> {
+    pub(crate) fn held_out_error(&self) -> Option<&crate::record::validation::ModelError> {
         match &self.masses {
             Some(m) if m.kept => m.held_out_error.as_ref(),
             _ => self

@@ -96,7 +96,7 @@ impl<T: Real> Sparse<T> {
     /// (an entry off the pattern, too many or too few entries). Sticky: the filters check it once
     /// per step and end the run with [`crate::FilterError::JacobianPattern`].
     #[inline]
-    pub fn pattern_broken(&self) -> bool {
+    pub(crate) fn pattern_broken(&self) -> bool {
         self.broken
     }
 

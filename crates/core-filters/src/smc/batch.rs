@@ -135,7 +135,7 @@ pub const PARALLEL_MIN_DIM: usize = 32;
 
 /// Whether a marginalized filter of particles of `shape` advances them in blocks on the threads
 /// of the pool it runs in ([`PARALLEL_MIN_DIM`]).
-pub fn shares_steps(shape: Shape) -> bool {
+pub(crate) fn shares_steps(shape: Shape) -> bool {
     shape.marginal >= PARALLEL_MIN_DIM && shape.sampled > 0
 }
 
@@ -477,7 +477,7 @@ pub struct Marginalized<S: ParticleStep> {
 impl<S: ParticleStep> Marginalized<S> {
     /// The filter of `step`; `lanes = false` runs every particle through the `f64` step (the
     /// reference the lanes are tested against).
-    pub fn from_step(step: S, lanes: bool) -> Self {
+    pub(crate) fn from_step(step: S, lanes: bool) -> Self {
         Self {
             layout: step.layout(),
             statics: step.static_params(),

@@ -306,7 +306,7 @@ pub fn slot_moments(slot: Slot, w: &[f64], p: &Particles) -> (f64, f64) {
 
 /// The correlation matrix of `slots` over the weighted particles (row-major; see
 /// [`WeightedParticles::param_correlation`]).
-pub fn slot_correlation(slots: &[Slot], w: &[f64], p: &Particles) -> Vec<f64> {
+pub(crate) fn slot_correlation(slots: &[Slot], w: &[f64], p: &Particles) -> Vec<f64> {
     let n = slots.len();
     let nm = p.shape().marginal;
     let value = |i: usize, slot: Slot| match slot {

@@ -10,7 +10,7 @@
 //! So after the held-out choice ([`crate::choice`]) has chosen the noise levels and the damping
 //! form, the ratios m_j/m_1 (j ≥ 2) are moved to maximise the chosen filter's log-likelihood of
 //! the part of the record it identifies on — a compass search on ln(m_j / stated m_j), from
-//! steps of [`FIRST_STEP`] halved [`HALVINGS`] times, at most a factor [`MAX_FACTOR`] from the
+//! steps of `FIRST_STEP` halved `HALVINGS` times, at most a factor `MAX_FACTOR` from the
 //! stated masses — and the held-out part decides: the identified masses are taken only when
 //! their free run, with the discrepancy term chosen for it, predicts every channel of it better
 //! than the stated ones' with theirs (a better building can leave less for the term to explain;
@@ -31,21 +31,21 @@ use crate::plan::{Candidate, MassChoice, RunPlan, Target};
 use crate::settings::FilterSettings;
 
 /// First step of the search in ln(m_j / stated m_j): ±22 %.
-pub const FIRST_STEP: f64 = 0.2;
+const FIRST_STEP: f64 = 0.2;
 
 /// Times the step is halved once no move gains (the last step 1.25 %).
-pub const HALVINGS: usize = 4;
+const HALVINGS: usize = 4;
 
 /// Farthest the search moves a mass from the stated one, as a factor either way: the stated
 /// masses are approximate, not unknown.
-pub const MAX_FACTOR: f64 = 2.0;
+const MAX_FACTOR: f64 = 2.0;
 
 /// Most filter runs the search may take (a safeguard; the frame's search takes about 40).
 const MAX_EVALUATIONS: usize = 400;
 
 /// Why the masses of `plan` cannot be identified from `data`, if they cannot: one storey has no
 /// ratio, and a storey without a sensor leaves the mode shapes, which fix the ratios, unseen.
-pub fn not_informed(plan: &RunPlan, data: &LoadedDataset) -> Option<String> {
+pub(crate) fn not_informed(plan: &RunPlan, data: &LoadedDataset) -> Option<String> {
     let n = plan.building.storeys;
     if n < 2 {
         return Some("one storey: its mass only scales the answer".into());
