@@ -11,7 +11,7 @@
 //! A model whose pattern depended on the values would make those kernels compute with entries at
 //! the wrong places. So every build checks each write against the recorded pattern (two integer
 //! comparisons per entry, against arrays already in cache): a write off the pattern changes no
-//! value and marks the matrix ([`Sparse::pattern_broken`]), which the filters report as the
+//! value and marks the matrix (`Sparse::pattern_broken`), which the filters report as the
 //! typed error [`crate::FilterError::JacobianPattern`]. A wrong pattern is an error, never a
 //! wrong number.
 //!
