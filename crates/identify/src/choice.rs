@@ -328,19 +328,17 @@ pub fn choose(
         .take()
         .and_then(|sim| with_discrepancy(&mut error, &sim, data, ident.len()));
     candidates[chosen].held_out_error = error;
-    let masses = match masses::not_informed(&out, data) {
-        Some(why) => {
-            if out.building.storeys > 1 {
-                kept(&mut out, Level::Info, why);
-            }
-            None
-        }
-        None => {
-            let c = &candidates[chosen];
-            let m;
-            (out, m) = identify_masses(out, t, settings, (&ident, data), c, &mut discrepancy)?;
-            Some(m)
-        }
+    // One storey has no mass ratio: its mass only scales the answer.
+    let masses = if out.building.storeys < 2 {
+        None
+    } else if let Some(why) = masses::not_informed(&out, data) {
+        kept(&mut out, Level::Info, why);
+        None
+    } else {
+        let c = &candidates[chosen];
+        let m;
+        (out, m) = identify_masses(out, t, settings, (&ident, data), c, &mut discrepancy)?;
+        Some(m)
     };
     let choice = HeldOutChoice {
         identified_samples: ident.len(),
@@ -367,7 +365,7 @@ fn identify_masses(
     chosen: &Candidate,
     discrepancy: &mut Option<discrepancy::DiscrepancyChoice>,
 ) -> Result<(RunPlan, MassChoice)> {
-    let (mut m, moved) = masses::identify(&out, t, settings, (ident, data), chosen)?;
+    let (mut m, moved) = masses::identify(&out, t, settings, (ident, data))?;
     let Some((plan_m, sim_m)) = moved else {
         return Ok((out, m));
     };

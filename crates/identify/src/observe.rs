@@ -168,17 +168,16 @@ impl Observer for Recorder<'_> {
     fn on_finish(&mut self, last: &WeightedParticles<'_>) {
         self.distinct = last.distinct_sampled_params();
         self.credible = final_intervals(last);
-        // A pool's member is pooled before its answer is read: the pool's correlation is the
-        // pooled particles' (`pool::combine`), so a member's own would be thrown away.
-        if !self.keep_final {
-            self.correlation = last.param_correlation();
-        }
         if self.keep_final {
+            // A pool's member: pooled before its answer is read, the pool's correlation is the
+            // pooled particles' (`pool::combine`), so the member computes none of its own.
             self.final_particles = Some(FinalParticles {
                 w: last.w.to_vec(),
                 particles: last.particles.clone(),
                 bounds: last.bounds.to_vec(),
             });
+        } else {
+            self.correlation = last.param_correlation();
         }
     }
 

@@ -123,15 +123,17 @@ impl Evidence {
     }
 }
 
+/// "68.0 / 72.1 / 72.6": channels' fits.
+fn fits_list(fits: &[f64]) -> String {
+    fits.iter()
+        .map(|f| format!("{f:.1}"))
+        .collect::<Vec<_>>()
+        .join(" / ")
+}
+
 /// "held-out fit 70.9 % (68.0 / 72.1 / 72.6)": a candidate's score and its channels' fits.
 fn held_out_fit(score: f64, fits: &[f64]) -> String {
-    format!(
-        "held-out fit {score:.1} % ({})",
-        fits.iter()
-            .map(|f| format!("{f:.1}"))
-            .collect::<Vec<_>>()
-            .join(" / ")
-    )
+    format!("held-out fit {score:.1} % ({})", fits_list(fits))
 }
 
 /// A number of discrepancy modes and how well it predicted the held-out part
@@ -225,16 +227,18 @@ pub struct MassChoice {
     /// The masses stated, and those that maximise the log-likelihood (m_1 kept).
     pub stated: Vec<f64>,
     pub identified: Vec<f64>,
-    /// The chosen filter's log-likelihood of the identified part under each.
-    pub loglik_stated: f64,
-    pub loglik_identified: f64,
+    /// The chosen filter's log-likelihood of the identified part under each (none where that
+    /// run failed).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub loglik_stated: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub loglik_identified: Option<f64>,
     /// Filter runs the search took, and how many of them failed (scored −∞).
     pub evaluations: usize,
     #[serde(default, skip_serializing_if = "is_zero")]
     pub failed_evaluations: usize,
-    /// The held-out part's free-run fit with the stated masses (the chosen candidate's score)
-    /// and with the identified ones, with its channels' fits.
-    pub stated_score: f64,
+    /// The held-out part's free-run fit with the identified masses, building alone (the stated
+    /// masses' is the chosen candidate's, `HeldOutChoice`), with its channels' fits.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub held_out_fit: Vec<f64>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -270,26 +274,15 @@ fn ratios(m: &[f64]) -> String {
 impl MassChoice {
     /// What was found and what the run takes.
     pub fn describe(&self) -> String {
-        let list = |v: &[f64]| {
-            v.iter()
-                .map(|f| format!("{f:.1}"))
-                .collect::<Vec<_>>()
-                .join(" / ")
-        };
-        let with = if self.final_fit.is_empty() {
-            String::new()
-        } else {
-            format!(
-                "; per channel, each with its discrepancy term, {} % against {} %",
-                list(&self.final_fit),
-                list(&self.stated_final_fit)
-            )
-        };
+        let ll = |l: Option<f64>| l.map_or("run failed".into(), |l| format!("{l:.1}"));
         let held = match self.score {
-            Some(s) => format!(
-                "held-out fit {s:.1} % against {:.1} %{with}",
-                self.stated_score
+            Some(s) if !self.final_fit.is_empty() => format!(
+                "held-out fit {s:.1} % (building alone); per channel, each with its discrepancy \
+                 term, {} % against the stated masses' {} %",
+                fits_list(&self.final_fit),
+                fits_list(&self.stated_final_fit)
             ),
+            Some(s) => format!("held-out fit {s:.1} % (building alone)"),
             None => format!(
                 "no held-out fit ({})",
                 self.note.as_deref().unwrap_or("no free run")
@@ -302,12 +295,12 @@ impl MassChoice {
         };
         format!(
             "mass ratios identified by the chosen filter's log-likelihood of the first part of the record \
-             ({} runs{failed}): {} (log-likelihood {:.1}) against the stated {} ({:.1}); {held}: {}",
+             ({} runs{failed}): {} (log-likelihood {}) against the stated {} ({}); {held}: {}",
             self.evaluations,
             ratios(&self.identified),
-            self.loglik_identified,
+            ll(self.loglik_identified),
             ratios(&self.stated),
-            self.loglik_stated,
+            ll(self.loglik_stated),
             if self.kept {
                 "the identified masses are taken"
             } else {

@@ -27,7 +27,7 @@ use rayon::prelude::*;
 use super::{score, Scored};
 use crate::error::Result;
 use crate::field::StructureSettings;
-use crate::plan::{Candidate, MassChoice, RunPlan, Target};
+use crate::plan::{MassChoice, RunPlan, Target};
 use crate::settings::FilterSettings;
 
 /// First step of the search in ln(m_j / stated m_j): ±22 %.
@@ -43,14 +43,12 @@ const MAX_FACTOR: f64 = 2.0;
 /// Most filter runs the search may take (a safeguard; the frame's search takes about 40).
 const MAX_EVALUATIONS: usize = 400;
 
-/// Why the masses of `plan` cannot be identified from `data`, if they cannot: one storey has no
-/// ratio, and a storey without a sensor leaves the mode shapes, which fix the ratios, unseen.
+/// Why the masses of `plan` (two storeys or more) cannot be identified from `data`, if they
+/// cannot: a storey without a sensor leaves the mode shapes, which fix the ratios, unseen.
 pub(crate) fn not_informed(plan: &RunPlan, data: &LoadedDataset) -> Option<String> {
-    let n = plan.building.storeys;
-    if n < 2 {
-        return Some("one storey: its mass only scales the answer".into());
-    }
-    let unmeasured: Vec<usize> = (1..=n).filter(|s| !data.sensors.contains(s)).collect();
+    let unmeasured: Vec<usize> = (1..=plan.building.storeys)
+        .filter(|s| !data.sensors.contains(s))
+        .collect();
     (!unmeasured.is_empty()).then(|| {
         format!(
             "masses as stated: storeys {unmeasured:?} have no sensor, so the mode shapes that fix the mass ratios are not seen"
@@ -104,8 +102,8 @@ fn masses_at(stated: &[f64], u: &[f64]) -> Vec<f64> {
 /// The identified masses' plan and free run over the record (none when the run failed).
 pub(crate) type Moved = (RunPlan, Option<Vec<Vec<f64>>>);
 
-/// The masses identified for the chosen candidate's `plan` (scored `chosen` on the held-out part
-/// of `data`, identified on `ident`) and their held-out score without the discrepancy: the
+/// The masses identified for the chosen candidate's `plan` (identified on `ident`, the first
+/// samples of `data`) and their held-out score without the discrepancy: the
 /// evidence (not yet `kept`: [`crate::choice`] compares the two with their discrepancy terms)
 /// and, when the search moved them, their plan and free run over `data`.
 pub(crate) fn identify(
@@ -113,18 +111,19 @@ pub(crate) fn identify(
     t: &Target,
     settings: &FilterSettings,
     (ident, data): (&LoadedDataset, &LoadedDataset),
-    chosen: &Candidate,
 ) -> Result<(MassChoice, Option<Moved>)> {
     let stated = plan.building.masses.clone();
     let eval = |u: &[f64]| {
         let m = masses_at(&stated, u);
         loglik(with_masses(plan, t, settings, &m), ident)
     };
-    let (mut evaluations, mut failed) = (1, 0);
-    let start = eval(&vec![0.0; stated.len() - 1]);
-    let loglik_stated = start.unwrap_or(f64::NEG_INFINITY);
-    failed += usize::from(start.is_none());
-    let (mut u, mut best) = (vec![0.0; stated.len() - 1], loglik_stated);
+    // The stated masses' log-likelihood is the chosen plan's own.
+    let loglik_stated = loglik(Ok(plan.clone()), ident);
+    let (mut evaluations, mut failed) = (1, usize::from(loglik_stated.is_none()));
+    let (mut u, mut best) = (
+        vec![0.0; stated.len() - 1],
+        loglik_stated.unwrap_or(f64::NEG_INFINITY),
+    );
     let bound = MAX_FACTOR.ln();
     let mut step = FIRST_STEP;
     for _ in 0..=HALVINGS {
@@ -163,10 +162,9 @@ pub(crate) fn identify(
         stated,
         identified: identified.clone(),
         loglik_stated,
-        loglik_identified: best,
+        loglik_identified: best.is_finite().then_some(best),
         evaluations,
         failed_evaluations: failed,
-        stated_score: chosen.score.unwrap_or(f64::NEG_INFINITY),
         held_out_fit: Vec::new(),
         score: None,
         stated_final_fit: Vec::new(),
