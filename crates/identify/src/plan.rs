@@ -1354,3 +1354,37 @@ pub fn resolve_substeps(
         field,
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::MassChoice;
+
+    /// A search whose every run failed has no log-likelihood: the evidence says so and reads back
+    /// from a record's JSON (a −∞ would be written as `null` and not read back).
+    #[test]
+    fn a_failed_masses_search_reads_back_from_json() {
+        let m = MassChoice {
+            stated: vec![1.0, 1.0],
+            identified: vec![1.0, 1.0],
+            loglik_stated: None,
+            loglik_identified: None,
+            evaluations: 5,
+            failed_evaluations: 5,
+            held_out_fit: Vec::new(),
+            score: None,
+            stated_final_fit: Vec::new(),
+            final_fit: Vec::new(),
+            kept: false,
+            held_out_error: None,
+            note: Some("no move raised the log-likelihood".into()),
+        };
+        let text = serde_json::to_string(&m).unwrap();
+        assert_eq!(serde_json::from_str::<MassChoice>(&text).unwrap(), m);
+        let d = m.describe();
+        assert!(
+            d.contains("(log-likelihood run failed)") && d.contains("5 of them failed"),
+            "{d}"
+        );
+        assert!(d.contains("the stated masses are kept"), "{d}");
+    }
+}
