@@ -272,6 +272,31 @@ fn ratios(m: &[f64]) -> String {
 }
 
 impl MassChoice {
+    /// The evidence of a search that found `identified` from `stated` in `evaluations` runs
+    /// (`failed` of them failed), before any held-out score: not taken.
+    pub(crate) fn searched(
+        (stated, identified): (Vec<f64>, Vec<f64>),
+        (loglik_stated, loglik_identified): (Option<f64>, Option<f64>),
+        evaluations: usize,
+        failed: usize,
+    ) -> Self {
+        Self {
+            stated,
+            identified,
+            loglik_stated,
+            loglik_identified,
+            evaluations,
+            failed_evaluations: failed,
+            held_out_fit: Vec::new(),
+            score: None,
+            stated_final_fit: Vec::new(),
+            final_fit: Vec::new(),
+            kept: false,
+            held_out_error: None,
+            note: None,
+        }
+    }
+
     /// What was found and what the run takes.
     pub fn describe(&self) -> String {
         let ll = |l: Option<f64>| l.map_or("run failed".into(), |l| format!("{l:.1}"));
@@ -1363,21 +1388,8 @@ mod tests {
     /// from a record's JSON (a −∞ would be written as `null` and not read back).
     #[test]
     fn a_failed_masses_search_reads_back_from_json() {
-        let m = MassChoice {
-            stated: vec![1.0, 1.0],
-            identified: vec![1.0, 1.0],
-            loglik_stated: None,
-            loglik_identified: None,
-            evaluations: 5,
-            failed_evaluations: 5,
-            held_out_fit: Vec::new(),
-            score: None,
-            stated_final_fit: Vec::new(),
-            final_fit: Vec::new(),
-            kept: false,
-            held_out_error: None,
-            note: Some("no move raised the log-likelihood".into()),
-        };
+        let mut m = MassChoice::searched((vec![1.0, 1.0], vec![1.0, 1.0]), (None, None), 5, 5);
+        m.note = Some("no move raised the log-likelihood".into());
         let text = serde_json::to_string(&m).unwrap();
         assert_eq!(serde_json::from_str::<MassChoice>(&text).unwrap(), m);
         let d = m.describe();

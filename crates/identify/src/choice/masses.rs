@@ -158,21 +158,12 @@ pub(crate) fn identify(
         step /= 2.0;
     }
     let identified = masses_at(&stated, &u);
-    let mut choice = MassChoice {
-        stated,
-        identified: identified.clone(),
-        loglik_stated,
-        loglik_identified: best.is_finite().then_some(best),
+    let mut choice = MassChoice::searched(
+        (stated, identified.clone()),
+        (loglik_stated, best.is_finite().then_some(best)),
         evaluations,
-        failed_evaluations: failed,
-        held_out_fit: Vec::new(),
-        score: None,
-        stated_final_fit: Vec::new(),
-        final_fit: Vec::new(),
-        kept: false,
-        held_out_error: None,
-        note: None,
-    };
+        failed,
+    );
     if u.iter().all(|&v| v == 0.0) {
         choice.note = Some("no move raised the log-likelihood".into());
         return Ok((choice, None));
