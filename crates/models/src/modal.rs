@@ -176,6 +176,58 @@ pub fn modes_of_damped(
     })
 }
 
+/// One undamped mode shape of the chain: `K φ = ω² M φ`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Shape {
+    /// Natural frequency ω/2π of the undamped chain, Hz.
+    pub frequency_hz: f64,
+    /// φ over storeys 1..N, scaled so that its largest component (in magnitude) is +1.
+    pub phi: Vec<f64>,
+}
+
+/// The undamped mode shapes of the chain with masses `m` and stiffnesses `k`, by increasing
+/// frequency: the eigenvectors of the symmetric `M^(-1/2) K M^(-1/2)` (`nalgebra`'s symmetric
+/// eigen-solver), mapped back by `M^(-1/2)`. These are the shapes a mode-shape comparison
+/// (MAC) uses: with damping proportional to `M` and `K` they are the damped modes' shapes
+/// exactly; otherwise the damped modes are complex and these are their classical-damping
+/// approximation.
+pub fn shapes_of(m: &[f64], k: &[f64]) -> Result<Vec<Shape>, ModalError> {
+    let n = m.len();
+    if n == 0
+        || k.len() != n
+        || m.iter().any(|v| !v.is_finite() || *v <= 0.0)
+        || k.iter().any(|v| !v.is_finite())
+    {
+        return Err(ModalError::NonFinite);
+    }
+    let (_, _, kk) = matrices(m, k, &vec![0.0; n], None);
+    let inv_sqrt: Vec<f64> = m.iter().map(|v| 1.0 / v.sqrt()).collect();
+    let a = DMatrix::from_fn(n, n, |i, j| inv_sqrt[i] * kk[(i, j)] * inv_sqrt[j]);
+    let eig = nalgebra::linalg::SymmetricEigen::try_new(a, f64::EPSILON, 10_000)
+        .ok_or(ModalError::NoConvergence { dim: n })?;
+    let mut shapes: Vec<Shape> = (0..n)
+        .map(|r| {
+            let w2 = eig.eigenvalues[r];
+            let mut phi: Vec<f64> = (0..n)
+                .map(|i| inv_sqrt[i] * eig.eigenvectors[(i, r)])
+                .collect();
+            let big = phi
+                .iter()
+                .copied()
+                .fold(0.0_f64, |a, v| if v.abs() > a.abs() { v } else { a });
+            if big != 0.0 {
+                phi.iter_mut().for_each(|v| *v /= big);
+            }
+            Shape {
+                frequency_hz: w2.max(0.0).sqrt() / std::f64::consts::TAU,
+                phi,
+            }
+        })
+        .collect();
+    shapes.sort_by(|x, y| x.frequency_hz.total_cmp(&y.frequency_hz));
+    Ok(shapes)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -288,5 +340,47 @@ mod tests {
         assert_eq!(grow.not_decaying, 2);
         assert!((grow.modes[0].damping_ratio + 0.1).abs() < 1e-12);
         assert!(modes_of(&[1.0, 0.0], &[1.0, 1.0], &[0.0, 0.0]).is_err());
+    }
+
+    #[test]
+    fn the_uniform_chains_shapes_are_the_closed_form_sines() {
+        // Unit masses, equal k: φ_r(j) ∝ sin(j·(2r − 1)π / (2N + 1)), j = 1..N; M-orthogonal.
+        let n = 5;
+        let got = shapes_of(&[1.0; 5], &[8.0; 5]).unwrap();
+        assert_eq!(got.len(), n);
+        let modes = modes_of(&[1.0; 5], &[8.0; 5], &[0.0; 5]).unwrap();
+        for (r, s) in got.iter().enumerate() {
+            assert!((s.frequency_hz / modes.modes[r].frequency_hz - 1.0).abs() < 1e-10);
+            let angle = (2 * r + 1) as f64 * std::f64::consts::PI / (2 * n + 1) as f64;
+            let exact: Vec<f64> = (1..=n).map(|j| (j as f64 * angle).sin()).collect();
+            let big = exact
+                .iter()
+                .copied()
+                .fold(0.0_f64, |a, v| if v.abs() > a.abs() { v } else { a });
+            for (got, want) in s.phi.iter().zip(&exact) {
+                assert!(
+                    (got - want / big).abs() < 1e-10,
+                    "mode {r}: {:?} vs {exact:?}",
+                    s.phi
+                );
+            }
+            assert!(s.phi.iter().all(|v| v.abs() <= 1.0 + 1e-12));
+        }
+        // Unequal masses: K φ = ω² M φ and the shapes are M-orthogonal.
+        let (m, k) = ([1.0, 1.03, 1.41], [3200.0, 3400.0, 3800.0]);
+        let got = shapes_of(&m, &k).unwrap();
+        let (mm, _, kk) = matrices(&m, &k, &[0.0; 3], None);
+        for (r, s) in got.iter().enumerate() {
+            let phi = nalgebra::DVector::from_column_slice(&s.phi);
+            let w2 = (s.frequency_hz * std::f64::consts::TAU).powi(2);
+            let resid = &kk * &phi - &mm * &phi * w2;
+            assert!(resid.norm() < 1e-8 * (&kk * &phi).norm(), "mode {r}");
+            for t in got.iter().skip(r + 1) {
+                let psi = nalgebra::DVector::from_column_slice(&t.phi);
+                assert!((phi.transpose() * &mm * psi)[(0, 0)].abs() < 1e-10);
+            }
+        }
+        assert!(shapes_of(&[1.0, -1.0], &[1.0, 1.0]).is_err());
+        assert!(shapes_of(&[1.0], &[f64::NAN]).is_err());
     }
 }

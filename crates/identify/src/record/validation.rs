@@ -198,6 +198,23 @@ pub struct ModePair {
     pub model_hz_95: Option<[f64; 2]>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub damping_ratio_95: Option<[f64; 2]>,
+    /// The model's undamped mode shape at θ_val over storeys 1..N, its largest component +1
+    /// (`validation::shapes`; absent for one storey or one measured channel).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub model_shape: Vec<f64>,
+    /// Per storey, the central 95 % of that shape over θ drawn from the posterior.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub model_shape_95: Vec<[f64; 2]>,
+    /// The measured operating shape at the paired peak: Im H1 per measured channel
+    /// (quadrature picking, `validation::spectral::operating_shape`).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub operating_shape: Vec<f64>,
+    /// The modal assurance criterion between the model's shape on the measured floors and the
+    /// operating shape (1: the same shape; 0: orthogonal), and its central 95 % over the draws.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub mac: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub mac_95: Option<[f64; 2]>,
 }
 
 /// Modes of the identified linearised model and the measured transfer functions.

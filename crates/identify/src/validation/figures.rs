@@ -7,14 +7,17 @@
 //!   band is shaded underneath and the free run drawn last, so that no line hides it;
 //! - `transfer.svg`: per channel the measured |H1| (log scale) with the identified model's
 //!   modes as dashed vertical lines and the peaks read from the data as dots; the legend is a
-//!   strip below the panels, where it covers no curve.
+//!   strip below the panels, where it covers no curve;
+//! - `shapes.svg`: per paired mode whose shape could be compared (two measured floors or more)
+//!   the model's undamped mode shape over the floors with its 95 % range per floor, and the
+//!   measured operating shape (quadrature picking) scaled onto it, the MAC in the caption.
 
 use std::path::{Path, PathBuf};
 
 use crate::error::{bail, Result};
 use plotters::prelude::*;
 
-use super::{FreeRun, ModalComparison};
+use super::{shapes, FreeRun, ModalComparison, ModePair};
 use crate::figures::{
     colour, draw_mesh, finish, finite_range, legend_layout, open_figure, padded, panel_chart_right,
     segments, tick, Area, Swatch,
@@ -379,6 +382,129 @@ pub fn transfer(m: &ModalComparison, out: &Path, who: &str) -> Result<PathBuf> {
     Ok(path)
 }
 
+/// The measured floors of a modal comparison's channels (named `a<floor>`).
+fn channel_floors(m: &ModalComparison) -> Option<Vec<usize>> {
+    m.channels
+        .iter()
+        .map(|c| c.strip_prefix('a').and_then(|f| f.parse().ok()))
+        .collect()
+}
+
+/// The pairs `shapes.svg` draws: a model shape, an operating shape and a MAC.
+fn shape_pairs(m: &ModalComparison) -> Vec<&ModePair> {
+    m.pairs
+        .iter()
+        .filter(|p| p.mac.is_some() && !p.model_shape.is_empty() && !p.operating_shape.is_empty())
+        .collect()
+}
+
+/// Draws one panel of `shapes.svg`: floor against shape component, the ground at 0.
+fn shape_panel(area: &Area<'_>, p: &ModePair, floors: &[usize]) -> Result<()> {
+    let n = p.model_shape.len();
+    let on_floors: Vec<f64> = floors
+        .iter()
+        .map(|f| {
+            p.model_shape
+                .get(f.wrapping_sub(1))
+                .copied()
+                .unwrap_or(f64::NAN)
+        })
+        .collect();
+    let measured = shapes::aligned(&on_floors, &p.operating_shape);
+    let values = p
+        .model_shape
+        .iter()
+        .chain(p.model_shape_95.iter().flatten())
+        .chain(&measured)
+        .copied()
+        .chain([0.0]);
+    let (x0, x1) = padded(finite_range(values).unwrap_or((-1.0, 1.0)));
+    let caption = format!(
+        "mode {} ({:.2} Hz): MAC {:.3}{}",
+        p.mode,
+        p.model_hz,
+        p.mac.unwrap_or(f64::NAN),
+        p.mac_95
+            .map_or(String::new(), |[a, b]| format!(" [{a:.3}, {b:.3}]"))
+    );
+    let mut chart = panel_chart_right(area, &caption, 56, RIGHT, x0..x1, -0.3..n as f64 + 0.3)?;
+    let span = x1 - x0;
+    draw_mesh(
+        chart
+            .configure_mesh()
+            .x_desc("shape [-]")
+            .y_desc("floor")
+            .x_labels(6)
+            .x_label_formatter(&|v| tick(*v, span))
+            .y_labels(n + 1)
+            .y_label_formatter(&|v| format!("{v:.0}")),
+    )?;
+    for (j, [lo, hi]) in p.model_shape_95.iter().enumerate() {
+        let y = (j + 1) as f64;
+        chart.draw_series(LineSeries::new(
+            vec![(*lo, y), (*hi, y)],
+            colour(2).stroke_width(8),
+        ))?;
+    }
+    let line: Vec<(f64, f64)> = std::iter::once((0.0, 0.0))
+        .chain(
+            p.model_shape
+                .iter()
+                .enumerate()
+                .map(|(j, v)| (*v, (j + 1) as f64)),
+        )
+        .collect();
+    chart.draw_series(LineSeries::new(line, colour(1).stroke_width(2)))?;
+    chart.draw_series(
+        measured
+            .iter()
+            .zip(floors)
+            .filter(|(v, _)| v.is_finite())
+            .map(|(v, f)| Circle::new((*v, *f as f64), 6, colour(0).filled())),
+    )?;
+    Ok(())
+}
+
+/// Draws `shapes.svg`: a panel per mode with a MAC, side by side, the legend below.
+pub fn shapes(m: &ModalComparison, out: &Path, who: &str) -> Result<PathBuf> {
+    let pairs = shape_pairs(m);
+    let Some(floors) = channel_floors(m) else {
+        bail!("the record's channels are not named by floor");
+    };
+    if pairs.is_empty() {
+        bail!("the record holds no mode shape compared with a measured one");
+    }
+    let mut entries = vec![(
+        Swatch::Line(colour(1)),
+        "identified model's undamped mode shape (θ_val)".to_string(),
+    )];
+    if pairs.iter().any(|p| !p.model_shape_95.is_empty()) {
+        entries.push((
+            Swatch::Bar(colour(2)),
+            "its central 95 % per floor over posterior draws".to_string(),
+        ));
+    }
+    entries.push((
+        Swatch::Dot(colour(0)),
+        "measured operating shape (Im H1 at the paired peak), scaled onto the model's".to_string(),
+    ));
+    let (_, legend_h) = legend_layout(&entries);
+    let path = out.join("shapes.svg");
+    let file = path.clone();
+    let (root, grid, legend) = open_figure(
+        &file,
+        60 + legend_h + 420,
+        &format!("{who}: mode shapes against the measured operating shapes"),
+        legend_h,
+    )?;
+    let areas = grid.split_evenly((1, pairs.len()));
+    for (p, area) in pairs.iter().zip(&areas) {
+        shape_panel(area, p, &floors)?;
+    }
+    finish(&root, &legend, &entries, &file)?;
+    Ok(path)
+}
+
 /// Draws both figures of a record that has them; notes what is missing.
 pub fn draw(
     free: Option<&FreeRun>,
@@ -400,7 +526,18 @@ pub fn draw(
         ),
     }
     match modal {
-        Some(m) if !m.channels.is_empty() => written.push(transfer(m, out, who)?),
+        Some(m) if !m.channels.is_empty() => {
+            written.push(transfer(m, out, who)?);
+            if shape_pairs(m).is_empty() {
+                skipped.push(
+                    "shapes.svg: no mode shape compared with a measured one (it needs two \
+                     storeys or more, two measured floors or more and a paired peak)"
+                        .into(),
+                );
+            } else {
+                written.push(shapes(m, out, who)?);
+            }
+        }
         Some(m) => skipped.push(format!(
             "transfer.svg: no transfer functions ({})",
             m.errors.join("; ")
