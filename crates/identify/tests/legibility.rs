@@ -24,7 +24,7 @@ use identify::figures::convergence;
 use identify::observe::Trace;
 use identify::record::validation::{ChannelFit, FreeRun, Integrator, ModalComparison};
 use identify::record::{RunRecord, Timing};
-use identify::validation::figures::{free_run, transfer};
+use identify::validation::figures::{free_run, shapes, transfer};
 use identify::validation::spectral::Peak;
 use models::modal::Mode;
 use models::sensors::MeasurementKind;
@@ -561,6 +561,45 @@ fn transfer_legend_covers_no_curve() {
     // legend box over one), and every text fits.
     assert!(f.texts.iter().any(|t| t.text == "measured |H1| (Welch)"));
     assert_texts_legible(&f);
+}
+
+#[test]
+fn shapes_are_legible_with_their_intervals() {
+    // The frame's three modes, each shape with a 95 % range of ±0.08 per floor and a measured
+    // operating shape a little off it; the longest caption ("mode 2 (11.10 Hz): MAC 0.990
+    // [0.981, 0.995]") in a third of the width.
+    let mut m = synthetic_modal();
+    let shapes_of = [[0.44, 0.83, 1.0], [1.0, 0.35, -0.7], [-0.7, 1.0, -0.5]];
+    m.pairs = shapes_of
+        .iter()
+        .enumerate()
+        .map(|(i, phi)| identify::validation::ModePair {
+            mode: i + 1,
+            model_hz: m.modes[i].frequency_hz,
+            damping_ratio: 0.01,
+            measured_hz: Some(m.peaks[i].frequency_hz),
+            difference_percent: Some(-1.0),
+            excitation_db: Some(-3.0),
+            model_hz_95: None,
+            damping_ratio_95: None,
+            model_shape: phi.to_vec(),
+            model_shape_95: phi.iter().map(|v| [v - 0.08, v + 0.08]).collect(),
+            operating_shape: phi.iter().map(|v| -2.0 * v + 0.05).collect(),
+            mac: Some(0.99),
+            mac_95: Some([0.981, 0.995]),
+        })
+        .collect();
+    let dir = out_dir();
+    let path = shapes(&m, dir.path(), "mpf-ekf2 (seed 1, run 0)").unwrap();
+    let f = figure(&path);
+    assert!(f
+        .texts
+        .iter()
+        .any(|t| t.text.starts_with("mode 2 (") && t.text.contains("MAC 0.990 [0.981, 0.995]")));
+    assert_texts_legible(&f);
+    // Without a compared shape there is no figure, and the reason is given.
+    let err = shapes(&synthetic_modal(), dir.path(), "x").unwrap_err();
+    assert!(err.to_string().contains("no mode shape"), "{err}");
 }
 
 #[test]

@@ -24,7 +24,8 @@ pub struct Args {
     /// Where to write the result (JSON).
     #[arg(long)]
     pub out: Option<PathBuf>,
-    /// Also draw `free_run.svg` and `transfer.svg` into this directory.
+    /// Also draw `free_run.svg`, `transfer.svg` and, where mode shapes were compared (two
+    /// measured floors or more), `shapes.svg` into this directory.
     #[arg(long)]
     pub plot: Option<PathBuf>,
     /// Posterior draws for the band (0: no band).

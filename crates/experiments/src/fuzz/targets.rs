@@ -49,8 +49,9 @@ const RUN_FIGURES: &[&str] = &[
     "innovation_acf.svg",
     "free_run.svg",
     "transfer.svg",
+    "shapes.svg",
 ];
-const VALIDATE_FIGURES: &[&str] = &["free_run.svg", "transfer.svg"];
+const VALIDATE_FIGURES: &[&str] = &["free_run.svg", "transfer.svg", "shapes.svg"];
 const STUDY_OUT: &[&str] = &[
     "REPORT.md",
     "summary.json",
