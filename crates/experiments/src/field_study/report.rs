@@ -155,9 +155,10 @@ fn modes_cell(m: Option<&ModalComparison>) -> String {
     let Some(m) = m else { return "—".into() };
     m.pairs
         .iter()
-        .map(|p| match p.difference_percent {
-            Some(d) => format!("{:.2} ({:+.1} %)", p.model_hz, d),
-            None => format!("{:.2} (unpaired)", p.model_hz),
+        .map(|p| match (p.difference_percent, p.mac) {
+            (Some(d), Some(mac)) => format!("{:.2} ({:+.1} %, MAC {mac:.3})", p.model_hz, d),
+            (Some(d), None) => format!("{:.2} ({:+.1} %)", p.model_hz, d),
+            (None, _) => format!("{:.2} (unpaired)", p.model_hz),
         })
         .collect::<Vec<_>>()
         .join(", ")
@@ -235,7 +236,9 @@ pub(crate) fn render(study: &FieldStudy, out: &Path) -> Result<String> {
          committed: the study writes them again. Fit = 100·(1 − ‖y − ŷ‖/‖y − ȳ‖) per measured floor, free run from rest \
          driven by the measured ground motion (docs/validation.md). LB = Ljung–Box Q of each \
          channel's one-step prediction errors over its 95 % critical value (1 = white). ±k, ±c: \
-         the largest 95 % half-width relative to θ_val among the stiffnesses / the dampings.\n"
+         the largest 95 % half-width relative to θ_val among the stiffnesses / the dampings. MAC: \
+         the modal assurance criterion between the model's mode shape and the measured operating \
+         shape at the paired peak (1 = the same shape; docs/validation.md, \"Mode shapes\").\n"
     )?;
     for part in &study.part {
         render_part(&mut s, part, out)?;
@@ -312,7 +315,7 @@ fn identified(s: &mut String, x: Section<'_>) -> Result<()> {
     writeln!(s, "### Identified on `{train}`\n")?;
     writeln!(
         s,
-        "| variant | result | stiffness | damping | other | modes Hz (vs measured peak) | ζ % | fit % | LB | ±k | ±c | log-lik | wall s |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|"
+        "| variant | result | stiffness | damping | other | modes Hz (vs measured peak, MAC) | ζ % | fit % | LB | ±k | ±c | log-lik | wall s |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|"
     )?;
     let mut records = BTreeMap::new();
     for v in &part.variant {
