@@ -237,6 +237,10 @@ struct Row {
     /// The discrepancy term's modes (Hz), empty without one.
     #[serde(default)]
     discrepancy_hz: Vec<f64>,
+    /// Per mode of the identified building, the MAC of its shape with the measured operating
+    /// shape on the identified record (none where the mode has no paired peak).
+    #[serde(default)]
+    mac: Vec<Option<f64>>,
 }
 
 fn row(out: &Path, entry: &Value) -> Result<Row> {
@@ -278,6 +282,10 @@ fn row(out: &Path, entry: &Value) -> Result<Row> {
                 .collect()
         })
         .unwrap_or_default();
+    let mac = record["modal"]["pairs"]
+        .as_array()
+        .map(|a| a.iter().map(|p| p["mac"].as_f64()).collect())
+        .unwrap_or_default();
     let coverage = held["free_run"]["channels"]
         .as_array()
         .map(|a| {
@@ -317,6 +325,7 @@ fn row(out: &Path, entry: &Value) -> Result<Row> {
         truth: floats(&entry["held-out"]["truth_fit"]),
         held_building,
         discrepancy_hz,
+        mac,
         case,
     })
 }
@@ -359,14 +368,16 @@ fn report(out: &Path) -> Result<String> {
          5 % noise). Nothing was chosen on this corpus: it judges the defaults. Fits are free-run \
          fits per floor, 100 (1 − ‖y − ŷ‖/‖y − ȳ‖) %, of the identified building with the \
          discrepancy term its held-out choice kept (its modes are listed; docs/validation.md, \
-         \"A discrepancy term\"), and of the building alone on the held-out record.\n",
+         \"A discrepancy term\"), and of the building alone on the held-out record. MAC: each \
+         identified mode's shape against the measured operating shape of the identified record \
+         (docs/validation.md, \"Mode shapes\"; 1 = the same shape).\n",
         foreign::MINIMAL_FLAGS.join(" "),
         foreign::SEED
     )?;
-    writeln!(s, "| case | exit | physical | discrepancy modes (Hz) | fit, identified record | SRIM (order) | fit, held-out record | building alone | SRIM | ground | true structure | band covers (held-out) |")?;
+    writeln!(s, "| case | exit | physical | discrepancy modes (Hz) | MAC, modes 1–3 | fit, identified record | SRIM (order) | fit, held-out record | building alone | SRIM | ground | true structure | band covers (held-out) |")?;
     writeln!(
         s,
-        "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"
+        "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"
     )?;
     for r in &rows {
         let (so, sid) = match &r.srim {
@@ -375,7 +386,7 @@ fn report(out: &Path) -> Result<String> {
         };
         writeln!(
             s,
-            "| {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
+            "| {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
             r.case,
             r.exit.map_or("killed".into(), |c| c.to_string()),
             if r.physical { "yes" } else { "**no**" },
@@ -387,6 +398,15 @@ fn report(out: &Path) -> Result<String> {
                     .map(|f| format!("{f:.2}"))
                     .collect::<Vec<_>>()
                     .join(", ")
+            },
+            if r.mac.is_empty() {
+                "—".to_string()
+            } else {
+                r.mac
+                    .iter()
+                    .map(|m| m.map_or("–".into(), |m| format!("{m:.3}")))
+                    .collect::<Vec<_>>()
+                    .join(" / ")
             },
             list(&r.id_fit),
             so,
