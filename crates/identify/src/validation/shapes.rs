@@ -125,7 +125,7 @@ pub(crate) fn intervals(
     let mut mac_draws: Vec<Vec<f64>> = vec![Vec::new(); pairs.len()];
     for _ in 0..SHAPE_DRAWS {
         let theta = q.draw(&mut rng);
-        let Ok(shapes) = shapes_of(&d.masses, &theta[..n]) else {
+        let Some(Ok(shapes)) = theta.get(..n).map(|k| shapes_of(&d.masses, k)) else {
             continue;
         };
         for (i, p) in pairs.iter().enumerate() {
