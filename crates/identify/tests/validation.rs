@@ -425,8 +425,28 @@ fn modes_pair_with_the_nearest_peak_and_never_with_a_far_one() {
     assert!(text.contains("not excited (-45 dB)"), "{text}");
     assert!(text.contains("without a model mode: 13.000 Hz"), "{text}");
     // Excited (−20 dB): paired as before.
-    let p = validation::pair(&modes, &peaks, 0.06, &[Some(-5.0), Some(-20.0)]);
+    let mut p = validation::pair(&modes, &peaks, 0.06, &[Some(-5.0), Some(-20.0)]);
     assert_eq!(p[1].measured_hz, Some(13.0));
+    // Paired by frequency but of another shape (MAC 0.062, as the frame's 11.13 Hz mode with a
+    // bump of a sine record's input): the summary says the peak is not that mode; a MAC of 0.5
+    // or more is not flagged.
+    p[0].mac = Some(0.999);
+    p[1].mac = Some(0.062);
+    let mut m = validation::ModalComparison {
+        modes: modes.to_vec(),
+        peaks: peaks.to_vec(),
+        pairs: p,
+        resolution_hz: 0.06,
+        ..Default::default()
+    };
+    let text = validation::summary(None, Some(&m));
+    assert!(
+        text.contains("not the same shape: mode 2 (MAC 0.062)") && !text.contains("mode 1 (MAC"),
+        "{text}"
+    );
+    assert!(text.contains("MAC 95 %"), "{text}");
+    m.pairs[1].mac = Some(0.5);
+    assert!(!validation::summary(None, Some(&m)).contains("not the same shape"));
 }
 
 /// The modal intervals of a one-storey building against its closed form: the natural frequency

@@ -1056,6 +1056,24 @@ fn write_modal_notes(o: &mut String, m: &ModalComparison) {
              — docs/validation.md"
         );
     }
+    let unlike: Vec<String> = m
+        .pairs
+        .iter()
+        .filter_map(|p| {
+            p.mac
+                .filter(|v| *v < shapes::UNLIKE_MAC)
+                .map(|v| format!("mode {} (MAC {v:.3})", p.mode))
+        })
+        .collect();
+    if !unlike.is_empty() {
+        let _ = writeln!(
+            o,
+            "not the same shape: {} — less than half of the measured shape lies along the \
+             model's (MAC < {}), so the peak it is paired with by frequency is not that mode",
+            unlike.join(", "),
+            shapes::UNLIKE_MAC
+        );
+    }
     if m.pairs.iter().any(|p| p.mac.is_some()) {
         let _ = writeln!(
             o,
