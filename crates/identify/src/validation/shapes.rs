@@ -31,7 +31,8 @@ pub(crate) const SHAPE_DRAWS: usize = 400;
 /// A MAC below this says the paired peak is not the model's mode: less than half of the measured
 /// shape's squared norm lies along the model's shape (MAC = cos² of the angle between them; 0.5
 /// is 45°). On the frame a frequency pairing of the 11.13 Hz mode with a 9.01 Hz bump of a sine
-/// record's input gives 0.062; every other pairing of the frame and the foreign corpus 0.77–1.0.
+/// record's input gives 0.062, the particle filters' misplaced modes 0.012–0.023; the pairings
+/// of the frame's MPF-EKF2 variants and of the foreign corpus 0.77–1.0.
 pub(crate) const UNLIKE_MAC: f64 = 0.5;
 
 /// MAC(φ, ψ) of two shapes of the same length; NaN when either is zero or the lengths differ.
