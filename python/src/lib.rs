@@ -891,6 +891,20 @@ impl PyRecord {
     fn validation(&self, py: Python<'_>) -> PyResult<PyObject> {
         json_value(py, &self.r.validation)
     }
+    /// The free run of the identified model against the measured floors (field data): fit and
+    /// NRMSE per channel, the predictive band and its coverage, as in the record; None for
+    /// simulated data.
+    #[getter]
+    fn free_run(&self, py: Python<'_>) -> PyResult<PyObject> {
+        json_value(py, &self.r.free_run)
+    }
+    /// The identified model's modes beside the measured transfer functions' peaks (field data):
+    /// frequencies and damping ratios with their 95 % intervals, mode shapes and their MAC
+    /// against the measured operating shapes, as in the record; None for simulated data.
+    #[getter]
+    fn modal(&self, py: Python<'_>) -> PyResult<PyObject> {
+        json_value(py, &self.r.modal)
+    }
     /// Online state errors against the truth (simulated data), as in the record.
     #[getter]
     fn online_states(&self, py: Python<'_>) -> PyResult<PyObject> {

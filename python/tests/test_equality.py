@@ -68,6 +68,13 @@ def test_field_arrays_same_bits_as_cli(sysid, tmp_path, short_data, algorithm):
     )
     assert bits(got.theta_val) == bits(want["theta_val"])
     assert bits([got.loglik]) == bits([want["loglik"]])
+    # Field data: the free run and the modes (with their shapes' MAC where peaks are paired),
+    # the CLI's record's own.
+    assert got.free_run == want.get("free_run")
+    assert got.modal == want.get("modal")
+    if algorithm == "mpf-ekf2":
+        assert [c["channel"] for c in got.free_run["channels"]] == ["a1", "a2", "a3"]
+        assert len(got.modal["pairs"]) == 3
     # Field data: the posterior's correlation matrix, the CLI's to the bit (a failed run has
     # none).
     if want.get("failure") is None:

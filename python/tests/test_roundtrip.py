@@ -80,6 +80,8 @@ def test_record_round_trips_and_has_every_output(tmp_path):
     assert res["measured"].shape == res["predicted"].shape == (len(d) - 2, 3)
     assert res["t"][0] == 2 * d.dt
     assert r.validation["error"] is None
+    # Simulated data are validated against their truth, not by a free run against the floors.
+    assert r.free_run is None and r.modal is None
     assert isinstance(r.warnings, list) and r.loglik == r.to_dict()["loglik"]
     path = tmp_path / "r.json"
     r.write(path)
