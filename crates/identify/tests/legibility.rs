@@ -597,6 +597,28 @@ fn shapes_are_legible_with_their_intervals() {
         .iter()
         .any(|t| t.text.starts_with("mode 2 (") && t.text.contains("MAC 0.990 [0.981, 0.995]")));
     assert_texts_legible(&f);
+    // Ten storeys, ten compared modes: four panels a row, every text still legible.
+    let mut ten = m.clone();
+    ten.channels = (1..=10).map(|c| format!("a{c}")).collect();
+    ten.pairs = (0..10)
+        .map(|r| {
+            let phi: Vec<f64> = (1..=10)
+                .map(|j| ((j * (2 * r + 1)) as f64 * std::f64::consts::PI / 21.0).sin())
+                .collect();
+            identify::validation::ModePair {
+                mode: r + 1,
+                model_hz: 1.5 * (2 * r + 1) as f64,
+                model_shape_95: phi.iter().map(|v| [v - 0.05, v + 0.05]).collect(),
+                operating_shape: phi.iter().map(|v| 3.0 * v).collect(),
+                model_shape: phi,
+                ..m.pairs[1].clone()
+            }
+        })
+        .collect();
+    let path = shapes(&ten, dir.path(), "mpf-ekf2 (seed 1, run 0)").unwrap();
+    let f = figure(&path);
+    assert!(f.texts.iter().any(|t| t.text.starts_with("mode 10 (")));
+    assert_texts_legible(&f);
     // Without a compared shape there is no figure, and the reason is given.
     let err = shapes(&synthetic_modal(), dir.path(), "x").unwrap_err();
     assert!(err.to_string().contains("no mode shape"), "{err}");

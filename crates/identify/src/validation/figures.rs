@@ -382,6 +382,9 @@ pub fn transfer(m: &ModalComparison, out: &Path, who: &str) -> Result<PathBuf> {
     Ok(path)
 }
 
+/// Most panels in one row of `shapes.svg`.
+const SHAPES_PER_ROW: usize = 4;
+
 /// The measured floors of a modal comparison's channels (named `a<floor>`).
 fn channel_floors(m: &ModalComparison) -> Option<Vec<usize>> {
     m.channels
@@ -491,13 +494,17 @@ pub fn shapes(m: &ModalComparison, out: &Path, who: &str) -> Result<PathBuf> {
     let (_, legend_h) = legend_layout(&entries);
     let path = out.join("shapes.svg");
     let file = path.clone();
+    // At most `SHAPES_PER_ROW` panels side by side (each at least 300 px wide), as many rows
+    // as that takes: a ten-storey building's ten modes in three rows.
+    let cols = pairs.len().min(SHAPES_PER_ROW);
+    let rows = pairs.len().div_ceil(cols);
     let (root, grid, legend) = open_figure(
         &file,
-        60 + legend_h + 420,
+        60 + legend_h + 420 * rows as u32,
         &format!("{who}: mode shapes against the measured operating shapes"),
         legend_h,
     )?;
-    let areas = grid.split_evenly((1, pairs.len()));
+    let areas = grid.split_evenly((rows, cols));
     for (p, area) in pairs.iter().zip(&areas) {
         shape_panel(area, p, &floors)?;
     }
