@@ -60,7 +60,8 @@ enum Command {
     /// The information limit of a linear record: the maximum-likelihood θ, its error and the
     /// Cramér–Rao s.d. of every parameter (exact Kalman likelihood), beside run records' answers.
     Information(cli::information::Args),
-    /// Draw the figures of one run record (convergence, ESS, hysteresis loop, residuals).
+    /// Draw the figures of one run record (convergence, ESS, hysteresis loop, residuals; of field
+    /// data also the free run, the transfer functions and the mode shapes).
     Plot(cli::plot::Args),
     /// A study of one real structure from its recordings: import, identify model variants,
     /// cross-validate, compare with a black-box baseline, REPORT.md.
