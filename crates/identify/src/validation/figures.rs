@@ -404,16 +404,10 @@ fn shape_pairs(m: &ModalComparison) -> Vec<&ModePair> {
 /// Draws one panel of `shapes.svg`: floor against shape component, the ground at 0.
 fn shape_panel(area: &Area<'_>, p: &ModePair, floors: &[usize]) -> Result<()> {
     let n = p.model_shape.len();
-    let on_floors: Vec<f64> = floors
-        .iter()
-        .map(|f| {
-            p.model_shape
-                .get(f.wrapping_sub(1))
-                .copied()
-                .unwrap_or(f64::NAN)
-        })
-        .collect();
-    let measured = shapes::aligned(&on_floors, &p.operating_shape);
+    let measured = shapes::aligned(
+        &shapes::on_floors(&p.model_shape, floors),
+        &p.operating_shape,
+    );
     let values = p
         .model_shape
         .iter()

@@ -61,8 +61,8 @@ pub fn aligned(phi: &[f64], psi: &[f64]) -> Vec<f64> {
     psi.iter().map(|b| b * dot / qq).collect()
 }
 
-/// φ on the measured floors (1-based storeys).
-fn on_floors(phi: &[f64], floors: &[usize]) -> Vec<f64> {
+/// φ on the measured floors (1-based storeys; NaN for a floor φ does not have).
+pub(crate) fn on_floors(phi: &[f64], floors: &[usize]) -> Vec<f64> {
     floors
         .iter()
         .map(|s| phi.get(s.wrapping_sub(1)).copied().unwrap_or(f64::NAN))

@@ -95,8 +95,9 @@ pub struct TransferEstimate {
     pub frequency_hz: Vec<f64>,
     /// |H1| per output channel, per bin.
     pub magnitude: Vec<Vec<f64>>,
-    /// H1 itself (re, im) per output channel, per bin: the phase the operating shapes need.
-    pub response: Vec<Vec<[f64; 2]>>,
+    /// Im H1 per output channel, per bin: the quadrature response the operating shapes are read
+    /// from ([`operating_shape`]).
+    pub quadrature: Vec<Vec<f64>>,
     /// P_xx per bin (input auto-spectrum, arbitrary scale).
     pub pxx: Vec<f64>,
     /// Magnitude-squared coherence per output channel, per bin.
@@ -161,24 +162,25 @@ pub fn welch_h1(x: &[f64], ys: &[Vec<f64>], dt: f64) -> Result<TransferEstimate,
     if pxx.iter().all(|p| *p == 0.0) {
         return Err(SpectralError::NoInput);
     }
-    let response: Vec<Vec<[f64; 2]>> = pxy
-        .iter()
-        .map(|(pr, pi)| {
-            (0..bins)
-                .map(|b| {
-                    if pxx[b] > 0.0 {
-                        [pr[b] / pxx[b], pi[b] / pxx[b]]
-                    } else {
-                        [f64::NAN, f64::NAN]
-                    }
-                })
-                .collect()
-        })
-        .collect();
-    let magnitude = response
-        .iter()
-        .map(|h| h.iter().map(|[re, im]| re.hypot(*im)).collect())
-        .collect();
+    // H1 = P_xy / P_xx per bin (NaN where the input has no power): its modulus and its
+    // imaginary part.
+    let h1 = |part: fn(f64, f64) -> f64| -> Vec<Vec<f64>> {
+        pxy.iter()
+            .map(|(pr, pi)| {
+                (0..bins)
+                    .map(|b| {
+                        if pxx[b] > 0.0 {
+                            part(pr[b], pi[b]) / pxx[b]
+                        } else {
+                            f64::NAN
+                        }
+                    })
+                    .collect()
+            })
+            .collect()
+    };
+    let magnitude = h1(f64::hypot);
+    let quadrature = h1(|_, im| im);
     let coherence = pxy
         .iter()
         .zip(&pyy)
@@ -202,7 +204,7 @@ pub fn welch_h1(x: &[f64], ys: &[Vec<f64>], dt: f64) -> Result<TransferEstimate,
         resolution_hz: df,
         frequency_hz: (0..bins).map(|b| b as f64 * df).collect(),
         magnitude,
-        response,
+        quadrature,
         pxx,
         coherence,
     })
@@ -221,9 +223,9 @@ pub fn operating_shape(t: &TransferEstimate, f_hz: f64) -> Option<Vec<f64>> {
         return None;
     }
     let b = (f_hz / t.resolution_hz).round() as usize;
-    t.response
+    t.quadrature
         .iter()
-        .map(|h| h.get(b).map(|[_, im]| *im).filter(|im| im.is_finite()))
+        .map(|h| h.get(b).copied().filter(|im| im.is_finite()))
         .collect()
 }
 
@@ -351,7 +353,7 @@ mod tests {
             resolution_hz: 0.25,
             frequency_hz: (0..n).map(|b| b as f64 * 0.25).collect(),
             magnitude: vec![magnitude],
-            response: Vec::new(),
+            quadrature: Vec::new(),
             pxx: vec![1.0; n],
             coherence: vec![coherence],
         };
