@@ -43,6 +43,7 @@ fn one_identification_resolves_its_building_and_scans_its_prior_once() {
         storvik_update: None,
         discretisation: None,
         substeps: None,
+        coloured_noise: None,
         rejuvenation: None,
         fix: None,
         noise_fraction: None,

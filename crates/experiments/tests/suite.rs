@@ -21,6 +21,8 @@ mod cli_validate;
 mod cluster;
 #[path = "cluster_submit.rs"]
 mod cluster_submit;
+#[path = "coloured_noise.rs"]
+mod coloured_noise;
 #[path = "coverage.rs"]
 mod coverage;
 #[path = "discrepancy.rs"]

@@ -157,6 +157,13 @@ physical_support = {physical}
 r_noise_fraction = {rnf}
 # Discretisation inside the filters: "euler" (the paper's), "symplectic", "rk4" (bootstrap only).
 discretisation = {disc}
+# Coloured measurement noise (MPF-EKF2 only): the part `share` of each channel's measurement
+# variance is an AR(1) sequence with coefficient `rho` per sample interval, one more state per
+# channel in the filter's Gaussian part (docs/validation.md, "Coloured measurement noise").
+# Absent: white noise only (the SPEC's). As a table at the end of the file, e.g.
+#   [coloured_noise]
+#   rho = 0.97
+#   share = 0.8
 # Transitions inside the filter per sample interval (dt/substeps each, ü_g interpolated), for
 # data sampled coarsely relative to the structure's highest modes; "auto": where one step would
 # shift the highest mode of the prior's building by more than 2 %, enough sub-steps to bring it
@@ -277,6 +284,8 @@ pub struct FilterRequest {
     /// [`crate::choice`]).
     pub noise_fraction: Option<f64>,
     pub process_noise_factor: Option<f64>,
+    /// Coloured measurement noise, over the config's.
+    pub coloured_noise: Option<models::filtering::ColouredNoise>,
     pub experiment: String,
     pub seed: u64,
     pub run: u64,
@@ -453,6 +462,9 @@ fn request_settings(req: &FilterRequest) -> Result<FilterSettings> {
     }
     if let Some(pf) = req.process_noise_factor {
         settings.process_noise_factor = pf;
+    }
+    if let Some(c) = req.coloured_noise {
+        settings.coloured_noise = Some(c);
     }
     Ok(settings)
 }

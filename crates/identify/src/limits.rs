@@ -28,6 +28,7 @@ pub(crate) const MAX_PROCESS_NOISE_FACTOR: f64 = 100.0;
 /// - `ess_threshold` in `(0, 1]`;
 /// - `rejuvenation` (the Liu–West discount) in `[1/3, 1]`;
 /// - `substeps` in `1..=MAX_SUBSTEPS`;
+/// - `coloured_noise`: `rho` in `[0, 1)`, `share` in `(0, 1)`;
 /// - `structure.masses`: at most `MAX_STOREYS`, each finite and positive;
 /// - `fix`: finite values.
 pub fn check_filter_settings(s: &FilterSettings) -> Result<()> {
@@ -49,6 +50,9 @@ pub fn check_filter_settings(s: &FilterSettings) -> Result<()> {
         }
     }
     s.liu_west()?;
+    if let Some(c) = &s.coloured_noise {
+        c.validate().context("field `coloured_noise`")?;
+    }
     if let crate::settings::Substeps::Fixed(m) = s.substeps {
         check_count(m, 1, models::filtering::MAX_SUBSTEPS).context("field `substeps`")?;
     }
@@ -159,6 +163,29 @@ mod tests {
             assert!(err(&s).contains("`process_noise_factor`"), "{bad}");
         }
         s.process_noise_factor = 1.0;
+        for (rho, share) in [
+            (1.0, 0.5),
+            (-0.1, 0.5),
+            (f64::NAN, 0.5),
+            (0.9, 0.0),
+            (0.9, 1.0),
+        ] {
+            s.coloured_noise = Some(models::filtering::ColouredNoise { rho, share });
+            let e = err(&s);
+            assert!(e.contains("`coloured_noise`"), "{rho} {share}: {e}");
+            let part = if rho.is_finite() && (0.0..1.0).contains(&rho) {
+                "share"
+            } else {
+                "rho"
+            };
+            assert!(e.contains(part), "{rho} {share}: {e}");
+        }
+        s.coloured_noise = Some(models::filtering::ColouredNoise {
+            rho: 0.0,
+            share: 0.5,
+        });
+        check_filter_settings(&s).unwrap();
+        s.coloured_noise = None;
         for bad in [0.0, -0.05, f64::NAN, 1e9] {
             s.r_noise_fraction = bad;
             assert!(err(&s).contains("`r_noise_fraction`"), "{bad}");

@@ -277,6 +277,9 @@ fn recorded_config(plan: &RunPlan, spec: &ChainSpec, data: &LoadedDataset) -> se
     if spec.substeps != 1 {
         config["spec"]["substeps"] = spec.substeps.into();
     }
+    if let Some(c) = spec.coloured_noise {
+        config["spec"]["coloured_noise"] = serde_json::to_value(c).expect("serialisable");
+    }
     let auto = &plan.evidence.substeps;
     if let Some(a) = auto.linear {
         config["substeps_auto"] = serde_json::to_value(a).expect("serialisable");

@@ -81,6 +81,9 @@ pub struct Model {
     pub q_r: Vec<f64>,
     /// Transitions inside the filter per sample interval.
     pub substeps: usize,
+    /// The coloured part of the measurement noise, if any (settings' `coloured_noise`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub coloured_noise: Option<models::filtering::ColouredNoise>,
 }
 
 /// What the automatic choices of a plan rest on.
@@ -585,6 +588,7 @@ pub fn settle(req: PlanRequest) -> Result<RunPlan> {
             q_vel: spec.q_vel,
             q_r: spec.q_r,
             substeps: spec.substeps,
+            coloured_noise: spec.coloured_noise,
         },
         evidence: Evidence {
             prior_from_data: scaled,
@@ -945,6 +949,7 @@ impl RunPlan {
             discretisation: self.settings.discretisation,
             substeps: self.model.substeps,
             physical_support: self.settings.physical_support,
+            coloured_noise: self.model.coloured_noise,
         };
         if spec.sensors.len() != data.channels {
             bail!(
@@ -1229,6 +1234,7 @@ fn assemble_spec(
     spec.discretisation = s.discretisation;
     spec.physical_support = s.physical_support;
     spec.q_vel *= s.process_noise_factor;
+    spec.coloured_noise = s.coloured_noise;
     spec.substeps = match s.substeps {
         Substeps::Fixed(m) => m,
         // Chosen per algorithm once the prior is known (`resolve_substeps`).

@@ -60,7 +60,10 @@ enum Source {
 impl Predictor {
     /// A predictor with the run's filter specification (noise levels, discretisation, sensors)
     /// for the measurements `ys` (`y_k` for k = 1..=K, `ny` per row) named `channels`.
-    pub fn new(spec: ChainSpec, ys: Vec<f64>, channels: Vec<String>) -> Result<Self> {
+    pub fn new(mut spec: ChainSpec, ys: Vec<f64>, channels: Vec<String>) -> Result<Self> {
+        // The prediction errors are the model's, scaled by the whole measurement noise: a
+        // coloured part of it is a state of the filter, not of the structure's prediction.
+        spec.coloured_noise = None;
         let ny = channels.len();
         let noise_sd = spec.r_diag.iter().map(|r| r.sqrt()).collect();
         let dt = spec.dt;

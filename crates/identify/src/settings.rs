@@ -88,6 +88,13 @@ pub struct FilterSettings {
     /// prediction ([`crate::choice`]). Absent from a record's settings when 1.
     #[serde(skip_serializing_if = "is_one_f64")]
     pub process_noise_factor: f64,
+    /// Part of each channel's measurement noise as an AR(1) sequence carried by the MPF-EKF2's
+    /// Gaussian part (`[coloured_noise]` with `rho` per sample interval and `share` of the
+    /// channel's variance; [`models::filtering::ColouredNoise`]): time-correlated prediction
+    /// errors that a model error makes go into it instead of into θ. Absent: white noise only
+    /// (the SPEC's), and absent from a record's settings.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub coloured_noise: Option<models::filtering::ColouredNoise>,
 }
 
 /// Transitions per sample interval: a number, or chosen by the rule of
@@ -203,6 +210,7 @@ impl Default for FilterSettings {
             r_noise_fraction: models::filtering::SPEC_R_NOISE_FRACTION,
             physical_support: false,
             process_noise_factor: 1.0,
+            coloured_noise: None,
         }
     }
 }

@@ -12,7 +12,9 @@ use core_filters::smc::mpf::MpfEkf2;
 use core_filters::smc::storvik::{Storvik, StorvikUpdate};
 use core_filters::smc::{run, Filter, Observer, Posterior, SmcConfig, StepInfo};
 use models::building::{Building, Damping};
-use models::filtering::{AugmentedChain, ChainSpec, Discretisation, MlnChain, MpfChain, RmsLevels};
+use models::filtering::{
+    AugmentedChain, ChainSpec, ColouredNoise, Discretisation, MlnChain, MpfChain, RmsLevels,
+};
 use models::ground_motions::el_centro;
 use models::integrate::simulate_rk4;
 use models::sensors::{MeasurementKind, SensorLayout};
@@ -352,22 +354,50 @@ fn mln_rbpf_gaussian_is_the_kalman_filter_of_z_given_its_path() {
 /// sensors — for forward and semi-implicit Euler, with one transition per sample and with three
 /// (`substeps`: the Kalman filter predicts three times with dt/3, ü_g interpolated linearly and a
 /// third of the process-noise variance, then updates once) — and with the storey+mass damping
-/// form, α fixed: `C` gains `αM` (unit masses here).
+/// form, α fixed: `C` gains `αM` (unit masses here). With coloured measurement noise the Kalman
+/// filter's state gains one AR(1) state per sensor (`e ← a e + w`, a = ρ^(1/M) per transition,
+/// Var w = (1 − a²)·share·r, started at its stationary variance), added to its channel, and the
+/// white part is (1 − share)·r.
 #[test]
 fn mpf_ekf2_is_the_kalman_filter_of_a_linear_chain() {
     for disc in [Discretisation::Euler, Discretisation::Symplectic] {
         for substeps in [1, 3] {
-            mpf_ekf2_against_kalman(disc, substeps, None);
+            mpf_ekf2_against_kalman(disc, substeps, None, None);
         }
-        mpf_ekf2_against_kalman(disc, 1, Some(0.7));
+        mpf_ekf2_against_kalman(disc, 1, Some(0.7), None);
+        let colour = ColouredNoise {
+            rho: 0.9,
+            share: 0.6,
+        };
+        mpf_ekf2_against_kalman(disc, 1, None, Some(colour));
+        mpf_ekf2_against_kalman(disc, 3, Some(0.7), Some(colour));
     }
 }
 
-fn mpf_ekf2_against_kalman(disc: Discretisation, substeps: usize, alpha: Option<f64>) {
+fn mpf_ekf2_against_kalman(
+    disc: Discretisation,
+    substeps: usize,
+    alpha: Option<f64>,
+    colour: Option<ColouredNoise>,
+) {
     let n = 10;
     let sensors = [1, 4, 8, 10];
     let (mut spec, y) = chain_data(n, &[], &sensors, 0.5, disc);
     spec.substeps = substeps;
+    spec.coloured_noise = colour;
+    if colour.is_some() {
+        // Only the MPF-EKF2 has a Gaussian part to carry the coloured noise.
+        for err in [
+            AugmentedChain::new(spec.clone()).err(),
+            MlnChain::new(spec.clone()).err(),
+        ] {
+            let msg = err.expect("refused").to_string();
+            assert!(
+                msg.contains("coloured_noise") && msg.contains("MPF-EKF2"),
+                "{msg}"
+            );
+        }
+    }
     if let Some(a) = alpha {
         spec.building = spec.building.with_damping(Damping::StoreyMass);
         spec.prior.alpha = Some(models::priors::Prior::Fixed { value: a });
@@ -451,10 +481,33 @@ fn mpf_ekf2_against_kalman(disc: Discretisation, substeps: usize, alpha: Option<
             spec.ug[k0] + (spec.ug[k0 + 1] - spec.ug[k0]) * s as f64 / m_sub
         }
     };
-    let c = DMatrix::from_fn(4, 2 * n, |i, jj| acc[(sensors[i] - 1, jj)]);
-    let r = DMatrix::from_diagonal(&DVector::from_vec(spec.r_diag.clone()));
-    let mut m = DVector::<f64>::zeros(2 * n);
+    let mut c = DMatrix::from_fn(4, 2 * n, |i, jj| acc[(sensors[i] - 1, jj)]);
+    let mut r = DMatrix::from_diagonal(&DVector::from_vec(spec.r_diag.clone()));
     let mut p = DMatrix::<f64>::zeros(2 * n, 2 * n);
+    if let Some(col) = colour {
+        // x = [x, v, e1..e4].
+        let d = 2 * n + 4;
+        let ar = col.rho.powf(1.0 / m_sub);
+        let grow = |old: &DMatrix<f64>, rows: usize, cols: usize| {
+            let mut g = DMatrix::<f64>::zeros(rows, cols);
+            g.view_mut((0, 0), old.shape()).copy_from(old);
+            g
+        };
+        a = grow(&a, d, d);
+        q = grow(&q, d, d);
+        c = grow(&c, 4, d);
+        b = b.resize_vertically(d, 0.0);
+        p = grow(&p, d, d);
+        for i in 0..4 {
+            let var = col.share * spec.r_diag[i];
+            a[(2 * n + i, 2 * n + i)] = ar;
+            q[(2 * n + i, 2 * n + i)] = (1.0 - ar * ar) * var;
+            c[(i, 2 * n + i)] = 1.0;
+            p[(2 * n + i, 2 * n + i)] = var;
+        }
+        r *= 1.0 - col.share;
+    }
+    let mut m = DVector::<f64>::zeros(a.nrows());
     for (kk, (post, info)) in steps.0.iter().enumerate() {
         let k = kk + 1;
         for kf in (k - 1) * substeps + 1..=k * substeps {
@@ -471,7 +524,7 @@ fn mpf_ekf2_against_kalman(disc: Discretisation, substeps: usize, alpha: Option<
         let ll = -0.5 * (resid.transpose() * chol.solve(&resid))[0]
             - 0.5 * s_cov.determinant().ln()
             - 2.0 * (2.0 * std::f64::consts::PI).ln();
-        let ctx = format!("{disc:?}, substeps {substeps}, α {alpha:?}, k={k}");
+        let ctx = format!("{disc:?}, substeps {substeps}, α {alpha:?}, {colour:?}, k={k}");
         assert!(
             (info.loglik_increment - ll).abs() < 1e-7 * ll.abs().max(1.0),
             "{ctx}: {} vs {ll}",

@@ -155,6 +155,7 @@ fn plastic_spec(case: &Case, disc: Discretisation) -> ChainSpecOf<PlasticLaw> {
         discretisation: s.discretisation,
         substeps: s.substeps,
         physical_support: false,
+        coloured_noise: None,
     }
 }
 

@@ -29,7 +29,7 @@ enum Command {
     Import(cli::import::Args),
     /// Run one identification filter on a data set and write a run record.
     #[command(allow_negative_numbers = true)]
-    Filter(cli::filter::Args),
+    Filter(Box<cli::filter::Args>),
     /// Reproduce the paper: every study, figure and the report.
     #[command(allow_negative_numbers = true)]
     Reproduce(cli::reproduce::Args),
@@ -102,7 +102,7 @@ fn main() -> std::process::ExitCode {
 fn run(cli: Cli) -> experiments::error::Result<()> {
     match cli.command {
         Command::Simulate(args) => cli::simulate::run(args, &mut Console::standard()),
-        Command::Filter(args) => cli::filter::run(args, &mut Console::standard()),
+        Command::Filter(args) => cli::filter::run(*args, &mut Console::standard()),
         Command::Import(args) => cli::import::run(args, &mut Console::standard()),
         Command::Table1(args) => cli::table1::run(args, &mut Console::standard()),
         Command::Reference(args) => cli::reference::run(args, &mut Console::standard()),

@@ -54,7 +54,7 @@ pub struct Args {
         "algorithm", "particles", "seed", "run", "resampling", "ess_threshold", "storvik_update",
         "discretisation", "substeps", "rejuvenation", "config", "fix", "experiment", "storeys",
         "hysteretic", "masses", "measurement", "damping", "noise_fraction",
-        "process_noise_factor",
+        "process_noise_factor", "coloured_noise",
     ])]
     pub plan: Option<PathBuf>,
     /// Also draw the run's figures into this directory (as `sysid plot RECORD --out DIR`).
@@ -99,6 +99,13 @@ pub struct Args {
     /// noise fraction on field data of a linear building unless given here.
     #[arg(long)]
     pub process_noise_factor: Option<f64>,
+    /// Coloured measurement noise `RHO,SHARE` (MPF-EKF2): the part SHARE (in (0, 1)) of each
+    /// channel's measurement variance is an AR(1) sequence with coefficient RHO (in [0, 1)) per
+    /// sample interval, one more state per channel in the filter's Gaussian part, so that
+    /// prediction errors correlated in time go into it rather than into the parameters
+    /// (docs/validation.md, "Coloured measurement noise"). Default: white noise only.
+    #[arg(long, value_name = "RHO,SHARE", value_parser = parse_coloured_noise)]
+    pub coloured_noise: Option<models::filtering::ColouredNoise>,
     /// Experiment name written into the record (default `cli`).
     #[arg(long)]
     pub experiment: Option<String>,
@@ -139,6 +146,24 @@ fn parse_storvik(s: &str) -> Result<StorvikUpdate, String> {
             "unknown Storvik update `{s}` (expected linearised or exact)"
         )),
     }
+}
+
+/// `RHO,SHARE` of `--coloured-noise`, each checked for its range.
+fn parse_coloured_noise(s: &str) -> Result<models::filtering::ColouredNoise, String> {
+    let parts: Vec<&str> = s.split(',').map(str::trim).collect();
+    let [rho, share] = parts[..] else {
+        return Err(format!("`{s}` is not RHO,SHARE (e.g. 0.97,0.8)"));
+    };
+    let number = |name: &str, v: &str| {
+        v.parse::<f64>()
+            .map_err(|_| format!("{name} `{v}` is not a number"))
+    };
+    let c = models::filtering::ColouredNoise {
+        rho: number("RHO", rho)?,
+        share: number("SHARE", share)?,
+    };
+    c.validate().map_err(|e| e.to_string())?;
+    Ok(c)
 }
 
 /// Runs `sysid filter`, its text to `con`.
@@ -301,6 +326,7 @@ fn request(args: &Args, algorithm: Algorithm, data: PathBuf) -> FilterRequest {
         fix: args.fix.clone(),
         noise_fraction: args.noise_fraction,
         process_noise_factor: args.process_noise_factor,
+        coloured_noise: args.coloured_noise,
         experiment: args.experiment.clone().unwrap_or_else(|| "cli".into()),
         seed: args.seed.unwrap_or(1),
         run: args.run.unwrap_or(0),

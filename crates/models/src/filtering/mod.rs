@@ -51,7 +51,10 @@ pub use discretisation::Discretisation;
 pub use mln::{MlnChain, MlnChainOf};
 pub use mpf::{MpfChain, MpfChainOf};
 pub use prior::{ChainPrior, ChainPriorOf, ElementPrior, MarginalPrior};
-pub use spec::{ChainSpec, ChainSpecOf, RmsLevels, SpecError, MAX_SUBSTEPS, SPEC_R_NOISE_FRACTION};
+pub use spec::{
+    ChainSpec, ChainSpecOf, ColouredNoise, RmsLevels, SpecError, MAX_SUBSTEPS,
+    SPEC_R_NOISE_FRACTION,
+};
 
 use crate::law::{HysteresisLaw, MAX_LINEAR};
 use crate::structure::{state_names, theta_names_damped, ChainView};
@@ -251,14 +254,30 @@ impl<L: HysteresisLaw> ChainCore<L> {
             .collect()
     }
 
-    /// `R` (column-major, diagonal).
+    /// `R` (column-major, diagonal): the white part of the measurement noise (all of it without
+    /// coloured noise, `(1 − share)·r_diag` with it).
     pub fn measurement_cov(&self) -> Vec<f64> {
         let m = self.sensors.len();
+        let white = 1.0 - self.spec.coloured_noise.map_or(0.0, |c| c.share);
         let mut r = vec![0.0; m * m];
         for (i, v) in self.spec.r_diag.iter().enumerate() {
-            r[i + i * m] = *v;
+            r[i + i * m] = white * *v;
         }
         r
+    }
+
+    /// Refuses coloured measurement noise for a partition that has no Gaussian part to carry it.
+    pub fn white_noise_only(&self, partition: &'static str) -> Result<(), SpecError> {
+        match self.spec.coloured_noise {
+            None => Ok(()),
+            Some(_) => Err(SpecError::Invalid {
+                field: "coloured_noise",
+                reason: format!(
+                    "the {partition} partition has no state for coloured measurement noise; \
+                     use the MPF-EKF2"
+                ),
+            }),
+        }
     }
 
     /// Writes `s · ∂F_j/∂w` at the point `p` into row `row`, `w` the variables `vars`: the one

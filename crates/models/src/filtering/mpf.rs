@@ -29,6 +29,10 @@
 //!   (affine); `Q_bl` adds `Var(x_j) += dt² q_vel²` and `Cov(x_j, v_j) = dt q_vel²` for every
 //!   marginal velocity (the same noise moves `x_j` through the new velocity).
 //!
+//! With coloured measurement noise ([`super::ColouredNoise`]) x^bl ends with one AR(1) state per
+//! sensor, `e_i ← a e_i` (`D` entry `a − 1`, noise `(1 − a²)·share·r_i`), added to its
+//! channel's observation (Jacobian entry 1): linear, so the Kalman part carries it exactly.
+//!
 //! A chain without hysteretic element samples nothing: xⁿ is empty and there are no sampled
 //! stages, so the MPF-EKF2 reduces to an EKF2 (exact here: a KF with bilinear terms) on x^bl.
 
@@ -72,6 +76,11 @@ pub struct MpfChainOf<L: HysteresisLaw> {
     a0: usize,
     /// Offset of (β_0, γ_0) in x^bl.
     b0: usize,
+    /// Offset of the coloured-noise states in x^bl (one per sensor, after the elements'
+    /// parameters), their AR coefficient per transition and stationary variances; no states
+    /// without coloured noise.
+    e0: usize,
+    colour: Option<(f64, Vec<f64>)>,
     stages: Vec<Vec<usize>>,
     stage_noise: Vec<Vec<f64>>,
     stage_hessians: Vec<SparseHessians>,
@@ -170,6 +179,11 @@ impl<L: HysteresisLaw> MpfChainOf<L> {
         let nvs = sampled_vel.len();
         let na = core.spec.building.damping().extra_parameters();
         let (k0, c0, a0, b0) = (n + nvm, 2 * n + nvm, 3 * n + nvm, 3 * n + nvm + na);
+        let e0 = b0 + L::NLIN * ne;
+        let colour = core.spec.coloured_noise.map(|c| {
+            let var: Vec<f64> = core.spec.r_diag.iter().map(|r| c.share * r).collect();
+            (c.per_transition(core.substeps, 1.0).0, var)
+        });
         let mut me = Self {
             core,
             symplectic,
@@ -180,6 +194,8 @@ impl<L: HysteresisLaw> MpfChainOf<L> {
             c0,
             a0,
             b0,
+            e0,
+            colour,
             stages: Vec::new(),
             stage_noise: Vec::new(),
             stage_hessians: Vec::new(),
@@ -222,6 +238,17 @@ impl<L: HysteresisLaw> MpfChainOf<L> {
                 me.push_acceleration_hessian(&mut mh, j, j, dt * dt);
                 q.push(j, j, dt * dt * q_vel * q_vel);
                 q.push(j, vi, dt * q_vel * q_vel);
+            }
+        }
+        if let Some(c) = me.core.spec.coloured_noise {
+            for (i, var) in me
+                .colour
+                .as_ref()
+                .map_or(&[][..], |(_, v)| v)
+                .iter()
+                .enumerate()
+            {
+                q.push(e0 + i, e0 + i, c.per_transition(me.core.substeps, *var).1);
             }
         }
         me.marginal_hessians = mh;
@@ -379,7 +406,8 @@ impl<L: HysteresisLaw> ConditionallyQuadratic for MpfChainOf<L> {
             nbl: 3 * n
                 + self.marginal_vel.len()
                 + self.core.spec.building.damping().extra_parameters()
-                + L::NLIN * ne,
+                + L::NLIN * ne
+                + self.colour.as_ref().map_or(0, |(_, v)| v.len()),
             ny: self.core.sensors.len(),
         }
     }
@@ -488,6 +516,12 @@ impl<L: HysteresisLaw> ConditionallyQuadratic for MpfChainOf<L> {
                 }
             }
         }
+        if let Some((a, var)) = &self.colour {
+            for i in self.e0..self.e0 + var.len() {
+                value[i] = T::splat(*a) * m[i];
+                d.add(i, i, T::splat(a - 1.0));
+            }
+        }
     }
 
     fn marginal_hessians(&self) -> &SparseHessians {
@@ -512,6 +546,10 @@ impl<L: HysteresisLaw> ConditionallyQuadratic for MpfChainOf<L> {
         for (i, &s) in self.core.sensors.iter().enumerate() {
             value[i] = self.core.spec.building.acceleration(&p, s, ground);
             self.write_acceleration_gradient(jac, i, s, &p, T::splat(1.0));
+            if self.colour.is_some() {
+                value[i] += m[self.e0 + i];
+                jac.add(i, self.e0 + i, T::splat(1.0));
+            }
         }
     }
 
@@ -553,6 +591,16 @@ impl<L: HysteresisLaw> Marginalised for MpfChainOf<L> {
             for i in 0..L::NLIN {
                 set(self.beta_index(e) + i, t + i);
             }
+        }
+        // The coloured noise starts from its stationary distribution.
+        for (i, var) in self
+            .colour
+            .as_ref()
+            .map_or(&[][..], |(_, v)| v)
+            .iter()
+            .enumerate()
+        {
+            cov[(self.e0 + i) * (nbl + 1)] = *var;
         }
     }
 }

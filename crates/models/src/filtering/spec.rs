@@ -98,6 +98,52 @@ pub struct ChainSpecOf<L: HysteresisLaw> {
     /// by construction. Off in the SPEC's filters (the paper's Gaussians are unconstrained).
     #[serde(default, skip_serializing_if = "is_false")]
     pub physical_support: bool,
+    /// Part of each channel's measurement noise is coloured, an AR(1) state per channel in the
+    /// marginalised Gaussian ([`ColouredNoise`]); `None`: all of it white (SPEC §3).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub coloured_noise: Option<ColouredNoise>,
+}
+
+/// Coloured measurement noise: of each channel's variance `r_diag[i]`, the part `share` is an
+/// AR(1) sequence `e_k = ρ e_{k−1} + w_k` (stationary variance `share·r_diag[i]`, started from
+/// it), the rest white. `e` is one more state per channel of the marginalised Gaussian, so the
+/// Kalman part carries it exactly (it is linear): the one-step prediction errors that a model
+/// error makes correlated in time go into `e` rather than into θ (docs/validation.md,
+/// "Coloured measurement noise"). MPF-EKF2 only.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ColouredNoise {
+    /// AR(1) coefficient per sample interval, in [0, 1).
+    pub rho: f64,
+    /// Part of each channel's measurement variance that is coloured, in (0, 1).
+    pub share: f64,
+}
+
+impl ColouredNoise {
+    /// ρ within [0, 1) and the share within (0, 1).
+    pub fn validate(&self) -> Result<(), SpecError> {
+        if !(self.rho.is_finite() && (0.0..1.0).contains(&self.rho)) {
+            return Err(invalid(
+                "coloured_noise.rho",
+                format!("{} is not within [0, 1)", self.rho),
+            ));
+        }
+        if !(self.share.is_finite() && self.share > 0.0 && self.share < 1.0) {
+            return Err(invalid(
+                "coloured_noise.share",
+                format!("{} is not within (0, 1)", self.share),
+            ));
+        }
+        Ok(())
+    }
+
+    /// (AR coefficient, innovation variance) per transition of a grid of `substeps` transitions
+    /// per sample interval, for a stationary variance `var`: ρ^(1/M) and (1 − ρ^(2/M))·var, so
+    /// that M transitions make the per-sample AR(1).
+    pub fn per_transition(&self, substeps: usize, var: f64) -> (f64, f64) {
+        let a = self.rho.powf(1.0 / substeps as f64);
+        (a, (1.0 - a * a) * var)
+    }
 }
 
 /// The spec of a chain with Bouc–Wen elements.
@@ -204,6 +250,7 @@ impl<L: HysteresisLaw> ChainSpecOf<L> {
             discretisation: Discretisation::Euler,
             substeps: 1,
             physical_support: false,
+            coloured_noise: None,
         };
         spec.validate()?;
         Ok(spec)
@@ -325,6 +372,9 @@ impl<L: HysteresisLaw> ChainSpecOf<L> {
         }
         if let Some(r) = self.r_diag.iter().find(|r| !(r.is_finite() && **r > 0.0)) {
             return Err(invalid("r_diag", format!("variance {r} is not positive")));
+        }
+        if let Some(c) = &self.coloured_noise {
+            c.validate()?;
         }
         Ok(())
     }
