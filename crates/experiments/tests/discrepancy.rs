@@ -84,6 +84,31 @@ fn chosen_modes(s: &Structure, ug: &[f64], dt: f64, i: u64, dir: &Path) -> (usiz
     // The record holds the term exactly when modes were chosen.
     let term = &r["free_run"]["discrepancy"];
     assert_eq!(term.is_object(), chosen > 0, "{term}");
+    // With modes, θ was also identified with them inside the filter and scored on the held-out
+    // part; the run takes that where its mean held-out fit is at least the term-after-θ's, and
+    // then the plan and the record's spec carry the modes.
+    let joint = &r["plan"]["evidence"]["joint_discrepancy"];
+    assert_eq!(joint.is_object(), chosen > 0, "{joint}");
+    let in_filter = &r["plan"]["model"]["discrepancy_modes"];
+    if chosen > 0 {
+        let mean = |k: &str| {
+            let f = joint[k].as_array().unwrap();
+            f.iter().map(|v| v.as_f64().unwrap()).sum::<f64>() / f.len() as f64
+        };
+        assert_eq!(
+            joint["after_fit"],
+            choice["candidates"][chosen]["held_out_fit"]
+        );
+        let kept = joint["kept"].as_bool().unwrap();
+        assert_eq!(kept, mean("joint_fit") >= mean("after_fit"), "{joint}");
+        if kept {
+            assert_eq!(in_filter, &term["modes"]);
+            assert_eq!(&r["config"]["spec"]["discrepancy_modes"], in_filter);
+        }
+        assert_eq!(in_filter.is_array(), kept, "{in_filter}");
+    } else {
+        assert!(in_filter.is_null());
+    }
     (chosen, score(0), score(chosen))
 }
 

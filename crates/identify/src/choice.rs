@@ -28,7 +28,9 @@ use rayon::prelude::*;
 
 use crate::error::Result;
 use crate::field::StructureSettings;
-use crate::plan::{Candidate, Decision, HeldOutChoice, Level, MassChoice, RunPlan, Target};
+use crate::plan::{
+    Candidate, Decision, HeldOutChoice, JointDiscrepancy, Level, MassChoice, RunPlan, Target,
+};
 use crate::settings::FilterSettings;
 use crate::validation::free_run::{chain_of, fit_percent, free_run_integrator, simulate_channels};
 use crate::validation::{discrepancy, prediction};
@@ -340,17 +342,91 @@ pub fn choose(
         (out, m) = identify_masses(out, t, settings, (&ident, data), c, &mut discrepancy)?;
         Some(m)
     };
+    let (out, joint) = joint_discrepancy(out, discrepancy.as_ref(), (&ident, data))?;
     let choice = HeldOutChoice {
         identified_samples: ident.len(),
         held_out_samples: held_out,
         candidates,
         chosen,
     };
-    Ok(with_evidence(
-        with_choice(out, choice, open),
-        masses,
-        discrepancy,
-    ))
+    let mut out = with_evidence(with_choice(out, choice, open), masses, discrepancy);
+    if let Some(j) = joint {
+        out.decisions.push(Decision {
+            rule: "choice::joint_discrepancy".into(),
+            set: if j.kept {
+                format!("discrepancy_modes = {}", out.model.discrepancy_modes.len())
+            } else {
+                String::new()
+            },
+            level: Level::Note,
+            why: j.describe(),
+        });
+        out.evidence.joint_discrepancy = Some(j);
+    }
+    Ok(out)
+}
+
+/// The discrepancy inside the filter: `out` identified on the first part again with the chosen
+/// modes' responses as regressors whose coefficients its Gaussian part carries beside θ
+/// ([`crate::plan::Model::discrepancy_modes`]), θ's free run with the term fitted after it as
+/// before, scored on the held-out part; the run takes it when its mean held-out fit is at least
+/// that of θ identified alone with the term fitted after it. Model error then has the modes to
+/// go into instead of θ, and θ's intervals carry what the data cannot tell apart between the
+/// building and the modes.
+fn joint_discrepancy(
+    out: RunPlan,
+    discrepancy: Option<&discrepancy::DiscrepancyChoice>,
+    (ident, data): (&LoadedDataset, &LoadedDataset),
+) -> Result<(RunPlan, Option<JointDiscrepancy>)> {
+    let Some(d) = discrepancy.filter(|d| !d.modes().is_empty()) else {
+        return Ok((out, None));
+    };
+    let modes = d.modes();
+    let mut joint = out.clone();
+    joint.model.discrepancy_modes = modes.to_vec();
+    let mut j = JointDiscrepancy {
+        after_fit: d.candidates[d.chosen].held_out_fit.clone(),
+        joint_fit: Vec::new(),
+        joint_building_fit: Vec::new(),
+        kept: false,
+        held_out_error: None,
+        note: None,
+    };
+    let (c, sim) = score(&joint, ident, data)?;
+    let Some(sim) = sim else {
+        j.note = Some(c.note.unwrap_or_else(|| "no free run".into()));
+        return Ok((out, Some(j)));
+    };
+    j.joint_building_fit = c.held_out_fit;
+    let names: Vec<String> = data.sensors.iter().map(|s| format!("a{s}")).collect();
+    let measured = crate::validation::measured_channels(data);
+    let from = ident.len();
+    let (term, fits) =
+        discrepancy::held_out_with(modes, &names, &measured, &sim, &data.ug_meas, data.dt, from);
+    j.joint_fit = fits;
+    let add = discrepancy::contribution(&term, &data.ug_meas, data.dt);
+    let with: Vec<Vec<f64>> = sim
+        .iter()
+        .zip(&add)
+        .map(|(s, a)| s.iter().zip(a).map(|(x, y)| x + y).collect())
+        .collect();
+    j.held_out_error = c.held_out_error.and_then(|e| {
+        prediction::learn(
+            &names,
+            &measured,
+            &with,
+            data.dt,
+            e.window_s,
+            from,
+            prediction::ErrorSource::HeldOut {
+                samples: data.len() - from,
+            },
+        )
+    });
+    let mean = |f: &[f64]| f.iter().sum::<f64>() / f.len() as f64;
+    let (mj, ma) = (mean(&j.joint_fit), mean(&j.after_fit));
+    j.kept = mj.is_finite() && (mj >= ma || !ma.is_finite());
+    Ok((if j.kept { joint } else { out }, Some(j)))
 }
 
 /// The masses of the chosen candidate's plan `out` identified ([`masses::identify`]) and, when

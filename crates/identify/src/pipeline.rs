@@ -280,6 +280,10 @@ fn recorded_config(plan: &RunPlan, spec: &ChainSpec, data: &LoadedDataset) -> se
     if let Some(c) = spec.coloured_noise {
         config["spec"]["coloured_noise"] = serde_json::to_value(c).expect("serialisable");
     }
+    if !plan.model.discrepancy_modes.is_empty() {
+        config["spec"]["discrepancy_modes"] =
+            serde_json::to_value(&plan.model.discrepancy_modes).expect("serialisable");
+    }
     let auto = &plan.evidence.substeps;
     if let Some(a) = auto.linear {
         config["substeps_auto"] = serde_json::to_value(a).expect("serialisable");

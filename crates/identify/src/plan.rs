@@ -84,6 +84,11 @@ pub struct Model {
     /// The coloured part of the measurement noise, if any (settings' `coloured_noise`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub coloured_noise: Option<models::filtering::ColouredNoise>,
+    /// Discrepancy modes identified with θ: their responses to the ground motion are regressors
+    /// of every channel whose coefficients the filter's Gaussian part carries beside θ
+    /// ([`crate::choice`], "the discrepancy inside the filter"); none: θ alone.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub discrepancy_modes: Vec<crate::record::validation::DiscrepancyMode>,
 }
 
 /// What the automatic choices of a plan rest on.
@@ -108,6 +113,52 @@ pub struct Evidence {
     /// ([`crate::choice::masses`]).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub masses: Option<MassChoice>,
+    /// The chosen discrepancy modes identified with θ inside the filter, and whether the run
+    /// does so ([`crate::choice`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub joint_discrepancy: Option<JointDiscrepancy>,
+}
+
+/// The evidence of identifying θ with the discrepancy modes inside the filter: the held-out
+/// part's free-run fit with the term, each way, the term's coefficients fitted on the
+/// identified part.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct JointDiscrepancy {
+    /// θ identified alone, the term fitted after it (the discrepancy choice's chosen fits).
+    pub after_fit: Vec<f64>,
+    /// θ identified with the modes' coefficients in the filter, the term fitted after it.
+    pub joint_fit: Vec<f64>,
+    /// The held-out part's fit of the building alone, identified jointly.
+    pub joint_building_fit: Vec<f64>,
+    /// Whether the run identifies θ with the modes: its mean held-out fit is at least the
+    /// other's.
+    pub kept: bool,
+    /// The joint model's error learned on the held-out part (the band's, when kept).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub held_out_error: Option<crate::record::validation::ModelError>,
+    /// Why it could not be scored, if so.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub note: Option<String>,
+}
+
+impl JointDiscrepancy {
+    /// One line: both ways' held-out fits and which the run takes.
+    pub fn describe(&self) -> String {
+        let mean = |f: &[f64]| f.iter().sum::<f64>() / f.len().max(1) as f64;
+        match &self.note {
+            Some(n) => format!("θ identified without the discrepancy modes: {n}"),
+            None => format!(
+                "θ identified {} the discrepancy modes inside the filter: held-out fit with the \
+                 term {} (building alone {}) identified with them, against {} with the term \
+                 fitted after θ",
+                if self.kept { "with" } else { "without" },
+                held_out_fit(mean(&self.joint_fit), &self.joint_fit),
+                fits_list(&self.joint_building_fit),
+                held_out_fit(mean(&self.after_fit), &self.after_fit),
+            ),
+        }
+    }
 }
 
 impl Evidence {
@@ -115,6 +166,9 @@ impl Evidence {
     /// masses and discrepancy the run takes (the identified masses' when kept, else the chosen
     /// candidate's); `None` when the held-out choice did not run.
     pub(crate) fn held_out_error(&self) -> Option<&crate::record::validation::ModelError> {
+        if let Some(j) = self.joint_discrepancy.as_ref().filter(|j| j.kept) {
+            return j.held_out_error.as_ref();
+        }
         match &self.masses {
             Some(m) if m.kept => m.held_out_error.as_ref(),
             _ => self
@@ -589,6 +643,7 @@ pub fn settle(req: PlanRequest) -> Result<RunPlan> {
             q_r: spec.q_r,
             substeps: spec.substeps,
             coloured_noise: spec.coloured_noise,
+            discrepancy_modes: Vec::new(),
         },
         evidence: Evidence {
             prior_from_data: scaled,
@@ -596,6 +651,7 @@ pub fn settle(req: PlanRequest) -> Result<RunPlan> {
             held_out: None,
             discrepancy: None,
             masses: None,
+            joint_discrepancy: None,
         },
         decisions,
     })
@@ -930,10 +986,48 @@ fn linear_substep_decisions(
     }
 }
 
+/// The responses of the discrepancy `modes` to the ground motion of `data` as regressors of the
+/// filter ([`models::filtering::Regressors`]): each mode's `ω² q` and `ω q̇`
+/// ([`models::integrate::oscillator_basis`], the discrepancy term's own columns), and for the
+/// coefficient of column c in channel i a prior s.d. of RMS(y_i)/RMS(column c) — wide enough for
+/// one column alone to carry the whole channel.
+fn discrepancy_regressors(
+    modes: &[crate::record::validation::DiscrepancyMode],
+    data: &LoadedDataset,
+) -> models::filtering::Regressors {
+    let columns: Vec<Vec<f64>> = modes
+        .iter()
+        .flat_map(|m| {
+            models::integrate::oscillator_basis(
+                m.frequency_hz,
+                m.damping_ratio,
+                &data.ug_meas,
+                data.dt,
+            )
+        })
+        .collect();
+    let rms = |xs: &mut dyn Iterator<Item = f64>| {
+        let (sum, n) = xs.fold((0.0, 0usize), |(s, n), x| (s + x * x, n + 1));
+        (sum / n.max(1) as f64).sqrt()
+    };
+    let ny = data.channels;
+    let mut prior_sd = Vec::with_capacity(ny * columns.len());
+    for i in 0..ny {
+        let ry = rms(&mut data.y_meas.iter().skip(i).step_by(ny).copied());
+        for c in &columns {
+            let rc = rms(&mut c.iter().copied());
+            // A column the record does not excite: any positive s.d. (it is never informed).
+            prior_sd.push(if rc > 0.0 && ry > 0.0 { ry / rc } else { 1.0 });
+        }
+    }
+    models::filtering::Regressors { columns, prior_sd }
+}
+
 impl RunPlan {
     /// The filter partitions' specification of this plan on `data` (the data the plan was
     /// settled on): the building, the prior and noise levels of [`Model`], the settings'
-    /// discretisation and marginal prior, the measured ground acceleration.
+    /// discretisation and marginal prior, the measured ground acceleration, and the regressors
+    /// of [`Model::discrepancy_modes`] on it.
     pub fn spec(&self, data: &LoadedDataset) -> Result<ChainSpec> {
         let spec = ChainSpec {
             dt: data.dt,
@@ -950,6 +1044,8 @@ impl RunPlan {
             substeps: self.model.substeps,
             physical_support: self.settings.physical_support,
             coloured_noise: self.model.coloured_noise,
+            regressors: (!self.model.discrepancy_modes.is_empty())
+                .then(|| discrepancy_regressors(&self.model.discrepancy_modes, data)),
         };
         if spec.sensors.len() != data.channels {
             bail!(

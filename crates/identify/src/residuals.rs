@@ -64,6 +64,7 @@ impl Predictor {
         // The prediction errors are the model's, scaled by the whole measurement noise: a
         // coloured part of it is a state of the filter, not of the structure's prediction.
         spec.coloured_noise = None;
+        spec.regressors = None;
         let ny = channels.len();
         let noise_sd = spec.r_diag.iter().map(|r| r.sqrt()).collect();
         let dt = spec.dt;

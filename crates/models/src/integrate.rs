@@ -557,6 +557,33 @@ pub fn first_order_hold<L: HysteresisLaw>(
     (phi, g0, g1)
 }
 
+/// The response of the oscillator `q̈ + 2ζω q̇ + ω² q = −ü_g` (`f_hz`, `zeta`) to `ug` from rest as
+/// the two signals `ω² q` and `ω q̇`, by the exact solution of the one-storey chain of unit mass
+/// ([`first_order_hold`], as [`simulate_linear_exact`] steps it; the recursion written out for its two
+/// states because the search runs it thousands of times).
+pub fn oscillator_basis(f_hz: f64, zeta: f64, ug: &[f64], dt: f64) -> [Vec<f64>; 2] {
+    let w = 2.0 * std::f64::consts::PI * f_hz;
+    let building =
+        crate::building::Building::new(vec![1.0], vec![], crate::building::Damping::Storey)
+            .expect("a one-storey building of unit mass is valid");
+    let chain = crate::structure::ShearChain::from_theta(&building, &[w * w, 2.0 * zeta * w])
+        .expect("a positive stiffness and damping make a valid chain");
+    let (phi, g0, g1) = first_order_hold(&chain, 2, dt);
+    let n = ug.len();
+    let (mut q, mut qd) = (vec![0.0; n], vec![0.0; n]);
+    let (mut x, mut v) = (0.0, 0.0);
+    for k in 1..n {
+        let (u, du) = (ug[k - 1], (ug[k] - ug[k - 1]) / dt);
+        (x, v) = (
+            phi[(0, 0)] * x + phi[(0, 1)] * v + g0[0] * u + g1[0] * du,
+            phi[(1, 0)] * x + phi[(1, 1)] * v + g0[1] * u + g1[1] * du,
+        );
+        q[k] = w * w * x;
+        qd[k] = w * v;
+    }
+    [q, qd]
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

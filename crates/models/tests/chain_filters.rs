@@ -13,7 +13,8 @@ use core_filters::smc::storvik::{Storvik, StorvikUpdate};
 use core_filters::smc::{run, Filter, Observer, Posterior, SmcConfig, StepInfo};
 use models::building::{Building, Damping};
 use models::filtering::{
-    AugmentedChain, ChainSpec, ColouredNoise, Discretisation, MlnChain, MpfChain, RmsLevels,
+    AugmentedChain, ChainSpec, ColouredNoise, Discretisation, MlnChain, MpfChain, Regressors,
+    RmsLevels,
 };
 use models::ground_motions::el_centro;
 use models::integrate::simulate_rk4;
@@ -357,20 +358,23 @@ fn mln_rbpf_gaussian_is_the_kalman_filter_of_z_given_its_path() {
 /// form, α fixed: `C` gains `αM` (unit masses here). With coloured measurement noise the Kalman
 /// filter's state gains one AR(1) state per sensor (`e ← a e + w`, a = ρ^(1/M) per transition,
 /// Var w = (1 − a²)·share·r, started at its stationary variance), added to its channel, and the
-/// white part is (1 − share)·r.
+/// white part is (1 − share)·r. With regressors the state gains their coefficients (static, their
+/// prior's variance at the start) and each channel's row of the observation matrix the columns'
+/// values at the sample.
 #[test]
 fn mpf_ekf2_is_the_kalman_filter_of_a_linear_chain() {
     for disc in [Discretisation::Euler, Discretisation::Symplectic] {
         for substeps in [1, 3] {
-            mpf_ekf2_against_kalman(disc, substeps, None, None);
+            mpf_ekf2_against_kalman(disc, substeps, None, None, false);
         }
-        mpf_ekf2_against_kalman(disc, 1, Some(0.7), None);
+        mpf_ekf2_against_kalman(disc, 1, Some(0.7), None, false);
         let colour = ColouredNoise {
             rho: 0.9,
             share: 0.6,
         };
-        mpf_ekf2_against_kalman(disc, 1, None, Some(colour));
-        mpf_ekf2_against_kalman(disc, 3, Some(0.7), Some(colour));
+        mpf_ekf2_against_kalman(disc, 1, None, Some(colour), false);
+        mpf_ekf2_against_kalman(disc, 3, Some(0.7), Some(colour), true);
+        mpf_ekf2_against_kalman(disc, 1, None, None, true);
     }
 }
 
@@ -379,23 +383,38 @@ fn mpf_ekf2_against_kalman(
     substeps: usize,
     alpha: Option<f64>,
     colour: Option<ColouredNoise>,
+    regress: bool,
 ) {
     let n = 10;
     let sensors = [1, 4, 8, 10];
     let (mut spec, y) = chain_data(n, &[], &sensors, 0.5, disc);
     spec.substeps = substeps;
     spec.coloured_noise = colour;
-    if colour.is_some() {
-        // Only the MPF-EKF2 has a Gaussian part to carry the coloured noise.
+    if regress {
+        // Two known signals, each channel with its own coefficients (prior s.d. 0.3, 0.1).
+        let len = spec.ug.len();
+        let columns = vec![
+            (0..len).map(|k| (0.13 * k as f64).sin()).collect(),
+            (0..len).map(|k| (0.041 * k as f64).cos() * 2.0).collect(),
+        ];
+        spec.regressors = Some(Regressors {
+            columns,
+            prior_sd: [0.3, 0.1].repeat(4),
+        });
+    }
+    if colour.is_some() || regress {
+        // Only the MPF-EKF2 has a Gaussian part to carry the coloured noise or coefficients.
         for err in [
             AugmentedChain::new(spec.clone()).err(),
             MlnChain::new(spec.clone()).err(),
         ] {
             let msg = err.expect("refused").to_string();
-            assert!(
-                msg.contains("coloured_noise") && msg.contains("MPF-EKF2"),
-                "{msg}"
-            );
+            let field = if colour.is_some() {
+                "coloured_noise"
+            } else {
+                "regressors"
+            };
+            assert!(msg.contains(field) && msg.contains("MPF-EKF2"), "{msg}");
         }
     }
     if let Some(a) = alpha {
@@ -507,6 +526,38 @@ fn mpf_ekf2_against_kalman(
         }
         r *= 1.0 - col.share;
     }
+    // x = [.., β (channel-major: 4 channels × 2 columns)].
+    let reg = spec.regressors.clone();
+    if let Some(rg) = &reg {
+        let d0 = a.nrows();
+        let d = d0 + 8;
+        let grow = |old: &DMatrix<f64>, rows: usize, cols: usize| {
+            let mut g = DMatrix::<f64>::zeros(rows, cols);
+            g.view_mut((0, 0), old.shape()).copy_from(old);
+            g
+        };
+        a = grow(&a, d, d);
+        q = grow(&q, d, d);
+        c = grow(&c, 4, d);
+        b = b.resize_vertically(d, 0.0);
+        p = grow(&p, d, d);
+        for j in 0..8 {
+            a[(d0 + j, d0 + j)] = 1.0;
+            p[(d0 + j, d0 + j)] = rg.prior_sd[j] * rg.prior_sd[j];
+        }
+    }
+    let beta0 = a.nrows() - if reg.is_some() { 8 } else { 0 };
+    let observation_at = |k: usize| {
+        let mut ck = c.clone();
+        if let Some(rg) = &reg {
+            for i in 0..4 {
+                for (col, values) in rg.columns.iter().enumerate() {
+                    ck[(i, beta0 + 2 * i + col)] = values[k];
+                }
+            }
+        }
+        ck
+    };
     let mut m = DVector::<f64>::zeros(a.nrows());
     for (kk, (post, info)) in steps.0.iter().enumerate() {
         let k = kk + 1;
@@ -514,6 +565,7 @@ fn mpf_ekf2_against_kalman(
             m = &a * &m + &b * fine(kf - 1);
             p = &a * &p * a.transpose() + &q;
         }
+        let c = observation_at(k);
         let yhat = &c * &m - DVector::from_element(4, spec.ug[k]);
         let resid = DVector::from_iterator(4, (0..4).map(|j| y[kk * 4 + j])) - yhat;
         let s_cov = &c * &p * c.transpose() + &r;
@@ -524,7 +576,9 @@ fn mpf_ekf2_against_kalman(
         let ll = -0.5 * (resid.transpose() * chol.solve(&resid))[0]
             - 0.5 * s_cov.determinant().ln()
             - 2.0 * (2.0 * std::f64::consts::PI).ln();
-        let ctx = format!("{disc:?}, substeps {substeps}, α {alpha:?}, {colour:?}, k={k}");
+        let ctx = format!(
+            "{disc:?}, substeps {substeps}, α {alpha:?}, {colour:?}, regressors {regress}, k={k}"
+        );
         assert!(
             (info.loglik_increment - ll).abs() < 1e-7 * ll.abs().max(1.0),
             "{ctx}: {} vs {ll}",

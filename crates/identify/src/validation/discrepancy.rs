@@ -15,9 +15,6 @@
 //! The discrepancy is a black box beside the physics: it does not change θ, its modes are not the
 //! building's, and the record keeps the physical model's own fit beside the one with it.
 
-use models::building::{Building, Damping};
-use models::integrate::first_order_hold;
-use models::structure::ShearChain;
 use nalgebra::{DMatrix, DVector};
 use rayon::prelude::*;
 
@@ -68,30 +65,38 @@ fn highest_hz(dt: f64) -> f64 {
     0.4 / dt
 }
 
-/// The two regressors of mode (`f_hz`, `zeta`) under `ug`: `ω² q` and `ω q̇`, by the exact
-/// solution of the one-storey chain ([`models::integrate::first_order_hold`], as
-/// [`models::integrate::simulate_linear_exact`] steps it; the recursion written out for its two
-/// states because the search runs it thousands of times).
-pub fn mode_basis(f_hz: f64, zeta: f64, ug: &[f64], dt: f64) -> [Vec<f64>; 2] {
-    let w = 2.0 * std::f64::consts::PI * f_hz;
-    let building = Building::new(vec![1.0], vec![], Damping::Storey)
-        .expect("a one-storey building of unit mass is valid");
-    let chain = ShearChain::from_theta(&building, &[w * w, 2.0 * zeta * w])
-        .expect("a positive stiffness and damping make a valid chain");
-    let (phi, g0, g1) = first_order_hold(&chain, 2, dt);
-    let n = ug.len();
-    let (mut q, mut qd) = (vec![0.0; n], vec![0.0; n]);
-    let (mut x, mut v) = (0.0, 0.0);
-    for k in 1..n {
-        let (u, du) = (ug[k - 1], (ug[k] - ug[k - 1]) / dt);
-        (x, v) = (
-            phi[(0, 0)] * x + phi[(0, 1)] * v + g0[0] * u + g1[0] * du,
-            phi[(1, 0)] * x + phi[(1, 1)] * v + g0[1] * u + g1[1] * du,
-        );
-        q[k] = w * w * x;
-        qd[k] = w * v;
-    }
-    [q, qd]
+/// The two regressors of mode (`f_hz`, `zeta`) under `ug`: `ω² q` and `ω q̇`
+/// ([`models::integrate::oscillator_basis`], the exact free run of the one-storey chain).
+pub use models::integrate::oscillator_basis as mode_basis;
+
+/// The term of the given `modes` fitted to the residual of the free run `simulated` on the
+/// samples `..from`, and the free-run fit of each channel over the samples `from..` with it.
+pub fn held_out_with(
+    modes: &[DiscrepancyMode],
+    channels: &[String],
+    measured: &[Vec<f64>],
+    simulated: &[Vec<f64>],
+    ug: &[f64],
+    dt: f64,
+    from: usize,
+) -> (Discrepancy, Vec<f64>) {
+    let residuals: Vec<Vec<f64>> = measured
+        .iter()
+        .zip(simulated)
+        .map(|(y, s)| y.iter().zip(s).map(|(a, b)| a - b).collect())
+        .collect();
+    let d = fit_modes(modes.to_vec(), &residuals, from, ug, dt).discrepancy(channels);
+    let add = contribution(&d, ug, dt);
+    let fits = measured
+        .iter()
+        .zip(simulated)
+        .zip(&add)
+        .map(|((y, s), a)| {
+            let yhat: Vec<f64> = s.iter().zip(a).map(|(x, e)| x + e).collect();
+            fit_percent(&y[from..], &yhat[from..])
+        })
+        .collect();
+    (d, fits)
 }
 
 /// The discrepancy's contribution to each of its channels under `ug`.
@@ -580,6 +585,8 @@ pub fn refit(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use models::building::{Building, Damping};
+    use models::structure::ShearChain;
 
     fn ground(n: usize, dt: f64) -> Vec<f64> {
         // A deterministic broadband input: a sum of incommensurate sines.

@@ -52,7 +52,7 @@ pub use mln::{MlnChain, MlnChainOf};
 pub use mpf::{MpfChain, MpfChainOf};
 pub use prior::{ChainPrior, ChainPriorOf, ElementPrior, MarginalPrior};
 pub use spec::{
-    ChainSpec, ChainSpecOf, ColouredNoise, RmsLevels, SpecError, MAX_SUBSTEPS,
+    ChainSpec, ChainSpecOf, ColouredNoise, Regressors, RmsLevels, SpecError, MAX_SUBSTEPS,
     SPEC_R_NOISE_FRACTION,
 };
 
@@ -268,16 +268,25 @@ impl<L: HysteresisLaw> ChainCore<L> {
 
     /// Refuses coloured measurement noise for a partition that has no Gaussian part to carry it.
     pub fn white_noise_only(&self, partition: &'static str) -> Result<(), SpecError> {
-        match self.spec.coloured_noise {
-            None => Ok(()),
-            Some(_) => Err(SpecError::Invalid {
+        if self.spec.coloured_noise.is_some() {
+            return Err(SpecError::Invalid {
                 field: "coloured_noise",
                 reason: format!(
                     "the {partition} partition has no state for coloured measurement noise; \
                      use the MPF-EKF2"
                 ),
-            }),
+            });
         }
+        if self.spec.regressors.is_some() {
+            return Err(SpecError::Invalid {
+                field: "regressors",
+                reason: format!(
+                    "the {partition} partition has no Gaussian part for the regressors' \
+                     coefficients; use the MPF-EKF2"
+                ),
+            });
+        }
+        Ok(())
     }
 
     /// Writes `s · ∂F_j/∂w` at the point `p` into row `row`, `w` the variables `vars`: the one

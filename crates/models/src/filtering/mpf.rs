@@ -33,6 +33,9 @@
 //! sensor, `e_i ← a e_i` (`D` entry `a − 1`, noise `(1 − a²)·share·r_i`), added to its
 //! channel's observation (Jacobian entry 1): linear, so the Kalman part carries it exactly.
 //!
+//! With regressors ([`super::Regressors`]) x^bl ends with their coefficients β (channel-major),
+//! static, each observation gaining `Σ_c β_ic s_c(k)` (Jacobian entries `s_c(k)`): linear too.
+//!
 //! A chain without hysteretic element samples nothing: xⁿ is empty and there are no sampled
 //! stages, so the MPF-EKF2 reduces to an EKF2 (exact here: a KF with bilinear terms) on x^bl.
 
@@ -81,6 +84,8 @@ pub struct MpfChainOf<L: HysteresisLaw> {
     /// without coloured noise.
     e0: usize,
     colour: Option<(f64, Vec<f64>)>,
+    /// Offset of the regressors' coefficients in x^bl (after the coloured-noise states).
+    g0: usize,
     stages: Vec<Vec<usize>>,
     stage_noise: Vec<Vec<f64>>,
     stage_hessians: Vec<SparseHessians>,
@@ -184,6 +189,7 @@ impl<L: HysteresisLaw> MpfChainOf<L> {
             let var: Vec<f64> = core.spec.r_diag.iter().map(|r| c.share * r).collect();
             (c.per_transition(core.substeps, 1.0).0, var)
         });
+        let g0 = e0 + colour.as_ref().map_or(0, |(_, v)| v.len());
         let mut me = Self {
             core,
             symplectic,
@@ -196,6 +202,7 @@ impl<L: HysteresisLaw> MpfChainOf<L> {
             b0,
             e0,
             colour,
+            g0,
             stages: Vec::new(),
             stage_noise: Vec::new(),
             stage_hessians: Vec::new(),
@@ -407,7 +414,13 @@ impl<L: HysteresisLaw> ConditionallyQuadratic for MpfChainOf<L> {
                 + self.marginal_vel.len()
                 + self.core.spec.building.damping().extra_parameters()
                 + L::NLIN * ne
-                + self.colour.as_ref().map_or(0, |(_, v)| v.len()),
+                + self.colour.as_ref().map_or(0, |(_, v)| v.len())
+                + self
+                    .core
+                    .spec
+                    .regressors
+                    .as_ref()
+                    .map_or(0, |r| r.prior_sd.len()),
             ny: self.core.sensors.len(),
         }
     }
@@ -550,6 +563,16 @@ impl<L: HysteresisLaw> ConditionallyQuadratic for MpfChainOf<L> {
                 value[i] += m[self.e0 + i];
                 jac.add(i, self.e0 + i, T::splat(1.0));
             }
+            if let Some(r) = &self.core.spec.regressors {
+                // The columns are on the samples' grid; k is on the model's.
+                let sample = k / self.core.substeps;
+                let first = self.g0 + i * r.columns.len();
+                for (c, column) in r.columns.iter().enumerate() {
+                    let s = T::splat(column[sample]);
+                    value[i] += m[first + c] * s;
+                    jac.add(i, first + c, s);
+                }
+            }
         }
     }
 
@@ -590,6 +613,11 @@ impl<L: HysteresisLaw> Marginalised for MpfChainOf<L> {
             let t = self.core.theta_element(e);
             for i in 0..L::NLIN {
                 set(self.beta_index(e) + i, t + i);
+            }
+        }
+        if let Some(r) = &self.core.spec.regressors {
+            for (j, sd) in r.prior_sd.iter().enumerate() {
+                cov[(self.g0 + j) * (nbl + 1)] = sd * sd;
             }
         }
         // The coloured noise starts from its stationary distribution.

@@ -102,6 +102,23 @@ pub struct ChainSpecOf<L: HysteresisLaw> {
     /// marginalised Gaussian ([`ColouredNoise`]); `None`: all of it white (SPEC §3).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub coloured_noise: Option<ColouredNoise>,
+    /// Known signals each channel adds with unknown coefficients ([`Regressors`]), marginalised
+    /// in the Gaussian part (MPF-EKF2 only). Built by the caller from the data (never read
+    /// from a file).
+    #[serde(skip)]
+    pub regressors: Option<Regressors>,
+}
+
+/// Known signals `s_c(k)` (one value per sample, k = 0..=K, as `ug`) that every channel adds
+/// with its own unknown coefficients: `y_i(k) = h_i(x_k, θ) + Σ_c β_ic s_c(k) + noise`, each
+/// `β_ic ~ N(0, prior_sd[i·C + c]²)` a static entry of the marginalised Gaussian, so the Kalman
+/// part identifies them with θ (the observation is linear in them with the known Jacobian
+/// `s_c(k)`). For a discrepancy term: the responses of extra linear modes to the ground motion.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Regressors {
+    pub columns: Vec<Vec<f64>>,
+    /// Prior s.d. of β, channel-major (channel i, column c at `i·C + c`).
+    pub prior_sd: Vec<f64>,
 }
 
 /// Coloured measurement noise: of each channel's variance `r_diag[i]`, the part `share` is an
@@ -251,6 +268,7 @@ impl<L: HysteresisLaw> ChainSpecOf<L> {
             substeps: 1,
             physical_support: false,
             coloured_noise: None,
+            regressors: None,
         };
         spec.validate()?;
         Ok(spec)
@@ -375,6 +393,29 @@ impl<L: HysteresisLaw> ChainSpecOf<L> {
         }
         if let Some(c) = &self.coloured_noise {
             c.validate()?;
+        }
+        if let Some(r) = &self.regressors {
+            if let Some(c) = r.columns.iter().find(|c| c.len() != self.ug.len()) {
+                return Err(invalid(
+                    "regressors",
+                    format!(
+                        "a column of {} values for {} samples",
+                        c.len(),
+                        self.ug.len()
+                    ),
+                ));
+            }
+            if r.columns.iter().flatten().any(|v| !v.is_finite()) {
+                return Err(invalid("regressors", "a value is not finite"));
+            }
+            if r.prior_sd.len() != r.columns.len() * self.sensors.len()
+                || r.prior_sd.iter().any(|s| !(s.is_finite() && *s > 0.0))
+            {
+                return Err(invalid(
+                    "regressors.prior_sd",
+                    "not one positive s.d. per channel and column",
+                ));
+            }
         }
         Ok(())
     }
