@@ -61,8 +61,9 @@ pub const NUMERICS_VERSION: u32 = 4;
 ///
 /// History: 1 — the discrepancy term beside the building, chosen by the held-out part of the
 /// record (`crate::validation::discrepancy`, 2026-11-30); field-data records without this key
-/// were computed before it.
-pub const FIELD_VALIDATION_VERSION: u32 = 1;
+/// were computed before it. 2 — θ identified with the discrepancy modes inside the filter where
+/// that predicts the held-out part at least as well (`crate::choice`, `evidence.joint_discrepancy`).
+pub const FIELD_VALIDATION_VERSION: u32 = 2;
 
 /// Versions and provenance written into every record.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
