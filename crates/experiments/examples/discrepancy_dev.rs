@@ -260,7 +260,7 @@ fn main() -> Result<()> {
             let choice = discrepancy::choose(search, &names, &ya, &sim_a, &a.ug_meas, dt, from)
                 .with_context(|| format!("{name}: the record is too short to choose"))?;
             let modes = choice.modes().to_vec();
-            let disc = discrepancy::refit(&modes, &names, &ya, &sim_a, &a.ug_meas, dt);
+            let disc = discrepancy::refit(&modes, &names, &ya, &sim_a, (&a.ug_meas, dt), a.len());
             let add = discrepancy::contribution(&disc, &b.ug_meas, dt);
             let with: Vec<f64> = (0..3)
                 .map(|c| {

@@ -122,34 +122,20 @@ fn coloured_noise_is_carried_recorded_and_refused_where_it_cannot_be() {
 
     // Refused by name: a partition without a Gaussian part, values out of range.
     let refused = root.join("refused.json");
-    let o = sysid(
-        &[
-            "filter",
-            "--algorithm",
-            "bootstrap",
-            "--storeys",
-            "3",
-            "--hysteretic",
-            "none",
-            "--masses",
-            "1",
-            "--measurement",
-            "absolute",
-            "--particles",
-            "50",
-            "--coloured-noise",
-            "0.9,0.5",
-        ]
+    // The minimal flags with the bootstrap PF in place of the MPF-EKF2.
+    let bootstrap: Vec<&OsStr> = common::LINEAR_FIELD_FILTER
+        .iter()
+        .map(|a| if *a == "mpf-ekf2" { "bootstrap" } else { a })
+        .chain(["--particles", "50", "--coloured-noise", "0.9,0.5"])
         .map(OsStr::new)
-        .into_iter()
         .chain([
             "--data".as_ref(),
             data.as_os_str(),
             "--out".as_ref(),
             refused.as_os_str(),
         ])
-        .collect::<Vec<_>>(),
-    );
+        .collect();
+    let o = sysid(&bootstrap);
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(!o.status.success());
     assert!(

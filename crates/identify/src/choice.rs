@@ -401,9 +401,10 @@ fn joint_discrepancy(
     let names: Vec<String> = data.sensors.iter().map(|s| format!("a{s}")).collect();
     let measured = crate::validation::measured_channels(data);
     let from = ident.len();
-    let (term, fits) =
-        discrepancy::held_out_with(modes, &names, &measured, &sim, &data.ug_meas, data.dt, from);
-    j.joint_fit = fits;
+    let ground = (&data.ug_meas[..], data.dt);
+    let term = discrepancy::refit(modes, &names, &measured, &sim, ground, from);
+    j.joint_fit =
+        discrepancy::held_out_fits(Some(&term), &measured, &sim, ground.0, ground.1, from);
     let add = discrepancy::contribution(&term, &data.ug_meas, data.dt);
     let with: Vec<Vec<f64>> = sim
         .iter()

@@ -378,6 +378,15 @@ fn mpf_ekf2_is_the_kalman_filter_of_a_linear_chain() {
     }
 }
 
+/// A, Q, C, b and P of a Kalman filter, to grow together.
+type KalmanMatrices<'a> = (
+    &'a mut DMatrix<f64>,
+    &'a mut DMatrix<f64>,
+    &'a mut DMatrix<f64>,
+    &'a mut DVector<f64>,
+    &'a mut DMatrix<f64>,
+);
+
 fn mpf_ekf2_against_kalman(
     disc: Discretisation,
     substeps: usize,
@@ -503,20 +512,24 @@ fn mpf_ekf2_against_kalman(
     let mut c = DMatrix::from_fn(4, 2 * n, |i, jj| acc[(sensors[i] - 1, jj)]);
     let mut r = DMatrix::from_diagonal(&DVector::from_vec(spec.r_diag.clone()));
     let mut p = DMatrix::<f64>::zeros(2 * n, 2 * n);
-    if let Some(col) = colour {
-        // x = [x, v, e1..e4].
-        let d = 2 * n + 4;
-        let ar = col.rho.powf(1.0 / m_sub);
-        let grow = |old: &DMatrix<f64>, rows: usize, cols: usize| {
-            let mut g = DMatrix::<f64>::zeros(rows, cols);
+    // Appends `extra` zero states to the Kalman filter's matrices.
+    let grow = |(a, q, c, b, p): KalmanMatrices<'_>, extra: usize| {
+        let d = a.nrows() + extra;
+        let padded = |old: &DMatrix<f64>, rows: usize| {
+            let mut g = DMatrix::<f64>::zeros(rows, d);
             g.view_mut((0, 0), old.shape()).copy_from(old);
             g
         };
-        a = grow(&a, d, d);
-        q = grow(&q, d, d);
-        c = grow(&c, 4, d);
-        b = b.resize_vertically(d, 0.0);
-        p = grow(&p, d, d);
+        *a = padded(a, d);
+        *q = padded(q, d);
+        *c = padded(c, 4);
+        *p = padded(p, d);
+        *b = b.clone().resize_vertically(d, 0.0);
+    };
+    if let Some(col) = colour {
+        // x = [x, v, e1..e4].
+        let ar = col.rho.powf(1.0 / m_sub);
+        grow((&mut a, &mut q, &mut c, &mut b, &mut p), 4);
         for i in 0..4 {
             let var = col.share * spec.r_diag[i];
             a[(2 * n + i, 2 * n + i)] = ar;
@@ -530,17 +543,7 @@ fn mpf_ekf2_against_kalman(
     let reg = spec.regressors.clone();
     if let Some(rg) = &reg {
         let d0 = a.nrows();
-        let d = d0 + 8;
-        let grow = |old: &DMatrix<f64>, rows: usize, cols: usize| {
-            let mut g = DMatrix::<f64>::zeros(rows, cols);
-            g.view_mut((0, 0), old.shape()).copy_from(old);
-            g
-        };
-        a = grow(&a, d, d);
-        q = grow(&q, d, d);
-        c = grow(&c, 4, d);
-        b = b.resize_vertically(d, 0.0);
-        p = grow(&p, d, d);
+        grow((&mut a, &mut q, &mut c, &mut b, &mut p), 8);
         for j in 0..8 {
             a[(d0 + j, d0 + j)] = 1.0;
             p[(d0 + j, d0 + j)] = rg.prior_sd[j] * rg.prior_sd[j];

@@ -69,34 +69,38 @@ fn highest_hz(dt: f64) -> f64 {
 /// ([`models::integrate::oscillator_basis`], the exact free run of the one-storey chain).
 pub use models::integrate::oscillator_basis as mode_basis;
 
-/// The term of the given `modes` fitted to the residual of the free run `simulated` on the
-/// samples `..from`, and the free-run fit of each channel over the samples `from..` with it.
-pub fn held_out_with(
-    modes: &[DiscrepancyMode],
-    channels: &[String],
+/// y − ŷ per channel.
+fn residuals_of(measured: &[Vec<f64>], simulated: &[Vec<f64>]) -> Vec<Vec<f64>> {
+    measured
+        .iter()
+        .zip(simulated)
+        .map(|(y, s)| y.iter().zip(s).map(|(a, b)| a - b).collect())
+        .collect()
+}
+
+/// The free-run fit of each channel of `measured` over the samples `from..`: of `simulated`,
+/// with the term `d` added when given.
+pub fn held_out_fits(
+    d: Option<&Discrepancy>,
     measured: &[Vec<f64>],
     simulated: &[Vec<f64>],
     ug: &[f64],
     dt: f64,
     from: usize,
-) -> (Discrepancy, Vec<f64>) {
-    let residuals: Vec<Vec<f64>> = measured
+) -> Vec<f64> {
+    let add = d.map(|d| contribution(d, ug, dt));
+    measured
         .iter()
         .zip(simulated)
-        .map(|(y, s)| y.iter().zip(s).map(|(a, b)| a - b).collect())
-        .collect();
-    let d = fit_modes(modes.to_vec(), &residuals, from, ug, dt).discrepancy(channels);
-    let add = contribution(&d, ug, dt);
-    let fits = measured
-        .iter()
-        .zip(simulated)
-        .zip(&add)
-        .map(|((y, s), a)| {
-            let yhat: Vec<f64> = s.iter().zip(a).map(|(x, e)| x + e).collect();
+        .enumerate()
+        .map(|(c, (y, s))| {
+            let yhat: Vec<f64> = match &add {
+                Some(a) => s.iter().zip(&a[c]).map(|(x, e)| x + e).collect(),
+                None => s.clone(),
+            };
             fit_percent(&y[from..], &yhat[from..])
         })
-        .collect();
-    (d, fits)
+        .collect()
 }
 
 /// The discrepancy's contribution to each of its channels under `ug`.
@@ -489,26 +493,8 @@ pub fn choose(
     {
         return None;
     }
-    let residuals: Vec<Vec<f64>> = measured
-        .iter()
-        .zip(simulated)
-        .map(|(y, s)| y.iter().zip(s).map(|(a, b)| a - b).collect())
-        .collect();
-    let held_out = |d: Option<&Discrepancy>| -> Vec<f64> {
-        let add = d.map(|d| contribution(d, ug, dt));
-        measured
-            .iter()
-            .zip(simulated)
-            .enumerate()
-            .map(|(c, (y, s))| {
-                let yhat: Vec<f64> = match &add {
-                    Some(a) => s.iter().zip(&a[c]).map(|(x, e)| x + e).collect(),
-                    None => s.clone(),
-                };
-                fit_percent(&y[from..], &yhat[from..])
-            })
-            .collect()
-    };
+    let residuals = residuals_of(measured, simulated);
+    let held_out = |d: Option<&Discrepancy>| held_out_fits(d, measured, simulated, ug, dt, from);
     let mut candidates = vec![DiscrepancyCandidate::new(
         Discrepancy::none(channels),
         held_out(None),
@@ -564,22 +550,18 @@ pub fn choose(
     })
 }
 
-/// The chosen modes refitted on the whole record: the discrepancy of a run, its coefficients
-/// fitted to the residual of θ_val's free run `simulated` over every sample.
+/// The chosen modes refitted: their coefficients fitted to the residual of the free run
+/// `simulated` over the samples `..rows` (a run's discrepancy: every sample of the record).
 pub fn refit(
     modes: &[DiscrepancyMode],
     channels: &[String],
     measured: &[Vec<f64>],
     simulated: &[Vec<f64>],
-    ug: &[f64],
-    dt: f64,
+    (ug, dt): (&[f64], f64),
+    rows: usize,
 ) -> Discrepancy {
-    let residuals: Vec<Vec<f64>> = measured
-        .iter()
-        .zip(simulated)
-        .map(|(y, s)| y.iter().zip(s).map(|(a, b)| a - b).collect())
-        .collect();
-    fit_modes(modes.to_vec(), &residuals, ug.len(), ug, dt).discrepancy(channels)
+    let residuals = residuals_of(measured, simulated);
+    fit_modes(modes.to_vec(), &residuals, rows, ug, dt).discrepancy(channels)
 }
 
 #[cfg(test)]
@@ -665,8 +647,8 @@ mod tests {
             &truth.channels,
             &measured,
             &simulated,
-            &ug,
-            dt,
+            (&ug, dt),
+            ug.len(),
         );
         for (got, want) in d.coefficients.iter().zip(&truth.coefficients) {
             for (g, w) in got[0].iter().zip(&want[0]) {
