@@ -149,9 +149,9 @@ impl JointDiscrepancy {
         match &self.note {
             Some(n) => format!("θ identified without the discrepancy modes: {n}"),
             None => format!(
-                "θ identified {} the discrepancy modes inside the filter: held-out fit with the \
-                 term {} (building alone {}) identified with them, against {} with the term \
-                 fitted after θ",
+                "θ identified {} the discrepancy modes inside the filter: identified with them, \
+                 {} with the term (the building alone {} %), against {} identified alone with \
+                 the term fitted after it",
                 if self.kept { "with" } else { "without" },
                 held_out_fit(mean(&self.joint_fit), &self.joint_fit),
                 fits_list(&self.joint_building_fit),
@@ -1484,7 +1484,42 @@ pub fn resolve_substeps(
 
 #[cfg(test)]
 mod tests {
-    use super::MassChoice;
+    use super::{JointDiscrepancy, MassChoice};
+
+    /// The joint identification's decision says which way the run went, with both held-out fits,
+    /// or why it could not be scored; it reads back from a record's JSON.
+    #[test]
+    fn the_joint_discrepancy_says_which_way_and_why() {
+        let mut j = JointDiscrepancy {
+            after_fit: vec![80.0, 70.0],
+            joint_fit: vec![60.0, 50.0],
+            joint_building_fit: vec![10.0, 20.0],
+            kept: false,
+            held_out_error: None,
+            note: None,
+        };
+        let text = j.describe();
+        assert!(
+            text.starts_with("θ identified without the discrepancy modes"),
+            "{text}"
+        );
+        assert!(text.contains("held-out fit 55.0 % (60.0 / 50.0)"), "{text}");
+        assert!(text.contains("the building alone 10.0 / 20.0 %"), "{text}");
+        assert!(text.contains("held-out fit 75.0 % (80.0 / 70.0)"), "{text}");
+        j.kept = true;
+        assert!(j
+            .describe()
+            .starts_with("θ identified with the discrepancy modes"));
+        let back: JointDiscrepancy =
+            serde_json::from_str(&serde_json::to_string(&j).unwrap()).unwrap();
+        assert_eq!(back, j);
+        j.note = Some("the run failed: x".into());
+        assert!(
+            j.describe().ends_with(": the run failed: x"),
+            "{}",
+            j.describe()
+        );
+    }
 
     /// A search whose every run failed has no log-likelihood: the evidence says so and reads back
     /// from a record's JSON (a −∞ would be written as `null` and not read back).
