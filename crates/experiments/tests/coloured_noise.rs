@@ -72,7 +72,11 @@ fn coloured_noise_is_carried_recorded_and_refused_where_it_cannot_be() {
         (&["--coloured-noise", "0.9,0.5"][..], &coloured),
     ] {
         let o = run(extra, out);
-        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(o.status.success(), "{err}");
+        // The noise line says what part is coloured, and only when some is.
+        let said = err.contains("the part 0.5 is coloured, AR(1) with ρ 0.9 per sample");
+        assert_eq!(said, !extra.is_empty(), "{err}");
     }
     let (w, c) = (read(&white), read(&coloured));
     let expected = serde_json::json!({"rho": 0.9, "share": 0.5});

@@ -339,6 +339,8 @@ pub struct NoiseLevels {
     pub q_vel: f64,
     /// Process noise s.d. of the hysteretic variables.
     pub q_r: Vec<f64>,
+    /// The coloured part of the measurement noise, if any.
+    pub coloured: Option<models::filtering::ColouredNoise>,
 }
 
 impl NoiseLevels {
@@ -349,6 +351,7 @@ impl NoiseLevels {
             q_disp: plan.model.q_disp,
             q_vel: plan.model.q_vel,
             q_r: plan.model.q_r.clone(),
+            coloured: plan.model.coloured_noise,
         }
     }
 }
@@ -371,9 +374,17 @@ impl fmt::Display for NoiseLevels {
                 "?".to_string()
             }
         };
+        let coloured = match self.coloured {
+            Some(c) => format!(
+                "; of each channel's measurement variance the part {} is coloured, AR(1) with \
+                 ρ {} per sample, carried by the filter",
+                c.share, c.rho
+            ),
+            None => String::new(),
+        };
         write!(
             f,
-            "noise levels from the data (noise fraction {}): measurement s.d. [{}] m/s², process s.d. x {}, v {}, r [{}] (recorded under config.spec)",
+            "noise levels from the data (noise fraction {}): measurement s.d. [{}] m/s²{coloured}, process s.d. x {}, v {}, r [{}] (recorded under config.spec)",
             self.noise_fraction,
             list(&self.r_diag, f64::sqrt),
             num(self.q_disp),
