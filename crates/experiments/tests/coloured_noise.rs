@@ -43,18 +43,10 @@ fn coloured_noise_is_carried_recorded_and_refused_where_it_cannot_be() {
     let (_tmp, root) = common::temp_dir("sysid-coloured-");
     let data = root.join("d");
     common::linear_field_data(&data, "7", "10");
-    let stated = [
-        "--damping",
-        "storey",
-        "--noise-fraction",
-        "0.1",
-        "--process-noise-factor",
-        "1",
-    ];
     let run = |extra: &[&str], out: &Path| {
         let args: Vec<&OsStr> = common::LINEAR_FIELD_FILTER
             .iter()
-            .chain(&stated)
+            .chain(&common::LINEAR_FIELD_STATED)
             .chain(extra)
             .map(OsStr::new)
             .chain([

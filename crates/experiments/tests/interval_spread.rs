@@ -22,16 +22,10 @@ fn agreeing_parts_are_not_taken_for_model_error() {
         common::linear_field_data(&data, &seed.to_string(), "10");
         // The settings the data were simulated with: the model and its noise levels are right.
         let record = root.join(format!("r{seed}.json"));
-        let stated = [
-            "--damping",
-            "storey",
-            "--noise-fraction",
-            "0.1",
-            "--process-noise-factor",
-            "1",
-            "--data",
-        ];
-        let args = common::LINEAR_FIELD_FILTER.iter().chain(&stated);
+        let args = common::LINEAR_FIELD_FILTER
+            .iter()
+            .chain(&common::LINEAR_FIELD_STATED)
+            .chain(&["--data"]);
         common::sysid_ok(args.map(std::ffi::OsStr::new).chain([
             data.as_os_str(),
             "--out".as_ref(),

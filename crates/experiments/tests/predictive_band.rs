@@ -137,14 +137,7 @@ fn without_a_held_out_part_the_band_is_learned_in_sample_and_says_so() {
     let text = run(
         &[
             &common::LINEAR_FIELD_FILTER[..],
-            &[
-                "--damping",
-                "storey",
-                "--noise-fraction",
-                "0.1",
-                "--process-noise-factor",
-                "1",
-            ],
+            &common::LINEAR_FIELD_STATED[..],
         ]
         .concat(),
         &[("--data", &a), ("--out", &record)],

@@ -403,8 +403,7 @@ fn joint_discrepancy(
     let from = ident.len();
     let ground = (&data.ug_meas[..], data.dt);
     let term = discrepancy::refit(modes, &names, &measured, &sim, ground, from);
-    j.joint_fit =
-        discrepancy::held_out_fits(Some(&term), &measured, &sim, ground.0, ground.1, from);
+    j.joint_fit = discrepancy::held_out_fits(Some(&term), &measured, &sim, ground, from);
     let add = discrepancy::contribution(&term, &data.ug_meas, data.dt);
     let with: Vec<Vec<f64>> = sim
         .iter()

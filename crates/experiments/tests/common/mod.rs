@@ -27,6 +27,17 @@ pub const LINEAR_FIELD_FILTER: [&str; 11] = [
 
 /// The README's `sysid filter` of the shake-table frame (`northridge`, masses 1 : 1 : 1.2,
 /// dashpots and αM, no hysteresis, absolute accelerations); `--data` and `--out` to add.
+/// The settings `linear_field_data` simulates with, stated: the model and its noise levels are
+/// right, and the held-out choice has nothing to choose.
+pub const LINEAR_FIELD_STATED: [&str; 6] = [
+    "--damping",
+    "storey",
+    "--noise-fraction",
+    "0.1",
+    "--process-noise-factor",
+    "1",
+];
+
 pub const FRAME_FILTER: [&str; 13] = [
     "filter",
     "--algorithm",

@@ -84,8 +84,7 @@ pub fn held_out_fits(
     d: Option<&Discrepancy>,
     measured: &[Vec<f64>],
     simulated: &[Vec<f64>],
-    ug: &[f64],
-    dt: f64,
+    (ug, dt): (&[f64], f64),
     from: usize,
 ) -> Vec<f64> {
     let add = d.map(|d| contribution(d, ug, dt));
@@ -494,7 +493,7 @@ pub fn choose(
         return None;
     }
     let residuals = residuals_of(measured, simulated);
-    let held_out = |d: Option<&Discrepancy>| held_out_fits(d, measured, simulated, ug, dt, from);
+    let held_out = |d: Option<&Discrepancy>| held_out_fits(d, measured, simulated, (ug, dt), from);
     let mut candidates = vec![DiscrepancyCandidate::new(
         Discrepancy::none(channels),
         held_out(None),

@@ -50,7 +50,7 @@ impl<L: HysteresisLaw> AugmentedChainOf<L> {
     /// Validates the spec; every discretisation is supported.
     pub fn new(spec: ChainSpecOf<L>) -> Result<Self, SpecError> {
         let core = ChainCore::new(spec)?;
-        core.white_noise_only("bootstrap PF")?;
+        core.no_gaussian_extras("bootstrap PF")?;
         let (n, ne) = (core.n, core.ne);
         let mut noise_sd = vec![core.q_disp; n];
         noise_sd.extend(std::iter::repeat_n(core.q_vel, n));

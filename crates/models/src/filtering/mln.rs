@@ -109,7 +109,7 @@ impl<L: HysteresisLaw> MlnChainOf<L> {
     /// Validates the spec; Euler and symplectic only (RK4 is not linear in z given `u`).
     pub fn new(spec: ChainSpecOf<L>) -> Result<Self, SpecError> {
         let core = ChainCore::new(spec)?;
-        core.white_noise_only("MLN-RBPF/Storvik")?;
+        core.no_gaussian_extras("MLN-RBPF/Storvik")?;
         if core.substeps != 1 {
             return Err(SpecError::SubstepsUnsupported {
                 partition: "MLN-RBPF/Storvik",

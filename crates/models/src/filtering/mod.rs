@@ -266,8 +266,9 @@ impl<L: HysteresisLaw> ChainCore<L> {
         r
     }
 
-    /// Refuses coloured measurement noise for a partition that has no Gaussian part to carry it.
-    pub fn white_noise_only(&self, partition: &'static str) -> Result<(), SpecError> {
+    /// Refuses coloured measurement noise and regressors for a partition that has no Gaussian
+    /// part to carry them.
+    pub fn no_gaussian_extras(&self, partition: &'static str) -> Result<(), SpecError> {
         if self.spec.coloured_noise.is_some() {
             return Err(SpecError::Invalid {
                 field: "coloured_noise",

@@ -80,10 +80,12 @@ pub struct MpfChainOf<L: HysteresisLaw> {
     /// Offset of (β_0, γ_0) in x^bl.
     b0: usize,
     /// Offset of the coloured-noise states in x^bl (one per sensor, after the elements'
-    /// parameters), their AR coefficient per transition and stationary variances; no states
-    /// without coloured noise.
+    /// parameters), their AR coefficient and innovation variance per transition, and their
+    /// stationary variances (empty without coloured noise).
     e0: usize,
-    colour: Option<(f64, Vec<f64>)>,
+    colour_ar: f64,
+    colour_q: Vec<f64>,
+    colour_var: Vec<f64>,
     /// Offset of the regressors' coefficients in x^bl (after the coloured-noise states).
     g0: usize,
     stages: Vec<Vec<usize>>,
@@ -185,11 +187,17 @@ impl<L: HysteresisLaw> MpfChainOf<L> {
         let na = core.spec.building.damping().extra_parameters();
         let (k0, c0, a0, b0) = (n + nvm, 2 * n + nvm, 3 * n + nvm, 3 * n + nvm + na);
         let e0 = b0 + L::NLIN * ne;
-        let colour = core.spec.coloured_noise.map(|c| {
-            let var: Vec<f64> = core.spec.r_diag.iter().map(|r| c.share * r).collect();
-            (c.per_transition(core.substeps, 1.0).0, var)
-        });
-        let g0 = e0 + colour.as_ref().map_or(0, |(_, v)| v.len());
+        let (mut colour_ar, mut colour_q, mut colour_var) = (1.0, Vec::new(), Vec::new());
+        if let Some(c) = core.spec.coloured_noise {
+            for r in &core.spec.r_diag {
+                let var = c.share * r;
+                let (ar, q) = c.per_transition(core.substeps, var);
+                colour_ar = ar;
+                colour_q.push(q);
+                colour_var.push(var);
+            }
+        }
+        let g0 = e0 + colour_var.len();
         let mut me = Self {
             core,
             symplectic,
@@ -201,7 +209,9 @@ impl<L: HysteresisLaw> MpfChainOf<L> {
             a0,
             b0,
             e0,
-            colour,
+            colour_ar,
+            colour_q,
+            colour_var,
             g0,
             stages: Vec::new(),
             stage_noise: Vec::new(),
@@ -247,16 +257,8 @@ impl<L: HysteresisLaw> MpfChainOf<L> {
                 q.push(j, vi, dt * q_vel * q_vel);
             }
         }
-        if let Some(c) = me.core.spec.coloured_noise {
-            for (i, var) in me
-                .colour
-                .as_ref()
-                .map_or(&[][..], |(_, v)| v)
-                .iter()
-                .enumerate()
-            {
-                q.push(e0 + i, e0 + i, c.per_transition(me.core.substeps, *var).1);
-            }
+        for (i, qe) in me.colour_q.iter().enumerate() {
+            q.push(e0 + i, e0 + i, *qe);
         }
         me.marginal_hessians = mh;
         me.marginal_noise = q;
@@ -414,7 +416,7 @@ impl<L: HysteresisLaw> ConditionallyQuadratic for MpfChainOf<L> {
                 + self.marginal_vel.len()
                 + self.core.spec.building.damping().extra_parameters()
                 + L::NLIN * ne
-                + self.colour.as_ref().map_or(0, |(_, v)| v.len())
+                + self.colour_var.len()
                 + self
                     .core
                     .spec
@@ -529,11 +531,10 @@ impl<L: HysteresisLaw> ConditionallyQuadratic for MpfChainOf<L> {
                 }
             }
         }
-        if let Some((a, var)) = &self.colour {
-            for i in self.e0..self.e0 + var.len() {
-                value[i] = T::splat(*a) * m[i];
-                d.add(i, i, T::splat(a - 1.0));
-            }
+        let a = self.colour_ar;
+        for i in self.e0..self.e0 + self.colour_var.len() {
+            value[i] = T::splat(a) * m[i];
+            d.add(i, i, T::splat(a - 1.0));
         }
     }
 
@@ -559,7 +560,7 @@ impl<L: HysteresisLaw> ConditionallyQuadratic for MpfChainOf<L> {
         for (i, &s) in self.core.sensors.iter().enumerate() {
             value[i] = self.core.spec.building.acceleration(&p, s, ground);
             self.write_acceleration_gradient(jac, i, s, &p, T::splat(1.0));
-            if self.colour.is_some() {
+            if !self.colour_var.is_empty() {
                 value[i] += m[self.e0 + i];
                 jac.add(i, self.e0 + i, T::splat(1.0));
             }
@@ -621,13 +622,7 @@ impl<L: HysteresisLaw> Marginalised for MpfChainOf<L> {
             }
         }
         // The coloured noise starts from its stationary distribution.
-        for (i, var) in self
-            .colour
-            .as_ref()
-            .map_or(&[][..], |(_, v)| v)
-            .iter()
-            .enumerate()
-        {
+        for (i, var) in self.colour_var.iter().enumerate() {
             cov[(self.e0 + i) * (nbl + 1)] = *var;
         }
     }
