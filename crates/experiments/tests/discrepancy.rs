@@ -16,18 +16,6 @@ fn sysid() -> Command {
     Command::new(env!("CARGO_BIN_EXE_sysid"))
 }
 
-/// The clean ground motion of `sysid simulate --excitation <name>` (20 s at 200 Hz).
-fn ground(name: &str, dir: &Path) -> (Vec<f64>, f64) {
-    let o = sysid()
-        .args(foreign::GROUND)
-        .args(["--excitation", name, "--duration", "20", "--out"])
-        .arg(dir)
-        .output()
-        .unwrap();
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    foreign::clean_ground(dir).unwrap()
-}
-
 /// A shear chain of storey stiffnesses `k` (unit masses) with Rayleigh damping of 3 % in its
 /// first and last modes, floors measured; with `appendage`, a mass of that share on floor 3
 /// tuned 10 % above the first mode (a fourth, unmeasured degree of freedom).
@@ -115,7 +103,10 @@ fn chosen_modes(s: &Structure, ug: &[f64], dt: f64, i: u64, dir: &Path) -> (usiz
 #[test]
 fn no_discrepancy_mode_on_the_filters_own_class_and_one_for_an_unmeasured_mode() {
     let (_tmp, root) = common::temp_dir("sysid-discrepancy-");
-    let (ug, dt) = ground("san-fernando-1971", &root.join("ground"));
+    let (ug, dt) = common::foreign_ground(
+        &root.join("ground"),
+        &["--excitation", "san-fernando-1971", "--duration", "20"],
+    );
     for (i, k) in [[1500.0, 1100.0, 900.0], [800.0, 800.0, 600.0]]
         .iter()
         .enumerate()

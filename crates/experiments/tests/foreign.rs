@@ -6,7 +6,6 @@
 
 use crate::common;
 
-use std::path::Path;
 use std::process::Command;
 
 use experiments::foreign;
@@ -15,35 +14,10 @@ fn sysid() -> Command {
     Command::new(env!("CARGO_BIN_EXE_sysid"))
 }
 
-/// The clean ground motion and time step of `sysid simulate --storeys 3 --seed 1` (El Centro
-/// 1940 × 3, 31.18 s at 200 Hz), as `cargo xtask reproduce-foreign` identifies with.
-fn ground_motion(dir: &Path) -> (Vec<f64>, f64) {
-    let st = sysid()
-        .args([
-            "simulate",
-            "--storeys",
-            "3",
-            "--hysteretic",
-            "none",
-            "--seed",
-            "1",
-        ])
-        .arg("--out")
-        .arg(dir)
-        .output()
-        .unwrap();
-    assert!(
-        st.status.success(),
-        "{}",
-        String::from_utf8_lossy(&st.stderr)
-    );
-    foreign::clean_ground(dir).unwrap()
-}
-
 #[test]
 fn foreign_structures_get_physical_answers_that_predict_better_than_the_ground() {
     let (_tmp, root) = common::temp_dir("sysid-foreign-");
-    let (ug, dt) = ground_motion(&root.join("ground"));
+    let (ug, dt) = common::foreign_ground(&root.join("ground"), &[]);
     for (ci, mut case) in foreign::cases().into_iter().enumerate() {
         foreign::calibrate_joint(&mut case, &ug, dt);
         let clean = foreign::respond(&case.structure, &ug, dt);

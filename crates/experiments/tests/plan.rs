@@ -264,7 +264,9 @@ fn plan_only_prints_the_plan_and_runs_nothing() {
 /// without a config on a hysteretic building takes that δ.
 #[test]
 fn the_help_states_the_rules_defaults() {
-    use identify::rules::{HYSTERETIC_PARTICLES, LAG_SUBSTEPS, MPF_REJUVENATION};
+    use identify::rules::{
+        HYSTERETIC_PARTICLES, LAG_SUBSTEPS, MPF_REJUVENATION, SUBSTEP_CHECK_TOLERANCE,
+    };
     let out = ok(
         sysid().args(["filter", "--help"]).output().unwrap(),
         "--help",
@@ -274,6 +276,10 @@ fn the_help_states_the_rules_defaults() {
         format!("Default without --config: δ = {MPF_REJUVENATION} for the MPF-EKF2"),
         format!("{HYSTERETIC_PARTICLES} as 8 × 500"),
         format!("velocity lag exceeds 3 %, {LAG_SUBSTEPS}"),
+        format!(
+            "the count is doubled (at most {}) until a doubling moves every stiffness by at most {SUBSTEP_CHECK_TOLERANCE} of its posterior s.d.",
+            models::filtering::MAX_SUBSTEPS
+        ),
         "runs as one Gaussian filter (1 particle)".to_string(),
     ] {
         assert!(help.contains(&needle), "`{needle}` missing from the help");

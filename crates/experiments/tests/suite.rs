@@ -95,6 +95,8 @@ mod residuals;
 mod scaling;
 #[path = "sparse_sensors.rs"]
 mod sparse_sensors;
+#[path = "substep_check.rs"]
+mod substep_check;
 #[path = "user_study.rs"]
 mod user_study;
 #[path = "verdict.rs"]

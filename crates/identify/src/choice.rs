@@ -21,6 +21,7 @@
 //! says so and keeps the default.
 
 pub mod masses;
+pub mod substeps;
 
 use models::dataset::LoadedDataset;
 use models::structure::Damping;
@@ -258,8 +259,20 @@ pub(crate) fn score(plan: &RunPlan, ident: &LoadedDataset, data: &LoadedDataset)
 /// Chooses the noise fraction (and, where the user left it open, the damping form) of `plan` —
 /// settled for `t` from `settings` — by held-out prediction, and returns the plan of the chosen
 /// candidate with the evidence and a decision; a plan the choice does not apply to comes back
-/// with a decision saying why.
+/// with a decision saying why. Then, on the plan chosen, the sub-steps are doubled until θ no
+/// longer moves with them ([`substeps::converge`], where that applies).
 pub fn choose(
+    plan: RunPlan,
+    t: &Target,
+    settings: &FilterSettings,
+    stated: Stated,
+) -> Result<RunPlan> {
+    let plan = choose_noise(plan, t, settings, stated)?;
+    substeps::converge(plan, t)
+}
+
+/// [`choose`] without the sub-step check.
+fn choose_noise(
     plan: RunPlan,
     t: &Target,
     settings: &FilterSettings,

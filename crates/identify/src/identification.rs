@@ -567,16 +567,15 @@ pub fn identify_plan(
     if data.meta.is_none() && record.failure.is_none() {
         // Field data: the intervals include the spread of θ between the record's parts
         // (model error, docs/validation.md), before the band and the modes draw from them.
-        let held = plan.settings.physical_support && plan.algorithm != Algorithm::Storvik;
-        let bounded = |name: &str| held && crate::spread::physically_bounded(name);
-        if let Some((spread, widened)) = crate::spread::spread(
+        let (widened, spread) = crate::spread::reported(
             &record.param_names,
             &record.credible,
             &record.trace,
-            &bounded,
-        ) {
+            plan.holds_bounds(),
+        );
+        if spread.is_some() {
             record.credible = widened;
-            record.segment_spread = Some(spread);
+            record.segment_spread = spread;
         }
     }
     if data.meta.is_none() {

@@ -117,6 +117,92 @@ pub struct Evidence {
     /// does so ([`crate::choice`]).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub joint_discrepancy: Option<JointDiscrepancy>,
+    /// The sub-steps doubled until θ no longer moved with them ([`crate::choice::substeps`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub substep_convergence: Option<SubstepConvergence>,
+}
+
+/// One run of the sub-step check: the count, θ_val and each parameter's posterior s.d. as the
+/// run reports it (its 95 % half-width over 1.96, model error included).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SubstepRun {
+    pub substeps: usize,
+    pub theta_val: Vec<f64>,
+    pub sd: Vec<f64>,
+    /// The stiffnesses' largest |Δθ_j| / s.d._j against the run before (none for the first):
+    /// what decides.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub moved: Option<Moved>,
+    /// The other parameters' largest, reported beside.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub others_moved: Option<Moved>,
+}
+
+/// How far a parameter moved between two runs, in its posterior s.d.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Moved {
+    pub parameter: String,
+    pub sd: f64,
+}
+
+/// The evidence of the sub-step check ([`crate::choice::substeps`]): the whole record identified
+/// with the sub-steps of the rules, then with twice as many, and so on, until θ_val moved by at
+/// most `tolerance` posterior s.d. in a doubling or the count reached its largest.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SubstepConvergence {
+    pub tolerance: f64,
+    pub runs: Vec<SubstepRun>,
+    /// Whether the last doubling moved θ by at most `tolerance` s.d.
+    pub converged: bool,
+    /// Why the check stopped early (a run that failed), if it did.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub note: Option<String>,
+}
+
+impl SubstepConvergence {
+    /// The count the run takes: the last run's.
+    pub fn substeps(&self) -> Option<usize> {
+        self.runs.last().map(|r| r.substeps)
+    }
+
+    /// The line `sysid filter` prints.
+    pub fn describe(&self) -> String {
+        let counts: Vec<String> = self.runs.iter().map(|r| r.substeps.to_string()).collect();
+        let list = |pick: &dyn Fn(&SubstepRun) -> Option<&Moved>| {
+            let moves: Vec<String> = self
+                .runs
+                .iter()
+                .filter_map(|r| pick(r).map(|m| format!("{:.2} ({})", m.sd, m.parameter)))
+                .collect();
+            if moves.is_empty() {
+                "—".to_string()
+            } else {
+                moves.join(", ")
+            }
+        };
+        let verdict = if let Some(n) = &self.note {
+            format!("stopped: {n}")
+        } else if self.converged {
+            format!(
+                "converged: the last doubling moved the stiffnesses by at most {} s.d., so the step's own bias is about that or less",
+                self.tolerance
+            )
+        } else {
+            format!(
+                "not converged: the largest count still moved a stiffness by more than {} s.d.; its interval does not include the step's bias",
+                self.tolerance
+            )
+        };
+        format!(
+            "sub-steps checked on the whole record: {} per sample; each step up moved the stiffnesses by at most {} of their posterior s.d. (the others by at most {}); {verdict} (docs/validation.md, \"Sub-steps checked by doubling\")",
+            counts.join(" → "),
+            list(&|r| r.moved.as_ref()),
+            list(&|r| r.others_moved.as_ref()),
+        )
+    }
 }
 
 /// The evidence of identifying θ with the discrepancy modes inside the filter: the held-out
@@ -652,6 +738,7 @@ pub fn settle(req: PlanRequest) -> Result<RunPlan> {
             discrepancy: None,
             masses: None,
             joint_discrepancy: None,
+            substep_convergence: None,
         },
         decisions,
     })
@@ -1024,6 +1111,12 @@ fn discrepancy_regressors(
 }
 
 impl RunPlan {
+    /// Whether the run holds k, c and α at ≥ 0 (its physical support; Storvik's sampler does
+    /// not), so that a widened interval is held at 0 too.
+    pub fn holds_bounds(&self) -> bool {
+        self.settings.physical_support && self.algorithm != Algorithm::Storvik
+    }
+
     /// The filter partitions' specification of this plan on `data` (the data the plan was
     /// settled on): the building, the prior and noise levels of [`Model`], the settings'
     /// discretisation and marginal prior, the measured ground acceleration, and the regressors

@@ -45,6 +45,23 @@ pub(crate) fn physically_bounded(name: &str) -> bool {
     indexed("k") || indexed("c") || name == "alpha"
 }
 
+/// The intervals a run on field data reports: the filter's own `credible`, widened by the spread
+/// of θ between the record's parts where they disagree ([`spread`]; held at 0 for a parameter
+/// the physical support holds ≥ 0 when `held`), with that spread (none where the trace is too
+/// short to cut into parts).
+pub(crate) fn reported(
+    names: &[String],
+    credible: &[ParamIntervals],
+    trace: &Trace,
+    held: bool,
+) -> (Vec<ParamIntervals>, Option<SegmentSpread>) {
+    let bounded = |name: &str| held && physically_bounded(name);
+    match spread(names, credible, trace, &bounded) {
+        Some((s, widened)) => (widened, Some(s)),
+        None => (credible.to_vec(), None),
+    }
+}
+
 /// What each part of the trace says of parameter `j` alone: (mean, variance) per part with
 /// information.
 pub(crate) fn parts(trace: &Trace, j: usize, segments: usize) -> Vec<(f64, f64)> {

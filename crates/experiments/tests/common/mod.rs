@@ -74,6 +74,20 @@ where
     String::from_utf8(out.stdout).unwrap()
 }
 
+/// The clean ground motion and time step of the foreign corpus's `sysid simulate`
+/// ([`experiments::foreign::GROUND`]: El Centro 1940 × 3, 31.18 s at 200 Hz) with `extra`
+/// arguments (another excitation, a duration), written under `dir`.
+pub fn foreign_ground(dir: &std::path::Path, extra: &[&str]) -> (Vec<f64>, f64) {
+    let mut args: Vec<&std::ffi::OsStr> = experiments::foreign::GROUND
+        .iter()
+        .chain(extra)
+        .map(|a| std::ffi::OsStr::new(*a))
+        .collect();
+    args.extend(["--out".as_ref(), dir.as_os_str()]);
+    sysid_ok(args);
+    experiments::foreign::clean_ground(dir).unwrap()
+}
+
 /// `sysid import` of the shake-table frame's `northridge` record into `dir`.
 pub fn import_frame_northridge(dir: &std::path::Path) {
     sysid_ok([
