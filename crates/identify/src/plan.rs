@@ -1577,7 +1577,57 @@ pub fn resolve_substeps(
 
 #[cfg(test)]
 mod tests {
-    use super::{JointDiscrepancy, MassChoice};
+    use super::{JointDiscrepancy, MassChoice, Moved, SubstepConvergence, SubstepRun};
+
+    /// The sub-step check's decision lists the counts and moves and says whether it converged,
+    /// ran out of counts, or stopped at a failed run; the run takes the last count that ran.
+    #[test]
+    fn the_substep_check_says_how_it_ended() {
+        let run = |substeps: usize, moved: Option<f64>| SubstepRun {
+            substeps,
+            theta_val: vec![1.0],
+            sd: vec![0.1],
+            moved: moved.map(|sd| Moved {
+                parameter: "k3".into(),
+                sd,
+            }),
+            others_moved: moved.map(|sd| Moved {
+                parameter: "c2".into(),
+                sd: 2.0 * sd,
+            }),
+        };
+        let mut c = SubstepConvergence {
+            tolerance: 0.25,
+            runs: vec![run(8, None), run(16, Some(0.9)), run(32, Some(0.2))],
+            converged: true,
+            note: None,
+        };
+        assert_eq!(c.substeps(), Some(32));
+        let d = c.describe();
+        assert!(d.contains("8 → 16 → 32 per sample"), "{d}");
+        assert!(d.contains("0.90 (k3), 0.20 (k3)"), "{d}");
+        assert!(
+            d.contains("the others by at most 1.80 (c2), 0.40 (c2)"),
+            "{d}"
+        );
+        assert!(d.contains("converged"), "{d}");
+        c.converged = false;
+        assert!(c.describe().contains("not converged"), "{}", c.describe());
+        c.note = Some("the run with 64 sub-steps failed: NaN".into());
+        assert!(
+            c.describe().contains("stopped: the run with 64"),
+            "{}",
+            c.describe()
+        );
+        let back: SubstepConvergence =
+            serde_json::from_value(serde_json::to_value(&c).unwrap()).unwrap();
+        assert_eq!(back, c);
+        c.runs.clear();
+        assert_eq!(c.substeps(), None);
+        assert!(c
+            .describe()
+            .contains("each step up moved the stiffnesses by at most — "));
+    }
 
     /// The joint identification's decision says which way the run went, with both held-out fits,
     /// or why it could not be scored; it reads back from a record's JSON.
