@@ -78,14 +78,19 @@ where
 /// ([`experiments::foreign::GROUND`]: El Centro 1940 × 3, 31.18 s at 200 Hz) with `extra`
 /// arguments (another excitation, a duration), written under `dir`.
 pub fn foreign_ground(dir: &std::path::Path, extra: &[&str]) -> (Vec<f64>, f64) {
-    let mut args: Vec<&std::ffi::OsStr> = experiments::foreign::GROUND
+    sysid_out(&experiments::foreign::GROUND, extra, dir);
+    experiments::foreign::clean_ground(dir).unwrap()
+}
+
+/// [`sysid_ok`] with `args`, then `extra`, then `--out out`.
+pub fn sysid_out(args: &[&str], extra: &[&str], out: &std::path::Path) -> String {
+    let mut all: Vec<&std::ffi::OsStr> = args
         .iter()
         .chain(extra)
         .map(|a| std::ffi::OsStr::new(*a))
         .collect();
-    args.extend(["--out".as_ref(), dir.as_os_str()]);
-    sysid_ok(args);
-    experiments::foreign::clean_ground(dir).unwrap()
+    all.extend(["--out".as_ref(), out.as_os_str()]);
+    sysid_ok(all)
 }
 
 /// `sysid import` of the shake-table frame's `northridge` record into `dir`.
@@ -107,7 +112,7 @@ pub fn linear_field_data(dir: &std::path::Path, seed: &str, duration: &str) {
 
 /// [`linear_field_data`] with more `sysid simulate` arguments (`--sensors 1,3`, …).
 pub fn linear_field_data_with(dir: &std::path::Path, seed: &str, duration: &str, extra: &[&str]) {
-    let mut args: Vec<&std::ffi::OsStr> = [
+    let args = [
         "simulate",
         "--storeys",
         "3",
@@ -118,13 +123,8 @@ pub fn linear_field_data_with(dir: &std::path::Path, seed: &str, duration: &str,
         "--seed",
         seed,
         "--absolute",
-    ]
-    .iter()
-    .chain(extra)
-    .map(|a| std::ffi::OsStr::new(*a))
-    .collect();
-    args.extend(["--out".as_ref(), dir.as_os_str()]);
-    sysid_ok(args);
+    ];
+    sysid_out(&args, extra, dir);
     for f in ["dataset.json", "truth.csv"] {
         std::fs::remove_file(dir.join(f)).unwrap();
     }
