@@ -298,11 +298,19 @@ fn choose_noise(
         );
         return Ok(plan);
     }
+    let ident = head(data, split_point(data));
+    // The candidates run at a count their own step does not bias: the default candidate's
+    // sub-steps checked on the part they identify on (docs/validation.md, "Sub-steps checked by
+    // doubling").
+    if substeps::applies(&plan, t)? {
+        plan = substeps::converge_on(plan, &ident, false)?;
+    }
     let mut bases = vec![plan.clone()];
     if open {
-        bases.push(with_other_damping(&plan, t, settings)?);
+        let mut other = with_other_damping(&plan, t, settings)?;
+        substeps::carry(&plan, &mut other);
+        bases.push(other);
     }
-    let ident = head(data, split_point(data));
     let held_out = data.len() - ident.len();
     let factors = &factors;
     let mut plans: Vec<RunPlan> = bases

@@ -117,9 +117,11 @@ pub struct Evidence {
     /// does so ([`crate::choice`]).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub joint_discrepancy: Option<JointDiscrepancy>,
-    /// The sub-steps doubled until θ no longer moved with them ([`crate::choice::substeps`]).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub substep_convergence: Option<SubstepConvergence>,
+    /// The sub-steps doubled until θ no longer moved with them ([`crate::choice::substeps`]):
+    /// on the part the held-out choice identifies on (its candidates run at that count), then
+    /// on the whole record.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub substep_checks: Vec<SubstepConvergence>,
 }
 
 /// One run of the sub-step check: the count, θ_val and each parameter's posterior s.d. as the
@@ -153,6 +155,10 @@ pub struct Moved {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct SubstepConvergence {
+    /// Samples identified on: the whole record, or the first part of it (the held-out
+    /// choice's).
+    pub samples: usize,
+    pub whole: bool,
     pub tolerance: f64,
     pub runs: Vec<SubstepRun>,
     /// Whether the last doubling moved θ by at most `tolerance` s.d.
@@ -197,7 +203,15 @@ impl SubstepConvergence {
             )
         };
         format!(
-            "sub-steps checked on the whole record: {} per sample; each step up moved the stiffnesses by at most {} of their posterior s.d. (the others by at most {}); {verdict} (docs/validation.md, \"Sub-steps checked by doubling\")",
+            "sub-steps checked on {}: {} per sample; each step up moved the stiffnesses by at most {} of their posterior s.d. (the others by at most {}); {verdict} (docs/validation.md, \"Sub-steps checked by doubling\")",
+            if self.whole {
+                "the whole record".to_string()
+            } else {
+                format!(
+                    "the first {} samples (the part the held-out choice identifies on; its candidates run at the count found)",
+                    self.samples
+                )
+            },
             counts.join(" → "),
             list(&|r| r.moved.as_ref()),
             list(&|r| r.others_moved.as_ref()),
@@ -738,7 +752,7 @@ pub fn settle(req: PlanRequest) -> Result<RunPlan> {
             discrepancy: None,
             masses: None,
             joint_discrepancy: None,
-            substep_convergence: None,
+            substep_checks: Vec::new(),
         },
         decisions,
     })
@@ -1597,6 +1611,8 @@ mod tests {
             }),
         };
         let mut c = SubstepConvergence {
+            samples: 1000,
+            whole: true,
             tolerance: 0.25,
             runs: vec![run(8, None), run(16, Some(0.9)), run(32, Some(0.2))],
             converged: true,
@@ -1611,6 +1627,16 @@ mod tests {
             "{d}"
         );
         assert!(d.contains("converged"), "{d}");
+        assert!(
+            d.starts_with("sub-steps checked on the whole record"),
+            "{d}"
+        );
+        c.whole = false;
+        let d = c.describe();
+        assert!(
+            d.starts_with("sub-steps checked on the first 1000 samples"),
+            "{d}"
+        );
         c.converged = false;
         assert!(c.describe().contains("not converged"), "{}", c.describe());
         c.note = Some("the run with 64 sub-steps failed: NaN".into());

@@ -576,13 +576,44 @@ fn unsteady(rel: &str) -> bool {
 }
 
 /// `text` with what differs from one making of the seeds to the next written as fixed values —
-/// timings (JSON keys ending in `_s`, `seconds`, `realtime_factor`) and UTC times —
-/// so that a seed makes the same probes byte for byte (`.cpu` files, the thread CPU times of
-/// the scaling runs, are made 0.25 too). No reader checks these values.
+/// timings (JSON keys ending in `_s`, `seconds`, `realtime_factor`; the last column of a
+/// Markdown table headed `wall s`, a field study's) and UTC times — so that a seed makes the
+/// same probes byte for byte (`.cpu` files, the thread CPU times of the scaling runs, are made
+/// 0.25 too). No reader checks these values.
 fn steady(text: &str) -> String {
+    let mut wall_table = false;
     text.split_inclusive('\n')
-        .map(|line| steady_times(&steady_timing(line)))
+        .map(|line| {
+            let row = line.trim_end();
+            if !row.starts_with('|') {
+                wall_table = false;
+            } else if row.ends_with("| wall s |") {
+                wall_table = true;
+                return line.to_string();
+            }
+            let line = if wall_table {
+                steady_last_cell(line)
+            } else {
+                line.to_string()
+            };
+            steady_times(&steady_timing(&line))
+        })
         .collect()
+}
+
+/// A Markdown table row `| … | <number> |` with its last cell made 0.25 (other rows as they are).
+fn steady_last_cell(line: &str) -> String {
+    let row = line.trim_end();
+    let Some(head) = row.strip_suffix('|') else {
+        return line.to_string();
+    };
+    let Some((before, last)) = head.rsplit_once('|') else {
+        return line.to_string();
+    };
+    if last.trim().parse::<f64>().is_err() {
+        return line.to_string();
+    }
+    format!("{before}| 0.25 |{}", &line[row.len()..])
 }
 
 /// A line `"<timing key>": <number>,` with the number made 0.25.
@@ -641,6 +672,13 @@ mod tests {
             steady(text),
             "{\n  \"wall_s\": 0.25,\n  \"realtime_factor\": 0.25\n  \"runs\": 3,\n  \
              \"submitted\": \"2026-01-01T00:00:00Z\", \"é\": 1\n}\n"
+        );
+        // A field study's table: its wall-time column only.
+        let report =
+            "| variant | fit % | wall s |\n|---|---|---|\n| a | 62.1 | 0.1 |\n\n| x | 3 |\n";
+        assert_eq!(
+            steady(report),
+            "| variant | fit % | wall s |\n|---|---|---|\n| a | 62.1 | 0.25 |\n\n| x | 3 |\n"
         );
     }
 }

@@ -72,12 +72,14 @@ fn with_masses(
         flags: &flags,
         ..*t
     };
-    let settled = crate::plan::settle(target.request(
+    let mut settled = crate::plan::settle(target.request(
         settings.clone(),
         plan.seed,
         plan.run,
         &plan.experiment,
     ))?;
+    // What the sub-step check found stays (the rules' count may differ with the masses).
+    super::substeps::carry(plan, &mut settled);
     Ok(super::with_noise(
         &settled,
         plan.settings.noise_fraction,

@@ -13,13 +13,16 @@
 //! with 24, 800.14 with 48; the differences halve with each doubling, as a first-order error's.
 //!
 //! So on field data of a linear building run as one Gaussian filter (where a run costs little:
-//! [`crate::rules::samples_nothing`]), with the sub-steps left to `auto`, the whole record is
-//! identified with the rules' M, then with 2M, 4M, … until a doubling moves every stiffness by at
-//! most [`TOLERANCE`] of its posterior s.d. (the run's reported 95 % half-width over 1.96,
-//! model error included), or the count reaches [`models::filtering::MAX_SUBSTEPS`]. With a
-//! first-order error the bias left at the last count is about the last move, so a 95 % interval
-//! keeps at least 94.6 % coverage (Φ(1.96 − 0.25) − Φ(−1.96 − 0.25)). The run takes the last
-//! count; a check that did not converge says so, as a warning.
+//! [`crate::rules::samples_nothing`]), with the sub-steps left to `auto`, a record is identified
+//! with the rules' M, then with 2M, 4M, … until a doubling moves every stiffness by at most
+//! [`TOLERANCE`] of its posterior s.d. (the run's reported 95 % half-width over 1.96, model error
+//! included), or the count reaches [`models::filtering::MAX_SUBSTEPS`]. With a first-order error
+//! the bias left at the last count is about the last move, so a 95 % interval keeps at least
+//! 94.6 % coverage (Φ(1.96 − 0.25) − Φ(−1.96 − 0.25)). A check that did not converge says so, as
+//! a warning. It runs twice: on the part of the record the held-out choice identifies on, with
+//! the default candidate, so that every candidate is scored at a count its own step does not
+//! bias ([`converge_on`], called by the choice), and on the whole record from that count, whose
+//! last count the run takes ([`converge`]).
 //!
 //! The stiffnesses decide; the other parameters' largest move is recorded beside. On the
 //! shake-table frame (dashpots + αM: four damping parameters for three modes) c2 sits near its
@@ -44,7 +47,7 @@ const Z95: f64 = 1.959963984540054;
 /// Whether the check applies to `plan` for `t`: field data (no data set description), sub-steps
 /// left to `auto` (by no flag and no config), and a run that samples nothing (one Gaussian
 /// filter).
-fn applies(plan: &RunPlan, t: &Target) -> Result<bool> {
+pub(crate) fn applies(plan: &RunPlan, t: &Target) -> Result<bool> {
     Ok(t.data.meta.is_none()
         && plan.settings.substeps == Substeps::Auto
         && crate::rules::samples_nothing(plan.algorithm, &plan.spec(t.data)?))
@@ -100,16 +103,24 @@ fn largest_move(
     best
 }
 
-/// `plan` with the sub-steps doubled until θ no longer moves with them (see the module
-/// documentation), with the evidence and a decision; a plan the check does not apply to comes
-/// back unchanged.
+/// `plan` (for `t`, where the check applies) with the sub-steps doubled from its count until
+/// θ identified on the whole record no longer moves with them (see the module documentation),
+/// with the evidence and a decision; a plan the check does not apply to, or whose count is
+/// already the largest, comes back unchanged.
 pub fn converge(plan: RunPlan, t: &Target) -> Result<RunPlan> {
-    if !applies(&plan, t)? {
+    if !applies(&plan, t)? || plan.model.substeps >= models::filtering::MAX_SUBSTEPS {
         return Ok(plan);
     }
-    let data: &LoadedDataset = t.data;
+    converge_on(plan, t.data, true)
+}
+
+/// The check of [`converge`] on `data` — the whole record (`whole`) or the part the held-out
+/// choice identifies on, whose candidates then run at the count it found.
+pub(crate) fn converge_on(plan: RunPlan, data: &LoadedDataset, whole: bool) -> Result<RunPlan> {
     let max = models::filtering::MAX_SUBSTEPS;
     let mut check = SubstepConvergence {
+        samples: data.len(),
+        whole,
         tolerance: TOLERANCE,
         runs: Vec::new(),
         converged: false,
@@ -158,8 +169,23 @@ pub fn converge(plan: RunPlan, t: &Target) -> Result<RunPlan> {
         },
         why: check.describe(),
     });
-    out.evidence.substep_convergence = Some(check);
+    out.evidence.substep_checks.push(check);
     Ok(out)
+}
+
+/// `to` (the same run settled again: the other damping form, other masses) with what the
+/// checks of `from` found: at least its count, and its checks' evidence and decisions.
+pub(crate) fn carry(from: &RunPlan, to: &mut RunPlan) {
+    to.model.substeps = to.model.substeps.max(from.model.substeps);
+    if to.evidence.substep_checks.is_empty() {
+        to.evidence.substep_checks = from.evidence.substep_checks.clone();
+        to.decisions.extend(
+            from.decisions
+                .iter()
+                .filter(|d| d.rule == "choice::substeps::converge")
+                .cloned(),
+        );
+    }
 }
 
 #[cfg(test)]
