@@ -21,7 +21,7 @@
 //! 94.6 % coverage (Φ(1.96 − 0.25) − Φ(−1.96 − 0.25)). A check that did not converge says so, as
 //! a warning. It runs twice: on the part of the record the held-out choice identifies on, with
 //! the default candidate, so that every candidate is scored at a count its own step does not
-//! bias ([`converge_on`], called by the choice), and on the whole record from that count, whose
+//! bias (`converge_on`, called by the choice), and on the whole record from that count, whose
 //! last count the run takes ([`converge`]).
 //!
 //! The stiffnesses decide; the other parameters' largest move is recorded beside. On the
