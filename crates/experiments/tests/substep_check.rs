@@ -21,23 +21,6 @@ fn identify(data: &Path, out: &Path, extra: &[&str]) -> serde_json::Value {
     serde_json::from_str(&std::fs::read_to_string(out).unwrap()).unwrap()
 }
 
-/// The 95 % credible interval the record reports for parameter `name`.
-fn interval95(r: &serde_json::Value, name: &str) -> (f64, f64) {
-    let p = r["credible"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .find(|p| p["parameter"] == name)
-        .unwrap();
-    let i = p["intervals"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .find(|i| (i["level"].as_f64().unwrap() - 0.95).abs() < 1e-9)
-        .unwrap();
-    (i["lo"].as_f64().unwrap(), i["hi"].as_f64().unwrap())
-}
-
 #[test]
 fn sub_steps_are_doubled_until_the_stiffnesses_stop_moving_and_then_hold_the_truth() {
     let (_tmp, root) = common::temp_dir("sysid-substep-check-");
@@ -126,7 +109,7 @@ fn sub_steps_are_doubled_until_the_stiffnesses_stop_moving_and_then_hold_the_tru
     }
     // The checked run's stiffness intervals hold the truth.
     for (k, name) in truth.iter().zip(["k1", "k2", "k3"]) {
-        let (lo, hi) = interval95(&r, name);
+        let (lo, hi) = common::interval95(&r, name);
         assert!(lo <= *k && *k <= hi, "{name}: {k} outside [{lo}, {hi}]");
     }
 
@@ -140,7 +123,7 @@ fn sub_steps_are_doubled_until_the_stiffnesses_stop_moving_and_then_hold_the_tru
         .into_iter()
         .zip(truth)
         .filter(|(name, k)| {
-            let (lo, hi) = interval95(&r, name);
+            let (lo, hi) = common::interval95(&r, name);
             !(lo <= *k && *k <= hi)
         })
         .map(|(name, _)| name)

@@ -203,21 +203,10 @@ threshold = 0
             if !(name.starts_with('k') || name.starts_with('c')) {
                 continue;
             }
-            let p = r["credible"]
-                .as_array()
-                .unwrap()
-                .iter()
-                .find(|p| p["parameter"] == name)
-                .unwrap();
-            let i = p["intervals"]
-                .as_array()
-                .unwrap()
-                .iter()
-                .find(|i| i["level"] == 0.95)
-                .unwrap();
+            let (lo, hi) = crate::common::interval95(&r, name);
             let t = truth[j].as_f64().unwrap();
             pairs += 1;
-            if i["lo"].as_f64().unwrap() <= t && t <= i["hi"].as_f64().unwrap() {
+            if lo <= t && t <= hi {
                 covered += 1;
             }
         }

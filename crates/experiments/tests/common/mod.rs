@@ -93,6 +93,23 @@ pub fn sysid_out(args: &[&str], extra: &[&str], out: &std::path::Path) -> String
     sysid_ok(all)
 }
 
+/// The 95 % credible interval a record (as JSON) reports for parameter `name`.
+pub fn interval95(r: &serde_json::Value, name: &str) -> (f64, f64) {
+    let p = r["credible"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|p| p["parameter"] == name)
+        .unwrap();
+    let i = p["intervals"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|i| (i["level"].as_f64().unwrap() - 0.95).abs() < 1e-9)
+        .unwrap();
+    (i["lo"].as_f64().unwrap(), i["hi"].as_f64().unwrap())
+}
+
 /// `sysid import` of the shake-table frame's `northridge` record into `dir`.
 pub fn import_frame_northridge(dir: &std::path::Path) {
     sysid_ok([
