@@ -87,6 +87,10 @@ pub struct BandInfo {
     /// independently (records without correlations).
     #[serde(default)]
     pub correlated: bool,
+    /// Whether θ was drawn from the one Gaussian filter's posterior N(θ_val, Σ) itself (kept
+    /// inside every 95 % interval), else through the copula of the record's quantiles.
+    #[serde(default)]
+    pub gaussian: bool,
 }
 
 /// The free run of an identified model on one record.

@@ -327,14 +327,24 @@ fn parameter_band(
     let (lo, hi) = spread_of_draws(&ok, channels);
     ParameterBand {
         info: Some(BandInfo {
-            method: format!(
-                "θ drawn from {} (quantile function interpolated through its \
-                 2.5/5/25/75/95/97.5 % points, so draws stay inside the 95 % intervals), {}; \
-                 pointwise 2.5–97.5 % of the draws",
-                drawn_from(q.correlated()),
-                how_drawn(q.correlated())
-            ),
+            method: if q.gaussian() {
+                format!(
+                    "θ drawn from {}, inside each 95 % interval, {}; pointwise 2.5–97.5 % of \
+                     the draws",
+                    drawn_from(true),
+                    how_drawn(true, true)
+                )
+            } else {
+                format!(
+                    "θ drawn from {} (quantile function interpolated through its \
+                     2.5/5/25/75/95/97.5 % points, so draws stay inside the 95 % intervals), {}; \
+                     pointwise 2.5–97.5 % of the draws",
+                    drawn_from(q.correlated()),
+                    how_drawn(q.correlated(), false)
+                )
+            },
             correlated: q.correlated(),
+            gaussian: q.gaussian(),
             purpose: BAND_PURPOSE.into(),
             draws,
             valid: ok.len(),
@@ -722,7 +732,10 @@ pub(crate) fn posterior_of(r: &RunRecord) -> Result<QuantileDraw, String> {
             .segment_spread
             .as_ref()
             .map_or(&r.credible, |s| &s.filter_credible);
-        let q = QuantileDraw::new(&r.param_names, own)?.with_correlation(&r.theta_correlation);
+        let mut q = QuantileDraw::new(&r.param_names, own)?.with_correlation(&r.theta_correlation);
+        if r.one_gaussian_filter {
+            q = q.with_gaussian(&r.theta_val, &r.theta_sd_final);
+        }
         if q.correlated() {
             return Ok(q);
         }
@@ -922,7 +935,7 @@ fn write_free_run(o: &mut String, f: &FreeRun) {
                 b.valid,
                 b.draws,
                 drawn_from(b.correlated),
-                how_drawn(b.correlated)
+                how_drawn(b.correlated, b.gaussian)
             );
         }
         (None, Some(e)) => {
@@ -1035,12 +1048,21 @@ fn drawn_from(correlated: bool) -> &'static str {
     }
 }
 
-/// How the band's θ were drawn, for its method and the summary.
-fn how_drawn(correlated: bool) -> &'static str {
-    if correlated {
-        "parameters drawn jointly with the posterior's correlations (a Gaussian copula)"
-    } else {
-        "parameters drawn independently (the record keeps no usable correlation matrix)"
+/// How the band's θ were drawn, for its method and the summary: from the one Gaussian filter's
+/// posterior itself, or through the copula of the record's quantiles
+/// ([`free_run::QuantileDraw`]).
+fn how_drawn(correlated: bool, gaussian: bool) -> &'static str {
+    match (correlated, gaussian) {
+        (_, true) => {
+            "parameters drawn jointly from the one Gaussian filter's posterior N(θ_val, Σ) \
+             itself (its 95 % intervals hold k, c and α ≥ 0)"
+        }
+        (true, false) => {
+            "parameters drawn jointly with the posterior's correlations (a Gaussian copula)"
+        }
+        (false, false) => {
+            "parameters drawn independently (the record keeps no usable correlation matrix)"
+        }
     }
 }
 
