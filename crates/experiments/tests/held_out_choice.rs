@@ -273,3 +273,74 @@ fn masses_stay_as_stated_without_a_sensor_on_every_storey() {
         .iter()
         .any(|d| d.rule == "choice::choose" && d.why.contains("one full particle run")));
 }
+
+/// One storey has one damping form: its dashpot and the mass term act on the same velocity, so
+/// with `--damping` left open the choice keeps `storey` (every candidate of that form, one
+/// decision saying why); stated, `storey+mass` runs as asked with a warning.
+#[test]
+fn one_storey_keeps_one_damping_form() {
+    let (_tmp, root) = common::temp_dir("sysid-choice-one-");
+    let data = root.join("d");
+    let args = [
+        "simulate",
+        "--storeys",
+        "1",
+        "--hysteretic",
+        "none",
+        "--duration",
+        "10",
+        "--seed",
+        "5",
+        "--absolute",
+    ];
+    common::sysid_out(&args, &[], &data);
+    for f in ["dataset.json", "truth.csv"] {
+        std::fs::remove_file(data.join(f)).unwrap();
+    }
+    let one = |extra: &[&str]| {
+        let flags = common::LINEAR_FIELD_FILTER.map(|a| if a == "3" { "1" } else { a });
+        let out = sysid()
+            .args(flags)
+            .args(extra)
+            .arg("--data")
+            .arg(&data)
+            .arg("--print-plan")
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        RunPlan::from_toml(&String::from_utf8(out.stdout).unwrap(), "plan").unwrap()
+    };
+    let rule = "choice::one_storey_damping";
+    let plan = one(&[]);
+    let choice = plan.evidence.held_out.as_ref().expect("the choice ran");
+    assert_eq!(
+        choice.candidates.len(),
+        NOISE_FRACTIONS.len() * PROCESS_NOISE_FACTORS.len()
+    );
+    assert!(choice
+        .candidates
+        .iter()
+        .all(|c| c.damping == Damping::Storey));
+    assert_eq!(plan.building.damping, Damping::Storey);
+    let d: Vec<_> = plan.decisions.iter().filter(|d| d.rule == rule).collect();
+    assert_eq!(d.len(), 1, "{:?}", plan.decisions);
+    assert!(d[0].why.contains("c1/m1 + alpha"), "{}", d[0].why);
+    // Stated: kept, warned.
+    let plan = one(&["--damping", "storey+mass"]);
+    assert_eq!(plan.building.damping, Damping::StoreyMass);
+    let d: Vec<_> = plan.decisions.iter().filter(|d| d.rule == rule).collect();
+    assert_eq!(d.len(), 1, "{:?}", plan.decisions);
+    assert_eq!(d[0].level, identify::plan::Level::Warning);
+    assert!(plan
+        .evidence
+        .held_out
+        .as_ref()
+        .unwrap()
+        .candidates
+        .iter()
+        .all(|c| c.damping == Damping::StoreyMass));
+}

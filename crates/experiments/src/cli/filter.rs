@@ -128,7 +128,10 @@ pub struct Args {
     pub measurement: Option<MeasurementKind>,
     /// Damping form of the model: storey (per-storey dashpots c1..cN, the default) or
     /// storey+mass (also mass-proportional damping αM, θ gains `alpha` after c1..cN; MPF-EKF2
-    /// and bootstrap PF). Data with dataset.json must agree with the form they record.
+    /// and bootstrap PF). Data with dataset.json must agree with the form they record. Left
+    /// open on field data where the noise is chosen on held-out data, the choice tries both
+    /// forms on two or more storeys; one storey keeps storey (its dashpot and the mass term act
+    /// on the same velocity: only c1/m1 + alpha is identified).
     #[arg(long, value_parser = parse_damping)]
     pub damping: Option<models::structure::Damping>,
 }
