@@ -344,3 +344,89 @@ fn one_storey_keeps_one_damping_form() {
         .iter()
         .all(|c| c.damping == Damping::StoreyMass));
 }
+
+/// A particle run's noise chosen with its linear counterpart: field data of a building with a
+/// Bouc–Wen storey, no noise stated — the held-out choice scores the 12 noise candidates of the
+/// same building with that storey linear (one Gaussian filter each), then the particle run
+/// itself with its own noise and with the chosen one on the held-out part, and takes the
+/// better; its plan is the one settled with those noise levels stated (noise levels, hysteretic
+/// process noise and all), and stated, they are kept.
+#[test]
+fn a_particle_runs_noise_is_chosen_with_its_linear_counterpart() {
+    let (_tmp, root) = common::temp_dir("sysid-choice-bw-");
+    let data = root.join("d");
+    let args = ["simulate", "--duration", "10", "--seed", "6", "--absolute"];
+    common::sysid_out(&args, &[], &data);
+    for f in ["dataset.json", "truth.csv"] {
+        std::fs::remove_file(data.join(f)).unwrap();
+    }
+    let hysteretic = common::LINEAR_FIELD_FILTER.map(|a| if a == "none" { "1" } else { a });
+    let plan_of = |extra: &[&str]| {
+        let out = sysid()
+            .args(hysteretic)
+            .args(["--damping", "storey", "--particles", "200"])
+            .args(extra)
+            .arg("--data")
+            .arg(&data)
+            .arg("--print-plan")
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        RunPlan::from_toml(&String::from_utf8(out.stdout).unwrap(), "plan").unwrap()
+    };
+    let plan = plan_of(&[]);
+    assert_eq!(plan.building.hysteretic, vec![1]);
+    let choice = plan.evidence.held_out.as_ref().expect("the choice ran");
+    assert_eq!(
+        choice.candidates.len(),
+        NOISE_FRACTIONS.len() * PROCESS_NOISE_FACTORS.len()
+    );
+    assert!(choice.candidates.iter().all(|c| c.score.is_some()));
+    let chosen = &choice.candidates[choice.chosen];
+    let (nf, pf) = (
+        plan.settings.noise_fraction,
+        plan.settings.process_noise_factor,
+    );
+    let own = (
+        FilterSettings::default().noise_fraction,
+        FilterSettings::default().process_noise_factor,
+    );
+    assert!(
+        (nf, pf) == (chosen.noise_fraction, chosen.process_noise_factor) || (nf, pf) == own,
+        "({nf}, {pf})"
+    );
+    let decision = plan
+        .decisions
+        .iter()
+        .find(|d| d.rule == "choice::linear::choose")
+        .expect("the decision");
+    assert!(
+        decision.why.contains("linear counterpart"),
+        "{}",
+        decision.why
+    );
+    if (chosen.noise_fraction, chosen.process_noise_factor) != own {
+        // Both noise levels scored by the particle run itself.
+        assert!(
+            decision.why.contains("then the particle run"),
+            "{}",
+            decision.why
+        );
+    }
+    // The same plan as one settled with its noise stated (which chooses nothing).
+    let stated = plan_of(&[
+        "--noise-fraction",
+        &nf.to_string(),
+        "--process-noise-factor",
+        &pf.to_string(),
+    ]);
+    assert!(stated.evidence.held_out.is_none());
+    assert_eq!(plan.model.r_diag, stated.model.r_diag);
+    assert_eq!(plan.model.q_vel, stated.model.q_vel);
+    assert_eq!(plan.model.q_r, stated.model.q_r);
+    assert_eq!(plan.model.substeps, stated.model.substeps);
+}

@@ -20,6 +20,7 @@
 //! particle run would cost one full run per candidate (24 with both damping forms open); its plan
 //! says so and keeps the default.
 
+mod linear;
 pub mod masses;
 pub mod substeps;
 
@@ -306,6 +307,11 @@ fn choose_noise(
     }
     if let Some(why) = applies(&plan, t, data)? {
         if t.config.is_none() && data.meta.is_none() {
+            // A particle run: its noise chosen on its linear counterpart, where that runs.
+            let applies_to = |p: &RunPlan, t: &Target| applies(p, t, data);
+            if let Some(p) = linear::choose(&plan, t, settings, stated, applies_to)? {
+                return Ok(p);
+            }
             kept(&mut plan, Level::Info, why);
         }
         return Ok(plan);

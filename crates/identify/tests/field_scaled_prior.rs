@@ -409,3 +409,22 @@ fn stiff_sweep() {
         100.0 * worst
     );
 }
+
+/// The stiff sweep's data sets written under `STIFF_OUT` (one directory per noise seed, as
+/// [`stiff_sweep`] makes them: `STIFF_SCALE`, `STIFF_HZ`, `STIFF_SEEDS`, `STIFF_FIRST_NOISE`),
+/// to identify with `sysid filter` as a user would — its plan as settled and chosen, which the
+/// sweep's settled settings do not include. Run with `STIFF_OUT=dir cargo test --release -p
+/// identify --test suite write_stiff_data_sets -- --ignored`.
+#[test]
+#[ignore = "writes data sets for a measurement, not a check"]
+fn write_stiff_data_sets() {
+    let out = std::path::PathBuf::from(std::env::var("STIFF_OUT").expect("STIFF_OUT"));
+    let scale: f64 = env("STIFF_SCALE", 4.0);
+    let hz: f64 = env("STIFF_HZ", 200.0 * scale);
+    let (seeds, first): (u64, u64) = (env("STIFF_SEEDS", 6), env("STIFF_FIRST_NOISE", 101));
+    for noise in first..first + seeds {
+        let dir = out.join(format!("noise-{noise}"));
+        let k = write_stiff_field_data(&dir, scale, 1.0 / hz, noise);
+        std::fs::write(dir.join("k_true.txt"), format!("{k:?}\n")).unwrap();
+    }
+}
