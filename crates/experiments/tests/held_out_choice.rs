@@ -430,3 +430,43 @@ fn a_particle_runs_noise_is_chosen_with_its_linear_counterpart() {
     assert_eq!(plan.model.q_r, stated.model.q_r);
     assert_eq!(plan.model.substeps, stated.model.substeps);
 }
+
+/// Another filter on a linear building is a particle run too: its noise is chosen with the
+/// same building under the MPF-EKF2, and the counterpart's held-out error stays out of the
+/// run's band (each candidate's is dropped: the particle run learns its own).
+#[test]
+fn another_filters_noise_is_chosen_with_the_mpf_ekf2() {
+    let (_tmp, root) = common::temp_dir("sysid-choice-pf-");
+    let data = root.join("d");
+    linear_field_data(&data);
+    let flags = common::LINEAR_FIELD_FILTER.map(|a| if a == "mpf-ekf2" { "bootstrap" } else { a });
+    let out = sysid()
+        .args(flags)
+        .args(["--damping", "storey", "--particles", "200", "--print-plan"])
+        .arg("--data")
+        .arg(&data)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let plan = RunPlan::from_toml(&String::from_utf8(out.stdout).unwrap(), "plan").unwrap();
+    let choice = plan.evidence.held_out.as_ref().expect("the choice ran");
+    assert_eq!(
+        choice.candidates.len(),
+        NOISE_FRACTIONS.len() * PROCESS_NOISE_FACTORS.len()
+    );
+    assert!(choice.candidates.iter().all(|c| c.held_out_error.is_none()));
+    let d = plan
+        .decisions
+        .iter()
+        .find(|d| d.rule == "choice::linear::choose")
+        .expect("the decision");
+    assert!(
+        d.why.contains("under the MPF-EKF2") && d.why.contains("bootstrap"),
+        "{}",
+        d.why
+    );
+}

@@ -92,9 +92,9 @@ pub struct Args {
     /// Noise fraction nf: the measurement noise s.d. nf × RMS of each channel, the velocities'
     /// process noise dt × nf × RMS ü_g (SPEC §3). Without --config the default is 0.1; on field
     /// data of a linear building it is chosen by held-out prediction (docs/validation.md) unless
-    /// given here; for the MPF-EKF2 on a building with hysteretic storeys, on its linear
-    /// counterpart, then taken only if the particle run itself predicts the held-out part
-    /// better with it (two partial particle runs).
+    /// given here; for a particle run (hysteretic storeys, or another filter), on its linear
+    /// counterpart under the MPF-EKF2, then taken only if the particle run itself predicts the
+    /// held-out part better with it (two partial particle runs).
     #[arg(long)]
     pub noise_fraction: Option<f64>,
     /// The velocities' process noise relative to SPEC §3's (1: the SPEC's). Chosen with the

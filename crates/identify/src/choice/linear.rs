@@ -1,24 +1,26 @@
 //! The noise levels of a particle run on field data chosen with its linear counterpart.
 //!
-//! A building with hysteretic storeys runs as a particle filter, and choosing its noise by
-//! held-out prediction ([`super::choose`]) would cost one particle run per candidate. Its noise
-//! levels still decide where its model error goes: on the Painter Street bent (Ferndale 2015,
-//! one storey, `--hysteretic 1`) the SPEC's noise fraction 0.1 pushed the Bouc–Wen k1 to its
-//! bound (0.006, with a warning) and the free run fitted 7.1 %. So the choice runs in two stages:
+//! A building with hysteretic storeys, or any building under a particle filter (bootstrap PF,
+//! MLN-RBPF, Storvik), runs as particles, and choosing its noise by held-out prediction
+//! ([`super::choose`]) would cost one particle run per candidate. Its noise levels still decide
+//! where its model error goes: on the Painter Street bent (Ferndale 2015, one storey) the SPEC's
+//! noise fraction 0.1 pushed the MPF-EKF2's Bouc–Wen k1 (`--hysteretic 1`) and the linear
+//! MLN-RBPF's k1 to their bound (0.006, 0.004, with a warning) and their free runs fitted 7.1 and
+//! 5.6 %. So the choice runs in two stages:
 //!
 //! 1. The linear counterpart — the same building with its hysteretic storeys as linear springs,
-//!    the Bouc–Wen element at small amplitude — runs as one Gaussian filter, so its 12 noise
-//!    candidates cost what a linear run's do: they are scored on the held-out part exactly as a
-//!    linear run's (its sub-steps checked first where that applies).
-//! 2. A hysteretic building's model error is not its linear counterpart's (on records of the
-//!    filter's own class the counterpart, missing the hysteresis, chooses the most noise): the
-//!    particle run itself, with its own noise and with the counterpart's, is identified on the
-//!    same part and scored on the held-out part — two partial particle runs — and the run takes
-//!    the counterpart's only where it predicts better by more than [`SWITCH_MARGIN`] points.
+//!    the Bouc–Wen element at small amplitude — under the MPF-EKF2 runs as one Gaussian filter,
+//!    so its 12 noise candidates cost what a linear run's do: they are scored on the held-out
+//!    part exactly as a linear run's (its sub-steps checked first where that applies).
+//! 2. A particle run's model error is not its linear counterpart's (on records of the filter's
+//!    own class the counterpart, missing the hysteresis, chooses the most noise): the particle
+//!    run itself, with its own noise and with the counterpart's, is identified on the same part
+//!    and scored on the held-out part — two partial particle runs — and the run takes the
+//!    counterpart's only where it predicts better by more than [`SWITCH_MARGIN`] points.
 //!
 //! The run taking the counterpart's noise is settled with it, as a run stating it would be. Its
-//! damping form stays the run's; the counterpart's masses, discrepancy and sub-steps are not
-//! carried over (the particle run has its own rules for them).
+//! damping form stays the run's; the counterpart's masses, discrepancy, sub-steps and held-out
+//! error (the band's) are not carried over (the particle run has its own).
 
 use models::dataset::LoadedDataset;
 
@@ -41,7 +43,8 @@ const SWITCH_MARGIN: f64 = 2.0;
 /// `plan` (a particle run of `t`) with the noise fraction and process-noise factor chosen with
 /// its linear counterpart, the counterpart's choice as its evidence and one decision with the
 /// particle runs' scores; `None` where that does not
-/// apply (not the MPF-EKF2 with hysteretic storeys, both noise settings stated, or a linear
+/// apply (the MPF-EKF2 on a linear building, which the choice itself serves; both noise
+/// settings stated; or a linear
 /// counterpart the held-out choice would not run on: `why_not` says why for the latter).
 pub(super) fn choose(
     plan: &RunPlan,
@@ -50,8 +53,9 @@ pub(super) fn choose(
     stated: Stated,
     why_not: impl Fn(&RunPlan, &Target) -> Result<Option<String>>,
 ) -> Result<Option<RunPlan>> {
-    if t.algorithm != Algorithm::MpfEkf2
-        || plan.building.hysteretic.is_empty()
+    // The MPF-EKF2 on a linear building is the held-out choice's own case.
+    let gaussian_itself = t.algorithm == Algorithm::MpfEkf2 && plan.building.hysteretic.is_empty();
+    if gaussian_itself
         || (stated.noise_fraction && stated.process_noise_factor)
         || t.data.len() < super::MIN_SAMPLES
     {
@@ -65,7 +69,7 @@ pub(super) fn choose(
         ..t.flags.clone()
     };
     let target = Target {
-        algorithm: t.algorithm,
+        algorithm: Algorithm::MpfEkf2,
         data: t.data,
         chain: t.chain,
         measured: t.measured,
@@ -93,7 +97,12 @@ pub(super) fn choose(
         .flat_map(|&nf| factors.iter().map(move |&pf| (nf, pf)))
         .map(|(nf, pf)| with_noise(&linear, nf, pf))
         .collect();
-    let candidates = scored(&plans, &ident, data)?;
+    let mut candidates = scored(&plans, &ident, data)?;
+    // Each candidate's held-out error is the counterpart's, not the particle run's model's:
+    // the band of the run must not take it (it learns its own, docs/validation.md).
+    for c in &mut candidates {
+        c.held_out_error = None;
+    }
     let Some(chosen) = best_scored(&candidates) else {
         return Ok(None);
     };
@@ -108,9 +117,11 @@ pub(super) fn choose(
         chosen,
     };
     let linear_why = format!(
-        "on the building's linear counterpart (hysteretic storeys {:?} as linear springs, one \
-         Gaussian filter per candidate: a particle run per candidate would cost {} runs), {}",
+        "on the building's linear counterpart under the MPF-EKF2 (hysteretic storeys {:?} as \
+         linear springs, one Gaussian filter per candidate: a {} run per candidate would cost {} \
+         particle runs), {}",
         plan.building.hysteretic,
+        t.algorithm.name(),
         plans.len(),
         choice.describe()
     );
