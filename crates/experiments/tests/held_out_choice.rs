@@ -30,6 +30,12 @@ fn print_plan(data: &Path, extra: &[&str]) -> (RunPlan, String) {
 /// [`print_plan`] with the masses stated as `masses`.
 fn print_plan_with_masses(data: &Path, masses: &str, extra: &[&str]) -> (RunPlan, String) {
     let flags = common::LINEAR_FIELD_FILTER.map(|a| if a == "1" { masses } else { a });
+    plan_of(&flags, extra, data)
+}
+
+/// `sysid` with `flags` (a `filter` command) and `extra` on `data`, with `--print-plan`: the plan
+/// and its text (panics unless it succeeds).
+fn plan_of(flags: &[&str], extra: &[&str], data: &Path) -> (RunPlan, String) {
     let out = sysid()
         .args(flags)
         .args(extra)
@@ -297,23 +303,8 @@ fn one_storey_keeps_one_damping_form() {
     for f in ["dataset.json", "truth.csv"] {
         std::fs::remove_file(data.join(f)).unwrap();
     }
-    let one = |extra: &[&str]| {
-        let flags = common::LINEAR_FIELD_FILTER.map(|a| if a == "3" { "1" } else { a });
-        let out = sysid()
-            .args(flags)
-            .args(extra)
-            .arg("--data")
-            .arg(&data)
-            .arg("--print-plan")
-            .output()
-            .unwrap();
-        assert!(
-            out.status.success(),
-            "{}",
-            String::from_utf8_lossy(&out.stderr)
-        );
-        RunPlan::from_toml(&String::from_utf8(out.stdout).unwrap(), "plan").unwrap()
-    };
+    let flags = common::LINEAR_FIELD_FILTER.map(|a| if a == "3" { "1" } else { a });
+    let one = |extra: &[&str]| plan_of(&flags, extra, &data).0;
     let rule = "choice::one_storey_damping";
     let plan = one(&[]);
     let choice = plan.evidence.held_out.as_ref().expect("the choice ran");
@@ -361,24 +352,15 @@ fn a_particle_runs_noise_is_chosen_with_its_linear_counterpart() {
         std::fs::remove_file(data.join(f)).unwrap();
     }
     let hysteretic = common::LINEAR_FIELD_FILTER.map(|a| if a == "none" { "1" } else { a });
-    let plan_of = |extra: &[&str]| {
-        let out = sysid()
-            .args(hysteretic)
-            .args(["--damping", "storey", "--particles", "200"])
-            .args(extra)
-            .arg("--data")
-            .arg(&data)
-            .arg("--print-plan")
-            .output()
-            .unwrap();
-        assert!(
-            out.status.success(),
-            "{}",
-            String::from_utf8_lossy(&out.stderr)
-        );
-        RunPlan::from_toml(&String::from_utf8(out.stdout).unwrap(), "plan").unwrap()
+    let plan_with = |extra: &[&str]| {
+        let flags = [
+            &hysteretic[..],
+            &["--damping", "storey", "--particles", "200"],
+        ]
+        .concat();
+        plan_of(&flags, extra, &data).0
     };
-    let plan = plan_of(&[]);
+    let plan = plan_with(&[]);
     assert_eq!(plan.building.hysteretic, vec![1]);
     let choice = plan.evidence.held_out.as_ref().expect("the choice ran");
     assert_eq!(
@@ -418,7 +400,7 @@ fn a_particle_runs_noise_is_chosen_with_its_linear_counterpart() {
         );
     }
     // The same plan as one settled with its noise stated (which chooses nothing).
-    let stated = plan_of(&[
+    let stated = plan_with(&[
         "--noise-fraction",
         &nf.to_string(),
         "--process-noise-factor",
@@ -440,19 +422,11 @@ fn another_filters_noise_is_chosen_with_the_mpf_ekf2() {
     let data = root.join("d");
     linear_field_data(&data);
     let flags = common::LINEAR_FIELD_FILTER.map(|a| if a == "mpf-ekf2" { "bootstrap" } else { a });
-    let out = sysid()
-        .args(flags)
-        .args(["--damping", "storey", "--particles", "200", "--print-plan"])
-        .arg("--data")
-        .arg(&data)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    let (plan, _) = plan_of(
+        &flags,
+        &["--damping", "storey", "--particles", "200"],
+        &data,
     );
-    let plan = RunPlan::from_toml(&String::from_utf8(out.stdout).unwrap(), "plan").unwrap();
     let choice = plan.evidence.held_out.as_ref().expect("the choice ran");
     assert_eq!(
         choice.candidates.len(),

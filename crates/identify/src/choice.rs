@@ -276,7 +276,9 @@ pub(crate) fn score(plan: &RunPlan, ident: &LoadedDataset, data: &LoadedDataset)
 /// settled for `t` from `settings` — by held-out prediction, and returns the plan of the chosen
 /// candidate with the evidence and a decision; a plan the choice does not apply to comes back
 /// with a decision saying why. Then, on the plan chosen, the sub-steps are doubled until θ no
-/// longer moves with them ([`substeps::converge`], where that applies).
+/// longer moves with them ([`substeps::converge`], where that applies); a one-storey plan with
+/// `storey+mass` damping (stated: the choice keeps `storey` on one storey) is warned that c1 and
+/// alpha are one damping.
 pub fn choose(
     plan: RunPlan,
     t: &Target,
@@ -284,7 +286,16 @@ pub fn choose(
     stated: Stated,
 ) -> Result<RunPlan> {
     let plan = choose_noise(plan, t, settings, stated)?;
-    substeps::converge(plan, t)
+    let mut plan = substeps::converge(plan, t)?;
+    if plan.building.storeys == 1 && plan.building.damping == Damping::StoreyMass {
+        plan.decisions.push(Decision {
+            rule: "choice::one_storey_damping".into(),
+            set: String::new(),
+            level: Level::Warning,
+            why: ONE_STOREY_DAMPING_STATED.into(),
+        });
+    }
+    Ok(plan)
 }
 
 /// [`choose`] without the sub-step check.
@@ -297,14 +308,6 @@ fn choose_noise(
     let data = t.data;
     let mut plan = plan;
     let one_storey = plan.building.storeys == 1;
-    if one_storey && plan.building.damping == Damping::StoreyMass {
-        plan.decisions.push(Decision {
-            rule: "choice::one_storey_damping".into(),
-            set: String::new(),
-            level: Level::Warning,
-            why: ONE_STOREY_DAMPING_STATED.into(),
-        });
-    }
     if let Some(why) = applies(&plan, t, data)? {
         if t.config.is_none() && data.meta.is_none() {
             // A particle run: its noise chosen on its linear counterpart, where that runs.
@@ -651,15 +654,7 @@ fn with_other_damping(plan: &RunPlan, t: &Target, settings: &FilterSettings) -> 
         damping: Some(other),
         ..t.flags.clone()
     };
-    let target = Target {
-        algorithm: t.algorithm,
-        data: t.data,
-        chain: t.chain,
-        measured: t.measured,
-        flags: &flags,
-        config: t.config,
-        particles_asked: t.particles_asked,
-    };
+    let target = t.with_flags(t.algorithm, &flags);
     crate::plan::settle(target.request(settings.clone(), plan.seed, plan.run, &plan.experiment))
 }
 

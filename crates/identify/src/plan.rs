@@ -574,6 +574,24 @@ pub struct Target<'a> {
 }
 
 impl Target<'_> {
+    /// The same run with another `algorithm` and structure `flags`: the target of a candidate
+    /// settled on another building (the other damping form, the linear counterpart).
+    pub fn with_flags<'b>(
+        &'b self,
+        algorithm: Algorithm,
+        flags: &'b StructureSettings,
+    ) -> Target<'b> {
+        Target {
+            algorithm,
+            data: self.data,
+            chain: self.chain,
+            measured: self.measured,
+            flags,
+            config: self.config,
+            particles_asked: self.particles_asked,
+        }
+    }
+
     /// The plan request of this target with `settings`, seed, run and experiment.
     pub fn request<'a>(
         &'a self,

@@ -42,10 +42,9 @@ const SWITCH_MARGIN: f64 = 2.0;
 
 /// `plan` (a particle run of `t`) with the noise fraction and process-noise factor chosen with
 /// its linear counterpart, the counterpart's choice as its evidence and one decision with the
-/// particle runs' scores; `None` where that does not
-/// apply (the MPF-EKF2 on a linear building, which the choice itself serves; both noise
-/// settings stated; or a linear
-/// counterpart the held-out choice would not run on: `why_not` says why for the latter).
+/// particle runs' scores; `None` where that does not apply (the MPF-EKF2 on a linear building,
+/// which the choice itself serves; both noise settings stated; a record too short; or a linear
+/// counterpart the held-out choice would not run on, which `why_not` tells).
 pub(super) fn choose(
     plan: &RunPlan,
     t: &Target,
@@ -68,15 +67,7 @@ pub(super) fn choose(
         damping: Some(plan.building.damping),
         ..t.flags.clone()
     };
-    let target = Target {
-        algorithm: Algorithm::MpfEkf2,
-        data: t.data,
-        chain: t.chain,
-        measured: t.measured,
-        flags: &flags,
-        config: t.config,
-        particles_asked: t.particles_asked,
-    };
+    let target = t.with_flags(Algorithm::MpfEkf2, &flags);
     let mut linear = crate::plan::settle(target.request(
         settings.clone(),
         plan.seed,
@@ -131,9 +122,9 @@ pub(super) fn choose(
     s.noise_fraction = nf;
     s.process_noise_factor = pf;
     let theirs = crate::plan::settle(t.request(s, plan.seed, plan.run, &plan.experiment))?;
-    // A hysteretic building's error is not its linear counterpart's: both noise levels, the
-    // run's and the counterpart's, are scored by the particle run itself on the held-out part
-    // (two partial particle runs), the run's kept on a tie.
+    // A particle run's error is not its linear counterpart's: both noise levels, the run's and
+    // the counterpart's, are scored by the particle run itself on the held-out part (two
+    // partial particle runs), the counterpart's taken only when better by SWITCH_MARGIN.
     let (taken, why) =
         if same {
             (true, "the particle run's own noise levels".to_string())
