@@ -147,13 +147,14 @@ fn a_linear_field_identification_chooses_its_noise_by_held_out_prediction() {
         .all(|c| c.damping == Damping::Storey));
 }
 
-/// The settings-free plan of `data` with noise fraction `nf` and process-noise factor `pf`.
-fn settled(data: &LoadedDataset, nf: f64, pf: f64) -> RunPlan {
+/// The settings-free plan of `data` with noise fraction `nf`, process-noise factor `pf` and
+/// Bouc–Wen elements in the (1-based) `hysteretic` storeys.
+fn settled_with(data: &LoadedDataset, nf: f64, pf: f64, hysteretic: Vec<usize>) -> RunPlan {
     let mut s = FilterSettings::recommended();
     s.noise_fraction = nf;
     s.process_noise_factor = pf;
     s.structure.storeys = Some(3);
-    s.structure.hysteretic = Some(vec![]);
+    s.structure.hysteretic = Some(hysteretic);
     s.structure.masses = Some(vec![1.0]);
     s.structure.measurement = Some(models::sensors::MeasurementKind::Absolute);
     settle(PlanRequest {
@@ -175,19 +176,24 @@ fn a_candidate_is_the_plan_settled_with_its_noise() {
     let dir = root.join("d");
     linear_field_data(&dir);
     let data = load_dir(&dir).unwrap();
-    let base = settled(&data, 0.1, 1.0);
-    for &(nf, pf) in &[(0.3, 0.1), (3.0, 0.01), (1.0, 1.0)] {
-        let want = settled(&data, nf, pf);
-        let got = with_noise(&base, nf, pf);
-        assert_eq!(got.settings, want.settings, "{nf} {pf}");
-        for (a, b) in got.model.r_diag.iter().zip(&want.model.r_diag) {
-            assert!((a - b).abs() <= 1e-14 * b.abs(), "R {nf}: {a} {b}");
+    // A linear building, and one with a Bouc–Wen storey (whose hysteretic process noise the
+    // plan does not scale with the noise fraction).
+    for hysteretic in [vec![], vec![1]] {
+        let base = settled_with(&data, 0.1, 1.0, hysteretic.clone());
+        for &(nf, pf) in &[(0.3, 0.1), (3.0, 0.01), (1.0, 1.0)] {
+            let want = settled_with(&data, nf, pf, hysteretic.clone());
+            let got = with_noise(&base, nf, pf);
+            assert_eq!(got.model.q_r.len(), hysteretic.len());
+            assert_eq!(got.settings, want.settings, "{nf} {pf}");
+            for (a, b) in got.model.r_diag.iter().zip(&want.model.r_diag) {
+                assert!((a - b).abs() <= 1e-14 * b.abs(), "R {nf}: {a} {b}");
+            }
+            let (a, b) = (got.model.q_vel, want.model.q_vel);
+            assert!((a - b).abs() <= 1e-14 * b.abs(), "q_vel {nf} {pf}: {a} {b}");
+            assert_eq!(got.model.q_r, want.model.q_r);
+            assert_eq!(got.model.q_disp, want.model.q_disp);
+            assert_eq!(got.model.prior, want.model.prior);
         }
-        let (a, b) = (got.model.q_vel, want.model.q_vel);
-        assert!((a - b).abs() <= 1e-14 * b.abs(), "q_vel {nf} {pf}: {a} {b}");
-        assert_eq!(got.model.q_r, want.model.q_r);
-        assert_eq!(got.model.q_disp, want.model.q_disp);
-        assert_eq!(got.model.prior, want.model.prior);
     }
 }
 
@@ -381,11 +387,7 @@ fn a_particle_runs_noise_is_chosen_with_its_linear_counterpart() {
         (nf, pf) == (chosen.noise_fraction, chosen.process_noise_factor) || (nf, pf) == own,
         "({nf}, {pf})"
     );
-    let decision = plan
-        .decisions
-        .iter()
-        .find(|d| d.rule == "choice::linear::choose")
-        .expect("the decision");
+    let decision = linear_decision(&plan);
     assert!(
         decision.why.contains("linear counterpart"),
         "{}",
@@ -433,14 +435,18 @@ fn another_filters_noise_is_chosen_with_the_mpf_ekf2() {
         NOISE_FRACTIONS.len() * PROCESS_NOISE_FACTORS.len()
     );
     assert!(choice.candidates.iter().all(|c| c.held_out_error.is_none()));
-    let d = plan
-        .decisions
-        .iter()
-        .find(|d| d.rule == "choice::linear::choose")
-        .expect("the decision");
+    let d = linear_decision(&plan);
     assert!(
         d.why.contains("under the MPF-EKF2") && d.why.contains("bootstrap"),
         "{}",
         d.why
     );
+}
+
+/// The decision of the noise chosen with the linear counterpart.
+fn linear_decision(plan: &RunPlan) -> &identify::plan::Decision {
+    plan.decisions
+        .iter()
+        .find(|d| d.rule == "choice::linear::choose")
+        .expect("the decision")
 }

@@ -113,7 +113,8 @@ fn applies(plan: &RunPlan, t: &Target, data: &LoadedDataset) -> Result<Option<St
 /// to `pf` — the plan [`crate::plan::settle`] settles with them. On field data the clean RMS of a
 /// channel is its measured RMS over √(1 + nf²) (the noise is nf × the clean RMS), so a noise
 /// s.d. nf·RMS(clean) scales with g(nf) = nf/√(1 + nf²): `R` ∝ g², the velocities' process
-/// noise ∝ g·pf, the hysteretic variables' ∝ 1/√(1 + nf²) (SPEC §3; the displacements' fixed).
+/// noise ∝ g·pf; the hysteretic variables' and the displacements' do not depend on nf (the plan
+/// settles them from the measured response alone; tested against `settle`).
 pub fn with_noise(plan: &RunPlan, nf: f64, pf: f64) -> RunPlan {
     let g = |f: f64| f / (1.0 + f * f).sqrt();
     let (nf0, pf0) = (
@@ -128,10 +129,6 @@ pub fn with_noise(plan: &RunPlan, nf: f64, pf: f64) -> RunPlan {
         *r *= ratio * ratio;
     }
     p.model.q_vel *= ratio * pf / pf0;
-    let clean = ((1.0 + nf0 * nf0) / (1.0 + nf * nf)).sqrt();
-    for q in &mut p.model.q_r {
-        *q *= clean;
-    }
     p
 }
 

@@ -117,18 +117,19 @@ pub(super) fn choose(
         choice.describe()
     );
     let same = nf == plan.settings.noise_fraction && pf == plan.settings.process_noise_factor;
-    // The particle run with the counterpart's noise: settled with it, as a run stating it.
-    let mut s = settings.clone();
-    s.noise_fraction = nf;
-    s.process_noise_factor = pf;
-    let theirs = crate::plan::settle(t.request(s, plan.seed, plan.run, &plan.experiment))?;
     // A particle run's error is not its linear counterpart's: both noise levels, the run's and
     // the counterpart's, are scored by the particle run itself on the held-out part (two
     // partial particle runs), the counterpart's taken only when better by SWITCH_MARGIN.
-    let (taken, why) =
+    let (theirs, why) =
         if same {
-            (true, "the particle run's own noise levels".to_string())
+            (None, "the particle run's own noise levels".to_string())
         } else {
+            // The particle run with the counterpart's noise: settled with it, as a run stating
+            // it.
+            let mut s = settings.clone();
+            s.noise_fraction = nf;
+            s.process_noise_factor = pf;
+            let theirs = crate::plan::settle(t.request(s, plan.seed, plan.run, &plan.experiment))?;
             let (own, their) = rayon::join(
                 || score(plan, &ident, data),
                 || score(&theirs, &ident, data),
@@ -145,7 +146,7 @@ pub(super) fn choose(
                 None => c.note.clone().unwrap_or_else(|| "no score".into()),
             };
             (
-                taken,
+                taken.then_some(theirs),
                 format!(
                 "the particle run identified on the same part predicted the held-out part at {} \
                  with noise fraction {} and process noise ×{} (the run's), at {} with the \
@@ -158,7 +159,7 @@ pub(super) fn choose(
             ),
             )
         };
-    let mut out = if taken { theirs } else { plan.clone() };
+    let mut out = theirs.unwrap_or_else(|| plan.clone());
     out.decisions.push(Decision {
         rule: "choice::linear::choose".into(),
         set: format!(
