@@ -44,6 +44,7 @@ fn one_identification_resolves_its_building_and_scans_its_prior_once() {
         discretisation: None,
         substeps: None,
         coloured_noise: None,
+        learn_noise: false,
         rejuvenation: None,
         fix: None,
         noise_fraction: None,

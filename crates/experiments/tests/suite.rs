@@ -53,6 +53,8 @@ mod inputs_simulate;
 mod inputs_structure;
 #[path = "interval_spread.rs"]
 mod interval_spread;
+#[path = "learned_noise.rs"]
+mod learned_noise;
 #[path = "loglik.rs"]
 mod loglik;
 #[path = "merge_cli.rs"]

@@ -20,6 +20,7 @@
 //! particle run would cost one full run per candidate (24 with both damping forms open); its plan
 //! says so and keeps the default.
 
+pub mod channel_noise;
 mod linear;
 pub mod masses;
 pub mod substeps;

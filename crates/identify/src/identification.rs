@@ -286,6 +286,9 @@ pub struct FilterRequest {
     pub process_noise_factor: Option<f64>,
     /// Coloured measurement noise, over the config's.
     pub coloured_noise: Option<models::filtering::ColouredNoise>,
+    /// Each channel's measurement noise learned by maximum likelihood after the plan is
+    /// settled ([`crate::choice::channel_noise`]).
+    pub learn_noise: bool,
     pub experiment: String,
     pub seed: u64,
     pub run: u64,
@@ -532,7 +535,11 @@ pub fn plan_request(
         noise_fraction: req.noise_fraction.is_some(),
         process_noise_factor: req.process_noise_factor.is_some(),
     };
-    crate::choice::choose(plan, &target, &settings, stated)
+    let plan = crate::choice::choose(plan, &target, &settings, stated)?;
+    if req.learn_noise {
+        return crate::choice::channel_noise::learn(plan, data);
+    }
+    Ok(plan)
 }
 
 /// Runs a settled plan as `sysid filter` does: the run (progress shown, prediction errors

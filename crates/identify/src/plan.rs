@@ -113,6 +113,10 @@ pub struct Evidence {
     /// ([`crate::choice::masses`]).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub masses: Option<MassChoice>,
+    /// Each channel's measurement noise learned by maximum likelihood after the masses, and
+    /// whether the run takes it ([`crate::choice::channel_noise`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub channel_noise: Option<ChannelNoise>,
     /// The chosen discrepancy modes identified with θ inside the filter, and whether the run
     /// does so ([`crate::choice`]).
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -492,6 +496,65 @@ impl MassChoice {
     }
 }
 
+/// The evidence of each channel's noise learned by maximum likelihood
+/// ([`crate::choice::channel_noise`]).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ChannelNoise {
+    /// Each channel's noise s.d. as settled before (the noise fraction's), and as learned.
+    pub settled_sd: Vec<f64>,
+    pub learned_sd: Vec<f64>,
+    /// The filter's log-likelihood of the record under each (none where that run failed).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub loglik_settled: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub loglik_learned: Option<f64>,
+    /// Filter runs the search took, and how many of them failed (scored −∞).
+    pub evaluations: usize,
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub failed_evaluations: usize,
+    /// Channels whose learned level is at the search's bound (`MAX_FACTOR` from the settled
+    /// one): the likelihood wants more, so the level is a bound, not an estimate.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub at_bound: Vec<String>,
+}
+
+impl ChannelNoise {
+    /// What was learned.
+    pub fn describe(&self) -> String {
+        let ll = |l: Option<f64>| l.map_or("run failed".into(), |l| format!("{l:.1}"));
+        let sds = |s: &[f64]| {
+            s.iter()
+                .map(|x| format!("{x:.3e}"))
+                .collect::<Vec<_>>()
+                .join(" / ")
+        };
+        let failed = if self.failed_evaluations > 0 {
+            format!(", {} of them failed", self.failed_evaluations)
+        } else {
+            String::new()
+        };
+        let bound = if self.at_bound.is_empty() {
+            String::new()
+        } else {
+            format!(
+                "; {} at the search's bound (a bound, not an estimate)",
+                self.at_bound.join(", ")
+            )
+        };
+        format!(
+            "each channel's measurement noise s.d. learned by the filter's log-likelihood of the record \
+             ({} runs{failed}): {} m/s² (log-likelihood {}) against the settled {} ({}){bound}; the \
+             process noise as settled (docs/validation.md, \"Noise learned by maximum likelihood\")",
+            self.evaluations,
+            sds(&self.learned_sd),
+            ll(self.loglik_learned),
+            sds(&self.settled_sd),
+            ll(self.loglik_settled),
+        )
+    }
+}
+
 /// One candidate and how well it predicted the held-out part.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -769,6 +832,7 @@ pub fn settle(req: PlanRequest) -> Result<RunPlan> {
             held_out: None,
             discrepancy: None,
             masses: None,
+            channel_noise: None,
             joint_discrepancy: None,
             substep_checks: Vec::new(),
         },
