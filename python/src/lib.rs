@@ -402,7 +402,7 @@ fn field_data(
 
 /// One identification run: `sysid filter` on this data set with these options, in memory.
 #[pyfunction]
-#[pyo3(name = "identify", signature = (data, algorithm, *, particles, seed, run, config, config_json, fix, resampling, ess_threshold, discretisation, substeps, storvik_update, storeys, hysteretic, masses, measurement, experiment, out, damping=None))]
+#[pyo3(name = "identify", signature = (data, algorithm, *, particles, seed, run, config, config_json, fix, resampling, ess_threshold, discretisation, substeps, storvik_update, storeys, hysteretic, masses, measurement, experiment, out, damping=None, learn_noise=false))]
 #[allow(clippy::too_many_arguments)]
 fn identify_py(
     py: Python<'_>,
@@ -426,6 +426,7 @@ fn identify_py(
     experiment: String,
     out: Option<PathBuf>,
     damping: Option<String>,
+    learn_noise: bool,
 ) -> PyResult<PyRecord> {
     let algorithm: Algorithm = parse("algorithm", algorithm)?;
     // The settings as `sysid filter` builds them: a config file (or its JSON form) over the
@@ -494,6 +495,14 @@ fn identify_py(
     let settings = overrides.apply(settings);
     let plan = ::identify::plan::settle(target.request(settings.clone(), seed, run, &experiment))
         .and_then(|plan| ::identify::choice::choose(plan, &target, &settings, Default::default()))
+        .and_then(|plan| {
+            // As `sysid filter --learn-noise`: each channel's noise learned once the plan is settled.
+            if learn_noise {
+                ::identify::choice::channel_noise::learn(plan, d)
+            } else {
+                Ok(plan)
+            }
+        })
         .map_err(err)?;
     let record = stoppable(py, |stop| {
         // The run as `sysid filter` runs it: the plan, the config digest, and for field data

@@ -230,6 +230,7 @@ def identify(
     storvik_update: Optional[str] = None,
     experiment: str = "python",
     out: Optional[PathLike] = None,
+    learn_noise: bool = False,
 ) -> Record:
     """One identification run: ``sysid filter`` in memory, same numbers for the same data,
     settings and seed.
@@ -244,7 +245,9 @@ def identify(
     4000 as 8 × 500, as ``sysid filter`` does; with ``particles=P`` and no config, one pooled
     filter per 125 particles, 1 to 8). The other options
     override it as the flags of the same names do. ``fix``: point-mass priors, e.g. ``{"k1": 8.0}``. ``out``: also
-    write the record there (atomically), as ``sysid filter --out``.
+    write the record there (atomically), as ``sysid filter --out``. ``learn_noise``: each
+    channel's measurement noise learned by maximum likelihood once the plan is settled, as
+    ``sysid filter --learn-noise`` (one Gaussian filter only).
 
     Returns a :class:`Record`: θ_val, posterior s.d., credible intervals, traces, ESS,
     log-likelihood, warnings, one-step prediction errors and (simulated data) the free-run
@@ -284,6 +287,7 @@ def identify(
         storvik_update=storvik_update,
         experiment=experiment,
         out=None if out is None else os.fspath(out),
+        learn_noise=bool(learn_noise),
         **b._flags(),
     )
 

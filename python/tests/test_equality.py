@@ -176,3 +176,24 @@ def test_coloured_noise_by_config_as_cli(sysid, tmp_path, short_dir):
     # Only the MPF-EKF2 has a Gaussian part to carry it.
     with pytest.raises(sm.SysidError, match="coloured_noise.*MPF-EKF2"):
         sm.identify(data, algorithm="bootstrap", particles=PARTICLES, seed=SEED, config=config)
+
+
+def test_learned_noise_same_bits_as_cli(sysid, tmp_path):
+    # A linear building (one Gaussian filter): each channel's noise learned as `--learn-noise`
+    # learns it, the same plan and numbers; a sampling run is refused by name.
+    data = sm.simulate(sm.Building(hysteretic=[]), duration=3.0, seed=11)
+    d = tmp_path / "linear"
+    data.write(d)
+    out = tmp_path / "learned.json"
+    sysid("filter", "--algorithm", "mpf-ekf2", "--data", d, "--seed", SEED,
+          "--learn-noise", "--out", out)
+    want = json.loads(out.read_text())
+    got = sm.identify(data, algorithm="mpf-ekf2", seed=SEED, learn_noise=True)
+    assert bits(got.theta_val) == bits(want["theta_val"])
+    assert bits([got.loglik]) == bits([want["loglik"]])
+    mine = got.to_dict()
+    learned = mine["plan"]["evidence"]["channel_noise"]
+    assert learned == want["plan"]["evidence"]["channel_noise"]
+    assert learned["learned_sd"] != learned["settled_sd"]
+    with pytest.raises(sm.SysidError, match="--learn-noise needs a run that is one Gaussian"):
+        sm.identify(data, algorithm="bootstrap", particles=50, seed=SEED, learn_noise=True)
