@@ -114,7 +114,18 @@ fn learned_noise_recovers_a_known_noise_level_per_channel_against_the_exact_kalm
     let data = dir.join("field");
     let data = data.to_str().unwrap();
     let identified = dir.join("identified.json");
-    common::sysid_out(&FIELD, &["--data", data], &identified);
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_sysid"))
+        .args(FIELD)
+        .args(["--data", data, "--out", identified.to_str().unwrap()])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{err}");
+    // The noise line says the levels were learned, not the noise fraction's.
+    assert!(
+        err.contains("measurement noise learned per channel by maximum likelihood"),
+        "{err}"
+    );
     let (settled, sd) = learned(&identified);
     // θ fixed at the simulated building's: the filter is the exact Kalman filter of the chain.
     let exact = dir.join("exact.json");

@@ -344,6 +344,9 @@ pub struct NoiseLevels {
     pub q_r: Vec<f64>,
     /// The coloured part of the measurement noise, if any.
     pub coloured: Option<models::filtering::ColouredNoise>,
+    /// Whether the measurement noise was learned per channel (`--learn-noise`) rather than
+    /// the noise fraction's.
+    pub learned: bool,
 }
 
 impl NoiseLevels {
@@ -355,6 +358,7 @@ impl NoiseLevels {
             q_vel: plan.model.q_vel,
             q_r: plan.model.q_r.clone(),
             coloured: plan.model.coloured_noise,
+            learned: plan.evidence.channel_noise.is_some(),
         }
     }
 }
@@ -385,9 +389,14 @@ impl fmt::Display for NoiseLevels {
             ),
             None => String::new(),
         };
+        let learned = if self.learned {
+            "; measurement noise learned per channel by maximum likelihood"
+        } else {
+            ""
+        };
         write!(
             f,
-            "noise levels from the data (noise fraction {}): measurement s.d. [{}] m/s²{coloured}, process s.d. x {}, v {}, r [{}] (recorded under config.spec)",
+            "noise levels from the data (noise fraction {}{learned}): measurement s.d. [{}] m/s²{coloured}, process s.d. x {}, v {}, r [{}] (recorded under config.spec)",
             self.noise_fraction,
             list(&self.r_diag, f64::sqrt),
             num(self.q_disp),
