@@ -10,7 +10,7 @@ use crate::common;
 
 use std::path::Path;
 
-use identify::choice::channel_noise::{FIRST_STEP, HALVINGS};
+use identify::choice::channel_noise::SEARCH;
 
 /// Noise fractions of the two channels: a1 at 2 % of its clean RMS, a2 at 10 %. The run starts
 /// from 10 % on both (`--noise-fraction 0.1`), so a1 must move by a factor 5 and a2 not at all:
@@ -143,7 +143,7 @@ fn learned_noise_recovers_a_known_noise_level_per_channel_against_the_exact_kalm
     // maximum.
     let samples = 2001.0_f64;
     let se = 1.25 / (2.0 * samples).sqrt();
-    let last_step = FIRST_STEP / 2f64.powi(HALVINGS as i32);
+    let last_step = SEARCH.last_step();
     let tol = 4.0 * se + last_step;
     for i in 0..2 {
         let (got, exact, want) = (sd[i].ln(), sd_exact[i].ln(), truth[i].ln());

@@ -23,6 +23,7 @@
 pub mod channel_noise;
 mod linear;
 pub mod masses;
+pub mod search;
 pub mod substeps;
 
 use models::dataset::LoadedDataset;

@@ -20,7 +20,8 @@
 //! free run a user judges (docs/validation.md, "Noise learned by maximum likelihood").
 
 use models::dataset::LoadedDataset;
-use rayon::prelude::*;
+
+use super::search::Compass;
 
 use crate::error::Result;
 use crate::plan::{ChannelNoise, Decision, Level, RunPlan};
@@ -31,11 +32,12 @@ pub const FIRST_STEP: f64 = 0.5;
 /// Times the step is halved once no move gains (the last step 1.6 %).
 pub const HALVINGS: usize = 5;
 
-/// Farthest the search moves a channel's noise s.d. from the chosen one, as a factor either
-/// way (the grid of noise fractions spans 30: a level outside it is the grid's to find).
+/// Farthest the search moves a channel's noise s.d. from the settled one, as a factor either
+/// way (the grid of noise fractions spans 30), and its logarithm (the bound of `u_i`).
 pub const MAX_FACTOR: f64 = 10.0;
+const MAX_FACTOR_LN: f64 = std::f64::consts::LN_10;
 
-/// Most filter runs the search may take (a safeguard; a three-channel search takes about 60).
+/// Most filter runs the search may take (a safeguard; a three-channel search takes 100–130).
 const MAX_EVALUATIONS: usize = 400;
 
 /// `plan` with channel `i`'s noise s.d. scaled by `exp(u[i])` (its variance by `exp(2 u[i])`).
@@ -53,50 +55,13 @@ fn loglik(plan: &RunPlan, data: &LoadedDataset) -> Option<f64> {
     (record.failure.is_none() && record.loglik.is_finite()).then_some(record.loglik)
 }
 
-/// The compass search of the module documentation from `u = 0`, maximising `eval`: the point
-/// reached, its value, the evaluations made and how many failed (`None`, scored −∞). Neighbours
-/// are evaluated side by side and the best (the first of equals) taken, so the answer is the
-/// same for any thread count.
-pub fn compass_search(
-    dims: usize,
-    at_zero: Option<f64>,
-    eval: &(dyn Fn(&[f64]) -> Option<f64> + Sync),
-) -> (Vec<f64>, Option<f64>, usize, usize) {
-    let (mut evaluations, mut failed) = (1, usize::from(at_zero.is_none()));
-    let (mut u, mut best) = (vec![0.0; dims], at_zero.unwrap_or(f64::NEG_INFINITY));
-    let bound = MAX_FACTOR.ln();
-    let mut step = FIRST_STEP;
-    for _ in 0..=HALVINGS {
-        while evaluations < MAX_EVALUATIONS {
-            let moves: Vec<Vec<f64>> = (0..dims)
-                .flat_map(|j| [step, -step].map(|d| (j, d)))
-                .map(|(j, d)| {
-                    let mut v = u.clone();
-                    v[j] += d;
-                    v
-                })
-                .filter(|v| v.iter().all(|x| x.abs() <= bound + 1e-12))
-                .collect();
-            let tried: Vec<Option<f64>> = moves.par_iter().map(|v| eval(v)).collect();
-            evaluations += tried.len();
-            failed += tried.iter().filter(|l| l.is_none()).count();
-            let mut gain: Option<(Vec<f64>, f64)> = None;
-            for (v, l) in moves.into_iter().zip(tried) {
-                if let Some(l) = l {
-                    if l > best && gain.as_ref().is_none_or(|(_, g)| l > *g) {
-                        gain = Some((v, l));
-                    }
-                }
-            }
-            match gain {
-                Some((v, l)) => (u, best) = (v, l),
-                None => break,
-            }
-        }
-        step /= 2.0;
-    }
-    (u, best.is_finite().then_some(best), evaluations, failed)
-}
+/// The search of the module documentation.
+pub const SEARCH: Compass = Compass {
+    first_step: FIRST_STEP,
+    halvings: HALVINGS,
+    bound: MAX_FACTOR_LN,
+    max_evaluations: MAX_EVALUATIONS,
+};
 
 /// Why `--learn-noise` cannot serve `plan` on `data`, if it cannot: the search compares
 /// log-likelihoods, which only a run that is one Gaussian filter gives exactly (a particle run's
@@ -122,13 +87,14 @@ pub fn learn(plan: RunPlan, data: &LoadedDataset) -> Result<RunPlan> {
     let sd = |p: &RunPlan| p.model.r_diag.iter().map(|r| r.sqrt()).collect::<Vec<_>>();
     let eval = |u: &[f64]| loglik(&with_channel_noise(&plan, u), data);
     let at_settled = loglik(&plan, data);
-    let (u, best, evaluations, failed) = compass_search(plan.model.r_diag.len(), at_settled, &eval);
+    let (u, best, evaluations, failed) =
+        SEARCH.maximise(plan.model.r_diag.len(), at_settled, &eval);
     let mut out = with_channel_noise(&plan, &u);
     let at_bound = data
         .sensors
         .iter()
         .zip(&u)
-        .filter(|(_, v)| v.abs() >= MAX_FACTOR.ln() - 1e-9)
+        .filter(|(_, v)| v.abs() >= MAX_FACTOR_LN - 1e-9)
         .map(|(s, _)| format!("a{s}"))
         .collect();
     let evidence = ChannelNoise {
@@ -161,7 +127,7 @@ pub fn learn(plan: RunPlan, data: &LoadedDataset) -> Result<RunPlan> {
 
 #[cfg(test)]
 mod tests {
-    use super::{compass_search, FIRST_STEP, HALVINGS, MAX_FACTOR};
+    use super::{MAX_FACTOR_LN, SEARCH};
     use core_filters::kalman::linear::{kalman_filter, LinearGaussian};
     use nalgebra::{SMatrix, SVector};
     use rand::Rng;
@@ -217,13 +183,13 @@ mod tests {
             ];
             kalman_filter(&model(r), &ys).ok().map(|k| k.loglik)
         };
-        let (u, best, evaluations, failed) = compass_search(2, ll(&[0.0, 0.0]), &ll);
+        let (u, best, evaluations, failed) = SEARCH.maximise(2, ll(&[0.0, 0.0]), &ll);
         assert_eq!(failed, 0);
         assert!(evaluations < 200, "{evaluations}");
         let learned = [start[0] * u[0].exp(), start[1] * u[1].exp()];
         // A local maximum of the exact likelihood to the search's last step: every neighbour
         // one step away along each channel is lower.
-        let last = FIRST_STEP / 2f64.powi(HALVINGS as i32);
+        let last = SEARCH.last_step();
         let best = best.unwrap();
         for j in 0..2 {
             for d in [last, -last] {
@@ -248,6 +214,6 @@ mod tests {
                 truth[j]
             );
         }
-        assert!(u.iter().all(|v| v.abs() < MAX_FACTOR.ln()));
+        assert!(u.iter().all(|v| v.abs() < MAX_FACTOR_LN));
     }
 }

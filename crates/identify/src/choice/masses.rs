@@ -22,8 +22,8 @@
 //! for the masses.
 
 use models::dataset::LoadedDataset;
-use rayon::prelude::*;
 
+use super::search::Compass;
 use super::{score, Scored};
 use crate::error::Result;
 use crate::field::StructureSettings;
@@ -121,48 +121,17 @@ pub(crate) fn identify(
     };
     // The stated masses' log-likelihood is the chosen plan's own.
     let loglik_stated = loglik(Ok(plan.clone()), ident);
-    let (mut evaluations, mut failed) = (1, usize::from(loglik_stated.is_none()));
-    let (mut u, mut best) = (
-        vec![0.0; stated.len() - 1],
-        loglik_stated.unwrap_or(f64::NEG_INFINITY),
-    );
-    let bound = MAX_FACTOR.ln();
-    let mut step = FIRST_STEP;
-    for _ in 0..=HALVINGS {
-        while evaluations < MAX_EVALUATIONS {
-            let moves: Vec<Vec<f64>> = (0..u.len())
-                .flat_map(|j| [step, -step].map(|d| (j, d)))
-                .map(|(j, d)| {
-                    let mut v = u.clone();
-                    v[j] += d;
-                    v
-                })
-                .filter(|v| v.iter().all(|x| x.abs() <= bound + 1e-12))
-                .collect();
-            // The neighbours side by side, the best (the first of equals) taken: the same for
-            // any thread count.
-            let tried: Vec<Option<f64>> = moves.par_iter().map(|v| eval(v)).collect();
-            evaluations += tried.len();
-            failed += tried.iter().filter(|l| l.is_none()).count();
-            let mut gain = None;
-            for (v, l) in moves.into_iter().zip(tried) {
-                if let Some(l) = l {
-                    if l > best && gain.as_ref().is_none_or(|(_, g)| l > *g) {
-                        gain = Some((v, l));
-                    }
-                }
-            }
-            match gain {
-                Some((v, l)) => (u, best) = (v, l),
-                None => break,
-            }
-        }
-        step /= 2.0;
-    }
+    let search = Compass {
+        first_step: FIRST_STEP,
+        halvings: HALVINGS,
+        bound: MAX_FACTOR.ln(),
+        max_evaluations: MAX_EVALUATIONS,
+    };
+    let (u, best, evaluations, failed) = search.maximise(stated.len() - 1, loglik_stated, &eval);
     let identified = masses_at(&stated, &u);
     let mut choice = MassChoice::searched(
         (stated, identified.clone()),
-        (loglik_stated, best.is_finite().then_some(best)),
+        (loglik_stated, best),
         evaluations,
         failed,
     );
