@@ -353,6 +353,13 @@ fn choose_noise(
         bases.push(other);
     }
     let held_out = data.len() - ident.len();
+    log::info!(
+        "choosing the noise levels{} on held-out data: {} candidates identified on the first {} of {} samples, each run freely over the rest…",
+        if open { " and the damping form" } else { "" },
+        bases.len() * fractions.len() * factors.len(),
+        ident.len(),
+        data.len()
+    );
     let factors = &factors;
     let mut plans: Vec<RunPlan> = bases
         .iter()

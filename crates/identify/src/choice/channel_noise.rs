@@ -84,6 +84,10 @@ pub fn learn(plan: RunPlan, data: &LoadedDataset) -> Result<RunPlan> {
     if let Some(why) = refused(&plan, data)? {
         return Err(crate::error::Error::Invalid(why));
     }
+    log::info!(
+        "learning each of the {} channels' measurement noise by maximum likelihood…",
+        plan.model.r_diag.len()
+    );
     let sd = |p: &RunPlan| p.model.r_diag.iter().map(|r| r.sqrt()).collect::<Vec<_>>();
     let eval = |u: &[f64]| loglik(&with_channel_noise(&plan, u), data);
     let at_settled = loglik(&plan, data);

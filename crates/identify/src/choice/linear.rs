@@ -83,6 +83,13 @@ pub(super) fn choose(
         linear = substeps::converge_on(linear, &ident, false)?;
     }
     let (fractions, factors) = noise_grids(settings, stated);
+    log::info!(
+        "choosing the {} run's noise levels on its linear counterpart: {} candidates identified on the first {} of {} samples…",
+        t.algorithm.label(),
+        fractions.len() * factors.len(),
+        ident.len(),
+        data.len()
+    );
     let plans: Vec<RunPlan> = fractions
         .iter()
         .flat_map(|&nf| factors.iter().map(move |&pf| (nf, pf)))
@@ -120,34 +127,37 @@ pub(super) fn choose(
     // A particle run's error is not its linear counterpart's: both noise levels, the run's and
     // the counterpart's, are scored by the particle run itself on the held-out part (two
     // partial particle runs), the counterpart's taken only when better by SWITCH_MARGIN.
-    let (theirs, why) =
-        if same {
-            (None, "the particle run's own noise levels".to_string())
-        } else {
-            // The particle run with the counterpart's noise: settled with it, as a run stating
-            // it.
-            let mut s = settings.clone();
-            s.noise_fraction = nf;
-            s.process_noise_factor = pf;
-            let theirs = crate::plan::settle(t.request(s, plan.seed, plan.run, &plan.experiment))?;
-            let (own, their) = rayon::join(
-                || score(plan, &ident, data),
-                || score(&theirs, &ident, data),
+    let (theirs, why) = if same {
+        (None, "the particle run's own noise levels".to_string())
+    } else {
+        // The particle run with the counterpart's noise: settled with it, as a run stating
+        // it.
+        let mut s = settings.clone();
+        s.noise_fraction = nf;
+        s.process_noise_factor = pf;
+        let theirs = crate::plan::settle(t.request(s, plan.seed, plan.run, &plan.experiment))?;
+        log::info!(
+                "scoring the {} run with its own noise levels and with the counterpart's (two partial particle runs)…",
+                t.algorithm.label()
             );
-            let ((own, _), (their, _)) = (own?, their?);
-            let mean = |c: &crate::plan::Candidate| {
-                c.score
-                    .filter(|s| s.is_finite())
-                    .unwrap_or(f64::NEG_INFINITY)
-            };
-            let taken = mean(&their) > mean(&own) + SWITCH_MARGIN;
-            let fits = |c: &crate::plan::Candidate| match c.score {
-                Some(s) => format!("{s:.1} %"),
-                None => c.note.clone().unwrap_or_else(|| "no score".into()),
-            };
-            (
-                taken.then_some(theirs),
-                format!(
+        let (own, their) = rayon::join(
+            || score(plan, &ident, data),
+            || score(&theirs, &ident, data),
+        );
+        let ((own, _), (their, _)) = (own?, their?);
+        let mean = |c: &crate::plan::Candidate| {
+            c.score
+                .filter(|s| s.is_finite())
+                .unwrap_or(f64::NEG_INFINITY)
+        };
+        let taken = mean(&their) > mean(&own) + SWITCH_MARGIN;
+        let fits = |c: &crate::plan::Candidate| match c.score {
+            Some(s) => format!("{s:.1} %"),
+            None => c.note.clone().unwrap_or_else(|| "no score".into()),
+        };
+        (
+            taken.then_some(theirs),
+            format!(
                 "the particle run identified on the same part predicted the held-out part at {} \
                  with noise fraction {} and process noise ×{} (the run's), at {} with the \
                  counterpart's (taken when better by more than {SWITCH_MARGIN} points): {} taken",
@@ -155,10 +165,14 @@ pub(super) fn choose(
                 plan.settings.noise_fraction,
                 plan.settings.process_noise_factor,
                 fits(&their),
-                if taken { "the counterpart's" } else { "the run's" }
+                if taken {
+                    "the counterpart's"
+                } else {
+                    "the run's"
+                }
             ),
-            )
-        };
+        )
+    };
     let mut out = theirs.unwrap_or_else(|| plan.clone());
     out.decisions.push(Decision {
         rule: "choice::linear::choose".into(),

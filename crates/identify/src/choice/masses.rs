@@ -115,6 +115,10 @@ pub(crate) fn identify(
     (ident, data): (&LoadedDataset, &LoadedDataset),
 ) -> Result<(MassChoice, Option<Moved>)> {
     let stated = plan.building.masses.clone();
+    log::info!(
+        "identifying the mass ratios by the likelihood of the first {} samples…",
+        ident.len()
+    );
     let eval = |u: &[f64]| {
         let m = masses_at(&stated, u);
         loglik(with_masses(plan, t, settings, &m), ident)

@@ -118,6 +118,15 @@ pub fn converge(plan: RunPlan, t: &Target) -> Result<RunPlan> {
 /// choice identifies on, whose candidates then run at the count it found.
 pub(crate) fn converge_on(plan: RunPlan, data: &LoadedDataset, whole: bool) -> Result<RunPlan> {
     let max = models::filtering::MAX_SUBSTEPS;
+    log::info!(
+        "checking the sub-steps on {}: {} per sample, doubled until the stiffnesses stop moving…",
+        if whole {
+            "the whole record".to_string()
+        } else {
+            format!("the first {} samples", data.len())
+        },
+        plan.model.substeps
+    );
     let mut check = SubstepConvergence {
         samples: data.len(),
         whole,
