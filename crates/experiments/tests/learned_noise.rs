@@ -86,6 +86,18 @@ const FIELD: [&str; 20] = [
     "1",
 ];
 
+/// Each learned level's 95 % interval in a record's plan.
+fn intervals(record: &Path) -> Vec<[f64; 2]> {
+    let r: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(record).unwrap()).unwrap();
+    r["plan"]["evidence"]["channel_noise"]["learned_sd_95"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|i| [i["lo"].as_f64().unwrap(), i["hi"].as_f64().unwrap()])
+        .collect()
+}
+
 /// The channel-noise evidence of a record's plan: (settled s.d., learned s.d.).
 fn learned(record: &Path) -> (Vec<f64>, Vec<f64>) {
     let r: serde_json::Value =
@@ -169,6 +181,25 @@ fn learned_noise_recovers_a_known_noise_level_per_channel_against_the_exact_kalm
             i + 1,
             sd[i],
             sd_exact[i]
+        );
+    }
+    // Each level's 95 % interval (Laplace, from the likelihood's curvature) holds the truth and
+    // is as wide as the estimate's s.e. says: 1.96 × (S/R)/√(2T) on each side in ln, S/R in
+    // [1, 1.25] (the bound above) — allowed [0.9, 1.5]/√(2T) for the curvature's finite
+    // difference.
+    for (i, [lo, hi]) in intervals(&identified).into_iter().enumerate() {
+        assert!(
+            lo <= truth[i] && truth[i] <= hi,
+            "a{}: [{lo}, {hi}] against the true {}",
+            i + 1,
+            truth[i]
+        );
+        let se = (hi / lo).ln() / 2.0 / 1.96;
+        let unit = 1.0 / (2.0 * samples).sqrt();
+        assert!(
+            (0.9 * unit..=1.5 * unit).contains(&se),
+            "a{}: s.e. {se:.4} in ln against {unit:.4} × S/R",
+            i + 1
         );
     }
     // The levels the run started from are not the truth (the test cannot pass without the

@@ -504,6 +504,9 @@ pub struct ChannelNoise {
     /// Each channel's noise s.d. as settled before (the noise fraction's), and as learned.
     pub settled_sd: Vec<f64>,
     pub learned_sd: Vec<f64>,
+    /// The learned levels' 95 % intervals (Laplace, per channel); a channel is left out where
+    /// the curvature there was not negative or a neighbour's run failed.
+    pub learned_sd_95: Vec<LevelInterval>,
     /// The filter's log-likelihood of the record under each (none where that run failed).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub loglik_settled: Option<f64>,
@@ -513,10 +516,21 @@ pub struct ChannelNoise {
     pub evaluations: usize,
     #[serde(default, skip_serializing_if = "is_zero")]
     pub failed_evaluations: usize,
+    /// The channels, in order (`a1`, …).
+    pub channels: Vec<String>,
     /// Channels whose learned level is at the search's bound (`MAX_FACTOR` from the settled
     /// one): the likelihood wants more, so the level is a bound, not an estimate.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub at_bound: Vec<String>,
+}
+
+/// A channel's learned noise s.d.'s 95 % interval.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LevelInterval {
+    pub channel: String,
+    pub lo: f64,
+    pub hi: f64,
 }
 
 impl ChannelNoise {
@@ -529,6 +543,18 @@ impl ChannelNoise {
                 .collect::<Vec<_>>()
                 .join(" / ")
         };
+        let learned = self
+            .learned_sd
+            .iter()
+            .zip(&self.channels)
+            .map(
+                |(x, c)| match self.learned_sd_95.iter().find(|i| &i.channel == c) {
+                    Some(i) => format!("{x:.3e} [{:.3e}, {:.3e}]", i.lo, i.hi),
+                    None => format!("{x:.3e} [no interval]"),
+                },
+            )
+            .collect::<Vec<_>>()
+            .join(" / ");
         let failed = if self.failed_evaluations > 0 {
             format!(", {} of them failed", self.failed_evaluations)
         } else {
@@ -543,11 +569,11 @@ impl ChannelNoise {
             )
         };
         format!(
-            "each channel's measurement noise s.d. learned by the filter's log-likelihood of the record \
-             ({} runs{failed}): {} m/s² (log-likelihood {}) against the settled {} ({}){bound}; the \
-             process noise as settled (docs/validation.md, \"Noise learned by maximum likelihood\")",
+            "each channel's measurement noise s.d. learned by the filter's log-likelihood of the record, \
+             the settled level its prior's median ({} runs{failed}): {learned} m/s² [95 %] \
+             (log-likelihood {}) against the settled {} ({}){bound}; the process noise as settled \
+             (docs/validation.md, \"Noise learned by maximum likelihood\")",
             self.evaluations,
-            sds(&self.learned_sd),
             ll(self.loglik_learned),
             sds(&self.settled_sd),
             ll(self.loglik_settled),
@@ -1786,5 +1812,41 @@ mod tests {
             "{d}"
         );
         assert!(d.contains("the stated masses are kept"), "{d}");
+    }
+
+    /// A learned level without an interval (a flat or failed neighbourhood) and one at the
+    /// search's bound read back from a record's JSON and a plan's TOML, and say so.
+    #[test]
+    fn learned_noise_without_an_interval_reads_back_and_says_so() {
+        let n = super::ChannelNoise {
+            settled_sd: vec![0.1, 0.2],
+            learned_sd: vec![0.05, 2.0],
+            learned_sd_95: vec![super::LevelInterval {
+                channel: "a1".into(),
+                lo: 0.04,
+                hi: 0.06,
+            }],
+            channels: vec!["a1".into(), "a2".into()],
+            loglik_settled: Some(-10.0),
+            loglik_learned: None,
+            evaluations: 9,
+            failed_evaluations: 2,
+            at_bound: vec!["a2".into()],
+        };
+        let json = serde_json::to_string(&n).unwrap();
+        assert_eq!(
+            serde_json::from_str::<super::ChannelNoise>(&json).unwrap(),
+            n
+        );
+        let toml = toml::to_string(&n).unwrap();
+        assert_eq!(toml::from_str::<super::ChannelNoise>(&toml).unwrap(), n);
+        let d = n.describe();
+        assert!(d.contains("5.000e-2 [4.000e-2, 6.000e-2]"), "{d}");
+        assert!(d.contains("2.000e0 [no interval]"), "{d}");
+        assert!(d.contains("a2 at the search's bound"), "{d}");
+        assert!(
+            d.contains("(log-likelihood run failed)") && d.contains("2 of them failed"),
+            "{d}"
+        );
     }
 }

@@ -4,12 +4,16 @@
 //! The noise levels a run settles are a fraction `nf` of each signal's RMS (SPEC §3), the same
 //! fraction on every channel, chosen on field data by held-out prediction ([`crate::choice`]).
 //! Asked to learn them, the run treats each channel's noise s.d. as an unknown: scaled by
-//! `exp(u_i)`, with the `u_i` moved to maximise the filter's log-likelihood of the record,
-//! `log p(y_1:T | R) = Σ_k log N(y_k; ŷ_k|k−1, S_k(R))`, θ integrated out by the filter — the
-//! marginal likelihood of the noise levels. A compass search on `u`, from steps of `FIRST_STEP`
-//! halved `HALVINGS` times, each `u_i` at most `ln MAX_FACTOR` from the settled level; the
-//! neighbours of a step are run side by side and the best (the first of equals) taken, so the
-//! answer is the same for any thread count. The process noise stays as settled.
+//! `exp(u_i)`, the settled level its prior's median (`u_i ~ N(0, PRIOR_LOG_SD²)`), with the
+//! `u_i` moved to maximise the posterior — the filter's log-likelihood of the record,
+//! `log p(y_1:T | R) = Σ_k log N(y_k; ŷ_k|k−1, S_k(R))`, θ integrated out by the filter (the
+//! marginal likelihood of the noise levels), plus the prior's log-density. A compass search on
+//! `u`, from steps of `FIRST_STEP` halved `HALVINGS` times, each `u_i` at most `ln MAX_FACTOR`
+//! from the settled level; the neighbours of a step are run side by side and the best (the first
+//! of equals) taken, so the answer is the same for any thread count. Each level's 95 % interval
+//! is the Laplace approximation's, `exp(u_i ± 1.96/√−∂²/∂u_i²)` with the curvature from the
+//! neighbours one last step away (per channel: the levels' correlations are left out). The
+//! process noise stays as settled.
 //!
 //! Only for a run that is one Gaussian filter, whose log-likelihood is exact for a linear
 //! building: on data of the filter's own class it recovers a known noise level per channel
@@ -20,11 +24,12 @@
 //! free run a user judges (docs/validation.md, "Noise learned by maximum likelihood").
 
 use models::dataset::LoadedDataset;
+use rayon::prelude::*;
 
 use super::search::Compass;
 
 use crate::error::Result;
-use crate::plan::{ChannelNoise, Decision, Level, RunPlan};
+use crate::plan::{ChannelNoise, Decision, Level, LevelInterval, RunPlan};
 
 /// First step of the search in `u_i = ln(σ_i / σ_i chosen)`: ±65 %.
 pub const FIRST_STEP: f64 = 0.5;
@@ -53,6 +58,19 @@ pub fn with_channel_noise(plan: &RunPlan, u: &[f64]) -> RunPlan {
 fn loglik(plan: &RunPlan, data: &LoadedDataset) -> Option<f64> {
     let record = super::run_on(plan, data).ok()?;
     (record.failure.is_none() && record.loglik.is_finite()).then_some(record.loglik)
+}
+
+/// The prior of each `u_i`: N(0, `PRIOR_LOG_SD`²) — the settled level (the noise fraction's)
+/// as the median, a factor 10 either way two s.d. out. The fixed noise fraction becomes the
+/// prior of what is learned; a record of a few hundred samples moves it, a short one less.
+pub const PRIOR_LOG_SD: f64 = std::f64::consts::LN_10 / 2.0;
+
+/// The normal quantile of a central 95 % interval.
+const Z95: f64 = 1.959_963_984_540_054;
+
+/// The prior's log-density of `u` (up to its constant).
+fn log_prior(u: &[f64]) -> f64 {
+    -u.iter().map(|v| v * v).sum::<f64>() / (2.0 * PRIOR_LOG_SD * PRIOR_LOG_SD)
 }
 
 /// The search of the module documentation.
@@ -89,23 +107,55 @@ pub fn learn(plan: RunPlan, data: &LoadedDataset) -> Result<RunPlan> {
         plan.model.r_diag.len()
     );
     let sd = |p: &RunPlan| p.model.r_diag.iter().map(|r| r.sqrt()).collect::<Vec<_>>();
-    let eval = |u: &[f64]| loglik(&with_channel_noise(&plan, u), data);
+    let dims = plan.model.r_diag.len();
+    // The log-posterior of u: the filter's log-likelihood and the prior's log-density.
+    let eval = |u: &[f64]| loglik(&with_channel_noise(&plan, u), data).map(|l| l + log_prior(u));
     let at_settled = loglik(&plan, data);
-    let (u, best, evaluations, failed) =
-        SEARCH.maximise(plan.model.r_diag.len(), at_settled, &eval);
+    let (u, best, mut evaluations, mut failed) = SEARCH.maximise(dims, at_settled, &eval);
+    // Each u_i's curvature at the answer, from its neighbours one last step away (run side by
+    // side, collected in order).
+    let h = SEARCH.last_step();
+    let around: Vec<Vec<f64>> = (0..dims)
+        .flat_map(|j| [h, -h].map(|d| (j, d)))
+        .map(|(j, d)| {
+            let mut v = u.clone();
+            v[j] += d;
+            v
+        })
+        .collect();
+    let values: Vec<Option<f64>> = around.par_iter().map(|v| eval(v)).collect();
+    evaluations += values.len();
+    failed += values.iter().filter(|v| v.is_none()).count();
     let mut out = with_channel_noise(&plan, &u);
-    let at_bound = data
-        .sensors
+    let learned = sd(&out);
+    let channels: Vec<String> = data.sensors.iter().map(|s| format!("a{s}")).collect();
+    let interval: Vec<LevelInterval> = (0..dims)
+        .filter_map(|j| {
+            let (up, down, at) = (values[2 * j]?, values[2 * j + 1]?, best?);
+            let curvature = (up - 2.0 * at + down) / (h * h);
+            (curvature < 0.0).then(|| {
+                let half = Z95 / (-curvature).sqrt();
+                LevelInterval {
+                    channel: channels[j].clone(),
+                    lo: learned[j] * (-half).exp(),
+                    hi: learned[j] * half.exp(),
+                }
+            })
+        })
+        .collect();
+    let at_bound = channels
         .iter()
         .zip(&u)
         .filter(|(_, v)| v.abs() >= MAX_FACTOR_LN - 1e-9)
-        .map(|(s, _)| format!("a{s}"))
+        .map(|(c, _)| c.clone())
         .collect();
     let evidence = ChannelNoise {
         settled_sd: sd(&plan),
-        learned_sd: sd(&out),
+        learned_sd: learned,
+        learned_sd_95: interval,
+        channels,
         loglik_settled: at_settled,
-        loglik_learned: best,
+        loglik_learned: best.map(|b| b - log_prior(&u)),
         evaluations,
         failed_evaluations: failed,
         at_bound,
