@@ -109,8 +109,9 @@ pub struct Args {
     #[arg(long, value_name = "RHO,SHARE", value_parser = parse_coloured_noise)]
     pub coloured_noise: Option<models::filtering::ColouredNoise>,
     /// Learn each channel's measurement noise s.d. by maximum likelihood once the plan is
-    /// settled (θ integrated out by the filter; the process noise as settled), and run with it.
-    /// A run that is one Gaussian filter only (the MPF-EKF2 on a linear building). Not the
+    /// settled (θ integrated out by the filter, the settled level the prior's median; each
+    /// level with a 95 % interval; the process noise as settled), and run with it. A run that
+    /// is one Gaussian filter only (the MPF-EKF2 on a linear building). Not the
     /// default: on real records it predicts the free run worse than the noise chosen on
     /// held-out data (docs/validation.md, "Noise learned by maximum likelihood").
     #[arg(long)]

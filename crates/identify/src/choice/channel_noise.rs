@@ -19,8 +19,8 @@
 //! building: on data of the filter's own class it recovers a known noise level per channel
 //! (tested against the exact Kalman likelihood). It is not the default because on every real
 //! record measured it predicts worse: the likelihood scores one-step predictions, which a filter
-//! tracking the response makes well with little noise, and the levels it learns (4–10× below the
-//! held-out choice's) let θ fit what the model cannot represent; the held-out choice scores the
+//! tracking the response makes well with little noise, and the levels it learns (0.10–0.75 of the
+//! held-out choice's on five real records) let θ fit what the model cannot represent; the held-out choice scores the
 //! free run a user judges (docs/validation.md, "Noise learned by maximum likelihood").
 
 use models::dataset::LoadedDataset;
@@ -31,7 +31,7 @@ use super::search::Compass;
 use crate::error::Result;
 use crate::plan::{ChannelNoise, Decision, Level, LevelInterval, RunPlan};
 
-/// First step of the search in `u_i = ln(σ_i / σ_i chosen)`: ±65 %.
+/// First step of the search in `u_i = ln(σ_i / σ_i settled)`: ±65 %.
 pub const FIRST_STEP: f64 = 0.5;
 
 /// Times the step is halved once no move gains (the last step 1.6 %).
@@ -95,9 +95,10 @@ pub fn refused(plan: &RunPlan, data: &LoadedDataset) -> Result<Option<String>> {
     }))
 }
 
-/// `plan` with each channel's measurement noise learned on `data` (the whole record) by
-/// maximum likelihood, with the evidence and a decision; refused by name where [`refused`]
-/// says so.
+/// `plan` with each channel's measurement noise learned on `data` (the whole record) — the
+/// posterior's mode, the settled level its prior's median (the likelihood dominates on any
+/// record long enough to identify on) — with the evidence and a decision; refused by name
+/// where [`refused`] says so.
 pub fn learn(plan: RunPlan, data: &LoadedDataset) -> Result<RunPlan> {
     if let Some(why) = refused(&plan, data)? {
         return Err(crate::error::Error::Invalid(why));
