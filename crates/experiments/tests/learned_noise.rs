@@ -86,11 +86,14 @@ const FIELD: [&str; 20] = [
     "1",
 ];
 
+/// A record, as JSON.
+fn read(record: &Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(record).unwrap()).unwrap()
+}
+
 /// Each learned level's 95 % interval in a record's plan.
 fn intervals(record: &Path) -> Vec<[f64; 2]> {
-    let r: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(record).unwrap()).unwrap();
-    r["plan"]["evidence"]["channel_noise"]["learned_sd_95"]
+    read(record)["plan"]["evidence"]["channel_noise"]["learned_sd_95"]
         .as_array()
         .unwrap()
         .iter()
@@ -100,8 +103,7 @@ fn intervals(record: &Path) -> Vec<[f64; 2]> {
 
 /// The channel-noise evidence of a record's plan: (settled s.d., learned s.d.).
 fn learned(record: &Path) -> (Vec<f64>, Vec<f64>) {
-    let r: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(record).unwrap()).unwrap();
+    let r = read(record);
     let e = &r["plan"]["evidence"]["channel_noise"];
     let list = |v: &serde_json::Value| -> Vec<f64> {
         v.as_array()
@@ -230,8 +232,7 @@ fn a_learned_noise_plan_runs_again_as_printed_and_a_particle_run_is_refused() {
     let args = ["filter", "--data", data, "--plan", plan.to_str().unwrap()];
     common::sysid_out(&args, &[], &b);
     let theta = |p: &Path| {
-        let r: serde_json::Value =
-            serde_json::from_str(&std::fs::read_to_string(p).unwrap()).unwrap();
+        let r = read(p);
         (
             r["theta_val"].clone(),
             r["config"]["spec"]["r_diag"].clone(),

@@ -112,9 +112,10 @@ pub fn learn(plan: RunPlan, data: &LoadedDataset) -> Result<RunPlan> {
     // The log-posterior of u: the filter's log-likelihood and the prior's log-density.
     let eval = |u: &[f64]| loglik(&with_channel_noise(&plan, u), data).map(|l| l + log_prior(u));
     let at_settled = loglik(&plan, data);
-    let (u, best, mut evaluations, mut failed) = SEARCH.maximise(dims, at_settled, &eval);
-    // Each u_i's curvature at the answer, from its neighbours one last step away (run side by
-    // side, collected in order).
+    let ((u, best, mut evaluations, mut failed), last) =
+        SEARCH.maximise_keeping_last(dims, at_settled, &eval);
+    // Each u_i's curvature at the answer, from its neighbours one last step away: those the
+    // search's last round ran, the others (beyond its bound) run here, side by side.
     let h = SEARCH.last_step();
     let around: Vec<Vec<f64>> = (0..dims)
         .flat_map(|j| [h, -h].map(|d| (j, d)))
@@ -124,9 +125,18 @@ pub fn learn(plan: RunPlan, data: &LoadedDataset) -> Result<RunPlan> {
             v
         })
         .collect();
-    let values: Vec<Option<f64>> = around.par_iter().map(|v| eval(v)).collect();
-    evaluations += values.len();
-    failed += values.iter().filter(|v| v.is_none()).count();
+    let known = |v: &Vec<f64>| last.iter().find(|(w, _)| w == v).map(|(_, l)| *l);
+    let values: Vec<Option<f64>> = around
+        .par_iter()
+        .map(|v| known(v).unwrap_or_else(|| eval(v)))
+        .collect();
+    let ran = around.iter().filter(|v| known(v).is_none()).count();
+    evaluations += ran;
+    failed += around
+        .iter()
+        .zip(&values)
+        .filter(|(v, l)| known(v).is_none() && l.is_none())
+        .count();
     let mut out = with_channel_noise(&plan, &u);
     let learned = sd(&out);
     let channels: Vec<String> = data.sensors.iter().map(|s| format!("a{s}")).collect();

@@ -22,6 +22,10 @@ pub struct Compass {
 /// evaluations made and how many of them failed.
 pub type Reached = (Vec<f64>, Option<f64>, usize, usize);
 
+/// The points the search's last round evaluated, with their values: where it stopped, the
+/// neighbours one last step either side of the answer (those inside the bound).
+pub type LastRound = Vec<(Vec<f64>, Option<f64>)>;
+
 impl Compass {
     /// Maximises `eval` over `dims` coordinates from 0, whose value `at_zero` is given (`None`:
     /// the evaluation failed). A failed evaluation (`None`) scores −∞. The neighbours of a step
@@ -33,6 +37,18 @@ impl Compass {
         at_zero: Option<f64>,
         eval: &(dyn Fn(&[f64]) -> Option<f64> + Sync),
     ) -> Reached {
+        self.maximise_keeping_last(dims, at_zero, eval).0
+    }
+
+    /// [`Compass::maximise`], with the points its last round evaluated (what a curvature at
+    /// the answer needs, without running them again).
+    pub fn maximise_keeping_last(
+        &self,
+        dims: usize,
+        at_zero: Option<f64>,
+        eval: &(dyn Fn(&[f64]) -> Option<f64> + Sync),
+    ) -> (Reached, LastRound) {
+        let mut last: LastRound = Vec::new();
         let (mut evaluations, mut failed) = (1, usize::from(at_zero.is_none()));
         let (mut u, mut best) = (vec![0.0; dims], at_zero.unwrap_or(f64::NEG_INFINITY));
         let mut step = self.first_step;
@@ -51,13 +67,14 @@ impl Compass {
                 evaluations += tried.len();
                 failed += tried.iter().filter(|l| l.is_none()).count();
                 let mut gain: Option<(Vec<f64>, f64)> = None;
-                for (v, l) in moves.into_iter().zip(tried) {
-                    if let Some(l) = l {
+                for (v, l) in moves.iter().zip(&tried) {
+                    if let Some(l) = *l {
                         if l > best && gain.as_ref().is_none_or(|(_, g)| l > *g) {
-                            gain = Some((v, l));
+                            gain = Some((v.clone(), l));
                         }
                     }
                 }
+                last = moves.into_iter().zip(tried).collect();
                 match gain {
                     Some((v, l)) => (u, best) = (v, l),
                     None => break,
@@ -65,7 +82,10 @@ impl Compass {
             }
             step /= 2.0;
         }
-        (u, best.is_finite().then_some(best), evaluations, failed)
+        (
+            (u, best.is_finite().then_some(best), evaluations, failed),
+            last,
+        )
     }
 
     /// The last step the search takes.
