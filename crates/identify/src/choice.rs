@@ -36,7 +36,9 @@ use crate::plan::{
     Candidate, Decision, HeldOutChoice, JointDiscrepancy, Level, MassChoice, RunPlan, Target,
 };
 use crate::settings::FilterSettings;
-use crate::validation::free_run::{chain_of, fit_percent, free_run_integrator, simulate_channels};
+use crate::validation::free_run::{
+    chain_of, fit_percent, free_run_integrator, simulate_channels_between,
+};
 use crate::validation::{discrepancy, prediction};
 
 /// The noise fractions tried, in order of preference on a tie (SPEC §3's 0.1 first).
@@ -223,13 +225,14 @@ pub(crate) fn score(plan: &RunPlan, ident: &LoadedDataset, data: &LoadedDataset)
             return Ok((c, None));
         }
     };
-    let sim = match simulate_channels(
+    let sim = match simulate_channels_between(
         &chain,
         &data.ug_meas,
         data.dt,
         &data.sensors,
         plan.building.measurement,
         free_run_integrator(&chain),
+        plan.building.ground_between,
     ) {
         Ok(sim) => sim,
         Err(e) => {

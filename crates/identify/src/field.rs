@@ -14,6 +14,7 @@ use crate::error::{bail, Result};
 use models::building::BuildingError;
 use models::dataset::{LoadedDataset, MEASURED, META};
 use models::description::StructureDescription;
+use models::ground_between::GroundBetween;
 use models::sensors::MeasurementKind;
 use models::structure::{Damping, ShearChain};
 use serde::{Deserialize, Serialize};
@@ -218,6 +219,10 @@ pub fn resolve(
         sensors: data.sensors.clone(),
         measurement: given.measurement.expect("checked"),
         damping: given.damping.unwrap_or_default(),
+        // A recorded ground motion is the sampling of a band-limited signal; linear
+        // interpolation would take up to a quarter of its amplitude near a stiff building's
+        // modes (models::ground_between).
+        ground_between: GroundBetween::BandLimited,
     };
     d.building()
         .map_err(|e: BuildingError| crate::error::invalid!("{}: {}", name(e.field), e.message))?;

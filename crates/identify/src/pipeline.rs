@@ -277,6 +277,10 @@ fn recorded_config(plan: &RunPlan, spec: &ChainSpec, data: &LoadedDataset) -> se
     if spec.substeps != 1 {
         config["spec"]["substeps"] = spec.substeps.into();
     }
+    if !spec.ground_between.is_linear() {
+        config["spec"]["ground_between"] =
+            serde_json::to_value(spec.ground_between).expect("serialisable");
+    }
     if let Some(c) = spec.coloured_noise {
         config["spec"]["coloured_noise"] = serde_json::to_value(c).expect("serialisable");
     }

@@ -909,8 +909,14 @@ fn settle_building(
         level: Level::Info,
         why: format!(
             "field data: {} storeys, masses {:?}, hysteretic storeys {:?}, {} accelerations at \
-             storeys {:?}, {} damping (no {META})",
-            d.storeys, d.masses, d.hysteretic, d.measurement, d.sensors, d.damping
+             storeys {:?}, {} damping, the ground motion {} between its samples (no {META})",
+            d.storeys,
+            d.masses,
+            d.hysteretic,
+            d.measurement,
+            d.sensors,
+            d.damping,
+            d.ground_between.name()
         ),
     });
     Ok(d)
@@ -1259,6 +1265,7 @@ impl RunPlan {
             substeps: self.model.substeps,
             physical_support: self.settings.physical_support,
             coloured_noise: self.model.coloured_noise,
+            ground_between: self.building.ground_between,
             regressors: (!self.model.discrepancy_modes.is_empty())
                 .then(|| discrepancy_regressors(&self.model.discrepancy_modes, data)),
         };

@@ -9,6 +9,7 @@
 //! converts them into the 0-based [`Building`].
 
 use crate::building::{error, Building, BuildingError, Damping};
+use crate::ground_between::GroundBetween;
 use crate::limits;
 use crate::sensors::{MeasurementKind, SensorLayout};
 use serde::{Deserialize, Serialize};
@@ -31,6 +32,11 @@ pub struct StructureDescription {
     /// dashpots) is not written.
     #[serde(default, skip_serializing_if = "Damping::is_default")]
     pub damping: Damping,
+    /// The measured ground acceleration between its samples, in the filter's sub-steps and the
+    /// free run ([`GroundBetween`]): linear (SPEC §2, the default, not written) or band-limited
+    /// (a recorded ground motion: field data).
+    #[serde(default, skip_serializing_if = "GroundBetween::is_linear")]
+    pub ground_between: GroundBetween,
 }
 
 impl StructureDescription {
@@ -44,6 +50,7 @@ impl StructureDescription {
             sensors,
             measurement,
             damping: building.damping(),
+            ground_between: GroundBetween::Linear,
         }
     }
 
@@ -98,6 +105,7 @@ mod tests {
             damping: Damping::Storey,
             sensors: vec![1, 3, 6, 10],
             measurement: MeasurementKind::Absolute,
+            ground_between: Default::default(),
         }
     }
 

@@ -11,6 +11,7 @@
 //! - [`integrate`]: classical RK4 (truth) and adaptive Dormand–Prince 5(4) (validation);
 //! - [`excitation`] and [`readers`]: ground motions (El Centro, Kanai–Tajimi, harmonic, user
 //!   records in CSV and PEER `.AT2`); [`ground_motions`]: vendored PEER NGA records by name;
+//!   [`ground_between`]: the measured ground motion between its samples (linear or band-limited);
 //! - [`import`]: real recordings (sensor CSV exports, CSMIP V2 records) and a channel map
 //!   into a field-data set, with every repair logged;
 //! - [`limits`]: the limits on every size and value that comes from a user;
@@ -24,6 +25,7 @@ pub mod dataset;
 pub mod description;
 pub mod excitation;
 pub mod filtering;
+pub mod ground_between;
 pub mod ground_motions;
 pub mod import;
 pub mod integrate;

@@ -156,6 +156,7 @@ fn plastic_spec(case: &Case, disc: Discretisation) -> ChainSpecOf<PlasticLaw> {
         substeps: s.substeps,
         physical_support: false,
         coloured_noise: None,
+        ground_between: Default::default(),
         regressors: None,
     }
 }

@@ -34,8 +34,8 @@ pub use crate::record::validation::{
 };
 use crate::record::RunRecord;
 use free_run::{
-    chain_of, fit_percent, free_run_integrator, nrmse, percentile_sorted, simulate_channels,
-    FreeRunError, QuantileDraw,
+    chain_of, fit_percent, free_run_integrator, nrmse, percentile_sorted,
+    simulate_channels_between, FreeRunError, QuantileDraw,
 };
 use spectral::Peak;
 
@@ -88,7 +88,7 @@ pub fn free_run(
     let kind = d.measurement;
     let names: Vec<String> = data.sensors.iter().map(|s| format!("a{s}")).collect();
     let measured = measured_channels(data);
-    let physical = simulate_record(&chain, data, kind)?;
+    let physical = simulate_record(&chain, data, d)?;
     let (discrepancy, disc_note) = discrepancy_of(disc, &names, &measured, &physical, data);
     let added = discrepancy
         .as_ref()
@@ -262,15 +262,16 @@ impl ParameterBand {
 fn simulate_record(
     chain: &models::structure::ShearChain,
     data: &LoadedDataset,
-    kind: MeasurementKind,
+    d: &StructureDescription,
 ) -> Result<Vec<Vec<f64>>, FreeRunError> {
-    simulate_channels(
+    simulate_channels_between(
         chain,
         &data.ug_meas,
         data.dt,
         &data.sensors,
-        kind,
+        d.measurement,
         free_run_integrator(chain),
+        d.ground_between,
     )
 }
 
@@ -370,7 +371,7 @@ fn simulate_draws(
         .par_iter()
         .map(|th| {
             let c = chain_of(d, th).map_err(|e| e.to_string())?;
-            let mut y = simulate_record(&c, data, d.measurement).map_err(|e| e.to_string())?;
+            let mut y = simulate_record(&c, data, d).map_err(|e| e.to_string())?;
             if let Some(a) = added {
                 y = plus(&y, a);
             }
@@ -712,7 +713,12 @@ pub(crate) fn description_of(r: &RunRecord) -> Result<StructureDescription> {
     };
     let building = models::building::Building::new(masses, hysteretic, damping)
         .context("the record's structure (`config.spec`)")?;
-    let d = StructureDescription::of(&building, sensors.one_based(), sensors.kind());
+    let mut d = StructureDescription::of(&building, sensors.one_based(), sensors.kind());
+    // Records before it interpolated linearly (the default, not written).
+    if let Some(v) = spec.get("ground_between") {
+        d.ground_between =
+            serde_json::from_value(v.clone()).context("field `config.spec.ground_between`")?;
+    }
     d.validate()
         .context("the record's structure (`config.spec`)")?;
     Ok(d)

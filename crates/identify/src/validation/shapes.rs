@@ -252,6 +252,7 @@ mod tests {
             sensors: vec![1, 2, 3],
             measurement: MeasurementKind::Absolute,
             damping: Default::default(),
+            ground_between: Default::default(),
         };
         let theta = [3000.0, 3100.0, 3800.0, 0.1, 0.1, 0.8];
         let modes = models::modal::modes_of(&d.masses, &theta[..3], &theta[3..]).unwrap();

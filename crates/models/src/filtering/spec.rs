@@ -4,6 +4,7 @@ use super::discretisation::Discretisation;
 use super::prior::ChainPriorOf;
 use super::prior::MarginalPrior;
 use crate::building::{Building, BuildingError, Damping};
+use crate::ground_between::GroundBetween;
 use crate::law::{BoucWenLaw, HysteresisLaw};
 use crate::priors::PriorError;
 use crate::sensors::{MeasurementKind, SensorError, SensorLayout};
@@ -102,6 +103,10 @@ pub struct ChainSpecOf<L: HysteresisLaw> {
     /// marginalised Gaussian ([`ColouredNoise`]); `None`: all of it white (SPEC §3).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub coloured_noise: Option<ColouredNoise>,
+    /// `ü_g` between its samples on the sub-steps' grid ([`crate::ground_between`]): linear
+    /// (SPEC §2, the default) or band-limited (a recorded ground motion).
+    #[serde(default, skip_serializing_if = "GroundBetween::is_linear")]
+    pub ground_between: GroundBetween,
     /// Known signals each channel adds with unknown coefficients ([`Regressors`]), marginalised
     /// in the Gaussian part (MPF-EKF2 only). Built by the caller from the data (never read
     /// from a file).
@@ -268,6 +273,7 @@ impl<L: HysteresisLaw> ChainSpecOf<L> {
             substeps: 1,
             physical_support: false,
             coloured_noise: None,
+            ground_between: Default::default(),
             regressors: None,
         };
         spec.validate()?;
