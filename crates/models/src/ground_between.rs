@@ -9,10 +9,10 @@
 //! A stiff building sampled coarsely has modes there: a three-storey frame with modes at 9, 24
 //! and 36 Hz recorded at 120 Hz, simulated exactly from a band-limited ground motion with 1 %
 //! noise on the ground channel and 2 % on the floors, is predicted by its *true* parameters at
-//! 88.1 / 93.0 / 95.5 % (free-run fit per floor) with a linearly interpolated input and at
-//! 97.7 / 97.9 / 97.9 % with a band-limited one (docs/validation.md, "The ground between its
-//! samples"): with the linear input the model's error is the input's, and the parameters bend
-//! to absorb it.
+//! 87.9 / 92.8 / 95.3 % (free-run fit per floor) with a linearly interpolated input and at
+//! 97.7 / 97.8 / 97.8 % with a band-limited one (`experiments/real/stiff_standin.py`;
+//! docs/validation.md, "The ground between its samples"): with the linear input the model's
+//! error is the input's, and the parameters bend to absorb it.
 
 use rustfft::{num_complex::Complex64, FftPlanner};
 use serde::{Deserialize, Serialize};
