@@ -113,7 +113,7 @@ pub fn simulate_channels(
 /// samples: the integrators then interpolate linearly only within a sub-interval, which keeps
 /// sinc²(f·dt/8) ≥ 0.987 of the input's amplitude up to the Nyquist frequency (1 − 0.995 at
 /// 0.3 of the sampling rate, where linear interpolation between the samples keeps 0.74).
-pub(crate) const BAND_LIMITED_REFINE: usize = 8;
+pub const BAND_LIMITED_REFINE: usize = 8;
 
 /// [`simulate_channels`] with `ug` reconstructed between its samples as `between` says: linear
 /// (SPEC §2), or band-limited on a grid [`BAND_LIMITED_REFINE`] times finer, the building
