@@ -44,28 +44,29 @@ impl GroundBetween {
     }
 }
 
-/// `ug` (samples `k·dt`, k = 0..K) on the grid of `m` points per sample interval, `(K)·m + 1`
+/// `ug` (samples `k·dt`, k = 0..K, `dt` > 0) on the grid of `m` points per sample interval, `(K)·m + 1`
 /// samples: index `k·m` is sample `k`. `BandLimited` reproduces the samples to rounding.
-pub fn refine(ug: &[f64], m: usize, how: GroundBetween) -> Vec<f64> {
+pub fn refine(ug: &[f64], dt: f64, m: usize, how: GroundBetween) -> Vec<f64> {
     let m = m.max(1);
     if m == 1 || ug.len() < 2 {
         return ug.to_vec();
     }
     match how {
-        GroundBetween::Linear => linear(ug, m),
+        GroundBetween::Linear => linear(ug, dt, m),
         GroundBetween::BandLimited => band_limited(ug, m),
     }
 }
 
-fn linear(ug: &[f64], m: usize) -> Vec<f64> {
-    let mut out = Vec::with_capacity((ug.len() - 1) * m + 1);
-    for w in ug.windows(2) {
-        for j in 0..m {
-            out.push(w[0] + (w[1] - w[0]) * (j as f64 / m as f64));
-        }
-    }
-    out.push(ug[ug.len() - 1]);
-    out
+/// Linear between samples by the one resampler of ground motions (what the filters have always
+/// used: `(K)·m + 1` samples, bit for bit).
+fn linear(ug: &[f64], dt: f64, m: usize) -> Vec<f64> {
+    let motion = crate::excitation::GroundMotion {
+        dt,
+        acc: ug.to_vec(),
+    };
+    let fine = motion.resample_linear(dt / m as f64).acc;
+    debug_assert_eq!(fine.len(), (ug.len() - 1) * m + 1, "m samples per interval");
+    fine
 }
 
 /// The trigonometric interpolant of the record padded with as many zeros as it has samples (so
@@ -108,15 +109,15 @@ mod tests {
             .map(|k| ((k as f64) * 0.7).sin() * (k as f64))
             .collect();
         for how in [GroundBetween::Linear, GroundBetween::BandLimited] {
-            let f = refine(&ug, 4, how);
+            let f = refine(&ug, 1.0 / 120.0, 4, how);
             assert_eq!(f.len(), 49 * 4 + 1);
             for (k, u) in ug.iter().enumerate() {
                 assert!((f[4 * k] - u).abs() < 1e-10, "{how:?} sample {k}");
             }
         }
-        let f = refine(&ug, 4, GroundBetween::Linear);
+        let f = refine(&ug, 1.0 / 120.0, 4, GroundBetween::Linear);
         assert_eq!(f[4 * 7 + 1], ug[7] + (ug[8] - ug[7]) * 0.25);
-        assert_eq!(refine(&ug, 1, GroundBetween::BandLimited), ug);
+        assert_eq!(refine(&ug, 1.0 / 120.0, 1, GroundBetween::BandLimited), ug);
     }
 
     /// A sine at 0.3 of the sampling rate, tapered in and out so that the record starts and ends
@@ -133,8 +134,8 @@ mod tests {
         let ug: Vec<f64> = (0..n).map(|k| s(k as f64 * dt)).collect();
         let m = 8;
         let (mut err_bl, mut err_lin, mut norm) = (0.0f64, 0.0f64, 0.0f64);
-        let bl = refine(&ug, m, GroundBetween::BandLimited);
-        let lin = refine(&ug, m, GroundBetween::Linear);
+        let bl = refine(&ug, 1.0 / 120.0, m, GroundBetween::BandLimited);
+        let lin = refine(&ug, 1.0 / 120.0, m, GroundBetween::Linear);
         for i in (n / 4) * m..(3 * n / 4) * m {
             let truth = s(i as f64 * dt / m as f64);
             err_bl = err_bl.max((bl[i] - truth).abs());

@@ -141,7 +141,11 @@ pub fn simulate_channels_between(
         GroundBetween::Linear => 1,
         GroundBetween::BandLimited => BAND_LIMITED_REFINE,
     };
-    let fine = models::ground_between::refine(ug, every, between);
+    // The record itself when nothing is refined (no copy per free run or band draw).
+    let fine: std::borrow::Cow<[f64]> = match every {
+        1 => std::borrow::Cow::Borrowed(ug),
+        _ => std::borrow::Cow::Owned(models::ground_between::refine(ug, dt, every, between)),
+    };
     let h = dt / every as f64;
     let traj = match integrator {
         Integrator::Adaptive(tol) => simulate_adaptive(chain, &fine, h, tol)?,

@@ -56,7 +56,6 @@ pub use spec::{
     SPEC_R_NOISE_FRACTION,
 };
 
-use crate::ground_between::GroundBetween;
 use crate::law::{HysteresisLaw, MAX_LINEAR};
 use crate::structure::{state_names, theta_names_damped, ChainView};
 use core_filters::linalg::Sparse;
@@ -87,24 +86,6 @@ pub(crate) const fn nlin<L: HysteresisLaw>() -> usize {
         )
     };
     L::NLIN
-}
-
-/// `ug` on a grid `m` times finer (`ug` itself when `m` is 1): linear between samples by the one
-/// resampler of ground motions, or band-limited ([`crate::ground_between`]).
-fn fine_grid(ug: &[f64], dt: f64, m: usize, between: GroundBetween) -> Vec<f64> {
-    if m == 1 {
-        return ug.to_vec();
-    }
-    if between == GroundBetween::BandLimited {
-        return crate::ground_between::refine(ug, m, between);
-    }
-    let motion = crate::excitation::GroundMotion {
-        dt,
-        acc: ug.to_vec(),
-    };
-    let fine = motion.resample_linear(dt / m as f64).acc;
-    assert_eq!(fine.len(), (ug.len() - 1) * m + 1, "m samples per interval");
-    fine
 }
 
 /// The support of a scalar prior, `None` for a point mass.
@@ -193,7 +174,7 @@ impl<L: HysteresisLaw> ChainCore<L> {
             ne: spec.building.hysteretic().len(),
             dt: spec.dt / m as f64,
             substeps: m,
-            ug: fine_grid(&spec.ug, spec.dt, m, spec.ground_between),
+            ug: crate::ground_between::refine(&spec.ug, spec.dt, m, spec.ground_between),
             q_disp: spec.q_disp * noise,
             q_vel: spec.q_vel * noise,
             q_r: spec.q_r.iter().map(|q| q * noise).collect(),
