@@ -259,13 +259,15 @@ fn remove_clock_delays(
                 channel: names[j].clone(),
                 action: format!(
                     "its clock {} the ground's by {:.2} ms ({:.2} samples, s.e. {:.2} ms), \
-                     measured from the phase of its transfer function at {} frequencies of \
-                     {:.2}–{:.2} Hz, below half its first mode ({:.2} Hz): {how}",
+                     measured from the phase of its transfer function over the whole record, \
+                     {} blocks of {} frequencies at {:.2}–{:.2} Hz, below half its first mode \
+                     ({:.2} Hz): {how}",
                     if d.seconds >= 0.0 { "lags" } else { "leads" },
                     1e3 * d.seconds.abs(),
                     d.seconds.abs() / a.dt,
                     1e3 * d.standard_error,
                     d.bins,
+                    delay::BLOCK,
                     d.band_hz.0,
                     d.band_hz.1,
                     d.first_mode_hz
