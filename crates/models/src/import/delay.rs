@@ -9,7 +9,7 @@
 //! model does not know is lethal to an identification: at a mode of 22 Hz sampled at 120 Hz a
 //! delay of 2.3 samples is a phase error of 150°, which the filter can only explain with
 //! negative damping or a wrong stiffness (the stiff one-storey frame in
-//! `docs/real-frame.md`, "Clock delays", measured 19.4–19.6 ms on each of its six records).
+//! `docs/real-frame.md`, "Clock delays", measured 19.2–19.5 ms on each of its six records).
 //!
 //! [`measure`] fits `τ` to the phase of the whole record's cross-spectrum, averaged over blocks
 //! of [`BLOCK`] adjacent frequencies, at the blocks below half the first mode where the coherence
