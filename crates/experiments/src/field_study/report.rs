@@ -23,6 +23,30 @@ pub(crate) struct Baseline {
     pub command: String,
     pub best_order: usize,
     pub runs: Vec<BaselineRun>,
+    /// On a one-storey record: the best linear one-storey model by output error (absent from
+    /// baselines written before it, and on structures of more storeys).
+    #[serde(default)]
+    pub one_storey: Option<OneStorey>,
+}
+
+/// The best linear one-storey model by output error (`experiments/real/srim.py`): the yardstick
+/// of a one-storey identification.
+#[derive(Debug, Clone, Deserialize)]
+pub(crate) struct OneStorey {
+    pub frequency_hz: f64,
+    pub damping_ratio: f64,
+    /// Fit % of its one channel on each data set (keyed by its directory).
+    pub fits: BTreeMap<String, Vec<f64>>,
+}
+
+impl OneStorey {
+    /// Fits on the record named `record` (the last component of the data directory).
+    pub(crate) fn fits_on(&self, record: &str) -> Option<&[f64]> {
+        self.fits
+            .iter()
+            .find(|(k, _)| Path::new(k).file_name().is_some_and(|n| n == record))
+            .map(|(_, v)| v.as_slice())
+    }
 }
 
 /// One model order of the baseline.
@@ -280,6 +304,7 @@ fn render_part(s: &mut String, part: &Part, out: &Path) -> Result<()> {
         train,
         validate: &validate,
         best,
+        one_storey: baseline.as_ref().and_then(|b| b.one_storey.as_ref()),
     };
     identified(s, x)?;
     if !validate.is_empty() {
@@ -300,6 +325,8 @@ struct Section<'a> {
     train: &'a str,
     validate: &'a [&'a str],
     best: Option<&'a BaselineRun>,
+    /// The best one-storey model by output error, where the baseline has it.
+    one_storey: Option<&'a OneStorey>,
 }
 
 /// The variants identified on the training record, beside the baseline's best order; the
@@ -407,6 +434,7 @@ fn cross_validation(s: &mut String, x: Section<'_>) -> Result<()> {
         train,
         validate,
         best,
+        ..
     } = x;
     if !validate.is_empty() {
         writeln!(s, "### Cross-validation: predicting the records kept out\n")?;
@@ -490,6 +518,7 @@ fn selected_model(s: &mut String, x: Section<'_>) -> Result<()> {
         train,
         validate,
         best,
+        one_storey,
     } = x;
     let selected = select(part, dirs)?;
     if let (Some(sel), None) = (&part.selection, &selected) {
@@ -565,7 +594,7 @@ fn selected_model(s: &mut String, x: Section<'_>) -> Result<()> {
         band(s, dirs, chosen, r0, train, validate)?;
         // The goals compare with the baseline: only where the part has one.
         if part.baseline {
-            goals(s, part, dirs, chosen, r0, best, validate)?;
+            goals(s, part, dirs, chosen, r0, (best, one_storey), validate)?;
         }
     }
     Ok(())
@@ -709,7 +738,7 @@ fn goals(
     dirs: &PartDirs,
     chosen: &super::Variant,
     r: &RunRecord,
-    best: Option<&BaselineRun>,
+    (best, one_storey): (Option<&BaselineRun>, Option<&OneStorey>),
     validate: &[&str],
 ) -> Result<()> {
     let train = &part.identify_record().name;
@@ -755,6 +784,18 @@ fn goals(
             "not met"
         }
     )?;
+    // A one-storey record: at least the best linear one-storey model's free-run fit.
+    if let Some(o) = one_storey {
+        let (ok, text) = vs(fit.as_deref(), o.fits_on(train));
+        writeln!(
+            s,
+            "- On `{train}`, one storey: free-run fit at least the best linear one-storey \
+             model's (output error, {:.3} Hz, ζ {:.2} %: srim.json's `one_storey`): {text}: **{}**.",
+            o.frequency_hz,
+            100.0 * o.damping_ratio,
+            if ok { "met" } else { "not met" }
+        )?;
+    }
     for v in validate {
         let cv = cross(&dirs.validation(&chosen.name, v))?;
         let (ok, text) = vs(
@@ -770,4 +811,29 @@ fn goals(
     }
     writeln!(s)?;
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const RUNS: &str = r#""method": "SRIM", "mdof_version": "0.0.23", "command": "python srim.py",
+        "best_order": 2, "runs": [{"order": 2, "fits": {"d/elcentro-1": [61.4]}, "modes": [],
+        "seconds": 0.1}]"#;
+
+    #[test]
+    fn a_baseline_reads_with_or_without_its_one_storey_model() {
+        let before: Baseline = serde_json::from_str(&format!("{{{RUNS}}}")).unwrap();
+        assert!(before.one_storey.is_none());
+        let with: Baseline = serde_json::from_str(&format!(
+            r#"{{{RUNS}, "one_storey": {{"frequency_hz": 22.03, "damping_ratio": 0.0065,
+                "fits": {{"d/elcentro-1": [63.4], "d/sine-1": [-86.5]}}, "seconds": 5.0}}}}"#
+        ))
+        .unwrap();
+        let o = with.one_storey.as_ref().unwrap();
+        assert_eq!(o.fits_on("elcentro-1"), Some(&[63.4][..]));
+        assert_eq!(o.fits_on("sine-1"), Some(&[-86.5][..]));
+        assert_eq!(o.fits_on("elcentro"), None);
+        assert_eq!(with.runs[0].fits_on("elcentro-1"), Some(&[61.4][..]));
+    }
 }
