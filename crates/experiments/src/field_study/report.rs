@@ -42,11 +42,16 @@ pub(crate) struct OneStorey {
 impl OneStorey {
     /// Fits on the record named `record` (the last component of the data directory).
     pub(crate) fn fits_on(&self, record: &str) -> Option<&[f64]> {
-        self.fits
-            .iter()
-            .find(|(k, _)| Path::new(k).file_name().is_some_and(|n| n == record))
-            .map(|(_, v)| v.as_slice())
+        on_record(&self.fits, record).map(Vec::as_slice)
     }
+}
+
+/// The entry of a map keyed by data directories whose last component is `record`.
+fn on_record<'a, V>(by_dir: &'a BTreeMap<String, V>, record: &str) -> Option<&'a V> {
+    by_dir
+        .iter()
+        .find(|(k, _)| Path::new(k).file_name().is_some_and(|n| n == record))
+        .map(|(_, v)| v)
 }
 
 /// One model order of the baseline.
@@ -68,10 +73,7 @@ pub(crate) struct BaselineMode {
 impl BaselineRun {
     /// Fits on the record named `record` (the last component of the data directory).
     pub(crate) fn fits_on(&self, record: &str) -> Option<&[f64]> {
-        self.fits
-            .iter()
-            .find(|(k, _)| Path::new(k).file_name().is_some_and(|n| n == record))
-            .and_then(|(_, v)| v.as_deref())
+        on_record(&self.fits, record).and_then(|v| v.as_deref())
     }
 }
 
