@@ -788,7 +788,18 @@ fn goals(
     )?;
     // A one-storey record: at least the best linear one-storey model's free-run fit.
     if let Some(o) = one_storey {
-        let (ok, text) = vs(fit.as_deref(), o.fits_on(train));
+        let (ok, _) = vs(fit.as_deref(), o.fits_on(train));
+        // Two decimals: the two fits are often within a tenth of a point of each other, and the
+        // verdict must be readable from the numbers printed beside it.
+        let two = |f: Option<&[f64]>| {
+            f.map_or("—".into(), |v| {
+                v.iter()
+                    .map(|x| format!("{x:.2}"))
+                    .collect::<Vec<_>>()
+                    .join(" / ")
+            })
+        };
+        let text = format!("{} against {}", two(fit.as_deref()), two(o.fits_on(train)));
         writeln!(
             s,
             "- On `{train}`, one storey: free-run fit at least the best linear one-storey \
