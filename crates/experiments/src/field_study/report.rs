@@ -137,10 +137,15 @@ fn fits(f: &FreeRun) -> Vec<f64> {
 }
 
 fn fit_cell(f: Option<&[f64]>) -> String {
+    fit_cell_to(f, 1)
+}
+
+/// [`fit_cell`] with `decimals` decimals.
+fn fit_cell_to(f: Option<&[f64]>, decimals: usize) -> String {
     match f {
         Some(v) => v
             .iter()
-            .map(|x| format!("{x:.1}"))
+            .map(|x| format!("{x:.decimals$}"))
             .collect::<Vec<_>>()
             .join(" / "),
         None => "—".into(),
@@ -791,15 +796,11 @@ fn goals(
         let (ok, _) = vs(fit.as_deref(), o.fits_on(train));
         // Two decimals: the two fits are often within a tenth of a point of each other, and the
         // verdict must be readable from the numbers printed beside it.
-        let two = |f: Option<&[f64]>| {
-            f.map_or("—".into(), |v| {
-                v.iter()
-                    .map(|x| format!("{x:.2}"))
-                    .collect::<Vec<_>>()
-                    .join(" / ")
-            })
-        };
-        let text = format!("{} against {}", two(fit.as_deref()), two(o.fits_on(train)));
+        let text = format!(
+            "{} against {}",
+            fit_cell_to(fit.as_deref(), 2),
+            fit_cell_to(o.fits_on(train), 2)
+        );
         writeln!(
             s,
             "- On `{train}`, one storey: free-run fit at least the best linear one-storey \
