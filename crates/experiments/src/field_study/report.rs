@@ -152,6 +152,27 @@ fn fit_cell_to(f: Option<&[f64]>, decimals: usize) -> String {
     }
 }
 
+/// The share of a held-out record's samples the 95 % band should cover, in per cent.
+const BAND_GOAL: std::ops::RangeInclusive<f64> = 90.0..=98.0;
+
+/// Band coverages, each to one decimal unless that would put it on the other side of the goal's
+/// bounds ([`BAND_GOAL`]) than the verdict counts it: 89.96 % is written 89.96, not 90.0.
+fn coverage_cell(f: Option<&[f64]>) -> String {
+    let text = |x: f64| {
+        (1..=4)
+            .map(|d| format!("{x:.d$}"))
+            .find(|t| {
+                t.parse::<f64>()
+                    .is_ok_and(|shown| BAND_GOAL.contains(&shown) == BAND_GOAL.contains(&x))
+            })
+            .unwrap_or_else(|| format!("{x}"))
+    };
+    match f {
+        Some(v) => v.iter().map(|x| text(*x)).collect::<Vec<_>>().join(" / "),
+        None => "—".into(),
+    }
+}
+
 /// 95 % interval of `name` in the record, if computed.
 fn interval(r: &RunRecord, name: &str) -> Option<(f64, f64)> {
     r.credible
@@ -703,12 +724,12 @@ fn band(
     writeln!(
         s,
         "| `{train}` | {} | identified on it (not independent) |",
-        fit_cell(cell(f0).as_deref())
+        coverage_cell(cell(f0).as_deref())
     )?;
     let mut kept = Vec::new();
     for v in validate {
         let c = cross(&dirs.validation(&chosen.name, v))?.and_then(|cv| cell(&cv.free_run));
-        writeln!(s, "| `{v}` | {} | kept out |", fit_cell(c.as_deref()))?;
+        writeln!(s, "| `{v}` | {} | kept out |", coverage_cell(c.as_deref()))?;
         kept.push((v, c));
     }
     if !kept.is_empty() {
@@ -716,7 +737,7 @@ fn band(
             .iter()
             .filter_map(|(_, c)| c.as_ref())
             .flatten()
-            .filter(|c| (90.0..=98.0).contains(*c))
+            .filter(|c| BAND_GOAL.contains(*c))
             .count();
         let total = kept
             .iter()
@@ -849,5 +870,15 @@ mod tests {
         assert_eq!(o.fits_on("sine-1"), Some(&[-86.5][..]));
         assert_eq!(o.fits_on("elcentro"), None);
         assert_eq!(with.runs[0].fits_on("elcentro-1"), Some(&[61.4][..]));
+    }
+
+    #[test]
+    fn a_coverage_is_written_on_the_side_of_the_goal_its_verdict_counts() {
+        assert_eq!(
+            coverage_cell(Some(&[89.96466, 96.94, 98.04, 97.96, 90.0])),
+            "89.96 / 96.9 / 98.04 / 98.0 / 90.0"
+        );
+        assert_eq!(coverage_cell(Some(&[89.99996])), "89.99996");
+        assert_eq!(coverage_cell(None), "—");
     }
 }
