@@ -33,7 +33,7 @@
 //! estimate; both are the meta-analysis literature's known faults of DL (Veroniki et al. 2016
 //! recommend Paule–Mandel). Chosen on the shake-table frame's four records (the selected model's
 //! θ_val of one record inside another's 95 % interval: 29 → 46 of 84 (parameter, pair) cases),
-//! judged on the unseen structures' (stiff one-storey frame 38 → 42 of 60, Meloland 5 → 7 of
+//! judged on the unseen structures' (stiff one-storey frame 38 → 41 of 60, Meloland 5 → 7 of
 //! 12, Capistrano 8 → 8 of 24) — docs/validation.md.
 //!
 //! Only for a marginalised parameter (a Gaussian or a mixture of Gaussians per particle): a
