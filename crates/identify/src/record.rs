@@ -63,7 +63,9 @@ pub const NUMERICS_VERSION: u32 = 4;
 /// record (`crate::validation::discrepancy`, 2026-11-30); field-data records without this key
 /// were computed before it. 2 — θ identified with the discrepancy modes inside the filter where
 /// that predicts the held-out part at least as well (`crate::choice`, `evidence.joint_discrepancy`).
-pub const FIELD_VALIDATION_VERSION: u32 = 2;
+/// 3 — the intervals' model-error term is Paule–Mandel's τ with Student's t (`crate::spread`,
+/// 2026-12-01); the sub-step check reads its s.d.s off those intervals, so θ_val can move too.
+pub const FIELD_VALIDATION_VERSION: u32 = 3;
 
 /// Versions and provenance written into every record.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
