@@ -142,35 +142,64 @@ fn fit_cell(f: Option<&[f64]>) -> String {
 
 /// [`fit_cell`] with `decimals` decimals.
 fn fit_cell_to(f: Option<&[f64]>, decimals: usize) -> String {
+    cells(f, |x| format!("{x:.decimals$}"))
+}
+
+/// Values written by `text`, joined by " / " (one per floor); "—" for none.
+fn cells(f: Option<&[f64]>, text: impl Fn(f64) -> String) -> String {
     match f {
-        Some(v) => v
-            .iter()
-            .map(|x| format!("{x:.decimals$}"))
-            .collect::<Vec<_>>()
-            .join(" / "),
+        Some(v) => v.iter().map(|x| text(*x)).collect::<Vec<_>>().join(" / "),
         None => "—".into(),
     }
+}
+
+/// `x` as it reads written with `decimals` decimals.
+fn printed(x: f64, decimals: usize) -> f64 {
+    format!("{x:.decimals$}").parse().unwrap_or(x)
+}
+
+/// The fewest decimals, from one, at which a verdict read off the printed numbers is the one the
+/// values give (`tells(d)`); `None` if six do not suffice. A verdict beside its numbers must be
+/// readable from them: 47.96 against 47.99 is not "48.0 against 48.0: not met".
+fn telling_decimals(tells: impl Fn(usize) -> bool) -> Option<usize> {
+    (1..=6).find(|&d| tells(d))
 }
 
 /// The share of a held-out record's samples the 95 % band should cover, in per cent.
 const BAND_GOAL: std::ops::RangeInclusive<f64> = 90.0..=98.0;
 
-/// Band coverages, each to one decimal unless that would put it on the other side of the goal's
-/// bounds ([`BAND_GOAL`]) than the verdict counts it: 89.96 % is written 89.96, not 90.0.
+/// Band coverages, each to the decimals that put it on the side of the goal's bounds
+/// ([`BAND_GOAL`]) the verdict counts it on ([`telling_decimals`]): 89.96 % is written 89.96.
 fn coverage_cell(f: Option<&[f64]>) -> String {
-    let text = |x: f64| {
-        (1..=4)
-            .map(|d| format!("{x:.d$}"))
-            .find(|t| {
-                t.parse::<f64>()
-                    .is_ok_and(|shown| BAND_GOAL.contains(&shown) == BAND_GOAL.contains(&x))
-            })
-            .unwrap_or_else(|| format!("{x}"))
+    cells(f, |x| {
+        let inside = |v: f64| BAND_GOAL.contains(&v);
+        match telling_decimals(|d| inside(printed(x, d)) == inside(x)) {
+            Some(d) => format!("{x:.d$}"),
+            None => format!("{x}"),
+        }
+    })
+}
+
+/// Whether every floor's fit `mine` is at least `theirs`, and "mine against theirs" written to
+/// the decimals that show it ([`telling_decimals`]); not met when either is missing.
+fn versus(mine: Option<&[f64]>, theirs: Option<&[f64]>) -> (bool, String) {
+    let (Some(m), Some(t)) = (mine, theirs) else {
+        return (
+            false,
+            format!("{} against {}", fit_cell(mine), fit_cell(theirs)),
+        );
     };
-    match f {
-        Some(v) => v.iter().map(|x| text(*x)).collect::<Vec<_>>().join(" / "),
-        None => "—".into(),
-    }
+    let at_least = |read: &dyn Fn(f64) -> f64| m.iter().zip(t).all(|(a, b)| read(*a) >= read(*b));
+    let ok = at_least(&|x| x);
+    let d = telling_decimals(|d| at_least(&|x| printed(x, d)) == ok).unwrap_or(6);
+    (
+        ok,
+        format!(
+            "{} against {}",
+            fit_cell_to(mine, d),
+            fit_cell_to(theirs, d)
+        ),
+    )
 }
 
 /// 95 % interval of `name` in the record, if computed.
@@ -785,19 +814,7 @@ fn goals(
                 .all(|p| p.difference_percent.is_some_and(|d| d.abs() <= 1.0))
     });
     let fit = r.free_run.as_ref().map(fits);
-    let vs = |mine: Option<&[f64]>, theirs: Option<&[f64]>| -> (bool, String) {
-        match (mine, theirs) {
-            (Some(m), Some(t)) => {
-                let ok = m.iter().zip(t).all(|(a, b)| a >= b);
-                (
-                    ok,
-                    format!("{} against {}", fit_cell(Some(m)), fit_cell(Some(t))),
-                )
-            }
-            (m, t) => (false, format!("{} against {}", fit_cell(m), fit_cell(t))),
-        }
-    };
-    let (fit_ok, fit_text) = vs(fit.as_deref(), best.and_then(|b| b.fits_on(train)));
+    let (fit_ok, fit_text) = versus(fit.as_deref(), best.and_then(|b| b.fits_on(train)));
     let pos = damping_positive(r) && outcome(r) == "ok";
     writeln!(
         s,
@@ -814,14 +831,7 @@ fn goals(
     )?;
     // A one-storey record: at least the best linear one-storey model's free-run fit.
     if let Some(o) = one_storey {
-        let (ok, _) = vs(fit.as_deref(), o.fits_on(train));
-        // Two decimals: the two fits are often within a tenth of a point of each other, and the
-        // verdict must be readable from the numbers printed beside it.
-        let text = format!(
-            "{} against {}",
-            fit_cell_to(fit.as_deref(), 2),
-            fit_cell_to(o.fits_on(train), 2)
-        );
+        let (ok, text) = versus(fit.as_deref(), o.fits_on(train));
         writeln!(
             s,
             "- On `{train}`, one storey: free-run fit at least the best linear one-storey \
@@ -833,7 +843,7 @@ fn goals(
     }
     for v in validate {
         let cv = cross(&dirs.validation(&chosen.name, v))?;
-        let (ok, text) = vs(
+        let (ok, text) = versus(
             cv.as_ref().map(|c| fits(&c.free_run)).as_deref(),
             best.and_then(|b| b.fits_on(v)),
         );
@@ -880,5 +890,28 @@ mod tests {
         );
         assert_eq!(coverage_cell(Some(&[89.99996])), "89.99996");
         assert_eq!(coverage_cell(None), "—");
+    }
+
+    #[test]
+    fn a_comparison_of_fits_is_written_to_the_decimals_its_verdict_needs() {
+        // One decimal where it tells; more only where rounding would hide the verdict.
+        assert_eq!(
+            versus(Some(&[63.22]), Some(&[63.44])),
+            (false, "63.2 against 63.4".into())
+        );
+        assert_eq!(
+            versus(Some(&[47.96]), Some(&[47.99])),
+            (false, "47.96 against 47.99".into())
+        );
+        // Every floor decides: floor 2 at one decimal reads 70.1 ≥ 70.1, at two 70.14 < 70.15.
+        assert_eq!(
+            versus(Some(&[75.0, 70.14]), Some(&[74.0, 70.149])),
+            (false, "75.00 / 70.14 against 74.00 / 70.15".into())
+        );
+        assert_eq!(
+            versus(Some(&[57.6]), Some(&[47.3])),
+            (true, "57.6 against 47.3".into())
+        );
+        assert_eq!(versus(None, Some(&[1.0])), (false, "— against 1.0".into()));
     }
 }
