@@ -191,9 +191,9 @@ pub(crate) fn widen(
         .intervals
         .iter()
         .map(|ci| {
-            let zt = t_of(ci.level, parts) * tau;
-            let mut lo = centre - (centre - ci.lo).max(0.0).hypot(zt);
-            let hi = centre + (ci.hi - centre).max(0.0).hypot(zt);
+            let term = t_of(ci.level, parts) * tau;
+            let mut lo = centre - (centre - ci.lo).max(0.0).hypot(term);
+            let hi = centre + (ci.hi - centre).max(0.0).hypot(term);
             if bounded {
                 lo = lo.max(0.0);
             }
