@@ -278,8 +278,9 @@ pub(crate) fn describe(s: &SegmentSpread) -> String {
     } else {
         format!(
             "Model error: the record's {} parts disagree on {} (Cochran's Q, 5 %), so their \
-             intervals include the spread between the parts (τ); the filter's own intervals are \
-             in the record (segment_spread) — docs/validation.md",
+             intervals include the spread between the parts (Paule–Mandel's τ, times Student's \
+             t as for a part not seen) and a band on another record draws θ shifted by it; the \
+             filter's own intervals are in the record (segment_spread) — docs/validation.md",
             s.segments,
             widened.join(", ")
         )
