@@ -1,8 +1,8 @@
 //! Model error in the intervals (`identify::spread`): the parts of a record of the filter's own
 //! class, identified with its true noise settings, disagree no more often than the test's 5 %;
 //! the parts of the shake-table frame's record disagree on its first two stiffnesses (k3's
-//! agree at the noise level the held-out choice takes there, 0.3), and their intervals widen by
-//! their spread.
+//! agree at the noise level the held-out choice takes there, 0.3), their intervals widen by
+//! their spread, and the band on another record draws θ shifted by it.
 
 use crate::common;
 
@@ -82,6 +82,45 @@ fn the_frames_parts_disagree_and_its_intervals_widen() {
         assert!(
             widened >= 2.0 * 1.959 * p.tau.unwrap() && widened > filter,
             "{k}: {filter} -> {widened}"
+        );
+    }
+    // The band on another record draws θ shifted by that spread (here the record's own data
+    // stand in for another record, with the same model error): its spread of fits over the
+    // draws is wider than the band's on the record, where θ is the filter's posterior alone.
+    let out = dir.join("v.json");
+    common::sysid_ok([
+        "validate".as_ref(),
+        "--record".as_ref(),
+        record.as_os_str(),
+        "--data".as_ref(),
+        data.as_os_str(),
+        "--out".as_ref(),
+        out.as_os_str(),
+    ]);
+    let v: identify::validation::cross::CrossValidation =
+        serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
+    let own = r.free_run.as_ref().expect("a free run");
+    let (own_band, other_band) = (
+        own.band.as_ref().unwrap(),
+        v.free_run.band.as_ref().unwrap(),
+    );
+    assert!(!own_band.shifted && other_band.shifted);
+    assert!(
+        other_band.method.contains("Student's t"),
+        "{}",
+        other_band.method
+    );
+    let span = |c: &identify::validation::ChannelFit| {
+        let d = c.fit_draws.as_ref().expect("the fits' spread");
+        d[d.len() - 1] - d[0]
+    };
+    for (a, b) in own.channels.iter().zip(&v.free_run.channels) {
+        assert!(
+            span(b) > span(a),
+            "{}: {} -> {}",
+            a.channel,
+            span(a),
+            span(b)
         );
     }
 }

@@ -81,6 +81,15 @@ fn the_band_learned_on_one_record_covers_95_percent_of_another() {
     let v: CrossValidation = serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
     assert_eq!(v.free_run.model_error.as_ref(), Some(me));
     assert!(v.free_run.band.as_ref().expect("a band").correlated);
+    // On another record θ is shifted by the spread between the record's parts exactly where they
+    // disagreed (here, on data of the filter's own class: where the 5 % test fired); on the
+    // record itself never.
+    let disagreed = r
+        .segment_spread
+        .as_ref()
+        .is_some_and(|s| s.parameters.iter().any(|p| p.tau.is_some_and(|t| t > 0.0)));
+    assert_eq!(v.free_run.band.as_ref().unwrap().shifted, disagreed);
+    assert!(!f.band.as_ref().unwrap().shifted);
     // A matrix that is no correlation matrix (every pair −1 among more than two parameters has
     // no Cholesky factor): the record's intervals drawn independently, and the band says so.
     let mut bad: serde_json::Value =

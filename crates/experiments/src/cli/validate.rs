@@ -1,7 +1,7 @@
 //! `sysid validate --record RUN.json --data OTHER [--out validation.json]`: cross-validation —
 //! the model identified on one record predicts another record of the same building from its
 //! ground motion alone (free run, fit and NRMSE per channel, a band from the first record's
-//! posterior), and its modes are set beside the other record's transfer-function peaks
+//! posterior shifted by the spread between its parts), and its modes are set beside the other record's transfer-function peaks
 //! (docs/validation.md).
 
 use std::path::PathBuf;

@@ -743,8 +743,9 @@ fn band(
     writeln!(
         s,
         "**The 95 % predictive band** of the selected model (docs/validation.md): the spread of \
-         its posterior draws widened by the model's error ({source}). Per cent of each floor's \
-         samples inside it:\n"
+         its posterior draws — on a record kept out, each draw shifted by the spread between \
+         `{train}`'s parts where they disagree, as θ of another record — widened by the model's \
+         error ({source}). Per cent of each floor's samples inside it:\n"
     )?;
     writeln!(s, "| record | covered % | |\n|---|---|---|")?;
     let cell = |f: &FreeRun| -> Option<Vec<f64>> {
@@ -757,8 +758,18 @@ fn band(
     )?;
     let mut kept = Vec::new();
     for v in validate {
-        let c = cross(&dirs.validation(&chosen.name, v))?.and_then(|cv| cell(&cv.free_run));
-        writeln!(s, "| `{v}` | {} | kept out |", coverage_cell(c.as_deref()))?;
+        let cv = cross(&dirs.validation(&chosen.name, v))?;
+        let c = cv.as_ref().and_then(|cv| cell(&cv.free_run));
+        let shifted = cv
+            .as_ref()
+            .and_then(|cv| cv.free_run.band.as_ref())
+            .is_some_and(|b| b.shifted);
+        writeln!(
+            s,
+            "| `{v}` | {} | kept out{} |",
+            coverage_cell(c.as_deref()),
+            if shifted { ", θ shifted" } else { "" }
+        )?;
         kept.push((v, c));
     }
     if !kept.is_empty() {

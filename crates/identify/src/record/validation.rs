@@ -91,6 +91,11 @@ pub struct BandInfo {
     /// inside every 95 % interval), else through the copula of the record's quantiles.
     #[serde(default)]
     pub gaussian: bool,
+    /// Whether each θ was shifted to another record's by the spread between the identifying
+    /// record's parts (the band of a record kept out of the identification), so that the
+    /// draws may leave the record's own 95 % intervals.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub shifted: bool,
 }
 
 /// The free run of an identified model on one record.

@@ -1,6 +1,7 @@
 //! Cross-validation (`sysid validate`): the model identified on one record predicts another
 //! record of the same building from its ground motion alone (free run, fit and NRMSE per
-//! channel, a band from the first record's posterior), and its modes are set beside the other
+//! channel, a band from the first record's posterior, each draw shifted by the spread between
+//! that record's parts as θ of another record), and its modes are set beside the other
 //! record's transfer-function peaks (docs/validation.md).
 
 use std::path::Path;
@@ -139,7 +140,7 @@ pub fn cross_validate(
     let posterior = if draws == 0 {
         None
     } else {
-        match super::posterior_of(&record) {
+        match super::posterior_of_another(&record) {
             Ok(q) => Some(q),
             Err(e) => {
                 note(&format!("no band: {e}"));
@@ -184,7 +185,17 @@ pub fn cross_validate(
     };
     let free = super::free_run(&d, &data, &record.theta_val, q, draws, error, disc)
         .with_context(|| format!("the free run on {}", data_dir.display()))?;
-    let modal = super::modal_with_intervals(&d, &data, &record.theta_val, q);
+    // The modes' intervals are the identified model's (its statistical uncertainty, as on the
+    // record itself), not another record's: the band's shift is left out.
+    let own = (draws > 0)
+        .then(|| super::posterior_of(&record).ok())
+        .flatten();
+    let modal = super::modal_with_intervals(
+        &d,
+        &data,
+        &record.theta_val,
+        own.as_ref().map(|q| (q, record.seed, record.run)),
+    );
     let result = CrossValidation {
         record: record_path.display().to_string(),
         data: data_dir.display().to_string(),

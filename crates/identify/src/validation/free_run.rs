@@ -254,11 +254,37 @@ pub struct QuantileDraw {
     chol: Option<nalgebra::DMatrix<f64>>,
     /// The posterior's mean and s.d. when it is one Gaussian (with `chol`, its covariance).
     gaussian: Option<(Vec<f64>, Vec<f64>)>,
+    /// θ of another record: per parameter the between-part spread added to each draw.
+    between: Vec<Between>,
+}
+
+/// One parameter's between-part spread as a draw adds it ([`QuantileDraw::with_between`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Between {
+    /// The between-part s.d. τ (0: nothing added).
+    pub tau: f64,
+    /// The parts that gave τ (the shift is τ times Student's t on `parts − 2` degrees of
+    /// freedom); fewer than 3 add nothing.
+    pub parts: usize,
+    /// Whether the parameter is held ≥ 0 (k, c, α).
+    pub bounded: bool,
+}
+
+impl Between {
+    /// Nothing added.
+    pub const NONE: Between = Between {
+        tau: 0.0,
+        parts: 0,
+        bounded: false,
+    };
 }
 
 /// Tries of a draw from the joint Gaussian before it falls back to the copula: an acceptance
 /// below 1/1000 means the Gaussian is not the posterior the intervals describe.
 const GAUSSIAN_TRIES: usize = 1000;
+
+/// Tries of a physical between-record shift of one parameter before it is left out.
+const BETWEEN_TRIES: usize = 1000;
 
 impl QuantileDraw {
     /// From the record's intervals, in the order of `names`; an error names the parameter whose
@@ -305,6 +331,7 @@ impl QuantileDraw {
             tables,
             chol: None,
             gaussian: None,
+            between: Vec::new(),
         })
     }
 
@@ -354,6 +381,30 @@ impl QuantileDraw {
         self.gaussian.is_some()
     }
 
+    /// θ of **another** record of the structure rather than of this one: each draw from the
+    /// posterior is shifted by δ_j = τ_j·t_j (t_j Student's t on `parts − 2` degrees of freedom,
+    /// independent between parameters), the random-effects prediction of a new part's θ whose
+    /// quantiles the widened intervals state (`crate::spread`). The shift is added to a joint
+    /// draw, not built into the marginals: the posterior's ridges stay where the data put them
+    /// within the record, and move as a whole between records. A shift that takes a parameter
+    /// held ≥ 0 below zero is drawn again (`BETWEEN_TRIES` times, then that parameter's shift is
+    /// left out): the shifts are the random effects restricted to a physical structure.
+    /// `between` has one entry per parameter (another length: nothing is added,
+    /// [`QuantileDraw::shifted`] says which).
+    pub fn with_between(mut self, between: &[Between]) -> Self {
+        if between.len() == self.tables.len()
+            && between.iter().all(|b| b.tau.is_finite() && b.tau >= 0.0)
+        {
+            self.between = between.to_vec();
+        }
+        self
+    }
+
+    /// Whether the draws are of another record (shifted by the between-part spread).
+    pub fn shifted(&self) -> bool {
+        self.between.iter().any(|b| b.tau > 0.0 && b.parts >= 3)
+    }
+
     /// Whether every entry of `theta` lies inside its parameter's 95 % interval.
     fn inside(&self, theta: &[f64]) -> bool {
         self.tables.iter().zip(theta).all(|(t, &x)| {
@@ -362,8 +413,29 @@ impl QuantileDraw {
         })
     }
 
-    /// One θ.
+    /// One θ: of this record, shifted to another's when [`QuantileDraw::with_between`] says so.
     pub fn draw<R: Rng + ?Sized>(&self, rng: &mut R) -> Vec<f64> {
+        let mut theta = self.draw_posterior(rng);
+        for (x, b) in theta.iter_mut().zip(&self.between) {
+            if b.tau <= 0.0 || b.parts < 3 {
+                continue;
+            }
+            let Ok(t) = rand_distr::StudentT::new((b.parts - 2) as f64) else {
+                continue;
+            };
+            for _ in 0..BETWEEN_TRIES {
+                let shifted = *x + b.tau * rng.sample::<f64, _>(t);
+                if !b.bounded || shifted >= 0.0 {
+                    *x = shifted;
+                    break;
+                }
+            }
+        }
+        theta
+    }
+
+    /// One θ of the record's own posterior.
+    fn draw_posterior<R: Rng + ?Sized>(&self, rng: &mut R) -> Vec<f64> {
         if let (Some((mean, sd)), Some(l)) = (&self.gaussian, &self.chol) {
             let n = self.tables.len();
             for _ in 0..GAUSSIAN_TRIES {
@@ -448,6 +520,90 @@ mod tests {
         assert!(v[0] >= 7.5 && v[m - 1] <= 16.0);
         let missing = QuantileDraw::new(&["c1".into()], &[]).unwrap_err();
         assert!(missing.contains("c1"), "{missing}");
+    }
+
+    /// θ of another record: each draw is the posterior's shifted by τ·t on parts − 2 degrees of
+    /// freedom. With a posterior narrow beside τ the draws' quantiles are Student's t's, scaled
+    /// by τ about the posterior (the share of draws below each within 4 binomial standard
+    /// errors); a parameter held ≥ 0 is never drawn below 0; an entry per parameter is needed,
+    /// and τ = 0 or fewer than 3 parts shift nothing.
+    #[test]
+    fn another_records_draws_add_the_between_part_spread() {
+        let ci = |level: f64, lo: f64, hi: f64| CredibleInterval { level, lo, hi };
+        let param = |name: &str, centre: f64, w: f64| ParamIntervals {
+            parameter: name.into(),
+            shape: crate::observe::PosteriorShape::GaussianMixture,
+            intervals: vec![
+                ci(0.5, centre - w, centre + w),
+                ci(0.9, centre - 2.0 * w, centre + 2.0 * w),
+                ci(0.95, centre - 3.0 * w, centre + 3.0 * w),
+            ],
+            error: None,
+            mc_se: None,
+        };
+        let names: Vec<String> = vec!["k1".into(), "c1".into()];
+        let credible = [param("k1", 100.0, 0.01), param("c1", 0.05, 0.01)];
+        let between = [
+            Between {
+                tau: 5.0,
+                parts: 8,
+                bounded: true,
+            },
+            Between {
+                tau: 1.0,
+                parts: 8,
+                bounded: true,
+            },
+        ];
+        let q = QuantileDraw::new(&names, &credible)
+            .unwrap()
+            .with_between(&between);
+        assert!(q.shifted());
+        let mut rng = core_filters::rng::stream(1, 0, "test");
+        let m = 20_000;
+        let draws: Vec<Vec<f64>> = (0..m).map(|_| q.draw(&mut rng)).collect();
+        let mut k1: Vec<f64> = draws.iter().map(|d| d[0]).collect();
+        k1.sort_by(f64::total_cmp);
+        // Student's t on 6 degrees of freedom: its 75, 95 and 97.5 % points (tables).
+        for (p, t) in [(0.75, 0.7176), (0.95, 1.9432), (0.975, 2.4469)] {
+            for (share, x) in [(p, 100.0 + 5.0 * t), (1.0 - p, 100.0 - 5.0 * t)] {
+                let se = (share * (1.0 - share) / m as f64).sqrt();
+                let below = k1.partition_point(|v| *v < x) as f64 / m as f64;
+                assert!((below - share).abs() < 4.0 * se, "{x}: {below} vs {share}");
+            }
+        }
+        // c1: τ twenty times its value; held ≥ 0, and shifted far beyond its own interval.
+        assert!(draws.iter().all(|d| d[1] >= 0.0));
+        let beyond = draws.iter().filter(|d| d[1] > 0.08).count();
+        assert!(
+            beyond > m / 4,
+            "{beyond} of {m} beyond the posterior's 95 %"
+        );
+        // Nothing to add: the record's own posterior, draw for draw.
+        let own = QuantileDraw::new(&names, &credible).unwrap();
+        for nothing in [
+            vec![between[0]],
+            vec![Between::NONE, Between::NONE],
+            vec![
+                Between {
+                    parts: 2,
+                    ..between[0]
+                },
+                Between::NONE,
+            ],
+        ] {
+            let q = QuantileDraw::new(&names, &credible)
+                .unwrap()
+                .with_between(&nothing);
+            assert!(!q.shifted());
+            let (mut a, mut b) = (
+                core_filters::rng::stream(2, 0, "test"),
+                core_filters::rng::stream(2, 0, "test"),
+            );
+            for _ in 0..100 {
+                assert_eq!(q.draw(&mut a), own.draw(&mut b));
+            }
+        }
     }
 
     /// With a correlation matrix the draws keep each parameter's recorded quantiles and take the

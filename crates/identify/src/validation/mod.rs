@@ -35,7 +35,7 @@ pub use crate::record::validation::{
 use crate::record::RunRecord;
 use free_run::{
     chain_of, fit_percent, free_run_integrator, nrmse, percentile_sorted,
-    simulate_channels_between, FreeRunError, QuantileDraw,
+    simulate_channels_between, Between, FreeRunError, QuantileDraw,
 };
 use spectral::Peak;
 
@@ -328,24 +328,28 @@ fn parameter_band(
     let (lo, hi) = spread_of_draws(&ok, channels);
     ParameterBand {
         info: Some(BandInfo {
-            method: if q.gaussian() {
-                format!(
-                    "θ drawn from {}, inside each 95 % interval, {}; pointwise 2.5–97.5 % of \
-                     the draws",
-                    drawn_from(true),
-                    how_drawn(true, true)
-                )
-            } else {
-                format!(
-                    "θ drawn from {} (quantile function interpolated through its \
-                     2.5/5/25/75/95/97.5 % points, so draws stay inside the 95 % intervals), {}; \
-                     pointwise 2.5–97.5 % of the draws",
-                    drawn_from(q.correlated()),
-                    how_drawn(q.correlated(), false)
-                )
-            },
+            method: format!(
+                "{}{}; pointwise 2.5–97.5 % of the draws",
+                if q.gaussian() {
+                    format!(
+                        "θ drawn from {}, inside each 95 % interval, {}",
+                        drawn_from(true),
+                        how_drawn(true, true)
+                    )
+                } else {
+                    format!(
+                        "θ drawn from {} (quantile function interpolated through its \
+                         2.5/5/25/75/95/97.5 % points, so draws stay inside the 95 % intervals), \
+                         {}",
+                        drawn_from(q.correlated()),
+                        how_drawn(q.correlated(), false)
+                    )
+                },
+                if q.shifted() { SHIFTED } else { "" }
+            ),
             correlated: q.correlated(),
             gaussian: q.gaussian(),
+            shifted: q.shifted(),
             purpose: BAND_PURPOSE.into(),
             draws,
             valid: ok.len(),
@@ -726,9 +730,10 @@ pub(crate) fn description_of(r: &RunRecord) -> Result<StructureDescription> {
 
 /// The band's θ distribution for a record, or why there is none: the filter's posterior, its own
 /// intervals with its correlations. Where the spread between the record's parts widened the
-/// record's intervals, the draws still take the filter's own: model error enters the band once,
-/// through the error learned on the held-out part ([`prediction`]), and the widened marginals
-/// with the filter's correlations are no distribution at all (the data fix c1 + α of a
+/// record's intervals, the draws still take the filter's own: on the record itself θ's drift
+/// enters the band through the error learned on the held-out part ([`prediction`]); on another
+/// record it enters as a shift of each joint draw ([`posterior_of_another`]), not through the
+/// widened marginals, which with the filter's correlations are no distribution at all (the data fix c1 + α of a
 /// one-storey bent; widened and truncated at zero, every pair of quantiles the copula couples
 /// sums far above it, and a mode's drawn damping ratios excluded its own). A record without
 /// correlations (written before they were kept) draws its intervals independently, as then.
@@ -749,6 +754,37 @@ pub(crate) fn posterior_of(r: &RunRecord) -> Result<QuantileDraw, String> {
     // No usable matrix (none recorded, or not a correlation matrix): the record's intervals,
     // independently, as the band then says.
     QuantileDraw::new(&r.param_names, &r.credible)
+}
+
+/// The band's θ distribution on **another** record of the structure: the record's posterior
+/// ([`posterior_of`]) with each draw shifted by the spread between the record's parts where they
+/// disagree ([`QuantileDraw::with_between`]; `crate::spread`). The parts of one record are the
+/// nearest thing to other records it holds: what they disagree on, θ of another record may
+/// differ by — the random-effects prediction of a new part, whose quantiles the widened
+/// intervals state. On the record itself the band keeps the posterior alone: there θ's drift
+/// within the record is already in the model error learned on its held-out part. A record
+/// without a spread (too short, or older), or whose draws are its widened intervals drawn
+/// independently, is drawn as [`posterior_of`] draws it.
+pub(crate) fn posterior_of_another(r: &RunRecord) -> Result<QuantileDraw, String> {
+    let q = posterior_of(r)?;
+    let Some(s) = r.segment_spread.as_ref().filter(|_| q.correlated()) else {
+        return Ok(q);
+    };
+    let between: Vec<Between> = r
+        .param_names
+        .iter()
+        .map(|name| {
+            s.parameters
+                .iter()
+                .find(|p| &p.parameter == name)
+                .map_or(Between::NONE, |p| Between {
+                    tau: p.tau.unwrap_or(0.0),
+                    parts: p.part_mean.len(),
+                    bounded: crate::spread::physically_bounded(name),
+                })
+        })
+        .collect();
+    Ok(q.with_between(&between))
 }
 
 /// Checks that a record's θ_val can be simulated: a completed run with finite values and no
@@ -936,12 +972,13 @@ fn write_free_run(o: &mut String, f: &FreeRun) {
         (Some(b), _) => {
             let _ = writeln!(
                 o,
-                "band: {} of {} draws valid; θ drawn from {}, inside each 95 % interval, {} — \
+                "band: {} of {} draws valid; θ drawn from {}, inside each 95 % interval, {}{} — \
                  docs/validation.md",
                 b.valid,
                 b.draws,
                 drawn_from(b.correlated),
-                how_drawn(b.correlated, b.gaussian)
+                how_drawn(b.correlated, b.gaussian),
+                if b.shifted { SHIFTED } else { "" }
             );
         }
         (None, Some(e)) => {
@@ -1053,6 +1090,12 @@ fn drawn_from(correlated: bool) -> &'static str {
         "the record's credible intervals"
     }
 }
+
+/// What a band on another record adds to each drawn θ ([`posterior_of_another`]), for its
+/// method and the summary.
+const SHIFTED: &str = ", then each shifted to another record's θ by the spread between the \
+     identifying record's parts where they disagree (τ times Student's t on parts − 2 degrees of \
+     freedom, kept physical)";
 
 /// How the band's θ were drawn, for its method and the summary: from the one Gaussian filter's
 /// posterior itself, or through the copula of the record's quantiles
