@@ -137,10 +137,12 @@ pub fn cross_validate(
     for n in &notes {
         note(n);
     }
-    let posterior = if draws == 0 {
+    // The record's own posterior: the modes' intervals (its statistical uncertainty, as on the
+    // record itself); the band draws it shifted to another record's θ.
+    let own = if draws == 0 {
         None
     } else {
-        match super::posterior_of_another(&record) {
+        match super::posterior_of(&record) {
             Ok(q) => Some(q),
             Err(e) => {
                 note(&format!("no band: {e}"));
@@ -148,6 +150,7 @@ pub fn cross_validate(
             }
         }
     };
+    let posterior = own.clone().map(|q| super::shifted_to_another(&record, q));
     let q = posterior.as_ref().map(|q| (q, record.seed, record.run));
     // The model error learned with the identification (none in records older than it).
     let error = match record
@@ -185,11 +188,6 @@ pub fn cross_validate(
     };
     let free = super::free_run(&d, &data, &record.theta_val, q, draws, error, disc)
         .with_context(|| format!("the free run on {}", data_dir.display()))?;
-    // The modes' intervals are the identified model's (its statistical uncertainty, as on the
-    // record itself), not another record's: the band's shift is left out.
-    let own = (draws > 0)
-        .then(|| super::posterior_of(&record).ok())
-        .flatten();
     let modal = super::modal_with_intervals(
         &d,
         &data,

@@ -254,8 +254,9 @@ pub struct QuantileDraw {
     chol: Option<nalgebra::DMatrix<f64>>,
     /// The posterior's mean and s.d. when it is one Gaussian (with `chol`, its covariance).
     gaussian: Option<(Vec<f64>, Vec<f64>)>,
-    /// θ of another record: per parameter the between-part spread added to each draw.
-    between: Vec<Between>,
+    /// θ of another record: per parameter the between-part spread added to each draw, with its
+    /// t distribution (none: nothing added).
+    between: Vec<Option<(Between, rand_distr::StudentT<f64>)>>,
 }
 
 /// One parameter's between-part spread as a draw adds it ([`QuantileDraw::with_between`]).
@@ -395,14 +396,22 @@ impl QuantileDraw {
         if between.len() == self.tables.len()
             && between.iter().all(|b| b.tau.is_finite() && b.tau >= 0.0)
         {
-            self.between = between.to_vec();
+            self.between = between
+                .iter()
+                .map(|b| {
+                    let t = (b.tau > 0.0 && b.parts >= 3)
+                        .then(|| rand_distr::StudentT::new((b.parts - 2) as f64).ok())
+                        .flatten();
+                    t.map(|t| (*b, t))
+                })
+                .collect();
         }
         self
     }
 
     /// Whether the draws are of another record (shifted by the between-part spread).
     pub fn shifted(&self) -> bool {
-        self.between.iter().any(|b| b.tau > 0.0 && b.parts >= 3)
+        self.between.iter().any(Option::is_some)
     }
 
     /// Whether every entry of `theta` lies inside its parameter's 95 % interval.
@@ -416,15 +425,13 @@ impl QuantileDraw {
     /// One θ: of this record, shifted to another's when [`QuantileDraw::with_between`] says so.
     pub fn draw<R: Rng + ?Sized>(&self, rng: &mut R) -> Vec<f64> {
         let mut theta = self.draw_posterior(rng);
-        for (x, b) in theta.iter_mut().zip(&self.between) {
-            if b.tau <= 0.0 || b.parts < 3 {
-                continue;
-            }
-            let Ok(t) = rand_distr::StudentT::new((b.parts - 2) as f64) else {
-                continue;
-            };
+        for (x, (b, t)) in theta
+            .iter_mut()
+            .zip(&self.between)
+            .filter_map(|(x, b)| b.as_ref().map(|b| (x, b)))
+        {
             for _ in 0..BETWEEN_TRIES {
-                let shifted = *x + b.tau * rng.sample::<f64, _>(t);
+                let shifted = *x + b.tau * rng.sample::<f64, _>(*t);
                 if !b.bounded || shifted >= 0.0 {
                     *x = shifted;
                     break;

@@ -732,10 +732,10 @@ pub(crate) fn description_of(r: &RunRecord) -> Result<StructureDescription> {
 /// intervals with its correlations. Where the spread between the record's parts widened the
 /// record's intervals, the draws still take the filter's own: on the record itself θ's drift
 /// enters the band through the error learned on the held-out part ([`prediction`]); on another
-/// record it enters as a shift of each joint draw ([`posterior_of_another`]), not through the
-/// widened marginals, which with the filter's correlations are no distribution at all (the data fix c1 + α of a
-/// one-storey bent; widened and truncated at zero, every pair of quantiles the copula couples
-/// sums far above it, and a mode's drawn damping ratios excluded its own). A record without
+/// record it enters as a shift of each joint draw ([`shifted_to_another`]), not through the
+/// widened marginals, which with the filter's correlations are no distribution at all (the data
+/// fix c1 + α of a one-storey bent; widened and truncated at zero, every pair of quantiles the
+/// copula couples sums far above it, and a mode's drawn damping ratios excluded its own). A record without
 /// correlations (written before they were kept) draws its intervals independently, as then.
 pub(crate) fn posterior_of(r: &RunRecord) -> Result<QuantileDraw, String> {
     if !r.theta_correlation.is_empty() {
@@ -756,7 +756,7 @@ pub(crate) fn posterior_of(r: &RunRecord) -> Result<QuantileDraw, String> {
     QuantileDraw::new(&r.param_names, &r.credible)
 }
 
-/// The band's θ distribution on **another** record of the structure: the record's posterior
+/// The band's θ distribution on **another** record of the structure: the record's posterior `q`
 /// ([`posterior_of`]) with each draw shifted by the spread between the record's parts where they
 /// disagree ([`QuantileDraw::with_between`]; `crate::spread`). The parts of one record are the
 /// nearest thing to other records it holds: what they disagree on, θ of another record may
@@ -764,11 +764,10 @@ pub(crate) fn posterior_of(r: &RunRecord) -> Result<QuantileDraw, String> {
 /// intervals state. On the record itself the band keeps the posterior alone: there θ's drift
 /// within the record is already in the model error learned on its held-out part. A record
 /// without a spread (too short, or older), or whose draws are its widened intervals drawn
-/// independently, is drawn as [`posterior_of`] draws it.
-pub(crate) fn posterior_of_another(r: &RunRecord) -> Result<QuantileDraw, String> {
-    let q = posterior_of(r)?;
+/// independently, keeps `q` as it is.
+pub(crate) fn shifted_to_another(r: &RunRecord, q: QuantileDraw) -> QuantileDraw {
     let Some(s) = r.segment_spread.as_ref().filter(|_| q.correlated()) else {
-        return Ok(q);
+        return q;
     };
     let between: Vec<Between> = r
         .param_names
@@ -784,7 +783,7 @@ pub(crate) fn posterior_of_another(r: &RunRecord) -> Result<QuantileDraw, String
                 })
         })
         .collect();
-    Ok(q.with_between(&between))
+    q.with_between(&between)
 }
 
 /// Checks that a record's θ_val can be simulated: a completed run with finite values and no
@@ -1091,7 +1090,7 @@ fn drawn_from(correlated: bool) -> &'static str {
     }
 }
 
-/// What a band on another record adds to each drawn θ ([`posterior_of_another`]), for its
+/// What a band on another record adds to each drawn θ ([`shifted_to_another`]), for its
 /// method and the summary.
 const SHIFTED: &str = ", then each shifted to another record's θ by the spread between the \
      identifying record's parts where they disagree (τ times Student's t on parts − 2 degrees of \

@@ -27,8 +27,9 @@
 //! s_j uses only ŷ — the model driven by the ground motion — so the same q_j gives a band on any
 //! other record of the structure (`sysid validate`), where its coverage of the measured floors is
 //! an honest test; there the parameters' part of the band draws θ of another record, shifted by
-//! the spread between the identifying record's parts (`super::posterior_of_another`). No Gaussian shape is assumed for the error (q_j is an empirical quantile); the
-//! two parts of the band are added in quadrature, half-width by half-width.
+//! the spread between the identifying record's parts (`super::shifted_to_another`). No Gaussian
+//! shape is assumed for the error (q_j is an empirical quantile); the two parts of the band are
+//! added in quadrature, half-width by half-width.
 
 use models::description::StructureDescription;
 
