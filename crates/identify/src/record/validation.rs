@@ -202,7 +202,8 @@ pub struct ModePair {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub excitation_db: Option<f64>,
     /// The central 95 % of this mode's natural frequency (Hz) and damping ratio over θ drawn
-    /// from the posterior as the free-run band draws it (`validation::modal_intervals`).
+    /// from the posterior as the free-run band on the record draws it, never shifted as on another
+    /// record (`validation::modal_intervals`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub model_hz_95: Option<[f64; 2]>,
     #[serde(default, skip_serializing_if = "Option::is_none")]

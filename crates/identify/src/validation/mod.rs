@@ -647,11 +647,11 @@ pub(crate) const MODAL_PURPOSE: &str = "validation-modes";
 pub(crate) const MODAL_DRAWS: usize = 400;
 
 /// The central 95 % of each mode's natural frequency and damping ratio over `MODAL_DRAWS` θ
-/// drawn from `q` as the free-run band draws them (each parameter inside its 95 % interval,
-/// with the posterior's correlations where the record keeps them) on the stream (seed, run,
-/// `MODAL_PURPOSE`); one entry per mode of θ_val (`count`), `None` for all when fewer than
-/// half the draws give a building with as many under-damped modes (mode `r` of a draw is its
-/// `r`-th by frequency).
+/// drawn from `q` as the free-run band on the record draws them (each parameter inside its 95 %
+/// interval, with the posterior's correlations where the record keeps them; never shifted as on
+/// another record) on the stream (seed, run, `MODAL_PURPOSE`); one entry per mode of θ_val
+/// (`count`), `None` for all when fewer than half the draws give a building with as many
+/// under-damped modes (mode `r` of a draw is its `r`-th by frequency).
 pub fn modal_intervals(
     d: &StructureDescription,
     q: &QuantileDraw,
@@ -1120,10 +1120,10 @@ fn write_modal_notes(o: &mut String, m: &ModalComparison) {
     if m.pairs.iter().any(|p| p.model_hz_95.is_some()) {
         let _ = writeln!(
             o,
-            "95 %: the central 95 % of each mode over {MODAL_DRAWS} θ drawn as the band's \
-             (from the filter's posterior with its correlations where the record keeps them: \
-             its statistical uncertainty, without the model's error) \
-             — docs/validation.md"
+            "95 %: the central 95 % of each mode over {MODAL_DRAWS} θ drawn from the filter's \
+             posterior, with its correlations where the record keeps them, and never shifted \
+             as the band's θ are on another record: its statistical uncertainty, without the \
+             model's error — docs/validation.md"
         );
     }
     let unlike: Vec<String> = m
