@@ -1,7 +1,8 @@
 //! `REPORT.md` of a field study, drawn from its records only: the variants identified on the
 //! identification record, their predictions of the records kept out of every choice, the
-//! selected model on every record and whether their intervals agree, the black-box baseline,
-//! and the goals decided by stated tests.
+//! selected model on every record and whether their intervals agree — and whether their modes
+//! do, and the records' own measured peaks —, the black-box baseline, and the goals decided by
+//! stated tests.
 
 use std::collections::BTreeMap;
 use std::fmt::Write;
@@ -13,7 +14,8 @@ use serde::Deserialize;
 use super::{select, FieldStudy, Part, PartDirs};
 use identify::record::RunRecord;
 use identify::validation::cross::CrossValidation;
-use identify::validation::{ErrorSource, FreeRun, ModalComparison};
+use identify::validation::shapes::UNLIKE_MAC;
+use identify::validation::{ErrorSource, FreeRun, ModalComparison, ModePair};
 
 /// The baseline's result (`experiments/real/srim.py`).
 #[derive(Debug, Clone, Deserialize)]
@@ -648,6 +650,7 @@ fn selected_model(s: &mut String, x: Section<'_>) -> Result<()> {
         }
         writeln!(s, "\n")?;
         agreement(s, &on)?;
+        modes_between_records(s, &on)?;
         band(s, dirs, chosen, r0, train, validate)?;
         // The goals compare with the baseline: only where the part has one.
         if part.baseline {
@@ -716,6 +719,189 @@ fn agreement(s: &mut String, on: &[(String, RunRecord)]) -> Result<()> {
         writeln!(s, "- {w}")?;
     }
     writeln!(s)?;
+    Ok(())
+}
+
+/// One record's mode `r` for the comparison between records: the model's frequency, its 95 %
+/// interval, and the measured peak paired with it unless that peak has another shape.
+#[derive(Debug, Clone, Copy)]
+struct RecordMode {
+    model_hz: f64,
+    model_hz_95: Option<[f64; 2]>,
+    /// (peak Hz, the record's frequency resolution Hz).
+    measured: Option<(f64, f64)>,
+}
+
+impl RecordMode {
+    fn of(p: &ModePair, resolution_hz: f64) -> Self {
+        RecordMode {
+            model_hz: p.model_hz,
+            model_hz_95: p.model_hz_95,
+            // A peak of another shape is not this mode (the modal notes say so): left out.
+            measured: p
+                .measured_hz
+                .filter(|_| p.mac.is_none_or(|mac| mac >= UNLIKE_MAC))
+                .map(|f| (f, resolution_hz)),
+        }
+    }
+}
+
+fn record_modes(r: &RunRecord) -> Vec<RecordMode> {
+    r.modal.as_ref().map_or(Vec::new(), |m| {
+        m.pairs
+            .iter()
+            .map(|p| RecordMode::of(p, m.resolution_hz))
+            .collect()
+    })
+}
+
+/// Two records' measured peaks of one mode, beyond their resolutions added.
+#[derive(Debug, Clone, PartialEq)]
+struct PeaksApart {
+    mode: usize,
+    a: String,
+    f_a: f64,
+    b: String,
+    f_b: f64,
+    /// The two records' frequency resolutions added (Hz).
+    resolutions: f64,
+}
+
+/// The two tests of the modes between records, counted.
+#[derive(Debug, Clone, PartialEq, Default)]
+struct ModesBetween {
+    /// (mode, ordered pair) cases where A's model frequency lies inside B's 95 % interval.
+    inside: usize,
+    total: usize,
+    /// (mode, unordered pair) cases with a measured peak on both records.
+    measured_pairs: usize,
+    /// Of those, the ones whose peaks differ by more than the resolutions added.
+    beyond: usize,
+    /// The case furthest beyond (in resolutions).
+    furthest: Option<PeaksApart>,
+}
+
+/// A peak refined by a parabola through its three bins lies within a bin of the true one: two
+/// records' peaks of the same mode differing by more than their two resolutions added say the
+/// structure itself responded at different frequencies.
+fn modes_between(records: &[(&str, Vec<RecordMode>)]) -> ModesBetween {
+    let mut out = ModesBetween::default();
+    let mut furthest = 0.0;
+    for (i, (a, ma)) in records.iter().enumerate() {
+        for (j, (b, mb)) in records.iter().enumerate() {
+            if i == j {
+                continue;
+            }
+            for (r, (xa, xb)) in ma.iter().zip(mb).enumerate() {
+                if let Some([lo, hi]) = xb.model_hz_95 {
+                    out.total += 1;
+                    out.inside += usize::from((lo..=hi).contains(&xa.model_hz));
+                }
+                let (true, Some((f_a, res_a)), Some((f_b, res_b))) =
+                    (i < j, xa.measured, xb.measured)
+                else {
+                    continue;
+                };
+                out.measured_pairs += 1;
+                let excess = (f_a - f_b).abs() / (res_a + res_b);
+                if excess > 1.0 {
+                    out.beyond += 1;
+                    if excess > furthest {
+                        furthest = excess;
+                        out.furthest = Some(PeaksApart {
+                            mode: r + 1,
+                            a: a.to_string(),
+                            f_a,
+                            b: b.to_string(),
+                            f_b,
+                            resolutions: res_a + res_b,
+                        });
+                    }
+                }
+            }
+        }
+    }
+    out
+}
+
+/// Whether the selected model's modes identified on each record lie inside the other records'
+/// 95 % modal intervals, and whether the records' own measured peaks (no model) put a mode at
+/// different frequencies — the test that tells a structure that differs between records from
+/// intervals too narrow for one that does not.
+fn modes_between_records(s: &mut String, on: &[(String, RunRecord)]) -> Result<()> {
+    let done: Vec<(&str, Vec<RecordMode>)> = on
+        .iter()
+        .filter(|(_, r)| r.failure.is_none())
+        .map(|(n, r)| (n.as_str(), record_modes(r)))
+        .filter(|(_, m)| !m.is_empty())
+        .collect();
+    if done.len() < 2 {
+        return Ok(());
+    }
+    writeln!(
+        s,
+        "**Do the modes agree?** Test, model: mode r's natural frequency identified on record A \
+         lies inside record B's 95 % modal interval (the filter's statistical uncertainty, \
+         docs/validation.md), for every mode and ordered pair (A, B). Test, data: the measured \
+         transfer-function peaks two records pair with mode r (no model; a peak of another shape, \
+         MAC < {UNLIKE_MAC}, left out) differ by more than the two records' frequency resolutions \
+         added — then the structure itself responds differently on the two records.\n"
+    )?;
+    let modes = done.iter().map(|(_, m)| m.len()).max().unwrap_or(0);
+    write!(s, "| mode |")?;
+    for (n, _) in &done {
+        write!(s, " `{n}`: model Hz [95 %]; measured |")?;
+    }
+    writeln!(s, "\n|---|{}", "---|".repeat(done.len()))?;
+    for r in 0..modes {
+        write!(s, "| {} |", r + 1)?;
+        for (_, m) in &done {
+            let cell = m.get(r).map_or("—".to_string(), |x| {
+                let model = match x.model_hz_95 {
+                    Some([lo, hi]) => format!("{:.3} [{lo:.3}, {hi:.3}]", x.model_hz),
+                    None => format!("{:.3}", x.model_hz),
+                };
+                let measured = x
+                    .measured
+                    .map_or("—".to_string(), |(f, _)| format!("{f:.3}"));
+                format!("{model}; {measured}")
+            });
+            write!(s, " {cell} |")?;
+        }
+        writeln!(s)?;
+    }
+    let m = modes_between(&done);
+    let data = match (m.measured_pairs, &m.furthest) {
+        (0, _) => "**not resolved** (no two records have a measured peak paired with the same \
+                   mode)"
+            .to_string(),
+        (n, None) => format!(
+            "in none of the {n} (mode, pair) cases with two measured peaks do they differ by more \
+             than their resolutions added: **the data do not show the structure differs between \
+             records**"
+        ),
+        (n, Some(p)) => format!(
+            "{} of the {n} (mode, pair) cases with two measured peaks differ by more than their \
+             resolutions added; the furthest, mode {} on `{}` ({:.3} Hz) and `{}` ({:.3} Hz), \
+             {:.3} Hz apart ({:.1} %) against {:.3} Hz. **The structure responds differently on \
+             different records**: θ identified on one record is not another's, and the \
+             intervals' disagreement is at least in part the structure's",
+            m.beyond,
+            p.mode,
+            p.a,
+            p.f_a,
+            p.b,
+            p.f_b,
+            (p.f_a - p.f_b).abs(),
+            100.0 * (p.f_a - p.f_b).abs() / p.f_a.min(p.f_b),
+            p.resolutions,
+        ),
+    };
+    writeln!(
+        s,
+        "\nModel: inside in {} of {} (mode, pair) cases. Data: {data}.\n",
+        m.inside, m.total
+    )?;
     Ok(())
 }
 
@@ -924,5 +1110,67 @@ mod tests {
             (true, "57.6 against 47.3".into())
         );
         assert_eq!(versus(None, Some(&[1.0])), (false, "— against 1.0".into()));
+    }
+    fn mode(model_hz: f64, interval: [f64; 2], measured: Option<(f64, f64)>) -> RecordMode {
+        RecordMode {
+            model_hz,
+            model_hz_95: Some(interval),
+            measured,
+        }
+    }
+
+    #[test]
+    fn measured_peaks_apart_by_more_than_two_resolutions_say_the_structure_differs() {
+        // Within the resolutions added (0.2 Hz): no difference shown, whatever the models say.
+        let same = [
+            ("a", vec![mode(3.00, [2.99, 3.01], Some((3.05, 0.1)))]),
+            ("b", vec![mode(3.10, [3.09, 3.11], Some((3.20, 0.1)))]),
+        ];
+        let m = modes_between(&same);
+        assert_eq!((m.inside, m.total), (0, 2));
+        assert_eq!((m.measured_pairs, m.beyond, m.furthest), (1, 0, None));
+        // a–b 0.3 and a–c 0.45 Hz apart against 0.2: beyond, the furthest named; b–c 0.15: not.
+        let apart = [
+            ("a", vec![mode(3.0, [2.9, 3.1], Some((3.0, 0.1)))]),
+            ("b", vec![mode(3.05, [2.95, 3.15], Some((3.3, 0.1)))]),
+            ("c", vec![mode(3.0, [2.99, 3.01], Some((3.45, 0.1)))]),
+        ];
+        let m = modes_between(&apart);
+        assert_eq!((m.inside, m.total), (5, 6));
+        assert_eq!((m.measured_pairs, m.beyond), (3, 2));
+        let p = m.furthest.unwrap();
+        assert_eq!((p.mode, p.a.as_str(), p.b.as_str()), (1, "a", "c"));
+        assert!((p.resolutions - 0.2).abs() < 1e-12);
+    }
+
+    #[test]
+    fn a_peak_of_another_shape_is_not_compared() {
+        let pair = |mac| ModePair {
+            mode: 1,
+            model_hz: 3.0,
+            damping_ratio: 0.02,
+            measured_hz: Some(3.4),
+            difference_percent: Some(-11.8),
+            excitation_db: None,
+            model_hz_95: Some([2.9, 3.1]),
+            damping_ratio_95: None,
+            model_shape: Vec::new(),
+            model_shape_95: Vec::new(),
+            operating_shape: Vec::new(),
+            mac,
+            mac_95: None,
+        };
+        assert_eq!(RecordMode::of(&pair(Some(0.2)), 0.1).measured, None);
+        assert_eq!(
+            RecordMode::of(&pair(Some(0.9)), 0.1).measured,
+            Some((3.4, 0.1))
+        );
+        // One storey or one channel: no shape to compare, the peak counts.
+        assert_eq!(RecordMode::of(&pair(None), 0.1).measured, Some((3.4, 0.1)));
+        let other = [
+            ("a", vec![RecordMode::of(&pair(Some(0.2)), 0.1)]),
+            ("b", vec![mode(3.0, [2.9, 3.1], Some((3.0, 0.1)))]),
+        ];
+        assert_eq!(modes_between(&other).measured_pairs, 0);
     }
 }

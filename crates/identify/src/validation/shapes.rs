@@ -33,7 +33,7 @@ pub(crate) const SHAPE_DRAWS: usize = 400;
 /// is 45°). On the frame a frequency pairing of the 11.13 Hz mode with a 9.01 Hz bump of a sine
 /// record's input gives 0.062, the particle filters' misplaced modes 0.012–0.023; the pairings
 /// of the frame's MPF-EKF2 variants and of the foreign corpus 0.77–1.0.
-pub(crate) const UNLIKE_MAC: f64 = 0.5;
+pub const UNLIKE_MAC: f64 = 0.5;
 
 /// MAC(φ, ψ) of two shapes of the same length; NaN when either is zero or the lengths differ.
 pub fn mac(phi: &[f64], psi: &[f64]) -> f64 {
