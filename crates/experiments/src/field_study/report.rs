@@ -147,6 +147,45 @@ fn fit_cell_to(f: Option<&[f64]>, decimals: usize) -> String {
     cells(f, |x| format!("{x:.decimals$}"))
 }
 
+/// The fits of the building alone, where the free run carries a discrepancy term with modes
+/// (its fits include the term; `physical_fit_percent` does not).
+fn building_alone(f: &FreeRun) -> Option<Vec<f64>> {
+    f.discrepancy.as_ref().filter(|d| !d.modes.is_empty())?;
+    f.channels.iter().map(|c| c.physical_fit_percent).collect()
+}
+
+/// A free run's fits, and beside them the building's alone where a discrepancy term adds to
+/// them: a fit that leans on the term says so.
+fn fits_cell(f: Option<&FreeRun>) -> String {
+    let fit = fit_cell(f.map(fits).as_deref());
+    match f.and_then(building_alone) {
+        Some(alone) => format!("{fit} (building alone {})", fit_cell(Some(&alone))),
+        None => fit,
+    }
+}
+
+/// The discrepancy term's modes, "discrepancy 3.19 Hz (ζ 2.79 %)"; empty without one.
+fn discrepancy_modes(f: Option<&FreeRun>) -> String {
+    let Some(d) = f.and_then(|f| f.discrepancy.as_ref()) else {
+        return String::new();
+    };
+    if d.modes.is_empty() {
+        return String::new();
+    }
+    let modes: Vec<String> = d
+        .modes
+        .iter()
+        .map(|m| {
+            format!(
+                "{:.2} Hz (ζ {:.2} %)",
+                m.frequency_hz,
+                100.0 * m.damping_ratio
+            )
+        })
+        .collect();
+    format!("discrepancy {}", modes.join(", "))
+}
+
 /// Values written by `text`, joined by " / " (one per floor); "—" for none.
 fn cells(f: Option<&[f64]>, text: impl Fn(f64) -> String) -> String {
     match f {
@@ -416,10 +455,14 @@ fn identified(s: &mut String, x: Section<'_>) -> Result<()> {
             outcome(&r),
             params(&r, is_stiffness),
             params(&r, is_damping),
-            params(&r, others),
+            [params(&r, others), discrepancy_modes(r.free_run.as_ref())]
+                .into_iter()
+                .filter(|x| !x.is_empty())
+                .collect::<Vec<_>>()
+                .join("; "),
             modes_cell(r.modal.as_ref()),
             damping_ratios(r.modal.as_ref()),
-            fit_cell(r.free_run.as_ref().map(fits).as_deref()),
+            fits_cell(r.free_run.as_ref()),
             whiteness(&r),
             width(&r, is_stiffness),
             width(&r, is_damping),
@@ -506,7 +549,7 @@ fn cross_validation(s: &mut String, x: Section<'_>) -> Result<()> {
             write!(s, "| {} |", v.label)?;
             for r in validate {
                 let cell = match cross(&dirs.validation(&v.name, r))? {
-                    Some(cv) => fit_cell(Some(&fits(&cv.free_run))),
+                    Some(cv) => fits_cell(Some(&cv.free_run)),
                     None => {
                         let why =
                             super::log_reason(&dirs.log(&format!("validate--{}--{}", v.name, r)));
@@ -1011,7 +1054,17 @@ fn goals(
                 .all(|p| p.difference_percent.is_some_and(|d| d.abs() <= 1.0))
     });
     let fit = r.free_run.as_ref().map(fits);
+    // Where the fit leans on a discrepancy term, the building's alone is stated beside it.
+    let alone = |f: Option<&FreeRun>| {
+        f.and_then(building_alone).map_or(String::new(), |a| {
+            format!(
+                "; the model's building alone, without its discrepancy term, {}",
+                fit_cell(Some(&a))
+            )
+        })
+    };
     let (fit_ok, fit_text) = versus(fit.as_deref(), best.and_then(|b| b.fits_on(train)));
+    let fit_text = format!("{fit_text}{}", alone(r.free_run.as_ref()));
     let pos = damping_positive(r) && outcome(r) == "ok";
     writeln!(
         s,
@@ -1029,6 +1082,7 @@ fn goals(
     // A one-storey record: at least the best linear one-storey model's free-run fit.
     if let Some(o) = one_storey {
         let (ok, text) = versus(fit.as_deref(), o.fits_on(train));
+        let text = format!("{text}{}", alone(r.free_run.as_ref()));
         writeln!(
             s,
             "- On `{train}`, one storey: free-run fit at least the best linear one-storey \
@@ -1044,6 +1098,7 @@ fn goals(
             cv.as_ref().map(|c| fits(&c.free_run)).as_deref(),
             best.and_then(|b| b.fits_on(v)),
         );
+        let text = format!("{text}{}", alone(cv.as_ref().map(|c| &c.free_run)));
         writeln!(
             s,
             "- Cross-validation on `{v}`: fit of the `{train}` model against SRIM's `{train}` model: \
@@ -1172,5 +1227,35 @@ mod tests {
             ("b", vec![mode(3.0, [2.9, 3.1], Some((3.0, 0.1)))]),
         ];
         assert_eq!(modes_between(&other).measured_pairs, 0);
+    }
+    fn free_run(discrepancy: &str) -> FreeRun {
+        serde_json::from_str(&format!(
+            r#"{{"method": "m", "integrator": "exact_linear", "measurement": "absolute",
+            "channels": [{{"channel": "a1", "fit_percent": 58.46, "nrmse": 0.4,
+            "physical_fit_percent": 47.27}}], {discrepancy} "every": 1, "t": [],
+            "measured": [], "simulated": []}}"#
+        ))
+        .unwrap()
+    }
+
+    #[test]
+    fn a_fit_that_leans_on_a_discrepancy_term_states_the_buildings_beside_it() {
+        let with = free_run(
+            r#""discrepancy": {"channels": ["a1"], "modes": [{"frequency_hz": 3.186,
+            "damping_ratio": 0.0279}], "coefficients": [[[-0.46, 0.27]]]},"#,
+        );
+        assert_eq!(fits_cell(Some(&with)), "58.5 (building alone 47.3)");
+        assert_eq!(
+            discrepancy_modes(Some(&with)),
+            "discrepancy 3.19 Hz (ζ 2.79 %)"
+        );
+        // A term with no mode, or none: the fit alone, nothing listed.
+        let empty =
+            free_run(r#""discrepancy": {"channels": ["a1"], "modes": [], "coefficients": [[]]},"#);
+        for f in [&empty, &free_run("")] {
+            assert_eq!(fits_cell(Some(f)), "58.5");
+            assert_eq!(discrepancy_modes(Some(f)), "");
+        }
+        assert_eq!(fits_cell(None), "—");
     }
 }
