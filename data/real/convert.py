@@ -3,7 +3,7 @@
 
 Usage: python3 data/real/convert.py SOURCE_DATA_DIR [MDOF_CHECKOUT]
 
-With MDOF_CHECKOUT (a checkout of chrystalchern/mdof at commit 4f0e831c) the three structures of
+With MDOF_CHECKOUT (a checkout of chrystalchern/mdof at commit 4f0e831c) the four structures of
 `unseen/` are made too, from its `notebooks/uploads` as they are there:
 
 - `unseen/stiff-one-storey/`: the Xsens exports of `mini_shake_table/Flexible vs. Stiff/Stiff 1
@@ -13,6 +13,8 @@ With MDOF_CHECKOUT (a checkout of chrystalchern/mdof at commit 4f0e831c) the thr
   (deck, middle of the bridge) and 11 (south embankment), kept as the V2 records above.
 - `unseen/capistrano/`: from four zipped CSMIP V2 sets of `capistrano/`, the transverse channels
   4 (bent 4, bottom of column) and 10 (bent 4, deck level), kept as the V2 records above.
+- `unseen/ridgecrest/`: from five zipped CSMIP V2 sets of `ridgecrest/`, the transverse channels
+  4 (bent 3, south column at ground level) and 7 (bent 3, deck level), kept as above.
 
 - Shake table (Xsens DOT CSV exports): the seven header lines and the column-name line are
   kept; of the columns only SampleTimeFine (sensor clock, µs) and Acc_X (the shaking axis,
@@ -73,6 +75,14 @@ CAPISTRANO_EVENTS = {
     "borrego-springs-2010-07-07": "BorregoSprings_07Jul2010_CE13795P.zip",
 }
 CAPISTRANO_CHANNELS = [4, 10]
+RIDGECREST_EVENTS = {
+    "ridgecrest-2019-07-04": "ci38443183_ce33742p.zip",
+    "ridgecrest-2019-07-06": "ci38457511_ce33742p.zip",
+    "little-lake-2019-08-22": "ci38996632_ce33742p.zip",
+    "searles-valley-2020-06-04": "ci39462536_ce33742p.zip",
+    "lone-pine-2020-06-24": "ci39493944_ce33742p.zip",
+}
+RIDGECREST_CHANNELS = [4, 7]
 
 
 def compact_xsens(path, dst):
@@ -119,6 +129,7 @@ def unseen(mdof):
     for folder, events, channels, out in [
         ("meloland", MELOLAND_EVENTS, MELOLAND_CHANNELS, "meloland"),
         ("capistrano", CAPISTRANO_EVENTS, CAPISTRANO_CHANNELS, "capistrano"),
+        ("ridgecrest", RIDGECREST_EVENTS, RIDGECREST_CHANNELS, "ridgecrest"),
     ]:
         for event, zname in events.items():
             with zipfile.ZipFile(os.path.join(up, folder, zname)) as z:
