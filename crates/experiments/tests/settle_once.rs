@@ -66,6 +66,14 @@ fn one_identification_resolves_its_building_and_scans_its_prior_once() {
     let identified = identify_request(&req, &mut |_| notes += 1).unwrap();
     assert!(identified.record.failure.is_none());
     assert!(notes >= 3, "building, prior and rules are said");
+    // The time of settling the plan is recorded beside the run's, and on field data the free
+    // run's: the run alone is not what the identification cost.
+    let t = &identified.record.timing;
+    assert!(t.plan_s.is_some_and(|p| p > 0.0), "{t:?}");
+    assert!(
+        identified.record.free_run.is_some() && t.validation_s > 0.0,
+        "{t:?}"
+    );
     assert_eq!(
         identify::field::resolutions() - resolved,
         1,

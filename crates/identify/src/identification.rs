@@ -604,7 +604,9 @@ pub fn identify_plan(
             .discrepancy
             .as_ref()
             .map_or(&[][..], |c| c.modes());
+        let started = std::time::Instant::now();
         crate::validation::attach(&mut record, data, &plan.building, held_out, modes);
+        record.timing.validation_s += started.elapsed().as_secs_f64();
         // The noise levels were chosen from the measured signals (SPEC §3).
         noise = Some(NoiseLevels::of(plan));
     }
@@ -618,9 +620,13 @@ pub fn identify_request(
     note: &mut dyn FnMut(&Decision),
 ) -> Result<Identified> {
     let (data, chain) = load_request_data(&req.data)?;
+    let started = std::time::Instant::now();
     let plan = plan_request(req, &data, chain.as_ref())?;
+    let plan_s = started.elapsed().as_secs_f64();
     plan.decisions.iter().for_each(note);
-    identify_plan(&plan, &data, chain.as_ref(), &|| false, None)
+    let mut identified = identify_plan(&plan, &data, chain.as_ref(), &|| false, None)?;
+    identified.record.timing.plan_s = Some(plan_s);
+    Ok(identified)
 }
 
 /// Seconds of record filtered per second of computation (the record's `config.spec.dt` × the
@@ -669,6 +675,17 @@ impl Finished {
             realtime_factor(record).map_or(String::new(), |f| format!(", {f:.1}× real time"));
         if let (true, Some(n)) = (record.timing.particle_blocks, record.timing.threads) {
             realtime += &format!(", particle blocks on {n} threads");
+        }
+        // The run is not the whole of it: on field data the plan's choices identify on their
+        // own before it, and the free run and modes follow it.
+        if let Some(p) = record.timing.plan_s {
+            realtime += &format!("; plan settled in {p:.2} s before it");
+        }
+        if record.free_run.is_some() || record.modal.is_some() {
+            realtime += &format!(
+                ", free run and modes {:.2} s after it",
+                record.timing.validation_s
+            );
         }
         format!(
             "{}: {} of {} steps, loglik {:.2}, {:.2} s ({:.2} M particle-steps/s{realtime}); record {}",

@@ -489,6 +489,7 @@ fn run_record(
                 .then(|| d.summary.steps_completed as f64 * spec.dt / d.wall_s),
             threads: Some(rayon::current_num_threads()),
             particle_blocks: false,
+            plan_s: None,
         },
         warnings: Vec::new(),
         theta_correlation,

@@ -98,9 +98,20 @@ pub struct Timing {
     /// Particles × steps / wall_s.
     #[serde(with = "number::scalar")]
     pub particle_steps_per_s: f64,
-    /// Wall time of the validation integration (s).
+    /// Wall time of the validation (s): against the truth on simulated data; on field data the
+    /// free run, its band, the transfer functions and the modal intervals.
     #[serde(with = "number::scalar")]
     pub validation_s: f64,
+    /// Wall time of settling the run's plan before it (s): its rules, the sub-step checks and
+    /// the held-out choice of noise, damping form and discrepancy term, each an identification
+    /// of its own — on field data most of a run's time. Absent where the plan was given
+    /// (`--plan`), from the Python binding, and in older records.
+    #[serde(
+        default,
+        with = "number::opt_scalar",
+        skip_serializing_if = "Option::is_none"
+    )]
+    pub plan_s: Option<f64>,
     /// Seconds of record filtered per second of computation (steps × dt / wall_s): above 1 the
     /// filter keeps up with the structure in real time. Absent in older records.
     #[serde(

@@ -120,6 +120,7 @@ fn record(algorithm: &str, run: u64, bias: f64) -> RunRecord {
             particle_steps_per_s: 1.0e5,
             validation_s: 0.1,
             realtime_factor: None,
+            plan_s: None,
             threads: None,
             particle_blocks: false,
         },

@@ -514,6 +514,7 @@ fn synthetic_run() -> RunRecord {
             particle_steps_per_s: 1.0,
             validation_s: 0.0,
             realtime_factor: None,
+            plan_s: None,
             threads: None,
             particle_blocks: false,
         },

@@ -205,6 +205,7 @@ pub fn run(args: Args, con: &mut Console) -> Result<()> {
         Some(p) => p.install(f),
         None => f(),
     };
+    let started = std::time::Instant::now();
     let plan = match &args.plan {
         Some(file) => {
             let name = file.display().to_string();
@@ -221,6 +222,9 @@ pub fn run(args: Args, con: &mut Console) -> Result<()> {
             on_threads(&|| plan_request(&asked, &data, chain.as_ref()))?
         }
     };
+    // The time it took to settle the plan (its choices identify on their own), for the record;
+    // none for a plan given whole.
+    let plan_s = args.plan.is_none().then(|| started.elapsed().as_secs_f64());
     if args.plan_only {
         write!(con.out(), "{}", plan.describe())?;
         return Ok(());
@@ -253,7 +257,8 @@ pub fn run(args: Args, con: &mut Console) -> Result<()> {
         None => run(),
     };
     shown.finish();
-    let identified = identified?;
+    let mut identified = identified?;
+    identified.record.timing.plan_s = plan_s;
     if let Some(noise) = &identified.noise {
         writeln!(con.err(), "{noise}")?;
     }

@@ -213,6 +213,7 @@ pub fn record(algorithm: &str, run: u64, ratios: [f64; 9], nrmse: f64) -> RunRec
             particle_steps_per_s: 5.0e5,
             validation_s: 0.1,
             realtime_factor: None,
+            plan_s: None,
             threads: None,
             particle_blocks: false,
         },
