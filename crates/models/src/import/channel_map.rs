@@ -107,7 +107,8 @@ pub enum NonFinite {
 }
 
 /// What the import does with a storey sensor whose clock is offset from the ground sensor's
-/// ([`super::delay`]); only between sensor-CSV files (a V2 record's channels share a recorder).
+/// ([`super::delay`]); only between sensor-CSV files (a V2 record's channels are taken as
+/// simultaneous: one recorder, or recorders the agency started together).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum ClockDelay {
