@@ -15,7 +15,7 @@ use anyhow::{bail, Context, Result};
 use serde_json::{json, Value};
 
 use experiments::foreign;
-use identify::validation::shapes::UNLIKE_MAC;
+use identify::validation::ModalComparison;
 
 /// The two ground motions: `sysid simulate`'s arguments besides [`foreign::GROUND`].
 const GROUNDS: [(&str, &[&str]); 2] = [("identify", &[]), ("held-out", &foreign::HELD_OUT_GROUND)];
@@ -251,36 +251,14 @@ struct Row {
     peaks_apart: Vec<Option<f64>>,
 }
 
-/// Per mode of a record's modal comparison: its measured peak unless that peak has another
-/// shape (MAC below [`UNLIKE_MAC`]), with the record's frequency resolution.
-fn measured_peaks(record: &Value) -> Vec<Option<(f64, f64)>> {
-    let resolution = record["modal"]["resolution_hz"].as_f64();
-    record["modal"]["pairs"]
-        .as_array()
-        .map(|a| {
-            a.iter()
-                .map(|p| {
-                    let same_shape = p["mac"].as_f64().is_none_or(|m| m >= UNLIKE_MAC);
-                    p["measured_hz"]
-                        .as_f64()
-                        .filter(|_| same_shape)
-                        .zip(resolution)
-                })
-                .collect()
-        })
-        .unwrap_or_default()
-}
-
-/// Per mode, |f_a − f_b| over the resolutions added, where both records have a peak of it.
+/// Per mode, the field study's data test between the identified and the held-out record
+/// ([`experiments::field_study::report::peaks_apart`]); empty where either has no modes.
 fn peaks_apart(a: &Value, b: &Value) -> Vec<Option<f64>> {
-    measured_peaks(a)
-        .into_iter()
-        .zip(measured_peaks(b))
-        .map(|(x, y)| match (x, y) {
-            (Some((fa, ra)), Some((fb, rb))) => Some((fa - fb).abs() / (ra + rb)),
-            _ => None,
-        })
-        .collect()
+    let modal = |v: &Value| serde_json::from_value::<ModalComparison>(v["modal"].clone()).ok();
+    match (modal(a), modal(b)) {
+        (Some(a), Some(b)) => experiments::field_study::report::peaks_apart(&a, &b),
+        _ => Vec::new(),
+    }
 }
 
 fn row(out: &Path, entry: &Value) -> Result<Row> {
@@ -576,15 +554,15 @@ mod tests {
 
     #[test]
     fn peaks_apart_are_counted_in_resolutions_and_skip_a_peak_of_another_shape() {
+        let pair = |measured: Option<f64>, mac: Option<f64>| {
+            json!({"mode": 1, "model_hz": 2.0, "damping_ratio": 0.02,
+                   "measured_hz": measured, "mac": mac})
+        };
         let a = json!({"modal": {"resolution_hz": 0.1, "pairs": [
-            {"measured_hz": 2.0, "mac": 0.99},
-            {"measured_hz": 6.0, "mac": 0.2},
-            {"measured_hz": 9.0}
+            pair(Some(2.0), Some(0.99)), pair(Some(6.0), Some(0.2)), pair(Some(9.0), None)
         ]}});
         let b = json!({"modal": {"resolution_hz": 0.2, "pairs": [
-            {"measured_hz": 2.6, "mac": 0.9},
-            {"measured_hz": 6.1, "mac": 0.9},
-            {}
+            pair(Some(2.6), Some(0.9)), pair(Some(6.1), Some(0.9)), pair(None, None)
         ]}});
         let apart = peaks_apart(&a, &b);
         assert_eq!(apart.len(), 3);

@@ -850,13 +850,12 @@ fn modes_between(records: &[(&str, Vec<RecordMode>)]) -> ModesBetween {
                     out.total += 1;
                     out.inside += usize::from((lo..=hi).contains(&xa.model_hz));
                 }
-                let (true, Some((f_a, res_a)), Some((f_b, res_b))) =
-                    (i < j, xa.measured, xb.measured)
-                else {
+                let (true, Some(pa), Some(pb)) = (i < j, xa.measured, xb.measured) else {
                     continue;
                 };
+                let ((f_a, res_a), (f_b, res_b)) = (pa, pb);
+                let excess = apart(pa, pb);
                 out.measured_pairs += 1;
-                let excess = (f_a - f_b).abs() / (res_a + res_b);
                 if excess > 1.0 {
                     out.beyond += 1;
                     if excess > furthest {
@@ -875,6 +874,28 @@ fn modes_between(records: &[(&str, Vec<RecordMode>)]) -> ModesBetween {
         }
     }
     out
+}
+
+/// How far apart two records' measured peaks (Hz, resolution Hz) of one mode lie, in their
+/// frequency resolutions added: the data test of [`modes_between`].
+fn apart((f_a, res_a): (f64, f64), (f_b, res_b): (f64, f64)) -> f64 {
+    (f_a - f_b).abs() / (res_a + res_b)
+}
+
+/// Per mode, [`apart`] between two records' modal comparisons — the same test on any two
+/// records (the foreign corpus's report runs it on its identified and held-out records).
+pub fn peaks_apart(a: &ModalComparison, b: &ModalComparison) -> Vec<Option<f64>> {
+    let modes = |m: &ModalComparison| -> Vec<RecordMode> {
+        m.pairs
+            .iter()
+            .map(|p| RecordMode::of(p, m.resolution_hz))
+            .collect()
+    };
+    modes(a)
+        .iter()
+        .zip(&modes(b))
+        .map(|(x, y)| Some(apart(x.measured?, y.measured?)))
+        .collect()
 }
 
 /// Whether the selected model's modes identified on each record lie inside the other records'
