@@ -882,8 +882,10 @@ fn apart((f_a, res_a): (f64, f64), (f_b, res_b): (f64, f64)) -> f64 {
     (f_a - f_b).abs() / (res_a + res_b)
 }
 
-/// Per mode, [`apart`] between two records' modal comparisons — the same test on any two
-/// records (the foreign corpus's report runs it on its identified and held-out records).
+/// Per mode, how far apart two records' measured peaks lie, in their frequency resolutions added
+/// — the field study's data test ("Do the modes agree?"), the same on any two
+/// records (the foreign corpus's report runs it on its identified and held-out records); none
+/// where either has no peak of that mode's shape.
 pub fn peaks_apart(a: &ModalComparison, b: &ModalComparison) -> Vec<Option<f64>> {
     let modes = |m: &ModalComparison| -> Vec<RecordMode> {
         m.pairs
