@@ -493,6 +493,8 @@ fn identify_py(
         particles_asked: particles.is_some(),
     };
     let settings = overrides.apply(settings);
+    // Timed as `sysid filter` times it: the plan's choices identify on their own.
+    let started = std::time::Instant::now();
     let plan = ::identify::plan::settle(target.request(settings.clone(), seed, run, &experiment))
         .and_then(|plan| ::identify::choice::choose(plan, &target, &settings, Default::default()))
         .and_then(|plan| {
@@ -504,12 +506,14 @@ fn identify_py(
             }
         })
         .map_err(err)?;
+    let plan_s = started.elapsed().as_secs_f64();
     let record = stoppable(py, |stop| {
         // The run as `sysid filter` runs it: the plan, the config digest, and for field data
         // the intervals' model error and the validation without the truth.
-        let record =
+        let mut record =
             ::identify::identification::identify_plan(&plan, d, data.chain.as_ref(), stop, None)?
                 .record;
+        record.timing.plan_s = Some(plan_s);
         if let Some(out) = &out {
             // Written as `sysid filter` writes it: a temporary file renamed into place.
             experiments::sweep::write_atomic(out, &record)?;

@@ -43,6 +43,8 @@ def test_simulated_data_same_bits_as_cli(sysid, tmp_path, short_data, short_dir,
         assert got.steps_completed == want["steps_completed"] == len(short_data) - 1
         # Everything but the timings is the CLI's record.
         mine, theirs = got.to_dict(), read.to_dict()
+        # Both timed the plan before the run, as the CLI does.
+        assert mine["timing"]["plan_s"] >= 0.0 and theirs["timing"]["plan_s"] >= 0.0
         for r in (mine, theirs):
             r.pop("timing")
             r.pop("experiment")

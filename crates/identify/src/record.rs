@@ -105,7 +105,7 @@ pub struct Timing {
     /// Wall time of settling the run's plan before it (s): its rules, the sub-step checks and
     /// the held-out choice of noise, damping form and discrepancy term, each an identification
     /// of its own — on field data most of a run's time. Absent where the plan was given
-    /// (`--plan`), from the Python binding, and in older records.
+    /// (`--plan`) and in older records.
     #[serde(
         default,
         with = "number::opt_scalar",
