@@ -1108,6 +1108,18 @@ fn lag_substeps_decision(l: &LagSubsteps, spec: &ChainSpec) -> Decision {
     }
 }
 
+/// A mode's frequency shift with one step per sample, `error` (a fraction), as a percentage of
+/// `digits` decimals — or, past the semi-implicit Euler step's stability limit (ω·dt ≥ 2, where
+/// [`models::filtering::substeps::frequency_error`] is infinite), says that one step does not
+/// oscillate at that frequency at all.
+fn one_step_shift(error: f64, digits: usize) -> String {
+    if error.is_finite() {
+        format!("{:.digits$} %", 100.0 * error)
+    } else {
+        "∞ (one step is unstable there: ω·dt ≥ 2, the step's stability limit)".into()
+    }
+}
+
 /// The field-data rule's sub-steps (a linear building run as one Gaussian filter): the highest
 /// mode's frequency shift with one step and with the count taken.
 fn field_substeps_decision(f: &crate::rules::FieldSubsteps, spec: &ChainSpec) -> Decision {
@@ -1117,11 +1129,11 @@ fn field_substeps_decision(f: &crate::rules::FieldSubsteps, spec: &ChainSpec) ->
         level: Level::Info,
         why: format!(
             "sub-steps: {} per sample (auto, field data of a linear building, one Gaussian \
-             filter: the highest mode's frequency shift {:.2} % with one step, {:.3} % with \
+             filter: the highest mode's frequency shift {} with one step, {:.3} % with \
              {}, at most {:.2} %, because the free run's phase over a lightly damped mode's \
              many cycles is that shift over ζ: docs/real-frame.md)",
             spec.substeps,
-            100.0 * f.error_one,
+            one_step_shift(f.error_one, 2),
             100.0 * f.error_chosen,
             f.substeps,
             100.0 * crate::rules::FIELD_FREQUENCY_ERROR
@@ -1147,12 +1159,12 @@ fn linear_substep_decisions(
             level: Level::Warning,
             why: format!(
                 "the prior's building has modes up to {:.2} Hz (ω·dt = {:.2}): one step per \
-                 sample shifts that mode by {:.1} %, and {} cannot sub-step; its \
+                 sample shifts that mode by {}, and {} cannot sub-step; its \
                  frequencies and stiffnesses carry that bias (MPF-EKF2 and the bootstrap \
                  PF sub-step)",
                 a.omega_max / std::f64::consts::TAU,
                 a.omega_max * spec.dt,
-                100.0 * a.error_one,
+                one_step_shift(a.error_one, 1),
                 algorithm.label()
             ),
         });
@@ -1165,12 +1177,12 @@ fn linear_substep_decisions(
             level: Level::Info,
             why: format!(
                 "sub-steps: {} per sample (auto: the prior's building has modes up to {:.2} \
-                 Hz, ω·dt = {:.2}; one step per sample would shift that mode by {:.1} %, {} \
+                 Hz, ω·dt = {:.2}; one step per sample would shift that mode by {}, {} \
                  by {:.2} %)",
                 a.substeps,
                 a.omega_max / std::f64::consts::TAU,
                 a.omega_max * spec.dt,
-                100.0 * a.error_one,
+                one_step_shift(a.error_one, 1),
                 a.substeps,
                 100.0 * a.error_chosen
             ),
@@ -1706,7 +1718,19 @@ pub fn resolve_substeps(
 
 #[cfg(test)]
 mod tests {
-    use super::{JointDiscrepancy, MassChoice, Moved, SubstepConvergence, SubstepRun};
+    use super::{
+        one_step_shift, JointDiscrepancy, MassChoice, Moved, SubstepConvergence, SubstepRun,
+    };
+
+    /// Past ω·dt = 2 one step has no frequency to shift: said, not printed as "inf %".
+    #[test]
+    fn one_step_past_its_stability_limit_is_said_unstable() {
+        use models::filtering::substeps::frequency_error;
+        assert_eq!(one_step_shift(frequency_error(0.5), 2), "1.07 %");
+        // The shake-table frame decimated to 40 Hz: its third mode at ω·dt = 2.56.
+        let past = one_step_shift(frequency_error(2.56), 1);
+        assert!(!past.contains("inf") && past.contains("unstable"), "{past}");
+    }
 
     /// The sub-step check's decision lists the counts and moves and says whether it converged,
     /// ran out of counts, or stopped at a failed run; the run takes the last count that ran.
