@@ -252,13 +252,21 @@ struct Row {
 }
 
 /// Per mode, the field study's data test between the identified and the held-out record
-/// ([`experiments::field_study::report::peaks_apart`]); empty where either has no modes.
-fn peaks_apart(a: &Value, b: &Value) -> Vec<Option<f64>> {
-    let modal = |v: &Value| serde_json::from_value::<ModalComparison>(v["modal"].clone()).ok();
-    match (modal(a), modal(b)) {
+/// ([`experiments::field_study::report::peaks_apart`]); empty where either has no modes. A
+/// `modal` that is there but does not read is an error, not a test left out.
+fn peaks_apart(a: &Value, b: &Value) -> Result<Vec<Option<f64>>> {
+    let modal = |v: &Value, which: &str| -> Result<Option<ModalComparison>> {
+        match v.get("modal") {
+            None | Some(Value::Null) => Ok(None),
+            Some(m) => serde_json::from_value(m.clone())
+                .map(Some)
+                .with_context(|| format!("the {which} record's `modal`")),
+        }
+    };
+    Ok(match (modal(a, "identified")?, modal(b, "held-out")?) {
         (Some(a), Some(b)) => experiments::field_study::report::peaks_apart(&a, &b),
         _ => Vec::new(),
-    }
+    })
 }
 
 fn row(out: &Path, entry: &Value) -> Result<Row> {
@@ -344,7 +352,7 @@ fn row(out: &Path, entry: &Value) -> Result<Row> {
         held_building,
         discrepancy_hz,
         mac,
-        peaks_apart: peaks_apart(&record, &held),
+        peaks_apart: peaks_apart(&record, &held)?,
         case,
     })
 }
@@ -564,10 +572,17 @@ mod tests {
         let b = json!({"modal": {"resolution_hz": 0.2, "pairs": [
             pair(Some(2.6), Some(0.9)), pair(Some(6.1), Some(0.9)), pair(None, None)
         ]}});
-        let apart = peaks_apart(&a, &b);
+        let apart = peaks_apart(&a, &b).unwrap();
         assert_eq!(apart.len(), 3);
         assert!((apart[0].unwrap() - 2.0).abs() < 1e-12);
         assert_eq!(apart[1..], [None, None]);
-        assert!(peaks_apart(&a, &json!({})).is_empty());
+        assert!(peaks_apart(&a, &json!({})).unwrap().is_empty());
+        // A modal that does not read is said, not skipped.
+        let broken = json!({"modal": {"resolution_hz": "wide"}});
+        let e = peaks_apart(&a, &broken).unwrap_err();
+        assert!(
+            format!("{e:#}").contains("held-out record's `modal`"),
+            "{e:#}"
+        );
     }
 }
