@@ -154,10 +154,14 @@ fn sensor_seeds() -> Vec<Vec<u8>> {
 }
 
 fn v2_seeds() -> Vec<Vec<u8>> {
-    ["CHAN003-excerpt.V2", "CHAN007-excerpt.V2"]
-        .iter()
-        .map(|f| std::fs::read(fixture(f)).unwrap())
-        .collect()
+    [
+        "CHAN003-excerpt.V2",
+        "CHAN007-excerpt.V2",
+        "CHAN07-1979-excerpt.V2",
+    ]
+    .iter()
+    .map(|f| std::fs::read(fixture(f)).unwrap())
+    .collect()
 }
 
 #[test]

@@ -165,7 +165,7 @@ fn real_v2_excerpts_read_by_column() {
     let touching = text.replacen("   -.00018    .00003", "-123.45678-987.65432", 1);
     let r = parse_v2(Path::new("x.V2"), &touching).unwrap();
     assert_eq!(&r.acc[..2], &[-1.2345678, -9.8765432]);
-    // The older layout is refused by name.
+    // A layout whose line 16 is not the sample count is refused by name.
     let old: String = text
         .lines()
         .enumerate()
@@ -180,7 +180,7 @@ fn real_v2_excerpts_read_by_column() {
         .join("\n");
     let e = parse_v2(Path::new("old.V2"), &old).unwrap_err().to_string();
     assert!(
-        e.starts_with("old.V2:16:") && e.contains("older CSMIP layout"),
+        e.starts_with("old.V2:16:") && e.contains("another layout or format"),
         "{e}"
     );
     // A block shorter than its count.
@@ -214,6 +214,68 @@ fn v2_channels_are_imported_and_their_direction_checked() {
     );
     let e = run(&dir, &with_column).unwrap_err();
     assert!(e.contains("ground.column"), "{e}");
+}
+
+/// The layout of records before about 1993 (upper case, `(UNITS: CM/SEC/SEC)`, the sensor's
+/// azimuth in degrees): the Meloland overpass under the 1979 Imperial Valley earthquake.
+#[test]
+fn older_v2_layout_is_read_and_its_azimuth_checked() {
+    let text = std::fs::read_to_string(fixture("CHAN07-1979-excerpt.V2")).unwrap();
+    let r = parse_v2(Path::new("CHAN07-1979-excerpt.V2"), &text).unwrap();
+    assert_eq!(r.acc.len(), 80);
+    assert_eq!(r.dt, 0.02);
+    assert_eq!(r.orientation, 270);
+    assert_eq!((r.channel.as_str(), r.direction.as_str()), ("7", "270 DEG"));
+    assert_eq!(r.first_line, 47);
+    // Line 47: `.000 .000 .000 2.216 …` cm/s², the last value of the block 11.801.
+    assert_eq!(&r.acc[..3], &[0.0, 0.0, 0.0]);
+    assert!((r.acc[3] - 0.02216).abs() < 1e-15);
+    assert!((r.acc[79] - 0.11801).abs() < 1e-15);
+    // Another unit in the block's header is refused, naming it.
+    let feet = text.replacen("(UNITS: CM/SEC/SEC)", "(UNITS: FT/SEC/SEC)", 1);
+    let e = parse_v2(Path::new("ft.V2"), &feet).unwrap_err().to_string();
+    assert!(e.starts_with("ft.V2:46:") && e.contains("units"), "{e}");
+
+    let (_tmp, dir) = scratch("v2-1979");
+    let f11 = fixture("CHAN11-1979-excerpt.V2").display().to_string();
+    let f7 = fixture("CHAN07-1979-excerpt.V2").display().to_string();
+    let m = format!(
+        "[ground]\nfile = \"{f11}\"\nformat = \"csmip-v2\"\ndirection = \"270\"\n\
+         [[storey]]\nstorey = 1\nfile = \"{f7}\"\nformat = \"csmip-v2\"\ndirection = \"270\"\n"
+    );
+    let d = run(&dir, &m).unwrap();
+    // Both channels start with three rows of zeros, dropped.
+    assert_eq!(d.ug.len(), 77);
+    assert_eq!(d.dt, 0.02);
+    // Its first two values, 7.486 and 1.133 cm/s² (their mean removed alike).
+    assert!(
+        (d.ug[1] - d.ug[0] + 0.06353).abs() < 1e-15,
+        "{:?}",
+        &d.ug[..2]
+    );
+    // An axis word where the record gives an azimuth: the error says what to write.
+    let tran = m.replacen("direction = \"270\"", "direction = \"tran\"", 1);
+    let e = run(&dir, &tran).unwrap_err();
+    assert!(
+        e.contains("CHAN11-1979-excerpt.V2")
+            && e.contains("azimuth, 270°")
+            && e.contains("direction = \"270\""),
+        "{e}"
+    );
+    // Another azimuth: the wrong sensor.
+    let other = m.replacen("direction = \"270\"", "direction = \"360\"", 1);
+    let e = run(&dir, &other).unwrap_err();
+    assert!(
+        e.contains("swapped") && !e.contains("write direction"),
+        "{e}"
+    );
+    // Not an azimuth at all: refused with the map's key before a file is read.
+    let past = m.replacen("direction = \"270\"", "direction = \"400\"", 1);
+    let e = run(&dir, &past).unwrap_err();
+    assert!(
+        e.contains("ground.direction") && e.contains("0 to 360"),
+        "{e}"
+    );
 }
 
 #[test]

@@ -27,6 +27,7 @@
 //! sign = 1
 //! offset = 0.0               # optional: seconds added to this file's time stamps
 //! direction = "X"            # optional label; for csmip-v2 checked against the record
+//!                            # (long, tran, up, or an older record's azimuth, e.g. "270")
 //!
 //! [[storey]]
 //! storey = 1
@@ -602,7 +603,7 @@ fn check_sensor_csv_keys(spec: &ChannelSpec, at: &ChannelErrors) -> Result<(), I
 }
 
 /// A csmip-v2 channel has no column keys (one channel on a uniform step), no units but
-/// cm/s², and a direction V2 knows.
+/// cm/s², and a direction V2 knows (an axis word, or an azimuth in degrees).
 fn check_csmip_v2_keys(spec: &ChannelSpec, at: &ChannelErrors) -> Result<(), ImportError> {
     for (key, present) in [
         ("time", spec.time.is_some()),
@@ -628,10 +629,13 @@ fn check_csmip_v2_keys(spec: &ChannelSpec, at: &ChannelErrors) -> Result<(), Imp
     }
     if let Some(d) = &spec.direction {
         let d = d.to_ascii_lowercase();
-        if !["long", "tran", "up"].contains(&d.as_str()) {
+        if !["long", "tran", "up"].contains(&d.as_str()) && super::csmip::azimuth(&d).is_none() {
             return Err(at.err(
                 "direction",
-                format!("`{d}`: a V2 direction is long, tran or up"),
+                format!(
+                    "`{d}`: a V2 direction is long, tran or up, or (older records) an azimuth \
+                     in degrees, 0 to 360"
+                ),
             ));
         }
     }

@@ -1,22 +1,28 @@
 //! Reader of CSMIP/COSMOS V2 processed strong-motion records (`CHANnnn.V2`: corrected
-//! acceleration, velocity and displacement of one channel), the layout used by the California
-//! Strong Motion Instrumentation Program since about 1993.
+//! acceleration, velocity and displacement of one channel), in both layouts the California
+//! Strong Motion Instrumentation Program has distributed them in: the mixed-case one of records
+//! since about 1993 and the upper-case one of older records (film digitised, e.g. the Meloland
+//! overpass under the 1979 Imperial Valley and 1987 Superstition Hills earthquakes).
 //!
-//! The layout, as found in the records this reader was written for (lines 1-based):
-//! - lines 1–22 a text header: line 1 `Corrected accelerogram … Chan  7:  Tran …`, line 16
+//! The layout, as found in the records this reader was written for (lines 1-based; the
+//! phrases matched without regard to case):
+//! - lines 1–22 a text header: line 1 `Corrected accelerogram … Chan  7:  Tran …` (older:
+//!   `CORRECTED ACCELEROGRAM … CHAN  7: 270 DEG …`), line 16
 //!   `  8511 points of instrument- and baseline-corrected accel, veloc and displ data`, line 17
 //!   `At equally-spaced intervals of    .010  sec.`;
 //! - line 23 blank, lines 24–25 a title;
 //! - lines 26–32: 100 integers in 5-character fields (16 a line); integer 27 is the sensor's
-//!   orientation code (800 longitudinal, 900 transverse, 500 up);
+//!   orientation: 800 longitudinal, 900 transverse, 500 up, or (older records) the azimuth of
+//!   its horizontal axis in degrees (270, 360);
 //! - lines 33–45: 100 reals in 10-character fields;
-//! - line 46 `  8511 points of accel data equally spaced at  .010 sec, in cm/sec2. (8f10.5)`,
-//!   then the acceleration, 8 values a line in 10-character fields. Values may touch
-//!   (`-12.34567-123.45678`), so they are read by column, never split at white space.
+//! - line 46 `  8511 points of accel data equally spaced at  .010 sec, in cm/sec2. (8f10.5)`
+//!   (older: `… SPACED AT  .020 SEC.  (UNITS: CM/SEC/SEC)`), then the acceleration, 8 values a
+//!   line in 10-character fields. Values may touch (`-12.34567-123.45678`), so they are read by
+//!   column, never split at white space.
 //!
 //! Only the acceleration block is read; the velocity and displacement blocks after it are not
-//! needed to import a record. Older records (another header layout) are refused by name rather
-//! than read by guesswork.
+//! needed to import a record. Any other layout (another line 1, 16 or 46) is refused by name
+//! rather than read by guesswork.
 
 use crate::limits;
 use crate::readers::{limit_error, parse_field, parse_number, read_text, strip_bom, ReadError};
@@ -39,8 +45,8 @@ pub struct V2Record {
     /// The channel named on line 1 (`Chan  7:  Tran`): its number and direction word.
     pub channel: String,
     pub direction: String,
-    /// Orientation code (integer 27): 800 longitudinal, 900 transverse, 500 up, or another
-    /// azimuth in degrees.
+    /// Orientation code (integer 27): 800 longitudinal, 900 transverse, 500 up, or an azimuth
+    /// in degrees (0–360, older records).
     pub orientation: i64,
     pub dt: f64,
     /// Acceleration, m/s² (the file's cm/s² × 0.01).
@@ -92,8 +98,11 @@ fn leading_count(file: &Path, line_no: usize, line: &str) -> Result<usize, ReadE
 }
 
 /// The number that follows `key` in `line` (`… intervals of    .010  sec.`).
+/// `key` is matched without regard to case.
 fn number_after(file: &Path, line_no: usize, line: &str, key: &str) -> Result<f64, ReadError> {
+    // ASCII lower-casing keeps every byte where it was: the position found indexes `line`.
     let rest = line
+        .to_ascii_lowercase()
         .find(key)
         .map(|p| &line[p + key.len()..])
         .ok_or_else(|| {
@@ -116,7 +125,11 @@ pub fn parse_v2(file: &Path, text: &str) -> Result<V2Record, ReadError> {
         .collect();
     let line = |n: usize| header_line(file, &lines, n);
     let first = line(1)?;
-    if !first.trim_start().starts_with("Corrected accelerogram") {
+    if !first
+        .trim_start()
+        .to_ascii_lowercase()
+        .starts_with("corrected accelerogram")
+    {
         return Err(header_error(
             file,
             1,
@@ -161,17 +174,20 @@ fn header_line<'a>(file: &Path, lines: &[&'a str], n: usize) -> Result<&'a str, 
 }
 
 /// The sample count NPTS from its line `npts_text`, refused when that line is not the one of
-/// the V2 layout read here (an older layout or another format).
+/// the V2 layouts read here (another layout or format).
 fn sample_count(file: &Path, npts_text: &str) -> Result<usize, ReadError> {
-    if !npts_text.contains("points of instrument- and baseline-corrected") {
+    if !npts_text
+        .to_ascii_lowercase()
+        .contains("points of instrument- and baseline-corrected")
+    {
         return Err(header_error(
             file,
             NPTS_LINE,
             "NPTS",
             format!(
-                "`{}` is not the sample count of the V2 layout read here (`N points of \
-                 instrument- and baseline-corrected accel, veloc and displ data`): an older \
-                 CSMIP layout (records before about 1993) or another format, which is not read",
+                "`{}` is not the sample count of the V2 layouts read here (`N points of \
+                 instrument- and baseline-corrected accel, veloc and displ data`): another \
+                 layout or format, which is not read",
                 npts_text.trim()
             ),
         ));
@@ -200,9 +216,10 @@ fn orientation(file: &Path, lines: &[&str]) -> Result<i64, ReadError> {
 }
 
 /// The acceleration block's header line `acc_text`: its sample count that of NPTS (`npts`),
-/// its step that of line [`DT_LINE`] (`dt`), its unit cm/sec2.
+/// its step that of line [`DT_LINE`] (`dt`), its unit cm/s² (`cm/sec2` or `CM/SEC/SEC`).
 fn check_acc_header(file: &Path, acc_text: &str, npts: usize, dt: f64) -> Result<(), ReadError> {
-    if !acc_text.contains("points of accel data") {
+    let lower = acc_text.to_ascii_lowercase();
+    if !lower.contains("points of accel data") {
         return Err(header_error(
             file,
             ACC_LINE,
@@ -232,7 +249,8 @@ fn check_acc_header(file: &Path, acc_text: &str, npts: usize, dt: f64) -> Result
             format!("{acc_dt} s, but line {DT_LINE} says {dt} s"),
         ));
     }
-    if !acc_text.contains("cm/sec2") {
+    // `in cm/sec2.` since about 1993, `(UNITS: CM/SEC/SEC)` before.
+    if !(lower.contains("cm/sec2") || lower.contains("cm/sec/sec")) {
         return Err(header_error(
             file,
             ACC_LINE,
@@ -289,14 +307,19 @@ fn acc_values(file: &Path, lines: &[&str], npts: usize) -> Result<Vec<f64>, Read
     Ok(acc)
 }
 
-/// `("7", "Tran")` from line 1's `… Chan  7:  Tran  …` (empty when absent).
+/// `("7", "Tran")` from line 1's `… Chan  7:  Tran  …`, `("7", "270 DEG")` from an older
+/// record's `… CHAN  7: 270 DEG …` (empty when absent).
 fn channel_name(first: &str) -> (String, String) {
-    let Some(p) = first.find("Chan") else {
+    let Some(p) = first.to_ascii_lowercase().find("chan") else {
         return (String::new(), String::new());
     };
     let mut rest = first[p + 4..].split_whitespace();
     let number = rest.next().unwrap_or("").trim_end_matches(':').to_string();
-    let direction = rest.next().unwrap_or("").to_string();
+    let word = rest.next().unwrap_or("");
+    let direction = match rest.next() {
+        Some(unit) if unit.eq_ignore_ascii_case("deg") => format!("{word} {unit}"),
+        _ => word.to_string(),
+    };
     (number, direction)
 }
 
@@ -307,5 +330,57 @@ pub(crate) fn orientation_name(code: i64) -> Option<&'static str> {
         900 => Some("tran"),
         500 => Some("up"),
         _ => None,
+    }
+}
+
+/// An azimuth in degrees (0–360) as a map may write a direction (`"270"`).
+pub(crate) fn azimuth(direction: &str) -> Option<i64> {
+    direction
+        .trim()
+        .parse::<i64>()
+        .ok()
+        .filter(|d| (0..=360).contains(d))
+}
+
+/// Whether a map's `direction` (long, tran, up, or an azimuth in degrees) is the record's
+/// orientation `code`; 0° and 360° are one azimuth.
+pub(crate) fn direction_matches(direction: &str, code: i64) -> bool {
+    let want = direction.trim().to_ascii_lowercase();
+    match azimuth(&want) {
+        Some(d) => (0..=360).contains(&code) && d % 360 == code % 360,
+        None => orientation_name(code) == Some(want.as_str()),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn both_layouts_name_their_channel() {
+        assert_eq!(
+            channel_name(
+                "Corrected accelerogram   01336-E0785-08325.04       Chan  3:  Tran    from"
+            ),
+            ("3".into(), "Tran".into())
+        );
+        assert_eq!(
+            channel_name(
+                "CORRECTED ACCELEROGRAM   01336-C0164-79290.04       CHAN  7: 270 DEG     FROM"
+            ),
+            ("7".into(), "270 DEG".into())
+        );
+    }
+
+    #[test]
+    fn a_direction_is_a_word_or_an_azimuth() {
+        assert!(direction_matches("tran", 900) && direction_matches("Long", 800));
+        assert!(direction_matches("up", 500) && !direction_matches("up", 900));
+        assert!(direction_matches("270", 270) && direction_matches(" 360", 0));
+        assert!(direction_matches("0", 360) && !direction_matches("90", 270));
+        // An azimuth never matches a code that is not one, nor a word an azimuth.
+        assert!(!direction_matches("500", 500) && !direction_matches("tran", 270));
+        assert_eq!(azimuth("361"), None);
+        assert_eq!(azimuth("-90"), None);
     }
 }

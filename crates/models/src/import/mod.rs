@@ -139,16 +139,29 @@ fn read_channel(
         Format::CsmipV2 => {
             let r = csmip::read_v2(&c.path)?;
             if let Some(want) = &c.spec.direction {
-                let want = want.to_ascii_lowercase();
-                let has = csmip::orientation_name(r.orientation);
-                if has != Some(want.as_str()) {
+                if !csmip::direction_matches(want, r.orientation) {
+                    let want = want.trim().to_ascii_lowercase();
+                    // An older record gives an azimuth where the map names an axis: which
+                    // azimuth is the structure's transverse one only its user knows.
+                    let hint = if csmip::orientation_name(r.orientation).is_none()
+                        && csmip::azimuth(&want).is_none()
+                        && (0..=360).contains(&r.orientation)
+                    {
+                        format!(
+                            "; the record gives its sensor's azimuth, {}°, as records before \
+                             about 1993 do: write direction = \"{}\" if that is the axis meant",
+                            r.orientation, r.orientation
+                        )
+                    } else {
+                        String::new()
+                    };
                     return Err(ImportError::Map {
                         file: c.path.clone(),
                         line: 1,
                         key: "direction".into(),
                         message: format!(
                             "the map expects {want} for {}, the record is channel {} `{}` \
-                             (orientation code {}): wrong file or swapped channels",
+                             (orientation code {}): wrong file or swapped channels{hint}",
                             c.role, r.channel, r.direction, r.orientation
                         ),
                     });
