@@ -68,6 +68,12 @@ MELOLAND_EVENTS = {
     "borrego-springs-2010-07-07": "BorregoSprings_07Jul2010_CE01336P.ZIP",
 }
 MELOLAND_CHANNELS = [7, 11]
+# The same overpass under two older earthquakes, in the V2 layout of records before about 1993
+# (the sensor's azimuth, 270 degrees, for its transverse axis; 50 Hz).
+MELOLAND_OLDER_EVENTS = {
+    "imperial-valley-1979-10-15": "imperialvalley79_ce01336p.zip",
+    "superstition-hills-1987-11-24": "superstitionhills87_ce01336p.zip",
+}
 CAPISTRANO_EVENTS = {
     "inglewood-2009-05-17": "Inglewood_17May2009_CE13795P.zip",
     "el-mayor-cucapah-2010-04-04": "calexico_04apr2010_14607652_CE13795P.zip",
@@ -128,6 +134,7 @@ def unseen(mdof):
         f.write("\n".join(names) + "\n")
     for folder, events, channels, out in [
         ("meloland", MELOLAND_EVENTS, MELOLAND_CHANNELS, "meloland"),
+        ("meloland", MELOLAND_OLDER_EVENTS, MELOLAND_CHANNELS, "meloland"),
         ("capistrano", CAPISTRANO_EVENTS, CAPISTRANO_CHANNELS, "capistrano"),
         ("ridgecrest", RIDGECREST_EVENTS, RIDGECREST_CHANNELS, "ridgecrest"),
     ]:
@@ -135,10 +142,12 @@ def unseen(mdof):
             with zipfile.ZipFile(os.path.join(up, folder, zname)) as z:
                 for c in channels:
                     name = "CHAN%03d.V2" % c
+                    # The 1979 set names its channels with two digits (`CHAN07.V2`).
+                    member = name if name in z.namelist() else "CHAN%02d.V2" % c
                     dst = os.path.join(HERE, "unseen", out, event, name)
                     os.makedirs(os.path.dirname(dst), exist_ok=True)
                     with open(dst, "wb") as f:
-                        f.write(v2_acceleration(z.read(name)))
+                        f.write(v2_acceleration(z.read(member)))
 
 
 if __name__ == "__main__":

@@ -389,12 +389,13 @@ fn render_part(s: &mut String, part: &Part, out: &Path) -> Result<()> {
             "no record was".to_string()
         } else {
             format!(
-                "{} were",
+                "{} {}",
                 validate
                     .iter()
                     .map(|v| format!("`{v}`"))
                     .collect::<Vec<_>>()
-                    .join(", ")
+                    .join(", "),
+                if validate.len() == 1 { "was" } else { "were" }
             )
         }
     )?;
