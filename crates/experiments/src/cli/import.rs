@@ -34,7 +34,7 @@ pub fn run(args: Args, con: &mut Console) -> crate::error::Result<()> {
         con.out(),
         "imported {} samples at dt = {} s ({:.3} Hz), {:.3} s; ground and storey{} {}",
         record.samples,
-        record.dt,
+        shown(record.dt),
         1.0 / record.dt,
         (record.samples - 1) as f64 * record.dt,
         if record.sensors.len() == 1 { "" } else { "s" },
@@ -84,4 +84,21 @@ pub fn run(args: Args, con: &mut Console) -> crate::error::Result<()> {
         record.measurement
     )?;
     Ok(())
+}
+
+/// `dt` as a person reads it: the mean of a grid's time stamps carries the rounding of their sum
+/// (0.02 read from a V2 grid 3..1138 is 0.020000000000000004), shown to 12 significant digits.
+/// The data set keeps the value itself.
+fn shown(dt: f64) -> f64 {
+    format!("{dt:.11e}").parse().unwrap_or(dt)
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn a_step_is_shown_without_its_rounding() {
+        assert_eq!(super::shown(0.020000000000000004).to_string(), "0.02");
+        assert_eq!(super::shown(0.01).to_string(), "0.01");
+        assert_eq!(super::shown(1.0 / 120.0).to_string(), "0.00833333333333");
+    }
 }
