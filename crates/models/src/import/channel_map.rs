@@ -27,7 +27,7 @@
 //! sign = 1
 //! offset = 0.0               # optional: seconds added to this file's time stamps
 //! direction = "X"            # optional label; for csmip-v2 checked against the record
-//!                            # (long, tran, up, or an older record's azimuth, e.g. "270")
+//!                            # (long, tran, up, or the record's azimuth, e.g. "270")
 //!
 //! [[storey]]
 //! storey = 1
@@ -633,8 +633,8 @@ fn check_csmip_v2_keys(spec: &ChannelSpec, at: &ChannelErrors) -> Result<(), Imp
             return Err(at.err(
                 "direction",
                 format!(
-                    "`{d}`: a V2 direction is long, tran or up, or (older records) an azimuth \
-                     in degrees, 0 to 360"
+                    "`{d}`: a V2 direction is long, tran or up, or an azimuth in degrees, 0 \
+                     to 360 (where the record gives one, as records before about 1993 do)"
                 ),
             ));
         }

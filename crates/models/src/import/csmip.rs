@@ -46,7 +46,7 @@ pub struct V2Record {
     pub channel: String,
     pub direction: String,
     /// Orientation code (integer 27): 800 longitudinal, 900 transverse, 500 up, or an azimuth
-    /// in degrees (0–360, older records).
+    /// in degrees (0–360; older records give one for every horizontal sensor).
     pub orientation: i64,
     pub dt: f64,
     /// Acceleration, m/s² (the file's cm/s² × 0.01).

@@ -141,15 +141,16 @@ fn read_channel(
             if let Some(want) = &c.spec.direction {
                 if !csmip::direction_matches(want, r.orientation) {
                     let want = want.trim().to_ascii_lowercase();
-                    // An older record gives an azimuth where the map names an axis: which
-                    // azimuth is the structure's transverse one only its user knows.
+                    // The record gives an azimuth (older records do, and some later ones)
+                    // where the map names an axis: which azimuth is the structure's transverse
+                    // one only its user knows.
                     let hint = if csmip::orientation_name(r.orientation).is_none()
                         && csmip::azimuth(&want).is_none()
                         && (0..=360).contains(&r.orientation)
                     {
                         format!(
-                            "; the record gives its sensor's azimuth, {}°, as records before \
-                             about 1993 do: write direction = \"{}\" if that is the axis meant",
+                            "; the record gives its sensor's azimuth, {}°, not an axis: \
+                             write direction = \"{}\" if that is the axis meant",
                             r.orientation, r.orientation
                         )
                     } else {
