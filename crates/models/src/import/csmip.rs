@@ -342,12 +342,17 @@ pub(crate) fn azimuth(direction: &str) -> Option<i64> {
         .filter(|d| (0..=360).contains(d))
 }
 
+/// The azimuth (0–359°) an orientation `code` gives, if it gives one rather than an axis code.
+pub(crate) fn code_azimuth(code: i64) -> Option<i64> {
+    (0..=360).contains(&code).then_some(code % 360)
+}
+
 /// Whether a map's `direction` (long, tran, up, or an azimuth in degrees) is the record's
 /// orientation `code`; 0° and 360° are one azimuth.
 pub(crate) fn direction_matches(direction: &str, code: i64) -> bool {
     let want = direction.trim().to_ascii_lowercase();
     match azimuth(&want) {
-        Some(d) => (0..=360).contains(&code) && d % 360 == code % 360,
+        Some(d) => code_azimuth(code) == Some(d % 360),
         None => orientation_name(code) == Some(want.as_str()),
     }
 }

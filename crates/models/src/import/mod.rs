@@ -144,9 +144,8 @@ fn read_channel(
                     // The record gives an azimuth (older records do, and some later ones)
                     // where the map names an axis: which azimuth is the structure's transverse
                     // one only its user knows.
-                    let hint = if csmip::orientation_name(r.orientation).is_none()
+                    let hint = if csmip::code_azimuth(r.orientation).is_some()
                         && csmip::azimuth(&want).is_none()
-                        && (0..=360).contains(&r.orientation)
                     {
                         format!(
                             "; the record gives its sensor's azimuth, {}°, not an axis: \
