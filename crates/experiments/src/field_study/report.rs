@@ -23,7 +23,9 @@ pub(crate) struct Baseline {
     pub method: String,
     pub mdof_version: String,
     pub command: String,
-    pub best_order: usize,
+    /// The order of the largest mean fit on the training record; `null` where no order gave a
+    /// stable model.
+    pub best_order: Option<usize>,
     pub runs: Vec<BaselineRun>,
     /// On a one-storey record: the best linear one-storey model by output error (absent from
     /// baselines written before it, and on structures of more storeys).
@@ -87,7 +89,20 @@ impl Baseline {
             .with_context(|| format!("{}: not a baseline result", path.display()))
     }
     pub fn best(&self) -> Option<&BaselineRun> {
-        self.runs.iter().find(|r| r.order == self.best_order)
+        self.runs.iter().find(|r| Some(r.order) == self.best_order)
+    }
+    /// The baseline when none of its orders gave a stable model (every free run grows without
+    /// bound, so every fit is at least its): a result to state, not a missing one.
+    fn without_stable_model(&self) -> Option<&Self> {
+        self.best().is_none().then_some(self)
+    }
+    /// Its orders, as written in the report (`2, 4, 6`).
+    fn orders(&self) -> String {
+        self.runs
+            .iter()
+            .map(|r| r.order.to_string())
+            .collect::<Vec<_>>()
+            .join(", ")
     }
 }
 
@@ -241,6 +256,44 @@ fn versus(mine: Option<&[f64]>, theirs: Option<&[f64]>) -> (bool, String) {
             fit_cell_to(theirs, d)
         ),
     )
+}
+
+/// What the goals compare with: the baseline's best order, or none of its orders stable.
+#[derive(Clone, Copy)]
+struct Srim<'a> {
+    best: Option<&'a BaselineRun>,
+    /// No order of the baseline gave a stable model.
+    unstable: bool,
+}
+
+impl Srim<'_> {
+    /// [`versus`] the best order's fits on `record`. Against a baseline with no stable model
+    /// the goal is not resolved (`None`): its free run grows without bound, so any fit would
+    /// "beat" it, and that says nothing of ours.
+    fn versus(&self, mine: Option<&[f64]>, record: &str) -> (Option<bool>, String) {
+        match (self.best, self.unstable) {
+            (None, true) => (
+                None,
+                format!(
+                    "{} against no stable SRIM model (each order's free run grows without bound)",
+                    fit_cell(mine)
+                ),
+            ),
+            (best, _) => {
+                let (ok, text) = versus(mine, best.and_then(|b| b.fits_on(record)));
+                (Some(ok), text)
+            }
+        }
+    }
+}
+
+/// A goal's verdict: met, not met, or not resolved (nothing to decide it against).
+fn verdict(ok: Option<bool>) -> &'static str {
+    match ok {
+        Some(true) => "met",
+        Some(false) => "not met",
+        None => "not resolved",
+    }
 }
 
 /// 95 % interval of `name` in the record, if computed.
@@ -411,6 +464,7 @@ fn render_part(s: &mut String, part: &Part, out: &Path) -> Result<()> {
         train,
         validate: &validate,
         best,
+        unstable: baseline.as_ref().and_then(Baseline::without_stable_model),
         one_storey: baseline.as_ref().and_then(|b| b.one_storey.as_ref()),
     };
     identified(s, x)?;
@@ -432,6 +486,8 @@ struct Section<'a> {
     train: &'a str,
     validate: &'a [&'a str],
     best: Option<&'a BaselineRun>,
+    /// The baseline, where none of its orders gave a stable model.
+    unstable: Option<&'a Baseline>,
     /// The best one-storey model by output error, where the baseline has it.
     one_storey: Option<&'a OneStorey>,
 }
@@ -444,6 +500,7 @@ fn identified(s: &mut String, x: Section<'_>) -> Result<()> {
         dirs,
         train,
         best,
+        unstable,
         ..
     } = x;
     writeln!(s, "### Identified on `{train}`\n")?;
@@ -498,6 +555,14 @@ fn identified(s: &mut String, x: Section<'_>) -> Result<()> {
             fit_cell(b.fits_on(train)),
             b.seconds
         )?;
+    } else if let Some(b) = unstable {
+        writeln!(
+            s,
+            "| SRIM, orders {} (baseline) | black box: no stable model | — | — | — | — | — | \
+             unstable | | | | | {:.1} |",
+            b.orders(),
+            b.runs.iter().map(|r| r.seconds).sum::<f64>()
+        )?;
     }
     if let Some(first) = records.values().find_map(|r| r.modal.as_ref()) {
         let peaks: Vec<String> = first
@@ -545,6 +610,7 @@ fn cross_validation(s: &mut String, x: Section<'_>) -> Result<()> {
         train,
         validate,
         best,
+        unstable,
         ..
     } = x;
     if !validate.is_empty() {
@@ -576,6 +642,9 @@ fn cross_validation(s: &mut String, x: Section<'_>) -> Result<()> {
                 write!(s, " {} |", fit_cell(b.fits_on(r)))?;
             }
             writeln!(s)?;
+        } else if let Some(b) = unstable {
+            write!(s, "| SRIM, orders {} (baseline) |", b.orders())?;
+            writeln!(s, "{}", " unstable |".repeat(validate.len()))?;
         }
         writeln!(s)?;
     }
@@ -587,9 +656,18 @@ fn cross_validation(s: &mut String, x: Section<'_>) -> Result<()> {
 fn baseline_orders(s: &mut String, b: &Baseline, train: &str, validate: &[&str]) -> Result<()> {
     writeln!(
         s,
-        "### The baseline: {} (mdof {})\n\nTrained on `{train}`; the best order on `{train}` \
-         (largest mean fit) is the one compared above. Command: `{}`.\n",
-        b.method, b.mdof_version, b.command
+        "### The baseline: {} (mdof {})\n\nTrained on `{train}`; {} Command: `{}`.\n",
+        b.method,
+        b.mdof_version,
+        if b.best().is_some() {
+            format!("the best order on `{train}` (largest mean fit) is the one compared above.")
+        } else {
+            format!(
+                "no order gave a stable model on `{train}` (each free run grows without bound), \
+                 so the goals that compare with it are not resolved."
+            )
+        },
+        b.command
     )?;
     write!(s, "| order | modes Hz (ζ %) |")?;
     let names: Vec<&str> = std::iter::once(train)
@@ -629,6 +707,7 @@ fn selected_model(s: &mut String, x: Section<'_>) -> Result<()> {
         train,
         validate,
         best,
+        unstable,
         one_storey,
     } = x;
     let selected = select(part, dirs)?;
@@ -706,7 +785,11 @@ fn selected_model(s: &mut String, x: Section<'_>) -> Result<()> {
         band(s, dirs, chosen, r0, train, validate)?;
         // The goals compare with the baseline: only where the part has one.
         if part.baseline {
-            goals(s, part, dirs, chosen, r0, (best, one_storey), validate)?;
+            let srim = Srim {
+                best,
+                unstable: unstable.is_some(),
+            };
+            goals(s, part, dirs, chosen, r0, (srim, one_storey), validate)?;
         }
     }
     Ok(())
@@ -1069,7 +1152,7 @@ fn goals(
     dirs: &PartDirs,
     chosen: &super::Variant,
     r: &RunRecord,
-    (best, one_storey): (Option<&BaselineRun>, Option<&OneStorey>),
+    (srim, one_storey): (Srim<'_>, Option<&OneStorey>),
     validate: &[&str],
 ) -> Result<()> {
     let train = &part.identify_record().name;
@@ -1097,7 +1180,7 @@ fn goals(
             )
         })
     };
-    let (fit_ok, fit_text) = versus(fit.as_deref(), best.and_then(|b| b.fits_on(train)));
+    let (fit_ok, fit_text) = srim.versus(fit.as_deref(), train);
     let fit_text = format!("{fit_text}{}", alone(r.free_run.as_ref()));
     let pos = damping_positive(r) && outcome(r) == "ok";
     writeln!(
@@ -1107,8 +1190,8 @@ fn goals(
         if pos { "yes" } else { "no" },
         ["mode", "two modes", "three modes"][wanted - 1],
         if modes_ok { "yes" } else { "no" },
-        if pos && modes_ok && fit_ok {
-            "met"
+        if pos && modes_ok {
+            verdict(fit_ok)
         } else {
             "not met"
         }
@@ -1128,16 +1211,13 @@ fn goals(
     }
     for v in validate {
         let cv = cross(&dirs.validation(&chosen.name, v))?;
-        let (ok, text) = versus(
-            cv.as_ref().map(|c| fits(&c.free_run)).as_deref(),
-            best.and_then(|b| b.fits_on(v)),
-        );
+        let (ok, text) = srim.versus(cv.as_ref().map(|c| fits(&c.free_run)).as_deref(), v);
         let text = format!("{text}{}", alone(cv.as_ref().map(|c| &c.free_run)));
         writeln!(
             s,
             "- Cross-validation on `{v}`: fit of the `{train}` model against SRIM's `{train}` model: \
              {text}: **{}**.",
-            if ok { "met" } else { "not met" }
+            verdict(ok)
         )?;
     }
     writeln!(s)?;
@@ -1166,6 +1246,43 @@ mod tests {
         assert_eq!(o.fits_on("sine-1"), Some(&[-86.5][..]));
         assert_eq!(o.fits_on("elcentro"), None);
         assert_eq!(with.runs[0].fits_on("elcentro-1"), Some(&[61.4][..]));
+    }
+
+    #[test]
+    fn a_baseline_without_a_stable_order_is_a_result_the_goals_compare_with() {
+        let b: Baseline = serde_json::from_str(
+            r#"{"method": "SRIM", "mdof_version": "0.0.23", "command": "python srim.py",
+            "best_order": null, "runs": [{"order": 2, "fits": {"d/a": null, "d/b": null},
+            "modes": [], "seconds": 0.4}, {"order": 4, "fits": {"d/a": null, "d/b": null},
+            "modes": [], "seconds": 0.5}]}"#,
+        )
+        .unwrap();
+        assert!(b.best().is_none());
+        assert_eq!(b.orders(), "2, 4");
+        let srim = Srim {
+            best: b.best(),
+            unstable: b.without_stable_model().is_some(),
+        };
+        // Nothing to decide against: not resolved, and the text says why.
+        let (ok, text) = srim.versus(Some(&[7.4]), "a");
+        assert_eq!(ok, None);
+        assert!(
+            text.starts_with("7.4 against no stable SRIM model"),
+            "{text}"
+        );
+        assert_eq!(verdict(ok), "not resolved");
+        // A baseline with a stable order is compared as before.
+        let stable: Baseline = serde_json::from_str(&format!("{{{RUNS}}}")).unwrap();
+        assert!(stable.without_stable_model().is_none());
+        let srim = Srim {
+            best: stable.best(),
+            unstable: false,
+        };
+        assert_eq!(
+            srim.versus(Some(&[63.2]), "elcentro-1"),
+            (Some(true), "63.2 against 61.4".into())
+        );
+        assert_eq!(srim.versus(Some(&[60.0]), "elcentro-1").0, Some(false));
     }
 
     #[test]
