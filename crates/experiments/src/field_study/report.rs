@@ -12,6 +12,7 @@ use crate::error::{Context, Result};
 use serde::Deserialize;
 
 use super::{select, FieldStudy, Part, PartDirs};
+use identify::checks::{Warning, WarningKind};
 use identify::record::RunRecord;
 use identify::validation::cross::CrossValidation;
 use identify::validation::shapes::UNLIKE_MAC;
@@ -319,16 +320,33 @@ fn outcome(r: &RunRecord) -> String {
             r.steps_total
         );
     }
-    let fatal: Vec<&str> = r
-        .warnings
-        .iter()
-        .filter(|w| w.kind.is_fatal())
-        .filter_map(|w| w.parameter.as_deref())
-        .collect();
+    flagged(&r.warnings).unwrap_or_else(|| "ok".into())
+}
+
+/// What the warnings of a completed run say against it: a physically impossible value, or a
+/// parameter held at its bound 0 — possible by construction, but the data pushed it below zero,
+/// which is not an answer to read as "ok" (a stiffness of 0.004 where the prior said 36 is the
+/// model not fitting).
+fn flagged(warnings: &[Warning]) -> Option<String> {
+    let of = |kind: fn(WarningKind) -> bool| -> Vec<&str> {
+        warnings
+            .iter()
+            .filter(|w| kind(w.kind))
+            .filter_map(|w| w.parameter.as_deref())
+            .collect()
+    };
+    let fatal = of(WarningKind::is_fatal);
     if !fatal.is_empty() {
-        return format!("physically impossible ({})", fatal.join(", "));
+        return Some(format!("physically impossible ({})", fatal.join(", ")));
     }
-    "ok".into()
+    let at_bound = of(|k| k == WarningKind::AtBound);
+    (!at_bound.is_empty()).then(|| format!("held at its bound 0 ({})", at_bound.join(", ")))
+}
+
+/// Whether the run completed with a physically possible answer (a parameter held at its bound
+/// is possible; the report says so beside it).
+fn possible(r: &RunRecord) -> bool {
+    r.failure.is_none() && !r.warnings.iter().any(|w| w.kind.is_fatal())
 }
 
 fn modes_cell(m: Option<&ModalComparison>) -> String {
@@ -1182,7 +1200,7 @@ fn goals(
     };
     let (fit_ok, fit_text) = srim.versus(fit.as_deref(), train);
     let fit_text = format!("{fit_text}{}", alone(r.free_run.as_ref()));
-    let pos = damping_positive(r) && outcome(r) == "ok";
+    let pos = damping_positive(r) && possible(r);
     writeln!(
         s,
         "- On `{train}`: every damping positive ({}), the first {} within 1 % of the \
@@ -1283,6 +1301,29 @@ mod tests {
             (Some(true), "63.2 against 61.4".into())
         );
         assert_eq!(srim.versus(Some(&[60.0]), "elcentro-1").0, Some(false));
+    }
+
+    #[test]
+    fn a_parameter_held_at_its_bound_is_said_so_not_ok() {
+        let w = |kind, p: &str| Warning {
+            kind,
+            parameter: Some(p.into()),
+            message: String::new(),
+        };
+        assert_eq!(flagged(&[]), None);
+        assert_eq!(flagged(&[w(WarningKind::FewDistinct, "k1")]), None);
+        assert_eq!(
+            flagged(&[w(WarningKind::AtBound, "k1"), w(WarningKind::AtBound, "c1")]),
+            Some("held at its bound 0 (k1, c1)".into())
+        );
+        // An impossible value says more than a bound, and is what the cell says.
+        assert_eq!(
+            flagged(&[
+                w(WarningKind::AtBound, "k1"),
+                w(WarningKind::NonPositive, "c1")
+            ]),
+            Some("physically impossible (c1)".into())
+        );
     }
 
     #[test]
