@@ -3,7 +3,7 @@
 
 Usage: python3 data/real/convert.py SOURCE_DATA_DIR [MDOF_CHECKOUT]
 
-With MDOF_CHECKOUT (a checkout of chrystalchern/mdof at commit 4f0e831c) the four structures of
+With MDOF_CHECKOUT (a checkout of chrystalchern/mdof at commit 4f0e831c) the five structures of
 `unseen/` are made too, from its `notebooks/uploads` as they are there:
 
 - `unseen/stiff-one-storey/`: the Xsens exports of `mini_shake_table/Flexible vs. Stiff/Stiff 1
@@ -15,6 +15,8 @@ With MDOF_CHECKOUT (a checkout of chrystalchern/mdof at commit 4f0e831c) the fou
   4 (bent 4, bottom of column) and 10 (bent 4, deck level), kept as the V2 records above.
 - `unseen/ridgecrest/`: from five zipped CSMIP V2 sets of `ridgecrest/`, the transverse channels
   4 (bent 3, south column at ground level) and 7 (bent 3, deck level), kept as above.
+- `unseen/hayward/`: from eight zipped CSMIP V2 sets of `hayward/`, the transverse channels 18
+  (bent 4, north column at ground level) and 20 (bent 4, north column top), kept as above.
 
 - Shake table (Xsens DOT CSV exports): the seven header lines and the column-name line are
   kept; of the columns only SampleTimeFine (sensor clock, µs) and Acc_X (the shaking axis,
@@ -89,6 +91,19 @@ RIDGECREST_EVENTS = {
     "lone-pine-2020-06-24": "ci39493944_ce33742p.zip",
 }
 RIDGECREST_CHANNELS = [4, 7]
+# The Hayward bridge's sets of 2021-22 name their files in lower case (`chan018.v2`); the
+# preliminary processing names no earthquake, so the records are named by their date.
+HAYWARD_EVENTS = {
+    "berkeley-2018-01-04": "berkeley_04jan2018_72948801_ce58658p.zip",
+    "2021-04-26": "58658_007_20210426_10.09.54.P.zip",
+    "2021-06-23": "58658_002_20210623_17.15.07.P.zip",
+    "2021-07-23": "58658_004_20210723_08.59.25.P.zip",
+    "2021-08-03": "58658_005_20210803_12.52.01.P.zip",
+    "2021-10-02": "58658_003_20211002_12.22.00.P.zip",
+    "2021-10-07": "58658_005_20211007_11.51.59.P.zip",
+    "2022-02-15": "58658_014_20220215_12.01.04.P.zip",
+}
+HAYWARD_CHANNELS = [18, 20]
 
 
 def compact_xsens(path, dst):
@@ -137,13 +152,16 @@ def unseen(mdof):
         ("meloland", MELOLAND_OLDER_EVENTS, MELOLAND_CHANNELS, "meloland"),
         ("capistrano", CAPISTRANO_EVENTS, CAPISTRANO_CHANNELS, "capistrano"),
         ("ridgecrest", RIDGECREST_EVENTS, RIDGECREST_CHANNELS, "ridgecrest"),
+        ("hayward", HAYWARD_EVENTS, HAYWARD_CHANNELS, "hayward"),
     ]:
         for event, zname in events.items():
             with zipfile.ZipFile(os.path.join(up, folder, zname)) as z:
                 for c in channels:
                     name = "CHAN%03d.V2" % c
-                    # The 1979 set names its channels with two digits (`CHAN07.V2`).
-                    member = name if name in z.namelist() else "CHAN%02d.V2" % c
+                    # The 1979 set names its channels with two digits (`CHAN07.V2`), the
+                    # Hayward sets of 2021-22 in lower case (`chan018.v2`).
+                    by_upper = {n.upper(): n for n in z.namelist()}
+                    member = by_upper.get(name) or by_upper["CHAN%02d.V2" % c]
                     dst = os.path.join(HERE, "unseen", out, event, name)
                     os.makedirs(os.path.dirname(dst), exist_ok=True)
                     with open(dst, "wb") as f:
