@@ -230,6 +230,10 @@ struct Row {
     held_fit: Vec<f64>,
     coverage: Vec<f64>,
     srim: Option<(i64, Vec<f64>, Vec<f64>)>,
+    /// SRIM was computed and no order gave a stable model (`best_order` null): the goal that
+    /// compares with it is not resolved on this case.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    srim_unstable: bool,
     ground: Vec<f64>,
     truth: Vec<f64>,
     /// The held-out record's fit of the building alone (without the discrepancy term).
@@ -320,7 +324,11 @@ fn row(out: &Path, entry: &Value) -> Result<Row> {
                 .collect()
         })
         .unwrap_or_default();
-    let srim = match read_json(&dir.join("srim.json")) {
+    let srim_json = read_json(&dir.join("srim.json")).ok();
+    let srim_unstable = srim_json
+        .as_ref()
+        .is_some_and(|s| s["best_order"].is_null());
+    let srim = match srim_json.filter(|_| !srim_unstable).ok_or(()) {
         Ok(s) => {
             let best = s["best_order"].as_i64().unwrap_or(0);
             let run = s["runs"]
@@ -337,7 +345,7 @@ fn row(out: &Path, entry: &Value) -> Result<Row> {
             };
             Some((best, pick("/identify"), pick("/held-out")))
         }
-        Err(_) => None,
+        Err(()) => None,
     };
     Ok(Row {
         about: entry["about"].as_str().unwrap_or("").to_string(),
@@ -347,6 +355,7 @@ fn row(out: &Path, entry: &Value) -> Result<Row> {
         held_fit: channel_fits(&held),
         coverage,
         srim,
+        srim_unstable,
         ground: floats(&entry["held-out"]["ground_fit"]),
         truth: floats(&entry["held-out"]["truth_fit"]),
         held_building,
@@ -409,6 +418,7 @@ fn report(out: &Path) -> Result<String> {
     for r in &rows {
         let (so, sid) = match &r.srim {
             Some((o, a, b)) => (format!("{} ({o})", list(a)), list(b)),
+            None if r.srim_unstable => ("no stable model".into(), "no stable model".into()),
             None => ("not computed".into(), "not computed".into()),
         };
         writeln!(
@@ -478,7 +488,20 @@ fn verdicts(s: &mut String, rows: &[Row]) -> Result<()> {
          of {n} cases."
     )?;
     let with_srim: Vec<&Row> = rows.iter().filter(|r| r.srim.is_some()).collect();
-    if with_srim.is_empty() {
+    // A case where SRIM has no stable model has nothing to compare with: not resolved there,
+    // and not counted either way.
+    let unstable = rows.iter().filter(|r| r.srim_unstable).count();
+    let unresolved = if unstable > 0 {
+        format!(" ({unstable} case(s) where SRIM has no stable model: not resolved, not counted)")
+    } else {
+        String::new()
+    };
+    if with_srim.is_empty() && unstable > 0 {
+        writeln!(
+            s,
+            "- **At least SRIM's held-out fit on ≥ 80 % of cases**: not resolved{unresolved}."
+        )?;
+    } else if with_srim.is_empty() {
         writeln!(s, "- **At least SRIM's held-out fit on ≥ 80 % of cases**: not resolved (SRIM not computed: pass `--python`).")?;
     } else {
         let at_least = with_srim
@@ -493,7 +516,7 @@ fn verdicts(s: &mut String, rows: &[Row]) -> Result<()> {
             s,
             "- **At least SRIM's held-out fit on ≥ 80 % of cases** (the mean over floors of the \
              free-run fit on the held-out record, against SRIM's best order's): {} — {at_least} of \
-             {} cases ({share:.0} %).",
+             {} cases ({share:.0} %){unresolved}.",
             if share >= 80.0 {
                 "holds"
             } else {
@@ -559,6 +582,36 @@ fn verdicts(s: &mut String, rows: &[Row]) -> Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    fn case(held: f64, srim: Value, unstable: bool) -> Row {
+        serde_json::from_value(json!({
+            "case": "c", "about": "", "exit": 0, "physical": true, "id_fit": [held],
+            "held_fit": [held], "coverage": [95.0], "srim": srim, "srim_unstable": unstable,
+            "ground": [0.0], "truth": [99.0]
+        }))
+        .unwrap()
+    }
+
+    #[test]
+    fn a_case_where_srim_has_no_stable_model_is_not_counted_against_either() {
+        let rows = [
+            case(50.0, json!([2, [40.0], [40.0]]), false),
+            case(10.0, Value::Null, true),
+        ];
+        let mut s = String::new();
+        verdicts(&mut s, &rows).unwrap();
+        assert!(
+            s.contains("holds — 1 of 1 cases (100 %) (1 case(s) where SRIM has no stable model"),
+            "{s}"
+        );
+        // Only unstable cases: the goal is not resolved.
+        let mut s = String::new();
+        verdicts(&mut s, &rows[1..]).unwrap();
+        assert!(s.contains("cases**: not resolved (1 case(s)"), "{s}");
+        // The flag is written only where it is set: summaries of stable cases keep their bytes.
+        let stable = serde_json::to_value(&rows[0]).unwrap();
+        assert!(stable.get("srim_unstable").is_none());
+    }
 
     #[test]
     fn peaks_apart_are_counted_in_resolutions_and_skip_a_peak_of_another_shape() {
