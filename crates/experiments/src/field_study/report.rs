@@ -67,6 +67,10 @@ pub(crate) struct BaselineRun {
     pub fits: BTreeMap<String, Option<Vec<f64>>>,
     pub modes: Vec<BaselineMode>,
     pub seconds: f64,
+    /// Why the method failed at this order on these data (a record shorter than its horizon);
+    /// absent where it ran.
+    #[serde(default)]
+    pub error: Option<String>,
 }
 
 #[derive(Debug, Clone, Deserialize)]
@@ -681,8 +685,9 @@ fn baseline_orders(s: &mut String, b: &Baseline, train: &str, validate: &[&str])
             format!("the best order on `{train}` (largest mean fit) is the one compared above.")
         } else {
             format!(
-                "no order gave a stable model on `{train}` (each free run grows without bound), \
-                 so the goals that compare with it are not resolved."
+                "no order gave a stable model on `{train}` (each free run grows without bound, or \
+                 the method failed on the record), so the goals that compare with it are not \
+                 resolved."
             )
         },
         b.command
@@ -701,13 +706,21 @@ fn baseline_orders(s: &mut String, b: &Baseline, train: &str, validate: &[&str])
             .iter()
             .map(|m| format!("{:.2} ({:.2})", m.frequency_hz, 100.0 * m.damping_ratio))
             .collect();
-        write!(s, "| {} | {} |", r.order, modes.join(", "))?;
+        let modes = match &r.error {
+            Some(e) => format!("failed: {}", e.replace('|', "/")),
+            None => modes.join(", "),
+        };
+        write!(s, "| {} | {modes} |", r.order)?;
+        let missing = if r.error.is_some() {
+            "failed"
+        } else {
+            "unstable"
+        };
         for n in &names {
             write!(
                 s,
                 " {} |",
-                r.fits_on(n)
-                    .map_or("unstable".into(), |f| fit_cell(Some(f)))
+                r.fits_on(n).map_or(missing.into(), |f| fit_cell(Some(f)))
             )?;
         }
         writeln!(s, " {:.1} |", r.seconds)?;
@@ -1272,11 +1285,19 @@ mod tests {
             r#"{"method": "SRIM", "mdof_version": "0.0.23", "command": "python srim.py",
             "best_order": null, "runs": [{"order": 2, "fits": {"d/a": null, "d/b": null},
             "modes": [], "seconds": 0.4}, {"order": 4, "fits": {"d/a": null, "d/b": null},
-            "modes": [], "seconds": 0.5}]}"#,
+            "modes": [], "seconds": 0.5, "error": "ValueError: negative dimensions"}]}"#,
         )
         .unwrap();
         assert!(b.best().is_none());
         assert_eq!(b.orders(), "2, 4");
+        // An order the method failed on says so, and why, in the baseline's table.
+        let mut table = String::new();
+        baseline_orders(&mut table, &b, "a", &["b"]).unwrap();
+        assert!(table.contains("| 2 |  | unstable | unstable |"), "{table}");
+        assert!(
+            table.contains("| 4 | failed: ValueError: negative dimensions | failed | failed |"),
+            "{table}"
+        );
         let srim = Srim {
             best: b.best(),
             unstable: b.without_stable_model().is_some(),
