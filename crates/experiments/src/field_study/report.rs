@@ -96,8 +96,8 @@ impl Baseline {
     pub fn best(&self) -> Option<&BaselineRun> {
         self.runs.iter().find(|r| Some(r.order) == self.best_order)
     }
-    /// The baseline when none of its orders gave a stable model (every free run grows without
-    /// bound, so every fit is at least its): a result to state, not a missing one.
+    /// The baseline when none of its orders gave a stable model (each free run grows without
+    /// bound, or the method failed on the record): a result to state, not a missing one.
     fn without_stable_model(&self) -> Option<&Self> {
         self.best().is_none().then_some(self)
     }
@@ -581,7 +581,7 @@ fn identified(s: &mut String, x: Section<'_>) -> Result<()> {
         writeln!(
             s,
             "| SRIM, orders {} (baseline) | black box: no stable model | — | — | — | — | — | \
-             unstable | | | | | {:.1} |",
+             — | | | | | {:.1} |",
             b.orders(),
             b.runs.iter().map(|r| r.seconds).sum::<f64>()
         )?;
@@ -666,7 +666,7 @@ fn cross_validation(s: &mut String, x: Section<'_>) -> Result<()> {
             writeln!(s)?;
         } else if let Some(b) = unstable {
             write!(s, "| SRIM, orders {} (baseline) |", b.orders())?;
-            writeln!(s, "{}", " unstable |".repeat(validate.len()))?;
+            writeln!(s, "{}", " no stable model |".repeat(validate.len()))?;
         }
         writeln!(s)?;
     }
@@ -684,10 +684,15 @@ fn baseline_orders(s: &mut String, b: &Baseline, train: &str, validate: &[&str])
         if b.best().is_some() {
             format!("the best order on `{train}` (largest mean fit) is the one compared above.")
         } else {
+            let failed = b.runs.iter().filter(|r| r.error.is_some()).count();
+            let why = match failed {
+                0 => "each free run grows without bound",
+                n if n == b.runs.len() => "the method failed on the record at every order",
+                _ => "each free run grows without bound where the method did not fail",
+            };
             format!(
-                "no order gave a stable model on `{train}` (each free run grows without bound, or \
-                 the method failed on the record), so the goals that compare with it are not \
-                 resolved."
+                "no order gave a stable model on `{train}` ({why}), so the goals that compare \
+                 with it are not resolved."
             )
         },
         b.command
@@ -1296,6 +1301,10 @@ mod tests {
         assert!(table.contains("| 2 |  | unstable | unstable |"), "{table}");
         assert!(
             table.contains("| 4 | failed: ValueError: negative dimensions | failed | failed |"),
+            "{table}"
+        );
+        assert!(
+            table.contains("(each free run grows without bound where the method did not fail)"),
             "{table}"
         );
         let srim = Srim {
