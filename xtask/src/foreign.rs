@@ -328,25 +328,23 @@ fn row(out: &Path, entry: &Value) -> Result<Row> {
     let srim_unstable = srim_json
         .as_ref()
         .is_some_and(|s| s["best_order"].is_null());
-    let srim = match srim_json.filter(|_| !srim_unstable).ok_or(()) {
-        Ok(s) => {
-            let best = s["best_order"].as_i64().unwrap_or(0);
-            let run = s["runs"]
-                .as_array()
-                .and_then(|r| r.iter().find(|r| r["order"].as_i64() == Some(best)))
-                .cloned()
-                .unwrap_or(Value::Null);
-            let fits = run["fits"].as_object().cloned().unwrap_or_default();
-            let pick = |suffix: &str| {
-                fits.iter()
-                    .find(|(k, _)| k.ends_with(suffix))
-                    .map(|(_, v)| floats(v))
-                    .unwrap_or_default()
-            };
-            Some((best, pick("/identify"), pick("/held-out")))
-        }
-        Err(()) => None,
-    };
+    // A baseline with no stable order has no best order's fits to read (`srim_unstable`).
+    let srim = srim_json.filter(|_| !srim_unstable).map(|s| {
+        let best = s["best_order"].as_i64().unwrap_or(0);
+        let run = s["runs"]
+            .as_array()
+            .and_then(|r| r.iter().find(|r| r["order"].as_i64() == Some(best)))
+            .cloned()
+            .unwrap_or(Value::Null);
+        let fits = run["fits"].as_object().cloned().unwrap_or_default();
+        let pick = |suffix: &str| {
+            fits.iter()
+                .find(|(k, _)| k.ends_with(suffix))
+                .map(|(_, v)| floats(v))
+                .unwrap_or_default()
+        };
+        (best, pick("/identify"), pick("/held-out"))
+    });
     Ok(Row {
         about: entry["about"].as_str().unwrap_or("").to_string(),
         exit,
