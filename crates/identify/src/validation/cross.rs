@@ -181,6 +181,11 @@ pub fn cross_validate(
                     data_dir.display(),
                     names.join(", ")
                 ));
+            } else {
+                let (_, left) = super::discrepancy::within_band(dd, data.dt);
+                if !left.is_empty() {
+                    note(&super::discrepancy::left_out_note(&left, data.dt));
+                }
             }
             super::DiscrepancyUse::Given(dd)
         }

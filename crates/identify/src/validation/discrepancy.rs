@@ -102,6 +102,46 @@ pub fn held_out_fits(
         .collect()
 }
 
+/// The part of `d` a record sampled at `dt` can hold, and what it cannot: the modes above
+/// [`highest_hz`] of that record (80 % of its Nyquist frequency, the bound the search itself
+/// keeps to) are left out. A mode found on a record sampled faster can lie above another
+/// record's Nyquist frequency; simulated there it would ring at its alias (a mode at 80 Hz on a
+/// record of 100 Hz rings at 20 Hz), something the mode never was. The record's data hold
+/// nothing of it to check either.
+pub fn within_band(d: &Discrepancy, dt: f64) -> (Discrepancy, Vec<DiscrepancyMode>) {
+    let limit = highest_hz(dt);
+    let keep: Vec<usize> = (0..d.modes.len())
+        .filter(|&m| d.modes[m].frequency_hz <= limit)
+        .collect();
+    let left = (0..d.modes.len())
+        .filter(|m| !keep.contains(m))
+        .map(|m| d.modes[m])
+        .collect();
+    let kept = Discrepancy {
+        channels: d.channels.clone(),
+        modes: keep.iter().map(|&m| d.modes[m]).collect(),
+        coefficients: d
+            .coefficients
+            .iter()
+            .map(|row| keep.iter().map(|&m| row[m]).collect())
+            .collect(),
+    };
+    (kept, left)
+}
+
+/// Why the modes `left` are left out on a record sampled at `dt` ([`within_band`]).
+pub fn left_out_note(left: &[DiscrepancyMode], dt: f64) -> String {
+    format!(
+        "the discrepancy mode(s) at {} Hz lie above 80 % of this record's Nyquist frequency \
+         ({:.1} Hz), where its samples hold nothing of them: left out",
+        left.iter()
+            .map(|m| format!("{:.2}", m.frequency_hz))
+            .collect::<Vec<_>>()
+            .join(", "),
+        highest_hz(dt)
+    )
+}
+
 /// The discrepancy's contribution to each of its channels under `ug`.
 pub fn contribution(d: &Discrepancy, ug: &[f64], dt: f64) -> Vec<Vec<f64>> {
     let mut out = vec![vec![0.0; ug.len()]; d.channels.len()];
@@ -678,5 +718,61 @@ mod tests {
         let names = vec!["a1".to_string(), "a2".to_string()];
         let choice = choose(&SEARCH, &names, &measured, &simulated, &ug, dt, 2500).unwrap();
         assert_eq!(choice.chosen, 0, "{choice:?}");
+    }
+
+    #[test]
+    fn a_mode_above_a_records_band_is_left_out_there_and_the_rest_kept_in_order() {
+        let mode = |f: f64, z: f64| DiscrepancyMode {
+            frequency_hz: f,
+            damping_ratio: z,
+        };
+        // Found on a record of 200 Hz: the search's bound is 80 Hz, which it may reach.
+        let d = Discrepancy {
+            channels: vec!["a1".into(), "a2".into()],
+            modes: vec![mode(6.14, 0.026), mode(80.0, 0.0005), mode(30.0, 0.01)],
+            coefficients: vec![
+                vec![[0.36, 0.01], [-1.19, -4.31], [0.2, 0.3]],
+                vec![[1.0, 2.0], [3.0, 4.0], [5.0, 6.0]],
+            ],
+        };
+        // On a record of 200 Hz every mode is kept as it is.
+        let (same, none) = within_band(&d, 0.005);
+        assert_eq!(same, d);
+        assert!(none.is_empty());
+        // On one of 100 Hz (bound 40 Hz) the 80 Hz mode would ring at its 20 Hz alias: out.
+        let (kept, left) = within_band(&d, 0.01);
+        assert_eq!(kept.channels, d.channels);
+        assert_eq!(kept.modes, vec![mode(6.14, 0.026), mode(30.0, 0.01)]);
+        assert_eq!(
+            kept.coefficients,
+            vec![vec![[0.36, 0.01], [0.2, 0.3]], vec![[1.0, 2.0], [5.0, 6.0]]]
+        );
+        assert_eq!(left, vec![mode(80.0, 0.0005)]);
+        let note = left_out_note(&left, 0.01);
+        assert!(
+            note.contains("80.00 Hz") && note.contains("(40.0 Hz)"),
+            "{note}"
+        );
+        // Nothing else changed: the whole term's contribution is the kept part's plus the left
+        // mode's, each with its own coefficients.
+        let ug = ground(2000, 0.01);
+        let full = contribution(&d, &ug, 0.01);
+        let part = contribution(&kept, &ug, 0.01);
+        let alone = contribution(
+            &Discrepancy {
+                channels: d.channels.clone(),
+                modes: left.clone(),
+                coefficients: vec![vec![[-1.19, -4.31]], vec![[3.0, 4.0]]],
+            },
+            &ug,
+            0.01,
+        );
+        for c in 0..2 {
+            for k in 0..ug.len() {
+                assert!(
+                    (full[c][k] - part[c][k] - alone[c][k]).abs() < 1e-9 * (1.0 + full[c][k].abs())
+                );
+            }
+        }
     }
 }

@@ -215,7 +215,11 @@ fn discrepancy_of(
             None,
         ),
         DiscrepancyUse::Given(dd) if dd.modes.is_empty() => (None, None),
-        DiscrepancyUse::Given(dd) if dd.channels == names => (Some(dd.clone()), None),
+        DiscrepancyUse::Given(dd) if dd.channels == names => {
+            let (kept, left) = discrepancy::within_band(dd, data.dt);
+            let note = (!left.is_empty()).then(|| discrepancy::left_out_note(&left, data.dt));
+            ((!kept.modes.is_empty()).then_some(kept), note)
+        }
         DiscrepancyUse::Given(dd) => (
             None,
             Some(format!(
