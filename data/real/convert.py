@@ -3,7 +3,7 @@
 
 Usage: python3 data/real/convert.py SOURCE_DATA_DIR [MDOF_CHECKOUT]
 
-With MDOF_CHECKOUT (a checkout of chrystalchern/mdof at commit 4f0e831c) the five structures of
+With MDOF_CHECKOUT (a checkout of chrystalchern/mdof at commit 4f0e831c) the six structures of
 `unseen/` are made too, from its `notebooks/uploads` as they are there:
 
 - `unseen/stiff-one-storey/`: the Xsens exports of `mini_shake_table/Flexible vs. Stiff/Stiff 1
@@ -17,6 +17,8 @@ With MDOF_CHECKOUT (a checkout of chrystalchern/mdof at commit 4f0e831c) the fiv
   4 (bent 3, south column at ground level) and 7 (bent 3, deck level), kept as above.
 - `unseen/hayward/`: from eight zipped CSMIP V2 sets of `hayward/`, the transverse channels 18
   (bent 4, north column at ground level) and 20 (bent 4, north column top), kept as above.
+- `unseen/crowley/`: from four zipped CSMIP V2 sets of `crowley/`, the transverse channels 4
+  (centre bent, column at ground level) and 7 (centre bent, deck level), kept as above.
 
 - Shake table (Xsens DOT CSV exports): the seven header lines and the column-name line are
   kept; of the columns only SampleTimeFine (sensor clock, µs) and Acc_X (the shaking axis,
@@ -104,6 +106,15 @@ HAYWARD_EVENTS = {
     "2022-02-15": "58658_014_20220215_12.01.04.P.zip",
 }
 HAYWARD_CHANNELS = [18, 20]
+# Lake Crowley's two sets of 2004-09-18 are two earthquakes 41 minutes apart (the second set's
+# name says `event2`); its fifth set in the source (Tom's Place 2008) is not in the checkout.
+CROWLEY_EVENTS = {
+    "qualeys-camp-2004-09-18-a": "QualeysCamp_18Sep2004_CE54730.ZIP",
+    "qualeys-camp-2004-09-18-b": "QualeysCamp_18Sep2004_event2_CE54730.ZIP",
+    "toms-place-2006-11-26": "tomsplace_26nov2006_ce54730p.zip",
+    "mammoth-lakes-2007-06-12": "mammothlakes_12jun2007_ce54730p.zip",
+}
+CROWLEY_CHANNELS = [4, 7]
 
 
 def compact_xsens(path, dst):
@@ -153,13 +164,14 @@ def unseen(mdof):
         ("capistrano", CAPISTRANO_EVENTS, CAPISTRANO_CHANNELS, "capistrano"),
         ("ridgecrest", RIDGECREST_EVENTS, RIDGECREST_CHANNELS, "ridgecrest"),
         ("hayward", HAYWARD_EVENTS, HAYWARD_CHANNELS, "hayward"),
+        ("crowley", CROWLEY_EVENTS, CROWLEY_CHANNELS, "crowley"),
     ]:
         for event, zname in events.items():
             with zipfile.ZipFile(os.path.join(up, folder, zname)) as z:
                 for c in channels:
                     name = "CHAN%03d.V2" % c
-                    # The 1979 set names its channels with two digits (`CHAN07.V2`), the
-                    # Hayward sets of 2021-22 in lower case (`chan018.v2`).
+                    # The 1979 and Lake Crowley 2004 sets name their channels with two digits
+                    # (`CHAN07.V2`), the Hayward sets of 2021-22 in lower case (`chan018.v2`).
                     by_upper = {n.upper(): n for n in z.namelist()}
                     member = by_upper.get(name) or by_upper["CHAN%02d.V2" % c]
                     dst = os.path.join(HERE, "unseen", out, event, name)
