@@ -182,9 +182,9 @@ pub fn cross_validate(
                     names.join(", ")
                 ));
             } else {
-                let (_, left) = super::discrepancy::within_band(dd, data.dt);
-                if !left.is_empty() {
-                    note(&super::discrepancy::left_out_note(&left, data.dt));
+                let above = super::discrepancy::above_band(dd, data.dt);
+                if !above.is_empty() {
+                    note(&super::discrepancy::above_band_note(&above, data.dt));
                 }
             }
             super::DiscrepancyUse::Given(dd)

@@ -216,9 +216,9 @@ fn discrepancy_of(
         ),
         DiscrepancyUse::Given(dd) if dd.modes.is_empty() => (None, None),
         DiscrepancyUse::Given(dd) if dd.channels == names => {
-            let (kept, left) = discrepancy::within_band(dd, data.dt);
-            let note = (!left.is_empty()).then(|| discrepancy::left_out_note(&left, data.dt));
-            ((!kept.modes.is_empty()).then_some(kept), note)
+            let above = discrepancy::above_band(dd, data.dt);
+            let note = (!above.is_empty()).then(|| discrepancy::above_band_note(&above, data.dt));
+            (Some(dd.clone()), note)
         }
         DiscrepancyUse::Given(dd) => (
             None,
