@@ -267,8 +267,8 @@ fn versus(mine: Option<&[f64]>, theirs: Option<&[f64]>) -> (bool, String) {
 #[derive(Clone, Copy)]
 struct Srim<'a> {
     best: Option<&'a BaselineRun>,
-    /// No order of the baseline gave a stable model.
-    unstable: bool,
+    /// The baseline, where none of its orders gave a stable model (as the part's section holds it).
+    unstable: Option<&'a Baseline>,
 }
 
 impl Srim<'_> {
@@ -277,7 +277,7 @@ impl Srim<'_> {
     /// "beat" it, and that says nothing of ours.
     fn versus(&self, mine: Option<&[f64]>, record: &str) -> (Option<bool>, String) {
         match (self.best, self.unstable) {
-            (None, true) => (
+            (None, Some(_)) => (
                 None,
                 format!(
                     "{} against no stable SRIM model (each order's free run grows without bound)",
@@ -821,10 +821,7 @@ fn selected_model(s: &mut String, x: Section<'_>) -> Result<()> {
         band(s, dirs, chosen, r0, train, validate)?;
         // The goals compare with the baseline: only where the part has one.
         if part.baseline {
-            let srim = Srim {
-                best,
-                unstable: unstable.is_some(),
-            };
+            let srim = Srim { best, unstable };
             goals(s, part, dirs, chosen, r0, (srim, one_storey), validate)?;
         }
     }
@@ -1309,7 +1306,7 @@ mod tests {
         );
         let srim = Srim {
             best: b.best(),
-            unstable: b.without_stable_model().is_some(),
+            unstable: b.without_stable_model(),
         };
         // Nothing to decide against: not resolved, and the text says why.
         let (ok, text) = srim.versus(Some(&[7.4]), "a");
@@ -1324,7 +1321,7 @@ mod tests {
         assert!(stable.without_stable_model().is_none());
         let srim = Srim {
             best: stable.best(),
-            unstable: false,
+            unstable: None,
         };
         assert_eq!(
             srim.versus(Some(&[63.2]), "elcentro-1"),
