@@ -792,10 +792,10 @@ mod tests {
             let e: Vec<f64> = v.iter().zip(&reference).map(|(a, b)| a - b).collect();
             rms(&e) / rms(&reference)
         };
-        // On the slower record: the same prediction at its samples (the band-limited
-        // reconstruction of the slow record is the fast one to 1e-5 here), where stepping the
-        // mode at the slow rate rings at its 20 Hz alias and misses by more than the prediction
-        // itself.
+        // On the slower record: the same prediction at its samples (measured 6.4e-4 RMS; the
+        // band-limited reconstruction of the slow record is the fast one to 2e-5 RMS here),
+        // where stepping the mode at the slow rate rings at its 20 Hz alias and misses by more
+        // than the prediction itself (measured 47 times).
         let slow_dt = 2.0 * fine_dt;
         let now = contribution(&high, &slow, slow_dt);
         assert!(off(&now[0]) < 1e-3, "{}", off(&now[0]));
