@@ -109,8 +109,8 @@ fn points_per_sample(f_hz: f64, dt: f64) -> usize {
     (f_hz / highest_hz(dt)).ceil().max(1.0) as usize
 }
 
-/// The modes of `d` above [`highest_hz`] of a record sampled at `dt`: possible on a record
-/// sampled more slowly than the one they were found on.
+/// The modes of `d` above 80 % of the Nyquist frequency of a record sampled at `dt` (the search's
+/// own bound): possible on a record sampled more slowly than the one they were found on.
 pub fn above_band(d: &Discrepancy, dt: f64) -> Vec<DiscrepancyMode> {
     d.modes
         .iter()
@@ -139,7 +139,8 @@ pub fn above_band_note(above: &[DiscrepancyMode], dt: f64) -> String {
 /// A mode above the record's band — found on a record sampled faster — is what it was there: a
 /// transfer function of the ground motion, whose motion between this record's samples is the
 /// band-limited one (`models::ground_between`). Its basis is simulated on that reconstruction,
-/// [`points_per_sample`] points per sample, and read at the samples. Stepped at the record's own
+/// with as many points per sample as bring the mode within the search's bound, and read at the
+/// samples. Stepped at the record's own
 /// rate instead, a lightly damped mode above the Nyquist frequency resonates with the images of
 /// the input's content that the linear input between samples carries (80 Hz on a record of
 /// 100 Hz: with the image of its 20 Hz content) and rings at its alias: on the Lake Crowley bent
