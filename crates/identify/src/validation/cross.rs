@@ -181,11 +181,8 @@ pub fn cross_validate(
                     data_dir.display(),
                     names.join(", ")
                 ));
-            } else {
-                let above = super::discrepancy::above_band(dd, data.dt);
-                if !above.is_empty() {
-                    note(&super::discrepancy::above_band_note(&above, data.dt));
-                }
+            } else if let Some(n) = super::discrepancy::above_band_note(dd, data.dt) {
+                note(&n);
             }
             super::DiscrepancyUse::Given(dd)
         }

@@ -216,9 +216,7 @@ fn discrepancy_of(
         ),
         DiscrepancyUse::Given(dd) if dd.modes.is_empty() => (None, None),
         DiscrepancyUse::Given(dd) if dd.channels == names => {
-            let above = discrepancy::above_band(dd, data.dt);
-            let note = (!above.is_empty()).then(|| discrepancy::above_band_note(&above, data.dt));
-            (Some(dd.clone()), note)
+            (Some(dd.clone()), discrepancy::above_band_note(dd, data.dt))
         }
         DiscrepancyUse::Given(dd) => (
             None,
