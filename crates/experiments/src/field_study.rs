@@ -21,7 +21,9 @@ use std::process::Command;
 use crate::console::Console;
 
 use crate::error::{bail, Context, Result};
+use identify::record::fingerprint::hex;
 use serde::Deserialize;
+use sha2::{Digest, Sha256};
 
 use identify::pipeline::Algorithm;
 use identify::record::RunRecord;
@@ -680,6 +682,138 @@ fn kept_figures_redrawn(step: &Step) -> bool {
     }
 }
 
+/// SHA-256 of the running program's file: a step's output kept on resume was computed by this
+/// very build ([`inputs_digest`]). A program file that cannot be read gives a digest no earlier
+/// one matches, so nothing is kept rather than something of another build.
+fn this_binary() -> String {
+    match std::env::current_exe().and_then(std::fs::read) {
+        Ok(bytes) => hex(&Sha256::digest(&bytes)),
+        Err(e) => {
+            log::info!("the program's own file cannot be read ({e}): --resume keeps nothing");
+            format!("unreadable-{}", std::process::id())
+        }
+    }
+}
+
+/// The files a step's command reads, from its arguments: every file of a `--data` directory,
+/// the `--record`, `--config` and `--map` files, and the files a map names (its `file` values,
+/// relative to the map) — the bytes its output is computed from.
+fn inputs_of(step: &Step) -> Result<Vec<PathBuf>> {
+    let mut files = Vec::new();
+    for pair in step.args.windows(2) {
+        let path = Path::new(&pair[1]);
+        match pair[0].as_str() {
+            "--data" if path.is_dir() => {
+                let mut in_dir: Vec<PathBuf> = std::fs::read_dir(path)
+                    .with_context(|| format!("reading {}", path.display()))?
+                    .flatten()
+                    .map(|e| e.path())
+                    .filter(|p| p.is_file())
+                    .collect();
+                in_dir.sort();
+                files.extend(in_dir);
+            }
+            "--record" | "--config" | "--data" => files.push(path.to_path_buf()),
+            "--map" => {
+                files.push(path.to_path_buf());
+                files.extend(files_named_by_map(path));
+            }
+            _ => {}
+        }
+    }
+    Ok(files)
+}
+
+/// The `file` values of a map (at any depth), relative to its directory; none when the map does
+/// not read as TOML (the import then says why).
+fn files_named_by_map(map: &Path) -> Vec<PathBuf> {
+    fn walk(v: &toml::Value, out: &mut Vec<String>) {
+        match v {
+            toml::Value::Table(t) => {
+                for (k, v) in t {
+                    match v {
+                        toml::Value::String(s) if k == "file" => out.push(s.clone()),
+                        _ => walk(v, out),
+                    }
+                }
+            }
+            toml::Value::Array(a) => a.iter().for_each(|v| walk(v, out)),
+            _ => {}
+        }
+    }
+    let Some(value) = std::fs::read_to_string(map)
+        .ok()
+        .and_then(|t| t.parse::<toml::Value>().ok())
+    else {
+        return Vec::new();
+    };
+    let mut names = Vec::new();
+    walk(&value, &mut names);
+    let base = map.parent().unwrap_or(Path::new(""));
+    names.into_iter().map(|n| base.join(n)).collect()
+}
+
+/// What a step's output is computed from, as one SHA-256: the program (`binary`, from
+/// [`this_binary`]), the command's arguments and the bytes of every file it reads
+/// ([`inputs_of`]; an absent one as absent). A step whose input was computed again in this run
+/// (a new record: its timings alone change its bytes) therefore has a new digest, and so has
+/// every step after an import of changed data or a rebuilt program: on resume those are computed
+/// again, never kept beside inputs they were not computed from.
+fn inputs_digest(step: &Step, binary: &str) -> Result<String> {
+    let mut h = Sha256::new();
+    h.update(binary.as_bytes());
+    for a in &step.args {
+        h.update((a.len() as u64).to_le_bytes());
+        h.update(a.as_bytes());
+    }
+    for f in inputs_of(step)? {
+        h.update(f.to_string_lossy().as_bytes());
+        match std::fs::read(&f) {
+            Ok(bytes) => {
+                h.update((bytes.len() as u64).to_le_bytes());
+                h.update(&bytes);
+            }
+            Err(_) => h.update(b"absent"),
+        }
+    }
+    Ok(hex(&h.finalize()))
+}
+
+/// Where the digest of what a step's output was computed from is kept: beside its log.
+fn inputs_file(step: &Step) -> PathBuf {
+    step.log.with_extension("inputs")
+}
+
+/// Whether a step's output is kept on resume: it exists and was computed from `inputs` (the
+/// digest recorded when it was written equals the step's digest now). An output without a
+/// recorded digest — cut off between the two, or written before digests were kept — is
+/// computed again.
+fn kept(step: &Step, inputs: &str) -> bool {
+    let same = step.writes.exists()
+        && std::fs::read_to_string(inputs_file(step)).is_ok_and(|d| d.trim() == inputs);
+    if step.writes.exists() && !same {
+        log::info!(
+            "{}: computed from other inputs or by another build; computing it again",
+            step.writes.display()
+        );
+    }
+    same
+}
+
+/// Records the digest of what `step`'s output was just computed from (after the output itself:
+/// an interruption between the two leaves an output that is computed again).
+fn record_inputs(step: &Step, inputs: &str) -> Result<()> {
+    let path = inputs_file(step);
+    if step.writes.exists() {
+        identify::record::atomic::write_bytes_atomic(&path, format!("{inputs}\n").as_bytes())
+            .with_context(|| format!("writing {}", path.display()))
+    } else if path.exists() {
+        std::fs::remove_file(&path).with_context(|| format!("removing {}", path.display()))
+    } else {
+        Ok(())
+    }
+}
+
 /// Copies the figure `from` to `to` atomically when it is a complete SVG document; otherwise
 /// removes `to`, so that no figure of an earlier run stands in for a missing one.
 fn copy_figure(from: &Path, to: &Path) -> Result<()> {
@@ -705,13 +839,15 @@ pub(crate) struct RunOptions {
     /// The baseline script (`experiments/real/srim.py`).
     pub baseline_script: Option<PathBuf>,
     /// Keep the files already written (an interrupted study; every file is written atomically,
-    /// so one that exists is complete) instead of recomputing them.
+    /// so one that exists is complete) instead of recomputing them — each only where what it
+    /// was computed from is unchanged ([`inputs_digest`]).
     pub resume: bool,
 }
 
 /// Runs every part of the study and writes `REPORT.md` into `out`.
 pub(crate) fn run(study: &FieldStudy, opts: &RunOptions) -> Result<()> {
     let started = std::time::Instant::now();
+    let binary = this_binary();
     let mut notes = Vec::new();
     for part in &study.part {
         let dirs = PartDirs::new(&opts.out, part);
@@ -719,7 +855,8 @@ pub(crate) fn run(study: &FieldStudy, opts: &RunOptions) -> Result<()> {
         steps.extend(plan_validate(part, &dirs));
         let total = steps.len();
         for (i, step) in steps.iter().enumerate() {
-            if opts.resume && step.writes.exists() && kept_figures_redrawn(step) {
+            let inputs = inputs_digest(step, &binary)?;
+            if opts.resume && kept(step, &inputs) && kept_figures_redrawn(step) {
                 log::info!(
                     "[{}/{total}] {}: kept {}",
                     i + 1,
@@ -730,6 +867,7 @@ pub(crate) fn run(study: &FieldStudy, opts: &RunOptions) -> Result<()> {
             }
             let t = std::time::Instant::now();
             let ended = execute(opts.run_step, step)?;
+            record_inputs(step, &inputs)?;
             log::info!(
                 "[{}/{total}] {}: sysid {} → {} ({:.1} s){}",
                 i + 1,
@@ -760,10 +898,12 @@ pub(crate) fn run(study: &FieldStudy, opts: &RunOptions) -> Result<()> {
                 )?;
             }
             for step in plan_selected(part, &dirs, chosen) {
-                if opts.resume && step.writes.exists() {
+                let inputs = inputs_digest(&step, &binary)?;
+                if opts.resume && kept(&step, &inputs) {
                     continue;
                 }
                 let ended = execute(opts.run_step, &step)?;
+                record_inputs(&step, &inputs)?;
                 log::info!(
                     "{}: sysid filter → {} ({ended:?})",
                     part.name,

@@ -584,8 +584,23 @@ fn table1_writes_its_files_only_as_new_or_regular_files() {
 /// A field study of the frame's shortest recording with one variant, selected: small enough to
 /// run three times.
 fn mini_field_study(dir: &Path) -> PathBuf {
-    let map =
-        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../experiments/real/frame-bonus-event.toml");
+    mini_field_study_keeping_out(dir, &[])
+}
+
+/// The mini study with records `kept_out` (names of `experiments/real/frame-<name>.toml`) kept
+/// out of every choice: validated, and identified again by the selected model.
+fn mini_field_study_keeping_out(dir: &Path, kept_out: &[&str]) -> PathBuf {
+    let real = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../experiments/real");
+    let map = real.join("frame-bonus-event.toml");
+    let others: String = kept_out
+        .iter()
+        .map(|name| {
+            format!(
+                "[[part.record]]\nname = \"{name}\"\nmap = \"{}\"\nrole = \"validate\"\n",
+                real.join(format!("frame-{name}.toml")).display()
+            )
+        })
+        .collect();
     let study = dir.join("study.toml");
     std::fs::write(
         &study,
@@ -600,7 +615,7 @@ common = ["--storeys", "3", "--hysteretic", "none", "--measurement", "absolute",
 name = "bonus"
 map = "{}"
 role = "identify"
-[[part.variant]]
+{others}[[part.variant]]
 name = "mpf"
 label = "MPF-EKF2"
 algorithm = "mpf-ekf2"
@@ -720,6 +735,81 @@ fn a_resumed_field_study_redraws_broken_figures_and_links_only_existing_ones() {
     ));
     let report = report_links_only_existing_figures(&out);
     assert!(report.contains("frame/selected-free_run.svg"), "{report}");
+}
+
+/// The files under `dir` (recursively) and when each was last written.
+fn written_under(dir: &Path) -> std::collections::BTreeMap<PathBuf, std::time::SystemTime> {
+    let mut out = std::collections::BTreeMap::new();
+    let mut stack = vec![dir.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        for e in std::fs::read_dir(&d).unwrap().flatten() {
+            let p = e.path();
+            if p.is_dir() {
+                stack.push(p);
+            } else {
+                out.insert(p.clone(), e.metadata().unwrap().modified().unwrap());
+            }
+        }
+    }
+    out
+}
+
+/// A resumed field study keeps an output only where what it was computed from is unchanged: a
+/// record computed again takes the validation computed from it along, never leaving it beside
+/// a record it was not computed from; an output without the digest of its inputs (written by an
+/// earlier build, or cut off before its digest) is computed again; the rest is kept untouched.
+#[test]
+fn a_resumed_field_study_computes_again_what_depends_on_what_changed() {
+    let (_tmp, dir) = temp_dir("field-study-depends");
+    let study = mini_field_study_keeping_out(&dir, &["sine-1.0"]);
+    let out = dir.join("out");
+    let (s, o) = (study.to_str().unwrap(), out.to_str().unwrap());
+    let resume = ["field-study", "--config", s, "--out", o, "--resume"];
+    ok(&run(&["field-study", "--config", s, "--out", o], &dir));
+    let part = out.join("frame");
+    let (record, validation, selected, data) = (
+        part.join("records/mpf.json"),
+        part.join("validation/mpf--sine-1.0.json"),
+        part.join("records/selected--sine-1.0.json"),
+        part.join("data/sine-1.0/measured.csv"),
+    );
+    for f in [&record, &validation, &selected, &data] {
+        assert!(f.is_file(), "{} not written", f.display());
+    }
+    let outputs = [&record, &validation, &selected, &data];
+    let when = |f: &Path| std::fs::metadata(f).unwrap().modified().unwrap();
+    let first = written_under(&part.join("records"));
+
+    // Nothing changed: every output is kept as it was.
+    ok(&run(&resume, &dir));
+    assert_eq!(written_under(&part.join("records")), first);
+    let before: Vec<_> = outputs.iter().map(|f| when(f)).collect();
+    ok(&run(&resume, &dir));
+    let after: Vec<_> = outputs.iter().map(|f| when(f)).collect();
+    assert_eq!(before, after, "an unchanged study computed something again");
+
+    // The identification computed again: its validation with it; the imports and the selected
+    // model's run on the other record (from unchanged data and settings) kept.
+    std::fs::remove_file(&record).unwrap();
+    ok(&run(&resume, &dir));
+    assert!(record.is_file());
+    assert_ne!(
+        when(&validation),
+        before[1],
+        "validation kept beside a new record"
+    );
+    assert_eq!(when(&data), before[3]);
+    assert_eq!(when(&selected), before[2]);
+
+    // A validation without the digest of its inputs is computed again; the rest is kept.
+    let (again, record_at) = (when(&validation), when(&record));
+    let digest = part.join("logs/validate--mpf--sine-1.0.inputs");
+    assert!(digest.is_file(), "{} not written", digest.display());
+    std::fs::remove_file(&digest).unwrap();
+    ok(&run(&resume, &dir));
+    assert_ne!(when(&validation), again);
+    assert!(digest.is_file());
+    assert_eq!(when(&record), record_at);
 }
 
 /// `validate --plot` puts its figures in place as `plot` does: a figure name that is a link is

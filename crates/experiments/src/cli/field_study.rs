@@ -28,7 +28,9 @@ pub struct Args {
     #[arg(long)]
     pub report_only: bool,
     /// Keep the records, imports and validations already written (an interrupted study)
-    /// instead of recomputing them.
+    /// instead of recomputing them — each only where this build computed it from the inputs it
+    /// has now (the digest of the program, the command and the files it reads, kept beside its
+    /// log); the others, and everything computed from them, are computed again.
     #[arg(long)]
     pub resume: bool,
 }
