@@ -129,6 +129,19 @@ fn cross(path: &Path) -> Result<Option<CrossValidation>> {
     })?))
 }
 
+/// What `sysid validate` said of a free run's discrepancy modes above the record's band
+/// (`identify::validation::discrepancy::above_band_note`), from the free run itself: its term
+/// and the record's sampling step, `t`'s step over the samples it keeps (`every`; an ulp off the
+/// record's own step at 0.1, 0.011 or 0.003 s, which the bound's test allows for).
+fn above_band_note(free: &FreeRun) -> Option<String> {
+    let d = free.discrepancy.as_ref()?;
+    let step = free.t.get(1)? - free.t.first()?;
+    let dt = step / free.every.max(1) as f64;
+    (dt > 0.0)
+        .then(|| identify::validation::discrepancy::above_band_note(d, dt))
+        .flatten()
+}
+
 /// Is `name` a damping parameter (`c1`…, or the mass-proportional coefficient)?
 fn is_damping(name: &str) -> bool {
     let mut ch = name.chars();
@@ -642,11 +655,22 @@ fn cross_validation(s: &mut String, x: Section<'_>) -> Result<()> {
             write!(s, " fit % on `{v}` |")?;
         }
         writeln!(s, "\n|---|{}", "---|".repeat(validate.len()))?;
+        // What the cells do not say: a discrepancy mode simulated off the record's own grid.
+        let mut above_band: Vec<(String, Vec<&str>)> = Vec::new();
         for v in &part.variant {
             write!(s, "| {} |", v.label)?;
             for r in validate {
                 let cell = match cross(&dirs.validation(&v.name, r))? {
-                    Some(cv) => fits_cell(Some(&cv.free_run)),
+                    Some(cv) => {
+                        if let Some(n) = above_band_note(&cv.free_run) {
+                            let n = format!("{} — {n}", v.label);
+                            match above_band.iter_mut().find(|(m, _)| *m == n) {
+                                Some((_, records)) => records.push(r),
+                                None => above_band.push((n, vec![r])),
+                            }
+                        }
+                        fits_cell(Some(&cv.free_run))
+                    }
                     None => {
                         let why =
                             super::log_reason(&dirs.log(&format!("validate--{}--{}", v.name, r)));
@@ -669,6 +693,10 @@ fn cross_validation(s: &mut String, x: Section<'_>) -> Result<()> {
             writeln!(s, "{}", " no stable model |".repeat(validate.len()))?;
         }
         writeln!(s)?;
+        for (note, records) in above_band {
+            let on: Vec<String> = records.iter().map(|r| format!("`{r}`")).collect();
+            writeln!(s, "On {}: {note}.\n", on.join(", "))?;
+        }
     }
 
     Ok(())
@@ -1478,5 +1506,47 @@ mod tests {
             assert_eq!(discrepancy_modes(Some(f)), "");
         }
         assert_eq!(fits_cell(None), "—");
+    }
+
+    /// A free run of a record sampled at `dt` (its series keeping one sample in 3) with a term
+    /// of modes at `hz`.
+    fn sampled(dt: f64, hz: &[f64]) -> FreeRun {
+        let modes: Vec<String> = hz
+            .iter()
+            .map(|f| format!(r#"{{"frequency_hz": {f}, "damping_ratio": 0.01}}"#))
+            .collect();
+        let mut f = free_run(&format!(
+            r#""discrepancy": {{"channels": ["a1"], "modes": [{}], "coefficients": [[{}]]}},"#,
+            modes.join(", "),
+            vec!["[0.1, 0.2]"; hz.len()].join(", ")
+        ));
+        // Set here, not read from the text: a decimal read back can be an ulp off.
+        for (m, hz) in f.discrepancy.as_mut().unwrap().modes.iter_mut().zip(hz) {
+            m.frequency_hz = *hz;
+        }
+        f.every = 3;
+        f.t = (0..4).map(|k| (k * 3) as f64 * dt).collect();
+        f
+    }
+
+    #[test]
+    fn a_discrepancy_mode_above_a_records_band_is_stated_and_one_at_its_bound_is_not() {
+        // Lake Crowley: an 80 Hz mode found at 200 Hz, on a record of 100 Hz.
+        let note = above_band_note(&sampled(0.01, &[6.14, 80.0])).unwrap();
+        assert!(
+            note.contains("80.00 Hz") && !note.contains("6.14"),
+            "{note}"
+        );
+        assert!(note.contains("(40.0 Hz)"), "{note}");
+        // At the bound of the record's own rate (0.4/dt: where the search stops): within the
+        // band, no note — also where 3·dt/3 is an ulp off dt (0.1, 0.011, 0.003 s).
+        for dt in [0.01, 0.005, 1.0 / 120.0, 1.0 / 60.0, 0.1, 0.011, 0.003] {
+            assert_eq!(above_band_note(&sampled(dt, &[0.4 / dt])), None, "{dt}");
+            assert!(
+                above_band_note(&sampled(dt, &[0.41 / dt])).is_some(),
+                "{dt}"
+            );
+        }
+        assert_eq!(above_band_note(&free_run("")), None);
     }
 }

@@ -104,9 +104,12 @@ pub fn held_out_fits(
 
 /// The points per sample interval on which mode `f_hz` is simulated on a record sampled at `dt`:
 /// one where the mode lies within [`highest_hz`] of the record (as wherever it was found), else
-/// as many as bring it within that bound on the finer grid.
+/// as many as bring it within that bound on the finer grid. Within a billionth of the bound
+/// counts as within: a mode the search put at its bound on one record is at the bound of
+/// another of the same rate whose step was computed an ulp apart (or read back from a record's
+/// time series).
 fn points_per_sample(f_hz: f64, dt: f64) -> usize {
-    (f_hz / highest_hz(dt)).ceil().max(1.0) as usize
+    (f_hz / highest_hz(dt) - 1e-9).ceil().max(1.0) as usize
 }
 
 /// The modes of `d` above 80 % of the Nyquist frequency of a record sampled at `dt` (the search's
@@ -125,7 +128,7 @@ pub fn above_band_note(d: &Discrepancy, dt: f64) -> Option<String> {
     let above = above_band(d, dt);
     (!above.is_empty()).then(|| {
         format!(
-            "the discrepancy mode(s) at {} Hz lie above 80 % of this record's Nyquist frequency \
+            "the discrepancy mode(s) at {} Hz lie above 80 % of the record's Nyquist frequency \
              ({:.1} Hz): simulated on its ground motion band-limited between its samples, on a \
              grid fine enough to hold them (docs/validation.md)",
             above
