@@ -621,9 +621,13 @@ fn baseline(part: &Part, dirs: &PartDirs, opts: &RunOptions) -> Result<Option<St
     {
         let train = dirs.data(&part.identify_record().name);
         let mut cmd = Command::new(python);
-        cmd.arg(script).arg("--train").arg(&train).arg("--validate");
-        for r in part.validate_records() {
-            cmd.arg(dirs.data(&r.name));
+        cmd.arg(script).arg("--train").arg(&train);
+        // A structure of one record has none to validate on (and the command says none).
+        if part.validate_records().next().is_some() {
+            cmd.arg("--validate");
+            for r in part.validate_records() {
+                cmd.arg(dirs.data(&r.name));
+            }
         }
         cmd.arg("--out").arg(&baseline);
         if let Some(orders) = &part.baseline_orders {
