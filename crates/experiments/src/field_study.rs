@@ -745,7 +745,8 @@ fn files_named_by_map(map: &Path) -> Vec<PathBuf> {
             _ => {}
         }
     }
-    let Some(value) = std::fs::read_to_string(map)
+    // Through the one reader of input files: a device or a named pipe is refused, not read.
+    let Some(value) = models::readers::read_input_text(map)
         .ok()
         .and_then(|t| t.parse::<toml::Value>().ok())
     else {
@@ -759,7 +760,9 @@ fn files_named_by_map(map: &Path) -> Vec<PathBuf> {
 
 /// What a step's output is computed from, as one SHA-256: the program (`binary`, from
 /// [`this_binary`]), the command's arguments and the bytes of every file it reads
-/// ([`inputs_of`]; an absent one as absent). A step whose input was computed again in this run
+/// ([`inputs_of`]), each read as the step reads it (`models::readers::read_input`: a regular file
+/// within the size limit — a device, a named pipe or an absent file enters as the reader's error,
+/// which the step itself then reports, and is never read forever). A step whose input was computed again in this run
 /// (a new record: its timings alone change its bytes) therefore has a new digest, and so has
 /// every step after an import of changed data or a rebuilt program: on resume those are computed
 /// again, never kept beside inputs they were not computed from.
@@ -772,12 +775,12 @@ fn inputs_digest(step: &Step, binary: &str) -> Result<String> {
     }
     for f in inputs_of(step)? {
         h.update(f.to_string_lossy().as_bytes());
-        match std::fs::read(&f) {
+        match models::readers::read_input(&f) {
             Ok(bytes) => {
                 h.update((bytes.len() as u64).to_le_bytes());
                 h.update(&bytes);
             }
-            Err(_) => h.update(b"absent"),
+            Err(e) => h.update(format!("unread: {e}").as_bytes()),
         }
     }
     Ok(hex(&h.finalize()))

@@ -569,10 +569,11 @@ fn load(dir: &Path, bin: &Path) -> Result<BTreeMap<String, Vec<u8>>> {
 
 /// Files made from timings through and through, which no probe starts from: the scaling
 /// study's report, table, summary and cost figure (its records are kept) and the field study's
-/// logs.
+/// logs and the digests of its steps' inputs beside them (of records that hold their timings; a
+/// resumed probe therefore computes every step again, as after any change of its inputs).
 fn unsteady(rel: &str) -> bool {
     (rel.starts_with("sco/") && !rel.starts_with("sco/records/"))
-        || (rel.contains("/logs/") && rel.ends_with(".txt"))
+        || (rel.contains("/logs/") && (rel.ends_with(".txt") || rel.ends_with(".inputs")))
 }
 
 /// `text` with what differs from one making of the seeds to the next written as fixed values —
