@@ -700,8 +700,8 @@ fn this_binary() -> String {
 }
 
 /// The files a step's command reads, from its arguments: every file of a `--data` directory,
-/// the `--record`, `--config` and `--map` files, and the files a map names (its `file` values,
-/// relative to the map) — the bytes its output is computed from.
+/// the `--record`, `--config` and `--map` files, and the files a map names — the bytes its
+/// output is computed from.
 fn inputs_of(step: &Step) -> Result<Vec<PathBuf>> {
     let mut files = Vec::new();
     for pair in step.args.windows(2) {
@@ -728,34 +728,17 @@ fn inputs_of(step: &Step) -> Result<Vec<PathBuf>> {
     Ok(files)
 }
 
-/// The `file` values of a map (at any depth), relative to its directory; none when the map does
-/// not read as TOML (the import then says why).
+/// The files a map names, resolved as the import resolves them (`ChannelMap::load`, the
+/// import's own reader of maps); none when the map does not load (the import then says why).
 fn files_named_by_map(map: &Path) -> Vec<PathBuf> {
-    fn walk(v: &toml::Value, out: &mut Vec<String>) {
-        match v {
-            toml::Value::Table(t) => {
-                for (k, v) in t {
-                    match v {
-                        toml::Value::String(s) if k == "file" => out.push(s.clone()),
-                        _ => walk(v, out),
-                    }
-                }
-            }
-            toml::Value::Array(a) => a.iter().for_each(|v| walk(v, out)),
-            _ => {}
-        }
-    }
-    // Through the one reader of input files: a device or a named pipe is refused, not read.
-    let Some(value) = models::readers::read_input_text(map)
-        .ok()
-        .and_then(|t| t.parse::<toml::Value>().ok())
-    else {
-        return Vec::new();
-    };
-    let mut names = Vec::new();
-    walk(&value, &mut names);
-    let base = map.parent().unwrap_or(Path::new(""));
-    names.into_iter().map(|n| base.join(n)).collect()
+    models::import::channel_map::ChannelMap::load(map).map_or_else(
+        |_| Vec::new(),
+        |m| {
+            std::iter::once(m.ground.path)
+                .chain(m.storeys.into_iter().map(|c| c.path))
+                .collect()
+        },
+    )
 }
 
 /// What a step's output is computed from, as one SHA-256: the program (`binary`, from
@@ -970,6 +953,24 @@ group = "g"
         let path = dir.path().join("study.toml");
         std::fs::write(&path, text)?;
         FieldStudy::load(&path)
+    }
+
+    #[test]
+    fn a_maps_inputs_are_its_files_as_the_import_reads_them() {
+        let map = Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../../experiments/real/frame-bonus-event.toml");
+        let files = files_named_by_map(&map);
+        let names: Vec<String> = files
+            .iter()
+            .map(|f| f.file_name().unwrap().to_string_lossy().into_owned())
+            .collect();
+        // The ground, then storeys 1–3 (floor-2.csv is storey 1 on this day: the map says why).
+        assert_eq!(
+            names,
+            ["ground.csv", "floor-2.csv", "floor-1.csv", "floor-3.csv"]
+        );
+        assert!(files.iter().all(|f| f.is_file()), "{files:?}");
+        assert!(files_named_by_map(Path::new("no-such-map.toml")).is_empty());
     }
 
     #[test]
